@@ -1,0 +1,1 @@
+"""Co-simulation master, components, campaigns and command line of pendulum-cosim."""

@@ -1,0 +1,39 @@
+"""Exact symbolic plant models of two benchmark pendulums, and their FMUs.
+
+>>> from fmu_models import get_model
+>>> cp = get_model("cartpole", Bc=0.3)
+>>> A, B = cp.linearize([0, 0, 0, 0], [0])
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+from . import cartpole, iwp
+from .plant import METHODS, PlantModel
+from .variables import Variable
+
+_BUILDERS = {"cartpole": cartpole.build, "iwp": iwp.build}
+MODEL_NAMES = tuple(_BUILDERS)
+
+__all__ = ["get_model", "PlantModel", "Variable", "MODEL_NAMES", "METHODS"]
+
+
+@lru_cache(maxsize=None)
+def _base(name: str) -> PlantModel:
+    return _BUILDERS[name]()
+
+
+def get_model(name: str, **params: float) -> PlantModel:
+    """Return the plant model ``name`` ("cartpole" or "iwp") with parameters overridden by name.
+
+    Raises
+    ------
+    KeyError
+        Unknown model name or parameter name (the message lists the valid ones).
+    ValueError
+        A parameter value outside its domain.
+    """
+    if name not in _BUILDERS:
+        raise KeyError(f"unknown model {name!r}; valid models: {', '.join(MODEL_NAMES)}")
+    model = _base(name)
+    return model.with_params(**params) if params else model.with_params()

@@ -1,0 +1,68 @@
+"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1 with SPEC section 1 errata).
+
+State ``x = [x, x_dot, theta, theta_dot]`` (SPEC x1..x4): cart position [m], cart
+velocity [m/s], pole angle from UPRIGHT [rad] (positive leaning towards +x), pole rate
+[rad/s]. Input ``F``: force on the cart [N]. Measurement ``y = [x, theta]`` (eqs 13, 23).
+
+Errata applied (SPEC section 1; each checked against Lagrange's equations in
+``tests/test_cartpole_lagrange.py``):
+
+* Table 1 prints ``M3 = M1 M2 - mc^2 l^2 cos^2 x3``; the mass must be ``mp``.
+* Table 1 gives ``Bc`` the unit N m s/rad; cart friction is linear, N s/m.
+* Eq 22's "linearised" A, B are not the Jacobian of eqs 8-11: the model never uses
+  them; :meth:`PlantModel.linearize` gives the exact Jacobian.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+from .plant import PlantModel
+from .variables import Variable
+
+STATES = (
+    Variable("x", "m", "cart position (seed 000 x1)", 0.5),
+    Variable("x_dot", "m/s", "cart velocity (x2)", 0.0),
+    Variable("theta", "rad", "pole angle from upright, positive towards +x (x3)", 1.8),
+    Variable("theta_dot", "rad/s", "pole angular rate (x4)", 0.5),
+)
+INPUTS = (Variable("F", "N", "horizontal force on the cart", 0.0),)
+OUTPUTS = (
+    Variable("y_x", "m", "measured cart position (noise-free h(x), eq 23)"),
+    Variable("y_theta", "rad", "measured pole angle (noise-free h(x), eq 23)"),
+)
+PARAMETERS = (
+    Variable("mc", "kg", "cart mass (Table 1)", 0.94, "positive"),
+    Variable("mp", "kg", "pole mass (Table 1)", 0.23, "positive"),
+    Variable("l", "m", "pivot to pole centre of mass; pole inertia I = mp l^2/3 (Table 1)",
+             0.33, "positive"),
+    Variable("Bc", "N.s/m", "cart viscous friction (Table 1; unit corrected)", 0.44, "nonnegative"),
+    Variable("Bp", "N.m.s/rad", "pivot viscous friction (Table 1)", 0.05, "nonnegative"),
+    Variable("g", "m/s2", "gravitational acceleration", 9.81, "positive"),
+)
+
+
+def dynamics(x, u, p):
+    """Seed 000 eqs 8-11 with ``M3 = M1 M2 - mp^2 l^2 cos^2 x3`` (Table 1 erratum fixed)."""
+    mc, mp, l, Bc, Bp, g = (p[k] for k in ("mc", "mp", "l", "Bc", "Bp", "g"))
+    x2, x3, x4, F = x[1], x[2], x[3], u[0]
+    s, c = ca.sin(x3), ca.cos(x3)
+    inertia = mp * l**2 / 3
+    M1 = mc + mp
+    M2 = inertia + mp * l**2
+    M3 = M1 * M2 - mp**2 * l**2 * c**2
+    x2dot = (-Bc * M2 * x2 + mp * l * Bp * x4 * c - mp**2 * l**2 * g * s * c
+             + mp * l * M2 * x4**2 * s + M2 * F) / M3                      # eq 9
+    x4dot = (-Bp * M1 * x4 + mp * l * Bc * x2 * c - mp**2 * l**2 * x4**2 * s * c
+             + mp * l * g * M1 * s - mp * l * c * F) / M3                  # eq 11
+    return ca.vertcat(x2, x2dot, x4, x4dot)                                # eqs 8, 10
+
+
+def measurement(x, p):
+    """Eq 23: cart position and pole angle (y_k = [x1_k, x3_k]; SPEC fixes eqs 18-19's index)."""
+    return ca.vertcat(x[0], x[2])
+
+
+def build() -> PlantModel:
+    return PlantModel("cartpole", "CartPole",
+                      "Cart-inverted pendulum (seed 000 eqs 8-11, SPEC section 1)",
+                      STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement)

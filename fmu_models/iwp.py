@@ -1,0 +1,78 @@
+"""Inertia-wheel pendulum of seed 002 (eqs 1-2; SPEC section 3).
+
+State ``x = [alpha, alpha_dot, phi_dot]``: pendulum angle from the upright vertical
+[rad], its rate [rad/s] and the wheel speed relative to the body [rad/s]. Input ``i``:
+motor current [A]. All three states are measured (``C = I``).
+
+Equations (seed 002 eqs 1-2)::
+
+    phi''   = (k i - b_phi phi') / I_k
+    alpha'' = (s I_k phi'' + m_c g l_p sin(alpha) - b_alpha alpha') / (I_r + I_k)
+
+Coupling sign ``s`` (SPEC section 3): seed 002 prints ``s = +1``. With the denominator
+``I_r + I_k``, ``phi`` is the wheel angle relative to the body and the reaction torque
+on the body opposes the torque that spins the wheel, so the physical sign is ``s = -1``,
+the default here. Simplification kept from the paper: for a relative wheel angle the
+exact wheel equation is ``I_k (alpha'' + phi'') = k i - b_phi phi'``; eq 1 neglects the
+body's acceleration ``alpha''`` in it.
+
+Default parameters: the 1-D Cubli (Gajamohan et al., IROS 2012), mapped by SPEC
+section 3: ``I_k = Iw``, ``I_r = Ib + mw lw^2``, ``m_c = mb + mw``,
+``l_p = (mb lb + mw lw)/(mb + mw)``, ``b_alpha = Cb``, ``b_phi = Cw``, ``k = Km``.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+from .plant import PlantModel
+from .variables import Variable
+
+STATES = (
+    Variable("alpha", "rad", "pendulum angle from upright vertical", 0.0),
+    Variable("alpha_dot", "rad/s", "pendulum angular rate", 0.0),
+    Variable("phi_dot", "rad/s", "wheel speed relative to the body", 0.0),
+)
+INPUTS = (Variable("i", "A", "motor current", 0.0),)
+OUTPUTS = (
+    Variable("y_alpha", "rad", "measured pendulum angle (C = I)"),
+    Variable("y_alpha_dot", "rad/s", "measured pendulum rate (C = I)"),
+    Variable("y_phi_dot", "rad/s", "measured wheel speed (C = I)"),
+)
+PARAMETERS = (
+    Variable("Iw", "kg.m2", "wheel inertia about its axis (I_k)", 0.57e-3, "positive"),
+    Variable("Ib", "kg.m2", "body inertia about the pivot", 3.34e-3, "positive"),
+    Variable("mb", "kg", "body mass", 0.419, "positive"),
+    Variable("lb", "m", "pivot to body centre of mass", 0.075, "nonnegative"),
+    Variable("mw", "kg", "wheel mass", 0.204, "positive"),
+    Variable("lw", "m", "pivot to wheel axis", 0.085, "nonnegative"),
+    Variable("Cb", "N.m.s/rad", "body (pivot) viscous friction, b_alpha", 1.02e-3, "nonnegative"),
+    Variable("Cw", "N.m.s/rad", "wheel bearing viscous friction, b_phi", 0.05e-3, "nonnegative"),
+    Variable("Km", "N.m/A", "motor torque constant, k", 25.1e-3, "positive"),
+    Variable("g", "m/s2", "gravitational acceleration", 9.81, "positive"),
+    Variable("s", "1", "coupling sign of the wheel reaction torque (SPEC: -1; paper prints +1)",
+             -1.0, "sign"),
+)
+
+
+def dynamics(x, u, p):
+    """Seed 002 eqs 1-2 with the Cubli parameter map of SPEC section 3."""
+    alpha, alpha_dot, phi_dot, i = x[0], x[1], x[2], u[0]
+    I_k = p["Iw"]
+    I_r = p["Ib"] + p["mw"] * p["lw"] ** 2
+    m_c = p["mb"] + p["mw"]
+    l_p = (p["mb"] * p["lb"] + p["mw"] * p["lw"]) / m_c
+    phi_dd = (p["Km"] * i - p["Cw"] * phi_dot) / I_k                                  # eq 1
+    alpha_dd = (p["s"] * I_k * phi_dd + m_c * p["g"] * l_p * ca.sin(alpha)
+                - p["Cb"] * alpha_dot) / (I_r + I_k)                                  # eq 2
+    return ca.vertcat(alpha_dot, alpha_dd, phi_dd)
+
+
+def measurement(x, p):
+    """C = I: all three states are measured (seed 002)."""
+    return ca.vertcat(x[0], x[1], x[2])
+
+
+def build() -> PlantModel:
+    return PlantModel("iwp", "InertiaWheelPendulum",
+                      "Inertia-wheel pendulum (seed 002 eqs 1-2, SPEC section 3)",
+                      STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement)

@@ -1,0 +1,281 @@
+"""`PlantModel`: one CasADi definition of a plant, feeding every numeric use of it.
+
+The symbolic expressions built here are the single source of the Python functions, the
+exact Jacobians (CasADi's algorithmic differentiation), the discrete maps, the C code
+and the FMUs (`fmu_models.fmu`).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+
+from .variables import Variable
+
+#: Integration methods of the discrete maps.
+METHODS = ("euler", "rk4")
+
+Dynamics = Callable[[ca.SX, ca.SX, Mapping[str, ca.SX]], ca.SX]
+Measurement = Callable[[ca.SX, Mapping[str, ca.SX]], ca.SX]
+
+
+def as_vector(value, n: int, what: str) -> np.ndarray:
+    """Return ``value`` as a finite float vector of shape ``(n,)`` or raise a ValueError.
+
+    Scalars are accepted when ``n == 1``; ``(n, 1)`` columns are flattened.
+    """
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 0 and n == 1:
+        a = a.reshape(1)
+    elif a.ndim == 2 and a.shape == (n, 1):
+        a = a.reshape(n)
+    if a.shape != (n,):
+        raise ValueError(f"{what} must have shape ({n},), got shape {np.shape(value)}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} contains NaN or inf: {a}")
+    return a
+
+
+def check_method(method: str, substeps: int) -> None:
+    """Validate an integration method name and a substep count."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
+    if int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
+
+
+class _Symbolic:
+    """The symbolic part of a plant, shared by all parameter variants of a model."""
+
+    def __init__(self, states, inputs, outputs, params, dynamics, measurement):
+        self.x = ca.SX.sym("x", len(states))
+        self.u = ca.SX.sym("u", len(inputs))
+        self.p = ca.SX.sym("p", len(params))
+        self.dt = ca.SX.sym("dt")
+        pd = {v.name: self.p[i] for i, v in enumerate(params)}
+        self.xdot = ca.vertcat(dynamics(self.x, self.u, pd))
+        self.y = ca.vertcat(measurement(self.x, pd))
+        if self.xdot.shape != (len(states), 1):
+            raise ValueError(f"dynamics returned shape {self.xdot.shape}, expected ({len(states)}, 1)")
+        if self.y.shape != (len(outputs), 1):
+            raise ValueError(f"measurement returned shape {self.y.shape}, expected ({len(outputs)}, 1)")
+        x, u, p = self.x, self.u, self.p
+        self.f = ca.Function("f", [x, u, p], [self.xdot], ["x", "u", "p"], ["xdot"])
+        self.h = ca.Function("h", [x, p], [self.y], ["x", "p"], ["y"])
+        self.jac_f = ca.Function("jac_f", [x, u, p],
+                                 [ca.jacobian(self.xdot, x), ca.jacobian(self.xdot, u)],
+                                 ["x", "u", "p"], ["A", "B"])
+        self.jac_h = ca.Function("jac_h", [x, p], [ca.jacobian(self.y, x)], ["x", "p"], ["H"])
+
+    def step_expr(self, method: str, substeps: int) -> ca.SX:
+        """x_{k+1} as an expression of (x, u, p, dt): `substeps` equal steps of `method`."""
+        x, u, p = self.x, self.u, self.p
+        h = self.dt / substeps
+        xk = x
+        for _ in range(substeps):
+            if method == "euler":
+                xk = xk + h * self.f(xk, u, p)
+            else:
+                k1 = self.f(xk, u, p)
+                k2 = self.f(xk + h / 2 * k1, u, p)
+                k3 = self.f(xk + h / 2 * k2, u, p)
+                k4 = self.f(xk + h * k3, u, p)
+                xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return xk
+
+    @lru_cache(maxsize=None)
+    def step(self, method: str, substeps: int) -> ca.Function:
+        xn = self.step_expr(method, substeps)
+        return ca.Function(f"step_{method}_{substeps}", [self.x, self.u, self.p, self.dt], [xn],
+                           ["x", "u", "p", "dt"], ["x_next"])
+
+    @lru_cache(maxsize=None)
+    def step_jac(self, method: str, substeps: int) -> ca.Function:
+        xn = self.step_expr(method, substeps)
+        return ca.Function(f"step_jac_{method}_{substeps}", [self.x, self.u, self.p, self.dt],
+                           [ca.jacobian(xn, self.x), ca.jacobian(xn, self.u)],
+                           ["x", "u", "p", "dt"], ["F", "G"])
+
+
+class PlantModel:
+    """A continuous-time plant ``x' = f(x, u; p)``, ``y = h(x; p)`` defined once in CasADi.
+
+    Build instances with :func:`fmu_models.get_model`; derive parameter variants with
+    :meth:`with_params`.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``"cartpole"``, ``"iwp"``).
+    fmu_name : str
+        Model name of the generated FMU (``"CartPole"``, ...).
+    states, inputs, outputs, parameters : tuple of Variable
+        Descriptors with names, units, descriptions and defaults.
+    state_names, input_names, output_names : list of str
+    params : dict
+        Current parameter values by name (a copy; use :meth:`with_params` to change).
+    nx, nu, ny : int
+        Numbers of states, inputs and outputs.
+    """
+
+    def __init__(self, name: str, fmu_name: str, description: str,
+                 states: Sequence[Variable], inputs: Sequence[Variable],
+                 outputs: Sequence[Variable], parameters: Sequence[Variable],
+                 dynamics: Dynamics | None = None, measurement: Measurement | None = None,
+                 *, _symbolic: _Symbolic | None = None, _values: np.ndarray | None = None):
+        self.name, self.fmu_name, self.description = name, fmu_name, description
+        self.states, self.inputs = tuple(states), tuple(inputs)
+        self.outputs, self.parameters = tuple(outputs), tuple(parameters)
+        names = [v.name for v in self.states + self.inputs + self.outputs + self.parameters]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"model {name!r}: duplicate variable names {sorted(dup)}")
+        self.sym = _symbolic or _Symbolic(self.states, self.inputs, self.outputs,
+                                          self.parameters, dynamics, measurement)
+        self._p = (np.array([v.check(v.start) for v in self.parameters]) if _values is None
+                   else _values)
+
+    # ------------------------------------------------------------------ description
+    state_names = property(lambda self: [v.name for v in self.states])
+    input_names = property(lambda self: [v.name for v in self.inputs])
+    output_names = property(lambda self: [v.name for v in self.outputs])
+    param_names = property(lambda self: [v.name for v in self.parameters])
+    nx = property(lambda self: len(self.states))
+    nu = property(lambda self: len(self.inputs))
+    ny = property(lambda self: len(self.outputs))
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Current parameter values by name (a copy)."""
+        return dict(zip(self.param_names, self._p.tolist()))
+
+    @property
+    def p(self) -> np.ndarray:
+        """Current parameter vector, shape ``(n_params,)``, in :attr:`param_names` order."""
+        return self._p.copy()
+
+    @property
+    def x0(self) -> np.ndarray:
+        """Default initial state (the states' start values), shape ``(nx,)``."""
+        return np.array([v.start for v in self.states])
+
+    def with_params(self, **params: float) -> "PlantModel":
+        """Return a copy of this model with parameters overridden by name.
+
+        Raises
+        ------
+        KeyError
+            For an unknown name; the message lists the valid ones.
+        ValueError
+            For a value outside the parameter's domain (e.g. a non-positive mass).
+        """
+        values = self._p.copy()
+        index = {n: i for i, n in enumerate(self.param_names)}
+        for key, val in params.items():
+            if key not in index:
+                raise KeyError(f"model {self.name!r} has no parameter {key!r}; "
+                               f"valid parameters: {', '.join(self.param_names)}")
+            values[index[key]] = self.parameters[index[key]].check(val)
+        return PlantModel(self.name, self.fmu_name, self.description, self.states, self.inputs,
+                          self.outputs, self.parameters, _symbolic=self.sym, _values=values)
+
+    def __repr__(self) -> str:
+        return (f"PlantModel({self.name!r}, states={self.state_names}, "
+                f"inputs={self.input_names}, outputs={self.output_names})")
+
+    # ------------------------------------------------------------------ numeric calls
+    def _xu(self, x, u):
+        return as_vector(x, self.nx, "state x"), as_vector(u, self.nu, "input u")
+
+    def f(self, x, u) -> np.ndarray:
+        """Continuous dynamics x' = f(x, u), shape ``(nx,)``; x in state units, u in input units."""
+        x, u = self._xu(x, u)
+        return np.asarray(self.sym.f(x, u, self._p)).reshape(self.nx)
+
+    def h(self, x) -> np.ndarray:
+        """Noise-free measurement y = h(x), shape ``(ny,)``."""
+        return np.asarray(self.sym.h(as_vector(x, self.nx, "state x"), self._p)).reshape(self.ny)
+
+    def H(self, x) -> np.ndarray:
+        """Exact measurement Jacobian dh/dx, shape ``(ny, nx)``."""
+        return np.asarray(self.sym.jac_h(as_vector(x, self.nx, "state x"), self._p))
+
+    def linearize(self, x0, u0) -> tuple[np.ndarray, np.ndarray]:
+        """Exact continuous linearisation about (x0, u0): ``A = df/dx`` (nx, nx), ``B = df/du`` (nx, nu)."""
+        x, u = self._xu(x0, u0)
+        A, B = self.sym.jac_f(x, u, self._p)
+        return np.asarray(A), np.asarray(B)
+
+    def step(self, x, u, dt: float, method: str = "euler", substeps: int = 1) -> np.ndarray:
+        """One discrete step of length ``dt`` [s] with u held constant, shape ``(nx,)``.
+
+        ``method="euler"`` with ``substeps=1`` is the papers' truth model (seed 000
+        eqs 14-17, without the noise w); ``"rk4"`` is the classical Runge-Kutta scheme
+        with ``substeps`` equal substeps.
+        """
+        check_method(method, substeps)
+        x, u = self._xu(x, u)
+        dt = _check_dt(dt)
+        return np.asarray(self.sym.step(method, int(substeps))(x, u, self._p, dt)).reshape(self.nx)
+
+    def jacobians(self, x, u, dt: float, method: str = "euler",
+                  substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """Exact Jacobians of :meth:`step`: ``F = dx_next/dx`` (nx, nx), ``G = dx_next/du`` (nx, nu)."""
+        check_method(method, substeps)
+        x, u = self._xu(x, u)
+        F, G = self.sym.step_jac(method, int(substeps))(x, u, self._p, _check_dt(dt))
+        return np.asarray(F), np.asarray(G)
+
+    def discretize(self, x0, u0, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
+        """Discrete linear model about (x0, u0) for period ``dt`` [s].
+
+        ``method="zoh"``: exact zero-order hold, ``[[Ad, Bd], [0, I]] = expm([[A, B], [0, 0]] dt)``;
+        ``method="euler"``: ``Ad = I + A dt``, ``Bd = B dt`` (seed 000 eq 20 form).
+        """
+        A, B = self.linearize(x0, u0)
+        dt = _check_dt(dt)
+        if method == "euler":
+            return np.eye(self.nx) + A * dt, B * dt
+        if method != "zoh":
+            raise ValueError(f"unknown discretisation {method!r}; valid: 'zoh', 'euler'")
+        n, m = self.nx, self.nu
+        M = np.zeros((n + m, n + m))
+        M[:n, :n], M[:n, n:] = A, B
+        E = scipy.linalg.expm(M * dt)
+        return E[:n, :n], E[:n, n:]
+
+    def simulate(self, x0, u, dt: float, n_steps: int, method: str = "euler",
+                 substeps: int = 1) -> np.ndarray:
+        """Simulate ``n_steps`` discrete steps; returns states of shape ``(n_steps + 1, nx)``.
+
+        ``u`` is either one input vector held throughout, an array of shape
+        ``(n_steps, nu)``, or a callable ``u(t) -> (nu,)`` evaluated at each step start.
+        """
+        check_method(method, substeps)
+        fn = self.sym.step(method, int(substeps))
+        x = as_vector(x0, self.nx, "initial state x0")
+        dt = _check_dt(dt)
+        if callable(u):
+            us = np.array([as_vector(u(k * dt), self.nu, f"u({k * dt})") for k in range(n_steps)])
+        else:
+            ua = np.asarray(u, dtype=float)
+            us = (np.broadcast_to(as_vector(ua, self.nu, "input u"), (n_steps, self.nu))
+                  if ua.ndim <= 1 else ua)
+            if us.shape != (n_steps, self.nu) or not np.all(np.isfinite(us)):
+                raise ValueError(f"input sequence must be finite with shape ({n_steps}, {self.nu}), "
+                                 f"got {ua.shape}")
+        if n_steps == 0:
+            return x[None, :].copy()
+        # one mapped call over the whole horizon: CasADi's mapaccum folds the step
+        xs = fn.mapaccum(n_steps)(x, us.T, self._p, dt)
+        return np.vstack([x, np.asarray(xs).T])
+
+
+def _check_dt(dt) -> float:
+    dt = float(dt)
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"time step dt must be a positive finite number of seconds, got {dt}")
+    return dt

@@ -1,0 +1,52 @@
+"""Named, unit-carrying descriptors for a plant's states, inputs, outputs and parameters."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+#: Admissible value sets for a parameter; checked in Python and in the generated FMU.
+DOMAINS = ("real", "positive", "nonnegative", "sign")
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One named scalar of a plant model.
+
+    Parameters
+    ----------
+    name : str
+        Identifier, also used as the FMI variable name (must be a legal C identifier).
+    unit : str
+        SI unit string, e.g. ``"m"``, ``"rad/s"``, ``"N.s/m"``; ``"1"`` if dimensionless.
+    description : str
+        One line shown to users and written into ``modelDescription.xml``.
+    start : float
+        Default value (parameter value, state start value, input start value).
+    domain : str
+        For parameters: one of :data:`DOMAINS`. ``"sign"`` admits only -1 and +1.
+    """
+
+    name: str
+    unit: str
+    description: str
+    start: float = 0.0
+    domain: str = "real"
+
+    def __post_init__(self):
+        if not self.name.isidentifier():
+            raise ValueError(f"variable name {self.name!r} is not a legal identifier")
+        if self.domain not in DOMAINS:
+            raise ValueError(f"variable {self.name!r}: domain {self.domain!r} not in {DOMAINS}")
+
+    def check(self, value: float) -> float:
+        """Return ``value`` as float if it lies in this variable's domain, else raise ValueError."""
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"parameter {self.name!r} must be finite, got {value!r}")
+        if self.domain == "positive" and not v > 0.0:
+            raise ValueError(f"parameter {self.name!r} [{self.unit}] must be > 0, got {v}")
+        if self.domain == "nonnegative" and not v >= 0.0:
+            raise ValueError(f"parameter {self.name!r} [{self.unit}] must be >= 0, got {v}")
+        if self.domain == "sign" and v not in (-1.0, 1.0):
+            raise ValueError(f"parameter {self.name!r} must be -1 or +1, got {v}")
+        return v
