@@ -1,0 +1,36 @@
+"""``python -m fmu_models build --out DIR [--fmi-version 2]``: build the plant FMUs."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+
+def main(argv=None) -> int:
+    from . import MODEL_NAMES
+    from .build import FMI_VERSIONS, CompilerNotFoundError, build_fmus
+
+    parser = argparse.ArgumentParser(prog="python -m fmu_models",
+                                     description="Build the plant FMUs from the CasADi models.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    b = sub.add_parser("build", help="compile and pack CartPole.fmu and InertiaWheelPendulum.fmu")
+    b.add_argument("--out", default=".", help="output directory (default: current directory)")
+    b.add_argument("--fmi-version", type=int, choices=FMI_VERSIONS, default=2,
+                   help="FMI version (2: Model Exchange + Co-Simulation)")
+    b.add_argument("--model", action="append", choices=MODEL_NAMES,
+                   help="build only this model (repeatable; default: all)")
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        paths = build_fmus(args.out, args.fmi_version, tuple(args.model or MODEL_NAMES))
+    except CompilerNotFoundError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    for p in paths:
+        print(p)
+    print(f"built {len(paths)} FMU(s) in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
