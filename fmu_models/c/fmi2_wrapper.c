@@ -27,10 +27,19 @@ static void logmsg(Instance *c, fmi2Status st, const char *cat, const char *fmt,
     va_list ap;
     if (!c || !c->cb.logger) return;
     if (st < fmi2Warning && !c->logging) return;
+    char msg[1100];
+    size_t j = 0;
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
-    c->cb.logger(c->cb.componentEnvironment, c->name, st, cat, "%s", buf);
+    /* the logger treats the message as a printf format (and '#' as a reference marker):
+     * pass it with no arguments and every '%' and '#' escaped */
+    for (size_t i = 0; buf[i] && j + 2 < sizeof msg; i++) {
+        if (buf[i] == '%' || buf[i] == '#') msg[j++] = buf[i];
+        msg[j++] = buf[i];
+    }
+    msg[j] = 0;
+    c->cb.logger(c->cb.componentEnvironment, c->name, st, cat, msg);
 }
 
 static fmi2Status fail(Instance *c, const char *fn, const char *fmt, ...) {
