@@ -48,6 +48,7 @@ def config_header(model: PlantModel, guid: str, funcs: list[ca.Function]) -> str
         f"#define VR_Y {lay.first_vr('output')}", f"#define N_REAL {lay.n_real}",
         f"#define VR_INTEGRATOR {lay.by_name('integrator').vr}",
         f"#define VR_SUBSTEPS {lay.by_name('substeps').vr}",
+        f"#define VR_TIME {lay.by_name('time').vr}",
         f"#define DEFAULT_STEP_SIZE {DEFAULT_STEP_SIZE!r}",
         *(f"#define WORK_{k.upper()} {n}" for k, n in work.items()),
         _c_array("int", "PARAM_DOMAIN", [str(DOMAINS.index(p.domain)) for p in model.parameters]),

@@ -3,7 +3,7 @@
 Real value references, in this order (the ModelVariables index is the reference + 1):
 parameters, ``step_size``, states, ``der(state)``, inputs, noise inputs ``w_<state>``,
 measured outputs. Then two Integer (enumeration) parameters: ``integrator`` and
-``substeps``.
+``substeps``, and the independent variable ``time``.
 """
 from __future__ import annotations
 
@@ -87,6 +87,8 @@ class FmuLayout:
         add(name="substeps", type="Integer", causality="parameter", variability="fixed",
             initial="exact", start=1, unit=None,
             description="internal steps per step_size (both integrators)", kind="int")
+        add(name="time", type="Real", causality="independent", variability="continuous",
+            initial=None, start=None, unit="s", description="simulation time", kind="time")
         self.variables = tuple(v)
 
     def of_kind(self, kind: str) -> list[FmuVariable]:

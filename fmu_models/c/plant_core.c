@@ -1,8 +1,12 @@
 /* pendulum-cosim: FMI-independent core of a plant FMU (see plant_core.h). */
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 #include "plant_core.h"
 #include "model_funcs.h"
+
+#define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+#define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
 
 void plant_defaults(PlantData *d) {
     memset(d, 0, sizeof(*d));
@@ -13,8 +17,8 @@ void plant_defaults(PlantData *d) {
     d->substeps = 1;
 }
 
-const char *plant_check_param(int k, double v) {
-    if (!isfinite(v)) return "must be finite";
+static const char *check_param(int k, double v) {
+    if (!isfinite(v)) return "is not finite";
     switch (PARAM_DOMAIN[k]) {
     case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
     case DOMAIN_NONNEGATIVE: return v >= 0 ? NULL : "must be >= 0";
@@ -44,7 +48,127 @@ void plant_jacobians(PlantWork *wk, const PlantData *d, double *A, double *B, do
     mdl_jac_h(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-/* One step of length T from x into xn (may alias x). Same arithmetic as PlantModel.step. */
+int plant_check_all(const PlantData *d, char *err) {
+    for (int k = 0; k < NP; k++) {
+        const char *why = check_param(k, d->p[k]);
+        if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
+    }
+    for (int i = 0; i < NX; i++)
+        if (!isfinite(d->x[i])) FAIL("start value of %s is not finite", REAL_NAMES[VR_X + i]);
+    return 0;
+}
+
+int plant_get_real(PlantWork *wk, const PlantData *d, const unsigned vr[], size_t n, double v[], char *err) {
+    double xdot[NX], y[NY];
+    int have_xdot = 0, have_y = 0;
+    for (size_t i = 0; i < n; i++) {
+        unsigned r = vr[i];
+        if (IN(r, VR_DX, NX)) {
+            if (!have_xdot) { plant_f(wk, d, d->x, xdot); have_xdot = 1; }
+            v[i] = xdot[r - VR_DX];
+        } else if (IN(r, VR_Y, NY)) {
+            if (!have_y) { plant_h(wk, d, y); have_y = 1; }
+            v[i] = y[r - VR_Y];
+        } else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
+        else if (r == VR_STEP) v[i] = d->step_size;
+        else if (IN(r, VR_X, NX)) v[i] = d->x[r - VR_X];
+        else if (IN(r, VR_U, NU)) v[i] = d->u[r - VR_U];
+        else if (IN(r, VR_W, NX)) v[i] = d->w[r - VR_W];
+        else if (r == VR_TIME) v[i] = d->time;
+        else FAIL("no Real variable has value reference %u", r);
+    }
+    return 0;
+}
+
+int plant_set_real(PlantData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
+    for (size_t i = 0; i < n; i++) {
+        unsigned r = vr[i];
+        if (r >= N_REAL) FAIL("no settable Real variable has value reference %u", r);
+        if (!isfinite(v[i])) FAIL("%s: value %g is not finite", REAL_NAMES[r], v[i]);
+        if (IN(r, VR_P, NP)) {
+            const char *why = check_param(r - VR_P, v[i]);
+            if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", REAL_NAMES[r]);
+            if (why) FAIL("parameter %s = %g %s", REAL_NAMES[r], v[i], why);
+            d->p[r - VR_P] = v[i];
+        } else if (r == VR_STEP) {
+            if (!before_run) FAIL("step_size is fixed: set it before leaving initialization mode");
+            if (!(v[i] > 0)) FAIL("step_size = %g must be > 0", v[i]);
+            d->step_size = v[i];
+        } else if (IN(r, VR_X, NX)) {
+            if (!before_run)
+                FAIL("start value of state %s can only be set before leaving initialization mode "
+                     "(use the FMU state or SetContinuousStates)", REAL_NAMES[r]);
+            d->x[r - VR_X] = v[i];
+        } else if (IN(r, VR_U, NU)) d->u[r - VR_U] = v[i];
+        else if (IN(r, VR_W, NX)) d->w[r - VR_W] = v[i];
+        else FAIL("%s is calculated and cannot be set", REAL_NAMES[r]);
+    }
+    return 0;
+}
+
+int plant_get_int(const PlantData *d, const unsigned vr[], size_t n, long long v[], char *err) {
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == VR_INTEGRATOR) v[i] = d->integrator;
+        else if (vr[i] == VR_SUBSTEPS) v[i] = d->substeps;
+        else FAIL("no Integer variable has value reference %u", vr[i]);
+    }
+    return 0;
+}
+
+int plant_set_int(PlantData *d, const unsigned vr[], size_t n, const long long v[], char *err) {
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == VR_INTEGRATOR) {
+            if (v[i] != INTEGRATOR_EULER && v[i] != INTEGRATOR_RK4)
+                FAIL("integrator = %lld: valid values are 1 (euler) and 2 (rk4)", v[i]);
+            d->integrator = (int)v[i];
+        } else if (vr[i] == VR_SUBSTEPS) {
+            if (v[i] < 1 || v[i] > 1000000) FAIL("substeps = %lld must be in [1, 1000000]", v[i]);
+            d->substeps = (int)v[i];
+        } else FAIL("no Integer variable has value reference %u", vr[i]);
+    }
+    return 0;
+}
+
+int plant_set_states(PlantData *d, const double x[], size_t nx, char *err) {
+    if (nx != NX) FAIL("%zu states given, this model has %d", nx, NX);
+    for (size_t i = 0; i < nx; i++)
+        if (!isfinite(x[i])) FAIL("state %s = %g is not finite", REAL_NAMES[VR_X + i], x[i]);
+    memcpy(d->x, x, sizeof(double) * NX);
+    return 0;
+}
+
+int plant_directional(PlantWork *wk, const PlantData *d, const unsigned unk[], size_t nU,
+                      const unsigned kn[], size_t nK, const double seed[], double sens[], char *err) {
+    double A[NX * NX], Bm[NX * NU + 1], H[NY * NX];
+    for (size_t k = 0; k < nK; k++)
+        if (!(IN(kn[k], VR_X, NX) || IN(kn[k], VR_U, NU) || IN(kn[k], VR_W, NX)))
+            FAIL("value reference %u is not a state or an input", kn[k]);
+    for (size_t i = 0; i < nU; i++)
+        if (!(IN(unk[i], VR_DX, NX) || IN(unk[i], VR_Y, NY) || IN(unk[i], VR_X, NX)))
+            FAIL("value reference %u is not a derivative or an output", unk[i]);
+    plant_jacobians(wk, d, A, Bm, H);
+    for (size_t i = 0; i < nU; i++) {
+        unsigned r = unk[i];
+        double s = 0;
+        for (size_t k = 0; k < nK; k++) {
+            unsigned q = kn[k];
+            double dz = 0;
+            if (IN(r, VR_DX, NX)) {
+                if (IN(q, VR_X, NX)) dz = A[(r - VR_DX) + NX * (q - VR_X)];
+                else if (IN(q, VR_U, NU)) dz = Bm[(r - VR_DX) + NX * (q - VR_U)];
+            } else if (IN(r, VR_Y, NY)) {
+                if (IN(q, VR_X, NX)) dz = H[(r - VR_Y) + NY * (q - VR_X)];
+            } else {
+                dz = (q == r) ? 1.0 : 0.0;   /* a state read as an output */
+            }
+            s += dz * seed[k];
+        }
+        sens[i] = s;
+    }
+    return 0;
+}
+
+/* One step of length T on x (in place). Same arithmetic as PlantModel.step. */
 static void one_step(PlantWork *wk, const PlantData *d, double T, double *x) {
     double k1[NX], k2[NX], k3[NX], k4[NX], z[NX];
     plant_f(wk, d, x, k1);
@@ -61,11 +185,15 @@ static void one_step(PlantWork *wk, const PlantData *d, double T, double *x) {
     for (int i = 0; i < NX; i++) x[i] = x[i] + (T / 6) * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
 }
 
-int plant_advance(PlantWork *wk, PlantData *d, double h) {
+int plant_do_step(PlantWork *wk, PlantData *d, double t, double h, char *err) {
     double x[NX];
     double T = d->step_size / d->substeps;
-    double ratio = h / T;
-    double n = floor(ratio + 0.5), rest = 0.0;
+    double ratio, n, rest = 0.0;
+    if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
+    if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
+        FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
+    ratio = h / T;
+    n = floor(ratio + 0.5);
     /* a communication step that is not a whole number of internal steps ends with a
      * partial step of the remaining length */
     if (fabs(ratio - n) > 1e-9 * fmax(1.0, ratio)) {
@@ -77,9 +205,19 @@ int plant_advance(PlantWork *wk, PlantData *d, double h) {
     if (rest > 0) one_step(wk, d, rest, x);
     for (int i = 0; i < NX; i++) {
         x[i] += d->w[i];
-        if (!isfinite(x[i])) return 1;
+        if (!isfinite(x[i]))
+            FAIL("the state became non-finite (%s) in the step from t = %g s to %g s; state kept at t = %g s",
+                 REAL_NAMES[VR_X + i], t, t + h, t);
     }
     memcpy(d->x, x, sizeof(x));
-    d->time += h;
+    d->time = t + h;
+    return 0;
+}
+
+int plant_deserialize(const unsigned char *bytes, size_t size, SavedState *out, char *err) {
+    if (size != sizeof(SavedState)) FAIL("%zu bytes given, expected %zu", size, sizeof(SavedState));
+    memcpy(out, bytes, sizeof(SavedState));
+    if (out->magic != STATE_MAGIC || out->size != sizeof(SavedState))
+        FAIL("bytes are not a serialised state of this FMU");
     return 0;
 }
