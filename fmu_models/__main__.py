@@ -16,7 +16,7 @@ def main(argv=None) -> int:
     b = sub.add_parser("build", help="compile and pack CartPole.fmu and InertiaWheelPendulum.fmu")
     b.add_argument("--out", default=".", help="output directory (default: current directory)")
     b.add_argument("--fmi-version", type=int, choices=FMI_VERSIONS, default=2,
-                   help="FMI version (2: Model Exchange + Co-Simulation)")
+                   help="FMI version, 2 (default) or 3; both hold Model Exchange and Co-Simulation")
     b.add_argument("--model", action="append", choices=MODEL_NAMES,
                    help="build only this model (repeatable; default: all)")
     args = parser.parse_args(argv)

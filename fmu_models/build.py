@@ -21,10 +21,10 @@ import fmpy
 
 from . import MODEL_NAMES, get_model
 from .codegen import C_DIR, write_sources
-from .model_description import fmi2_xml
+from .model_description import build_description_xml, fmi2_xml, fmi3_xml
 from .plant import PlantModel
 
-FMI_VERSIONS = (2,)
+FMI_VERSIONS = (2, 3)
 _FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 
 
@@ -77,7 +77,7 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     out_dir : path
         Directory to write ``<fmu_name>.fmu`` into (created if missing).
     fmi_version : int
-        2 (Model Exchange and Co-Simulation in one FMU).
+        2 or 3; either way Model Exchange and Co-Simulation in one FMU.
 
     Raises
     ------
@@ -112,7 +112,11 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             raise RuntimeError(f"compiling {model.fmu_name} failed:\n{' '.join(cmd)}\n{proc.stderr}")
-        xml = fmi2_xml(model, guid, c_files)
+        if fmi_version == 2:
+            xml = fmi2_xml(model, guid, c_files)
+        else:
+            xml = fmi3_xml(model, guid)
+            (src / "buildDescription.xml").write_text(build_description_xml(model, c_files))
         (tmp / "modelDescription.xml").write_text(xml)
         fmu = out_dir / f"{model.fmu_name}.fmu"
         with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:

@@ -90,6 +90,15 @@ def _units_xml(lay: FmuLayout) -> list[str]:
     return out
 
 
+_GENERATION = dict(generationTool="pendulum-cosim (CasADi code generation)",
+                   generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"))
+_LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description="errors"/>'
+                   '<Category name="logAll" description="everything"/></LogCategories>')
+_DEFAULT_EXPERIMENT = f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=5.0, stepSize=0.01)}/>"
+_ITEMS = ('<Item name="euler" value="1" description="forward Euler (seed 000 eqs 14-17)"/>'
+          '<Item name="rk4" value="2" description="classical Runge-Kutta 4"/>')
+
+
 def fmi2_xml(model: PlantModel, guid: str, source_files: list[str]) -> str:
     """FMI 2.0 model description with Model Exchange and Co-Simulation."""
     lay = FmuLayout(model)
@@ -100,23 +109,16 @@ def fmi2_xml(model: PlantModel, guid: str, source_files: list[str]) -> str:
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            "<fmiModelDescription" + _attrs(
                fmiVersion="2.0", modelName=ident, guid=guid, description=model.description,
-               generationTool="pendulum-cosim (CasADi code generation)",
-               generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"),
-               variableNamingConvention="structured", numberOfEventIndicators=0) + ">",
+               **_GENERATION, variableNamingConvention="structured",
+               numberOfEventIndicators=0) + ">",
            f"  <ModelExchange{_attrs(**caps, completedIntegratorStepNotNeeded='true')}>"
            f"<SourceFiles>{srcs}</SourceFiles></ModelExchange>",
            f"  <CoSimulation{_attrs(**caps, canHandleVariableCommunicationStepSize='true', canInterpolateInputs='false', maxOutputDerivativeOrder=0)}>"
            f"<SourceFiles>{srcs}</SourceFiles></CoSimulation>",
            *_units_xml(lay),
            "  <TypeDefinitions>",
-           '    <SimpleType name="Integrator"><Enumeration>'
-           '<Item name="euler" value="1" description="forward Euler (seed 000 eqs 14-17)"/>'
-           '<Item name="rk4" value="2" description="classical Runge-Kutta 4"/>'
-           "</Enumeration></SimpleType>",
-           "  </TypeDefinitions>",
-           '  <LogCategories><Category name="logStatusError" description="errors"/>'
-           '<Category name="logAll" description="everything"/></LogCategories>',
-           f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=5.0, stepSize=0.01)}/>",
+           f'    <SimpleType name="Integrator"><Enumeration>{_ITEMS}</Enumeration></SimpleType>',
+           "  </TypeDefinitions>", _LOG_CATEGORIES, _DEFAULT_EXPERIMENT,
            "  <ModelVariables>"]
     for v in lay.variables:
         head = _attrs(name=v.name, valueReference=v.vr, description=v.description,
@@ -150,3 +152,74 @@ def fmi2_xml(model: PlantModel, guid: str, source_files: list[str]) -> str:
     out.append("  </ModelStructure>")
     out.append("</fmiModelDescription>")
     return "\n".join(out) + "\n"
+
+
+def fmi3_xml(model: PlantModel, token: str) -> str:
+    """FMI 3.0 model description with Model Exchange and Co-Simulation.
+
+    ModelStructure dependencies are value references (FMI 3.0), here index - 1.
+    """
+    lay = FmuLayout(model)
+    ident = model.fmu_name
+    caps = dict(modelIdentifier=ident, canGetAndSetFMUState="true", canSerializeFMUState="true",
+                providesDirectionalDerivative="true", providesAdjointDerivatives="true")
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           "<fmiModelDescription" + _attrs(
+               fmiVersion="3.0", modelName=ident, instantiationToken=token,
+               description=model.description, **_GENERATION,
+               variableNamingConvention="structured") + ">",
+           f"  <ModelExchange{_attrs(**caps, needsCompletedIntegratorStep='false')}/>",
+           f"  <CoSimulation{_attrs(**caps, canHandleVariableCommunicationStepSize='true', maxOutputDerivativeOrder=0, hasEventMode='false', providesIntermediateUpdate='false')}/>",
+           *_units_xml(lay),
+           f'  <TypeDefinitions><EnumerationType name="Integrator">{_ITEMS}</EnumerationType></TypeDefinitions>',
+           _LOG_CATEGORIES, _DEFAULT_EXPERIMENT,
+           "  <ModelVariables>"]
+    # FMI 3.0 wants the independent variable first; value references stay those of the layout
+    ordered = sorted(lay.variables, key=lambda v: v.kind != "time")
+    for v in ordered:
+        a = dict(name=v.name, valueReference=v.vr, description=v.description,
+                 causality=v.causality, variability=v.variability, initial=v.initial)
+        if v.type == "Real":
+            deriv = None if v.derivative_of is None else v.derivative_of - 1
+            start = None if v.start is None else repr(v.start)
+            out.append(f"    <Float64{_attrs(**a, start=start, unit=v.unit, derivative=deriv)}/>")
+        elif v.type == "Enumeration":
+            out.append(f"    <Enumeration{_attrs(**a, declaredType='Integrator', start=v.start)}/>")
+        else:
+            out.append(f"    <Int32{_attrs(**a, start=v.start, min=1)}/>")
+    out.append("  </ModelVariables>")
+    st = _Structure(model, lay)
+    vr = lambda idx: [i - 1 for i in idx]   # noqa: E731  index -> value reference
+    out.append("  <ModelStructure>")
+    for k in st.state_idx:
+        out.append(_unknown3("Output", k - 1, [k - 1], ["constant"]))
+    for j, k in enumerate(st.out_idx):
+        deps, kinds = st.output(j)
+        out.append(_unknown3("Output", k - 1, vr(deps), kinds))
+    for i, k in enumerate(st.der_idx):
+        deps, kinds = st.derivative(i)
+        out.append(_unknown3("ContinuousStateDerivative", k - 1, vr(deps), kinds))
+    unknowns = [(k, st.derivative(i, True)[0]) for i, k in enumerate(st.der_idx)]
+    unknowns += [(k, st.output(j, True)[0]) for j, k in enumerate(st.out_idx)]
+    for k, deps in sorted(unknowns):
+        out.append(_unknown3("InitialUnknown", k - 1, vr(deps)))
+    out.append("  </ModelStructure>")
+    out.append("</fmiModelDescription>")
+    return "\n".join(out) + "\n"
+
+
+def _unknown3(tag, vr, deps, kinds=None):
+    a = {"valueReference": vr, "dependencies": " ".join(map(str, sorted(deps)))}
+    if kinds is not None:
+        order = sorted(range(len(deps)), key=lambda i: deps[i])
+        a["dependenciesKind"] = " ".join(kinds[i] for i in order)
+    return f"    <{tag}{_attrs(**a)}/>"
+
+
+def build_description_xml(model: PlantModel, source_files: list[str]) -> str:
+    """FMI 3.0 ``sources/buildDescription.xml``: how to compile the shipped C sources."""
+    files = "".join(f"<SourceFile{_attrs(name=f)}/>" for f in source_files)
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiBuildDescription fmiVersion="3.0">'
+            f'<BuildConfiguration{_attrs(modelIdentifier=model.fmu_name)}>'
+            f'<SourceFileSet language="C99">{files}</SourceFileSet></BuildConfiguration>'
+            "</fmiBuildDescription>\n")
