@@ -1,0 +1,59 @@
+"""Benchmark: FMU build time and the cost of one doStep through fmpy.
+
+Run: python bench/bench_fmu.py
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
+
+from fmu_models.build import build_fmu
+
+
+def time_steps(path, version, n=20_000, with_input=True):
+    md = read_model_description(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    cls = FMU2Slave if version == 2 else FMU3Slave
+    fmu = cls(guid=md.guid, unzipDirectory=extract(path),
+              modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench")
+    fmu.instantiate()
+    if version == 2:
+        fmu.setupExperiment(startTime=0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    get = fmu.getReal if version == 2 else fmu.getFloat64
+    set_ = fmu.setReal if version == 2 else fmu.setFloat64
+    outs, ins = [vr["y_x"], vr["y_theta"]], [vr["F"]]
+    t, h = 0.0, 0.001
+    t0 = time.perf_counter()
+    for k in range(n):
+        if with_input:
+            set_(ins, [0.5 if k % 2000 < 1000 else -0.5])
+        fmu.doStep(t, h)
+        get(outs)
+        t += h
+    dt = (time.perf_counter() - t0) / n
+    fmu.terminate()
+    fmu.freeInstance()
+    return dt
+
+
+def main():
+    with tempfile.TemporaryDirectory() as out:
+        for version in (2, 3):
+            t0 = time.perf_counter()
+            path = str(build_fmu("cartpole", out + f"/v{version}", fmi_version=version))
+            build_s = time.perf_counter() - t0
+            a = np.median([time_steps(path, version, with_input=False) for _ in range(3)])
+            b = np.median([time_steps(path, version, with_input=True) for _ in range(3)])
+            print(f"FMI {version}.0 CartPole: build {build_s:.2f} s; doStep + 2 outputs "
+                  f"{a * 1e6:.2f} us; with 1 input set each step {b * 1e6:.2f} us")
+
+
+if __name__ == "__main__":
+    main()
