@@ -1,1 +1,18 @@
-"""State estimators (KF, EKF, UKF, IAE, MF-IAE) for the plant models of `fmu_models`."""
+"""State estimators for the plant models of :mod:`fmu_models`.
+
+Every filter has the interface of :class:`~estimators.base.KalmanBase`:
+``predict(u)``, ``update(y)``, ``step(u, y)`` and the attributes ``x, P, Q, R,
+innovation, S, K, nis, log``.
+
+>>> from fmu_models import get_model
+>>> from estimators import EKF, discretize
+>>> sys_ = discretize(get_model("cartpole"), dt=0.01)
+>>> ekf = EKF(sys_, x0=[0.5, 0, 1.8, 0.5], P0=1.0, Q=0.2, R=0.1)
+"""
+from .base import KalmanBase
+from .ekf import EKF
+from .kf import KF
+from .system import DiscreteModel, augment_rate_bias, discretize
+from .ukf import UKF
+
+__all__ = ["KalmanBase", "EKF", "KF", "UKF", "DiscreteModel", "discretize", "augment_rate_bias"]

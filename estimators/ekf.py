@@ -1,0 +1,32 @@
+"""Extended Kalman filter with the model's exact CasADi Jacobians (seed 002 eqs 10-16)."""
+from __future__ import annotations
+
+import casadi as ca
+
+from .base import KalmanBase, joseph_update, symmetric
+
+
+class EKF(KalmanBase):
+    """Extended Kalman filter.
+
+    Prediction ``x^- = f(x, u)``, ``P^- = F P F^T + Q`` with ``F = df/dx`` exact (CasADi
+    AD); update with ``H = dh/dx`` at ``x^-``, gain by a linear solve and the Joseph form.
+    See :class:`~estimators.base.KalmanBase` for parameters and attributes.
+    """
+
+    name = "EKF"
+
+    def _predict_expr(self, x, P, u, Q):
+        s = self.system
+        xp = ca.substitute(s.fx, ca.vertcat(s.x, s.u), ca.vertcat(x, u))
+        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
+        return xp, symmetric(ca.mtimes([F, P, F.T]) + Q)
+
+    def _update_expr(self, xp, Pp, y, R):
+        s = self.system
+        yp = ca.substitute(s.hx, s.x, xp)
+        H = ca.substitute(ca.jacobian(s.hx, s.x), s.x, xp)
+        S = symmetric(ca.mtimes([H, Pp, H.T]) + R)
+        innov = y - yp
+        xu, Pu, K = joseph_update(xp, Pp, innov, H, S, R)
+        return xu, Pu, innov, S, K

@@ -1,0 +1,131 @@
+"""Discrete-time models that the filters run on, as CasADi expressions with numbers bound.
+
+A :class:`DiscreteModel` is ``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` with every model
+parameter replaced by its value, so that a filter can fuse prediction, Jacobians and
+update into one CasADi Function. Build one from a plant with :func:`discretize`.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from fmu_models.plant import PlantModel, as_vector, check_method
+
+
+class DiscreteModel:
+    """``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` built from CasADi SX expressions.
+
+    Parameters
+    ----------
+    x, u : casadi.SX
+        Column symbols of the state (nx) and input (nu).
+    f, h : casadi.SX
+        Expressions of the next state (nx) and of the measurement (ny) in ``x`` and ``u``.
+    dt : float
+        Sample period [s].
+    state_names, input_names, output_names : sequence of str
+    description : str
+
+    Attributes
+    ----------
+    nx, nu, ny : int
+    """
+
+    def __init__(self, x: ca.SX, u: ca.SX, f: ca.SX, h: ca.SX, dt: float,
+                 state_names: Sequence[str], input_names: Sequence[str],
+                 output_names: Sequence[str], description: str = ""):
+        self.x, self.u, self.fx, self.hx = x, u, ca.densify(f), ca.densify(h)
+        self.dt = float(dt)
+        self.state_names, self.input_names = list(state_names), list(input_names)
+        self.output_names, self.description = list(output_names), description
+        self.nx, self.nu, self.ny = x.numel(), u.numel(), h.numel()
+        if f.numel() != self.nx:
+            raise ValueError(f"f has {f.numel()} entries, expected nx = {self.nx}")
+        if ca.depends_on(self.hx, u):
+            raise ValueError("h must not depend on the input u (no feed-through)")
+        F, G = ca.jacobian(self.fx, x), ca.jacobian(self.fx, u)
+        H = ca.jacobian(self.hx, x)
+        self._f = ca.Function("f", [x, u], [self.fx])
+        self._h = ca.Function("h", [x], [self.hx])
+        self._jac = ca.Function("jac_fu", [x, u], [ca.densify(F), ca.densify(G)])
+        self._H = ca.Function("jac_h", [x], [ca.densify(H)])
+        self.cache: dict = {}   # filters keep their compiled functions here, per model
+
+    def __repr__(self):
+        return (f"DiscreteModel({self.description!r}, dt={self.dt}, states={self.state_names}, "
+                f"outputs={self.output_names})")
+
+    def f(self, x, u) -> np.ndarray:
+        """Next state, shape ``(nx,)``."""
+        return np.asarray(self._f(as_vector(x, self.nx, "x"), as_vector(u, self.nu, "u"))).ravel()
+
+    def h(self, x) -> np.ndarray:
+        """Measurement, shape ``(ny,)``."""
+        return np.asarray(self._h(as_vector(x, self.nx, "x"))).ravel()
+
+    def F(self, x, u) -> np.ndarray:
+        """Exact state Jacobian of f, shape ``(nx, nx)``."""
+        return np.asarray(self._jac(as_vector(x, self.nx, "x"), as_vector(u, self.nu, "u"))[0])
+
+    def G(self, x, u) -> np.ndarray:
+        """Exact input Jacobian of f, shape ``(nx, nu)``."""
+        return np.asarray(self._jac(as_vector(x, self.nx, "x"), as_vector(u, self.nu, "u"))[1])
+
+    def H(self, x) -> np.ndarray:
+        """Exact measurement Jacobian, shape ``(ny, nx)``."""
+        return np.asarray(self._H(as_vector(x, self.nx, "x")))
+
+    def linearized(self, x_op, u_op) -> "DiscreteModel":
+        """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001).
+
+        ``x_{k+1} = f(x_op, u_op) + F0 (x_k - x_op) + G0 (u_k - u_op)``,
+        ``y_k = h(x_op) + H0 (x_k - x_op)``, with the exact Jacobians of the discrete map
+        (for the Euler map, ``F0 = I + T A``: seed 000 eq 20).
+        """
+        x_op, u_op = as_vector(x_op, self.nx, "x_op"), as_vector(u_op, self.nu, "u_op")
+        F0, G0 = (ca.DM(M) for M in (self.F(x_op, u_op), self.G(x_op, u_op)))
+        c, y0, H0 = ca.DM(self.f(x_op, u_op)), ca.DM(self.h(x_op)), ca.DM(self.H(x_op))
+        x, u = ca.SX.sym("x", self.nx), ca.SX.sym("u", self.nu)
+        f = c + ca.mtimes(F0, x - x_op) + ca.mtimes(G0, u - u_op)
+        h = y0 + ca.mtimes(H0, x - x_op)
+        return DiscreteModel(x, u, f, h, self.dt, self.state_names, self.input_names,
+                             self.output_names, f"{self.description}, linearised")
+
+
+def discretize(model: PlantModel, dt: float, method: str = "euler", substeps: int = 1) -> DiscreteModel:
+    """The discrete map of a :class:`~fmu_models.PlantModel` with its current parameters.
+
+    ``method="euler"``, ``substeps=1`` is the papers' model (seed 000 eqs 14-17 and 23).
+    """
+    check_method(method, substeps)
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+    x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
+    p = ca.DM(model.p)
+    f = model.sym.step(method, int(substeps))(x, u, p, dt)
+    h = model.sym.h(x, p)
+    return DiscreteModel(x, u, f, h, dt, model.state_names, model.input_names,
+                         model.output_names, f"{model.name} ({method}, {substeps} substep(s))")
+
+
+def augment_rate_bias(system: DiscreteModel, output: str) -> DiscreteModel:
+    """Augment ``system`` with a constant sensor offset ``b`` on measured output ``output``.
+
+    State ``[x, b]`` with ``b_{k+1} = b_k``; the measurement ``output`` becomes
+    ``h_j(x) + b``. This is seed 002's EKF that estimates and removes the gyroscope offset
+    (``output="y_alpha_dot"`` on the wheel pendulum).
+    """
+    if output not in system.output_names:
+        raise KeyError(f"no output {output!r}; valid outputs: {', '.join(system.output_names)}")
+    j = system.output_names.index(output)
+    xa = ca.SX.sym("xa", system.nx + 1)
+    x, b = xa[: system.nx], xa[system.nx]
+    f = ca.vertcat(ca.substitute(system.fx, system.x, x), b)
+    e = ca.DM.zeros(system.ny)
+    e[j] = 1
+    h = ca.substitute(system.hx, system.x, x) + e * b
+    return DiscreteModel(xa, system.u, f, h, system.dt,
+                         system.state_names + [f"bias_{output}"], system.input_names,
+                         system.output_names, f"{system.description}, bias on {output}")

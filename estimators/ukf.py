@@ -1,0 +1,99 @@
+"""Unscented Kalman filter with the scaled unscented transform (seed 001 section 1)."""
+from __future__ import annotations
+
+import casadi as ca
+
+from .base import KalmanBase, symmetric
+from .system import DiscreteModel
+
+
+def cholesky_lower(P: ca.SX) -> ca.SX:
+    """Lower-triangular L with ``P = L L^T``, written out for a symbolic n x n matrix."""
+    n = P.shape[0]
+    L = ca.SX.zeros(n, n)
+    for j in range(n):
+        d = P[j, j] - sum((L[j, k] ** 2 for k in range(j)), ca.SX(0))
+        L[j, j] = ca.sqrt(d)
+        for i in range(j + 1, n):
+            L[i, j] = (P[i, j] - sum((L[i, k] * L[j, k] for k in range(j)), ca.SX(0))) / L[j, j]
+    return L
+
+
+class UKF(KalmanBase):
+    """Unscented Kalman filter (Julier; scaled sigma points of van der Merwe).
+
+    ``2n+1`` sigma points ``x``, ``x +/- sqrt(n + lambda) L_i`` with ``P = L L^T``
+    (Cholesky), ``lambda = alpha^2 (n + kappa) - n``; mean weights
+    ``Wm0 = lambda/(n + lambda)``, covariance weight ``Wc0 = Wm0 + 1 - alpha^2 + beta``,
+    others ``1/(2(n + lambda))``. The measurement sigma points are drawn anew from the
+    prior ``(x^-, P^-)``; update ``K = Pxy S^{-1}`` (by a solve), ``P = P^- - K S K^T``.
+    A covariance that is not positive definite makes the Cholesky factor NaN: the step
+    then raises FloatingPointError and keeps the previous state.
+
+    Parameters
+    ----------
+    system, x0, P0, Q, R, backend
+        As :class:`~estimators.base.KalmanBase`.
+    alpha : float
+        Spread of the sigma points, 0 < alpha <= 1 (default 0.5, see Notes).
+    beta : float
+        Prior knowledge of the distribution; 2 is optimal for a Gaussian (default 2).
+    kappa : float
+        Secondary scaling, commonly ``3 - n`` or 0 (default 0).
+
+    Notes
+    -----
+    ``alpha = 0.5`` is the default: the often quoted 1e-3 makes ``Wc0`` about -1e6 and
+    the covariance update numerically fragile for nonlinear models.
+    """
+
+    name = "UKF"
+
+    def __init__(self, system: DiscreteModel, x0, P0, Q, R, alpha: float = 0.5,
+                 beta: float = 2.0, kappa: float = 0.0, backend: str = "compiled"):
+        n = system.nx
+        if not (0 < alpha <= 1):
+            raise ValueError(f"alpha must be in (0, 1], got {alpha}")
+        if not (n + kappa > 0):
+            raise ValueError(f"kappa must satisfy n + kappa > 0 (n = {n}), got {kappa}")
+        self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
+        lam = alpha**2 * (n + kappa) - n
+        self.lam = lam
+        self.Wm = [lam / (n + lam)] + [0.5 / (n + lam)] * (2 * n)
+        self.Wc = [lam / (n + lam) + 1 - alpha**2 + beta] + [0.5 / (n + lam)] * (2 * n)
+        super().__init__(system, x0, P0, Q, R, backend)
+
+    def _cache_key(self):
+        return (type(self).__name__, self.alpha, self.beta, self.kappa)
+
+    def _sigma_points(self, x, P):
+        n = self.system.nx
+        L = cholesky_lower((n + self.lam) * P)
+        return [x] + [x + L[:, i] for i in range(n)] + [x - L[:, i] for i in range(n)]
+
+    @staticmethod
+    def _mean_cov(points, Wm, Wc):
+        mean = sum((w * p for w, p in zip(Wm, points)), ca.SX.zeros(points[0].shape))
+        cov = sum((w * ca.mtimes(p - mean, (p - mean).T) for w, p in zip(Wc, points)),
+                  ca.SX.zeros(points[0].numel(), points[0].numel()))
+        return mean, cov
+
+    def _predict_expr(self, x, P, u, Q):
+        s = self.system
+        f = ca.Function("f", [s.x, s.u], [s.fx])
+        xp, Pp = self._mean_cov([f(p, u) for p in self._sigma_points(x, P)], self.Wm, self.Wc)
+        return xp, symmetric(Pp + Q)
+
+    def _update_expr(self, xp, Pp, y, R):
+        s = self.system
+        h = ca.Function("h", [s.x], [s.hx])
+        # sigma points redrawn from the prior (x^-, P^-), so that Q is in S and Pxy
+        sig = self._sigma_points(xp, Pp)
+        sig_y = [h(p) for p in sig]
+        yp, S = self._mean_cov(sig_y, self.Wm, self.Wc)
+        S = symmetric(S + R)
+        Pxy = sum((w * ca.mtimes(p - xp, (q - yp).T) for w, p, q in zip(self.Wc, sig, sig_y)),
+                  ca.SX.zeros(s.nx, s.ny))
+        K = ca.solve(S, Pxy.T).T
+        innov = y - yp
+        return xp + ca.mtimes(K, innov), symmetric(Pp - ca.mtimes([K, S, K.T])), innov, S, K
