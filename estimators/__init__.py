@@ -11,8 +11,12 @@ innovation, S, K, nis, log``.
 """
 from .base import KalmanBase
 from .ekf import EKF
+from .iae import IAE
+from .fuzzy import MamdaniFuzzy
 from .kf import KF
-from .system import DiscreteModel, augment_rate_bias, discretize
+from .mfiae import MFIAE
+from .system import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ukf import UKF
 
-__all__ = ["KalmanBase", "EKF", "KF", "UKF", "DiscreteModel", "discretize", "augment_rate_bias"]
+__all__ = ["KalmanBase", "EKF", "KF", "UKF", "IAE", "MFIAE", "MamdaniFuzzy", "DiscreteModel", "discretize",
+           "augment_rate_bias", "linear_model"]

@@ -1,11 +1,14 @@
 """The interface and machinery shared by every Gaussian filter in this package.
 
-A filter builds three CasADi Functions from the model's expressions, once per model
-(cached on the :class:`~estimators.system.DiscreteModel`): ``predict``, ``update`` and the
-fused ``step`` (predict then update). Each is bound to the filter's numpy arrays with
-:class:`~estimators._buffered.BufferedFunction`, so a step is one call into CasADi plus a
-few array copies. Every Function also returns a status: 1 if an input was NaN or inf,
-2 if the result was not finite; the filter then raises and keeps its previous state.
+A filter is a *state* (arrays ``x, P, Q, R`` and, for adaptive filters, more) and three
+CasADi Functions built once per model (cached on the
+:class:`~estimators.system.DiscreteModel`) and compiled to native code: ``predict``,
+``update`` and the fused ``step``, which maps the whole state to the next one. Each is
+bound to the filter's numpy arrays with :class:`~estimators._buffered.BufferedFunction`;
+the fused step ping-pongs between two copies of the state, so a step is one call into
+native code plus the copies of ``u`` and ``y``. Every Function also returns a status: 1
+if an input was NaN or inf, 2 if the result was not finite; the filter then raises and
+keeps its previous state.
 """
 from __future__ import annotations
 
@@ -15,9 +18,12 @@ import numpy as np
 from . import checks
 from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
+from .history import NoiseHistory
 from .system import DiscreteModel
 
 OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
+#: Outputs of every fused step besides the state, in order.
+DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis")
 
 
 def symmetric(M: ca.SX) -> ca.SX:
@@ -44,6 +50,10 @@ def _finite(expr_list) -> ca.SX:
     return ca.fabs(total) < ca.inf
 
 
+def _status(inputs, outputs):
+    return ca.if_else(_finite(inputs), ca.if_else(_finite(outputs), OK, BAD_RESULT), BAD_INPUT)
+
+
 class KalmanBase:
     """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``.
 
@@ -57,6 +67,9 @@ class KalmanBase:
         Initial state covariance (nx, nx), process noise covariance (nx, nx) and
         measurement noise covariance (ny, ny); each may also be a diagonal vector or a
         scalar (times identity). Must be symmetric positive definite.
+    backend : {"compiled", "vm"}
+        Run the filter's CasADi Functions as compiled native code (cached on disk, about
+        10x faster; needs a C compiler, else falls back to "vm") or in CasADi's VM.
 
     Attributes
     ----------
@@ -77,12 +90,13 @@ class KalmanBase:
     nis : float
         Normalised innovation squared ``innovation^T S^{-1} innovation``.
     backend : str
-        ``"compiled"`` (native code, default) or ``"vm"`` (CasADi's virtual machine).
+        The backend in use.
     k : int
         Number of predictions done.
-    log : list of dict
-        Adaptation record ``{"k", "Q", "R"}``, one entry per change of Q or R (adaptive
-        filters append every step; the first entry holds the initial values).
+    history : NoiseHistory
+        Record of the diagonals of Q and R: the initial values, each :meth:`set_noise`,
+        and every adaptation of an adaptive filter; :meth:`noise_history` gives it as a
+        DataFrame.
     """
 
     name = "base"
@@ -92,24 +106,35 @@ class KalmanBase:
             raise TypeError("system must be a DiscreteModel (build one with estimators.discretize)")
         self.system = system
         n, m, p = system.nx, system.nu, system.ny
-        # canonical arrays, shared by the bound functions (column-major flat storage)
-        self._x = checks.vector(x0, n, "x0").copy()
-        self._P = np.asfortranarray(checks.covariance(P0, n, "P0")).ravel(order="F").copy()
-        self._Q = checks.covariance(Q, n, "Q").ravel(order="F").copy()
-        self._R = checks.covariance(R, p, "R").ravel(order="F").copy()
-        self._u, self._y = np.zeros(m), np.zeros(p)
         self._nu, self._ny = m, p
+        init = {"x": checks.vector(x0, n, "x0"),
+                "P": checks.covariance(P0, n, "P0").ravel(order="F"),
+                "Q": checks.covariance(Q, n, "Q").ravel(order="F"),
+                "R": checks.covariance(R, p, "R").ravel(order="F"),
+                **self._extra_state_init()}
+        # two copies of the state; self._cur says which holds the current one
+        self._pairs = {k: (np.array(v, float), np.array(v, float)) for k, v in init.items()}
+        self._cur = 0
+        self._u, self._y = np.zeros(m), np.zeros(p)
+        self._diag = {"x_prior": np.zeros(n), "P_prior": np.zeros(n * n), "innov": np.zeros(p),
+                      "S": np.zeros(p * p), "K": np.zeros(n * p), "nis": np.zeros(1)}
+        self._status_arr = np.zeros(1)
         self.k = 0
-        self.log = [{"k": 0, "Q": self.Q.copy(), "R": self.R.copy()}]
         key = self._cache_key() + (backend,)
         if key not in system.cache:
             system.cache[key] = compile_functions(list(self._build_functions()), backend)
         fns, self.backend = system.cache[key]
         self._bind(*fns)
+        self.history = NoiseHistory(n, p)
+        self._record()
 
     # ---------------------------------------------------------------- symbolic parts
     def _cache_key(self):
         return (type(self).__name__,)
+
+    def _extra_state_init(self) -> dict:
+        """Initial values of extra state arrays (adaptive filters), by name."""
+        return {}
 
     def _predict_expr(self, x, P, u, Q):
         """Return (x_prior, P_prior) expressions. Subclasses implement."""
@@ -119,97 +144,135 @@ class KalmanBase:
         """Return (x, P, innovation, S, K) expressions. Subclasses implement."""
         raise NotImplementedError
 
-    def _symbols(self):
+    def _sym(self, name, rows, cols=1):
+        return ca.SX.sym(name, rows, cols)
+
+    def _step_spec(self):
+        """Fused step: ``(state symbols, extra input symbols, new state, diagnostics, extra outputs)``.
+
+        Adaptive filters extend it: the new Q and R become functions of the step.
+        """
         s = self.system
-        return (ca.SX.sym("x", s.nx), ca.SX.sym("P", s.nx, s.nx), ca.SX.sym("u", s.nu),
-                ca.SX.sym("y", s.ny), ca.SX.sym("Q", s.nx, s.nx), ca.SX.sym("R", s.ny, s.ny))
-
-    def _step_exprs(self):
-        """Symbols and output expressions of the fused step, for subclasses that extend it."""
-        x, P, u, y, Q, R = self._symbols()
-        xp, Pp = self._predict_expr(x, P, u, Q)
-        xu, Pu, innov, S, K = self._update_expr(xp, Pp, y, R)
+        st = {"x": self._sym("x", s.nx), "P": self._sym("P", s.nx, s.nx),
+              "Q": self._sym("Q", s.nx, s.nx), "R": self._sym("R", s.ny, s.ny)}
+        u, y = self._sym("u", s.nu), self._sym("y", s.ny)
+        xp, Pp = self._predict_expr(st["x"], st["P"], u, st["Q"])
+        xu, Pu, innov, S, K = self._update_expr(xp, Pp, y, st["R"])
         nis = ca.dot(innov, ca.solve(S, innov))
-        return (x, P, u, y, Q, R), dict(x_new=xu, P_new=Pu, x_prior=xp, P_prior=Pp,
-                                        innov=innov, S=S, K=K, nis=nis)
-
-    @staticmethod
-    def _status(inputs, outputs):
-        return ca.if_else(_finite(inputs), ca.if_else(_finite(outputs), OK, BAD_RESULT), BAD_INPUT)
+        new = {"x": xu, "P": Pu, "Q": st["Q"], "R": st["R"]}
+        diag = dict(zip(DIAGNOSTICS, (xp, Pp, innov, S, K, nis)))
+        return st, {"u": u, "y": y}, new, diag, {}
 
     def _build_functions(self):
         d = ca.densify
-        x, P, u, y, Q, R = self._symbols()
+        s = self.system
+        x, P, u, y = (self._sym("x", s.nx), self._sym("P", s.nx, s.nx), self._sym("u", s.nu),
+                      self._sym("y", s.ny))
+        Q, R = self._sym("Q", s.nx, s.nx), self._sym("R", s.ny, s.ny)
         xp, Pp = self._predict_expr(x, P, u, Q)
-        pred = ca.Function("predict", [x, P, u, Q], [d(xp), d(Pp), self._status([u], [xp, Pp])],
+        pred = ca.Function("predict", [x, P, u, Q], [d(xp), d(Pp), _status([u], [xp, Pp])],
                            ["x", "P", "u", "Q"], ["x_prior", "P_prior", "status"])
         xu, Pu, innov, S, K = self._update_expr(x, P, y, R)
         nis = ca.dot(innov, ca.solve(S, innov))
         upd = ca.Function("update", [x, P, y, R],
-                          [d(xu), d(Pu), d(innov), d(S), d(K), nis, self._status([y], [xu, Pu])],
+                          [d(xu), d(Pu), d(innov), d(S), d(K), nis, _status([y], [xu, Pu])],
                           ["x", "P", "y", "R"], ["x_new", "P_new", "innov", "S", "K", "nis", "status"])
-        (x, P, u, y, Q, R), out = self._step_exprs()
-        names = ["x_new", "P_new", "x_prior", "P_prior", "innov", "S", "K", "nis"]
-        step = ca.Function("step", [x, P, u, y, Q, R],
-                           [d(out[k]) for k in names]
-                           + [self._status([u, y], [out["x_new"], out["P_new"]])],
-                           ["x", "P", "u", "y", "Q", "R"], names + ["status"])
+        st, ins, new, diag, extra = self._step_spec()
+        self._state_keys, self._input_keys = list(st), list(ins)
+        self._extra_keys = list(extra)
+        outs = [d(new[k]) for k in st] + [d(diag[k]) for k in DIAGNOSTICS] + [d(v) for v in extra.values()]
+        status = _status(list(ins.values()), [new["x"], new["P"], new["Q"], new["R"]])
+        step = ca.Function("step", list(st.values()) + list(ins.values()), outs + [status],
+                           list(st) + list(ins),
+                           [f"{k}_new" for k in st] + list(DIAGNOSTICS) + list(extra) + ["status"])
         return pred, upd, step
 
     # ---------------------------------------------------------------- binding
     def _bind(self, pred, upd, step):
-        s = self.system
-        n, p = s.nx, s.ny
-        self._xprior, self._Pprior = np.zeros(n), np.zeros(n * n)
-        self._xnew, self._Pnew = np.zeros(n), np.zeros(n * n)
-        self._innov, self._S, self._K = np.zeros(p), np.zeros(p * p), np.zeros(n * p)
-        self._nis, self._status_arr = np.zeros(1), np.zeros(1)
-        self._fpred = BufferedFunction(pred, {0: self._x, 1: self._P, 2: self._u, 3: self._Q},
-                                       {0: self._xprior, 1: self._Pprior, 2: self._status_arr})
-        self._fupd = BufferedFunction(upd, {0: self._x, 1: self._P, 2: self._y, 3: self._R},
-                                      {0: self._xnew, 1: self._Pnew, 2: self._innov, 3: self._S,
-                                       4: self._K, 5: self._nis, 6: self._status_arr})
-        # the fused step ping-pongs between two (x, P) array pairs: no copies on the hot path
-        self._xs, self._Ps = (self._x, self._xnew), (self._P, self._Pnew)
-        self._cur = 0
+        zero = {k: v[0] for k, v in self._pairs.items()}
+        self._fpred = BufferedFunction(pred, {0: zero["x"], 1: zero["P"], 2: self._u, 3: zero["Q"]},
+                                       {0: self._diag["x_prior"], 1: self._diag["P_prior"],
+                                        2: self._status_arr})
+        self._xnew, self._Pnew = np.zeros_like(zero["x"]), np.zeros_like(zero["P"])
+        self._fupd = BufferedFunction(upd, {0: zero["x"], 1: zero["P"], 2: self._y, 3: zero["R"]},
+                                      {0: self._xnew, 1: self._Pnew, 2: self._diag["innov"],
+                                       3: self._diag["S"], 4: self._diag["K"], 5: self._diag["nis"],
+                                       6: self._status_arr})
+        # step inputs: state, then u, y and any extra inputs; outputs: new state,
+        # diagnostics, extra outputs, status
+        self._state_keys = [step.name_in(i) for i in range(step.n_in()) if step.name_in(i) in self._pairs]
+        self._inputs = {"u": self._u, "y": self._y}
+        for i in range(step.n_in()):
+            name = step.name_in(i)
+            if name not in self._pairs and name not in self._inputs:
+                self._inputs[name] = np.zeros(step.nnz_in(i))
+        self._extra = {step.name_out(i): np.zeros(step.nnz_out(i)) for i in range(step.n_out())
+                       if step.name_out(i) not in DIAGNOSTICS and step.name_out(i) != "status"
+                       and not step.name_out(i).endswith("_new")}
         self._fsteps = tuple(self._bind_step(step, i) for i in (0, 1))
 
     def _bind_step(self, step, i):
-        """The fused step reading pair ``i`` and writing pair ``1 - i``."""
-        j = 1 - i
-        return BufferedFunction(step, {0: self._xs[i], 1: self._Ps[i], 2: self._u, 3: self._y,
-                                       4: self._Q, 5: self._R},
-                                {0: self._xs[j], 1: self._Ps[j], 2: self._xprior, 3: self._Pprior,
-                                 4: self._innov, 5: self._S, 6: self._K, 7: self._nis,
-                                 8: self._status_arr})
+        """The fused step reading state copy ``i`` and writing copy ``1 - i``."""
+        args, res = {}, {}
+        for j in range(step.n_in()):
+            name = step.name_in(j)
+            args[j] = self._pairs[name][i] if name in self._pairs else self._inputs[name]
+        for j in range(step.n_out()):
+            name = step.name_out(j)
+            if name.endswith("_new"):
+                res[j] = self._pairs[name[:-4]][1 - i]
+            elif name == "status":
+                res[j] = self._status_arr
+            elif name in self._diag:
+                res[j] = self._diag[name]
+            else:
+                res[j] = self._extra[name]
+        return BufferedFunction(step, args, res)
+
+    def _now(self, key: str) -> np.ndarray:
+        """The current copy of state array ``key`` (shared, not a copy)."""
+        return self._pairs[key][self._cur]
 
     def _sync(self):
-        """Bring the current (x, P) into the canonical pair read by predict/update."""
+        """Bring the current state into copy 0, which predict and update read."""
         if self._cur:
-            self._x[:] = self._xnew
-            self._P[:] = self._Pnew
+            for a, b in self._pairs.values():
+                a[:] = b
             self._cur = 0
 
     # ---------------------------------------------------------------- public state
-    x = property(lambda self: self._xs[self._cur].copy(), doc="State estimate, shape (nx,).")
-    P = property(lambda self: matrix(self._Ps[self._cur], self.system.nx, self.system.nx).copy(),
+    def _mat(self, key, rows, cols):
+        return matrix(self._now(key), rows, cols).copy()
+
+    x = property(lambda self: self._now("x").copy(), doc="State estimate, shape (nx,).")
+    P = property(lambda self: self._mat("P", self.system.nx, self.system.nx),
                  doc="State covariance, shape (nx, nx).")
-    x_prior = property(lambda self: self._xprior.copy())
-    P_prior = property(lambda self: matrix(self._Pprior, self.system.nx, self.system.nx).copy())
-    Q = property(lambda self: matrix(self._Q, self.system.nx, self.system.nx).copy())
-    R = property(lambda self: matrix(self._R, self.system.ny, self.system.ny).copy())
-    innovation = property(lambda self: self._innov.copy())
-    S = property(lambda self: matrix(self._S, self.system.ny, self.system.ny).copy())
-    K = property(lambda self: matrix(self._K, self.system.nx, self.system.ny).copy())
-    nis = property(lambda self: float(self._nis[0]))
+    Q = property(lambda self: self._mat("Q", self.system.nx, self.system.nx),
+                 doc="Process noise covariance, shape (nx, nx).")
+    R = property(lambda self: self._mat("R", self.system.ny, self.system.ny),
+                 doc="Measurement noise covariance, shape (ny, ny).")
+    x_prior = property(lambda self: self._diag["x_prior"].copy())
+    P_prior = property(lambda self: matrix(self._diag["P_prior"], self.system.nx, self.system.nx).copy())
+    innovation = property(lambda self: self._diag["innov"].copy())
+    S = property(lambda self: matrix(self._diag["S"], self.system.ny, self.system.ny).copy())
+    K = property(lambda self: matrix(self._diag["K"], self.system.nx, self.system.ny).copy())
+    nis = property(lambda self: float(self._diag["nis"][0]))
 
     def set_noise(self, Q=None, R=None) -> None:
         """Replace Q and/or R (validated: symmetric positive definite)."""
         if Q is not None:
-            self._Q[:] = checks.covariance(Q, self.system.nx, "Q").ravel(order="F")
+            self._now("Q")[:] = checks.covariance(Q, self.system.nx, "Q").ravel(order="F")
         if R is not None:
-            self._R[:] = checks.covariance(R, self.system.ny, "R").ravel(order="F")
-        self.log.append({"k": self.k, "Q": self.Q, "R": self.R})
+            self._now("R")[:] = checks.covariance(R, self.system.ny, "R").ravel(order="F")
+        self._record()
+
+    def _record(self) -> None:
+        n, p = self.system.nx, self.system.ny
+        self.history.append(self.k, np.concatenate([self._now("Q")[:: n + 1], self._now("R")[:: p + 1]]))
+
+    def noise_history(self):
+        """How Q and R changed: DataFrame indexed by step with their diagonals."""
+        return self.history.to_frame(self.system.state_names, self.system.output_names)
 
     # ---------------------------------------------------------------- stepping
     def _set_u(self, u):
@@ -245,22 +308,33 @@ class KalmanBase:
         self._fpred.trigger()
         if self._status_arr[0]:
             self._check("u")
-        self._x[:] = self._xprior
-        self._P[:] = self._Pprior
+        x, P = self._pairs["x"][0], self._pairs["P"][0]
+        x[:] = self._diag["x_prior"]
+        P[:] = self._diag["P_prior"]
         self.k += 1
-        return self._x.copy()
+        return x.copy()
 
     def update(self, y) -> np.ndarray:
-        """Measurement update with ``y`` (ny,); returns the posterior state estimate."""
+        """Measurement update with ``y`` (ny,); returns the posterior state estimate.
+
+        Adaptive filters adapt Q and R only in :meth:`step` (their adaptation is part of
+        the fused step); a separate update leaves Q and R unchanged.
+        """
         self._sync()
         self._set_y(y)
         self._fupd.trigger()
         if self._status_arr[0]:
             self._check("y")
-        self._x[:] = self._xnew
-        self._P[:] = self._Pnew
-        self._after_update()
-        return self._x.copy()
+        x, P = self._pairs["x"][0], self._pairs["P"][0]
+        x[:] = self._xnew
+        P[:] = self._Pnew
+        return x.copy()
+
+    def _prepare_step(self):
+        """Hook: fill extra step inputs before the fused step (adaptive filters)."""
+
+    def _after_step(self):
+        """Hook: runs after every fused step, once the new state is current."""
 
     def step(self, u, y) -> np.ndarray:
         """Predict with ``u`` then update with ``y``; ``y=None`` predicts only.
@@ -271,19 +345,17 @@ class KalmanBase:
             return self.predict(u)
         self._set_u(u)
         self._set_y(y)
+        self._prepare_step()
         self._fsteps[self._cur].trigger()
         if self._status_arr[0]:
             self._check("u or y")
         self._cur ^= 1
         self.k += 1
-        self._after_update()
-        return self._xs[self._cur].copy()
-
-    def _after_update(self):
-        """Hook for adaptive filters (runs after every measurement update)."""
+        self._after_step()
+        return self._pairs["x"][self._cur].copy()
 
     def run(self, us, ys) -> np.ndarray:
-        """Filter whole sequences: ``us`` (N, nu), ``ys`` (N, ny) with NaN rows allowed for
+        """Filter whole sequences: ``us`` (N, nu), ``ys`` (N, ny) with NaN rows for
         missing measurements. Returns the estimates, shape (N, nx)."""
         us, ys = np.asarray(us, float), np.asarray(ys, float)
         out = np.empty((len(us), self.system.nx))

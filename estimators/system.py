@@ -129,3 +129,21 @@ def augment_rate_bias(system: DiscreteModel, output: str) -> DiscreteModel:
     return DiscreteModel(xa, system.u, f, h, system.dt,
                          system.state_names + [f"bias_{output}"], system.input_names,
                          system.output_names, f"{system.description}, bias on {output}")
+
+
+def linear_model(A, B, C, dt: float = 1.0, state_names=None, input_names=None,
+                 output_names=None) -> DiscreteModel:
+    """The linear model ``x_{k+1} = A x_k + B u_k``, ``y_k = C x_k`` as a DiscreteModel.
+
+    Shapes: A (nx, nx), B (nx, nu), C (ny, nx); ``dt`` [s] is recorded only.
+    """
+    A, B, C = (np.atleast_2d(np.asarray(M, float)) for M in (A, B, C))
+    nx, nu, ny = A.shape[0], B.shape[1], C.shape[0]
+    if A.shape != (nx, nx) or B.shape[0] != nx or C.shape[1] != nx:
+        raise ValueError(f"inconsistent shapes A {A.shape}, B {B.shape}, C {C.shape}")
+    x, u = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
+    return DiscreteModel(x, u, ca.mtimes(ca.DM(A), x) + ca.mtimes(ca.DM(B), u),
+                         ca.mtimes(ca.DM(C), x), dt,
+                         state_names or [f"x{i + 1}" for i in range(nx)],
+                         input_names or [f"u{i + 1}" for i in range(nu)],
+                         output_names or [f"y{i + 1}" for i in range(ny)], "linear model")

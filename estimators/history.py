@@ -1,0 +1,33 @@
+"""A growing record of how a filter's Q and R changed (diagonals), cheap to append to."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+
+class NoiseHistory:
+    """Rows ``(k, diag Q, diag R)``; append costs one array write."""
+
+    def __init__(self, nx: int, ny: int, capacity: int = 1024):
+        self.nx, self.ny = nx, ny
+        self._rows = np.empty((capacity, 1 + nx + ny))
+        self._n = 0
+
+    def append(self, k: int, qr_diag) -> None:
+        """Add the row ``k, qr_diag`` where ``qr_diag = [diag Q, diag R]`` (nx + ny)."""
+        n = self._n
+        if n == len(self._rows):
+            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        self._rows[n, 0] = k
+        self._rows[n, 1:] = qr_diag
+        self._n = n + 1
+
+    def __len__(self):
+        return self._n
+
+    def to_frame(self, state_names, output_names) -> pd.DataFrame:
+        """DataFrame indexed by step k with columns ``Q_<state>`` and ``R_<output>``."""
+        cols = [f"Q_{n}" for n in state_names] + [f"R_{n}" for n in output_names]
+        rows = self._rows[: self._n]
+        return pd.DataFrame(rows[:, 1:], index=pd.Index(rows[:, 0].astype(int), name="k"),
+                            columns=cols)

@@ -1,0 +1,144 @@
+"""Fuzzy innovation-based adaptive EKF, MF-IAE (seed 000 eqs 38-42)."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from . import checks
+from .ekf import EKF
+from .fuzzy import MamdaniFuzzy
+from .system import DiscreteModel
+
+
+class MFIAE(EKF):
+    """EKF whose scalar Q and R are tuned online by a Mamdani fuzzy system (seed 000 sec. 4).
+
+    Each step, after the EKF update: ``C_I`` is the mean of ``I_j I_j^T`` over the last
+    ``window`` innovations (eq 37), ``C_T = H P^- H^T + R`` the theoretical innovation
+    covariance (eq 39, the step's S). The fuzzy system (:class:`MamdaniFuzzy`, Table 2)
+    maps ``(C_T, C_I)`` to the normalised adjustment ``m`` in [-1, 1], the fuzzy image of
+    ``MAdj = C_T - C_I`` (eq 38). Then (eqs 41-42), with ``Q = q I`` and ``R = r I``
+    (eqs 24-25)::
+
+        q_k     = q_{k-1} - MAdj_Q,   MAdj_Q = gain_q * m * q_{k-1}
+        r_{k+1} = r_k     - MAdj_R,   MAdj_R = gain_r * m * r_k
+
+    so that too large innovations (``C_I > C_T``, ``m < 0``) raise Q and R and too small
+    ones lower them. Choices the paper leaves open, each a parameter here: the scalar
+    summary of the matrices (``trace/ny``; or one ``m`` per measurement channel with
+    ``per_channel=True``, Q then moving with their mean), the input normalisation and
+    membership functions (:class:`MamdaniFuzzy`), how MAdj reaches Q and R (relative to
+    their current values, so they stay positive and the step is unit-free), and bounds.
+    Until ``window`` innovations are stored Q and R stay at their initial values. The
+    whole step, fuzzy inference included, is one compiled CasADi Function.
+
+    Parameters
+    ----------
+    system, x0, P0, backend
+        As :class:`~estimators.base.KalmanBase`.
+    q0 : float
+        Initial process noise variance sigma_q^2 (Q = q0 I).
+    r0 : float or array_like (ny,)
+        Initial measurement noise variance sigma_r^2 (R = r0 I), or one per channel.
+    window : int
+        N of eq 37 (default 20).
+    fuzzy : MamdaniFuzzy, optional
+        The fuzzy system (default ``MamdaniFuzzy()``).
+    gain_q, gain_r : float
+        Relative step sizes in (0, 1] (default 0.05 each).
+    per_channel : bool
+        One adjustment per measurement channel for R (default False: scalar R).
+    q_bounds, r_bounds : (float, float)
+        Bounds kept on q and on each r (default (1e-9, 1e6)).
+
+    Attributes
+    ----------
+    m : ndarray, shape (ny,)
+        The last fuzzy adjustment per channel (all equal unless ``per_channel``).
+    """
+
+    name = "MF-IAE"
+
+    def __init__(self, system: DiscreteModel, x0, P0, q0: float, r0, window: int = 20,
+                 fuzzy: MamdaniFuzzy | None = None, gain_q: float = 0.05, gain_r: float = 0.05,
+                 per_channel: bool = False, q_bounds=(1e-9, 1e6), r_bounds=(1e-9, 1e6),
+                 backend: str = "compiled"):
+        if int(window) != window or window < 1:
+            raise ValueError(f"window must be a positive integer, got {window!r}")
+        for name, g in (("gain_q", gain_q), ("gain_r", gain_r)):
+            if not (0 < g <= 1):
+                raise ValueError(f"{name} must be in (0, 1], got {g}")
+        for name, (lo, hi) in (("q_bounds", q_bounds), ("r_bounds", r_bounds)):
+            if not (0 < lo < hi):
+                raise ValueError(f"{name} must satisfy 0 < low < high, got {(lo, hi)}")
+        self.window, self.fuzzy = int(window), fuzzy or MamdaniFuzzy()
+        self.gain_q, self.gain_r, self.per_channel = float(gain_q), float(gain_r), bool(per_channel)
+        self.q_bounds, self.r_bounds = tuple(map(float, q_bounds)), tuple(map(float, r_bounds))
+        q0 = checks.positive(q0, "q0")
+        r0 = np.broadcast_to(np.asarray(r0, float), (system.ny,))
+        for r in r0:
+            checks.positive(r, "r0")
+        if not per_channel and np.ptp(r0) > 0:
+            raise ValueError("r0 must be one value unless per_channel=True")
+        super().__init__(system, x0, P0, q0 * np.eye(system.nx), np.diag(r0), backend)
+        self._ring = np.zeros((self.window, system.ny))
+        self._ri = 0
+        self._count = 0
+
+    def _cache_key(self):
+        return (type(self).__name__, self.window, self.fuzzy, self.gain_q, self.gain_r,
+                self.per_channel, self.q_bounds, self.r_bounds)
+
+    def _extra_state_init(self):
+        ny = self.system.ny
+        return {"Csum": np.zeros(ny * ny), "count": np.zeros(1)}
+
+    def _step_spec(self):
+        st, ins, new, diag, extra = super()._step_spec()
+        ny, nx = self.system.ny, self.system.nx
+        Csum, count, I_old = self._sym("Csum", ny, ny), self._sym("count", 1), self._sym("I_old", ny)
+        st.update(Csum=Csum, count=count)
+        ins["I_old"] = I_old
+        innov, C_T = diag["innov"], diag["S"]                  # eq 39: C_T = H P^- H^T + R
+        Csum_new = Csum + ca.mtimes(innov, innov.T) - ca.mtimes(I_old, I_old.T)
+        count_new = count + 1
+        C_I = Csum_new / self.window                            # eq 37
+        if self.per_channel:
+            m = ca.vertcat(*[self.fuzzy.expression(C_T[j, j], C_I[j, j]) for j in range(ny)])
+            m_q = ca.sum1(m) / ny
+        else:
+            m_q = self.fuzzy.expression(ca.trace(C_T) / ny, ca.trace(C_I) / ny)
+            m = ca.repmat(m_q, ny, 1)
+        Q, R = st["Q"], st["R"]
+        q_new = ca.fmin(ca.fmax(Q[0, 0] * (1 - self.gain_q * m_q), self.q_bounds[0]), self.q_bounds[1])
+        r_old = ca.diag(R)
+        r_new = ca.fmin(ca.fmax(r_old * (1 - self.gain_r * m), self.r_bounds[0]), self.r_bounds[1])
+        full = count_new >= self.window
+        new.update(Q=ca.if_else(full, q_new * ca.SX.eye(nx), Q),       # eq 41
+                   R=ca.if_else(full, ca.diag(r_new), R),               # eq 42
+                   Csum=Csum_new, count=count_new)
+        extra["m"] = ca.if_else(full, m, ca.SX.zeros(ny))
+        extra["qr"] = ca.vertcat(ca.diag(new["Q"]), ca.diag(new["R"]))   # the history row
+        return st, ins, new, diag, extra
+
+    m = property(lambda self: self._extra["m"].copy())
+
+    def _bind(self, pred, upd, step):
+        super()._bind(pred, upd, step)
+        self._iold, self._innov, self._qr = self._inputs["I_old"], self._diag["innov"], self._extra["qr"]
+
+    def _prepare_step(self):
+        self._iold[:] = self._ring[self._ri]
+
+    def _after_step(self):
+        ri = self._ri
+        self._ring[ri] = self._innov
+        ri += 1
+        if ri == self.window:
+            ri = 0
+            # re-sum the window exactly once per lap: no drift of the running sum
+            self._now("Csum")[:] = (self._ring.T @ self._ring).ravel(order="F")
+        self._ri = ri
+        self._count += 1
+        if self._count >= self.window:
+            self.history.append(self.k, self._qr)
