@@ -10,6 +10,7 @@ innovation, S, K, nis, log``.
 >>> ekf = EKF(sys_, x0=[0.5, 0, 1.8, 0.5], P0=1.0, Q=0.2, R=0.1)
 """
 from .base import KalmanBase
+from .batch import BatchFilter
 from .ekf import EKF
 from .iae import IAE
 from .fuzzy import MamdaniFuzzy
@@ -18,5 +19,5 @@ from .mfiae import MFIAE
 from .system import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ukf import UKF
 
-__all__ = ["KalmanBase", "EKF", "KF", "UKF", "IAE", "MFIAE", "MamdaniFuzzy", "DiscreteModel", "discretize",
+__all__ = ["KalmanBase", "BatchFilter", "EKF", "KF", "UKF", "IAE", "MFIAE", "MamdaniFuzzy", "DiscreteModel", "discretize",
            "augment_rate_bias", "linear_model"]

@@ -122,8 +122,9 @@ class KalmanBase:
         self.k = 0
         key = self._cache_key() + (backend,)
         if key not in system.cache:
-            system.cache[key] = compile_functions(list(self._build_functions()), backend)
-        fns, self.backend = system.cache[key]
+            raw = list(self._build_functions())
+            system.cache[key] = compile_functions(raw, backend) + (raw,)
+        fns, self.backend, self._raw_functions = system.cache[key]
         self._bind(*fns)
         self.history = NoiseHistory(n, p)
         self._record()
@@ -329,6 +330,8 @@ class KalmanBase:
         x[:] = self._xnew
         P[:] = self._Pnew
         return x.copy()
+
+    supports_batch = True
 
     def _prepare_step(self):
         """Hook: fill extra step inputs before the fused step (adaptive filters)."""

@@ -11,7 +11,8 @@ class EKF(KalmanBase):
 
     Prediction ``x^- = f(x, u)``, ``P^- = F P F^T + Q`` with ``F = df/dx`` exact (CasADi
     AD); update with ``H = dh/dx`` at ``x^-``, gain by a linear solve and the Joseph form.
-    See :class:`~estimators.base.KalmanBase` for parameters and attributes.
+    Parameters ``system, x0, P0, Q, R, backend`` and the attributes are those of
+    :class:`~estimators.base.KalmanBase`.
     """
 
     name = "EKF"

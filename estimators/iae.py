@@ -52,6 +52,7 @@ class IAE(EKF):
     """
 
     name = "IAE"
+    supports_batch = False      # its adaptation runs in numpy after each step
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 20,
                  adapt=("Q", "R"), form: str = "diagonal", q_floor: float = 1e-9,

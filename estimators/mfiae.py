@@ -154,3 +154,19 @@ class MFIAE(EKF):
         self._count += 1
         if self._count >= self.window:
             self.history.append(self.k, self._qr)
+
+    # ---------------------------------------------------------------- batched runs
+    def _batch_init(self, batch):
+        batch.ring = np.zeros((self.window, batch.n, self.system.ny))
+        batch.ri, batch.count = 0, 0
+
+    def _batch_prepare(self, batch):
+        batch._inputs["I_old"][:] = batch.ring[batch.ri].ravel()
+
+    def _batch_after(self, batch):
+        batch.ring[batch.ri] = batch._out["innov"].reshape(batch.n, self.system.ny)
+        batch.ri += 1
+        if batch.ri == self.window:
+            batch.ri = 0
+            C = np.einsum("wri,wrj->rji", batch.ring, batch.ring)   # column-major per run
+            batch.now("Csum")[:] = C.ravel()

@@ -98,6 +98,15 @@ def discretize(model: PlantModel, dt: float, method: str = "euler", substeps: in
     """The discrete map of a :class:`~fmu_models.PlantModel` with its current parameters.
 
     ``method="euler"``, ``substeps=1`` is the papers' model (seed 000 eqs 14-17 and 23).
+
+    Parameters
+    ----------
+    model : PlantModel
+    dt : float
+        Sample period [s].
+    method : {"euler", "rk4"}
+    substeps : int
+        Integration substeps per period.
     """
     check_method(method, substeps)
     if not (np.isfinite(dt) and dt > 0):
@@ -135,7 +144,8 @@ def linear_model(A, B, C, dt: float = 1.0, state_names=None, input_names=None,
                  output_names=None) -> DiscreteModel:
     """The linear model ``x_{k+1} = A x_k + B u_k``, ``y_k = C x_k`` as a DiscreteModel.
 
-    Shapes: A (nx, nx), B (nx, nu), C (ny, nx); ``dt`` [s] is recorded only.
+    Shapes: A (nx, nx), B (nx, nu), C (ny, nx); ``dt`` [s] is recorded only;
+    ``state_names``, ``input_names``, ``output_names`` default to x1.., u1.., y1...
     """
     A, B, C = (np.atleast_2d(np.asarray(M, float)) for M in (A, B, C))
     nx, nu, ny = A.shape[0], B.shape[1], C.shape[0]

@@ -24,6 +24,8 @@ from .codegen import C_DIR, write_sources
 from .model_description import build_description_xml, fmi2_xml, fmi3_xml
 from .plant import PlantModel
 
+__all__ = ["build_fmu", "build_fmus", "find_compiler", "CompilerNotFoundError", "FMI_VERSIONS"]
+
 FMI_VERSIONS = (2, 3)
 _FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 
@@ -129,5 +131,15 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
 
 def build_fmus(out_dir: str | Path = ".", fmi_version: int = 2,
                models: tuple[str, ...] = MODEL_NAMES) -> list[Path]:
-    """Build ``CartPole.fmu`` and ``InertiaWheelPendulum.fmu`` (default models) into ``out_dir``."""
+    """Build ``CartPole.fmu`` and ``InertiaWheelPendulum.fmu`` (default models) into ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output directory (created if missing).
+    fmi_version : int
+        2 or 3 (see :func:`build_fmu`).
+    models : tuple of str
+        Registry names of the models to build.
+    """
     return [build_fmu(get_model(name), out_dir, fmi_version) for name in models]

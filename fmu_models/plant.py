@@ -106,6 +106,18 @@ class PlantModel:
     Build instances with :func:`fmu_models.get_model`; derive parameter variants with
     :meth:`with_params`.
 
+    Parameters
+    ----------
+    name, fmu_name, description : str
+        Registry name, FMU model name and one-line description.
+    states, inputs, outputs, parameters : sequence of Variable
+        The model's variables (parameters carry their default values and domains).
+    dynamics : callable
+        ``dynamics(x, u, p) -> xdot``: CasADi SX column ``x`` (nx), ``u`` (nu) and a dict
+        of parameter symbols by name; returns the nx time derivatives.
+    measurement : callable
+        ``measurement(x, p) -> y`` (ny entries).
+
     Attributes
     ----------
     name : str
