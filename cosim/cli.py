@@ -1,13 +1,84 @@
-"""Command line: ``pendulum-cosim``."""
+"""Command line: ``pendulum-cosim``.
+
+    pendulum-cosim demo [--out DIR]             run the seed 000 scenario, write results and plot
+    pendulum-cosim run SCENARIO.toml --out DIR  run any scenario file
+    pendulum-cosim scenarios                    list the scenarios shipped with the package
+    pendulum-cosim models                       print both plant models and their Jacobians
+"""
 from __future__ import annotations
 
 import argparse
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 
+SCENARIO_DIR = Path(__file__).parent / "scenarios"
 
-def _demo(args) -> int:
+
+def _rmse_table(df, estimators_, truth_prefix="plant"):
+    """RMSE of every estimator's states against the plant's, and of the raw measurements."""
+    import pandas as pd
+
+    rows = {}
+    for est in estimators_:
+        cols = [c for c in df.columns if c.startswith(est + ".") and not c.split(".")[1].startswith("P_")
+                and c.split(".")[1] != "nis"]
+        row = {}
+        for c in cols:
+            tc = f"{truth_prefix}.{c.split('.')[1]}"
+            if tc in df.columns:
+                row[c.split(".")[1]] = float(np.sqrt(np.mean((df[c] - df[tc]) ** 2)))
+        rows[est] = row
+    meas = {}
+    for c in df.columns:
+        if ".y_" in c and not c.startswith(truth_prefix + "."):
+            tc = f"{truth_prefix}.{c.split('.y_')[1]}"
+            if tc in df.columns:
+                meas[c.split(".y_")[1]] = float(np.sqrt(np.mean((df[c] - df[tc]) ** 2)))
+    if meas:
+        rows["raw measurement"] = meas
+    return pd.DataFrame(rows).T
+
+
+def _run_scenario(path: Path, out: Path) -> int:
+    from .master import CosimError
+    from .results import plot_estimates, save_results
+    from .scenario import Scenario
+
+    t0 = time.perf_counter()
+    sc = Scenario.load(path, fmu_dir=out / "fmus")
+    print(f"scenario: {sc.title or path.name}")
+    try:
+        df = sc.run()
+    except CosimError as e:
+        if e.results is not None and len(e.results):
+            save_results(e.results, out, "results_partial")
+            print(f"partial results written to {out}", file=sys.stderr)
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    wall = time.perf_counter() - t0
+    paths = save_results(df, out)
+    ests = [c.name for c in sc.cosim.components if type(c).__name__ == "EstimatorComponent"]
+    table = _rmse_table(df, ests)
+    if len(table):
+        print("\nRMSE against the plant's true states:")
+        print(table.to_string(float_format=lambda v: f"{v:.4f}"))
+        table.to_csv(out / "rmse.csv")
+    if sc.plot:
+        png = out / "truth_vs_estimate.png"
+        measured = [m or None for m in sc.plot.get("measured", [])] or None
+        plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
+        paths.append(png)
+    print(f"\n{len(df)} rows x {len(df.columns)} signals, {sc.stop_time:g} s simulated in {wall:.2f} s "
+          "(including FMU build)")
+    for p in paths:
+        print(f"wrote {p}")
+    return 0
+
+
+def _models(args) -> int:
     """Simulate both models (Euler truth map and RK4) and print trajectories and Jacobians."""
     from fmu_models import get_model
 
@@ -26,10 +97,8 @@ def _demo(args) -> int:
         for k in range(0, n + 1, max(1, n // 10)):
             print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
         A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
-        F, G = m.jacobians(xs[-1], u(n * dt), dt)
         print("   exact A = df/dx at the upright equilibrium:\n", A)
         print("   exact B = df/du:", B.ravel())
-        print(f"   Euler-map Jacobian F at t = {n * dt:.2f} s:\n", F)
         print()
     return 0
 
@@ -37,13 +106,43 @@ def _demo(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="pendulum-cosim",
-        description="FMI co-simulation of two benchmark pendulums for nonlinear state estimation.")
+        description="FMI co-simulation of two benchmark pendulums for nonlinear state estimation. "
+                    "Plants run as FMUs built from CasADi models; estimators and other components "
+                    "run in Python, each at its own sample period.")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="simulate both plant models and print trajectories and Jacobians")
-    demo.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
-    demo.set_defaults(func=_demo)
+    demo = sub.add_parser("demo", help="run the seed 000 cart-pole scenario (EKF and MF-IAE): "
+                                       "results table, CSV/Parquet and a truth-vs-estimate plot")
+    demo.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
+    run = sub.add_parser("run", help="run a scenario file (TOML); see `pendulum-cosim scenarios`")
+    run.add_argument("scenario", help="scenario file, or the name of a shipped scenario")
+    run.add_argument("--out", required=True, help="output directory")
+    sub.add_parser("scenarios", help="list the shipped scenario files")
+    models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
+    models.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
     args = parser.parse_args(argv)
-    return args.func(args)
+    if args.command == "models":
+        return _models(args)
+    if args.command == "scenarios":
+        for p in sorted(SCENARIO_DIR.glob("*.toml")):
+            first = p.read_text().splitlines()[0]
+            print(f"{p.stem:24s} {first.split('=', 1)[1].strip().strip(chr(34)) if '=' in first else ''}")
+            print(f"{'':24s} {p}")
+        return 0
+    if args.command == "demo":
+        return _run_scenario(SCENARIO_DIR / "seed000_cartpole.toml", Path(args.out))
+    path = Path(args.scenario)
+    if not path.exists() and (SCENARIO_DIR / f"{args.scenario}.toml").exists():
+        path = SCENARIO_DIR / f"{args.scenario}.toml"
+    if not path.exists():
+        print(f"error: no scenario file {args.scenario!r} (shipped: "
+              f"{', '.join(p.stem for p in SCENARIO_DIR.glob('*.toml'))})", file=sys.stderr)
+        return 2
+    from .master import ConfigurationError
+    try:
+        return _run_scenario(path, Path(args.out))
+    except (ConfigurationError, KeyError, ValueError, TypeError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

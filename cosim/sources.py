@@ -1,0 +1,190 @@
+"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame)."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .component import Component
+
+
+class Constant(Component):
+    """Constant output ``value`` on port ``out``.
+
+    Parameters
+    ----------
+    name : str
+    period : float
+        Sample period [s].
+    value : float
+    """
+
+    def __init__(self, name: str, period: float, value: float):
+        super().__init__(name, period, outputs=["out"])
+        self.value = float(value)
+        if not np.isfinite(self.value):
+            raise ValueError(f"{name}: value must be finite")
+
+    def reset(self, t0):
+        super().reset(t0)
+        return np.array([self.value])
+
+    def sample(self, t, u):
+        return np.array([self.value])
+
+
+class Step(Constant):
+    """``before`` until ``t_step`` [s], then ``after`` (seed 000 Figure 2's input is
+    ``Step(t_step=2, before=-0.5, after=0.5)``).
+
+    Parameters
+    ----------
+    name : str
+    period : float
+    t_step : float
+        Switching time [s].
+    before, after : float
+        Values before and from ``t_step`` on.
+    """
+
+    def __init__(self, name: str, period: float, t_step: float, before: float, after: float):
+        super().__init__(name, period, before)
+        self.t_step, self.before, self.after = float(t_step), float(before), float(after)
+
+    def sample(self, t, u):
+        return np.array([self.after if t >= self.t_step - 1e-12 else self.before])
+
+
+class Sine(Component):
+    """``offset + amplitude * sin(2 pi frequency t + phase)`` on port ``out``.
+
+    Parameters
+    ----------
+    name : str
+    period : float
+    amplitude : float
+    frequency : float
+        [Hz]
+    phase : float
+        [rad] (default 0)
+    offset : float
+        (default 0)
+    """
+
+    def __init__(self, name, period, amplitude, frequency, phase=0.0, offset=0.0):
+        super().__init__(name, period, outputs=["out"])
+        self.a, self.f, self.ph, self.off = map(float, (amplitude, frequency, phase, offset))
+
+    def _value(self, t):
+        return self.off + self.a * np.sin(2 * np.pi * self.f * t + self.ph)
+
+    def reset(self, t0):
+        super().reset(t0)
+        return np.array([self._value(t0)])
+
+    def sample(self, t, u):
+        return np.array([self._value(t)])
+
+
+def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
+    """``n`` bits of the maximal-length sequence of a Fibonacci LFSR of ``order`` 2..16,
+    started from state ``seed`` (non-zero, reduced modulo 2^order)."""
+    taps = {2: (2, 1), 3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4),
+            9: (9, 5), 10: (10, 7), 11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8),
+            14: (14, 13, 12, 2), 15: (15, 14), 16: (16, 15, 13, 4)}
+    if order not in taps:
+        raise ValueError(f"PRBS order must be in 2..16, got {order}")
+    state = int(seed) % (2**order) or 1
+    out = np.empty(n, dtype=bool)
+    for i in range(n):
+        bit = 0
+        for tp in taps[order]:
+            bit ^= (state >> (tp - 1)) & 1
+        out[i] = state & 1
+        state = (state >> 1) | (bit << (order - 1))
+    return out
+
+
+class PRBS(Component):
+    """Pseudo-random binary sequence ``+/- amplitude`` (a maximal-length LFSR sequence).
+
+    The level is held for ``bit_time`` seconds per bit; the sequence repeats after
+    ``2**order - 1`` bits. Deterministic given ``seed`` (the LFSR's start state).
+
+    Parameters
+    ----------
+    name : str
+    period : float
+        Sample period [s].
+    amplitude : float
+        Output levels are ``offset +/- amplitude``.
+    bit_time : float
+        Duration of one bit [s].
+    order : int
+        LFSR length, 2..16 (default 7: period 127 bits).
+    seed : int
+        Non-zero LFSR start state (default 1).
+    offset : float
+        (default 0)
+    """
+
+    def __init__(self, name, period, amplitude, bit_time, order=7, seed=1, offset=0.0):
+        super().__init__(name, period, outputs=["out"])
+        if not bit_time > 0:
+            raise ValueError(f"{name}: bit_time must be > 0")
+        self.amplitude, self.bit_time, self.offset = float(amplitude), float(bit_time), float(offset)
+        self.bits = prbs_bits(int(order), int(seed), 2 ** int(order) - 1)
+
+    def _value(self, t):
+        b = self.bits[int(np.floor(t / self.bit_time + 1e-9)) % len(self.bits)]
+        return self.offset + (self.amplitude if b else -self.amplitude)
+
+    def reset(self, t0):
+        super().reset(t0)
+        return np.array([self._value(t0)])
+
+    def sample(self, t, u):
+        return np.array([self._value(t)])
+
+
+class Table(Component):
+    """Signals read from a table: a pandas DataFrame or a CSV file with a time column.
+
+    Parameters
+    ----------
+    name : str
+    period : float
+    data : DataFrame or str
+        Table (or CSV path) with column ``time`` [s] and one column per output port.
+    interpolation : {"zoh", "linear"}
+        Between rows: hold the last row (default) or interpolate linearly. Before the
+        first row the first row holds; after the last, the last.
+    """
+
+    def __init__(self, name, period, data, interpolation="zoh"):
+        df = pd.read_csv(data) if isinstance(data, (str, bytes)) or hasattr(data, "read_text") else data
+        if "time" not in df.columns:
+            raise ValueError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
+        cols = [c for c in df.columns if c != "time"]
+        super().__init__(name, period, outputs=cols)
+        if interpolation not in ("zoh", "linear"):
+            raise ValueError(f"{name}: interpolation must be 'zoh' or 'linear'")
+        self.t = df["time"].to_numpy(float)
+        if np.any(np.diff(self.t) < 0):
+            raise ValueError(f"{name}: table time must be non-decreasing")
+        self.v = df[cols].to_numpy(float)
+        if not np.all(np.isfinite(self.v)):
+            raise ValueError(f"{name}: table contains NaN or inf")
+        self.interpolation = interpolation
+
+    def _value(self, t):
+        if self.interpolation == "linear":
+            return np.array([np.interp(t, self.t, self.v[:, j]) for j in range(self.v.shape[1])])
+        i = max(np.searchsorted(self.t, t + 1e-12, side="right") - 1, 0)
+        return self.v[i].copy()
+
+    def reset(self, t0):
+        super().reset(t0)
+        return self._value(t0)
+
+    def sample(self, t, u):
+        return self._value(t)

@@ -1,0 +1,44 @@
+"""The pendulum-cosim command line."""
+import pandas as pd
+import pytest
+
+from cosim.cli import main
+
+
+def test_help_explains_the_commands(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    for word in ("demo", "run", "scenarios", "models"):
+        assert word in out
+
+
+def test_demo_writes_results_table_and_plot(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "RMSE against the plant's true states" in out and "mfiae" in out
+    df = pd.read_csv(tmp_path / "results.csv", index_col="time")
+    assert len(df) == 501 and "ekf.theta" in df.columns and "plant.theta" in df.columns
+    assert (tmp_path / "results.parquet").exists() and (tmp_path / "truth_vs_estimate.png").stat().st_size > 10_000
+    rmse = pd.read_csv(tmp_path / "rmse.csv", index_col=0)
+    # the EKF beats the raw measurements on both measured states
+    assert rmse.loc["ekf", "x"] < rmse.loc["raw measurement", "x"]
+    assert rmse.loc["ekf", "theta"] < rmse.loc["raw measurement", "theta"]
+
+
+def test_run_shipped_wheel_pendulum_scenario_balances(tmp_path, capsys):
+    assert main(["run", "seed002_wheel_lqr", "--out", str(tmp_path)]) == 0
+    df = pd.read_csv(tmp_path / "results.csv", index_col="time")
+    late = df.loc[2.0:]
+    assert late["plant.alpha"].abs().max() < 0.02                 # balanced upright
+    assert late["ekf.bias_y_alpha_dot"].mean() == pytest.approx(0.05, rel=0.15)   # gyro offset found
+
+
+def test_bad_scenario_is_reported(tmp_path, capsys):
+    assert main(["run", "nope", "--out", str(tmp_path)]) == 2
+    assert "no scenario file 'nope'" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[simulation]\nstop_time = 1\n[connections]\n\"a.b\" = \"c.d\"\n")
+    assert main(["run", str(bad), "--out", str(tmp_path)]) == 2
+    assert "unknown component 'c'" in capsys.readouterr().err
