@@ -34,7 +34,7 @@ class BatchFilter:
     """
 
     def __init__(self, template: KalmanBase, n_runs: int, x0=None):
-        if not type(template).supports_batch:
+        if not template.supports_batch:
             raise TypeError(f"{template.name} cannot run batched (its adaptation is not in the fused step)")
         if int(n_runs) != n_runs or n_runs < 1:
             raise ValueError(f"n_runs must be a positive integer, got {n_runs!r}")

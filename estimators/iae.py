@@ -1,9 +1,10 @@
 """Innovation-based adaptive EKF, maximum-likelihood window estimate (seed 000 eqs 26-37)."""
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
-from .ekf import EKF
+from .adaptive import WindowedAdaptiveEKF
 from .system import DiscreteModel
 
 FORMS = ("diagonal", "scalar", "full")
@@ -25,7 +26,15 @@ def project_pd(M: np.ndarray, floor: float, form: str) -> np.ndarray:
     return (V * np.maximum(w, floor)) @ V.T
 
 
-class IAE(EKF):
+def _project_sym(M, floor, form):
+    """:func:`project_pd` for the "diagonal" and "scalar" forms, as a CasADi expression."""
+    n = M.shape[0]
+    if form == "diagonal":
+        return ca.diag(ca.fmax(ca.diag(M), floor))
+    return ca.fmax(ca.trace(M) / n, floor) * ca.SX.eye(n)
+
+
+class IAE(WindowedAdaptiveEKF):
     """EKF whose Q and R follow the innovation sequence (Mohamed and Schwarz, 1999).
 
     After each update, with ``I_j`` the innovations of the last ``window`` steps:
@@ -33,8 +42,10 @@ class IAE(EKF):
     ``Q = K C_I K^T`` (eq 36), each projected onto the chosen ``form`` with eigenvalues
     at least ``floor`` so that they stay positive definite. ``H P^- H^T`` is taken as
     ``S - R`` of the step. The new values apply from the next step. Until the window is
-    full, the initial Q and R are kept. Adaptation happens in :meth:`step` (a separate
-    ``predict``/``update`` pair does not adapt).
+    full, the initial Q and R are kept. The "diagonal" and "scalar" forms are computed in
+    the compiled step (and run batched); "full" projects the eigenvalues in numpy after
+    each step. Adaptation happens in :meth:`step` (a separate predict/update does not
+    adapt).
 
     Parameters
     ----------
@@ -52,41 +63,45 @@ class IAE(EKF):
     """
 
     name = "IAE"
-    supports_batch = False      # its adaptation runs in numpy after each step
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 20,
                  adapt=("Q", "R"), form: str = "diagonal", q_floor: float = 1e-9,
                  r_floor: float = 1e-9, backend: str = "compiled"):
-        if int(window) != window or window < 1:
-            raise ValueError(f"window must be a positive integer, got {window!r}")
         if not set(adapt) <= {"Q", "R"}:
             raise ValueError(f"adapt must contain only 'Q' and 'R', got {adapt!r}")
         if form not in FORMS:
             raise ValueError(f"form must be one of {FORMS}, got {form!r}")
         if not (q_floor > 0 and r_floor > 0):
             raise ValueError("q_floor and r_floor must be > 0")
-        self.window, self.adapt, self.form = int(window), tuple(adapt), form
+        self.adapt, self.form = tuple(adapt), form
         self.q_floor, self.r_floor = float(q_floor), float(r_floor)
-        super().__init__(system, x0, P0, Q, R, backend)
-        self._ring = np.zeros((self.window, system.ny))
-        self._count = 0
+        super().__init__(system, x0, P0, Q, R, window, backend)
 
-    def innovation_covariance(self) -> np.ndarray:
-        """C_I of eq 37 over the innovations stored so far (at most ``window``)."""
-        n = min(self._count, self.window)
-        I = self._ring[:n]
-        return I.T @ I / max(n, 1)
+    @property
+    def supports_batch(self):
+        return self.form != "full"
 
-    def _after_step(self):
-        self._ring[self._count % self.window] = self._diag["innov"]
-        self._count += 1
-        if self._count < self.window:
-            return
+    def _cache_key(self):
+        return (type(self).__name__, self.window, self.adapt, self.form, self.q_floor, self.r_floor)
+
+    def _adapt(self, st, diag, C_I):
+        if self.form == "full":          # adapted in numpy after the step
+            return st["Q"], st["R"]
+        Q, R = st["Q"], st["R"]
+        if "R" in self.adapt:
+            R = _project_sym(C_I - (diag["S"] - st["R"]), self.r_floor, self.form)   # eq 35
+        if "Q" in self.adapt:
+            K = diag["K"]
+            Q = _project_sym(ca.mtimes([K, C_I, K.T]), self.q_floor, self.form)      # eq 36
+        return Q, R
+
+    def _adapted(self):
+        if self.form != "full":
+            return super()._adapted()
         C_I = self.innovation_covariance()
         if "R" in self.adapt:
-            HPH = self.S - self.R
-            self._now("R")[:] = project_pd(C_I - HPH, self.r_floor, self.form).ravel(order="F")
+            self._now("R")[:] = project_pd(C_I - (self.S - self.R), self.r_floor, "full").ravel(order="F")
         if "Q" in self.adapt:
             K = self.K
-            self._now("Q")[:] = project_pd(K @ C_I @ K.T, self.q_floor, self.form).ravel(order="F")
+            self._now("Q")[:] = project_pd(K @ C_I @ K.T, self.q_floor, "full").ravel(order="F")
         self._record()

@@ -5,12 +5,12 @@ import casadi as ca
 import numpy as np
 
 from . import checks
-from .ekf import EKF
+from .adaptive import WindowedAdaptiveEKF
 from .fuzzy import MamdaniFuzzy
 from .system import DiscreteModel
 
 
-class MFIAE(EKF):
+class MFIAE(WindowedAdaptiveEKF):
     """EKF whose scalar Q and R are tuned online by a Mamdani fuzzy system (seed 000 sec. 4).
 
     Each step, after the EKF update: ``C_I`` is the mean of ``I_j I_j^T`` over the last
@@ -73,15 +73,13 @@ class MFIAE(EKF):
                  fuzzy: MamdaniFuzzy | None = None, gain_q: float = 0.02, gain_r: float = 0.2,
                  per_channel: bool = False, q_bounds=(1e-9, 1e6), r_bounds=(1e-9, 1e6),
                  backend: str = "compiled"):
-        if int(window) != window or window < 1:
-            raise ValueError(f"window must be a positive integer, got {window!r}")
         for name, g in (("gain_q", gain_q), ("gain_r", gain_r)):
             if not (0 < g <= 1):
                 raise ValueError(f"{name} must be in (0, 1], got {g}")
         for name, (lo, hi) in (("q_bounds", q_bounds), ("r_bounds", r_bounds)):
             if not (0 < lo < hi):
                 raise ValueError(f"{name} must satisfy 0 < low < high, got {(lo, hi)}")
-        self.window, self.fuzzy = int(window), fuzzy or MamdaniFuzzy()
+        self.fuzzy = fuzzy or MamdaniFuzzy()
         self.gain_q, self.gain_r, self.per_channel = float(gain_q), float(gain_r), bool(per_channel)
         self.q_bounds, self.r_bounds = tuple(map(float, q_bounds)), tuple(map(float, r_bounds))
         q0 = checks.positive(q0, "q0")
@@ -90,29 +88,15 @@ class MFIAE(EKF):
             checks.positive(r, "r0")
         if not per_channel and np.ptp(r0) > 0:
             raise ValueError("r0 must be one value unless per_channel=True")
-        super().__init__(system, x0, P0, q0 * np.eye(system.nx), np.diag(r0), backend)
-        self._ring = np.zeros((self.window, system.ny))
-        self._ri = 0
-        self._count = 0
+        super().__init__(system, x0, P0, q0 * np.eye(system.nx), np.diag(r0), window, backend)
 
     def _cache_key(self):
         return (type(self).__name__, self.window, self.fuzzy, self.gain_q, self.gain_r,
                 self.per_channel, self.q_bounds, self.r_bounds)
 
-    def _extra_state_init(self):
-        ny = self.system.ny
-        return {"Csum": np.zeros(ny * ny), "count": np.zeros(1)}
-
-    def _step_spec(self):
-        st, ins, new, diag, extra = super()._step_spec()
+    def _adapt(self, st, diag, C_I):
         ny, nx = self.system.ny, self.system.nx
-        Csum, count, I_old = self._sym("Csum", ny, ny), self._sym("count", 1), self._sym("I_old", ny)
-        st.update(Csum=Csum, count=count)
-        ins["I_old"] = I_old
-        innov, C_T, K = diag["innov"], diag["S"], diag["K"]    # eq 39: C_T = H P^- H^T + R
-        Csum_new = Csum + ca.mtimes(innov, innov.T) - ca.mtimes(I_old, I_old.T)
-        count_new = count + 1
-        C_I = Csum_new / self.window                            # eq 37
+        C_T, K = diag["S"], diag["K"]                            # eq 39: C_T = H P^- H^T + R
         if self.per_channel:
             c_t, c_i = ca.diag(C_T), ca.diag(C_I)
             m = ca.vertcat(*[self.fuzzy.expression(c_t[j], c_i[j]) for j in range(ny)])
@@ -120,53 +104,17 @@ class MFIAE(EKF):
             c_t, c_i = ca.trace(C_T) / ny, ca.trace(C_I) / ny
             m = ca.repmat(self.fuzzy.expression(c_t, c_i), ny, 1)
             c_t, c_i = ca.repmat(c_t, ny, 1), ca.repmat(c_i, ny, 1)
+        self._m_expr = m
         madj = m * (c_t + c_i) / 2                              # eq 38, measurement units
         madj_q = ca.trace(ca.mtimes([K, ca.diag(madj), K.T])) / nx
-        Q, R = st["Q"], st["R"]
-        q_new = ca.fmin(ca.fmax(Q[0, 0] - self.gain_q * madj_q, self.q_bounds[0]), self.q_bounds[1])
-        r_new = ca.fmin(ca.fmax(ca.diag(R) - self.gain_r * madj, self.r_bounds[0]), self.r_bounds[1])
-        full = count_new >= self.window
-        new.update(Q=ca.if_else(full, q_new * ca.SX.eye(nx), Q),       # eq 41
-                   R=ca.if_else(full, ca.diag(r_new), R),               # eq 42
-                   Csum=Csum_new, count=count_new)
-        extra["m"] = ca.if_else(full, m, ca.SX.zeros(ny))
-        extra["qr"] = ca.vertcat(ca.diag(new["Q"]), ca.diag(new["R"]))   # the history row
+        q_new = ca.fmin(ca.fmax(st["Q"][0, 0] - self.gain_q * madj_q, self.q_bounds[0]), self.q_bounds[1])
+        r_new = ca.fmin(ca.fmax(ca.diag(st["R"]) - self.gain_r * madj, self.r_bounds[0]), self.r_bounds[1])
+        return q_new * ca.SX.eye(nx), ca.diag(r_new)            # eqs 41, 42
+
+    def _step_spec(self):
+        st, ins, new, diag, extra = super()._step_spec()
+        full = st["count"] + 1 >= self.window
+        extra["m"] = ca.if_else(full, self._m_expr, ca.SX.zeros(self.system.ny))
         return st, ins, new, diag, extra
 
     m = property(lambda self: self._extra["m"].copy())
-
-    def _bind(self, pred, upd, step):
-        super()._bind(pred, upd, step)
-        self._iold, self._innov, self._qr = self._inputs["I_old"], self._diag["innov"], self._extra["qr"]
-
-    def _prepare_step(self):
-        self._iold[:] = self._ring[self._ri]
-
-    def _after_step(self):
-        ri = self._ri
-        self._ring[ri] = self._innov
-        ri += 1
-        if ri == self.window:
-            ri = 0
-            # re-sum the window exactly once per lap: no drift of the running sum
-            self._now("Csum")[:] = (self._ring.T @ self._ring).ravel(order="F")
-        self._ri = ri
-        self._count += 1
-        if self._count >= self.window:
-            self.history.append(self.k, self._qr)
-
-    # ---------------------------------------------------------------- batched runs
-    def _batch_init(self, batch):
-        batch.ring = np.zeros((self.window, batch.n, self.system.ny))
-        batch.ri, batch.count = 0, 0
-
-    def _batch_prepare(self, batch):
-        batch._inputs["I_old"][:] = batch.ring[batch.ri].ravel()
-
-    def _batch_after(self, batch):
-        batch.ring[batch.ri] = batch._out["innov"].reshape(batch.n, self.system.ny)
-        batch.ri += 1
-        if batch.ri == self.window:
-            batch.ri = 0
-            C = np.einsum("wri,wrj->rji", batch.ring, batch.ring)   # column-major per run
-            batch.now("Csum")[:] = C.ravel()

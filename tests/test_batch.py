@@ -12,12 +12,12 @@ def cp():
 
 
 @pytest.mark.parametrize("cls,args", [(EKF, (0.2, 0.1)), (KF, (0.2, 0.1)), (UKF, (0.2, 0.1)),
-                                      (MFIAE, (1e-3, 1e-3))])
+                                      (MFIAE, (1e-3, 1e-3)), (IAE, (1e-3, 1e-3))])
 def test_batch_equals_single_filters(cp, cls, args):
     rng = np.random.default_rng(1)
     n = 7
     x0 = rng.normal([0.5, 0, 1.8, 0.5], 0.1, (n, 4))
-    kw = {"window": 5} if cls is MFIAE else {}
+    kw = {"window": 5} if cls in (MFIAE, IAE) else {}
     batch = BatchFilter(cls(cp, x0[0], 1.0, *args, **kw), n, x0=x0)
     singles = [cls(cp, x0[r], 1.0, *args, **kw) for r in range(n)]
     ys = rng.normal([0.5, 1.8], 0.3, (40, n, 2))
@@ -33,7 +33,7 @@ def test_batch_equals_single_filters(cp, cls, args):
 
 def test_batch_refusals(cp):
     with pytest.raises(TypeError, match="IAE cannot run batched"):
-        BatchFilter(IAE(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.1, 0.1), 3)
+        BatchFilter(IAE(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.1, 0.1, form="full"), 3)
     b = BatchFilter(EKF(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.1, 0.1), 3)
     ys = np.ones((3, 2))
     ys[2, 1] = np.nan
