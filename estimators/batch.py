@@ -24,6 +24,10 @@ class BatchFilter:
         Number of realisations.
     x0 : array_like, shape (n_runs, nx), optional
         Per-realisation initial estimates (default: the template's x for all).
+    on_failure : {"raise", "mark"}
+        What a realisation whose input or result is not finite does: raise (default),
+        or keep its previous state, mark it in :attr:`failed` and go on with the others
+        (Monte Carlo campaigns count such runs as diverged).
 
     Attributes
     ----------
@@ -31,9 +35,14 @@ class BatchFilter:
         Current estimates.
     P : ndarray, shape (n_runs, nx, nx)
     nis : ndarray, shape (n_runs,)
+    failed : ndarray of bool, shape (n_runs,)
+        Realisations that failed at least once (``on_failure="mark"``).
     """
 
-    def __init__(self, template: KalmanBase, n_runs: int, x0=None):
+    def __init__(self, template: KalmanBase, n_runs: int, x0=None, on_failure: str = "raise"):
+        if on_failure not in ("raise", "mark"):
+            raise ValueError(f"on_failure must be 'raise' or 'mark', got {on_failure!r}")
+        self.on_failure = on_failure
         if not template.supports_batch:
             raise TypeError(f"{template.name} cannot run batched (its adaptation is not in the fused step)")
         if int(n_runs) != n_runs or n_runs < 1:
@@ -67,6 +76,7 @@ class BatchFilter:
                        else self._out[step.name_out(j)]) for j in range(step.n_out())}
             self._steps.append(BufferedFunction(step, args, res))
         self.k = 0
+        self.failed = np.zeros(self.n, dtype=bool)
         template._batch_init(self)
 
     def now(self, key: str) -> np.ndarray:
@@ -99,7 +109,13 @@ class BatchFilter:
         self.template._batch_prepare(self)
         self._steps[self._cur].trigger()
         status = self._out["status"]
-        if status.any():
+        if status.any() and self.on_failure == "mark":
+            bad = status != 0
+            for pair in self._pairs.values():     # failed runs keep their previous state
+                old, new = pair[self._cur], pair[1 - self._cur]
+                new.reshape(self.n, -1)[bad] = old.reshape(self.n, -1)[bad]
+            self.failed |= bad
+        elif status.any():
             run = int(np.flatnonzero(status)[0])
             what = "u or y contains NaN or inf" if status[run] == BAD_INPUT else "the estimate became non-finite"
             raise (ValueError if status[run] == BAD_INPUT else FloatingPointError)(

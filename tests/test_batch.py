@@ -42,3 +42,17 @@ def test_batch_refusals(cp):
     with pytest.raises(ValueError, match=r"y have shape \(3, 2\)"):
         b.step(0.0, np.ones((2, 2)))
     assert b.k == 0 and np.all(np.isfinite(b.x))
+
+
+def test_batch_marks_failed_realisations_and_goes_on(cp):
+    b = BatchFilter(EKF(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.1, 0.1), 3, on_failure="mark")
+    b.step(0.0, np.ones((3, 2)))
+    x_before = b.x
+    ys = np.ones((3, 2))
+    ys[1, 0] = np.inf
+    X = b.step(0.0, ys)
+    assert b.failed.tolist() == [False, True, False]
+    np.testing.assert_array_equal(X[1], x_before[1])          # kept its previous state
+    assert not np.array_equal(X[0], x_before[0])               # the others went on
+    b.step(0.0, np.ones((3, 2)))
+    assert b.failed.tolist() == [False, True, False] and np.all(np.isfinite(b.x))

@@ -1,0 +1,1 @@
+"""The papers' experiments as Monte Carlo campaigns: ``pendulum-cosim experiment NAME``."""
