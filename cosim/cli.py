@@ -104,7 +104,7 @@ def _models(args) -> int:
     return 0
 
 
-EXPERIMENTS = ("seed000",)
+EXPERIMENTS = ("seed000", "seed001")
 
 
 def _experiment(args) -> int:
@@ -123,6 +123,24 @@ def _experiment(args) -> int:
               f"{wall:.2f} s")
         print(table[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
         print(f"\nwrote {md} and the tables and figures beside it")
+        return 0
+    if args.name == "seed001":
+        from .experiments import seed001 as exp
+
+        settings = exp.Settings(**({"runs": args.runs} if args.runs else {}),
+                                **({"seed": args.seed} if args.seed is not None else {}))
+        table, summary, wall = exp.run(settings, path=args.path, backend=args.backend,
+                                       n_jobs=args.jobs, progress=not args.quiet)
+        md = exp.write_report(table, summary, wall, settings, out)
+        print(f"Seed 001: mean |position error| [m], {settings.runs} realisations, {args.path} path, "
+              f"{wall:.2f} s")
+        print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+        for case, res in summary.items():
+            td = res["KF"]["t_div"]
+            when = f"median {np.nanmedian(td):.2f} s" if np.isfinite(td).any() else "never"
+            print(f"{case}: KF diverged in {int(np.isfinite(td).sum())} of {len(td)} runs ({when}); "
+                  f"EKF in {int(np.isfinite(res['EKF']['t_div']).sum())}")
+        print(f"\nwrote {md}")
         return 0
     return 2
 

@@ -86,3 +86,18 @@ def test_full_seed000_campaign_reproduces_the_bound():
     assert true["anees"].mean() == pytest.approx(4.0, rel=0.05)
     assert true["anis"].mean() == pytest.approx(2.0, rel=0.05)
     assert not per_run["diverged"].any()
+
+
+def test_seed001_fast_equals_master_and_kf_diverges_only_far_from_its_linearisation():
+    from cosim.experiments import seed001
+
+    s = seed001.Settings(runs=2, duration=3.0)
+    for case in seed001.CASES:
+        fast = seed001.fast_task(case, s)
+        master = seed001.master_task(case, s)
+        for n in seed001.FILTERS:
+            np.testing.assert_allclose(fast[n]["rmse"], master[n]["rmse"], rtol=1e-10, atol=1e-13)
+    up = seed001.fast_task("upright", s)
+    assert np.isfinite(up["KF"]["t_div"]).all() and not np.isfinite(up["EKF"]["t_div"]).any()
+    hang = seed001.fast_task("hanging", s)
+    assert not np.isfinite(hang["KF"]["t_div"]).any()

@@ -28,6 +28,8 @@ import pandas as pd
 
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
+from .common import batch_estimates, master_realisation, noise_components
+from .common import simulate_truth as common_truth
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
 READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 the measurement variance (R)",
@@ -109,32 +111,21 @@ def _inputs(s: Settings) -> np.ndarray:
     return np.array([src.sample(k * s.T, None)[0] for k in range(s.steps + 1)])
 
 
-def _noise_components(s: Settings, q: float, r: float, seed_w: int, seed_v: int):
-    from ..sensors import ProcessNoise, Sensor
-
-    return (ProcessNoise("noise", s.T, STATES, q, seed=seed_w),
-            Sensor("sensor", s.T, ["x", "theta"], noise_std=np.sqrt(r), seed=seed_v))
-
-
-# ---------------------------------------------------------------------------- fast path
-def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]):
-    """Truth ``X`` (runs, steps+1, 4) and measurements ``Y`` (runs, steps+1, 2), drawing the
-    same numbers as the ProcessNoise and Sensor components do in the master path."""
+def _noise(s: Settings, q: float, r: float, seed_w: int, seed_v: int):
     from fmu_models import get_model
 
-    model = get_model("cartpole")
-    R, N = len(seeds), s.steps
-    noise, sensor = _noise_components(s, q, r, 0, 0)
-    W = np.stack([np.random.default_rng(sw).standard_normal((N + 1, 4)) @ noise.L.T for sw, _ in seeds])
-    V = np.stack([sensor.noise_std * np.random.default_rng(sv).standard_normal((N + 1, 2)) for _, sv in seeds])
-    step = model.sym.step("euler", 1).map(R)
+    return noise_components(get_model("cartpole"), s.T, q, ["x", "theta"], np.sqrt(r), seed_w, seed_v)
+
+
+def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]):
+    """Truth ``X`` (runs, steps+1, 4), measurements ``Y`` (runs, steps+1, 2) and the input
+    sequence, drawing the same numbers as the components of the master path."""
+    from fmu_models import get_model
+
     u = _inputs(s)
-    X = np.empty((R, N + 1, 4))
-    X[:, 0] = s.x0
-    for k in range(N):
-        X[:, k + 1] = np.asarray(step(X[:, k].T, np.full((1, R), u[k]), model.p, s.T)).T + W[:, k]
-    H = np.asarray(model.sym.h.map(R * (N + 1))(X.reshape(-1, 4).T, model.p)).T.reshape(R, N + 1, 2)
-    return X, H + V, u
+    X, Y = common_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, ["x", "theta"],
+                        np.sqrt(r), seeds)
+    return X, Y, u
 
 
 def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, example: dict) -> dict:
@@ -152,76 +143,52 @@ def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, e
 
 def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) -> dict:
     """All realisations of one scenario and reading, every filter batched over them."""
-    from estimators import BatchFilter
-
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
     seeds = [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in runs]
     X, Y, u = simulate_truth(s, q, r, seeds)
-    system = _system(s)
     errors, nees, nis, failed = {}, {}, {}, {}
-    for name, make in make_filters(system, s, q, r).items():
-        batch = BatchFilter(make(), len(runs), on_failure="mark")
-        est = np.empty_like(X)
-        est[:, 0] = s.x0
-        ne, ni = np.zeros((len(runs), s.steps)), np.zeros((len(runs), s.steps))
-        for k in range(1, s.steps + 1):
-            est[:, k] = batch.step(u[k - 1], Y[:, k])
-            e = est[:, k] - X[:, k]
-            ne[:, k - 1] = np.einsum("ri,ri->r", e, np.linalg.solve(batch.P, e[..., None])[..., 0])
-            ni[:, k - 1] = batch.nis
-        errors[name], nees[name], nis[name], failed[name] = est - X, ne, ni, batch.failed.copy()
+    for name, make in make_filters(_system(s), s, q, r).items():
+        est, nees[name], nis[name], failed[name] = batch_estimates(make, X, Y, u[:, None], s.x0)
+        errors[name] = est - X
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
     return _summarise(errors, nees, nis, failed, s, example)
 
 
-# ---------------------------------------------------------------------------- master path
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None) -> dict:
-    """The same realisations, each run through the co-simulation master with the plant FMU."""
+    """The same realisations, each run through the co-simulation master with the plant FMU.
+
+    (NEES on this path uses only the covariance diagonals the estimator components output.)
+    """
     import tempfile
 
     from fmu_models.build import build_fmu
 
-    from ..estimation import EstimatorComponent
     from ..fmu_component import FMUComponent
-    from ..master import Cosimulation
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    system = _system(s)
-    makers = make_filters(system, s, q, r)
-    tags = {name: f"f{i}" for i, name in enumerate(makers)}
+    makers = make_filters(_system(s), s, q, r)
+    X = np.empty((len(runs), s.steps + 1, 4))
+    E = {name: np.empty_like(X) for name in makers}
+    NIS = {name: np.zeros((len(runs), s.steps)) for name in makers}
+    NEES = {name: np.zeros((len(runs), s.steps)) for name in makers}
     with tempfile.TemporaryDirectory() as tmp:
-        path = build_fmu("cartpole", fmu_dir or tmp)
-        plant = FMUComponent("plant", path, s.T, start=dict(zip(STATES, s.x0)))
-        X = np.empty((len(runs), s.steps + 1, 4))
-        E = {name: np.empty_like(X) for name in makers}
-        NIS = {name: np.zeros((len(runs), s.steps)) for name in makers}
-        NEES = {name: np.zeros((len(runs), s.steps)) for name in makers}
+        plant = FMUComponent("plant", build_fmu("cartpole", fmu_dir or tmp), s.T,
+                             start=dict(zip(STATES, s.x0)))
         for i, run in enumerate(runs):
-            sw, sv = realisation_seeds(s.seed, scenario_index, run)
-            noise, sensor = _noise_components(s, q, r, sw, sv)
-            ests = [EstimatorComponent(tags[n], makers[n], s.T) for n in makers]
-            conn = {"plant.F": "force.out", "sensor.x": "plant.x", "sensor.theta": "plant.theta",
-                    **{f"plant.w_{x}": f"noise.w_{x}" for x in STATES}}
-            for t in tags.values():
-                conn.update({f"{t}.F": "force.out", f"{t}.y_x": "sensor.y_x", f"{t}.y_theta": "sensor.y_theta"})
-            # estimators before the source: they predict with the force held over the last step
-            df = Cosimulation([plant, sensor, *ests, _input_component(s), noise], conn).run(s.duration)
-            X[i] = df[[f"plant.{x}" for x in STATES]].to_numpy()
-            for n, t in tags.items():
-                E[n][i] = df[[f"{t}.{x}" for x in STATES]].to_numpy()
-                NIS[n][i] = df[f"{t}.nis"].to_numpy()[1:]
-                e = E[n][i][1:] - X[i][1:]
-                NEES[n][i] = np.sum(e**2 / df[[f"{t}.P_{x}" for x in STATES]].to_numpy()[1:], axis=1)
+            noise, sensor = _noise(s, q, r, *realisation_seeds(s.seed, scenario_index, run))
+            X[i], est, pdiag, nis = master_realisation(plant, _input_component(s), noise, sensor,
+                                                       makers, s.T, s.duration)
+            for n in makers:
+                E[n][i], NIS[n][i] = est[n], nis[n]
+                NEES[n][i] = np.sum((est[n][1:] - X[i][1:]) ** 2 / pdiag[n][1:], axis=1)
     errors = {n: E[n] - X for n in makers}
     failed = {n: np.zeros(len(runs), dtype=bool) for n in makers}
     example = {"truth": X[0], **{f"est {n}": E[n][0] for n in makers}}
-    out = _summarise(errors, NEES, NIS, failed, s, example)
-    out["nees_is_diagonal"] = True
-    return out
+    return _summarise(errors, NEES, NIS, failed, s, example)
 
 
 # ---------------------------------------------------------------------------- campaign
