@@ -33,7 +33,8 @@ class FMUComponent:
         FMU variables (causality input) offered as input ports; default: all Real inputs.
         Unconnected ones keep their start values. A non-Real variable is refused.
     outputs : sequence of str, optional
-        FMU variables offered as output ports; default: all Real outputs.
+        FMU variables offered as output ports; default: all Real outputs. Local variables
+        such as ``der(alpha_dot)`` may be listed too (an accelerometer needs them).
     parameters : mapping, optional
         Parameter values by name, set before initialisation.
     start : mapping, optional
@@ -64,9 +65,11 @@ class FMUComponent:
         self.variables = {v.name: v for v in md.modelVariables}
         all_in = [v.name for v in md.modelVariables if v.causality == "input"]
         all_out = [v.name for v in md.modelVariables if v.causality == "output"]
+        # local variables (e.g. der(x)) may be read as outputs when asked for by name
+        readable = all_out + [v.name for v in md.modelVariables if v.causality == "local"]
         real = lambda names: [n for n in names if self.variables[n].type in REAL_TYPES]  # noqa: E731
         self.input_names = self._ports(real(all_in) if inputs is None else inputs, all_in, "input")
-        self.output_names = self._ports(real(all_out) if outputs is None else outputs, all_out, "output")
+        self.output_names = self._ports(real(all_out) if outputs is None else outputs, readable, "output")
         self.settings = {}
         for kind, values in (("parameter", parameters or {}), ("start", start or {})):
             for key, val in values.items():
