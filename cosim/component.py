@@ -16,10 +16,11 @@ implementing :meth:`Component.sample` (and :meth:`Component.reset` if it has sta
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import numpy as np
+
+from estimators.checks import positive
 
 
 def check_name(name: str, what: str = "component name") -> str:
@@ -29,10 +30,8 @@ def check_name(name: str, what: str = "component name") -> str:
 
 
 def check_period(period, owner: str) -> float:
-    p = float(period)
-    if not (math.isfinite(p) and p > 0):
-        raise ValueError(f"{owner}: sample period must be a positive number of seconds, got {period!r}")
-    return p
+    """A component's sample period [s] as a positive finite float, else ValueError."""
+    return positive(period, f"{owner}: sample period")
 
 
 class Component:

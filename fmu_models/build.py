@@ -95,7 +95,8 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     cc = find_compiler()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    generic = [C_DIR / "plant_core.h", C_DIR / "plant_core.c", C_DIR / f"fmi{fmi_version}_wrapper.c"]
+    generic = [C_DIR / n for n in ("plant_core.h", "plant_core.c", "wrapper_modes.h", "wrapper_common.h",
+                                   f"fmi{fmi_version}_wrapper.c")]
     with tempfile.TemporaryDirectory(prefix=f"{model.fmu_name}_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"

@@ -69,12 +69,13 @@ class _Structure:
         return deps, kinds
 
 
-def _unknown(tag, index, deps, kinds=None):
-    a = {"index": index, "dependencies": " ".join(map(str, sorted(deps)))}
+def _unknown(tag, index, deps, kinds=None, key="index", indent=6):
+    """One ModelStructure entry; FMI 2.0 refers by ``index``, FMI 3.0 by ``valueReference``."""
+    a = {key: index, "dependencies": " ".join(map(str, sorted(deps)))}
     if kinds is not None:
         order = sorted(range(len(deps)), key=lambda i: deps[i])
         a["dependenciesKind"] = " ".join(kinds[i] for i in order)
-    return f"      <{tag}{_attrs(**a)}/>"
+    return f"{' ' * indent}<{tag}{_attrs(**a)}/>"
 
 
 def _units_xml(lay: FmuLayout) -> list[str]:
@@ -209,11 +210,7 @@ def fmi3_xml(model: PlantModel, token: str) -> str:
 
 
 def _unknown3(tag, vr, deps, kinds=None):
-    a = {"valueReference": vr, "dependencies": " ".join(map(str, sorted(deps)))}
-    if kinds is not None:
-        order = sorted(range(len(deps)), key=lambda i: deps[i])
-        a["dependenciesKind"] = " ".join(kinds[i] for i in order)
-    return f"    <{tag}{_attrs(**a)}/>"
+    return _unknown(tag, vr, deps, kinds, key="valueReference", indent=4)
 
 
 def build_description_xml(model: PlantModel, source_files: list[str]) -> str:

@@ -6,8 +6,8 @@
 #include <string.h>
 #include "fmi2Functions.h"
 #include "plant_core.h"
+#include "wrapper_modes.h"
 
-typedef enum { M_INSTANTIATED, M_INIT, M_STEP, M_EVENT, M_CONT, M_TERMINATED, M_ERROR } Mode;
 
 typedef struct {
     PlantData d;
@@ -36,35 +36,12 @@ static void logmsg(Instance *c, fmi2Status st, const char *cat, const char *fn, 
     c->cb.logger(c->cb.componentEnvironment, c->name, st, cat, msg);
 }
 
-static fmi2Status fail(Instance *c, const char *fn, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(c->err, sizeof c->err, fmt, ap);
-    va_end(ap);
-    logmsg(c, fmi2Error, "logStatusError", fn, c->err);
-    return fmi2Error;
-}
+#define STATUS fmi2Status
+#define STATUS_OK fmi2OK
+#define STATUS_ERROR fmi2Error
+#include "wrapper_common.h"
 
-/* Status of a core call that wrote its message into c->err. */
-static fmi2Status core(Instance *c, const char *fn, int rc) {
-    if (!rc) return fmi2OK;
-    logmsg(c, fmi2Error, "logStatusError", fn, c->err);
-    return fmi2Error;
-}
-
-static const char *mode_name(Mode m) {
-    static const char *n[] = {"instantiated", "initialization mode", "step mode", "event mode",
-                              "continuous-time mode", "terminated", "error"};
-    return n[m];
-}
-
-#define B(m) (1u << (m))
-#define ANY_LIVE (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED))
-#define RUNNING (B(M_STEP) | B(M_EVENT) | B(M_CONT))
-#define BEFORE_RUN(c) (((1u << (c)->mode) & (B(M_INSTANTIATED) | B(M_INIT))) != 0)
-#define ALLOW(fn, mask) Instance *c = (Instance *)comp; \
-    if (!c) return fmi2Error; \
-    if (!((1u << c->mode) & (mask))) return fail(c, fn, "not allowed in %s", mode_name(c->mode))
+#define ALLOW(fn, mask) ALLOW_IN(comp, fn, mask)
 
 /* ------------------------------------------------------------------ lifecycle */
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }

@@ -8,8 +8,8 @@
 #include <string.h>
 #include "fmi3Functions.h"
 #include "plant_core.h"
+#include "wrapper_modes.h"
 
-typedef enum { M_INSTANTIATED, M_INIT, M_STEP, M_EVENT, M_CONT, M_TERMINATED, M_ERROR } Mode;
 typedef enum { ME, CS } Kind;
 
 typedef struct {
@@ -30,34 +30,12 @@ static void logmsg(Instance *c, fmi3Status st, const char *cat, const char *fn, 
     c->log(c->env, st, cat, buf);
 }
 
-static fmi3Status fail(Instance *c, const char *fn, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(c->err, sizeof c->err, fmt, ap);
-    va_end(ap);
-    logmsg(c, fmi3Error, "logStatusError", fn, c->err);
-    return fmi3Error;
-}
+#define STATUS fmi3Status
+#define STATUS_OK fmi3OK
+#define STATUS_ERROR fmi3Error
+#include "wrapper_common.h"
 
-static fmi3Status core(Instance *c, const char *fn, int rc) {
-    if (!rc) return fmi3OK;
-    logmsg(c, fmi3Error, "logStatusError", fn, c->err);
-    return fmi3Error;
-}
-
-static const char *mode_name(Mode m) {
-    static const char *n[] = {"instantiated", "initialization mode", "step mode", "event mode",
-                              "continuous-time mode", "terminated", "error"};
-    return n[m];
-}
-
-#define B(m) (1u << (m))
-#define ANY_LIVE (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED))
-#define RUNNING (B(M_STEP) | B(M_EVENT) | B(M_CONT))
-#define BEFORE_RUN(c) (((1u << (c)->mode) & (B(M_INSTANTIATED) | B(M_INIT))) != 0)
-#define ALLOW(fn, mask) Instance *c = (Instance *)inst; \
-    if (!c) return fmi3Error; \
-    if (!((1u << c->mode) & (mask))) return fail(c, fn, "not allowed in %s", mode_name(c->mode))
+#define ALLOW(fn, mask) ALLOW_IN(inst, fn, mask)
 #define UNSUPPORTED(fn, why) return fail(c, fn, "%s", why)
 
 /* ------------------------------------------------------------------ lifecycle */
