@@ -24,13 +24,15 @@ from estimators.checks import positive
 
 
 def check_name(name: str, what: str = "component name") -> str:
+    """``name`` if it is an identifier, else ValueError naming ``what`` it is."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"{what} {name!r} must be an identifier (letters, digits, _)")
     return name
 
 
 def check_period(period, owner: str) -> float:
-    """A component's sample period [s] as a positive finite float, else ValueError."""
+    """A component's sample period [s] as a positive finite float, else ValueError naming
+    the ``owner`` component."""
     return positive(period, f"{owner}: sample period")
 
 

@@ -65,7 +65,8 @@ class EstimatorComponent(Component):
 
 
 def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
-    """Discrete LQR gain K (nu, nx) on the exact ZOH discretisation of the linearisation.
+    """Discrete LQR gain K (nu, nx) of ``model`` linearised at (x_op, u_op) and discretised
+    with exact ZOH over ``period`` [s]; weights Q (state) and R (input).
 
     Minimises ``sum x^T Q x + u^T R u`` for ``x_{k+1} = Ad x_k + Bd u_k`` (deviations from
     the operating point); ``u = u_op - K (x - x_op)``.

@@ -36,7 +36,7 @@ class ConfigurationError(ValueError):
 
 
 class CosimError(RuntimeError):
-    """A component failed during a run.
+    """A component failed during a run (``message`` says which, when and why).
 
     Attributes
     ----------

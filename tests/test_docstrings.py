@@ -3,18 +3,24 @@ import inspect
 
 import pytest
 
-import cosim
 import estimators
 import fmu_models
+from cosim import component, estimation, fmu_component, imu, master, model_component, results
+from cosim import scenario, sensors, sources
+from cosim.experiments import campaign, metrics
 from fmu_models import build
+
+MODULES = (fmu_models, estimators, build, component, estimation, fmu_component, imu, master,
+           model_component, results, scenario, sensors, sources, campaign, metrics)
 
 
 def public_objects():
-    for mod in (fmu_models, estimators, build, cosim):
+    for mod in MODULES:
         for name in getattr(mod, "__all__", []) or [n for n in dir(mod) if not n.startswith("_")]:
             obj = getattr(mod, name)
             if inspect.isclass(obj) or inspect.isfunction(obj):
-                if getattr(obj, "__module__", "").split(".")[0] in ("fmu_models", "estimators", "cosim"):
+                defined_here = obj.__module__ == mod.__name__ or hasattr(mod, "__all__")
+                if defined_here and obj.__module__.split(".")[0] in ("fmu_models", "estimators", "cosim"):
                     yield f"{mod.__name__}.{name}", obj
 
 
