@@ -101,3 +101,10 @@ def test_seed001_fast_equals_master_and_kf_diverges_only_far_from_its_linearisat
     assert np.isfinite(up["KF"]["t_div"]).all() and not np.isfinite(up["EKF"]["t_div"]).any()
     hang = seed001.fast_task("hanging", s)
     assert not np.isfinite(hang["KF"]["t_div"]).any()
+
+
+def test_dask_backend_gives_the_same_numbers():
+    """The campaign on a local dask.distributed cluster equals the serial run."""
+    a = seed000.run(SMALL, readings=("eqs",), backend="dask", n_jobs=2, progress=False)[0]
+    b = seed000.run(SMALL, readings=("eqs",), backend="serial", progress=False)[0]
+    np.testing.assert_array_equal(_etas(a), _etas(b))
