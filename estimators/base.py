@@ -179,8 +179,6 @@ class KalmanBase:
                           [d(xu), d(Pu), d(innov), d(S), d(K), nis, _status([y], [xu, Pu])],
                           ["x", "P", "y", "R"], ["x_new", "P_new", "innov", "S", "K", "nis", "status"])
         st, ins, new, diag, extra = self._step_spec()
-        self._state_keys, self._input_keys = list(st), list(ins)
-        self._extra_keys = list(extra)
         outs = [d(new[k]) for k in st] + [d(diag[k]) for k in DIAGNOSTICS] + [d(v) for v in extra.values()]
         status = _status(list(ins.values()), [new["x"], new["P"], new["Q"], new["R"]])
         step = ca.Function("step", list(st.values()) + list(ins.values()), outs + [status],
@@ -201,7 +199,6 @@ class KalmanBase:
                                        6: self._status_arr})
         # step inputs: state, then u, y and any extra inputs; outputs: new state,
         # diagnostics, extra outputs, status
-        self._state_keys = [step.name_in(i) for i in range(step.n_in()) if step.name_in(i) in self._pairs]
         self._inputs = {"u": self._u, "y": self._y}
         for i in range(step.n_in()):
             name = step.name_in(i)
