@@ -85,7 +85,7 @@ def main():
         mast, mast_total = np.median([master_run(path, sys_, model.x0) for _ in range(REPEATS)], axis=0)
     print("5 s cart-pole, plant step 1 ms (5000 doSteps), EKF every 10 ms (500 steps), "
           "sensor and source every 10 ms")
-    print(f"                                   stepping loop   whole run (with instantiation)")
+    print("                                   stepping loop   whole run (with instantiation)")
     print(f"bare fmpy doStep loop:             {bare * 1e3:7.1f} ms      {bare_total * 1e3:7.1f} ms")
     print(f"estimator alone:                   {est * 1e3:7.1f} ms")
     print(f"master, whole closed loop:         {mast * 1e3:7.1f} ms      {mast_total * 1e3:7.1f} ms")

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import time
 from fractions import Fraction
-from typing import Iterable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd

@@ -152,11 +152,10 @@ class Scenario:
             system = estimators.augment_rate_bias(system, bias)
         cls = getattr(estimators, filt)
         kwargs = {k: (np.asarray(v, float) if isinstance(v, list) else v) for k, v in c.items()}
-        try:
-            cls(system, **kwargs)      # fail now, with the filter's own message
+        try:                           # builds one filter now: bad settings fail here
+            return EstimatorComponent(name, lambda: cls(system, **kwargs), period)
         except TypeError as e:
             raise ConfigurationError(f"component {name!r} ({filt}): {e}") from None
-        return EstimatorComponent(name, lambda: cls(system, **kwargs), period)
 
     def _lqr(self, name, c):
         from fmu_models import get_model

@@ -6,7 +6,7 @@ from xml.sax.saxutils import quoteattr
 
 import casadi as ca
 
-from .fmu_layout import FmuLayout, derivative_unit
+from .fmu_layout import FmuLayout
 from .plant import PlantModel
 
 # SI base-unit exponents of every unit string the models use (FMI <BaseUnit>).

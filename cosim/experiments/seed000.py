@@ -328,16 +328,8 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
     lines += ["", "Diverged realisations (error not finite or above "
               f"{settings.divergence_threshold:g}): " + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), "",
               "## Consistency and per-state RMSE (mean over scenarios and realisations)", "",
-              agg.to_markdown(floatfmt=".4f") if _has_tabulate() else agg.to_string(float_format="%.4f"), "",
+              agg.to_markdown(floatfmt=".4f"), "",
               "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
     md = out / "summary.md"
     md.write_text("\n".join(lines) + "\n")
     return md
-
-
-def _has_tabulate() -> bool:
-    try:
-        import tabulate  # noqa: F401
-        return True
-    except ImportError:
-        return False
