@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from estimators.checks import positive
+from fmu_models.checks import positive
 
 
 def check_name(name: str, what: str = "component name") -> str:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from . import checks
+from fmu_models import checks
 from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
 from .history import NoiseHistory

@@ -4,7 +4,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from . import checks
+from fmu_models import checks
 from .adaptive import WindowedAdaptiveEKF
 from .fuzzy import MamdaniFuzzy
 from .system import DiscreteModel

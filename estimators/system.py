@@ -11,7 +11,8 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from fmu_models.plant import PlantModel, as_vector, check_method
+from fmu_models import checks
+from fmu_models.plant import PlantModel, check_method
 
 
 class DiscreteModel:
@@ -59,23 +60,23 @@ class DiscreteModel:
 
     def f(self, x, u) -> np.ndarray:
         """Next state, shape ``(nx,)``."""
-        return np.asarray(self._f(as_vector(x, self.nx, "x"), as_vector(u, self.nu, "u"))).ravel()
+        return np.asarray(self._f(checks.vector(x, self.nx, "x"), checks.vector(u, self.nu, "u"))).ravel()
 
     def h(self, x) -> np.ndarray:
         """Measurement, shape ``(ny,)``."""
-        return np.asarray(self._h(as_vector(x, self.nx, "x"))).ravel()
+        return np.asarray(self._h(checks.vector(x, self.nx, "x"))).ravel()
 
     def F(self, x, u) -> np.ndarray:
         """Exact state Jacobian of f, shape ``(nx, nx)``."""
-        return np.asarray(self._jac(as_vector(x, self.nx, "x"), as_vector(u, self.nu, "u"))[0])
+        return np.asarray(self._jac(checks.vector(x, self.nx, "x"), checks.vector(u, self.nu, "u"))[0])
 
     def G(self, x, u) -> np.ndarray:
         """Exact input Jacobian of f, shape ``(nx, nu)``."""
-        return np.asarray(self._jac(as_vector(x, self.nx, "x"), as_vector(u, self.nu, "u"))[1])
+        return np.asarray(self._jac(checks.vector(x, self.nx, "x"), checks.vector(u, self.nu, "u"))[1])
 
     def H(self, x) -> np.ndarray:
         """Exact measurement Jacobian, shape ``(ny, nx)``."""
-        return np.asarray(self._H(as_vector(x, self.nx, "x")))
+        return np.asarray(self._H(checks.vector(x, self.nx, "x")))
 
     def linearized(self, x_op, u_op) -> "DiscreteModel":
         """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001).
@@ -84,7 +85,7 @@ class DiscreteModel:
         ``y_k = h(x_op) + H0 (x_k - x_op)``, with the exact Jacobians of the discrete map
         (for the Euler map, ``F0 = I + T A``: seed 000 eq 20).
         """
-        x_op, u_op = as_vector(x_op, self.nx, "x_op"), as_vector(u_op, self.nu, "u_op")
+        x_op, u_op = checks.vector(x_op, self.nx, "x_op"), checks.vector(u_op, self.nu, "u_op")
         F0, G0 = (ca.DM(M) for M in (self.F(x_op, u_op), self.G(x_op, u_op)))
         c, y0, H0 = ca.DM(self.f(x_op, u_op)), ca.DM(self.h(x_op)), ca.DM(self.H(x_op))
         x, u = ca.SX.sym("x", self.nx), ca.SX.sym("u", self.nu)

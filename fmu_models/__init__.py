@@ -9,6 +9,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 from . import cartpole, iwp
+from .errors import UnknownNameError
 from .plant import METHODS, PlantModel
 from .variables import Variable
 
@@ -28,12 +29,12 @@ def get_model(name: str, **params: float) -> PlantModel:
 
     Raises
     ------
-    KeyError
+    UnknownNameError
         Unknown model name or parameter name (the message lists the valid ones).
-    ValueError
+    ConfigurationError
         A parameter value outside its domain.
     """
-    if name not in _BUILDERS:
-        raise KeyError(f"unknown model {name!r}; valid models: {', '.join(MODEL_NAMES)}")
+    if not isinstance(name, str) or name not in _BUILDERS:
+        raise UnknownNameError(f"unknown model {name!r}; valid models: {', '.join(MODEL_NAMES)}")
     model = _base(name)
     return model.with_params(**params) if params else model.with_params()

@@ -6,6 +6,7 @@ sources (so that other platforms can rebuild it). No Python runs inside the FMU.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import platform
@@ -21,6 +22,7 @@ import fmpy
 
 from . import MODEL_NAMES, get_model
 from .codegen import C_DIR, write_sources
+from .errors import BuildError, CompilerNotFoundError, ConfigurationError
 from .model_description import build_description_xml, fmi2_xml, fmi3_xml
 from .plant import PlantModel
 
@@ -28,10 +30,6 @@ __all__ = ["build_fmu", "build_fmus", "find_compiler", "CompilerNotFoundError", 
 
 FMI_VERSIONS = (2, 3)
 _FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
-
-
-class CompilerNotFoundError(RuntimeError):
-    """No C compiler could be found to build an FMU."""
 
 
 def find_compiler() -> str:
@@ -85,11 +83,11 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     ------
     CompilerNotFoundError
         No C compiler is available.
-    RuntimeError
+    BuildError
         The compiler failed (its output is in the message).
     """
     if fmi_version not in FMI_VERSIONS:
-        raise ValueError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
+        raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
     if isinstance(model, str):
         model = get_model(model)
     cc = find_compiler()
@@ -114,7 +112,7 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
                *[str(src / f) for f in c_files], "-o", str(lib), "-lm"]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
-            raise RuntimeError(f"compiling {model.fmu_name} failed:\n{' '.join(cmd)}\n{proc.stderr}")
+            raise BuildError(f"compiling {model.fmu_name} failed:\n{' '.join(cmd)}\n{proc.stderr}")
         if fmi_version == 2:
             xml = fmi2_xml(model, guid, c_files)
         else:
@@ -122,12 +120,30 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
             (src / "buildDescription.xml").write_text(build_description_xml(model, c_files))
         (tmp / "modelDescription.xml").write_text(xml)
         fmu = out_dir / f"{model.fmu_name}.fmu"
-        with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        # write beside the target, then rename: a reader (or a second build running at
+        # the same time) never sees half a zip
+        partial = tmp / "packed.fmu"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
             z.write(tmp / "modelDescription.xml", "modelDescription.xml")
             z.write(lib, f"binaries/{bindir.name}/{lib.name}")
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
+        atomic_copy(partial, fmu)
     return fmu
+
+
+def atomic_copy(src: Path, dst: Path) -> None:
+    """Copy ``src`` to ``dst`` through a temporary file in ``dst``'s folder and an atomic
+    rename, so that ``dst`` is at every instant either absent, the old file or the new one."""
+    fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as out, open(src, "rb") as inp:
+            shutil.copyfileobj(inp, out)
+        os.replace(tmp, dst)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
 
 
 def build_fmus(out_dir: str | Path = ".", fmi_version: int = 2,

@@ -13,6 +13,8 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
+from . import checks
+from .errors import ConfigurationError, InputError, UnknownNameError
 from .variables import Variable
 
 #: Integration methods of the discrete maps.
@@ -22,29 +24,19 @@ Dynamics = Callable[[ca.SX, ca.SX, Mapping[str, ca.SX]], ca.SX]
 Measurement = Callable[[ca.SX, Mapping[str, ca.SX]], ca.SX]
 
 
-def as_vector(value, n: int, what: str) -> np.ndarray:
-    """Return ``value`` as a finite float vector of shape ``(n,)`` or raise a ValueError.
+def check_method(method: str, substeps: int) -> int:
+    """Validate an integration method name and a substep count; returns the count as int.
 
-    Scalars are accepted when ``n == 1``; ``(n, 1)`` columns are flattened.
+    Raises
+    ------
+    UnknownNameError
+        ``method`` is not one of :data:`METHODS`.
+    ConfigurationError
+        ``substeps`` is not a positive integer.
     """
-    a = np.asarray(value, dtype=float)
-    if a.ndim == 0 and n == 1:
-        a = a.reshape(1)
-    elif a.ndim == 2 and a.shape == (n, 1):
-        a = a.reshape(n)
-    if a.shape != (n,):
-        raise ValueError(f"{what} must have shape ({n},), got shape {np.shape(value)}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{what} contains NaN or inf: {a}")
-    return a
-
-
-def check_method(method: str, substeps: int) -> None:
-    """Validate an integration method name and a substep count."""
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
-    if int(substeps) != substeps or substeps < 1:
-        raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
+        raise UnknownNameError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
+    return checks.positive_int(substeps, "substeps")
 
 
 class _Symbolic:
@@ -59,9 +51,9 @@ class _Symbolic:
         self.xdot = ca.vertcat(dynamics(self.x, self.u, pd))
         self.y = ca.vertcat(measurement(self.x, pd))
         if self.xdot.shape != (len(states), 1):
-            raise ValueError(f"dynamics returned shape {self.xdot.shape}, expected ({len(states)}, 1)")
+            raise ConfigurationError(f"dynamics returned shape {self.xdot.shape}, expected ({len(states)}, 1)")
         if self.y.shape != (len(outputs), 1):
-            raise ValueError(f"measurement returned shape {self.y.shape}, expected ({len(outputs)}, 1)")
+            raise ConfigurationError(f"measurement returned shape {self.y.shape}, expected ({len(outputs)}, 1)")
         x, u, p = self.x, self.u, self.p
         self.f = ca.Function("f", [x, u, p], [self.xdot], ["x", "u", "p"], ["xdot"])
         self.h = ca.Function("h", [x, p], [self.y], ["x", "p"], ["y"])
@@ -144,7 +136,7 @@ class PlantModel:
         names = [v.name for v in self.states + self.inputs + self.outputs + self.parameters]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
-            raise ValueError(f"model {name!r}: duplicate variable names {sorted(dup)}")
+            raise ConfigurationError(f"model {name!r}: duplicate variable names {sorted(dup)}")
         self.sym = _symbolic or _Symbolic(self.states, self.inputs, self.outputs,
                                           self.parameters, dynamics, measurement)
         self._p = (np.array([v.check(v.start) for v in self.parameters]) if _values is None
@@ -179,16 +171,16 @@ class PlantModel:
 
         Raises
         ------
-        KeyError
+        UnknownNameError
             For an unknown name; the message lists the valid ones.
-        ValueError
+        ConfigurationError
             For a value outside the parameter's domain (e.g. a non-positive mass).
         """
         values = self._p.copy()
         index = {n: i for i, n in enumerate(self.param_names)}
         for key, val in params.items():
             if key not in index:
-                raise KeyError(f"model {self.name!r} has no parameter {key!r}; "
+                raise UnknownNameError(f"model {self.name!r} has no parameter {key!r}; "
                                f"valid parameters: {', '.join(self.param_names)}")
             values[index[key]] = self.parameters[index[key]].check(val)
         return PlantModel(self.name, self.fmu_name, self.description, self.states, self.inputs,
@@ -200,7 +192,7 @@ class PlantModel:
 
     # ------------------------------------------------------------------ numeric calls
     def _xu(self, x, u):
-        return as_vector(x, self.nx, "state x"), as_vector(u, self.nu, "input u")
+        return checks.vector(x, self.nx, "state x"), checks.vector(u, self.nu, "input u")
 
     def f(self, x, u) -> np.ndarray:
         """Continuous dynamics x' = f(x, u), shape ``(nx,)``; x in state units, u in input units."""
@@ -209,11 +201,11 @@ class PlantModel:
 
     def h(self, x) -> np.ndarray:
         """Noise-free measurement y = h(x), shape ``(ny,)``."""
-        return np.asarray(self.sym.h(as_vector(x, self.nx, "state x"), self._p)).reshape(self.ny)
+        return np.asarray(self.sym.h(checks.vector(x, self.nx, "state x"), self._p)).reshape(self.ny)
 
     def H(self, x) -> np.ndarray:
         """Exact measurement Jacobian dh/dx, shape ``(ny, nx)``."""
-        return np.asarray(self.sym.jac_h(as_vector(x, self.nx, "state x"), self._p))
+        return np.asarray(self.sym.jac_h(checks.vector(x, self.nx, "state x"), self._p))
 
     def linearize(self, x0, u0) -> tuple[np.ndarray, np.ndarray]:
         """Exact continuous linearisation about (x0, u0): ``A = df/dx`` (nx, nx), ``B = df/du`` (nx, nu)."""
@@ -228,17 +220,17 @@ class PlantModel:
         eqs 14-17, without the noise w); ``"rk4"`` is the classical Runge-Kutta scheme
         with ``substeps`` equal substeps.
         """
-        check_method(method, substeps)
+        substeps = check_method(method, substeps)
         x, u = self._xu(x, u)
         dt = _check_dt(dt)
-        return np.asarray(self.sym.step(method, int(substeps))(x, u, self._p, dt)).reshape(self.nx)
+        return np.asarray(self.sym.step(method, substeps)(x, u, self._p, dt)).reshape(self.nx)
 
     def jacobians(self, x, u, dt: float, method: str = "euler",
                   substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Exact Jacobians of :meth:`step`: ``F = dx_next/dx`` (nx, nx), ``G = dx_next/du`` (nx, nu)."""
-        check_method(method, substeps)
+        substeps = check_method(method, substeps)
         x, u = self._xu(x, u)
-        F, G = self.sym.step_jac(method, int(substeps))(x, u, self._p, _check_dt(dt))
+        F, G = self.sym.step_jac(method, substeps)(x, u, self._p, _check_dt(dt))
         return np.asarray(F), np.asarray(G)
 
     def discretize(self, x0, u0, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
@@ -252,7 +244,7 @@ class PlantModel:
         if method == "euler":
             return np.eye(self.nx) + A * dt, B * dt
         if method != "zoh":
-            raise ValueError(f"unknown discretisation {method!r}; valid: 'zoh', 'euler'")
+            raise UnknownNameError(f"unknown discretisation {method!r}; valid: 'zoh', 'euler'")
         n, m = self.nx, self.nu
         M = np.zeros((n + m, n + m))
         M[:n, :n], M[:n, n:] = A, B
@@ -266,18 +258,19 @@ class PlantModel:
         ``u`` is either one input vector held throughout, an array of shape
         ``(n_steps, nu)``, or a callable ``u(t) -> (nu,)`` evaluated at each step start.
         """
-        check_method(method, substeps)
-        fn = self.sym.step(method, int(substeps))
-        x = as_vector(x0, self.nx, "initial state x0")
+        substeps = check_method(method, substeps)
+        n_steps = checks.positive_int(n_steps, "n_steps", minimum=0)
+        fn = self.sym.step(method, substeps)
+        x = checks.vector(x0, self.nx, "initial state x0")
         dt = _check_dt(dt)
         if callable(u):
-            us = np.array([as_vector(u(k * dt), self.nu, f"u({k * dt})") for k in range(n_steps)])
+            us = np.array([checks.vector(u(k * dt), self.nu, f"u({k * dt})") for k in range(n_steps)])
         else:
-            ua = np.asarray(u, dtype=float)
-            us = (np.broadcast_to(as_vector(ua, self.nu, "input u"), (n_steps, self.nu))
+            ua = checks.float_array(u, "input u")
+            us = (np.broadcast_to(checks.vector(ua, self.nu, "input u"), (n_steps, self.nu))
                   if ua.ndim <= 1 else ua)
             if us.shape != (n_steps, self.nu) or not np.all(np.isfinite(us)):
-                raise ValueError(f"input sequence must be finite with shape ({n_steps}, {self.nu}), "
+                raise InputError(f"input sequence must be finite with shape ({n_steps}, {self.nu}), "
                                  f"got {ua.shape}")
         if n_steps == 0:
             return x[None, :].copy()
@@ -287,7 +280,4 @@ class PlantModel:
 
 
 def _check_dt(dt) -> float:
-    dt = float(dt)
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"time step dt must be a positive finite number of seconds, got {dt}")
-    return dt
+    return checks.positive(dt, "time step dt [s]")

@@ -4,6 +4,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .errors import ConfigurationError, TypeMismatchError
+
 #: Admissible value sets for a parameter; checked in Python and in the generated FMU.
 DOMAINS = ("real", "positive", "nonnegative", "sign")
 
@@ -34,19 +36,25 @@ class Variable:
 
     def __post_init__(self):
         if not self.name.isidentifier():
-            raise ValueError(f"variable name {self.name!r} is not a legal identifier")
+            raise ConfigurationError(f"variable name {self.name!r} is not a legal identifier")
         if self.domain not in DOMAINS:
-            raise ValueError(f"variable {self.name!r}: domain {self.domain!r} not in {DOMAINS}")
+            raise ConfigurationError(f"variable {self.name!r}: domain {self.domain!r} not in {DOMAINS}")
 
     def check(self, value: float) -> float:
-        """Return ``value`` as float if it lies in this variable's domain, else raise ValueError."""
-        v = float(value)
+        """Return ``value`` as float if it lies in this variable's domain, else raise
+        :class:`~fmu_models.errors.ConfigurationError` (TypeMismatchError for a non-number)."""
+        if isinstance(value, (str, bytes, bool)) or value is None:
+            raise TypeMismatchError(f"parameter {self.name!r} must be a number, got {value!r}")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise TypeMismatchError(f"parameter {self.name!r} must be a number, got {value!r}") from None
         if not math.isfinite(v):
-            raise ValueError(f"parameter {self.name!r} must be finite, got {value!r}")
+            raise ConfigurationError(f"parameter {self.name!r} must be finite, got {value!r}")
         if self.domain == "positive" and not v > 0.0:
-            raise ValueError(f"parameter {self.name!r} [{self.unit}] must be > 0, got {v}")
+            raise ConfigurationError(f"parameter {self.name!r} [{self.unit}] must be > 0, got {v}")
         if self.domain == "nonnegative" and not v >= 0.0:
-            raise ValueError(f"parameter {self.name!r} [{self.unit}] must be >= 0, got {v}")
+            raise ConfigurationError(f"parameter {self.name!r} [{self.unit}] must be >= 0, got {v}")
         if self.domain == "sign" and v not in (-1.0, 1.0):
-            raise ValueError(f"parameter {self.name!r} must be -1 or +1, got {v}")
+            raise ConfigurationError(f"parameter {self.name!r} must be -1 or +1, got {v}")
         return v

@@ -1,0 +1,124 @@
+"""Validation of numbers, vectors and covariances, shared by models, filters and components.
+
+Each check names what it checked in its message and raises from the package's exception
+family (:mod:`fmu_models.errors`): a value that cannot be a number raises
+:class:`TypeMismatchError`; a wrong shape or a non-finite entry raises the ``error`` class
+the caller chose (:class:`InputError` for run-time data, :class:`ConfigurationError` for
+settings). Finiteness is tested entry by entry, so huge finite values such as 1.5e308 pass.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import ConfigurationError, InputError, TypeMismatchError
+
+__all__ = ["float_array", "vector", "covariance", "positive", "finite", "positive_int"]
+
+
+def _describe(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def float_array(value, what: str) -> np.ndarray:
+    """``value`` as a float ndarray; :class:`TypeMismatchError` naming ``what`` if it is
+    ``None``, a string, or anything else that is not numbers."""
+    if value is None:
+        raise TypeMismatchError(f"{what} is None; expected numbers")
+    if isinstance(value, (str, bytes)):
+        raise TypeMismatchError(f"{what} must be numbers, got the string {_describe(value)}")
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeMismatchError(f"{what} must be numbers, got {_describe(value)}") from None
+    if a.dtype != np.float64:   # pragma: no cover - asarray(dtype=float) guarantees it
+        a = a.astype(float)
+    return a
+
+
+def vector(value, n: int, what: str, error: type[Exception] = InputError) -> np.ndarray:
+    """``value`` as a finite float vector of shape ``(n,)``.
+
+    Scalars are accepted when ``n == 1`` and ``(n, 1)`` columns are flattened. A wrong
+    shape or a NaN/inf entry raises ``error`` (default :class:`InputError`).
+    """
+    a = float_array(value, what)
+    if a.ndim == 0 and n == 1:
+        a = a.reshape(1)
+    elif a.ndim == 2 and a.shape == (n, 1):
+        a = a.reshape(n)
+    if a.shape != (n,):
+        raise error(f"{what} must have shape ({n},) ({n} number{'' if n == 1 else 's'}), "
+                    f"got shape {a.shape}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise error(f"{what} contains NaN or inf at index {np.flatnonzero(bad).tolist()}: {a}")
+    return a
+
+
+def covariance(value, n: int, what: str, allow_scalar: bool = True,
+               error: type[Exception] = ConfigurationError) -> np.ndarray:
+    """A symmetric positive-definite ``(n, n)`` matrix from a matrix, a vector (diagonal) or
+    a scalar (times identity).
+
+    Raises ``error`` (default :class:`ConfigurationError`) naming ``what`` if the shape is
+    wrong, an entry is not finite, the matrix is not symmetric (relative 1e-9) or not
+    positive definite (Cholesky fails).
+    """
+    a = float_array(value, what)
+    if a.ndim == 0 and allow_scalar:
+        a = float(a) * np.eye(n)
+    elif a.ndim == 1 and a.shape == (n,):
+        a = np.diag(a)
+    if a.shape != (n, n):
+        raise error(f"{what} must be a ({n}, {n}) matrix, a length-{n} diagonal or a scalar; "
+                    f"got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise error(f"{what} contains NaN or inf")
+    scale = max(float(np.abs(a).max()), 1e-300)
+    if np.abs(a - a.T).max() > 1e-9 * scale:
+        raise error(f"{what} is not symmetric")
+    a = 0.5 * (a + a.T)
+    try:
+        np.linalg.cholesky(a)
+    except np.linalg.LinAlgError:
+        raise error(f"{what} is not positive definite (eigenvalues "
+                    f"{np.linalg.eigvalsh(a)})") from None
+    return a
+
+
+def finite(value, what: str, error: type[Exception] = ConfigurationError) -> float:
+    """``value`` as a finite float, else ``error`` naming ``what``."""
+    if isinstance(value, bool):
+        raise TypeMismatchError(f"{what} must be a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeMismatchError(f"{what} must be a number, got {_describe(value)}") from None
+    if not math.isfinite(v):
+        raise error(f"{what} must be finite, got {value!r}")
+    return v
+
+
+def positive(value, what: str, error: type[Exception] = ConfigurationError) -> float:
+    """``value`` as a positive finite float, else ``error`` naming ``what``."""
+    v = finite(value, what, error)
+    if not v > 0:
+        raise error(f"{what} must be a positive finite number, got {value!r}")
+    return v
+
+
+def positive_int(value, what: str, error: type[Exception] = ConfigurationError,
+                 minimum: int = 1) -> int:
+    """``value`` as an int ``>= minimum`` (integral floats such as 3.0 accepted)."""
+    if isinstance(value, bool):
+        raise TypeMismatchError(f"{what} must be an integer, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeMismatchError(f"{what} must be an integer, got {_describe(value)}") from None
+    if not (math.isfinite(v) and v == int(v) and v >= minimum):
+        raise error(f"{what} must be an integer >= {minimum}, got {value!r}")
+    return int(v)
