@@ -1,43 +1,127 @@
-"""The component protocol of the co-simulation master.
+"""The component protocol: what the co-simulation master needs from every component.
 
-Two kinds of component take part:
+Every component, FMU or Python, is a :class:`Component`. The master depends on this
+class only. A component has a ``name``, a sample ``period`` [s], typed input and output
+ports (:class:`Port`), and declares which outputs depend *directly* on which inputs
+(:attr:`Component.feedthrough`). At each of its sample instants ``t`` (every ``period``
+seconds from the start time) the master calls, for all components due at ``t``:
 
-* a *discrete* component (:class:`Component`) is a sampled block: at each of its sample
-  instants ``t`` (every ``period`` seconds) the master calls ``sample(t, u)`` with its
-  inputs' values at ``t``, and the outputs it returns are the values at ``t``, held
-  (zero-order hold) until its next sample. Sources, sensors, estimators and
-  controllers are discrete components;
-* an *FMU* component (:class:`~cosim.fmu_component.FMUComponent`) advances in time:
-  inputs set at ``t`` are held over ``[t, t + period]`` and its outputs belong to
-  ``t + period`` (FMI Co-Simulation semantics).
+1. :meth:`Component.output` ``(t, u) -> y`` in an order that respects the direct
+   dependencies (a component's feedthrough inputs are computed before it reads them):
+   the outputs at ``t``. ``u`` holds every input's current value; only the feedthrough
+   inputs are guaranteed to be the values at ``t`` (the others may still be the
+   values before ``t``, and must not change the outputs).
+2. the row of all signals at ``t`` is recorded;
+3. :meth:`Component.update` ``(t, u)`` once, with every input at its value at ``t``: the
+   component consumes its inputs and advances its state to its next instant. An FMU
+   sets its inputs and steps over ``[t, t + period]`` here; its outputs at
+   ``t + period`` are then read by the next ``output``.
 
-Every port is one float. Write a new component by subclassing :class:`Component` and
-implementing :meth:`Component.sample` (and :meth:`Component.reset` if it has state).
+Between its instants a component's outputs are held (zero-order hold). A component
+whose output at ``t`` must not depend on its input at ``t`` (a filter's input ``u``
+predicts the *next* state; a unit delay; an encoder counting over the last period)
+declares no feedthrough for that input and reads it in :meth:`Component.update`. That
+declaration is what makes results independent of the order in which components are
+listed, and what lets the master find algebraic loops before a run.
+
+To write a component: subclass :class:`Component`, pass the ports to ``__init__``, and
+implement :meth:`~Component.output` (and :meth:`~Component.update`,
+:meth:`~Component.reset`, :meth:`~Component.close` when needed). Set ``feedthrough``
+when some output does not depend on every input, and ``reentrant = True`` if
+``output`` may be called several times at one instant with improving inputs (needed to
+iterate an algebraic loop through it; ``output`` must then not change the state).
+:meth:`~Component.bind` is an optional fast path for the master's inner loop (the FMU
+components use it to exchange values with the FMU without copies).
 """
 from __future__ import annotations
 
-from typing import Sequence
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from fmu_models.checks import positive
+from fmu_models.errors import ConfigurationError, NumericalError, TypeMismatchError
+
+__all__ = ["PORT_TYPES", "Component", "Port", "check_name", "check_period", "port_kind",
+           "ports_compatible"]
+
+#: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
+PORT_TYPES = {
+    "Float64": "real", "Float32": "real", "Real": "real",
+    "Int8": "integer", "UInt8": "integer", "Int16": "integer", "UInt16": "integer",
+    "Int32": "integer", "UInt32": "integer", "Int64": "integer", "UInt64": "integer",
+    "Integer": "integer", "Enumeration": "integer",
+    "Boolean": "boolean",
+}
+
+
+def port_kind(type_name: str) -> str:
+    """``"real"``, ``"integer"`` or ``"boolean"`` for the FMI type name ``type_name`` (see
+    :data:`PORT_TYPES`)."""
+    try:
+        return PORT_TYPES[type_name]
+    except KeyError:
+        raise TypeMismatchError(f"port type {type_name!r} is not supported; supported types: "
+                                f"{', '.join(PORT_TYPES)}") from None
+
+
+def ports_compatible(src_type: str, dst_type: str) -> bool:
+    """True if an output of type ``src_type`` may drive an input of type ``dst_type``.
+
+    Same kind always; integer and boolean outputs may also drive real inputs (exact).
+    A real output never drives an integer or boolean input (that would round silently).
+    """
+    s, d = port_kind(src_type), port_kind(dst_type)
+    return s == d or d == "real"
+
+
+@dataclass(frozen=True)
+class Port:
+    """A scalar port: ``name`` (an identifier, or an FMU variable name), ``type`` (an FMI
+    type name, default ``"Float64"``), optional ``unit`` and ``description``."""
+
+    name: str
+    type: str = "Float64"
+    unit: str = ""
+    description: str = ""
+
+    @property
+    def kind(self) -> str:
+        """``"real"``, ``"integer"`` or ``"boolean"``."""
+        return port_kind(self.type)
 
 
 def check_name(name: str, what: str = "component name") -> str:
-    """``name`` if it is an identifier, else ValueError naming ``what`` it is."""
+    """``name`` if it is an identifier, else :class:`ConfigurationError` naming ``what`` it is."""
     if not isinstance(name, str) or not name.isidentifier():
-        raise ValueError(f"{what} {name!r} must be an identifier (letters, digits, _)")
+        raise ConfigurationError(f"{what} {name!r} must be an identifier (letters, digits, _)")
     return name
 
 
 def check_period(period, owner: str) -> float:
-    """A component's sample period [s] as a positive finite float, else ValueError naming
-    the ``owner`` component."""
+    """A component's sample period [s] as a positive finite float, else
+    :class:`ConfigurationError` naming the ``owner`` component."""
     return positive(period, f"{owner}: sample period")
 
 
-class Component:
-    """A discrete-time block of the co-simulation.
+def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Port, ...]:
+    out = []
+    for p in ports:
+        port = p if isinstance(p, Port) else Port(p)
+        if check_names:
+            check_name(port.name, f"{owner}: {direction} port")
+        port_kind(port.type)
+        out.append(port)
+    names = [p.name for p in out]
+    if len(set(names)) != len(names):
+        raise ConfigurationError(f"{owner}: duplicate {direction} port names in {names}")
+    return tuple(out)
+
+
+class Component(ABC):
+    """A block of the co-simulation (see the module documentation for the protocol).
 
     Parameters
     ----------
@@ -45,45 +129,141 @@ class Component:
         Unique identifier of the component in a co-simulation.
     period : float
         Sample period [s].
-    inputs : sequence of str
-        Input port names; all must be connected.
-    outputs : sequence of str
-        Output port names.
+    inputs : sequence of str or Port
+        Input ports (strings are Float64 ports).
+    outputs : sequence of str or Port
+        Output ports.
+    feedthrough : mapping or bool, optional
+        Which inputs each output depends on directly: ``{output: [inputs]}`` (outputs not
+        listed depend on no input), ``True`` (every output on every input; the default)
+        or ``False`` (no output on any input).
+    port_names_are_identifiers : bool
+        Check that port names are identifiers (default True; FMU variables such as
+        ``der(x)`` are not).
 
     Attributes
     ----------
-    kind : str
-        ``"discrete"``.
+    name : str
+    period : float
+    input_ports, output_ports : tuple of Port
+    input_names, output_names : list of str
+    feedthrough : dict of str to frozenset of str
+        Output name -> the input names it depends on directly.
+    reentrant : bool
+        ``output`` may be called several times at one instant (class attribute, default
+        False).
     n_samples : int
-        Number of ``sample`` calls since the last reset.
+        Instants at which ``output`` was called since the last reset.
     """
 
-    kind = "discrete"
+    reentrant: bool = False
 
-    def __init__(self, name: str, period: float, inputs: Sequence[str] = (),
-                 outputs: Sequence[str] = ()):
+    def __init__(self, name: str, period: float, inputs: Sequence = (), outputs: Sequence = (),
+                 feedthrough: Mapping[str, Sequence[str]] | bool = True,
+                 port_names_are_identifiers: bool = True):
         self.name = check_name(name)
         self.period = check_period(period, name)
-        self.input_names = [check_name(p, f"{name}: input port") for p in inputs]
-        self.output_names = [check_name(p, f"{name}: output port") for p in outputs]
-        for ports in (self.input_names, self.output_names):
-            if len(set(ports)) != len(ports):
-                raise ValueError(f"{name}: duplicate port names in {ports}")
+        self.input_ports = _as_ports(inputs, name, "input", port_names_are_identifiers)
+        self.output_ports = _as_ports(outputs, name, "output", port_names_are_identifiers)
+        self.feedthrough = self._feedthrough(feedthrough)
         self.n_samples = 0
+
+    def _feedthrough(self, spec) -> dict[str, frozenset[str]]:
+        ins, outs = set(self.input_names), self.output_names
+        if spec is True:
+            return {o: frozenset(ins) for o in outs}
+        if spec is False or spec is None:
+            return {o: frozenset() for o in outs}
+        result = {o: frozenset() for o in outs}
+        for o, deps in spec.items():
+            if o not in result:
+                raise ConfigurationError(f"{self.name}: feedthrough names {o!r}, not an output; "
+                                         f"outputs: {', '.join(outs)}")
+            unknown = set(deps) - ins
+            if unknown:
+                raise ConfigurationError(f"{self.name}: feedthrough of {o!r} names {sorted(unknown)}, "
+                                         f"not inputs; inputs: {', '.join(sorted(ins))}")
+            result[o] = frozenset(deps)
+        return result
+
+    input_names = property(lambda self: [p.name for p in self.input_ports],
+                           doc="Input port names, in order.")
+    output_names = property(lambda self: [p.name for p in self.output_ports],
+                            doc="Output port names, in order.")
+
+    def required_inputs(self) -> list[str]:
+        """Inputs that must be connected (default: all). FMUs return none: their
+        unconnected inputs keep their start values."""
+        return self.input_names
+
+    def use_inputs(self, names: Sequence[str]) -> None:
+        """Called by the master before a run with the names of the connected inputs, in
+        the order their values appear in ``u`` (default: every input, in port order)."""
+        if list(names) != self.input_names:
+            raise ConfigurationError(f"{self.name}: every input must be connected")
 
     def __repr__(self):
         return (f"{type(self).__name__}({self.name!r}, period={self.period}, "
                 f"inputs={self.input_names}, outputs={self.output_names})")
 
-    def reset(self, t0: float) -> np.ndarray:
-        """Prepare a run starting at ``t0`` [s]; return the outputs held before the first
-        sample (shape ``(n_outputs,)``, default zeros)."""
-        self.n_samples = 0
-        return np.zeros(len(self.output_names))
+    def timing(self) -> str:
+        """One line on what an output at ``t`` means (for :meth:`Cosimulation.describe`)."""
+        return "sampled: outputs at t from the inputs at t"
 
-    def sample(self, t: float, u: np.ndarray) -> np.ndarray:
-        """Outputs at sample time ``t`` [s] from inputs ``u`` (shape ``(n_inputs,)``)."""
-        raise NotImplementedError
+    # ------------------------------------------------------------------ the protocol
+    def reset(self, t0: float) -> None:
+        """Prepare a run starting at ``t0`` [s] (instantiate, clear state)."""
+        self.n_samples = 0
+
+    @abstractmethod
+    def output(self, t: float, u: np.ndarray) -> np.ndarray:
+        """Outputs at instant ``t`` [s], shape ``(n_outputs,)``, from the inputs ``u``
+        (shape ``(n_connected_inputs,)``; only feedthrough inputs are current)."""
+
+    def update(self, t: float, u: np.ndarray) -> None:
+        """Consume the inputs ``u`` at instant ``t`` [s] (all current) and advance the state
+        to the next instant. Default: nothing."""
 
     def close(self) -> None:
-        """Release resources (called by the master at the end of every run)."""
+        """Release resources (called by the master at the end of every run, also after a
+        failure; must be safe to call twice)."""
+
+    def sample(self, t: float, u) -> np.ndarray:
+        """One whole instant outside a master: :meth:`output` then :meth:`update` with the
+        same inputs ``u``; returns the outputs at ``t`` [s]. Call :meth:`reset` first."""
+        u = np.asarray(u if u is not None else [], dtype=float)
+        y = np.asarray(self.output(t, u), dtype=float)
+        self.update(t, u)
+        self.n_samples += 1
+        return y
+
+    def bind(self, values: np.ndarray, inputs, outputs: slice
+             ) -> tuple[Callable[[float], None], Callable[[float], None]]:
+        """The master's fast path: return ``(output_fn, update_fn)``, each taking ``t``.
+
+        ``values`` is the master's array of all signals, ``inputs`` the index (slice or
+        int array) of this component's connected inputs in it, ``outputs`` the slice of
+        its outputs. ``output_fn(t)`` must write the outputs at ``t`` into
+        ``values[outputs]``; ``update_fn(t)`` must call the update with
+        ``values[inputs]``. The default wraps :meth:`output` and :meth:`update` and checks
+        that the outputs are finite.
+        """
+        n_out = outputs.stop - outputs.start
+        last = [np.nan]
+
+        def output_fn(t: float) -> None:
+            y = np.asarray(self.output(t, values[inputs]), dtype=float)
+            if y.shape != (n_out,):
+                raise ConfigurationError(f"output returned shape {y.shape}, expected ({n_out},)")
+            if not np.isfinite(y).all():
+                bad = [self.output_names[i] for i in np.flatnonzero(~np.isfinite(y))]
+                raise NumericalError(f"output {', '.join(bad)} is {y[~np.isfinite(y)][0]}")
+            values[outputs] = y
+            if t != last[0]:
+                last[0] = t
+                self.n_samples += 1
+
+        def update_fn(t: float) -> None:
+            self.update(t, values[inputs])
+
+        return output_fn, update_fn

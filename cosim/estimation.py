@@ -1,25 +1,35 @@
 """Estimator and controller components: any filter of :mod:`estimators`, and LQR."""
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import scipy.linalg
 
 from estimators.base import KalmanBase
+from fmu_models.checks import float_array
+from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.plant import PlantModel
 
 from .component import Component
+
+COVARIANCE_OUTPUTS = ("diagonal", "full")
 
 
 class EstimatorComponent(Component):
     """Runs a filter of :mod:`estimators` at its model's sample period.
 
-    Input ports: the model's inputs (e.g. ``F``; the value held over the last period)
-    and outputs (e.g. ``y_x, y_theta``: the measurements). Output ports: the state
-    estimate (state names), the covariance diagonal (``P_<state>``) and ``nis``. At the
-    first sample the initial estimate is output; from the second on, each sample is one
-    ``step(u, y)`` (predict with the held input, update with the measurement).
+    Input ports: the model's inputs (e.g. ``F``) and outputs (e.g. ``y_x, y_theta``: the
+    measurements). Output ports: the state estimate (state names), the covariance
+    diagonal (``P_<state>``), with ``covariance="full"`` also its upper off-diagonal
+    entries ``P_<i>_<j>`` (0-based state indices, ``i < j``), and ``nis``.
+
+    Timing (seed 000 eqs 14-23): at its first instant the component outputs the initial
+    estimate; at each later instant ``t_k`` it runs one ``step(u_{k-1}, y_k)``: it predicts
+    with the input it read at its previous instant and updates with the measurement at
+    ``t_k``. The estimate therefore depends directly on the measurement inputs only
+    (feedthrough), never on the input ``u`` at the same instant, and the result does not
+    depend on where the component sits in a component list.
 
     Parameters
     ----------
@@ -29,39 +39,54 @@ class EstimatorComponent(Component):
         ``lambda: EKF(system, x0, P0, Q, R)``.
     period : float, optional
         Must equal the filter's model period ``system.dt`` (default: that period).
+    covariance : {"diagonal", "full"}
+        Which covariance entries to output (default the diagonal).
     """
 
-    def __init__(self, name: str, make_filter: Callable[[], KalmanBase], period: float | None = None):
+    def __init__(self, name: str, make_filter: Callable[[], KalmanBase], period: float | None = None,
+                 covariance: str = "diagonal"):
         if not callable(make_filter):
-            raise TypeError(f"{name}: make_filter must be a callable returning a filter")
+            raise TypeMismatchError(f"{name}: make_filter must be a callable returning a filter")
         probe = make_filter()
         if not isinstance(probe, KalmanBase):
-            raise TypeError(f"{name}: make_filter returned {type(probe).__name__}, not a filter")
+            raise TypeMismatchError(f"{name}: make_filter returned {type(probe).__name__}, not a filter")
+        if covariance not in COVARIANCE_OUTPUTS:
+            raise UnknownNameError(f"{name}: covariance must be one of {COVARIANCE_OUTPUTS}, got {covariance!r}")
         sys_ = probe.system
         period = sys_.dt if period is None else period
         if abs(period - sys_.dt) > 1e-12 * max(1.0, sys_.dt):
-            raise ValueError(f"{name}: period {period} s differs from the filter model's dt "
-                             f"{sys_.dt} s; discretise the model with dt = period")
-        super().__init__(name, period, inputs=sys_.input_names + sys_.output_names,
-                         outputs=sys_.state_names + [f"P_{s}" for s in sys_.state_names] + ["nis"])
+            raise ConfigurationError(f"{name}: period {period} s differs from the filter model's dt "
+                                     f"{sys_.dt} s; discretise the model with dt = period")
+        n = sys_.nx
+        self._upper = np.triu_indices(n, 1) if covariance == "full" else (np.array([], int),) * 2
+        off = [f"P_{i}_{j}" for i, j in zip(*self._upper)]
+        outputs = sys_.state_names + [f"P_{s}" for s in sys_.state_names] + off + ["nis"]
+        super().__init__(name, period, inputs=sys_.input_names + sys_.output_names, outputs=outputs,
+                         feedthrough={o: sys_.output_names for o in outputs})
         self.make_filter, self.filter = make_filter, probe
-        self._nu, self._nx = sys_.nu, sys_.nx
+        self._nu, self._nx = sys_.nu, n
+        self._u_prev = None
 
     def _outputs(self):
         f = self.filter
-        return np.concatenate([f.x, np.diag(f.P), [f.nis]])
+        P = f.P
+        return np.concatenate([f.x, np.diag(P), P[self._upper], [f.nis]])
 
     def reset(self, t0):
         super().reset(t0)
         if self.filter.k:
             self.filter = self.make_filter()
+        self._u_prev = None
+
+    def output(self, t, u):
+        """The estimate at ``t``: the initial one, then ``step(u_prev, y)``."""
+        if self._u_prev is not None:
+            self.filter.step(self._u_prev, u[self._nu:])
         return self._outputs()
 
-    def sample(self, t, u):
-        self.n_samples += 1
-        if self.n_samples > 1:
-            self.filter.step(u[: self._nu], u[self._nu:])
-        return self._outputs()
+    def update(self, t, u):
+        """Keep the input read at ``t`` for the next prediction."""
+        self._u_prev = np.array(u[: self._nu])
 
 
 def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
@@ -72,10 +97,16 @@ def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
     the operating point); ``u = u_op - K (x - x_op)``.
     """
     Ad, Bd = model.discretize(x_op, u_op, period, method="zoh")
-    Q = np.atleast_2d(np.asarray(Q, float)) * (np.eye(model.nx) if np.ndim(Q) == 0 else 1)
+    Q = np.atleast_2d(float_array(Q, "LQR weight Q")) * (np.eye(model.nx) if np.ndim(Q) == 0 else 1)
     Q = np.diag(Q.ravel()) if Q.shape == (1, model.nx) else Q
-    R = np.atleast_2d(np.asarray(R, float))
-    P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
+    R = np.atleast_2d(float_array(R, "LQR weight R"))
+    if Q.shape != (model.nx, model.nx) or R.shape != (model.nu, model.nu):
+        raise ConfigurationError(f"LQR weights must be Q ({model.nx}, {model.nx}) and R ({model.nu}, {model.nu}); "
+                                 f"got {Q.shape} and {R.shape}")
+    try:
+        P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
+    except (ValueError, np.linalg.LinAlgError) as e:
+        raise ConfigurationError(f"no LQR solution for these weights: {e}") from None
     return np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
 
 
@@ -100,25 +131,31 @@ class LQRController(Component):
         Saturation of the command.
     """
 
+    reentrant = True
+
     def __init__(self, name: str, model: PlantModel, period: float, Q, R, x_op=None,
                  u_op=None, u_limits=None):
         super().__init__(name, period, inputs=model.state_names, outputs=model.input_names)
-        self.x_op = np.zeros(model.nx) if x_op is None else np.asarray(x_op, float)
-        self.u_op = np.zeros(model.nu) if u_op is None else np.asarray(u_op, float)
+        from fmu_models.checks import vector
+
+        self.x_op = np.zeros(model.nx) if x_op is None else vector(x_op, model.nx, f"{name}: x_op", ConfigurationError)
+        self.u_op = np.zeros(model.nu) if u_op is None else vector(u_op, model.nu, f"{name}: u_op", ConfigurationError)
         self.K = lqr_gain(model, self.x_op, self.u_op, self.period, Q, R)
         closed = model.discretize(self.x_op, self.u_op, self.period)
         eig = np.abs(np.linalg.eigvals(closed[0] - closed[1] @ self.K))
         if eig.max() >= 1:
-            raise ValueError(f"{name}: the LQR design does not stabilise the linearisation "
-                             f"(closed-loop |eig| max {eig.max():.3f})")
-        self.u_limits = None if u_limits is None else (float(u_limits[0]), float(u_limits[1]))
+            raise ConfigurationError(f"{name}: the LQR design does not stabilise the linearisation "
+                                     f"(closed-loop |eig| max {eig.max():.3f})")
+        if u_limits is None:
+            self.u_limits = None
+        else:
+            lim = float_array(u_limits, f"{name}: u_limits")
+            if lim.shape != (2,) or not lim[0] < lim[1]:
+                raise ConfigurationError(f"{name}: u_limits must be (low, high) with low < high, got {u_limits!r}")
+            self.u_limits = (float(lim[0]), float(lim[1]))
 
-    def reset(self, t0):
-        super().reset(t0)
-        return self.u_op.copy()
-
-    def sample(self, t, u):
-        self.n_samples += 1
+    def output(self, t, u):
+        """The command ``u_op - K (x_hat - x_op)``, saturated."""
         cmd = self.u_op - self.K @ (u - self.x_op)
         if self.u_limits is not None:
             cmd = np.clip(cmd, *self.u_limits)

@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from fmu_models.checks import finite, positive_int
+from fmu_models.errors import ConfigurationError
+
 from .component import Component
-from .sensors import _per_channel
+from .sensors import PerInstantNoise, _per_channel
 
 G = 9.81
-
-
-def _noise(rng, std, n):
-    return std * rng.standard_normal(n)
 
 
 class Accelerometer(Component):
@@ -50,27 +49,29 @@ class Accelerometer(Component):
         Noise seed (default 0).
     """
 
+    reentrant = True
+
     def __init__(self, name, period, r, noise_std=0.0, bias=0.0, g=G, seed=0):
         super().__init__(name, period, ["alpha", "alpha_dot", "alpha_ddot"], ["a_t", "a_r", "a_z"])
-        if not (np.isfinite(r) and r >= 0):
-            raise ValueError(f"{name}: r must be a distance >= 0 m, got {r!r}")
-        if not g > 0:
-            raise ValueError(f"{name}: g must be > 0")
-        self.r, self.g, self.seed = float(r), float(g), int(seed)
+        self.r = finite(r, f"{name}: r [m]")
+        if self.r < 0:
+            raise ConfigurationError(f"{name}: r must be a distance >= 0 m, got {r!r}")
+        if not finite(g, f"{name}: g") > 0:
+            raise ConfigurationError(f"{name}: g must be > 0")
+        self.g, self.seed = float(g), positive_int(seed, f"{name}: seed", minimum=0)
         self.noise_std = _per_channel(noise_std, 3, "noise_std", name, positive=True)
         self.bias = _per_channel(bias, 3, "bias", name)
 
     def reset(self, t0):
         super().reset(t0)
-        self.rng = np.random.default_rng(self.seed)
-        return np.array([0.0, self.g, 0.0])
+        self._noise = PerInstantNoise(self.seed, 3)
 
-    def sample(self, t, u):
+    def output(self, t, u):
+        """Specific force in body axes at ``t``."""
         alpha, alpha_dot, alpha_ddot = u
-        self.n_samples += 1
         a = np.array([self.r * alpha_ddot - self.g * np.sin(alpha),
                       self.g * np.cos(alpha) - self.r * alpha_dot**2, 0.0])
-        return a + self.bias + _noise(self.rng, self.noise_std, 3)
+        return a + self.bias + self.noise_std * self._noise.at(t)
 
 
 class Gyroscope(Component):
@@ -93,27 +94,34 @@ class Gyroscope(Component):
         Noise seed (default 0).
     """
 
+    reentrant = True
+
     def __init__(self, name, period, noise_std=0.0, bias=0.0, drift_std=0.0, seed=0):
         super().__init__(name, period, ["alpha_dot"], ["omega"])
         for what, v in (("noise_std", noise_std), ("drift_std", drift_std)):
-            if not (np.isfinite(v) and v >= 0):
-                raise ValueError(f"{name}: {what} must be >= 0, got {v!r}")
-        if not np.isfinite(bias):
-            raise ValueError(f"{name}: bias must be finite")
-        self.noise_std, self.bias0, self.drift_std = float(noise_std), float(bias), float(drift_std)
-        self.seed = int(seed)
+            if finite(v, f"{name}: {what}") < 0:
+                raise ConfigurationError(f"{name}: {what} must be >= 0, got {v!r}")
+        self.noise_std, self.drift_std = float(noise_std), float(drift_std)
+        self.bias0 = finite(bias, f"{name}: bias")
+        self.seed = positive_int(seed, f"{name}: seed", minimum=0)
 
     def reset(self, t0):
         super().reset(t0)
         self.rng = np.random.default_rng(self.seed)
-        self.b = self.bias0
-        return np.array([self.b])
+        self.b, self._t, self._v = self.bias0, None, 0.0
 
-    def sample(self, t, u):
-        if self.n_samples and self.drift_std:
-            self.b += self.drift_std * np.sqrt(self.period) * self.rng.standard_normal()
-        self.n_samples += 1
-        return np.array([u[0] + self.b + self.noise_std * self.rng.standard_normal()])
+    def _draw(self, t):
+        # the same random numbers, in the same order, as one draw pair per instant
+        if t != self._t:
+            if self._t is not None and self.drift_std:
+                self.b += self.drift_std * np.sqrt(self.period) * self.rng.standard_normal()
+            self._t, self._v = t, self.rng.standard_normal()
+        return self._v
+
+    def output(self, t, u):
+        """Measured rate at ``t``: ``alpha_dot + b + v``."""
+        v = self._draw(t)
+        return np.array([u[0] + self.b + self.noise_std * v])
 
 
 class Encoder(Component):
@@ -135,27 +143,31 @@ class Encoder(Component):
         Constant offset added after counting [rad/s] (seed 002 observes one; default 0).
     """
 
+    reentrant = True
+
     def __init__(self, name, period, counts_per_rev, offset=0.0):
-        super().__init__(name, period, ["phi_dot"], ["phi_dot"])
-        if int(counts_per_rev) != counts_per_rev or counts_per_rev <= 0:
-            raise ValueError(f"{name}: counts_per_rev must be a positive integer, got {counts_per_rev!r}")
-        self.cpr, self.offset = int(counts_per_rev), float(offset)
+        # the count at t_k reflects the speed up to t_k^-: no direct feedthrough
+        super().__init__(name, period, ["phi_dot"], ["phi_dot"], feedthrough=False)
+        self.cpr = positive_int(counts_per_rev, f"{name}: counts_per_rev")
+        self.offset = finite(offset, f"{name}: offset")
 
     def reset(self, t0):
         super().reset(t0)
-        self.phi, self.counts, self.speed = 0.0, 0, 0.0
-        return np.array([self.offset])
+        self.phi, self.counts = 0.0, 0
 
-    def sample(self, t, u):
-        if self.n_samples:
-            self.phi += self.speed * self.period
-        self.speed = float(u[0])
-        self.n_samples += 1
+    def _counts(self):
         # an angle within 1e-9 counts of an edge has crossed it (float rounding of the sum)
-        counts = int(np.floor(self.phi * self.cpr / (2 * np.pi) + 1e-9))
-        rate = (counts - self.counts) * 2 * np.pi / (self.cpr * self.period)
-        self.counts = counts
+        return int(np.floor(self.phi * self.cpr / (2 * np.pi) + 1e-9))
+
+    def output(self, t, u):
+        """Speed from the increments counted over the last period."""
+        rate = (self._counts() - self.counts) * 2 * np.pi / (self.cpr * self.period)
         return np.array([rate + self.offset])
+
+    def update(self, t, u):
+        """Integrate the wheel angle with the speed held over the next period."""
+        self.counts = self._counts()
+        self.phi += float(u[0]) * self.period
 
 
 class TiltFusion(Component):
@@ -185,7 +197,11 @@ class TiltFusion(Component):
     """
 
     def __init__(self, name, period, q_angle=1e-6, q_bias=1e-8, r_tilt=1e-3, correct_rate=False):
-        super().__init__(name, period, ["a_t", "a_r", "omega"], ["alpha", "alpha_dot", "bias"])
+        # the tilt and offset follow the accelerometer now and the gyro rate of the previous
+        # instant (the filter's input); the rate output is the gyro rate now
+        super().__init__(name, period, ["a_t", "a_r", "omega"], ["alpha", "alpha_dot", "bias"],
+                         feedthrough={"alpha": ["a_t", "a_r"], "bias": ["a_t", "a_r"],
+                                      "alpha_dot": ["a_t", "a_r", "omega"]})
         from estimators import linear_model
 
         T = self.period
@@ -204,17 +220,19 @@ class TiltFusion(Component):
     def reset(self, t0):
         super().reset(t0)
         self._make()
-        self.omega_prev = 0.0
-        return np.zeros(3)
+        self.omega_prev = None
 
-    def sample(self, t, u):
+    def output(self, t, u):
+        """Fused tilt, rate and offset at ``t``: one filter step with the previous rate."""
         a_t, a_r, omega = u
         tilt = np.arctan2(-a_t, a_r)
-        if self.n_samples:
+        if self.omega_prev is not None:
             x = self.filter.step([self.omega_prev], [tilt])
         else:
             x = self.filter.update([tilt])
-        self.n_samples += 1
-        self.omega_prev = omega
         rate = omega - x[1] if self.correct_rate else omega
         return np.array([x[0], rate, x[1]])
+
+    def update(self, t, u):
+        """Keep the gyro rate for the next prediction."""
+        self.omega_prev = float(u[2])

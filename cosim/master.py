@@ -1,66 +1,73 @@
-"""The co-simulation master: steps FMUs and discrete Python components, each at its own period.
+"""The co-simulation master: steps FMUs and Python components, each at its own period.
 
 Time runs on a base step ``h`` that divides every component's period (their greatest
-common divisor unless given). At each base time ``t_k = t0 + k h``:
+common divisor unless given; see :func:`cosim.schedule.base_step`). At each base time
+``t_k = t0 + k h``, for the components due at ``t_k`` (the protocol of
+:mod:`cosim.component`):
 
-1. FMUs due at ``t_k`` publish the outputs of their previous step (they belong to
-   ``t_k``);
-2. *phase A*: the discrete components due at ``t_k`` are sampled, in the order they were
-   given. With ``order="gauss-seidel"`` (default) each reads the newest values, so a
-   component sees what components before it produced at ``t_k``; with ``"jacobi"`` all
-   read the values as they were before phase A;
-3. the row of all signals at ``t_k`` is recorded;
-4. *phase B*: the FMUs due at ``t_k`` get their inputs (values after phase A; before it
-   with Jacobi) and step over ``[t_k, t_k + period]``.
+1. their outputs at ``t_k`` are computed (``output``) in an order derived from the
+   connections and each component's declared direct feedthrough (``order="auto"``,
+   default): a component reads a same-instant value of every input its outputs depend on
+   directly, whatever the order of the component list. ``order="given"`` evaluates in list
+   order instead (a component listed before its source sees the source's previous value);
+   ``order="jacobi"`` makes every component read the values as they were before ``t_k``;
+2. the row of recorded signals at ``t_k`` is stored;
+3. each due component consumes its inputs at ``t_k`` (``update``): FMUs set their inputs and
+   step over ``[t_k, t_k + period]``; filters store the input they will predict with.
 
-Outputs of a component are held between its samples (zero-order hold). With the order
-``sensor, estimator, controller`` this is the papers' discrete-time loop:
-``x_k = f(x_{k-1}, u_{k-1}) + w_{k-1}``, ``y_k = h(x_k) + v_k``, the filter predicts with
-``u_{k-1}`` and updates with ``y_k``, and the controller computes ``u_k`` from the estimate.
+Outputs are held between a component's instants (zero-order hold). The papers' discrete
+loop (``x_k = f(x_{k-1}, u_{k-1}) + w_{k-1}``, ``y_k = h(x_k) + v_k``, the filter predicts
+with ``u_{k-1}`` and updates with ``y_k``, the controller computes ``u_k`` from the
+estimate) follows from the components' feedthrough declarations in any list order.
+:meth:`Cosimulation.describe` prints the evaluation order and the latency of every
+connection.
+
+Algebraic loops (a cycle of direct dependencies at one instant) are refused before the
+run with the loop's ports named, or, with ``loops="iterate"``, solved at each instant by
+Newton's method on the loop's signals (finite-difference Jacobian; exact in one step for
+a linear loop) or by fixed-point iteration (``loop_solver="fixed-point"``), to
+``loop_tolerance`` within ``loop_max_iter`` iterations.
 """
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Mapping, Sequence
 from fractions import Fraction
-from typing import Mapping, Sequence
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-ORDERS = ("gauss-seidel", "jacobi")
+from fmu_models.errors import (
+    ConfigurationError,
+    CosimError,
+    Interrupted,
+    ResourceError,
+    TypeMismatchError,
+    UnknownNameError,
+)
 
+from .component import Component, ports_compatible
+from .recording import MemorySink, ParquetSink, select_signals
+from .schedule import Group, base_step, evaluation_order
 
-class ConfigurationError(ValueError):
-    """The co-simulation cannot be built as described (the message names the problem)."""
+__all__ = ["LOOP_SOLVERS", "LOOPS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
 
-
-class CosimError(RuntimeError):
-    """A component failed during a run (``message`` says which, when and why).
-
-    Attributes
-    ----------
-    component : str
-        Name of the failing component.
-    time : float
-        Simulation time [s] of the failure.
-    results : pandas.DataFrame
-        The signals recorded up to the failure.
-    """
-
-    def __init__(self, message, component, time, results):
-        super().__init__(message)
-        self.component, self.time, self.results = component, time, results
-
-
-def _fraction(x: float) -> Fraction:
-    return Fraction(x).limit_denominator(10**9)
+ORDERS = ("auto", "given", "jacobi")
+LOOPS = ("refuse", "iterate")
+LOOP_SOLVERS = ("newton", "fixed-point")
+#: Base steps between checks that every signal is finite (and progress updates).
+BLOCK = 64
+#: Largest number of base steps of one run.
+MAX_STEPS = 10**10
 
 
 def _split(ref: str, what: str) -> tuple[str, str]:
-    if not isinstance(ref, str) or ref.count(".") != 1:
+    if not isinstance(ref, str) or "." not in ref or ref.startswith(".") or ref.endswith("."):
         raise ConfigurationError(f"{what} {ref!r} must be written 'component.port'")
-    return tuple(ref.split("."))  # type: ignore[return-value]
+    comp, port = ref.split(".", 1)
+    return comp, port
 
 
 class Cosimulation:
@@ -68,99 +75,125 @@ class Cosimulation:
 
     Parameters
     ----------
-    components : sequence
-        :class:`~cosim.component.Component` and
-        :class:`~cosim.fmu_component.FMUComponent` objects. Discrete components are
-        sampled in this order.
+    components : sequence of Component
+        FMUs (:class:`~cosim.fmu_component.FMUComponent`), plant models
+        (:class:`~cosim.model_component.ModelComponent`) and Python components. With the
+        default order the list order does not change results.
     connections : mapping or iterable of pairs
         ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input
-        port gets at most one source. Every input of a discrete component must be
-        connected; unconnected FMU inputs keep their start values.
+        gets at most one source, of a compatible type (see
+        :func:`cosim.component.ports_compatible`). Every input of a Python component must
+        be connected; unconnected FMU inputs keep their start values.
     step_size : float, optional
         Base step [s]; every period must be an integer multiple of it. Default: the
         greatest common divisor of the periods.
-    order : {"gauss-seidel", "jacobi"}
-        Update order within a base step (see the module documentation).
+    order : {"auto", "given", "jacobi"}
+        Evaluation order within an instant (see the module documentation).
+    loops : {"refuse", "iterate"}
+        Algebraic loops: refused before the run (default) or solved at each instant.
+    loop_tolerance : float
+        Iteration stops when every loop signal changes by less than
+        ``loop_tolerance * (1 + |value|)`` (default 1e-10).
+    loop_max_iter : int
+        Iteration limit per instant; reaching it stops the run with a CosimError (default 50).
+    loop_solver : {"newton", "fixed-point"}
+        How loops are iterated (default Newton).
+
+    Attributes
+    ----------
+    step_size : float
+        The base step [s].
+    signal_names : list of str
+        ``component.port`` of every output, the columns of the results.
+    schedule : list of Group
+        The evaluation order (see :mod:`cosim.schedule`).
+    timings : dict
+        Wall times [s] of the last run: ``setup``, ``loop``, ``teardown``.
 
     Raises
     ------
     ConfigurationError
-        Duplicate names, an unknown component or port (the message lists the valid
-        ones), an input connected twice, an unconnected required input, or a period
-        that is not an integer multiple of the base step.
+        Duplicate names, an unknown component or port (the message lists the valid ones),
+        an input connected twice, an unconnected required input, incompatible port types,
+        periods that are not multiples of the base step or not commensurate, an algebraic
+        loop.
     """
 
-    def __init__(self, components: Sequence, connections, step_size: float | None = None,
-                 order: str = "gauss-seidel"):
-        if order not in ORDERS:
-            raise ConfigurationError(f"order must be one of {ORDERS}, got {order!r}")
-        self.order = order
+    def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
+                 order: str = "auto", loops: str = "refuse", loop_tolerance: float = 1e-10,
+                 loop_max_iter: int = 50, loop_solver: str = "newton"):
+        from fmu_models.checks import positive, positive_int
+
+        for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
+                                   ("loop_solver", loop_solver, LOOP_SOLVERS)):
+            if value not in valid:
+                raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
+        self.order, self.loops, self.loop_solver = order, loops, loop_solver
+        self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
+        self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
+        for c in self.components:
+            if not isinstance(c, Component):
+                raise TypeMismatchError(f"{c!r} is not a cosim.component.Component")
         names = [c.name for c in self.components]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ConfigurationError(f"duplicate component names: {dup}")
         self.by_name = {c.name: c for c in self.components}
         self.connections = self._parse_connections(connections)
-        self.step_size = self._base_step(step_size)
+        base, self._ratio, self._hyper = base_step({c.name: c.period for c in self.components}, step_size)
+        self._base, self.step_size = base, float(base)
         self._layout()
+        if order == "auto":
+            self.schedule = evaluation_order(self.components, self.connections, loops)
+        else:
+            from .schedule import Unit
+            self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
+                             for c in self.components]
+        self.timings: dict[str, float] = {}
 
     # ---------------------------------------------------------------- validation
     def _port(self, ref: str, direction: str):
         comp, port = _split(ref, f"{direction} port")
         if comp not in self.by_name:
-            raise ConfigurationError(f"unknown component {comp!r} in {ref!r}; components: "
-                                     f"{', '.join(self.by_name)}")
+            raise UnknownNameError(f"unknown component {comp!r} in {ref!r}; components: "
+                                   f"{', '.join(self.by_name)}")
         c = self.by_name[comp]
         ports = c.output_names if direction == "output" else c.input_names
         if port not in ports:
-            raise ConfigurationError(f"component {comp!r} has no {direction} {port!r}; its "
-                                     f"{direction}s: {', '.join(ports) or '(none)'}")
+            raise UnknownNameError(f"component {comp!r} has no {direction} {port!r}; its "
+                                   f"{direction}s: {', '.join(ports) or '(none)'}")
         return comp, port
 
     def _parse_connections(self, connections) -> dict:
-        pairs = ([(src, dst) for dst, src in connections.items()]
-                 if isinstance(connections, Mapping) else list(connections))
+        if isinstance(connections, Mapping):
+            pairs = [(src, dst) for dst, src in connections.items()]
+        else:
+            try:
+                pairs = [tuple(p) for p in connections]
+            except TypeError:
+                raise ConfigurationError("connections must be a mapping {dst: src} or pairs (src, dst)") from None
+            if any(len(p) != 2 for p in pairs):
+                raise ConfigurationError("each connection must be a pair (src, dst)")
         out = {}
         for src, dst in pairs:
             s, d = self._port(src, "output"), self._port(dst, "input")
             if d in out:
                 raise ConfigurationError(f"input {dst!r} is connected twice "
                                          f"(from {'.'.join(out[d])} and {src})")
+            st = next(p for p in self.by_name[s[0]].output_ports if p.name == s[1]).type
+            dt = next(p for p in self.by_name[d[0]].input_ports if p.name == d[1]).type
+            if not ports_compatible(st, dt):
+                raise TypeMismatchError(f"connection {src} -> {dst}: a {st} output cannot drive a {dt} "
+                                        "input (values would be rounded); convert it in a component")
             out[d] = s
         for c in self.components:
-            if c.kind != "discrete":
-                continue
-            for p in c.input_names:
+            for p in c.required_inputs():
                 if (c.name, p) not in out:
                     signals = [f"{o.name}.{q}" for o in self.components for q in o.output_names]
                     raise ConfigurationError(
                         f"input {c.name}.{p} is not connected; available signals: {', '.join(signals)}")
         return out
-
-    def _base_step(self, step_size):
-        periods = {c.name: _fraction(c.period) for c in self.components}
-        if not periods:
-            raise ConfigurationError("no components")
-        if step_size is None:
-            base = Fraction(0)
-            for p in periods.values():
-                base = Fraction(math.gcd(base.numerator * p.denominator, p.numerator * base.denominator),
-                                base.denominator * p.denominator)
-        else:
-            base = _fraction(step_size)
-            if base <= 0:
-                raise ConfigurationError(f"step_size must be > 0, got {step_size}")
-        self._ratio = {}
-        for name, p in periods.items():
-            r = p / base
-            if r.denominator != 1:
-                raise ConfigurationError(
-                    f"component {name!r}: period {float(p)} s is not an integer multiple of the "
-                    f"base step {float(base)} s")
-            self._ratio[name] = r.numerator
-        self._base = base
-        return float(base)
 
     # ---------------------------------------------------------------- layout
     def _layout(self):
@@ -173,40 +206,101 @@ class Cosimulation:
                 n += 1
         self.signal_names = [f"{c}.{p}" for (c, p) in slots]
         self._n_signals = n
-
-        def spec(c):
+        self._in_specs = {}
+        for c in self.components:
             ports = [p for p in c.input_names if (c.name, p) in self.connections]
-            if c.kind == "fmu":
-                c.use_inputs(ports)          # the FMU sets exactly these inputs each step
+            c.use_inputs(ports)
             idx = np.array([slots[self.connections[(c.name, p)]] for p in ports], dtype=np.intp)
             if len(idx) and np.all(np.diff(idx) == 1):
-                return ports, slice(int(idx[0]), int(idx[-1]) + 1)   # contiguous: a view
-            return ports, idx
+                self._in_specs[c.name] = (ports, slice(int(idx[0]), int(idx[-1]) + 1))
+            else:
+                self._in_specs[c.name] = (ports, idx)
 
-        self._in_specs = {c.name: spec(c) for c in self.components}
-        hyper = 1
-        for r in self._ratio.values():
-            hyper = hyper * r // math.gcd(hyper, r)
-        self._hyper = hyper
+    def _due(self, name: str, j: int) -> bool:
+        return j % self._ratio[name] == 0
 
-    def _schedule(self):
-        sched = []
-        for j in range(self._hyper):
-            due = [c for c in self.components if j % self._ratio[c.name] == 0]
-            disc = tuple((c, self._in_specs[c.name][1], self._out_slices[c.name])
-                         for c in due if c.kind == "discrete")
-            fmus = tuple((c, self._in_specs[c.name][1], self._out_slices[c.name])
-                         for c in due if c.kind == "fmu")
-            sched.append((disc, fmus))
-        return sched
+    # ---------------------------------------------------------------- description
+    def describe(self) -> str:
+        """The schedule in words: base step, evaluation order, and for every connection
+        when the value is read and how old it can be."""
+        h = self.step_size
+        lines = [f"base step {h:g} s; the pattern of due components repeats every {self._hyper} "
+                 f"base step(s) ({self._hyper * h:g} s); order: {self.order}; loops: {self.loops}", "",
+                 "components (period; what an output at t means):"]
+        for c in self.components:
+            lines.append(f"  {c.name:16s} every {c.period:g} s; {c.timing()}")
+        lines += ["", "evaluation order of the outputs at an instant (components not due hold theirs):"]
+        for i, g in enumerate(self.schedule, 1):
+            label = " + ".join(str(u) for u in g.units)
+            lines.append(f"  {i}. {label}" + ("   [algebraic loop, solved by iteration]" if g.loop else ""))
+        position = {}
+        for i, g in enumerate(self.schedule):
+            for u in g.units:
+                position.setdefault(u.comp.name, i)
+        lines += ["", "connections (latency = age of the value when it is used):"]
+        for (dn, dp), (sn, sp) in self.connections.items():
+            src, dst = self.by_name[sn], self.by_name[dn]
+            ft = any(dp in deps for deps in dst.feedthrough.values())
+            hold = ("" if src.period <= dst.period and self._ratio[dn] % self._ratio[sn] == 0
+                    else f"; {sn} updates every {src.period:g} s, held in between (zero-order hold)")
+            if self.order == "jacobi":
+                when = "read at t from the values before t: one base step old when both are due"
+            elif ft:
+                before = position.get(sn, -1) <= position.get(dn, -1) or sn == dn
+                when = ("direct feedthrough, read at t after the source's output at t: latency 0" if before
+                        else "read at t before the source's output at t (list order): one source period old")
+            else:
+                when = ("consumed at t by update (no direct feedthrough): "
+                        + ("held over the FMU's step [t, t + period]" if hasattr(dst, "interface")
+                           else "used for the component's next instant"))
+            lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {when}{hold}")
+        return "\n".join(lines)
+
+    def sample_counts(self, stop_time: float, start_time: float = 0.0) -> dict[str, int]:
+        """How many times each component computes its outputs in a run (a planning aid)."""
+        n = int(round((stop_time - start_time) / self.step_size))
+        return {c.name: n // self._ratio[c.name] + 1 for c in self.components}
 
     # ---------------------------------------------------------------- running
-    def run(self, stop_time: float, start_time: float = 0.0) -> pd.DataFrame:
-        """Run from ``start_time`` to ``stop_time`` [s]; returns every signal, one row per
-        base step (index ``time``, columns ``component.port``).
+    def _steps(self, stop_time: float, start_time: float, output_interval) -> tuple[int, int]:
+        from fmu_models.checks import finite
 
-        After the run, ``self.timings`` holds the wall times [s] of ``setup`` (resets,
-        FMU instantiation), ``loop`` and ``teardown``.
+        stop, start = finite(stop_time, "stop_time [s]"), finite(start_time, "start_time [s]")
+        span = Fraction(stop).limit_denominator(10**9) - Fraction(start).limit_denominator(10**9)
+        if span <= 0 or (span / self._base).denominator != 1:
+            raise ConfigurationError(f"stop_time - start_time = {float(span):g} s must be a positive "
+                                     f"multiple of the base step {self.step_size:g} s")
+        n = (span / self._base).numerator
+        if n > MAX_STEPS:
+            raise ResourceError(f"{n} base steps of {self.step_size:g} s (more than {MAX_STEPS})")
+        if output_interval is None:
+            return n, 1
+        m = Fraction(finite(output_interval, "output_interval [s]")).limit_denominator(10**9) / self._base
+        if m <= 0 or m.denominator != 1:
+            raise ConfigurationError(f"output_interval {output_interval} s must be a positive multiple of "
+                                     f"the base step {self.step_size:g} s")
+        return n, int(m)
+
+    def run(self, stop_time: float, start_time: float = 0.0, *, signals=None,
+            output_interval: float | None = None, progress: bool | None = None) -> pd.DataFrame:
+        """Run from ``start_time`` to ``stop_time`` [s] and return the recorded signals.
+
+        Parameters
+        ----------
+        stop_time, start_time : float
+            [s]; the span must be a multiple of the base step.
+        signals : str or sequence of str, optional
+            Glob patterns of the signals to record (e.g. ``["plant.*", "ekf.x"]``);
+            default all.
+        output_interval : float, optional
+            Record every this many seconds (a multiple of the base step); default every
+            base step.
+        progress : bool, optional
+            Show a progress bar; default: shown when the run takes more than 2 s.
+
+        Returns
+        -------
+        DataFrame indexed by ``time`` with one column per recorded signal.
 
         Raises
         ------
@@ -215,92 +309,205 @@ class Cosimulation:
             NaN or inf; the message names the component and the time, and
             ``error.results`` holds the rows recorded until then. FMU instances are
             always freed.
+        Interrupted
+            Ctrl-C: ``error.partial`` holds the rows recorded so far.
+        ResourceError
+            The recording would not fit in memory (the message gives the numbers).
         """
-        h = self._base
-        span = _fraction(stop_time) - _fraction(start_time)
-        if span <= 0 or (span / h).denominator != 1:
-            raise ConfigurationError(f"stop_time - start_time = {float(span)} s must be a positive "
-                                     f"multiple of the base step {float(h)} s")
-        n = (span / h).numerator
-        t0, hf = float(start_time), float(h)
+        n, m = self._steps(stop_time, start_time, output_interval)
+        sel = select_signals(self.signal_names, signals)
+        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 1)
+        return self._simulate(sink, sel, n, m, float(start_time), progress)
+
+    def run_to_parquet(self, path, stop_time: float, start_time: float = 0.0, *, signals=None,
+                       output_interval: float | None = None, progress: bool | None = None,
+                       chunk_rows: int = 8192) -> Path:
+        """Run like :meth:`run`, streaming the rows to the Parquet file ``path`` in chunks
+        of ``chunk_rows`` (constant memory); returns the path.
+
+        The file is written under a temporary name and renamed at the end; a failed or
+        interrupted run leaves ``<name>.partial.parquet`` with the rows so far (named in
+        the error). ``pandas.read_parquet(path)`` gives the DataFrame :meth:`run` returns.
+        """
+        n, m = self._steps(stop_time, start_time, output_interval)
+        sel = select_signals(self.signal_names, signals)
+        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 1, chunk_rows)
+        return self._simulate(sink, sel, n, m, float(start_time), progress)
+
+    def _bind_all(self, values, source):
+        bound = {}
+        for c in self.components:
+            inp, out = self._in_specs[c.name][1], self._out_slices[c.name]
+            bound[c.name] = (c.bind(values, inp, out) if source is values
+                             else _bind_reading(c, values, source, inp, out))
+        return bound
+
+    def _entries(self, bound, values):
+        """Per hyperperiod position: (output callables, update callables)."""
+        patterns: dict = {}
+        index = np.empty(self._hyper, dtype=np.intp)
+        entries = []
+        for j in range(self._hyper):
+            due = frozenset(c.name for c in self.components if self._due(c.name, j))
+            if due not in patterns:
+                outs = []
+                for g in self.schedule:
+                    units = [u for u in g.units if u.comp.name in due]
+                    if not units:
+                        continue
+                    if g.loop:
+                        outs.append(self._loop_solver(units, bound, values))
+                    else:
+                        outs.extend(bound[u.comp.name][0] for u in units)
+                upds = [bound[c.name][1] for c in self.components if c.name in due]
+                patterns[due] = len(entries)
+                entries.append((tuple(outs), tuple(upds)))
+            index[j] = patterns[due]
+        return entries, index
+
+    def _loop_solver(self, units, bound, values):
+        """A callable solving one algebraic loop at an instant (see the module docs)."""
+        fns = [bound[u.comp.name][0] for u in units]
+        idx = np.concatenate([np.arange(self._out_slices[u.comp.name].start, self._out_slices[u.comp.name].stop)
+                              for u in units])
+        tol, max_iter, newton = self.loop_tolerance, self.loop_max_iter, self.loop_solver == "newton"
+        names = ", ".join(dict.fromkeys(u.comp.name for u in units))
+
+        def jacobi_map(z, t):
+            res = z.copy()
+            for f in fns:
+                values[idx] = z
+                f(t)
+                mine = values[idx]
+                res[mine != z] = mine[mine != z]
+            values[idx] = res
+            return res
+
+        def solve(t: float) -> None:
+            z = values[idx].copy()
+            for _ in range(max_iter):
+                gz = jacobi_map(z, t)
+                r = gz - z
+                if np.all(np.abs(r) <= tol * (1 + np.abs(z))):
+                    values[idx] = gz
+                    for f in fns:
+                        f(t)
+                    return
+                if not newton:
+                    z = gz
+                    continue
+                J = np.empty((len(z), len(z)))
+                for j in range(len(z)):
+                    eps = 1e-7 * (1 + abs(z[j]))
+                    zp = z.copy()
+                    zp[j] += eps
+                    J[:, j] = (jacobi_map(zp, t) - gz) / eps
+                try:
+                    z = z - np.linalg.solve(J - np.eye(len(z)), r)
+                except np.linalg.LinAlgError:
+                    z = gz
+            raise CosimError(f"algebraic loop through {names} did not converge in {max_iter} iterations "
+                             f"at t = {t:g} s (tolerance {tol:g})", units[0].comp.name, t)
+
+        return solve
+
+    def _simulate(self, sink, sel, n: int, m: int, t0: float, progress):
+        from tqdm.auto import tqdm
+
+        hf = self.step_size
         values = np.zeros(self._n_signals)
-        rec = np.full((n + 1, self._n_signals), np.nan)
-        sched = self._schedule()
         jacobi = self.order == "jacobi"
-        current, k, done = None, 0, 0      # done: rows recorded so far
+        source = np.zeros_like(values) if jacobi else values
+        sel_idx = np.asarray(sel, dtype=np.intp)
+        all_sel = len(sel) == self._n_signals
         clock = time.perf_counter()
         self.timings = {}
+        owner: dict = {}
+        k, phase, f = 0, "reset", None
+        bar = None
         try:
             for c in self.components:
-                current = c
-                out = self._out_slices[c.name]
-                init = np.asarray(c.reset(t0), float)
-                if init.shape != (out.stop - out.start,):
-                    raise ValueError(f"reset returned shape {init.shape}, expected ({out.stop - out.start},)")
-                values[out] = init
-                if c.kind == "fmu" and len(c.in_view) != len(self._in_specs[c.name][0]):
-                    raise ValueError("FMU input buffer does not match its connections")
+                f = c
+                c.reset(t0)
+            phase = "bind"
+            bound = self._bind_all(values, source)
+            for name, (o, u) in bound.items():
+                owner[o], owner[u] = name, name
+            entries, index = self._entries(bound, values)
             L = self._hyper
             self.timings["setup"] = time.perf_counter() - clock
             clock = time.perf_counter()
-            for k in range(n + 1):
-                t = t0 + k * hf
-                disc, fmus = sched[k % L]
-                for f, _, out in fmus:
-                    values[out] = f.out_view
-                src = values.copy() if jacobi else values
-                for c, inp, out in disc:
-                    current = c
-                    values[out] = c.sample(t, src[inp])
-                rec[k] = values
-                done = k + 1
-                if not done & 63 and not np.isfinite(rec[done - 64: done]).all():
-                    self._raise_nonfinite(rec, done, t0, hf)
-                if k == n:
-                    break
-                for f, inp, _ in fmus:
-                    current = f
-                    f.in_view[:] = src[inp]
-                    f.advance(t, f.period)
-            self._raise_nonfinite(rec, done, t0, hf)
+            bar = tqdm(total=n, unit="step", delay=2.0, disable=progress is False, leave=False,
+                       desc="co-simulation", mininterval=0.5)
+            if progress:
+                bar.delay = 0
+            for k0 in range(0, n + 1, BLOCK):
+                for k in range(k0, min(k0 + BLOCK, n + 1)):
+                    t = t0 + k * hf
+                    outs, upds = entries[index[k % L]]
+                    if jacobi:
+                        source[:] = values
+                    phase = "output"
+                    for f in outs:
+                        f(t)
+                    if k % m == 0:
+                        sink.append(t, values if all_sel else values[sel_idx])
+                    if k == n:
+                        break
+                    phase = "update"
+                    for f in upds:
+                        f(t)
+                if not np.isfinite(values).all():
+                    self._raise_nonfinite(values, t0 + k0 * hf, t)
+                bar.update(min(k0 + BLOCK, n + 1) - k0 - (1 if k0 + BLOCK > n else 0))
             self.timings["loop"] = time.perf_counter() - clock
+            return sink.finish()
+        except KeyboardInterrupt:
+            partial = sink.abort()
+            raise Interrupted(f"interrupted at t = {t0 + k * hf:g} s"
+                              + (f"; rows so far in {partial}" if isinstance(partial, Path) else ""),
+                              partial) from None
         except CosimError as e:
-            if e.results is None:
-                e.results = self._frame(rec[:done], t0, hf)
+            e.results = sink.abort()
             raise
         except Exception as e:
-            # a non-finite signal recorded before the failure is its root cause
-            self._raise_nonfinite(rec, done, t0, hf)
+            results = sink.abort()
             t = t0 + k * hf
-            raise CosimError(f"component {current.name!r} failed at t = {t:g} s: {e}",
-                             current.name, t, self._frame(rec[:done], t0, hf)) from e
+            name = getattr(f, "name", None) or owner.get(f, "?")
+            where = f"component {name!r} failed at t = {t:g} s" + ("" if phase != "reset" else " (reset)")
+            raise CosimError(f"{where}: {e}", name, t, results) from e
         finally:
+            if bar is not None:
+                bar.close()
             clock = time.perf_counter()
             for c in self.components:
                 c.close()
             self.timings["teardown"] = time.perf_counter() - clock
-        return self._frame(rec, t0, hf)
 
-    def _raise_nonfinite(self, rec, done, t0, h):
-        """Raise CosimError at the first NaN or inf among the ``done`` recorded rows, if any.
+    def _raise_nonfinite(self, values, t_from: float, t_to: float):
+        j = int(np.flatnonzero(~np.isfinite(values))[0])
+        sig = self.signal_names[j]
+        raise CosimError(f"signal {sig} is {values[j]} at t = {t_to:g} s (became non-finite after "
+                         f"t = {t_from:g} s; component {sig.split('.')[0]!r})", sig.split(".")[0], t_to)
 
-        Rows are checked in blocks of 64 during the run (and all at its end); the error
-        names the signal, its component and the time, and keeps the rows before it.
-        """
-        bad = ~np.isfinite(rec[:done])
-        if not bad.any():
-            return
-        k, j = np.argwhere(bad)[0]
-        sig, t = self.signal_names[j], t0 + k * h
-        raise CosimError(f"signal {sig} is {rec[k, j]} at t = {t:g} s (component "
-                         f"{sig.split('.')[0]!r})", sig.split(".")[0], t, self._frame(rec[:k], t0, h))
 
-    def _frame(self, rec, t0, h):
-        index = pd.Index(t0 + h * np.arange(len(rec)), name="time")
-        return pd.DataFrame(rec, index=index, columns=self.signal_names)
+def _bind_reading(comp: Component, values, source, inputs, outputs):
+    """Bind ``comp`` writing its outputs to ``values`` but reading its inputs from ``source``
+    (the Jacobi order), through the public protocol."""
+    n_out = outputs.stop - outputs.start
+    last = [math.nan]
 
-    def sample_counts(self, stop_time: float, start_time: float = 0.0) -> dict[str, int]:
-        """How many times each component is sampled/stepped in a run (a planning aid)."""
-        n = int(round((stop_time - start_time) / self.step_size))
-        return {c.name: (n // self._ratio[c.name] + 1 if c.kind == "discrete"
-                         else n // self._ratio[c.name]) for c in self.components}
+    def output_fn(t):
+        y = np.asarray(comp.output(t, source[inputs]), dtype=float)
+        if y.shape != (n_out,):
+            raise ConfigurationError(f"output returned shape {y.shape}, expected ({n_out},)")
+        values[outputs] = y
+        if t != last[0]:
+            last[0] = t
+            comp.n_samples += 1
+
+    def update_fn(t):
+        comp.update(t, source[inputs])
+
+    return output_fn, update_fn
+

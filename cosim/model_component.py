@@ -5,20 +5,23 @@ inputs and one process-noise input ``w_<state>`` per state, added at the end of 
 step), outputs (the states, the measured outputs and, on request, ``der(<state>)``).
 The step is the same CasADi expression the FMU's C code is generated from, so a
 co-simulation with this component reproduces one with the FMU (the experiments' fast
-paths use it).
+paths use it). ``der(<state>)`` depends directly on the model's inputs, as in the FMU's
+ModelStructure; ``feedthrough="none"`` reads it with the input of the previous step.
 """
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from fmu_models.checks import finite
+from fmu_models.errors import NumericalError, UnknownNameError
 from fmu_models.plant import PlantModel, check_method
 
-from .component import check_name, check_period
+from .component import Component
 
 
-class ModelComponent:
+class ModelComponent(Component):
     """A :class:`~fmu_models.PlantModel` as a continuous co-simulation component.
 
     Parameters
@@ -35,69 +38,83 @@ class ModelComponent:
         Initial states by name (default: the model's ``x0``).
     outputs : sequence of str, optional
         Output ports; default: states and measured outputs. ``der(<state>)`` allowed.
-
-    Attributes
-    ----------
-    kind : str
-        ``"fmu"``: the master steps it like an FMU.
+    feedthrough : {"model", "none"}
+        As :class:`~cosim.fmu_component.FMUComponent`: ``der(<state>)`` at ``t`` uses the
+        input at ``t`` ("model", default) or the input of the previous step ("none").
     """
 
-    kind = "fmu"
+    reentrant = True
 
     def __init__(self, name: str, model: PlantModel, period: float, method: str = "euler",
                  substeps: int = 1, start: Mapping[str, float] | None = None,
-                 outputs: Sequence[str] | None = None):
-        self.name, self.period = check_name(name), check_period(period, name)
-        check_method(method, substeps)
-        self.model, self.method, self.substeps = model, method, int(substeps)
-        self.input_names = model.input_names + [f"w_{s}" for s in model.state_names]
+                 outputs: Sequence[str] | None = None, feedthrough: str = "model"):
+        substeps = check_method(method, substeps)
+        if feedthrough not in ("model", "none"):
+            raise UnknownNameError(f"{name}: feedthrough must be 'model' or 'none', got {feedthrough!r}")
+        self.model, self.method, self.substeps = model, method, substeps
+        inputs = model.input_names + [f"w_{s}" for s in model.state_names]
         available = model.state_names + model.output_names + [f"der({s})" for s in model.state_names]
-        self.output_names = list(outputs) if outputs is not None else model.state_names + model.output_names
-        for p in self.output_names:
+        outs = list(outputs) if outputs is not None else model.state_names + model.output_names
+        for p in outs:
             if p not in available:
-                raise KeyError(f"{name}: no output {p!r}; valid outputs: {', '.join(available)}")
+                raise UnknownNameError(f"{name}: no output {p!r}; valid outputs: {', '.join(available)}")
+        ft = ({p: model.input_names for p in outs if p.startswith("der(")} if feedthrough == "model" else False)
+        super().__init__(name, period, inputs, outs, feedthrough=ft, port_names_are_identifiers=False)
+        self.feedthrough_mode = feedthrough
         x0 = dict(zip(model.state_names, model.x0))
         for k, v in (start or {}).items():
             if k not in x0:
-                raise KeyError(f"{name}: no state {k!r}; states: {', '.join(x0)}")
-            x0[k] = float(v)
+                raise UnknownNameError(f"{name}: no state {k!r}; states: {', '.join(x0)}")
+            x0[k] = finite(v, f"{name}: start value of {k}")
         self.x0 = np.array(list(x0.values()))
         self._step = model.sym.step(method, self.substeps)
         self.connected_inputs = list(self.input_names)
 
-    def use_inputs(self, names: Sequence[str]) -> None:
-        """Inputs set at each step (the connected ones); the others stay zero."""
-        self.connected_inputs = list(names)
+    def timing(self) -> str:
+        return (f"plant model in Python ({self.method}, {self.substeps} substep(s)): outputs at t; "
+                f"inputs held over [t, t + {self.period:g}]")
 
-    def _outputs(self):
+    def required_inputs(self) -> list[str]:
+        """None: unconnected inputs stay zero."""
+        return []
+
+    def use_inputs(self, names: Sequence[str]) -> None:
+        """Inputs set at each step (the connected ones), in this order; the others stay zero."""
+        self.connected_inputs = list(names)
+        model_in = self.model.input_names
+        self._in_index = [("u", model_in.index(p)) if p in model_in else ("w", self.model.state_names.index(p[2:]))
+                          for p in self.connected_inputs]
+
+    def _set_inputs(self, u):
+        for (kind, i), v in zip(self._in_index, u):
+            (self.u if kind == "u" else self.w)[i] = v
+
+    def reset(self, t0: float) -> None:
+        super().reset(t0)
+        self.x, self.u, self.w = self.x0.copy(), np.zeros(self.model.nu), np.zeros(self.model.nx)
+        if not hasattr(self, "_in_index"):
+            self.use_inputs(self.connected_inputs)
+
+    def output(self, t: float, u: np.ndarray) -> np.ndarray:
+        """States, measured outputs and derivatives at ``t``."""
         m = self.model
         vals = dict(zip(m.state_names, self.x))
         if any(p in m.output_names for p in self.output_names):
             vals.update(zip(m.output_names, m.h(self.x)))
         if any(p.startswith("der(") for p in self.output_names):
-            vals.update((f"der({s})", v) for s, v in zip(m.state_names, m.f(self.x, self.u)))
-        self.out_view[:] = [vals[p] for p in self.output_names]
-        return self.out_view
+            uu = self.u
+            if self.feedthrough_mode == "model":
+                uu = self.u.copy()
+                for (kind, i), v in zip(self._in_index, u):
+                    if kind == "u":
+                        uu[i] = v
+            vals.update((f"der({s})", v) for s, v in zip(m.state_names, m.f(self.x, uu)))
+        return np.array([vals[p] for p in self.output_names])
 
-    def reset(self, t0: float) -> np.ndarray:
-        self.x, self.u, self.w = self.x0.copy(), np.zeros(self.model.nu), np.zeros(self.model.nx)
-        self.in_view = np.zeros(len(self.connected_inputs))
-        self.out_view = np.zeros(len(self.output_names))
-        names = self.model.input_names
-        self._in_index = [("u", names.index(p)) if p in names else ("w", self.model.state_names.index(p[2:]))
-                          for p in self.connected_inputs]
-        return self._outputs()
-
-    def advance(self, t: float, h: float) -> np.ndarray:
-        for (kind, i), v in zip(self._in_index, self.in_view):
-            (self.u if kind == "u" else self.w)[i] = v
-        if abs(h - self.period) > 1e-12 * self.period:
-            raise ValueError(f"{self.name}: step {h} s differs from the period {self.period} s")
-        x = np.asarray(self._step(self.x, self.u, self.model.p, h)).ravel() + self.w
+    def update(self, t: float, u: np.ndarray) -> None:
+        """Set the inputs and step over ``[t, t + period]``, then add the noise ``w``."""
+        self._set_inputs(u)
+        x = np.asarray(self._step(self.x, self.u, self.model.p, self.period)).ravel() + self.w
         if not np.all(np.isfinite(x)):
-            raise FloatingPointError(f"{self.name}: the state became non-finite at t = {t + h:g} s")
+            raise NumericalError(f"{self.name}: the state became non-finite at t = {t + self.period:g} s")
         self.x = x
-        return self._outputs()
-
-    def close(self) -> None:
-        """Nothing to free."""

@@ -78,7 +78,7 @@ class Scenario:
         self.stop_time, self.start_time = float(sim["stop_time"]), float(sim.get("start_time", 0.0))
         comps = [self._component(c) for c in spec.get("component", [])]
         self.cosim = Cosimulation(comps, spec.get("connections", {}),
-                                  step_size=sim.get("step_size"), order=sim.get("order", "gauss-seidel"))
+                                  step_size=sim.get("step_size"), order=sim.get("order", "auto"))
         self.plot = spec.get("plot")
         self.title = spec.get("title", "")
 

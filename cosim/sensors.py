@@ -1,19 +1,43 @@
-"""Sensor and process-noise components (seeded Gaussian noise)."""
+"""Sensor and process-noise components (seeded Gaussian noise).
+
+Both draw their random numbers once per sample instant (a repeated ``output`` call at the
+same instant, as in an iterated loop, reuses them), so they are reentrant.
+"""
 from __future__ import annotations
 
 from collections import deque
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
+
+from fmu_models.checks import float_array, positive_int
+from fmu_models.errors import ConfigurationError
 
 from .component import Component
 
 
 def _per_channel(value, n, what, owner, positive=False):
-    a = np.broadcast_to(np.asarray(value, float), (n,)).copy()
+    a = float_array(value, f"{owner}: {what}")
+    try:
+        a = np.broadcast_to(a, (n,)).copy()
+    except ValueError:
+        raise ConfigurationError(f"{owner}: {what} must be one value or {n}, got {value!r}") from None
     if not np.all(np.isfinite(a)) or (positive and np.any(a < 0)):
-        raise ValueError(f"{owner}: {what} must be finite{' and >= 0' if positive else ''}, got {value!r}")
+        raise ConfigurationError(f"{owner}: {what} must be finite{' and >= 0' if positive else ''}, got {value!r}")
     return a
+
+
+class PerInstantNoise:
+    """Draws ``n`` standard normal numbers once per instant from a seeded PCG64 stream."""
+
+    def __init__(self, seed: int, n: int):
+        self.rng, self.n, self.t, self.value = np.random.default_rng(seed), n, None, None
+
+    def at(self, t: float) -> np.ndarray:
+        """The draw of instant ``t`` [s] (drawn at the first call for ``t``)."""
+        if t != self.t:
+            self.t, self.value = t, self.rng.standard_normal(self.n)
+        return self.value
 
 
 class Sensor(Component):
@@ -42,32 +66,45 @@ class Sensor(Component):
         Seed of the noise generator (numpy PCG64; default 0).
     """
 
+    reentrant = True
+
     def __init__(self, name: str, period: float, signals: Sequence[str], noise_std=0.0,
                  bias=0.0, quantization=0.0, delay: int = 0, seed: int = 0):
+        if isinstance(signals, str):
+            signals = [signals]
         signals = list(signals)
         super().__init__(name, period, inputs=signals, outputs=[f"y_{s}" for s in signals])
         n = len(signals)
         self.noise_std = _per_channel(noise_std, n, "noise_std", name, positive=True)
         self.bias = _per_channel(bias, n, "bias", name)
         self.quantization = _per_channel(quantization, n, "quantization", name, positive=True)
-        if int(delay) != delay or delay < 0:
-            raise ValueError(f"{name}: delay must be a non-negative integer of samples, got {delay!r}")
-        self.delay, self.seed = int(delay), int(seed)
+        self.delay = positive_int(delay, f"{name}: delay (samples)", minimum=0)
+        self.seed = positive_int(seed, f"{name}: seed", minimum=0)
 
     def reset(self, t0):
         super().reset(t0)
-        self.rng = np.random.default_rng(self.seed)
-        self._queue = deque(maxlen=self.delay + 1)
-        return np.zeros(len(self.output_names))
+        self._noise = PerInstantNoise(self.seed, len(self.input_ports))
+        self._queue = deque(maxlen=max(self.delay, 1))
 
-    def sample(self, t, u):
-        y = u + self.bias + self.noise_std * self.rng.standard_normal(len(u))
+    def _measure(self, t, u):
+        y = u + self.bias + self.noise_std * self._noise.at(t)
         q = self.quantization
         if q.any():
             y = np.where(q > 0, np.round(y / np.where(q > 0, q, 1)) * q, y)
-        self._queue.append(y)
-        self.n_samples += 1
-        return self._queue[0]
+        return y
+
+    def output(self, t, u):
+        """The measurement at ``t``: the sample ``delay`` instants old (the first one until
+        that many exist)."""
+        y = self._measure(t, u)
+        if not self.delay or not self._queue:
+            return y
+        return self._queue[0]     # y_{k-delay}, or y_0 while fewer than delay samples exist
+
+    def update(self, t, u):
+        """Store this instant's sample for the delay line."""
+        if self.delay:
+            self._queue.append(self._measure(t, u))
 
 
 class ProcessNoise(Component):
@@ -89,25 +126,28 @@ class ProcessNoise(Component):
         Seed of the generator (numpy PCG64; default 0).
     """
 
+    reentrant = True
+
     def __init__(self, name: str, period: float, states: Sequence[str], cov, seed: int = 0):
         states = list(states)
         super().__init__(name, period, outputs=[f"w_{s}" for s in states])
         n = len(states)
-        c = np.asarray(cov, float)
-        c = c * np.eye(n) if c.ndim == 0 else (np.diag(c) if c.ndim == 1 else c)
+        c = float_array(cov, f"{name}: cov")
+        c = c * np.eye(n) if c.ndim == 0 else (np.diag(c) if c.ndim == 1 and len(c) == n else c)
         if c.shape != (n, n) or not np.all(np.isfinite(c)) or np.abs(c - c.T).max() > 1e-12 * max(1, np.abs(c).max()):
-            raise ValueError(f"{name}: cov must be a finite symmetric ({n}, {n}) matrix, a diagonal or a scalar")
+            raise ConfigurationError(f"{name}: cov must be a finite symmetric ({n}, {n}) matrix, a diagonal "
+                                     "or a scalar")
         w, V = np.linalg.eigh(c)
         if w.min() < -1e-12 * max(1.0, w.max()):
-            raise ValueError(f"{name}: cov is not positive semi-definite (eigenvalues {w})")
+            raise ConfigurationError(f"{name}: cov is not positive semi-definite (eigenvalues {w})")
         self.L = V * np.sqrt(np.clip(w, 0, None))     # L L^T = cov, also for singular cov
-        self.cov, self.seed = c, int(seed)
+        self.cov = c
+        self.seed = positive_int(seed, f"{name}: seed", minimum=0)
 
     def reset(self, t0):
         super().reset(t0)
-        self.rng = np.random.default_rng(self.seed)
-        return np.zeros(len(self.output_names))
+        self._noise = PerInstantNoise(self.seed, len(self.output_ports))
 
-    def sample(self, t, u):
-        self.n_samples += 1
-        return self.L @ self.rng.standard_normal(len(self.output_names))
+    def output(self, t, u):
+        """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
+        return self.L @ self._noise.at(t)

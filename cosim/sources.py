@@ -1,13 +1,33 @@
-"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame)."""
+"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame).
+
+Sources have no inputs; their output at ``t`` is a function of ``t`` alone, so they are
+reentrant and may sit anywhere in a component list.
+"""
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 
+from fmu_models.checks import finite, positive, positive_int
+from fmu_models.errors import ConfigurationError, UnknownNameError
+
 from .component import Component
 
 
-class Constant(Component):
+class _Source(Component):
+    """A component whose outputs depend on time only."""
+
+    reentrant = True
+
+    def _value(self, t):
+        raise NotImplementedError
+
+    def output(self, t, u):
+        """Outputs at ``t`` [s] (``u`` is empty)."""
+        return np.atleast_1d(self._value(t))
+
+
+class Constant(_Source):
     """Constant output ``value`` on port ``out``.
 
     Parameters
@@ -20,16 +40,10 @@ class Constant(Component):
 
     def __init__(self, name: str, period: float, value: float):
         super().__init__(name, period, outputs=["out"])
-        self.value = float(value)
-        if not np.isfinite(self.value):
-            raise ValueError(f"{name}: value must be finite")
+        self.value = finite(value, f"{name}: value")
 
-    def reset(self, t0):
-        super().reset(t0)
-        return np.array([self.value])
-
-    def sample(self, t, u):
-        return np.array([self.value])
+    def _value(self, t):
+        return self.value
 
 
 class Step(Constant):
@@ -48,13 +62,14 @@ class Step(Constant):
 
     def __init__(self, name: str, period: float, t_step: float, before: float, after: float):
         super().__init__(name, period, before)
-        self.t_step, self.before, self.after = float(t_step), float(before), float(after)
+        self.t_step = finite(t_step, f"{name}: t_step")
+        self.before, self.after = self.value, finite(after, f"{name}: after")
 
-    def sample(self, t, u):
-        return np.array([self.after if t >= self.t_step - 1e-12 else self.before])
+    def _value(self, t):
+        return self.after if t >= self.t_step - 1e-12 else self.before
 
 
-class Sine(Component):
+class Sine(_Source):
     """``offset + amplitude * sin(2 pi frequency t + phase)`` on port ``out``.
 
     Parameters
@@ -72,17 +87,11 @@ class Sine(Component):
 
     def __init__(self, name, period, amplitude, frequency, phase=0.0, offset=0.0):
         super().__init__(name, period, outputs=["out"])
-        self.a, self.f, self.ph, self.off = map(float, (amplitude, frequency, phase, offset))
+        self.a, self.f, self.ph, self.off = (finite(v, f"{name}: {w}") for v, w in (
+            (amplitude, "amplitude"), (frequency, "frequency"), (phase, "phase"), (offset, "offset")))
 
     def _value(self, t):
         return self.off + self.a * np.sin(2 * np.pi * self.f * t + self.ph)
-
-    def reset(self, t0):
-        super().reset(t0)
-        return np.array([self._value(t0)])
-
-    def sample(self, t, u):
-        return np.array([self._value(t)])
 
 
 def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
@@ -92,7 +101,7 @@ def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
             9: (9, 5), 10: (10, 7), 11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8),
             14: (14, 13, 12, 2), 15: (15, 14), 16: (16, 15, 13, 4)}
     if order not in taps:
-        raise ValueError(f"PRBS order must be in 2..16, got {order}")
+        raise ConfigurationError(f"PRBS order must be in 2..16, got {order}")
     state = int(seed) % (2**order) or 1
     out = np.empty(n, dtype=bool)
     for i in range(n):
@@ -104,7 +113,7 @@ def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
     return out
 
 
-class PRBS(Component):
+class PRBS(_Source):
     """Pseudo-random binary sequence ``+/- amplitude`` (a maximal-length LFSR sequence).
 
     The level is held for ``bit_time`` seconds per bit; the sequence repeats after
@@ -129,24 +138,18 @@ class PRBS(Component):
 
     def __init__(self, name, period, amplitude, bit_time, order=7, seed=1, offset=0.0):
         super().__init__(name, period, outputs=["out"])
-        if not bit_time > 0:
-            raise ValueError(f"{name}: bit_time must be > 0")
-        self.amplitude, self.bit_time, self.offset = float(amplitude), float(bit_time), float(offset)
-        self.bits = prbs_bits(int(order), int(seed), 2 ** int(order) - 1)
+        self.amplitude, self.offset = finite(amplitude, f"{name}: amplitude"), finite(offset, f"{name}: offset")
+        self.bit_time = positive(bit_time, f"{name}: bit_time")
+        self.order = positive_int(order, f"{name}: order")
+        self.seed = positive_int(seed, f"{name}: seed", minimum=0)
+        self.bits = prbs_bits(self.order, self.seed, 2 ** self.order - 1)
 
     def _value(self, t):
         b = self.bits[int(np.floor(t / self.bit_time + 1e-9)) % len(self.bits)]
         return self.offset + (self.amplitude if b else -self.amplitude)
 
-    def reset(self, t0):
-        super().reset(t0)
-        return np.array([self._value(t0)])
 
-    def sample(self, t, u):
-        return np.array([self._value(t)])
-
-
-class Table(Component):
+class Table(_Source):
     """Signals read from a table: a pandas DataFrame or a CSV file with a time column.
 
     Parameters
@@ -161,19 +164,30 @@ class Table(Component):
     """
 
     def __init__(self, name, period, data, interpolation="zoh"):
-        df = pd.read_csv(data) if isinstance(data, (str, bytes)) or hasattr(data, "read_text") else data
+        if isinstance(data, pd.DataFrame):
+            df = data
+        else:
+            try:
+                df = pd.read_csv(data)
+            except (OSError, ValueError, pd.errors.ParserError) as e:
+                raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
         if "time" not in df.columns:
-            raise ValueError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
-        cols = [c for c in df.columns if c != "time"]
+            raise ConfigurationError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
+        cols = [str(c) for c in df.columns if c != "time"]
         super().__init__(name, period, outputs=cols)
         if interpolation not in ("zoh", "linear"):
-            raise ValueError(f"{name}: interpolation must be 'zoh' or 'linear'")
-        self.t = df["time"].to_numpy(float)
+            raise UnknownNameError(f"{name}: interpolation must be 'zoh' or 'linear', got {interpolation!r}")
+        try:
+            self.t = df["time"].to_numpy(float)
+            self.v = df[cols].to_numpy(float)
+        except (TypeError, ValueError):
+            raise ConfigurationError(f"{name}: the table must hold numbers only") from None
+        if len(self.t) == 0:
+            raise ConfigurationError(f"{name}: the table has no rows")
         if np.any(np.diff(self.t) < 0):
-            raise ValueError(f"{name}: table time must be non-decreasing")
-        self.v = df[cols].to_numpy(float)
-        if not np.all(np.isfinite(self.v)):
-            raise ValueError(f"{name}: table contains NaN or inf")
+            raise ConfigurationError(f"{name}: table time must be non-decreasing")
+        if not (np.all(np.isfinite(self.v)) and np.all(np.isfinite(self.t))):
+            raise ConfigurationError(f"{name}: table contains NaN or inf")
         self.interpolation = interpolation
 
     def _value(self, t):
@@ -181,10 +195,3 @@ class Table(Component):
             return np.array([np.interp(t, self.t, self.v[:, j]) for j in range(self.v.shape[1])])
         i = max(np.searchsorted(self.t, t + 1e-12, side="right") - 1, 0)
         return self.v[i].copy()
-
-    def reset(self, t0):
-        super().reset(t0)
-        return self._value(t0)
-
-    def sample(self, t, u):
-        return self._value(t)

@@ -87,6 +87,13 @@ class RunError(PendulumCosimError, RuntimeError):
 class CosimError(RunError):
     """A component failed during a co-simulation run.
 
+    Parameters
+    ----------
+    message : str
+        What failed, when and why.
+    component, time, results
+        As the attributes.
+
     Attributes
     ----------
     component : str
@@ -105,6 +112,13 @@ class CosimError(RunError):
 
 class Interrupted(RunError):
     """A run was stopped by Ctrl-C or SIGTERM; what finished was saved as partial results.
+
+    Parameters
+    ----------
+    message : str
+        Where the run stopped and where the partial results are.
+    partial : object
+        As the attribute.
 
     Attributes
     ----------

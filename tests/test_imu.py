@@ -63,7 +63,7 @@ def test_fusion_converges_to_the_tilt_and_the_gyro_offset_at_rest():
 
 
 def test_bad_sensor_parameters_are_refused():
-    with pytest.raises(ValueError, match="counts_per_rev must be a positive integer"):
+    with pytest.raises(ValueError, match="counts_per_rev must be an integer >= 1"):
         Encoder("e", 0.01, counts_per_rev=-5)
     with pytest.raises(ValueError, match="sample period must be a positive"):
         Encoder("e", 0.0, counts_per_rev=100)

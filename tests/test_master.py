@@ -32,13 +32,11 @@ class Recorder(Component):
     def reset(self, t0):
         super().reset(t0)
         self.times, self.inputs = [], []
-        return np.zeros(len(self.output_names))
 
-    def sample(self, t, u):
-        self.n_samples += 1
+    def output(self, t, u):
         self.times.append(t)
         self.inputs.append(np.array(u))
-        return np.full(len(self.output_names), float(self.n_samples))
+        return np.full(len(self.output_names), float(len(self.times)))
 
 
 class Gain(Component):
@@ -46,7 +44,7 @@ class Gain(Component):
         super().__init__(name, period, ["u"], ["y"])
         self.k = k
 
-    def sample(self, t, u):
+    def output(self, t, u):
         return self.k * u
 
 
@@ -55,7 +53,7 @@ class Failing(Component):
         super().__init__(name, period, outputs=["y"])
         self.at, self.nan = at, nan
 
-    def sample(self, t, u):
+    def output(self, t, u):
         if t >= self.at - 1e-12:
             if self.nan:
                 return np.array([np.nan])
@@ -95,7 +93,7 @@ def test_multirate_counts_and_zero_order_hold(fmu_paths):
     cs = Cosimulation([plant, sensor, ekf, ctrl], conn)
     assert cs.step_size == pytest.approx(0.001)
     df = cs.run(1.0)
-    counts = {"plant": 1000, "sensor": 201, "ekf": 101, "ctrl": 51}
+    counts = {"plant": 1001, "sensor": 201, "ekf": 101, "ctrl": 51}   # outputs at 0..1 s inclusive
     assert cs.sample_counts(1.0) == counts
     assert sensor.n_samples == 201 and ekf.filter.k == 100 and ctrl.n_samples == 51
     np.testing.assert_allclose(ctrl.times, np.arange(51) * 0.02, atol=1e-12)
@@ -214,11 +212,11 @@ def test_refusals_name_the_problem(fmu_paths, spring_damper_fmu):
         Cosimulation([src], {}).run(0.015)
     with pytest.raises(KeyError, match="no variable 'mass'.*valid names"):
         FMUComponent("plant", fmu_paths["cartpole"], 0.01, parameters={"mass": 1.0})
-    with pytest.raises(TypeError, match="'steps' is of type Integer"):
-        FMUComponent("body", spring_damper_fmu, 0.01, outputs=["pos", "steps"])
+    body = FMUComponent("body", spring_damper_fmu, 0.01, outputs=["pos", "steps"])
+    assert [p.type for p in body.output_ports] == ["Real", "Integer"]      # typed ports
     with pytest.raises(KeyError, match="'pos' is not an FMU input"):
         FMUComponent("body", spring_damper_fmu, 0.01, inputs=["pos"])
-    assert FMUComponent("body", spring_damper_fmu, 0.01).output_names == ["pos", "vel"]
+    assert FMUComponent("body", spring_damper_fmu, 0.01).output_names == ["pos", "vel", "steps"]
     with pytest.raises(ValueError, match="period must be a positive"):
         Constant("c", 0.0, 1.0)
     ekf = lambda: EKF(discretize(get_model("cartpole"), 0.01), np.zeros(4), 1.0, 0.1, 0.1)  # noqa: E731

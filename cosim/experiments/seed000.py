@@ -108,7 +108,7 @@ def _input_component(s: Settings):
 def _inputs(s: Settings) -> np.ndarray:
     src = _input_component(s)
     src.reset(0.0)
-    return np.array([src.sample(k * s.T, None)[0] for k in range(s.steps + 1)])
+    return np.array([src.output(k * s.T, None)[0] for k in range(s.steps + 1)])
 
 
 def _noise(s: Settings, q: float, r: float, seed_w: int, seed_v: int):

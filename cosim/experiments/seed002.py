@@ -78,12 +78,15 @@ def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
 
     model = get_model("iwp")
     outs = list(STATES) + ["der(alpha_dot)"]
+    # the sensors sample before the new current is applied: the accelerometer reads
+    # der(alpha_dot) with the current held over the last step (feedthrough "none"), which
+    # also opens the loop plant -> sensors -> filters -> LQR -> plant
     if path == "master":
         plant = FMUComponent("plant", fmu_path, s.T, outputs=outs, start={"alpha": s.alpha0},
-                             parameters={"integrator": 2, "substeps": s.substeps})
+                             parameters={"integrator": 2, "substeps": s.substeps}, feedthrough="none")
     else:
         plant = ModelComponent("plant", model, s.T, "rk4", s.substeps, start={"alpha": s.alpha0},
-                               outputs=outs)
+                               outputs=outs, feedthrough="none")
     sa, sg = realisation_seeds(s.seed, list(CASES).index(case), run)
     q, r = CASES[case]
     system = augment_rate_bias(discretize(model, s.T), "y_alpha_dot")

@@ -1,0 +1,139 @@
+"""Opening FMU files safely: checked zip, bounded extraction, named errors, no leftovers.
+
+An FMU is a zip archive; a damaged, hostile or wrong file must end in one
+:class:`~fmu_models.errors.FMUError` that says what is wrong, never a traceback from the
+zip or XML layers, a disk filled by a zip bomb, or a temporary folder left behind.
+:func:`read_description` checks the archive and parses its ``modelDescription.xml``;
+:class:`Extraction` unpacks it into a private temporary folder with limits on the
+total size and the number of files, and removes the folder when closed (or when the
+object is garbage-collected, or at interpreter exit).
+"""
+from __future__ import annotations
+
+import shutil
+import tempfile
+import weakref
+import zipfile
+from pathlib import Path
+
+from fmu_models.errors import FMUError
+
+__all__ = ["MAX_FILES", "MAX_UNPACKED_BYTES", "Extraction", "read_description"]
+
+#: Largest total unpacked size of an FMU [bytes].
+MAX_UNPACKED_BYTES = 1 << 30
+#: Largest number of files in an FMU.
+MAX_FILES = 20_000
+
+
+def _open_zip(path: Path) -> zipfile.ZipFile:
+    if not path.exists():
+        raise FMUError(f"no FMU file at {path}")
+    if path.is_dir():
+        raise FMUError(f"{path} is a folder, not an .fmu file (an FMU is a zip archive)")
+    try:
+        return zipfile.ZipFile(path)
+    except zipfile.BadZipFile:
+        raise FMUError(f"{path} is not an FMU: not a zip archive (damaged or wrong file)") from None
+    except OSError as e:
+        raise FMUError(f"cannot read {path}: {e.strerror or e}") from None
+
+
+def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: int) -> None:
+    infos = z.infolist()
+    if len(infos) > max_files:
+        raise FMUError(f"{path.name} holds {len(infos)} files, more than the limit of {max_files}")
+    total = sum(i.file_size for i in infos)
+    if total > max_bytes:
+        raise FMUError(f"{path.name} would unpack to {total / 2**20:.0f} MiB, more than the limit of "
+                       f"{max_bytes / 2**20:.0f} MiB")
+    for i in infos:
+        name = i.filename
+        if name.startswith(("/", "\\")) or ".." in Path(name).parts or ":" in name.split("/")[0]:
+            raise FMUError(f"{path.name} contains the unsafe path {name!r}")
+    if "modelDescription.xml" not in z.namelist():
+        raise FMUError(f"{path.name} is not an FMU: it has no modelDescription.xml")
+
+
+def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
+    """Check the archive at ``path`` and return fmpy's ``ModelDescription`` of it.
+
+    Raises
+    ------
+    FMUError
+        Missing file, a folder, not a zip, too large, too many files, unsafe member paths,
+        no or unparsable ``modelDescription.xml`` (the message says which).
+    """
+    from fmpy import read_model_description
+
+    path = Path(path)
+    with _open_zip(path) as z:
+        _check_members(z, path, max_bytes, max_files)
+        try:
+            z.testzip()
+        except (zipfile.BadZipFile, OSError, EOFError) as e:
+            raise FMUError(f"{path.name} is damaged: {e}") from None
+    try:
+        return read_model_description(str(path), validate=False)
+    except Exception as e:   # lxml, attrs and fmpy raise a variety of types for bad XML
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
+                       f"{first}") from None
+
+
+class Extraction:
+    """An FMU unpacked into a private temporary folder, removed by :meth:`close`.
+
+    Parameters
+    ----------
+    path : path
+        The ``.fmu`` file.
+    max_bytes, max_files : int
+        Limits on the total unpacked size and the number of files, enforced while
+        unpacking (sizes declared in the archive are not trusted).
+
+    Attributes
+    ----------
+    directory : str
+        The folder (exists until :meth:`close`).
+    """
+
+    def __init__(self, path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
+        path = Path(path)
+        self.directory = tempfile.mkdtemp(prefix="pendulum_cosim_fmu_")
+        self._finalizer = weakref.finalize(self, shutil.rmtree, self.directory, True)
+        try:
+            with _open_zip(path) as z:
+                _check_members(z, path, max_bytes, max_files)
+                written = 0
+                for info in z.infolist():
+                    target = Path(self.directory, info.filename)
+                    if info.is_dir():
+                        target.mkdir(parents=True, exist_ok=True)
+                        continue
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    with z.open(info) as src, open(target, "wb") as dst:
+                        while chunk := src.read(1 << 20):
+                            written += len(chunk)
+                            if written > max_bytes:
+                                raise FMUError(f"{path.name} unpacks to more than {max_bytes / 2**20:.0f} MiB "
+                                               "(its declared sizes are wrong)")
+                            dst.write(chunk)
+        except FMUError:
+            self.close()
+            raise
+        except (zipfile.BadZipFile, OSError, EOFError) as e:
+            self.close()
+            raise FMUError(f"cannot unpack {path.name}: {e}") from None
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Remove the folder (safe to call twice)."""
+        self._finalizer()
+
+    @property
+    def closed(self) -> bool:
+        """True once the folder is removed."""
+        return not self._finalizer.alive

@@ -1,0 +1,274 @@
+"""Static analysis of a co-simulation before it runs: base step, evaluation order, loops.
+
+* :func:`base_step`: the base step (greatest common divisor of the periods, exact in
+  rational arithmetic), each component's period in base steps, and the hyperperiod after
+  which the pattern of due components repeats. Sets of periods whose base step or
+  hyperperiod would be unreasonable (e.g. 1 ms beside pi ms, or 10 ms beside 10.001 ms)
+  are refused with the periods named.
+* :func:`evaluation_order`: the order in which the components' outputs are computed at an
+  instant, from the connections and each component's declared direct feedthrough (a
+  topological sort, so any list order gives the same result). A cycle of direct
+  dependencies is an algebraic loop: refused with the loop's ports named, or, with
+  ``loops="iterate"``, kept as a group the master solves by iteration. A cycle that exists
+  only between components (not between ports) is broken by evaluating a reentrant
+  component (an FMU) twice: first its outputs that depend on no input, later the others.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+
+from fmu_models.errors import ConfigurationError, ResourceError
+
+from .component import Component
+
+__all__ = ["MAX_HYPERPERIOD", "MAX_RATIO", "Group", "Unit", "base_step", "evaluation_order"]
+
+#: Largest period / base step ratio accepted (a base step a million times shorter than a
+#: period means periods that are not commensurate in practice).
+MAX_RATIO = 1_000_000
+#: Largest hyperperiod, in base steps, of the precomputed schedule.
+MAX_HYPERPERIOD = 100_000
+
+
+def _fraction(x: float) -> Fraction:
+    return Fraction(x).limit_denominator(10**9)
+
+
+def base_step(periods: Mapping[str, float], step_size: float | None = None
+              ) -> tuple[Fraction, dict[str, int], int]:
+    """``(base, ratios, hyper)``: the base step [s] as a Fraction, each period in base
+    steps, and the hyperperiod in base steps.
+
+    Raises
+    ------
+    ConfigurationError
+        A period is not a multiple of a given ``step_size``, or the periods are not
+        commensurate within :data:`MAX_RATIO` / :data:`MAX_HYPERPERIOD` (the message
+        names them).
+    """
+    if not periods:
+        raise ConfigurationError("no components")
+    fr = {n: _fraction(p) for n, p in periods.items()}
+    if step_size is None:
+        base = Fraction(0)
+        for p in fr.values():
+            base = Fraction(math.gcd(base.numerator * p.denominator, p.numerator * base.denominator),
+                            base.denominator * p.denominator)
+    else:
+        base = _fraction(step_size)
+        if base <= 0:
+            raise ConfigurationError(f"step_size must be > 0, got {step_size}")
+    ratios = {}
+    for name, p in fr.items():
+        r = p / base
+        if r.denominator != 1:
+            raise ConfigurationError(f"component {name!r}: period {float(p)} s is not an integer multiple "
+                                     f"of the base step {float(base)} s")
+        ratios[name] = r.numerator
+    listing = ", ".join(f"{n} {float(p):g} s" for n, p in fr.items())
+    worst = max(ratios, key=ratios.get)
+    if ratios[worst] > MAX_RATIO:
+        raise ConfigurationError(
+            f"the periods ({listing}) are not commensurate: their common base step would be "
+            f"{float(base):.3g} s, {ratios[worst]} times shorter than {worst!r}'s period (limit "
+            f"{MAX_RATIO}). Use periods that are multiples of a common step (e.g. round them), "
+            "or set step_size and periods that divide it")
+    hyper = 1
+    for r in ratios.values():
+        hyper = hyper * r // math.gcd(hyper, r)
+        if hyper > MAX_HYPERPERIOD:
+            raise ResourceError(
+                f"the periods ({listing}) repeat their pattern only every {hyper}+ base steps of "
+                f"{float(base):.3g} s (limit {MAX_HYPERPERIOD}); choose periods with a small least "
+                "common multiple")
+    return base, ratios, hyper
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One evaluation of a component's ``output`` at an instant.
+
+    ``part`` is ``"all"``, or, for a component split to break a component-level cycle,
+    ``"free"`` (its outputs that depend on no input) and later ``"dependent"``.
+    """
+
+    comp: Component
+    part: str
+    ports: frozenset
+    needs: frozenset
+
+    def __str__(self) -> str:
+        return self.comp.name if self.part == "all" else f"{self.comp.name} ({self.part} outputs)"
+
+
+@dataclass(frozen=True)
+class Group:
+    """Units evaluated together: one unit, or an algebraic loop solved by iteration."""
+
+    units: tuple
+    loop: bool = False
+
+
+def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
+    ft = {o: frozenset(comp.feedthrough.get(o, ())) & connected for o in comp.output_names}
+    free = frozenset(o for o, d in ft.items() if not d)
+    dep = frozenset(comp.output_names) - free
+    needs = frozenset().union(*ft.values()) if ft else frozenset()
+    if split and free and dep:
+        return [Unit(comp, "free", free, frozenset()), Unit(comp, "dependent", dep, needs)]
+    return [Unit(comp, "all", frozenset(comp.output_names), needs)]
+
+
+def _sccs(nodes: list, edges: dict) -> list[list]:
+    """Strongly connected components (Tarjan, iterative), each in discovery order."""
+    index, low, on, stack, out = {}, {}, set(), [], []
+    counter = [0]
+    for root in nodes:
+        if root in index:
+            continue
+        work = [(root, iter(edges.get(root, ())))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            advanced = False
+            for w in it:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(edges.get(w, ()))))
+                    advanced = True
+                    break
+                if w in on:
+                    low[v] = min(low[v], index[w])
+            if advanced:
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                out.append(comp)
+    return out
+
+
+def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
+    """Edges ``src unit -> dst unit`` (a dst feedthrough input reads a src output), with the
+    connection ``(src port ref, dst port ref)`` behind each edge."""
+    publisher = {}
+    for u in units:
+        for p in u.ports:
+            publisher[(u.comp.name, p)] = u
+    edges, why = {u: [] for u in units}, {}
+    for u in units:
+        for q in sorted(u.needs):
+            src = conn[(u.comp.name, q)]
+            s = publisher[src]
+            if u not in edges[s]:
+                edges[s].append(u)
+            why[(s, u)] = (f"{src[0]}.{src[1]}", f"{u.comp.name}.{q}")
+    return edges, why
+
+
+def _cycle(scc: list, edges: dict, why: dict) -> str:
+    """A readable cycle through the units of one strongly connected component."""
+    members = set(scc)
+    start = scc[-1]
+    path, seen = [start], {start: 0}
+    node = start
+    while True:
+        nxt = next(w for w in edges[node] if w in members)
+        if nxt in seen:
+            cyc = path[seen[nxt]:] + [nxt]
+            break
+        seen[nxt] = len(path)
+        path.append(nxt)
+        node = nxt
+    hops = [f"{why[(a, b)][0]} -> {why[(a, b)][1]}" for a, b in zip(cyc, cyc[1:])]
+    return ", ".join(hops)
+
+
+def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str = "refuse"
+                     ) -> list[Group]:
+    """The groups of units in evaluation order at an instant.
+
+    Parameters
+    ----------
+    components : sequence of Component
+        In the user's order (used only to break ties, so results do not depend on it).
+    conn : mapping
+        ``(dst component, input) -> (src component, output)`` for every connection.
+    loops : {"refuse", "iterate"}
+        What an algebraic loop does: raise :class:`ConfigurationError` naming its ports,
+        or become a :class:`Group` with ``loop=True`` (all its components must be
+        ``reentrant``).
+    """
+    connected = {c.name: {q for (d, q) in conn if d == c.name} for c in components}
+    rank = {c.name: i for i, c in enumerate(components)}
+    split: set[str] = set()
+    while True:
+        units = [u for c in components for u in _units(c, connected[c.name], c.name in split)]
+        edges, why = _graph(units, conn)
+        cyclic = [s for s in _sccs(units, edges) if len(s) > 1 or s[0] in edges[s[0]]]
+        more = {u.comp.name for s in cyclic for u in s
+                if u.comp.reentrant and u.comp.name not in split and len(_units(u.comp, connected[u.comp.name], True)) == 2}
+        if not more:
+            break
+        split |= more
+    loop_of = {}
+    for i, s in enumerate(cyclic):
+        if loops != "iterate":
+            raise ConfigurationError(
+                f"algebraic loop: {_cycle(s, edges, why)}. Each of these components' outputs depends "
+                "directly on its input at the same instant, so no order can evaluate them. Break the "
+                "loop (a component without feedthrough, e.g. an FMU with feedthrough='none', or a "
+                "delay), or solve it with loops='iterate'")
+        stiff = sorted({u.comp.name for u in s if not u.comp.reentrant})
+        if stiff:
+            raise ConfigurationError(
+                f"algebraic loop {_cycle(s, edges, why)} cannot be iterated: {', '.join(stiff)} "
+                "cannot evaluate its outputs twice at one instant (reentrant = False)")
+        for u in s:
+            loop_of[u] = i
+    # Kahn's algorithm on the condensation, ties broken by the components' list order
+    node_of = {u: (("loop", loop_of[u]) if u in loop_of else u) for u in units}
+    members: dict = {}
+    for u in units:
+        members.setdefault(node_of[u], []).append(u)
+    succ: dict = {n: set() for n in members}
+    indeg = {n: 0 for n in members}
+    for u, vs in edges.items():
+        for v in vs:
+            a, b = node_of[u], node_of[v]
+            if a != b and b not in succ[a]:
+                succ[a].add(b)
+                indeg[b] += 1
+
+    def key(n):
+        return min((rank[u.comp.name], u.part != "free") for u in members[n])
+
+    ready = sorted((n for n in members if indeg[n] == 0), key=key)
+    order: list[Group] = []
+    while ready:
+        n = ready.pop(0)
+        ms = sorted(members[n], key=lambda u: (rank[u.comp.name], u.part != "free"))
+        order.append(Group(tuple(ms), loop=isinstance(n, tuple)))
+        for m in succ[n]:
+            indeg[m] -= 1
+            if indeg[m] == 0:
+                ready.append(m)
+        ready.sort(key=key)
+    return order
