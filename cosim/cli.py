@@ -1,23 +1,58 @@
 """Command line: ``pendulum-cosim``.
 
     pendulum-cosim demo [--out DIR]             run the seed 000 scenario, write results and plot
-    pendulum-cosim run SCENARIO.toml --out DIR  run any scenario file
+    pendulum-cosim run SCENARIO.toml --out DIR  run any scenario file (--dry-run: print the schedule)
     pendulum-cosim scenarios                    list the scenarios shipped with the package
     pendulum-cosim models                       print both plant models and their Jacobians
     pendulum-cosim experiment NAME [--runs N]   reproduce a paper's experiment (seed000, ...)
+
+Every error of the package's family (:mod:`fmu_models.errors`) and the known library and
+system errors (bad zip, bad XML, OS errors) print one line ``error: ...`` and exit with
+status 2; ``--debug`` shows the traceback instead. Ctrl-C and SIGTERM stop a run, save
+what finished as partial results, and exit with status 130.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
+import math
+import signal
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
+
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
+EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 
+# ---------------------------------------------------------------------------- argument types
+def _number(kind, low=None, what="value", strict=False):
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be {'an integer' if kind is int else 'a number'}, "
+                                             f"got {text!r}") from None
+        if isinstance(v, float) and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{what} must be finite, got {text!r}")
+        if low is not None and (v <= low if strict else v < low):
+            raise argparse.ArgumentTypeError(f"{what} must be {'>' if strict else '>='} {low}, got {text!r}")
+        return v
+    return parse
+
+
+positive_int = _number(int, 1, "the number")
+nonneg_int = _number(int, 0, "the seed")
+positive_float = _number(float, 0, "the duration", strict=True)
+
+
+# ---------------------------------------------------------------------------- run / demo
 def _rmse_table(df, estimators_, truth_prefix="plant"):
     """RMSE of every estimator's states against the plant's, and of the raw measurements."""
     import pandas as pd
@@ -43,39 +78,71 @@ def _rmse_table(df, estimators_, truth_prefix="plant"):
     return pd.DataFrame(rows).T
 
 
-def _run_scenario(path: Path, out: Path) -> int:
-    from .master import CosimError
-    from .results import plot_estimates, save_results
+def _resolve_scenario(name: str) -> Path:
+    path = Path(name)
+    if not path.exists() and (SCENARIO_DIR / f"{name}.toml").exists():
+        path = SCENARIO_DIR / f"{name}.toml"
+    if not path.exists():
+        raise ConfigurationError(f"no scenario file {name!r} (shipped: "
+                                 f"{', '.join(sorted(p.stem for p in SCENARIO_DIR.glob('*.toml')))})")
+    return path
+
+
+def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
+                  stream: bool | None = None, progress: bool | None = None) -> int:
+    from .results import OutputFolder, atomic_write, plot_estimates, save_results
     from .scenario import Scenario
 
-    t0 = time.perf_counter()
-    sc = Scenario.load(path, fmu_dir=out / "fmus")
-    print(f"scenario: {sc.title or path.name}")
-    try:
-        df = sc.run()
-    except CosimError as e:
-        if e.results is not None and len(e.results):
-            save_results(e.results, out, "results_partial")
-            print(f"partial results written to {out}", file=sys.stderr)
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    wall = time.perf_counter() - t0
-    paths = save_results(df, out)
-    ests = [c.name for c in sc.cosim.components if type(c).__name__ == "EstimatorComponent"]
-    table = _rmse_table(df, ests)
-    if len(table):
-        print("\nRMSE against the plant's true states:")
-        print(table.to_string(float_format=lambda v: f"{v:.4f}"))
-        table.to_csv(out / "rmse.csv")
-    if sc.plot:
-        png = out / "truth_vs_estimate.png"
-        measured = [m or None for m in sc.plot.get("measured", [])] or None
-        plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
-        paths.append(png)
-    print(f"\n{len(df)} rows x {len(df.columns)} signals, {sc.stop_time:g} s simulated in {wall:.2f} s "
-          "(including FMU build)")
-    for p in paths:
-        print(f"wrote {p}")
+    if dry_run:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            sc = Scenario.load(path, fmu_dir=Path(tmp) / "fmus")
+            print(f"scenario: {sc.title or path.name}")
+            print(sc.cosim.describe())
+        return 0
+    import shutil
+    import tempfile
+
+    with OutputFolder(out, overwrite) as out, tempfile.TemporaryDirectory() as fmus:
+        t0 = time.perf_counter()
+        sc = Scenario.load(path, fmu_dir=fmus)
+        print(f"scenario: {sc.title or path.name}")
+        stream = bool(sc.recording.get("stream", False)) if stream is None else stream
+        rec = {k: v for k, v in sc.recording.items() if k != "stream"}
+        try:
+            if stream:
+                result = sc.cosim.run_to_parquet(out / "results.parquet", sc.stop_time, sc.start_time,
+                                                 progress=progress, **rec)
+                print(f"\n{sc.stop_time:g} s simulated in {time.perf_counter() - t0:.2f} s; "
+                      f"wrote {result} (streamed)")
+                return 0
+            df = sc.cosim.run(sc.stop_time, sc.start_time, progress=progress, **rec)
+        except (PendulumCosimError, KeyboardInterrupt) as e:
+            partial = getattr(e, "results", None) if not isinstance(e, Interrupted) else e.partial
+            if partial is not None and hasattr(partial, "to_csv") and len(partial):
+                save_results(partial, out, "results.partial")
+                print(f"partial results ({len(partial)} rows) written to {out}/results.partial.*", file=sys.stderr)
+            raise
+        wall = time.perf_counter() - t0
+        paths = save_results(df, out)
+        if any(Path(fmus).iterdir()):            # keep the FMUs the scenario built
+            shutil.copytree(fmus, out / "fmus")
+        ests = [c.name for c in sc.cosim.components if type(c).__name__ == "EstimatorComponent"]
+        table = _rmse_table(df, ests)
+        if len(table):
+            print("\nRMSE against the plant's true states:")
+            print(table.to_string(float_format=lambda v: f"{v:.4f}"))
+            paths.append(atomic_write(out / "rmse.csv", table.to_csv))
+        if sc.plot:
+            png = out / "truth_vs_estimate.png"
+            measured = [m or None for m in sc.plot.get("measured", [])] or None
+            plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
+            paths.append(png)
+        print(f"\n{len(df)} rows x {len(df.columns)} signals, {sc.stop_time:g} s simulated in {wall:.2f} s "
+              "(including FMU build)")
+        for p in paths:
+            print(f"wrote {p}")
     return 0
 
 
@@ -104,50 +171,68 @@ def _models(args) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------- experiments
 EXPERIMENTS = ("seed000", "seed001", "seed002")
 
 
 def _experiment(args) -> int:
+    from .results import OutputFolder
+
     out = Path(args.out or f"out/{args.name}")
-    if args.name == "seed000":
-        from .experiments import seed000 as exp
+    if args.runs is not None and args.runs > 100_000:
+        raise ConfigurationError(f"--runs {args.runs} is more than 100000 realisations per scenario")
+    with OutputFolder(out, args.overwrite) as out:
+        if args.name == "seed000":
+            return _seed000(args, out)
+        if args.name == "seed001":
+            return _seed001(args, out)
+        return _seed002(args, out)
 
-        settings = exp.Settings(**({"runs": args.runs} if args.runs else {}),
-                                **({"seed": args.seed} if args.seed is not None else {}))
-        per_run, eps, examples, wall = exp.run(settings, path=args.path, backend=args.backend,
-                                               n_jobs=args.jobs, progress=not args.quiet)
-        md = exp.write_report(per_run, eps, examples, wall, settings, out, args.path)
-        table = exp.summary_table(per_run)
-        cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *exp.FILTERS]
-        print(f"Seed 000, Table 3 (eta, eq 44): {settings.runs} realisations, {args.path} path, "
-              f"{wall:.2f} s")
-        print(table[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
-        print(f"\nwrote {md} and the tables and figures beside it")
-        return 0
-    if args.name == "seed001":
-        from .experiments import seed001 as exp
 
-        settings = exp.Settings(**({"runs": args.runs} if args.runs else {}),
-                                **({"seed": args.seed} if args.seed is not None else {}))
-        table, summary, wall = exp.run(settings, path=args.path, backend=args.backend,
-                                       n_jobs=args.jobs, progress=not args.quiet)
-        md = exp.write_report(table, summary, wall, settings, out)
-        print(f"Seed 001: mean |position error| [m], {settings.runs} realisations, {args.path} path, "
-              f"{wall:.2f} s")
-        print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
-        for case, res in summary.items():
-            td = res["KF"]["t_div"]
-            when = f"median {np.nanmedian(td):.2f} s" if np.isfinite(td).any() else "never"
-            print(f"{case}: KF diverged in {int(np.isfinite(td).sum())} of {len(td)} runs ({when}); "
-                  f"EKF in {int(np.isfinite(res['EKF']['t_div']).sum())}")
-        print(f"\nwrote {md}")
-        return 0
+def _common(args) -> dict:
+    return dict(path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
+
+
+def _overrides(args) -> dict:
+    return {**({"runs": args.runs} if args.runs else {}), **({"seed": args.seed} if args.seed is not None else {})}
+
+
+def _seed000(args, out: Path) -> int:
+    from .experiments import seed000 as exp
+
+    settings = exp.Settings(**_overrides(args))
+    per_run, eps, examples, wall = exp.run(settings, **_common(args))
+    md = exp.write_report(per_run, eps, examples, wall, settings, out, args.path)
+    table = exp.summary_table(per_run)
+    cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *exp.FILTERS]
+    print(f"Seed 000, Table 3 (eta, eq 44): {settings.runs} realisations, {args.path} path, {wall:.2f} s")
+    print(table[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    print(f"\nwrote {md} and the tables and figures beside it")
+    return 0
+
+
+def _seed001(args, out: Path) -> int:
+    from .experiments import seed001 as exp
+
+    settings = exp.Settings(**_overrides(args))
+    table, summary, wall = exp.run(settings, **_common(args))
+    md = exp.write_report(table, summary, wall, settings, out)
+    print(f"Seed 001: mean |position error| [m], {settings.runs} realisations, {args.path} path, {wall:.2f} s")
+    print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    for case, res in summary.items():
+        td = res["KF"]["t_div"]
+        when = f"median {np.nanmedian(td):.2f} s" if np.isfinite(td).any() else "never"
+        print(f"{case}: KF diverged in {int(np.isfinite(td).sum())} of {len(td)} runs ({when}); "
+              f"EKF in {int(np.isfinite(res['EKF']['t_div']).sum())}")
+    print(f"\nwrote {md}")
+    return 0
+
+
+def _seed002(args, out: Path) -> int:
     from .experiments import seed002 as exp
 
-    settings = exp.Settings(**({"runs": args.runs} if args.runs else {}),
-                            **({"seed": args.seed} if args.seed is not None else {}))
-    per_run, traces, wall = exp.run(settings, path=args.path, backend=args.backend, n_jobs=args.jobs,
-                                    progress=not args.quiet)
+    settings = exp.Settings(**_overrides(args))
+    per_run, traces, wall = exp.run(settings, **_common(args))
     md = exp.write_report(per_run, traces, wall, settings, out, args.path)
     print(f"Seed 002: wheel pendulum through the sensor chain, {settings.runs} realisations, "
           f"{args.path} path, {wall:.2f} s")
@@ -159,36 +244,50 @@ def _experiment(args) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
+# ---------------------------------------------------------------------------- parser and main
+def build_parser() -> argparse.ArgumentParser:
+    """The ``pendulum-cosim`` argument parser."""
     parser = argparse.ArgumentParser(
         prog="pendulum-cosim",
         description="FMI co-simulation of two benchmark pendulums for nonlinear state estimation. "
                     "Plants run as FMUs built from CasADi models; estimators and other components "
                     "run in Python, each at its own sample period.")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run the seed 000 cart-pole scenario (EKF and MF-IAE): "
                                        "results table, CSV/Parquet and a truth-vs-estimate plot")
-    demo.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
+    demo.add_argument("--out", default="out/demo", help="output directory (default out/demo; "
+                                                          "replaced on every demo run)")
     run = sub.add_parser("run", help="run a scenario file (TOML); see `pendulum-cosim scenarios`")
     run.add_argument("scenario", help="scenario file, or the name of a shipped scenario")
-    run.add_argument("--out", required=True, help="output directory")
+    run.add_argument("--out", help="output directory (required unless --dry-run)")
+    run.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
+    run.add_argument("--dry-run", action="store_true",
+                     help="print the schedule (order, latency of every connection) and stop")
+    run.add_argument("--stream", action="store_true", default=None,
+                     help="stream the rows to results.parquet in chunks (constant memory; long runs)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("scenarios", help="list the shipped scenario files")
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
-    models.add_argument("--duration", type=float, default=5.0, help="simulated time [s] (default 5)")
+    models.add_argument("--duration", type=positive_float, default=5.0, help="simulated time [s] (default 5)")
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
                                             "campaign; writes tables, figures and summary.md")
     exp.add_argument("name", choices=EXPERIMENTS, help="which experiment")
-    exp.add_argument("--runs", type=int, help="realisations per scenario (default: the paper's)")
+    exp.add_argument("--runs", type=positive_int, help="realisations per scenario (default: the paper's)")
     exp.add_argument("--path", choices=("fast", "master"), default="fast",
                      help="fast: vectorised truth and batched filters; master: every realisation "
                           "through the co-simulation master with the plant FMU (same numbers)")
     exp.add_argument("--backend", choices=("processes", "serial", "dask"), default="processes",
                      help="parallel backend (dask needs the 'dask' extra)")
-    exp.add_argument("--jobs", type=int, help="worker processes (default: all cores)")
-    exp.add_argument("--seed", type=int, help="seed of all random streams")
+    exp.add_argument("--jobs", type=positive_int, help="worker processes (default: all cores)")
+    exp.add_argument("--seed", type=nonneg_int, help="seed of all random streams")
     exp.add_argument("--out", help="output directory (default out/NAME)")
+    exp.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _dispatch(args) -> int:
     if args.command == "experiment":
         return _experiment(args)
     if args.command == "models":
@@ -200,20 +299,58 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{'':24s} {p}")
         return 0
     if args.command == "demo":
-        return _run_scenario(SCENARIO_DIR / "seed000_cartpole.toml", Path(args.out))
-    path = Path(args.scenario)
-    if not path.exists() and (SCENARIO_DIR / f"{args.scenario}.toml").exists():
-        path = SCENARIO_DIR / f"{args.scenario}.toml"
-    if not path.exists():
-        print(f"error: no scenario file {args.scenario!r} (shipped: "
-              f"{', '.join(p.stem for p in SCENARIO_DIR.glob('*.toml'))})", file=sys.stderr)
-        return 2
-    from .master import ConfigurationError
+        return _run_scenario(SCENARIO_DIR / "seed000_cartpole.toml", Path(args.out), overwrite=True)
+    if not args.dry_run and not args.out:
+        raise ConfigurationError("run needs --out DIR (or --dry-run)")
+    return _run_scenario(_resolve_scenario(args.scenario), Path(args.out or "."), args.overwrite,
+                         args.dry_run, args.stream, False if args.no_progress else None)
+
+
+def _known_errors() -> tuple:
+    errors = [PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError]
+    with contextlib.suppress(ImportError):
+        from lxml.etree import XMLSyntaxError
+
+        errors.append(XMLSyntaxError)
+    return tuple(errors)
+
+
+def _sigterm(signum, frame):
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
+    when interrupted)."""
+    args = build_parser().parse_args(argv)
+    previous = signal.getsignal(signal.SIGTERM)
+    in_main = True
     try:
-        return _run_scenario(path, Path(args.out))
-    except (ConfigurationError, KeyError, ValueError, TypeError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        signal.signal(signal.SIGTERM, _sigterm)
+    except ValueError:            # not the main thread: leave SIGTERM alone
+        in_main = False
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
+        logging.getLogger("cosim.fmu").setLevel(logging.INFO)
+    try:
+        return _dispatch(args)
+    except KeyboardInterrupt:
+        print("interrupted (Ctrl-C or SIGTERM)", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Interrupted as e:
+        if args.debug:
+            raise
+        print(f"interrupted: {e}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except _known_errors() as e:
+        if args.debug:
+            raise
+        text = " ".join(str(e).split()) or type(e).__name__
+        print(f"error: {text}", file=sys.stderr)
+        return EXIT_ERROR
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

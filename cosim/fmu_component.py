@@ -167,7 +167,7 @@ class FMUComponent(Component):
         self.messages: deque = deque(maxlen=200)
         self._extraction: Extraction | None = None
         self.connected_inputs = list(self.input_names)
-        self._private = None
+        self._private, self._me, self._initialized = None, None, False
 
     # ------------------------------------------------------------------ description
     def _check_binary(self, name: str) -> None:
@@ -300,8 +300,10 @@ class FMUComponent(Component):
         elif kind == "integer":
             if float(value) != int(value):
                 raise ConfigurationError(f"{self.name}: {name} is an integer variable, got {value!r}")
-            setter = (self.fmu.setInteger if self.version == 2 else
-                      {"Enumeration": self.fmu.setInt64}.get(v.type, getattr(self.fmu, f"set{v.type}")))
+            if self.version == 2:
+                setter = self.fmu.setInteger
+            else:
+                setter = getattr(self.fmu, "setInt64" if v.type == "Enumeration" else f"set{v.type}")
             setter(vr, [int(value)])
         else:
             (self.fmu.setReal if self.version == 2 else getattr(self.fmu, f"set{v.type}"))(vr, [float(value)])
@@ -325,6 +327,7 @@ class FMUComponent(Component):
             else:
                 self.fmu.enterInitializationMode(startTime=t0)
             self.fmu.exitInitializationMode()
+            self._initialized = True
             self._me = None
             if self.interface == "me":
                 self._me = MEIntegrator(self.fmu, self.md, self.solver, self.solver_step, self.rtol, self._fail)
@@ -416,11 +419,13 @@ class FMUComponent(Component):
         """Terminate and free the FMU instance and remove its unpacked files (safe twice)."""
         fmu, self.fmu = self.fmu, None
         self._private, self._me = None, None
+        initialized, self._initialized = self._initialized, False
         if fmu is not None:
-            try:
-                fmu.terminate()
-            except Exception:  # noqa: BLE001 - an FMU in error state may refuse; free it anyway
-                LOGGER.debug("%s: terminate refused", self.name)
+            if initialized:
+                try:
+                    fmu.terminate()
+                except Exception:  # noqa: BLE001 - an FMU in error state may refuse; free it anyway
+                    LOGGER.debug("%s: terminate refused", self.name)
             try:
                 fmu.freeInstance()
             except Exception:  # noqa: BLE001

@@ -175,6 +175,9 @@ class MEIntegrator:
         t_end = t + h
         tiny = 1e-12 * max(1.0, abs(t_end))
         rounds = 0
+        if self.cvode is not None:
+            # the inputs may have jumped at t: CVODE's multistep history must not span it
+            self.cvode.reset(t)
         while t < t_end - tiny:
             rounds += 1
             if rounds > self.MAX_ROUNDS:

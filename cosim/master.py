@@ -383,10 +383,16 @@ class Cosimulation:
             values[idx] = res
             return res
 
+        def sweep(z, t):
+            values[idx] = z
+            for f in fns:
+                f(t)
+            return values[idx].copy()
+
         def solve(t: float) -> None:
             z = values[idx].copy()
             for _ in range(max_iter):
-                gz = jacobi_map(z, t)
+                gz = jacobi_map(z, t) if newton else sweep(z, t)
                 r = gz - z
                 if np.all(np.abs(r) <= tol * (1 + np.abs(z))):
                     values[idx] = gz

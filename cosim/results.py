@@ -1,14 +1,46 @@
-"""Writing and plotting co-simulation results (a DataFrame indexed by time)."""
+"""Writing and plotting co-simulation results, and guarding an output folder.
+
+Every file is written under a temporary name in its folder and renamed when complete
+(:func:`atomic_write`), so a reader, a crash or Ctrl-C never leaves a file that looks
+finished but is not. :class:`OutputFolder` refuses a non-empty folder unless asked to
+overwrite it (then clears it first) and locks it, so that two runs cannot write into
+one folder at once.
+"""
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Sequence
 
 import pandas as pd
 
+from fmu_models.errors import ConfigurationError
+
+__all__ = ["OutputFolder", "atomic_write", "plot_estimates", "save_results"]
+
+
+def atomic_write(path, write: Callable[[Path], object]) -> Path:
+    """Call ``write(tmp)`` to write a temporary file beside ``path``, then rename it to
+    ``path`` (atomic); the temporary file is removed if ``write`` fails. Returns ``path``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return path
+
 
 def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]:
-    """Write ``df`` as ``<name>.csv`` and, if pyarrow is installed, ``<name>.parquet``.
+    """Write ``df`` as ``<name>.csv`` and ``<name>.parquet`` (each atomically).
 
     Parameters
     ----------
@@ -23,15 +55,76 @@ def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / f"{name}.csv"]
-    df.to_csv(paths[0])
-    try:
-        import pyarrow  # noqa: F401
-    except ImportError:
-        return paths
-    paths.append(out / f"{name}.parquet")
-    df.to_parquet(paths[1])
-    return paths
+    return [atomic_write(out / f"{name}.csv", df.to_csv),
+            atomic_write(out / f"{name}.parquet", df.to_parquet)]
+
+
+class OutputFolder:
+    """An output folder held for one run: created, checked, optionally cleared, locked.
+
+    Parameters
+    ----------
+    path : path
+        The folder.
+    overwrite : bool
+        Clear a non-empty folder first (default False: refuse it).
+
+    Use as a context manager; the lock (``flock`` on the folder) is released at exit, and
+    a folder this object created is removed again if nothing was written into it.
+
+    Raises
+    ------
+    ConfigurationError
+        ``path`` is a file, the folder is not empty and ``overwrite`` is False, another
+        run holds the folder, or it cannot be created or written.
+    """
+
+    def __init__(self, path, overwrite: bool = False):
+        self.path, self.overwrite = Path(path), bool(overwrite)
+        self._fd: int | None = None
+
+    def __enter__(self) -> Path:
+        p = self.path
+        if p.exists() and not p.is_dir():
+            raise ConfigurationError(f"--out {p} is a file, not a folder")
+        self._created = not p.exists()
+        try:
+            p.mkdir(parents=True, exist_ok=True)
+            self._fd = os.open(p, os.O_RDONLY)
+        except OSError as e:
+            raise ConfigurationError(f"cannot create the output folder {p}: {e.strerror or e}") from None
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(self._fd)
+            self._fd = None
+            raise ConfigurationError(f"another pendulum-cosim run is writing to {p}; wait for it or "
+                                     "choose another --out") from None
+        content = list(p.iterdir())
+        if content and not self.overwrite:
+            self.__exit__(None, None, None)
+            raise ConfigurationError(f"the output folder {p} is not empty ({len(content)} entries, e.g. "
+                                     f"{content[0].name}); use --overwrite to replace its contents, or "
+                                     "another --out")
+        for entry in content:
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+        if not os.access(p, os.W_OK):
+            self.__exit__(None, None, None)
+            raise ConfigurationError(f"the output folder {p} is not writable")
+        return p
+
+    def __exit__(self, *exc) -> None:
+        if self._fd is not None:
+            if self._created:
+                with contextlib.suppress(OSError):
+                    self.path.rmdir()          # only succeeds if nothing was written
+            with contextlib.suppress(OSError):
+                fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
 
 
 def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[str],
@@ -53,17 +146,17 @@ def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[st
 
     Returns the matplotlib Figure.
     """
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from fmu_models.errors import UnknownNameError
 
     if len(truth) != len(estimate):
-        raise ValueError("truth and estimate must list the same number of columns")
+        raise ConfigurationError("truth and estimate must list the same number of columns")
     for col in [*truth, *estimate, *[m for m in (measured or []) if m]]:
         if col not in df.columns:
-            raise KeyError(f"no column {col!r}; columns: {', '.join(df.columns)}")
-    fig, axes = plt.subplots(len(truth), 1, figsize=(8, 2.2 * len(truth)), sharex=True, squeeze=False)
+            raise UnknownNameError(f"no column {col!r}; columns: {', '.join(df.columns)}")
+    fig = Figure(figsize=(8, 2.2 * len(truth)))
+    axes = fig.subplots(len(truth), 1, sharex=True, squeeze=False)
     for i, (tc, ec) in enumerate(zip(truth, estimate)):
         ax = axes[i, 0]
         if measured and measured[i]:
@@ -78,6 +171,5 @@ def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[st
         fig.suptitle(title)
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=110)
-    plt.close(fig)
+        atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     return fig

@@ -1,9 +1,54 @@
+import shutil
+import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+import fmpy
 import pytest
+
+DATA = Path(__file__).parent / "data"
+
+
+def build_test_fmu(folder: str, identifier: str, version: int, out: Path) -> Path:
+    """Compile a hand-written test FMU of ``tests/data/<folder>`` and zip it into ``out``."""
+    src = DATA / folder
+    plat = ("linux64" if version == 2 else "x86_64-linux") if sys.platform.startswith("linux") else None
+    if plat is None:
+        pytest.skip("the hand-written test FMUs are built for Linux only")
+    binaries = out / "binaries" / plat
+    binaries.mkdir(parents=True)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    cc = shutil.which("cc") or shutil.which("gcc")
+    subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{headers}", str(src / f"{identifier}.c"),
+                    "-o", str(binaries / f"{identifier}.so"), "-lm"], check=True)
+    fmu = out / f"{identifier}.fmu"
+    with zipfile.ZipFile(fmu, "w") as z:
+        z.write(src / "modelDescription.xml", "modelDescription.xml")
+        z.write(binaries / f"{identifier}.so", f"binaries/{plat}/{identifier}.so")
+    return fmu
+
+
+@pytest.fixture(scope="session")
+def spring_damper_fmu(tmp_path_factory):
+    """A third-party FMI 2.0 CS FMU, hand-written in C (tests/data/spring_damper)."""
+    return build_test_fmu("spring_damper", "SpringDamper", 2, tmp_path_factory.mktemp("springdamper"))
+
+
+@pytest.fixture(scope="session")
+def typed_fmu(tmp_path_factory):
+    """A third-party FMI 3.0 CS FMU with Float32, Int32, Boolean, Enumeration, Float64 and
+    Int64 ports (tests/data/typed_feedthrough)."""
+    return build_test_fmu("typed_feedthrough", "TypedFeedthrough", 3, tmp_path_factory.mktemp("typed"))
+
+
+@pytest.fixture(scope="session")
+def bouncing_me_fmu(tmp_path_factory):
+    """A third-party FMI 2.0 Model-Exchange-only FMU with state and time events
+    (tests/data/bouncing_me)."""
+    return build_test_fmu("bouncing_me", "BouncingBallME", 2, tmp_path_factory.mktemp("bouncing"))
 
 
 @pytest.fixture(scope="session")

@@ -39,6 +39,7 @@ def test_bad_scenario_is_reported(tmp_path, capsys):
     assert main(["run", "nope", "--out", str(tmp_path)]) == 2
     assert "no scenario file 'nope'" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
-    bad.write_text("[simulation]\nstop_time = 1\n[connections]\n\"a.b\" = \"c.d\"\n")
-    assert main(["run", str(bad), "--out", str(tmp_path)]) == 2
+    bad.write_text("[simulation]\nstop_time = 1\n[[component]]\nname = \"a\"\ntype = \"constant\"\n"
+                   "period = 0.1\nvalue = 1\n[connections]\n\"a.b\" = \"c.d\"\n")
+    assert main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "unknown component 'c'" in capsys.readouterr().err

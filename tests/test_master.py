@@ -125,24 +125,6 @@ def test_gauss_seidel_and_jacobi_orders():
     np.testing.assert_allclose(jac["gain.y"].to_numpy()[1:], 2 * jac["src.out"].to_numpy()[:-1], atol=1e-15)
 
 
-@pytest.fixture(scope="session")
-def spring_damper_fmu(tmp_path_factory):
-    """A third-party FMI 2.0 CS FMU, hand-written in C (tests/data/spring_damper), built here."""
-    work = tmp_path_factory.mktemp("springdamper")
-    src = DATA / "spring_damper"
-    binaries = work / "binaries" / "linux64"
-    binaries.mkdir(parents=True)
-    headers = Path(fmpy.__file__).parent / "c-code"
-    cc = shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{headers}", str(src / "SpringDamper.c"),
-                    "-o", str(binaries / "SpringDamper.so")], check=True)
-    fmu = work / "SpringDamper.fmu"
-    with zipfile.ZipFile(fmu, "w") as z:
-        z.write(src / "modelDescription.xml", "modelDescription.xml")
-        z.write(binaries / "SpringDamper.so", "binaries/linux64/SpringDamper.so")
-    return fmu
-
-
 def spring_damper_reference(n, h, force, m=1.0, k=4.0, c=0.4):
     pos, vel, out = 1.0, 0.0, [(1.0, 0.0)]
     for _ in range(n):
