@@ -1,35 +1,44 @@
-"""Benchmark: the master's wall time for 5 s of the cart-pole (1 ms plant step, 10 ms EKF)
-against a bare loop of fmpy doStep calls on the same FMU, in the same run.
+"""Benchmark: the master's own cost per base step, against what a user would write instead.
 
-Run: python bench/bench_master.py
-Overhead = master - (bare loop + the estimator's own time); medians of 7 repeats.
+Run: python bench/bench_master.py [--long]
+
+Same FMU (the cart-pole plant, FMI 2.0 Co-Simulation, 1 ms steps, 5 s = 5000 steps), same
+work per step (set the force, doStep, read the 6 outputs into a record), three ways:
+
+* fmpy's ``FMU2Slave`` loop: ``setReal``, ``doStep``, ``getReal`` and a row copy;
+* a raw ctypes loop: the FMU's functions called with prebuilt ctypes arguments (the
+  cheapest a Python loop can be), rows copied into a preallocated array;
+* the master: plant FMU and a force source held at 10 ms, every signal recorded.
+
+"master own cost" = (master loop - raw loop) / steps. Medians of 7 repeats, all in this
+run. ``--long`` adds a 1e6-step run streamed to Parquet and reports its peak RSS beside a
+1e5-step one (constant memory means equal peaks).
 """
 from __future__ import annotations
 
+import argparse
+import ctypes
+import subprocess
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.estimation import EstimatorComponent
 from cosim.fmu_component import FMUComponent
 from cosim.master import Cosimulation
-from cosim.sensors import Sensor
 from cosim.sources import Step
-from estimators import EKF, discretize
 from fmu_models import get_model
 from fmu_models.build import build_fmu
 
-T_END, H, T_EST, REPEATS = 5.0, 0.001, 0.01, 7
+T_END, H, REPEATS = 5.0, 0.001, 7
+N = int(round(T_END / H))
 
 
-def bare_loop(path):
-    """What a user would write with fmpy alone: set the force, doStep, read x and theta.
-
-    Returns (loop time, total time including instantiation and freeing)."""
-    start = time.perf_counter()
+def _instance(path):
     md = read_model_description(path)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
@@ -39,58 +48,107 @@ def bare_loop(path):
     fmu.setReal([vr["step_size"]], [H])
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
-    n = int(round(T_END / H))
+    outs = [vr[n] for n in ("x", "x_dot", "theta", "theta_dot", "y_x", "y_theta")]
+    return fmu, vr, outs
+
+
+def fmpy_loop(path) -> float:
+    """What a user would write with fmpy alone."""
+    fmu, vr, outs = _instance(path)
+    rec = np.empty((N + 1, len(outs)))
+    rec[0] = fmu.getReal(outs)
     t0 = time.perf_counter()
-    for k in range(n):
+    for k in range(N):
         t = k * H
         fmu.setReal([vr["F"]], [-0.5 if t < 2.0 else 0.5])
         fmu.doStep(t, H)
-        fmu.getReal([vr["x"], vr["theta"]])
+        rec[k + 1] = fmu.getReal(outs)
     wall = time.perf_counter() - t0
     fmu.terminate()
     fmu.freeInstance()
-    return wall, time.perf_counter() - start
+    return wall
 
 
-def estimator_alone(sys_, x0):
-    ekf = EKF(sys_, x0, 1.0, 1e-6, 1e-4)
-    ys = np.tile([0.5, 1.8], (int(round(T_END / T_EST)), 1))
+def raw_loop(path) -> float:
+    """The same calls through raw ctypes pointers with prebuilt arguments."""
+    fmu, vr, outs = _instance(path)
+    dll, c = fmu.dll, ctypes.c_void_p(fmu.component)
+
+    def fn(name):
+        f = getattr(dll, name)
+        f = type(f).from_address(ctypes.addressof(f))
+        f.restype, f.argtypes = ctypes.c_int, None
+        return f
+
+    set_real, do_step, get_real = fn("fmi2SetReal"), fn("fmi2DoStep"), fn("fmi2GetReal")
+    in_vr, out_vr = (ctypes.c_uint32 * 1)(vr["F"]), (ctypes.c_uint32 * len(outs))(*outs)
+    in_buf, out_buf = (ctypes.c_double * 1)(), (ctypes.c_double * len(outs))()
+    out_np = np.ctypeslib.as_array(out_buf)
+    one, n_out, D = ctypes.c_size_t(1), ctypes.c_size_t(len(outs)), ctypes.c_double
+    rec = np.empty((N + 1, len(outs)))
+    get_real(c, out_vr, n_out, out_buf)
+    rec[0] = out_np
     t0 = time.perf_counter()
-    for y in ys:
-        ekf.step([0.5], y)
-    return time.perf_counter() - t0
+    for k in range(N):
+        t = k * H
+        in_buf[0] = -0.5 if t < 2.0 else 0.5
+        set_real(c, in_vr, one, in_buf)
+        do_step(c, D(t), D(H), 1)
+        get_real(c, out_vr, n_out, out_buf)
+        rec[k + 1] = out_np
+    wall = time.perf_counter() - t0
+    fmu.terminate()
+    fmu.freeInstance()
+    return wall
 
 
-def master_run(path, sys_, x0):
+def master(path) -> float:
     plant = FMUComponent("plant", path, H, parameters={"step_size": H})
-    comps = [plant, Step("force", T_EST, 2.0, -0.5, 0.5),
-             Sensor("sensor", T_EST, ["x", "theta"], noise_std=0.01, seed=1),
-             EstimatorComponent("ekf", lambda: EKF(sys_, x0, 1.0, 1e-6, 1e-4))]
-    conn = {"plant.F": "force.out", "sensor.x": "plant.x", "sensor.theta": "plant.theta",
-            "ekf.F": "force.out", "ekf.y_x": "sensor.y_x", "ekf.y_theta": "sensor.y_theta"}
-    cs = Cosimulation(comps, conn)
-    t0 = time.perf_counter()
-    cs.run(T_END)
-    return cs.timings["loop"], time.perf_counter() - t0
+    cs = Cosimulation([plant, Step("force", 0.01, 2.0, -0.5, 0.5)], {"plant.F": "force.out"})
+    cs.run(T_END, progress=False)
+    return cs.timings["loop"]
 
 
-def main():
-    model = get_model("cartpole")
-    sys_ = discretize(model, T_EST)
+def long_run(path, steps: int) -> str:
+    """Peak RSS [MiB] of a fresh process streaming ``steps`` base steps to Parquet."""
+    code = f"""
+import resource, tempfile, sys
+from cosim.fmu_component import FMUComponent
+from cosim.master import Cosimulation
+from cosim.sources import Step
+plant = FMUComponent("plant", {str(path)!r}, {H}, parameters={{"step_size": {H}}})
+cs = Cosimulation([plant, Step("force", 0.01, 2.0, -0.5, 0.5)], {{"plant.F": "force.out"}})
+with tempfile.TemporaryDirectory() as d:
+    cs.run_to_parquet(d + "/r.parquet", {steps * H}, progress=False)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, cs.timings["loop"])
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    rss, loop = map(float, out.split())
+    return f"{steps:>9d} steps streamed: peak RSS {rss:6.1f} MiB, loop {loop:6.2f} s ({loop / steps * 1e6:.2f} us/step)"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--long", action="store_true", help="also the 1e6-step streamed run (about 1 min)")
+    args = parser.parse_args()
     with tempfile.TemporaryDirectory() as out:
-        path = str(build_fmu(model, out))
-        master_run(path, sys_, model.x0)      # warm-up (compiles the filter once)
-        bare, bare_total = np.median([bare_loop(path) for _ in range(REPEATS)], axis=0)
-        est = np.median([estimator_alone(sys_, model.x0) for _ in range(REPEATS)])
-        mast, mast_total = np.median([master_run(path, sys_, model.x0) for _ in range(REPEATS)], axis=0)
-    print("5 s cart-pole, plant step 1 ms (5000 doSteps), EKF every 10 ms (500 steps), "
-          "sensor and source every 10 ms")
-    print("                                   stepping loop   whole run (with instantiation)")
-    print(f"bare fmpy doStep loop:             {bare * 1e3:7.1f} ms      {bare_total * 1e3:7.1f} ms")
-    print(f"estimator alone:                   {est * 1e3:7.1f} ms")
-    print(f"master, whole closed loop:         {mast * 1e3:7.1f} ms      {mast_total * 1e3:7.1f} ms")
-    print(f"master over (bare loop + estimator): {(mast / (bare + est) - 1) * 100:+.0f} % "
-          f"(loops), {(mast_total / (bare_total + est) - 1) * 100:+.0f} % (whole runs)")
+        path = str(build_fmu(get_model("cartpole"), out))
+        master(path)                                     # warm-up
+        f = np.median([fmpy_loop(path) for _ in range(REPEATS)])
+        r = np.median([raw_loop(path) for _ in range(REPEATS)])
+        m = np.median([master(path) for _ in range(REPEATS)])
+        print(f"cart-pole FMU (FMI 2.0 CS), {N} steps of {H * 1e3:g} ms, 6 outputs recorded per step; "
+              f"medians of {REPEATS}")
+        print(f"  fmpy FMU2Slave loop    {f * 1e3:7.2f} ms  {f / N * 1e6:5.2f} us/step")
+        print(f"  raw ctypes loop        {r * 1e3:7.2f} ms  {r / N * 1e6:5.2f} us/step")
+        print(f"  master (plant + source){m * 1e3:7.2f} ms  {m / N * 1e6:5.2f} us/step")
+        print(f"  master own cost over the raw loop: {(m - r) / N * 1e6:+.2f} us per base step; "
+              f"master / fmpy loop = {m / f:.2f}")
+        if args.long:
+            fmu = Path(out, "keep.fmu")
+            fmu.write_bytes(Path(path).read_bytes())
+            print(long_run(fmu, 100_000))
+            print(long_run(fmu, 1_000_000))
 
 
 if __name__ == "__main__":

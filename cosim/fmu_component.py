@@ -356,13 +356,14 @@ class FMUComponent(Component):
                   .bind(values, idx[pos]) if pos else None)
         get_out = Exchange(dll, inst, self.version, [var[n] for n in self.output_names], "get",
                            self._fail).bind(values, outputs)
-        h, fail, counter = self.period, self._fail, self
+        h, fail = self.period, self._fail
 
-        def output_fn(t: float) -> None:
-            if set_ft is not None:
+        if set_ft is None:
+            output_fn = lambda t: get_out()  # noqa: E731 - the hot path: one FMI call
+        else:
+            def output_fn(t: float) -> None:
                 set_ft()
-            get_out()
-            counter.n_samples += 1
+                get_out()
 
         if self.interface == "me":
             me = self._me
@@ -373,11 +374,11 @@ class FMUComponent(Component):
             return output_fn, update_fn
 
         do_step, D = raw_function(dll, f"fmi{self.version}DoStep"), ctypes.c_double
-        c = ctypes.c_void_p(inst)
+        c, Dh = ctypes.c_void_p(inst), ctypes.c_double(h)
         if self.version == 2:
             def update_fn(t: float) -> None:
                 set_all()
-                st = do_step(c, D(t), D(h), 1)
+                st = do_step(c, D(t), Dh, 1)
                 if st > 1:
                     fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
         else:
@@ -387,7 +388,7 @@ class FMUComponent(Component):
 
             def update_fn(t: float) -> None:
                 set_all()
-                st = do_step(c, D(t), D(h), True, *refs)
+                st = do_step(c, D(t), Dh, True, *refs)
                 if st > 1:
                     fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
                 if term.value:

@@ -316,7 +316,7 @@ class Cosimulation:
         """
         n, m = self._steps(stop_time, start_time, output_interval)
         sel = select_signals(self.signal_names, signals)
-        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 1)
+        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 1, float(start_time), self.step_size, m)
         return self._simulate(sink, sel, n, m, float(start_time), progress)
 
     def run_to_parquet(self, path, stop_time: float, start_time: float = 0.0, *, signals=None,
@@ -331,7 +331,8 @@ class Cosimulation:
         """
         n, m = self._steps(stop_time, start_time, output_interval)
         sel = select_signals(self.signal_names, signals)
-        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 1, chunk_rows)
+        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 1, float(start_time),
+                           self.step_size, m, chunk_rows)
         return self._simulate(sink, sel, n, m, float(start_time), progress)
 
     def _bind_all(self, values, source):
@@ -345,7 +346,7 @@ class Cosimulation:
     def _entries(self, bound, values):
         """Per hyperperiod position: (output callables, update callables)."""
         patterns: dict = {}
-        index = np.empty(self._hyper, dtype=np.intp)
+        index = [0] * self._hyper
         entries = []
         for j in range(self._hyper):
             due = frozenset(c.name for c in self.components if self._due(c.name, j))
@@ -363,7 +364,7 @@ class Cosimulation:
                 patterns[due] = len(entries)
                 entries.append((tuple(outs), tuple(upds)))
             index[j] = patterns[due]
-        return entries, index
+        return [entries[i] for i in index]
 
     def _loop_solver(self, units, bound, values):
         """A callable solving one algebraic loop at an instant (see the module docs)."""
@@ -426,10 +427,12 @@ class Cosimulation:
         source = np.zeros_like(values) if jacobi else values
         sel_idx = np.asarray(sel, dtype=np.intp)
         all_sel = len(sel) == self._n_signals
+        buf = sink.buffer
+        cap = len(buf)
         clock = time.perf_counter()
         self.timings = {}
         owner: dict = {}
-        k, phase, f = 0, "reset", None
+        k0, k, j, phase, f = 0, 0, 0, "reset", None
         bar = None
         try:
             for c in self.components:
@@ -439,44 +442,61 @@ class Cosimulation:
             bound = self._bind_all(values, source)
             for name, (o, u) in bound.items():
                 owner[o], owner[u] = name, name
-            entries, index = self._entries(bound, values)
+            schedule = self._entries(bound, values)
             L = self._hyper
             self.timings["setup"] = time.perf_counter() - clock
             clock = time.perf_counter()
-            bar = tqdm(total=n, unit="step", delay=2.0, disable=progress is False, leave=False,
-                       desc="co-simulation", mininterval=0.5)
-            if progress:
-                bar.delay = 0
+            bar = tqdm(total=n + 1, unit="step", delay=0 if progress else 2.0, disable=progress is False,
+                       leave=False, desc="co-simulation", mininterval=0.5)
             for k0 in range(0, n + 1, BLOCK):
-                for k in range(k0, min(k0 + BLOCK, n + 1)):
+                k1 = min(k0 + BLOCK, n + 1)
+                for k in range(k0, k1):
                     t = t0 + k * hf
-                    outs, upds = entries[index[k % L]]
+                    outs, upds = schedule[k % L]
                     if jacobi:
                         source[:] = values
                     phase = "output"
                     for f in outs:
                         f(t)
                     if k % m == 0:
-                        sink.append(t, values if all_sel else values[sel_idx])
+                        if all_sel:
+                            buf[j] = values
+                        else:
+                            np.take(values, sel_idx, out=buf[j])
+                        j += 1
+                        if j == cap:
+                            sink.flush(j)
+                            j = 0
                     if k == n:
                         break
                     phase = "update"
                     for f in upds:
                         f(t)
                 if not np.isfinite(values).all():
-                    self._raise_nonfinite(values, t0 + k0 * hf, t)
-                bar.update(min(k0 + BLOCK, n + 1) - k0 - (1 if k0 + BLOCK > n else 0))
+                    j = self._raise_nonfinite(values, sink, sel_idx, j, k0, k, m, t0)
+                bar.update(k1 - k0)
+            sink.flush(j)
             self.timings["loop"] = time.perf_counter() - clock
             return sink.finish()
         except KeyboardInterrupt:
+            sink.flush(j)
             partial = sink.abort()
             raise Interrupted(f"interrupted at t = {t0 + k * hf:g} s"
                               + (f"; rows so far in {partial}" if isinstance(partial, Path) else ""),
                               partial) from None
         except CosimError as e:
-            e.results = sink.abort()
+            if e.results is None:
+                sink.flush(j)
+                e.results = sink.abort()
             raise
         except Exception as e:
+            if phase != "reset" and not np.isfinite(values).all():
+                # a non-finite signal is the root cause of what failed after it
+                try:
+                    self._raise_nonfinite(values, sink, sel_idx, j, k0, k, m, t0)
+                except CosimError as root:
+                    raise root from e
+            sink.flush(j)
             results = sink.abort()
             t = t0 + k * hf
             name = getattr(f, "name", None) or owner.get(f, "?")
@@ -490,11 +510,27 @@ class Cosimulation:
                 c.close()
             self.timings["teardown"] = time.perf_counter() - clock
 
-    def _raise_nonfinite(self, values, t_from: float, t_to: float):
-        j = int(np.flatnonzero(~np.isfinite(values))[0])
-        sig = self.signal_names[j]
-        raise CosimError(f"signal {sig} is {values[j]} at t = {t_to:g} s (became non-finite after "
-                         f"t = {t_from:g} s; component {sig.split('.')[0]!r})", sig.split(".")[0], t_to)
+    def _raise_nonfinite(self, values, sink, sel_idx, j: int, k0: int, k: int, m: int, t0: float) -> int:
+        """Raise CosimError for the first NaN/inf signal found after base steps ``k0..k``.
+
+        Recording every base step in memory, the error names the exact time and the results
+        end just before it; otherwise it names the window ``t_k0..t_k`` (the rows recorded
+        up to ``t_k`` are kept).
+        """
+        h = self.step_size
+        col = int(np.flatnonzero(~np.isfinite(values))[0])
+        sig = self.signal_names[col]
+        where = np.flatnonzero(sel_idx == col)
+        t_bad, when = t0 + k * h, f"between t = {t0 + k0 * h:g} s and t = {t0 + k * h:g} s"
+        if isinstance(sink, MemorySink) and m == 1 and len(where):
+            rows = sink.buffer[j - (k - k0 + 1): j, where[0]]
+            first = int(np.flatnonzero(~np.isfinite(rows))[0])
+            j = j - (k - k0 + 1) + first
+            t_bad = t0 + (k0 + first) * h
+            when = f"at t = {t_bad:g} s"
+        sink.flush(j)
+        raise CosimError(f"signal {sig} is {values[col]} {when} (component {sig.split('.')[0]!r})",
+                         sig.split(".")[0], t_bad, sink.abort())
 
 
 def _bind_reading(comp: Component, values, source, inputs, outputs):

@@ -67,15 +67,24 @@ def partial_path(path: Path) -> Path:
 class MemorySink:
     """Rows kept in memory: a preallocated array, a DataFrame at the end.
 
+    The writer fills :attr:`buffer` row by row and calls :meth:`flush` with the number of
+    rows written whenever the buffer is full and at the end (the protocol of both sinks).
+
     Parameters
     ----------
     columns : sequence of str
         Signal names of the recorded columns.
     n_rows : int
         Rows the run will record.
+    t0, step : float
+        Time [s] of the first row, and the base step [s].
+    every : int
+        Base steps between rows (row ``i`` is at ``t0 + step * (every * i)``, the master's
+        own arithmetic).
     """
 
-    def __init__(self, columns: Sequence[str], n_rows: int):
+    def __init__(self, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
+                 every: int = 1):
         need = n_rows * (len(columns) + 1) * 8
         avail = available_memory()
         if need > MEMORY_FRACTION * avail:
@@ -84,20 +93,18 @@ class MemorySink:
                 f"more than half of the {avail / 2**30:.2f} GiB available; record fewer signals, "
                 "a longer output_interval, or stream to a Parquet file (run_to_parquet / --stream)")
         self.columns = list(columns)
-        self.times = np.empty(n_rows)
-        self.rows = np.empty((n_rows, len(columns)))
-        self.n = 0
+        self.buffer = np.empty((n_rows, len(columns)))
+        self.t0, self.step, self.every, self.n = t0, step, every, 0
 
-    def append(self, t: float, row: np.ndarray) -> None:
-        """Record the signals ``row`` at time ``t`` [s]."""
-        self.times[self.n] = t
-        self.rows[self.n] = row
-        self.n += 1
+    def flush(self, rows: int) -> None:
+        """``rows`` more rows of :attr:`buffer` are complete (the buffer holds the whole run,
+        so it fills only once)."""
+        self.n += rows
 
     def frame(self) -> pd.DataFrame:
         """The rows recorded so far, indexed by ``time``."""
-        return pd.DataFrame(self.rows[: self.n], index=pd.Index(self.times[: self.n], name="time"),
-                            columns=self.columns)
+        times = self.t0 + self.step * (self.every * np.arange(self.n))
+        return pd.DataFrame(self.buffer[: self.n], index=pd.Index(times, name="time"), columns=self.columns)
 
     def finish(self) -> pd.DataFrame:
         """End of a successful run: the whole recording."""
@@ -119,11 +126,14 @@ class ParquetSink:
         Signal names of the recorded columns.
     n_rows : int
         Rows the run will record (for the disk-space check).
+    t0, step, every
+        As :class:`MemorySink`.
     chunk_rows : int
         Rows per Parquet row group (default 8192).
     """
 
-    def __init__(self, path, columns: Sequence[str], n_rows: int, chunk_rows: int = 8192):
+    def __init__(self, path, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
+                 every: int = 1, chunk_rows: int = 8192):
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -138,9 +148,8 @@ class ParquetSink:
                                 f"{need / 2**30:.2f} GiB, but {self.path.parent} has {free / 2**30:.2f} GiB free")
         self.columns = list(columns)
         self.chunk = int(chunk_rows)
-        self.times = np.empty(self.chunk)
-        self.rows = np.empty((self.chunk, len(columns)))
-        self.n, self.total = 0, 0
+        self.buffer = np.empty((self.chunk, len(columns)))
+        self.t0, self.step, self.every, self.total = t0, step, every, 0
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
         fields = [pa.field("time", pa.float64())] + [pa.field(c, pa.float64()) for c in self.columns]
         meta = {b"pandas": _pandas_metadata(self.columns)}
@@ -148,38 +157,26 @@ class ParquetSink:
         self._pa = pa
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
 
-    def append(self, t: float, row: np.ndarray) -> None:
-        """Record the signals ``row`` at time ``t`` [s]."""
-        self.times[self.n] = t
-        self.rows[self.n] = row
-        self.n += 1
-        if self.n == self.chunk:
-            self._flush()
-
-    def _flush(self) -> None:
-        if not self.n:
+    def flush(self, rows: int) -> None:
+        """Write the first ``rows`` rows of :attr:`buffer` as one row group."""
+        if not rows:
             return
         pa = self._pa
-        arrays = [pa.array(self.times[: self.n])] + [pa.array(self.rows[: self.n, j])
-                                                     for j in range(len(self.columns))]
+        times = self.t0 + self.step * (self.every * np.arange(self.total, self.total + rows))
+        arrays = [pa.array(times)] + [pa.array(self.buffer[:rows, j]) for j in range(len(self.columns))]
         self.writer.write_table(pa.Table.from_arrays(arrays, schema=self.schema))
-        self.total += self.n
-        self.n = 0
+        self.total += rows
 
     def finish(self) -> Path:
-        """End of a successful run: flush, close and rename to the target; returns it."""
-        self._flush()
+        """End of a successful run: close and rename to the target; returns it."""
         self.writer.close()
         os.replace(self.tmp, self.path)
         return self.path
 
     def abort(self) -> Path | None:
-        """End of a failed or interrupted run: keep the rows so far as
+        """End of a failed or interrupted run (after the last :meth:`flush`): keep the rows so far as
         ``<name>.partial.parquet`` (returned), or nothing if no row was recorded."""
-        try:
-            self._flush()
-        finally:
-            self.writer.close()
+        self.writer.close()
         if self.total == 0:
             with contextlib.suppress(OSError):
                 os.unlink(self.tmp)
