@@ -1,14 +1,27 @@
 """The interface and machinery shared by every Gaussian filter in this package.
 
-A filter is a *state* (arrays ``x, P, Q, R`` and, for adaptive filters, more) and three
-CasADi Functions built once per model (cached on the
-:class:`~estimators.system.DiscreteModel`) and compiled to native code: ``predict``,
-``update`` and the fused ``step``, which maps the whole state to the next one. Each is
-bound to the filter's numpy arrays with :class:`~estimators._buffered.BufferedFunction`;
-the fused step ping-pongs between two copies of the state, so a step is one call into
-native code plus the copies of ``u`` and ``y``. Every Function also returns a status: 1
-if an input was NaN or inf, 2 if the result was not finite; the filter then raises and
-keeps its previous state.
+A filter is a *state* (arrays ``x, P, Q, R`` and, for adaptive filters, more) and one
+CasADi Function built once per model and filter configuration, the fused ``step``, which
+maps the state and ``(u, y, mask)`` to the next state and the step's diagnostics. It is
+compiled to native code (:mod:`estimators._compiled`) and:
+
+* bound to the filter's numpy arrays (:class:`~estimators._buffered.BufferedFunction`,
+  ping-pong between two copies of the state): :meth:`KalmanBase.step` is one native
+  call plus the copies of ``u`` and ``y``;
+* folded over a whole trajectory with ``mapaccum`` (:meth:`KalmanBase.run`: one native
+  call per block of :data:`RUN_BLOCK` steps, returning every step's estimate,
+  covariance and diagnostics);
+* mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`).
+
+Missing measurements: the step takes a 0/1 ``mask`` per measurement channel; a NaN
+measurement counts as missing too (unless ``nan_is_missing=False``). The update then uses
+the valid channels only (rows of ``H`` and of the innovation zeroed, ``S`` padded with
+ones on the missing diagonal: exactly the update of the reduced measurement vector), and
+with no valid channel the step is a prediction. An optional chi-square gate refuses a
+measurement vector whose NIS exceeds ``gate`` (the step is then a prediction, and
+``accepted`` is 0). Every step also returns a status: 1 if ``u`` or a valid ``y`` entry
+was NaN or inf, 2 if the result was not finite; the filter then raises and keeps its
+previous state. Finiteness is tested entry by entry, so no finite value can overflow the test.
 """
 from __future__ import annotations
 
@@ -16,46 +29,175 @@ import casadi as ca
 import numpy as np
 
 from fmu_models import checks
+from fmu_models.errors import (
+    ConfigurationError,
+    InputError,
+    NumericalError,
+    TypeMismatchError,
+)
+
 from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
 from .history import NoiseHistory
 from .system import DiscreteModel
 
+__all__ = ["DIAGNOSTICS", "RUN_BLOCK", "FilterRun", "KalmanBase", "gated_gain", "joseph_update",
+           "mask_measurement", "symmetric"]
+
 OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
 #: Outputs of every fused step besides the state, in order.
-DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis")
+DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
+#: Steps per native call of :meth:`KalmanBase.run`.
+RUN_BLOCK = 256
+#: The step's inputs after the state arrays.
+STEP_INPUTS = ("u", "y", "mask", "gate", "nan_missing")
 
 
 def symmetric(M: ca.SX) -> ca.SX:
-    """(M + M^T)/2: keeps a covariance exactly symmetric against rounding."""
-    return 0.5 * (M + M.T)
+    """The symmetric matrix with ``M``'s upper triangle: a covariance exactly symmetric by
+    construction, and only the upper triangle of ``M`` is ever computed (the generated
+    code drops the other half; 16 % fewer operations in the cart-pole EKF step)."""
+    n = M.shape[0]
+    out = ca.SX(n, n)
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = M[min(i, j), max(i, j)]
+    return out
 
 
-def joseph_update(xp, Pp, innov, H, S, R):
+def cholesky_lower(P: ca.SX) -> ca.SX:
+    """Lower-triangular L with ``P = L L^T``, written out for a symbolic n x n matrix."""
+    n = P.shape[0]
+    L = ca.SX.zeros(n, n)
+    for j in range(n):
+        d = P[j, j] - sum((L[j, k] ** 2 for k in range(j)), ca.SX(0))
+        L[j, j] = ca.sqrt(d)
+        for i in range(j + 1, n):
+            L[i, j] = (P[i, j] - sum((L[i, k] * L[j, k] for k in range(j)), ca.SX(0))) / L[j, j]
+    return L
+
+
+def log_det(S: ca.SX) -> ca.SX:
+    """``log det S`` of a symmetric positive-definite matrix: one log of the expanded
+    determinant up to 3 x 3, the Cholesky factor's diagonal beyond."""
+    n = S.shape[0]
+    if n <= 3:
+        return ca.log(ca.det(S))
+    L = cholesky_lower(S)
+    return 2 * sum((ca.log(L[i, i]) for i in range(n)), ca.SX(0))
+
+
+def gated_gain(S, B, innov, gate):
+    """Gain ``K = B^T S^{-1}``, ``nis = innov^T S^{-1} innov`` and the gate's verdict
+    ``nis <= gate``, from one linear solve ``S Z = [B, innov]`` (no inverse)."""
+    Z = ca.solve(S, ca.horzcat(B, innov))
+    K = Z[:, : B.shape[1]].T
+    nis = ca.dot(innov, Z[:, B.shape[1]])
+    return K, nis, nis <= gate
+
+
+def mask_measurement(valid, S_raw, innov_raw):
+    """The update of the valid channels only, at fixed size: ``S`` with the rows and
+    columns of missing channels replaced by those of the identity, and their innovation
+    zeroed. Returns ``(S, innov, M)`` with ``M = diag(valid)``."""
+    M = ca.diag(valid)
+    S = symmetric(ca.mtimes([M, S_raw, M]) + ca.diag(1 - valid))
+    return S, valid * innov_raw, M
+
+
+def joseph_update(xp, Pp, innov, H, S, R, gate=ca.inf):
     """Kalman gain and Joseph-form update (seed 002 eqs 13-16; stable for any gain).
 
-    ``K = Pp H^T S^{-1}`` computed by solving ``S K^T = H Pp`` (no inverse);
-    ``P = (I - K H) Pp (I - K H)^T + K R K^T``.
+    ``K = Pp H^T S^{-1}`` (by a solve, no inverse); with ``Ka = K`` if the NIS passes the
+    ``gate``, else 0: ``x = xp + Ka innov``, ``P = (I - Ka H) Pp (I - Ka H)^T + Ka R Ka^T``.
+    Returns ``(x, P, K, nis, accepted)``.
     """
     n = xp.numel()
-    K = ca.solve(S, ca.mtimes(H, Pp)).T
-    IKH = ca.SX.eye(n) - ca.mtimes(K, H)
-    P = symmetric(ca.mtimes([IKH, Pp, IKH.T]) + ca.mtimes([K, R, K.T]))
-    return xp + ca.mtimes(K, innov), P, K
+    K, nis, acc = gated_gain(S, ca.mtimes(H, Pp), innov, gate)
+    Ka = acc * K
+    IKH = ca.SX.eye(n) - ca.mtimes(Ka, H)
+    P = symmetric(ca.mtimes([IKH, Pp, IKH.T]) + ca.mtimes([Ka, R, Ka.T]))
+    return xp + ca.mtimes(Ka, innov), P, K, nis, acc
 
 
 def _finite(expr_list) -> ca.SX:
-    """1 if every entry of the expressions is finite, else 0 (NaN and inf fail the test)."""
-    total = sum(ca.sum1(ca.vec(e)) for e in expr_list)
-    return ca.fabs(total) < ca.inf
+    """1 if every entry is finite, else 0. Each entry is tested on its own (``|e| < inf``
+    is 0 for NaN and inf) and the 0/1 results are counted, so nothing can overflow (a sum
+    of the entries would, for finite values such as 1.5e308). (``e - e == 0`` would not
+    do: CasADi simplifies ``e - e`` to 0.)"""
+    count = sum(ca.sum1(ca.vec(ca.fabs(e) < ca.inf)) for e in expr_list)
+    return count == sum(e.numel() for e in expr_list)
+
+
+def not_nan(y: ca.SX) -> ca.SX:
+    """1 where ``y`` is not NaN (inf included), per entry (``y == y`` would be simplified
+    to 1 by CasADi)."""
+    return ca.fabs(y) <= ca.inf
+
+
+def _upper(M: ca.SX) -> ca.SX:
+    """The upper-triangular entries of a square matrix, as a column."""
+    n = M.shape[0]
+    return ca.vertcat(*[M[i, j] for j in range(n) for i in range(j + 1)])
 
 
 def _status(inputs, outputs):
     return ca.if_else(_finite(inputs), ca.if_else(_finite(outputs), OK, BAD_RESULT), BAD_INPUT)
 
 
+class FilterRun:
+    """The result of :meth:`KalmanBase.run`: every step's estimate and diagnostics.
+
+    Attributes (``N`` steps; arrays indexed by step ``k = 1..N`` in row ``k - 1``, except
+    ``x`` and ``P`` which also hold the initial estimate in row 0):
+
+    x : ndarray, shape (N + 1, nx)
+        Estimates, row 0 the initial one.
+    P : ndarray, shape (N + 1, nx, nx)
+        Their covariances.
+    x_prior, P_prior : ndarray, shapes (N, nx), (N, nx, nx)
+        Predictions.
+    innovation : ndarray, shape (N, ny)
+        Innovations (0 in missing channels).
+    S : ndarray, shape (N, ny, ny)
+        Innovation covariances (1 on the diagonal of missing channels).
+    K : ndarray, shape (N, nx, ny)
+        Gains.
+    nis : ndarray, shape (N,)
+    accepted : ndarray of bool, shape (N,)
+        False where the gate refused the measurement.
+    mask : ndarray of bool, shape (N, ny)
+        The channels used (valid and not NaN).
+    us : ndarray, shape (N, nu)
+        The inputs (the smoother needs them).
+    Q, R : ndarray, shapes (N + 1, nx), (N + 1, ny)
+        Diagonals of Q and R in force after each step (row 0: initial).
+    log_likelihood : float
+        Gaussian log-likelihood of the measurements,
+        ``-1/2 sum_k (nis_k + log det(2 pi S_k))`` over the valid channels.
+    """
+
+    def __init__(self, **arrays):
+        self.__dict__.update(arrays)
+
+    def to_frame(self, filt: KalmanBase):
+        """Tidy DataFrame indexed by step ``k`` (0..N) with the estimate, the covariance
+        diagonal, the innovation and NIS (NaN at k = 0)."""
+        import pandas as pd
+
+        s = filt.system
+        n = len(self.x)
+        data = {name: self.x[:, i] for i, name in enumerate(s.state_names)}
+        data.update({f"P_{name}": self.P[:, i, i] for i, name in enumerate(s.state_names)})
+        for j, name in enumerate(s.output_names):
+            data[f"innovation_{name}"] = np.r_[np.nan, self.innovation[:, j]]
+        data["nis"] = np.r_[np.nan, self.nis]
+        data["accepted"] = np.r_[True, self.accepted]
+        return pd.DataFrame(data, index=pd.RangeIndex(n, name="k"))
+
+
 class KalmanBase:
-    """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``.
+    """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``.
 
     Parameters
     ----------
@@ -67,8 +209,14 @@ class KalmanBase:
         Initial state covariance (nx, nx), process noise covariance (nx, nx) and
         measurement noise covariance (ny, ny); each may also be a diagonal vector or a
         scalar (times identity). Must be symmetric positive definite.
+    gate : float, optional
+        Chi-square gate on the NIS: a measurement vector with ``nis > gate`` is refused
+        (the step predicts only). E.g. ``scipy.stats.chi2.ppf(0.999, ny)``. Default None
+        (no gate).
+    nan_is_missing : bool
+        A NaN measurement channel is missing (default True); with False it is an error.
     backend : {"compiled", "vm"}
-        Run the filter's CasADi Functions as compiled native code (cached on disk, about
+        Run the filter's CasADi Function as compiled native code (cached on disk, about
         10x faster; needs a C compiler, else falls back to "vm") or in CasADi's VM.
 
     Attributes
@@ -82,17 +230,19 @@ class KalmanBase:
     Q, R : ndarray
         Current noise covariances.
     innovation : ndarray, shape (ny,)
-        Last innovation ``y - h(x_prior)`` (seed 000 eq 26).
+        Last innovation ``y - h(x_prior)`` (seed 000 eq 26; 0 in missing channels).
     S : ndarray, shape (ny, ny)
         Its predicted covariance.
     K : ndarray, shape (nx, ny)
         Last gain.
     nis : float
         Normalised innovation squared ``innovation^T S^{-1} innovation``.
+    accepted : bool
+        False if the gate refused the last measurement.
     backend : str
         The backend in use.
     k : int
-        Number of predictions done.
+        Number of steps done.
     history : NoiseHistory
         Record of the diagonals of Q and R: the initial values, each :meth:`set_noise`,
         and every adaptation of an adaptive filter; :meth:`noise_history` gives it as a
@@ -100,37 +250,46 @@ class KalmanBase:
     """
 
     name = "base"
+    #: Whether the fused step holds the whole filter (BatchFilter and native run use it).
+    supports_batch = True
+    #: Whether Q and R are part of the state (adaptive filters) or fixed parameters of
+    #: the step (then they are not carried from step to step).
+    adapts_noise = False
 
-    def __init__(self, system: DiscreteModel, x0, P0, Q, R, backend: str = "compiled"):
+    def __init__(self, system: DiscreteModel, x0, P0, Q, R, gate: float | None = None,
+                 nan_is_missing: bool = True, backend: str = "compiled"):
         if not isinstance(system, DiscreteModel):
-            raise TypeError("system must be a DiscreteModel (build one with estimators.discretize)")
+            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
         self.system = system
         n, m, p = system.nx, system.nu, system.ny
         self._nu, self._ny = m, p
-        init = {"x": checks.vector(x0, n, "x0"),
+        self.gate = np.inf if gate is None else checks.positive(gate, "gate")
+        self.nan_is_missing = bool(nan_is_missing)
+        noise = {"Q": checks.covariance(Q, n, "Q").ravel(order="F"),
+                 "R": checks.covariance(R, p, "R").ravel(order="F")}
+        init = {"x": checks.vector(x0, n, "x0", ConfigurationError),
                 "P": checks.covariance(P0, n, "P0").ravel(order="F"),
-                "Q": checks.covariance(Q, n, "Q").ravel(order="F"),
-                "R": checks.covariance(R, p, "R").ravel(order="F"),
-                **self._extra_state_init()}
+                **(noise if self.adapts_noise else {}), **self._extra_state_init()}
         # two copies of the state; self._cur says which holds the current one
         self._pairs = {k: (np.array(v, float), np.array(v, float)) for k, v in init.items()}
+        self._noise = {} if self.adapts_noise else noise     # fixed Q, R: step parameters
         self._cur = 0
-        self._u, self._y = np.zeros(m), np.zeros(p)
-        self._diag = {"x_prior": np.zeros(n), "P_prior": np.zeros(n * n), "innov": np.zeros(p),
-                      "S": np.zeros(p * p), "K": np.zeros(n * p), "nis": np.zeros(1)}
-        self._status_arr = np.zeros(1)
+        self._u, self._y, self._mask = np.zeros(m), np.zeros(p), np.ones(p)
+        self._const = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)])}
         self.k = 0
-        key = self._cache_key() + (backend,)
+        key = self.cache_key + (backend,)
         if key not in system.cache:
-            raw = list(self._build_functions())
-            system.cache[key] = compile_functions(raw, backend) + (raw,)
-        fns, self.backend, self._raw_functions = system.cache[key]
-        self._bind(*fns)
+            raw = self._build_step()
+            system.cache[key] = compile_functions([raw], backend) + (raw,)
+        (step,), self.backend, self._raw_step = system.cache[key]
+        self._bind(step)
         self.history = NoiseHistory(n, p)
         self._record()
 
     # ---------------------------------------------------------------- symbolic parts
-    def _cache_key(self):
+    @property
+    def cache_key(self) -> tuple:
+        """What identifies this filter's compiled step (type and configuration)."""
         return (type(self).__name__,)
 
     def _extra_state_init(self) -> dict:
@@ -141,72 +300,57 @@ class KalmanBase:
         """Return (x_prior, P_prior) expressions. Subclasses implement."""
         raise NotImplementedError
 
-    def _update_expr(self, xp, Pp, y, R):
-        """Return (x, P, innovation, S, K) expressions. Subclasses implement."""
+    def _update_expr(self, xp, Pp, y, R, valid, gate):
+        """Return (x, P, innovation, S, K, nis, accepted) expressions for the valid channels
+        (``valid``: 0/1 per channel; a NIS above ``gate`` refuses the update). Subclasses
+        implement (with :func:`mask_measurement` and :func:`gated_gain`)."""
         raise NotImplementedError
 
-    def _sym(self, name, rows, cols=1):
+    def _sym(self, name, rows=1, cols=1):
         return ca.SX.sym(name, rows, cols)
 
     def _step_spec(self):
-        """Fused step: ``(state symbols, extra input symbols, new state, diagnostics, extra outputs)``.
+        """Fused step: ``(state symbols, input symbols, new state, diagnostics, extra outputs)``.
 
         Adaptive filters extend it: the new Q and R become functions of the step.
         """
         s = self.system
-        st = {"x": self._sym("x", s.nx), "P": self._sym("P", s.nx, s.nx),
-              "Q": self._sym("Q", s.nx, s.nx), "R": self._sym("R", s.ny, s.ny)}
-        u, y = self._sym("u", s.nu), self._sym("y", s.ny)
-        xp, Pp = self._predict_expr(st["x"], st["P"], u, st["Q"])
-        xu, Pu, innov, S, K = self._update_expr(xp, Pp, y, st["R"])
-        nis = ca.dot(innov, ca.solve(S, innov))
-        new = {"x": xu, "P": Pu, "Q": st["Q"], "R": st["R"]}
-        diag = dict(zip(DIAGNOSTICS, (xp, Pp, innov, S, K, nis)))
-        return st, {"u": u, "y": y}, new, diag, {}
+        st = {"x": self._sym("x", s.nx), "P": self._sym("P", s.nx, s.nx)}
+        noise = {"Q": self._sym("Q", s.nx, s.nx), "R": self._sym("R", s.ny, s.ny)}
+        ins = {"u": self._sym("u", s.nu), "y": self._sym("y", s.ny), "mask": self._sym("mask", s.ny),
+               "gate": self._sym("gate"), "nan_missing": self._sym("nan_missing")}
+        (st if self.adapts_noise else ins).update(noise)
+        y = ins["y"]
+        # a channel is used if its mask is set and (unless NaN is an error) it is not NaN;
+        # if_else keeps a NaN of an unused channel out of every expression
+        valid = ins["mask"] * ca.if_else(ins["nan_missing"], not_nan(y), 1)
+        y_used = ca.if_else(valid, y, 0)
+        xp, Pp = self._predict_expr(st["x"], st["P"], ins["u"], noise["Q"])
+        xu, Pu, innov, S, K, nis, acc = self._update_expr(xp, Pp, y_used, noise["R"], valid, ins["gate"])
+        new = {"x": xu, "P": Pu, **({"Q": noise["Q"], "R": noise["R"]} if self.adapts_noise else {})}
+        diag = dict(zip(DIAGNOSTICS, (xp, Pp, innov, S, K, nis, acc, log_det(S))))
+        self._valid_expr, self._inputs_checked = valid, [ins["u"], y_used]
+        return st, ins, new, diag, {}
 
-    def _build_functions(self):
+    def _build_step(self) -> ca.Function:
         d = ca.densify
-        s = self.system
-        x, P, u, y = (self._sym("x", s.nx), self._sym("P", s.nx, s.nx), self._sym("u", s.nu),
-                      self._sym("y", s.ny))
-        Q, R = self._sym("Q", s.nx, s.nx), self._sym("R", s.ny, s.ny)
-        xp, Pp = self._predict_expr(x, P, u, Q)
-        pred = ca.Function("predict", [x, P, u, Q], [d(xp), d(Pp), _status([u], [xp, Pp])],
-                           ["x", "P", "u", "Q"], ["x_prior", "P_prior", "status"])
-        xu, Pu, innov, S, K = self._update_expr(x, P, y, R)
-        nis = ca.dot(innov, ca.solve(S, innov))
-        upd = ca.Function("update", [x, P, y, R],
-                          [d(xu), d(Pu), d(innov), d(S), d(K), nis, _status([y], [xu, Pu])],
-                          ["x", "P", "y", "R"], ["x_new", "P_new", "innov", "S", "K", "nis", "status"])
         st, ins, new, diag, extra = self._step_spec()
         outs = [d(new[k]) for k in st] + [d(diag[k]) for k in DIAGNOSTICS] + [d(v) for v in extra.values()]
-        status = _status(list(ins.values()), [new["x"], new["P"], new["Q"], new["R"]])
-        step = ca.Function("step", list(st.values()) + list(ins.values()), outs + [status],
+        # each distinct entry once (a symmetric matrix's lower triangle repeats the upper)
+        checked = [new["x"]] + [_upper(new[k]) for k in ("P", "Q", "R") if k in new]
+        status = _status(self._inputs_checked, checked)
+        return ca.Function("step", list(st.values()) + list(ins.values()), outs + [status],
                            list(st) + list(ins),
                            [f"{k}_new" for k in st] + list(DIAGNOSTICS) + list(extra) + ["status"])
-        return pred, upd, step
 
     # ---------------------------------------------------------------- binding
-    def _bind(self, pred, upd, step):
-        zero = {k: v[0] for k, v in self._pairs.items()}
-        self._fpred = BufferedFunction(pred, {0: zero["x"], 1: zero["P"], 2: self._u, 3: zero["Q"]},
-                                       {0: self._diag["x_prior"], 1: self._diag["P_prior"],
-                                        2: self._status_arr})
-        self._xnew, self._Pnew = np.zeros_like(zero["x"]), np.zeros_like(zero["P"])
-        self._fupd = BufferedFunction(upd, {0: zero["x"], 1: zero["P"], 2: self._y, 3: zero["R"]},
-                                      {0: self._xnew, 1: self._Pnew, 2: self._diag["innov"],
-                                       3: self._diag["S"], 4: self._diag["K"], 5: self._diag["nis"],
-                                       6: self._status_arr})
-        # step inputs: state, then u, y and any extra inputs; outputs: new state,
-        # diagnostics, extra outputs, status
-        self._inputs = {"u": self._u, "y": self._y}
-        for i in range(step.n_in()):
-            name = step.name_in(i)
-            if name not in self._pairs and name not in self._inputs:
-                self._inputs[name] = np.zeros(step.nnz_in(i))
+    def _bind(self, step: ca.Function) -> None:
+        self._inputs = {"u": self._u, "y": self._y, "mask": self._mask, **self._const}
+        self._diag = {name: np.zeros(step.nnz_out(name)) for name in DIAGNOSTICS}
         self._extra = {step.name_out(i): np.zeros(step.nnz_out(i)) for i in range(step.n_out())
                        if step.name_out(i) not in DIAGNOSTICS and step.name_out(i) != "status"
                        and not step.name_out(i).endswith("_new")}
+        self._status_arr = np.zeros(1)
         self._fsteps = tuple(self._bind_step(step, i) for i in (0, 1))
 
     def _bind_step(self, step, i):
@@ -214,7 +358,8 @@ class KalmanBase:
         args, res = {}, {}
         for j in range(step.n_in()):
             name = step.name_in(j)
-            args[j] = self._pairs[name][i] if name in self._pairs else self._inputs[name]
+            args[j] = (self._pairs[name][i] if name in self._pairs else
+                       self._noise[name] if name in self._noise else self._inputs[name])
         for j in range(step.n_out()):
             name = step.name_out(j)
             if name.endswith("_new"):
@@ -228,17 +373,25 @@ class KalmanBase:
         return BufferedFunction(step, args, res)
 
     def _now(self, key: str) -> np.ndarray:
-        """The current copy of state array ``key`` (shared, not a copy)."""
-        return self._pairs[key][self._cur]
-
-    def _sync(self):
-        """Bring the current state into copy 0, which predict and update read."""
-        if self._cur:
-            for a, b in self._pairs.values():
-                a[:] = b
-            self._cur = 0
+        """The current copy of state array ``key`` (or of the fixed Q or R; shared)."""
+        return self._pairs[key][self._cur] if key in self._pairs else self._noise[key]
 
     # ---------------------------------------------------------------- public state
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of the flat state arrays (CasADi column-major), by name: ``x, P``, and
+        ``Q, R`` with any other adaptive state; what :class:`~estimators.BatchFilter`
+        starts from."""
+        return {k: v[self._cur].copy() for k, v in self._pairs.items()}
+
+    def parameter_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of the step's fixed covariance inputs (``Q, R`` of a non-adaptive
+        filter; empty for an adaptive one), flat column-major."""
+        return {k: v.copy() for k, v in self._noise.items()}
+
+    def step_function(self) -> ca.Function:
+        """The uncompiled fused step (a CasADi Function; see the module documentation)."""
+        return self._raw_step
+
     def _mat(self, key, rows, cols):
         return matrix(self._now(key), rows, cols).copy()
 
@@ -255,13 +408,17 @@ class KalmanBase:
     S = property(lambda self: matrix(self._diag["S"], self.system.ny, self.system.ny).copy())
     K = property(lambda self: matrix(self._diag["K"], self.system.nx, self.system.ny).copy())
     nis = property(lambda self: float(self._diag["nis"][0]))
+    accepted = property(lambda self: bool(self._diag["accepted"][0]))
 
     def set_noise(self, Q=None, R=None) -> None:
-        """Replace Q and/or R (validated: symmetric positive definite)."""
-        if Q is not None:
-            self._now("Q")[:] = checks.covariance(Q, self.system.nx, "Q").ravel(order="F")
-        if R is not None:
-            self._now("R")[:] = checks.covariance(R, self.system.ny, "R").ravel(order="F")
+        """Replace Q and/or R (validated first: symmetric positive definite; on a refusal
+        nothing changes)."""
+        q = None if Q is None else checks.covariance(Q, self.system.nx, "Q").ravel(order="F")
+        r = None if R is None else checks.covariance(R, self.system.ny, "R").ravel(order="F")
+        if q is not None:
+            self._now("Q")[:] = q
+        if r is not None:
+            self._now("R")[:] = r
         self._record()
 
     def _record(self) -> None:
@@ -273,93 +430,273 @@ class KalmanBase:
         return self.history.to_frame(self.system.state_names, self.system.output_names)
 
     # ---------------------------------------------------------------- stepping
-    def _set_u(self, u):
+    def _set(self, buf: np.ndarray, value, what: str, allow_scalar: bool) -> None:
+        if value is None:
+            raise TypeMismatchError(f"{self.name}: {what} is None; expected {len(buf)} number(s)")
+        if isinstance(value, (str, bytes)):
+            raise TypeMismatchError(f"{self.name}: {what} must be numbers, got the string {value!r}")
+        scalar = np.ndim(value) == 0
+        if scalar and not (allow_scalar and len(buf) == 1):
+            raise InputError(f"{self.name}: {what} must have shape ({len(buf)},), got the scalar {value!r}")
         try:
-            if self._nu > 1 and len(u) != self._nu:
-                raise ValueError
-            self._u[:] = u
-        except (ValueError, TypeError):
-            raise ValueError(f"u must have shape ({self._nu},), got shape {np.shape(u)}") from None
+            if not scalar and len(value) != len(buf):
+                raise InputError(f"{self.name}: {what} must have shape ({len(buf)},), got shape {np.shape(value)}")
+            buf[:] = value
+        except TypeError:
+            raise TypeMismatchError(f"{self.name}: {what} must be {len(buf)} number(s), got {value!r}") from None
+        except ValueError as e:
+            if isinstance(e, InputError):
+                raise
+            raise TypeMismatchError(f"{self.name}: {what} must be numbers, got {value!r}") from None
 
-    def _set_y(self, y):
-        try:
-            if len(y) != self._ny:
-                raise ValueError
-            self._y[:] = y
-        except (ValueError, TypeError):
-            raise ValueError(f"y must have shape ({self._ny},), got shape {np.shape(y)}") from None
-
-    def _check(self, what: str):
+    def _explain(self, what: str) -> None:
+        """Raise the error of a failed step (the state is unchanged)."""
         st = self._status_arr[0]
         if st == BAD_INPUT:
-            raise ValueError(f"{self.name}: {what} contains NaN or inf at step {self.k} "
-                             f"(u = {self._u}, y = {self._y}); filter state unchanged "
-                             "(pass y=None for a step without measurement)")
+            bad_u = np.flatnonzero(~np.isfinite(self._u))
+            if len(bad_u):
+                raise InputError(f"{self.name}: u contains NaN or inf at index {bad_u.tolist()} at step {self.k} "
+                                 f"(u = {self._u}); filter state unchanged")
+            used = self._mask != 0
+            bad_y = np.flatnonzero(used & np.isinf(self._y) | (used & np.isnan(self._y) & ~self.nan_is_missing))
+            raise InputError(f"{self.name}: y contains {'inf' if np.isinf(self._y[bad_y]).any() else 'NaN'} at "
+                             f"index {bad_y.tolist()} at step {self.k} (y = {self._y}); filter state unchanged"
+                             + ("" if self.nan_is_missing else " (nan_is_missing=False)"))
         if st == BAD_RESULT:
-            raise FloatingPointError(f"{self.name}: the estimate became non-finite at step {self.k}; "
-                                     "filter state unchanged (diverged, or covariances too large)")
-
-    def predict(self, u) -> np.ndarray:
-        """Time update with input ``u`` (nu,); returns the prior state estimate."""
-        self._sync()
-        self._set_u(u)
-        self._fpred.trigger()
-        if self._status_arr[0]:
-            self._check("u")
-        x, P = self._pairs["x"][0], self._pairs["P"][0]
-        x[:] = self._diag["x_prior"]
-        P[:] = self._diag["P_prior"]
-        self.k += 1
-        return x.copy()
-
-    def update(self, y) -> np.ndarray:
-        """Measurement update with ``y`` (ny,); returns the posterior state estimate.
-
-        Adaptive filters adapt Q and R only in :meth:`step` (their adaptation is part of
-        the fused step); a separate update leaves Q and R unchanged.
-        """
-        self._sync()
-        self._set_y(y)
-        self._fupd.trigger()
-        if self._status_arr[0]:
-            self._check("y")
-        x, P = self._pairs["x"][0], self._pairs["P"][0]
-        x[:] = self._xnew
-        P[:] = self._Pnew
-        return x.copy()
-
-    supports_batch = True
+            raise NumericalError(f"{self.name}: the estimate became non-finite at step {self.k} ({what}); "
+                                 "filter state unchanged (diverged, or covariances too large)")
 
     def _prepare_step(self):
-        """Hook: fill extra step inputs before the fused step (adaptive filters)."""
+        """Hook: fill extra step inputs before the fused step (none by default)."""
 
     def _after_step(self):
         """Hook: runs after every fused step, once the new state is current."""
 
-    def step(self, u, y) -> np.ndarray:
-        """Predict with ``u`` then update with ``y``; ``y=None`` predicts only.
+    def step(self, u, y, mask=None) -> np.ndarray:
+        """Predict with ``u`` (nu,), then update with ``y`` (ny,).
 
-        Returns a copy of the new state estimate, shape ``(nx,)``.
+        ``y=None`` predicts only. NaN entries of ``y`` are missing channels (unless
+        ``nan_is_missing=False``); ``mask`` (ny,) of bool marks further channels as
+        missing (False). Returns a copy of the new state estimate, shape ``(nx,)``.
+
+        Raises
+        ------
+        InputError
+            ``u`` or a used ``y`` entry is NaN or inf, or a shape is wrong (the state is
+            then unchanged).
+        TypeMismatchError
+            ``u`` or ``y`` is not numbers.
+        NumericalError
+            The estimate became non-finite (the state is unchanged).
         """
+        self._set(self._u, u, "u", True)
         if y is None:
-            return self.predict(u)
-        self._set_u(u)
-        self._set_y(y)
+            self._y[:] = 0.0
+            self._mask[:] = 0.0
+        else:
+            self._set(self._y, y, "y", True)
+            if mask is None:
+                self._mask[:] = 1.0
+            else:
+                self._set(self._mask, mask, "mask", True)
         self._prepare_step()
         self._fsteps[self._cur].trigger()
         if self._status_arr[0]:
-            self._check("u or y")
+            self._explain("step")
         self._cur ^= 1
         self.k += 1
         self._after_step()
         return self._pairs["x"][self._cur].copy()
 
-    def run(self, us, ys) -> np.ndarray:
-        """Filter whole sequences: ``us`` (N, nu), ``ys`` (N, ny) with NaN rows for
-        missing measurements. Returns the estimates, shape (N, nx)."""
-        us, ys = np.asarray(us, float), np.asarray(ys, float)
-        out = np.empty((len(us), self.system.nx))
-        for k in range(len(us)):
-            yk = ys[k]
-            out[k] = self.step(us[k], None if np.all(np.isnan(yk)) else yk)
-        return out
+    def predict(self, u) -> np.ndarray:
+        """Time update with input ``u`` (nu,): a step without measurement; returns the
+        prior state estimate."""
+        return self.step(u, None)
+
+    def update(self, y, mask=None) -> np.ndarray:
+        """Measurement update alone with ``y`` (ny,) (and ``mask``), taking the current
+        estimate as the prior: x and P are replaced by the update. Q and R do not adapt
+        here. Returns the posterior estimate."""
+        s = self.system
+        key = ("update", self.cache_key, self.backend)
+        if key not in s.cache:
+            xs, Ps, Rs = self._sym("x", s.nx), self._sym("P", s.nx, s.nx), self._sym("R", s.ny, s.ny)
+            ys, ms, gs, nms = (self._sym("y", s.ny), self._sym("mask", s.ny), self._sym("gate"),
+                               self._sym("nan_missing"))
+            valid = ms * ca.if_else(nms, not_nan(ys), 1)
+            y_used = ca.if_else(valid, ys, 0)
+            xu, Pu, *_ = self._update_expr(xs, Ps, y_used, Rs, valid, gs)
+            fn = ca.Function("update", [xs, Ps, Rs, ys, ms, gs, nms],
+                             [ca.densify(xu), ca.densify(Pu), _status([y_used], [xu, _upper(Pu)])])
+            s.cache[key] = compile_functions([fn], self.backend)[0][0]
+        self._set(self._y, y, "y", True)
+        if mask is None:
+            self._mask[:] = 1.0
+        else:
+            self._set(self._mask, mask, "mask", True)
+        x, P, st = s.cache[key](self._now("x"), matrix(self._now("P"), s.nx, s.nx),
+                                matrix(self._now("R"), s.ny, s.ny), self._y, self._mask,
+                                self.gate, float(self.nan_is_missing))
+        self._status_arr[0] = float(st)
+        if self._status_arr[0]:
+            self._explain("update")
+        self._now("x")[:] = np.asarray(x).ravel()
+        self._now("P")[:] = np.asarray(P).ravel(order="F")
+        return self.x
+
+    # ---------------------------------------------------------------- whole trajectories
+    def native_fold(self):
+        """The fused step folded over trajectories in native code
+        (:class:`~estimators._fold.NativeFold`), compiled and cached on the model: what
+        :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
+        from ._fold import NativeFold
+
+        s = self.system
+        key = ("fold", self.cache_key, self.backend)
+        if key not in s.cache:
+            s.cache[key] = NativeFold(self._raw_step, len(self._pairs), self.backend)
+        return s.cache[key]
+
+    def _check_sequences(self, us, ys, masks):
+        us = checks.float_array(us, "us")
+        ys = checks.float_array(ys, "ys")
+        N = ys.shape[0] if ys.ndim else 0
+        if us.ndim == 1 and self._nu == 1:
+            us = us[:, None]
+        if ys.ndim == 1 and self._ny == 1:
+            ys = ys[:, None]
+        if ys.shape != (N, self._ny) or us.shape != (N, self._nu):
+            raise InputError(f"{self.name}: run needs us of shape (N, {self._nu}) and ys of shape "
+                             f"(N, {self._ny}); got {us.shape} and {ys.shape}")
+        if not np.isfinite(us).all():
+            k = int(np.flatnonzero(~np.isfinite(us).all(axis=1))[0])
+            raise InputError(f"{self.name}: us contains NaN or inf at index {k}")
+        if masks is None:
+            m = np.ones((N, self._ny))
+        else:
+            m = checks.float_array(masks, "masks")
+            if m.shape != (N, self._ny):
+                raise InputError(f"{self.name}: masks must have shape ({N}, {self._ny}), got {m.shape}")
+        return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
+
+    def run(self, us, ys, masks=None) -> FilterRun:
+        """Filter whole sequences in one native call: ``step(us[k], ys[k], masks[k])`` for
+        ``k = 0..N-1``.
+
+        Parameters
+        ----------
+        us : array_like, shape (N, nu)
+            Inputs; ``us[k]`` is held over the step that ends at measurement ``ys[k]``.
+        ys : array_like, shape (N, ny)
+            Measurements; NaN entries are missing (all NaN: a prediction only).
+        masks : array_like of bool, shape (N, ny), optional
+            False marks further missing channels.
+
+        Returns
+        -------
+        FilterRun
+            Every step's estimate, covariance and diagnostics; the filter is left at the
+            last step, as after N calls of :meth:`step` (equal to 1e-12).
+
+        Raises
+        ------
+        InputError, NumericalError
+            As :meth:`step`, naming the step; the filter's state is then unchanged.
+        """
+        us, ys, masks = self._check_sequences(us, ys, masks)
+        if not self.supports_batch:
+            return self._run_by_steps(us, ys, masks)
+        N = len(ys)
+        raw = self._raw_step
+        state = self.state_arrays()
+        init = self._initial_for_run
+        # outputs carrying the state get a leading row for the initial state (FilterRun.x, .P)
+        outs = {}
+        for i in range(raw.n_out()):
+            name = raw.name_out(i)
+            lead = 1 if name.endswith("_new") else 0
+            outs[name] = np.empty((1, N + lead, raw.nnz_out(i)))
+            if lead:
+                outs[name][0, 0] = state[name[:-4]]
+        views = {name: (a[:, 1:] if name.endswith("_new") else a) for name, a in outs.items()}
+        args = {"u": us[None], "y": ys[None], "mask": masks[None], "gate": np.array([[self.gate]]),
+                "nan_missing": np.array([[float(self.nan_is_missing)]]),
+                **{k: v[None] for k, v in self._noise.items()}}
+        self.native_fold()(1, N, args, {k: v[None] for k, v in state.items()}, views)
+        status = outs["status"][0, :, 0]
+        if status.any():
+            k = int(np.flatnonzero(status)[0])
+            self._status_arr[0] = status[k]
+            self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
+            k_saved, self.k = self.k, self.k + k
+            try:
+                self._explain(f"run index {k}")
+            finally:
+                self.k = k_saved
+        cat = {name: a[0] for name, a in outs.items()}
+        result = self._make_run(cat, us, ys, masks, init)
+        for name in state:                         # the filter now stands at the last step
+            self._pairs[name][self._cur][:] = cat[f"{name}_new"][-1]
+        for name in DIAGNOSTICS:
+            self._diag[name][:] = cat[name][-1]
+        self.k += N
+        self._after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()})
+        return result
+
+    def _make_run(self, cat: dict, us, ys, masks, init: dict) -> FilterRun:
+        """A FilterRun from per-step outputs ``cat`` (row ``k``: step k's output, flat in
+        CasADi's column-major layout) and the state ``init`` before the first step."""
+        nx, ny = self.system.nx, self.system.ny
+
+        def mats(name, r, c):
+            return cat[name].reshape(-1, c, r).transpose(0, 2, 1)
+
+        acc = cat["accepted"].ravel() != 0
+        nis = cat["nis"].ravel()
+        S = mats("S", ny, ny)
+        used = (masks != 0) & (~np.isnan(ys) if self.nan_is_missing else True)
+        n_used = used.sum(axis=1)
+        # missing channels contribute 1 to S's diagonal: log 1 = 0, no effect on logdet
+        loglik = -0.5 * float(np.sum((nis + cat["logdet_S"].ravel() + n_used * np.log(2 * np.pi))[acc]))
+        N = len(nis)
+
+        def with_initial(name, r, c, first):
+            """States over k = 0..N: the outputs of run() carry the initial row already."""
+            m = mats(name, r, c) if name != "x_new" else cat[name].reshape(-1, r)
+            if len(m) == N + 1:
+                return m
+            return np.concatenate([first[None], m])
+
+        if "Q_new" in cat:
+            Qd = with_initial("Q_new", nx, nx, init["Q"]).diagonal(axis1=1, axis2=2)
+            Rd = with_initial("R_new", ny, ny, init["R"]).diagonal(axis1=1, axis2=2)
+        else:
+            Qd = np.broadcast_to(np.diag(init["Q"]), (N + 1, nx))
+            Rd = np.broadcast_to(np.diag(init["R"]), (N + 1, ny))
+        return FilterRun(
+            x=with_initial("x_new", nx, 1, init["x"]), P=with_initial("P_new", nx, nx, init["P"]),
+            x_prior=cat["x_prior"].reshape(-1, nx), P_prior=mats("P_prior", nx, nx),
+            innovation=cat["innov"].reshape(-1, ny), S=S, K=mats("K", nx, ny), nis=nis,
+            accepted=acc, mask=used & acc[:, None], us=us, Q=Qd, R=Rd, log_likelihood=loglik)
+
+    @property
+    def _initial_for_run(self) -> dict:
+        nx, ny = self.system.nx, self.system.ny
+        return {"x": self._now("x").copy(), "P": matrix(self._now("P"), nx, nx).copy(),
+                "Q": matrix(self._now("Q"), nx, nx).copy(), "R": matrix(self._now("R"), ny, ny).copy()}
+
+    def _run_by_steps(self, us, ys, masks) -> FilterRun:
+        """``run`` for a filter whose adaptation is not all in the fused step (a loop of
+        :meth:`step`)."""
+        init = self._initial_for_run
+        rec: dict = {k: [] for k in ("x_new", "P_new", "Q_new", "R_new", *DIAGNOSTICS)}
+        for k in range(len(ys)):
+            self.step(us[k], ys[k], masks[k] != 0)
+            for key, val in (("x_new", self.x), ("P_new", self.P), ("Q_new", self.Q), ("R_new", self.R),
+                             *((name, self._diag[name]) for name in DIAGNOSTICS)):
+                rec[key].append(np.array(val, float).ravel(order="F"))
+        return self._make_run({k: np.array(v) for k, v in rec.items()}, us, ys, masks, init)
+
+    def _after_run(self, cat: dict) -> None:
+        """Hook: after a native run, with the per-step outputs ``cat`` (adaptive filters
+        record their Q, R history)."""

@@ -4,34 +4,37 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .adaptive import WindowedAdaptiveEKF
+from fmu_models.errors import ConfigurationError, UnknownNameError
+
+from .adaptive import WindowedAdaptiveEKF, bounds_around
 from .system import DiscreteModel
 
 FORMS = ("diagonal", "scalar", "full")
+ADAPT = {"both": ("Q", "R"), "Q": ("Q",), "R": ("R",)}
 
 
-def project_pd(M: np.ndarray, floor: float, form: str) -> np.ndarray:
-    """Nearest admissible covariance of the given form, eigenvalues at least ``floor``.
+def project_pd(M: np.ndarray, low: float, high: float, form: str) -> np.ndarray:
+    """Nearest admissible covariance of the given form with eigenvalues in ``[low, high]``.
 
-    ``"diagonal"``: keep the diagonal, clip it at ``floor``; ``"scalar"``: ``sigma^2 I``
-    with ``sigma^2 = max(trace/n, floor)`` (the form of seed 000 eqs 24-25); ``"full"``:
-    symmetrise and clip the eigenvalues at ``floor``.
+    ``"diagonal"``: keep the diagonal, clip it; ``"scalar"``: ``sigma^2 I`` with
+    ``sigma^2 = trace/n`` clipped (the form of seed 000 eqs 24-25); ``"full"``: symmetrise
+    and clip the eigenvalues.
     """
     n = M.shape[0]
     if form == "diagonal":
-        return np.diag(np.maximum(np.diag(M), floor))
+        return np.diag(np.clip(np.diag(M), low, high))
     if form == "scalar":
-        return max(np.trace(M) / n, floor) * np.eye(n)
+        return float(np.clip(np.trace(M) / n, low, high)) * np.eye(n)
     w, V = np.linalg.eigh(0.5 * (M + M.T))
-    return (V * np.maximum(w, floor)) @ V.T
+    return (V * np.clip(w, low, high)) @ V.T
 
 
-def _project_sym(M, floor, form):
+def _project_sym(M, low, high, form):
     """:func:`project_pd` for the "diagonal" and "scalar" forms, as a CasADi expression."""
     n = M.shape[0]
     if form == "diagonal":
-        return ca.diag(ca.fmax(ca.diag(M), floor))
-    return ca.fmax(ca.trace(M) / n, floor) * ca.SX.eye(n)
+        return ca.diag(ca.fmin(ca.fmax(ca.diag(M), low), high))
+    return ca.fmin(ca.fmax(ca.trace(M) / n, low), high) * ca.SX.eye(n)
 
 
 class IAE(WindowedAdaptiveEKF):
@@ -39,69 +42,84 @@ class IAE(WindowedAdaptiveEKF):
 
     After each update, with ``I_j`` the innovations of the last ``window`` steps:
     ``C_I = (1/N) sum I_j I_j^T`` (eq 37), ``R = C_I - H P^- H^T`` (eq 35) and
-    ``Q = K C_I K^T`` (eq 36), each projected onto the chosen ``form`` with eigenvalues
-    at least ``floor`` so that they stay positive definite. ``H P^- H^T`` is taken as
-    ``S - R`` of the step. The new values apply from the next step. Until the window is
-    full, the initial Q and R are kept. The "diagonal" and "scalar" forms are computed in
-    the compiled step (and run batched); "full" projects the eigenvalues in numpy after
-    each step. Adaptation happens in :meth:`step` (a separate predict/update does not
-    adapt).
+    ``Q = K C_I K^T`` (eq 36), each projected onto the chosen ``form`` with its variances
+    kept inside ``q_bounds`` / ``r_bounds``, so that they stay positive definite and
+    plausible. ``H P^- H^T`` is taken as ``S - R`` of the step. The new values apply from
+    the next step; until the window is full the initial Q and R are kept.
+
+    ``K C_I K^T`` has rank at most ny (2 for the cart-pole): it can only move Q in the
+    directions the gain reaches, and left unbounded it collapses Q in the others. Adapting
+    R only (``adapt="R"``, with Q as given) is the stable choice when Q is known to within
+    an order of magnitude; the seed 000 campaign uses ``adapt="both"`` as the paper
+    describes, with the default bounds.
 
     Parameters
     ----------
-    system, x0, P0, Q, R, backend
+    system, x0, P0, Q, R, gate, nan_is_missing, backend
         As :class:`~estimators.base.KalmanBase`; Q and R are the initial values.
     window : int
         N, the number of innovations in the estimate (eq 37); default 20.
-    adapt : tuple of str
-        Which covariances to adapt: any of ``"Q"``, ``"R"`` (default both).
+    adapt : {"both", "Q", "R"} or tuple of "Q", "R"
+        Which covariances to adapt (default both).
     form : {"diagonal", "scalar", "full"}
         Structure kept for the estimates (default "diagonal"; "scalar" is eqs 24-25).
-    q_floor, r_floor : float
-        Smallest eigenvalue allowed in Q and R (default 1e-9). ``K C_I K^T`` has rank
-        at most ny, so Q needs a floor to stay positive definite.
+        "diagonal" and "scalar" adapt inside the compiled step; "full" projects the
+        eigenvalues in numpy after each step (no batched or native run: a loop of steps).
+    q_bounds, r_bounds : (float, float), optional
+        Smallest and largest variance allowed in Q and R. Default: a factor 1e4 below the
+        smallest and above the largest initial variance.
     """
 
     name = "IAE"
 
-    def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 20,
-                 adapt=("Q", "R"), form: str = "diagonal", q_floor: float = 1e-9,
-                 r_floor: float = 1e-9, backend: str = "compiled"):
-        if not set(adapt) <= {"Q", "R"}:
-            raise ValueError(f"adapt must contain only 'Q' and 'R', got {adapt!r}")
+    def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 20, adapt="both",
+                 form: str = "diagonal", q_bounds=None, r_bounds=None, gate: float | None = None,
+                 nan_is_missing: bool = True, backend: str = "compiled"):
+        if isinstance(adapt, str):
+            if adapt not in ADAPT:
+                raise UnknownNameError(f"adapt must be one of {', '.join(ADAPT)}, got {adapt!r}")
+            adapt = ADAPT[adapt]
+        if not adapt or not set(adapt) <= {"Q", "R"}:
+            raise ConfigurationError(f"adapt must name Q, R or both, got {adapt!r}")
         if form not in FORMS:
-            raise ValueError(f"form must be one of {FORMS}, got {form!r}")
-        if not (q_floor > 0 and r_floor > 0):
-            raise ValueError("q_floor and r_floor must be > 0")
-        self.adapt, self.form = tuple(adapt), form
-        self.q_floor, self.r_floor = float(q_floor), float(r_floor)
-        super().__init__(system, x0, P0, Q, R, window, backend)
+            raise UnknownNameError(f"form must be one of {FORMS}, got {form!r}")
+        from fmu_models import checks
+
+        q0 = np.diag(checks.covariance(Q, system.nx, "Q"))
+        r0 = np.diag(checks.covariance(R, system.ny, "R"))
+        self.adapt, self.form = tuple(sorted(adapt)), form
+        self.q_bounds = bounds_around(q0, q_bounds, "q_bounds")
+        self.r_bounds = bounds_around(r0, r_bounds, "r_bounds")
+        super().__init__(system, x0, P0, Q, R, window, gate, nan_is_missing, backend)
 
     @property
     def supports_batch(self):
+        """False for ``form="full"`` (its projection runs in numpy)."""
         return self.form != "full"
 
-    def _cache_key(self):
-        return (type(self).__name__, self.window, self.adapt, self.form, self.q_floor, self.r_floor)
+    @property
+    def cache_key(self):
+        """Type, window, adapted covariances, form and bounds."""
+        return (type(self).__name__, self.window, self.adapt, self.form, self.q_bounds, self.r_bounds)
 
     def _adapt(self, st, diag, C_I):
-        if self.form == "full":          # adapted in numpy after the step
-            return st["Q"], st["R"]
         Q, R = st["Q"], st["R"]
+        if self.form == "full":          # adapted in numpy after the step
+            return Q, R
         if "R" in self.adapt:
-            R = _project_sym(C_I - (diag["S"] - st["R"]), self.r_floor, self.form)   # eq 35
+            R = _project_sym(C_I - (diag["S"] - st["R"]), *self.r_bounds, self.form)   # eq 35
         if "Q" in self.adapt:
             K = diag["K"]
-            Q = _project_sym(ca.mtimes([K, C_I, K.T]), self.q_floor, self.form)      # eq 36
+            Q = _project_sym(ca.mtimes([K, C_I, K.T]), *self.q_bounds, self.form)     # eq 36
         return Q, R
 
     def _adapted(self):
-        if self.form != "full":
-            return super()._adapted()
-        C_I = self.innovation_covariance()
-        if "R" in self.adapt:
-            self._now("R")[:] = project_pd(C_I - (self.S - self.R), self.r_floor, "full").ravel(order="F")
-        if "Q" in self.adapt:
-            K = self.K
-            self._now("Q")[:] = project_pd(K @ C_I @ K.T, self.q_floor, "full").ravel(order="F")
+        if self.form == "full":
+            C_I = self.innovation_covariance()
+            HPH = self.S - self.R             # the step left R unchanged in this form
+            if "R" in self.adapt:
+                self._now("R")[:] = project_pd(C_I - HPH, *self.r_bounds, "full").ravel(order="F")
+            if "Q" in self.adapt:
+                K = self.K
+                self._now("Q")[:] = project_pd(K @ C_I @ K.T, *self.q_bounds, "full").ravel(order="F")
         self._record()

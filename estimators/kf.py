@@ -15,7 +15,7 @@ class KF(EKF):
     ----------
     system : DiscreteModel
         Nonlinear model; it is linearised here.
-    x0, P0, Q, R
+    x0, P0, Q, R, gate, nan_is_missing
         As :class:`~estimators.base.KalmanBase`.
     x_op : array_like, shape (nx,)
         Operating point (default: zero, the cart-pole's upright equilibrium).
@@ -28,11 +28,18 @@ class KF(EKF):
     name = "KF"
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, x_op=None, u_op=None,
-                 backend: str = "compiled"):
+                 gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
         import numpy as np
 
-        x_op = np.zeros(system.nx) if x_op is None else x_op
-        u_op = np.zeros(system.nu) if u_op is None else u_op
+        from fmu_models.checks import vector
+        from fmu_models.errors import ConfigurationError
+
+        if not isinstance(system, DiscreteModel):
+            from fmu_models.errors import TypeMismatchError
+
+            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
+        x_op = np.zeros(system.nx) if x_op is None else vector(x_op, system.nx, "x_op", ConfigurationError)
+        u_op = np.zeros(system.nu) if u_op is None else vector(u_op, system.nu, "u_op", ConfigurationError)
         self.nonlinear_system = system
-        self.x_op, self.u_op = np.asarray(x_op, float), np.asarray(u_op, float)
-        super().__init__(system.linearized(x_op, u_op), x0, P0, Q, R, backend)
+        self.x_op, self.u_op = x_op, u_op
+        super().__init__(system.linearized(x_op, u_op), x0, P0, Q, R, gate, nan_is_missing, backend)

@@ -5,9 +5,14 @@ import casadi as ca
 import numpy as np
 
 from fmu_models import checks
-from .adaptive import WindowedAdaptiveEKF
+from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+
+from .adaptive import WindowedAdaptiveEKF, bounds_around
 from .fuzzy import MamdaniFuzzy
 from .system import DiscreteModel
+
+#: How the fuzzy adjustment reaches the process noise (see :class:`MFIAE`).
+Q_MAPPINGS = ("literal", "gain")
 
 
 class MFIAE(WindowedAdaptiveEKF):
@@ -18,29 +23,31 @@ class MFIAE(WindowedAdaptiveEKF):
     covariance (eq 39, the step's S). The fuzzy system (:class:`MamdaniFuzzy`, Table 2)
     maps ``(C_T, C_I)`` to a normalised adjustment ``m`` in [-1, 1], and
     ``MAdj = m s`` with ``s = (C_T + C_I)/2`` is the fuzzy image of ``C_T - C_I``
-    (eq 38), in measurement units. Then, with ``Q = q I`` and ``R = r I`` (eqs 24-25)::
+    (eq 38), in measurement-variance units. Then, with ``Q = sigma_q^2 I`` and
+    ``R = sigma_r^2 I`` (the scalar forms of eqs 24-25)::
 
-        r_{k+1} = r_k     - gain_r MAdj                      (eq 42)
-        q_k     = q_{k-1} - gain_q trace(K MAdj K^T) / nx    (eq 41)
+        sigma_r^2 <- sigma_r^2 - gain_r MAdj                     (eq 42)
+        sigma_q^2 <- sigma_q^2 - gain_q MAdj                     (eq 41, q_mapping="literal")
+        sigma_q^2 <- sigma_q^2 - gain_q trace(K MAdj K^T) / nx   (q_mapping="gain")
 
-    Too large innovations (``C_I > C_T``, ``m < 0``) raise Q and R, too small ones lower
-    them. Choices the paper leaves open, each a parameter or documented here:
+    each clipped to its bounds. Too large innovations (``C_I > C_T``, ``m < 0``) raise Q
+    and R, too small ones lower them. ``q_mapping="literal"`` (default) is eqs 41-42 read as
+    printed: both variances move by the same fuzzy output (so their ratio changes
+    whenever they differ, and with it the filter's gain). ``"gain"`` maps MAdj into the
+    state space through the gain, as eq 36 maps ``C_I`` into ``Q = K C_I K^T``; Q then
+    moves by about ``|K|^2`` times less than R.
 
-    * how MAdj reaches Q: eq 41 subtracts a measurement-space quantity from a
-      state-space matrix; it is mapped through the gain, as eq 36 maps ``C_I`` into
-      ``Q = K C_I K^T``. (Adjusting Q and R by the same relative factor would keep Q/R,
-      hence the steady-state gain, unchanged: the filter could not improve.)
-    * the scalar summary of the matrices: ``trace/ny``, or one adjustment per measurement
-      channel with ``per_channel=True`` (R diagonal);
-    * the input normalisation and membership functions (:class:`MamdaniFuzzy`);
-    * gains and bounds (q and r are clipped to them, so they stay positive).
+    Choices the paper leaves open, each a parameter: the mapping above; the scalar summary
+    of the matrices (``trace/ny``, or one adjustment per measurement channel with
+    ``per_channel=True``, R diagonal and Q moved by their mean); the input normalisation
+    and membership functions (:class:`MamdaniFuzzy`); the gains and the bounds.
 
-    Until ``window`` innovations are stored Q and R stay at their initial values. The
-    whole step, fuzzy inference included, is one compiled CasADi Function.
+    Until ``window`` innovations are stored Q and R stay at their initial values. The whole
+    step, fuzzy inference included, is one compiled CasADi Function.
 
     Parameters
     ----------
-    system, x0, P0, backend
+    system, x0, P0, gate, nan_is_missing, backend
         As :class:`~estimators.base.KalmanBase`.
     q0 : float
         Initial process noise variance sigma_q^2 (Q = q0 I).
@@ -51,47 +58,58 @@ class MFIAE(WindowedAdaptiveEKF):
     fuzzy : MamdaniFuzzy, optional
         The fuzzy system (default ``MamdaniFuzzy()``).
     gain_q, gain_r : float
-        Step sizes in (0, 1] (defaults 0.02 and 0.2). With window 50 they took the
-        cart-pole (q = 1e-4, r = 1e-2, started at 1e-7) to q = 7e-5, r = 1.03e-2 and the
-        error of the EKF that knows Q and R (tests/test_estimators.py); Q moves slower
-        than R because a wrong Q shows in the innovations only through the dynamics.
+        Step sizes in (0, 1] (default 0.1 both: eqs 41-42 use one MAdj for both).
+    q_mapping : {"literal", "gain"}
+        How MAdj reaches sigma_q^2 (default "literal", see above).
     per_channel : bool
-        One adjustment per measurement channel for R (default False: scalar R).
-    q_bounds, r_bounds : (float, float)
-        Bounds kept on q and on each r (default (1e-9, 1e6)).
+        One adjustment per measurement channel (default False: scalar R).
+    q_bounds, r_bounds : (float, float), optional
+        Bounds kept on sigma_q^2 and on each sigma_r^2. Default: a factor 1e4 either side
+        of the initial value, so that a start wrong by up to four orders of magnitude can
+        be corrected and nothing collapses to a numerical floor.
 
     Attributes
     ----------
     m : ndarray, shape (ny,)
         The last normalised fuzzy adjustment per channel (all equal unless
-        ``per_channel``).
+        ``per_channel``; 0 before the window is full).
     """
 
     name = "MF-IAE"
 
     def __init__(self, system: DiscreteModel, x0, P0, q0: float, r0, window: int = 50,
-                 fuzzy: MamdaniFuzzy | None = None, gain_q: float = 0.02, gain_r: float = 0.2,
-                 per_channel: bool = False, q_bounds=(1e-9, 1e6), r_bounds=(1e-9, 1e6),
-                 backend: str = "compiled"):
+                 fuzzy: MamdaniFuzzy | None = None, gain_q: float = 0.1, gain_r: float = 0.1,
+                 q_mapping: str = "literal", per_channel: bool = False, q_bounds=None, r_bounds=None,
+                 gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
         for name, g in (("gain_q", gain_q), ("gain_r", gain_r)):
-            if not (0 < g <= 1):
-                raise ValueError(f"{name} must be in (0, 1], got {g}")
-        for name, (lo, hi) in (("q_bounds", q_bounds), ("r_bounds", r_bounds)):
-            if not (0 < lo < hi):
-                raise ValueError(f"{name} must satisfy 0 < low < high, got {(lo, hi)}")
+            if not (0 < checks.finite(g, name) <= 1):
+                raise ConfigurationError(f"{name} must be in (0, 1], got {g}")
+        if q_mapping not in Q_MAPPINGS:
+            raise UnknownNameError(f"q_mapping must be one of {Q_MAPPINGS}, got {q_mapping!r}")
+        if fuzzy is not None and not isinstance(fuzzy, MamdaniFuzzy):
+            raise TypeMismatchError(f"fuzzy must be a MamdaniFuzzy, got {type(fuzzy).__name__}")
         self.fuzzy = fuzzy or MamdaniFuzzy()
         self.gain_q, self.gain_r, self.per_channel = float(gain_q), float(gain_r), bool(per_channel)
-        self.q_bounds, self.r_bounds = tuple(map(float, q_bounds)), tuple(map(float, r_bounds))
+        self.q_mapping = q_mapping
         q0 = checks.positive(q0, "q0")
-        r0 = np.broadcast_to(np.asarray(r0, float), (system.ny,))
+        r0 = checks.float_array(r0, "r0")
+        try:
+            r0 = np.broadcast_to(r0, (system.ny,)).copy()
+        except ValueError:
+            raise ConfigurationError(f"r0 must be one value or {system.ny}, got {r0.tolist()}") from None
         for r in r0:
             checks.positive(r, "r0")
         if not per_channel and np.ptp(r0) > 0:
-            raise ValueError("r0 must be one value unless per_channel=True")
-        super().__init__(system, x0, P0, q0 * np.eye(system.nx), np.diag(r0), window, backend)
+            raise ConfigurationError("r0 must be one value unless per_channel=True")
+        self.q_bounds = bounds_around(np.array([q0]), q_bounds, "q_bounds")
+        self.r_bounds = bounds_around(r0, r_bounds, "r_bounds")
+        super().__init__(system, x0, P0, q0 * np.eye(system.nx), np.diag(r0), window, gate,
+                         nan_is_missing, backend)
 
-    def _cache_key(self):
-        return (type(self).__name__, self.window, self.fuzzy, self.gain_q, self.gain_r,
+    @property
+    def cache_key(self):
+        """Type, window, fuzzy system, gains, mapping and bounds."""
+        return (type(self).__name__, self.window, self.fuzzy, self.gain_q, self.gain_r, self.q_mapping,
                 self.per_channel, self.q_bounds, self.r_bounds)
 
     def _adapt(self, st, diag, C_I):
@@ -106,15 +124,19 @@ class MFIAE(WindowedAdaptiveEKF):
             c_t, c_i = ca.repmat(c_t, ny, 1), ca.repmat(c_i, ny, 1)
         self._m_expr = m
         madj = m * (c_t + c_i) / 2                              # eq 38, measurement units
-        madj_q = ca.trace(ca.mtimes([K, ca.diag(madj), K.T])) / nx
-        q_new = ca.fmin(ca.fmax(st["Q"][0, 0] - self.gain_q * madj_q, self.q_bounds[0]), self.q_bounds[1])
-        r_new = ca.fmin(ca.fmax(ca.diag(st["R"]) - self.gain_r * madj, self.r_bounds[0]), self.r_bounds[1])
+        if self.q_mapping == "literal":
+            madj_q = ca.sum1(madj) / ny                         # eq 41 as printed
+        else:
+            madj_q = ca.trace(ca.mtimes([K, ca.diag(madj), K.T])) / nx
+        lo_q, hi_q = self.q_bounds
+        lo_r, hi_r = self.r_bounds
+        q_new = ca.fmin(ca.fmax(st["Q"][0, 0] - self.gain_q * madj_q, lo_q), hi_q)
+        r_new = ca.fmin(ca.fmax(ca.diag(st["R"]) - self.gain_r * madj, lo_r), hi_r)
         return q_new * ca.SX.eye(nx), ca.diag(r_new)            # eqs 41, 42
 
     def _step_spec(self):
         st, ins, new, diag, extra = super()._step_spec()
-        full = st["count"] + 1 >= self.window
-        extra["m"] = ca.if_else(full, self._m_expr, ca.SX.zeros(self.system.ny))
+        extra["m"] = ca.if_else(extra["adapted"], self._m_expr, ca.SX.zeros(self.system.ny))
         return st, ins, new, diag, extra
 
     m = property(lambda self: self._extra["m"].copy())

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .base import KalmanBase, symmetric
+from fmu_models.checks import finite
+from fmu_models.errors import ConfigurationError
+
+from .base import KalmanBase, gated_gain, mask_measurement, symmetric
 from .system import DiscreteModel
 
 
@@ -32,7 +35,7 @@ class UKF(KalmanBase):
 
     Parameters
     ----------
-    system, x0, P0, Q, R, backend
+    system, x0, P0, Q, R, gate, nan_is_missing, backend
         As :class:`~estimators.base.KalmanBase`.
     alpha : float
         Spread of the sigma points, 0 < alpha <= 1 (default 0.5, see Notes).
@@ -50,20 +53,24 @@ class UKF(KalmanBase):
     name = "UKF"
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, alpha: float = 0.5,
-                 beta: float = 2.0, kappa: float = 0.0, backend: str = "compiled"):
+                 beta: float = 2.0, kappa: float = 0.0, gate: float | None = None,
+                 nan_is_missing: bool = True, backend: str = "compiled"):
         n = system.nx
+        alpha, beta, kappa = (finite(v, w) for v, w in ((alpha, "alpha"), (beta, "beta"), (kappa, "kappa")))
         if not (0 < alpha <= 1):
-            raise ValueError(f"alpha must be in (0, 1], got {alpha}")
+            raise ConfigurationError(f"alpha must be in (0, 1], got {alpha}")
         if not (n + kappa > 0):
-            raise ValueError(f"kappa must satisfy n + kappa > 0 (n = {n}), got {kappa}")
+            raise ConfigurationError(f"kappa must satisfy n + kappa > 0 (n = {n}), got {kappa}")
         self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
         lam = alpha**2 * (n + kappa) - n
         self.lam = lam
         self.Wm = [lam / (n + lam)] + [0.5 / (n + lam)] * (2 * n)
         self.Wc = [lam / (n + lam) + 1 - alpha**2 + beta] + [0.5 / (n + lam)] * (2 * n)
-        super().__init__(system, x0, P0, Q, R, backend)
+        super().__init__(system, x0, P0, Q, R, gate, nan_is_missing, backend)
 
-    def _cache_key(self):
+    @property
+    def cache_key(self) -> tuple:
+        """Type and sigma-point parameters."""
         return (type(self).__name__, self.alpha, self.beta, self.kappa)
 
     def _sigma_points(self, x, P):
@@ -84,16 +91,16 @@ class UKF(KalmanBase):
         xp, Pp = self._mean_cov([f(p, u) for p in self._sigma_points(x, P)], self.Wm, self.Wc)
         return xp, symmetric(Pp + Q)
 
-    def _update_expr(self, xp, Pp, y, R):
+    def _update_expr(self, xp, Pp, y, R, valid, gate):
         s = self.system
         h = ca.Function("h", [s.x], [s.hx])
         # sigma points redrawn from the prior (x^-, P^-), so that Q is in S and Pxy
         sig = self._sigma_points(xp, Pp)
         sig_y = [h(p) for p in sig]
         yp, S = self._mean_cov(sig_y, self.Wm, self.Wc)
-        S = symmetric(S + R)
+        S, innov, M = mask_measurement(valid, symmetric(S + R), y - yp)
         Pxy = sum((w * ca.mtimes(p - xp, (q - yp).T) for w, p, q in zip(self.Wc, sig, sig_y)),
                   ca.SX.zeros(s.nx, s.ny))
-        K = ca.solve(S, Pxy.T).T
-        innov = y - yp
-        return xp + ca.mtimes(K, innov), symmetric(Pp - ca.mtimes([K, S, K.T])), innov, S, K
+        K, nis, acc = gated_gain(S, ca.mtimes(Pxy, M).T, innov, gate)
+        Ka = acc * K
+        return xp + ca.mtimes(Ka, innov), symmetric(Pp - ca.mtimes([Ka, S, Ka.T])), innov, S, K, nis, acc

@@ -36,7 +36,7 @@ def test_batch_refusals(cp):
         BatchFilter(IAE(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.1, 0.1, form="full"), 3)
     b = BatchFilter(EKF(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.1, 0.1), 3)
     ys = np.ones((3, 2))
-    ys[2, 1] = np.nan
+    ys[2, 1] = np.inf                     # (NaN would be a missing measurement)
     with pytest.raises(ValueError, match="realisation 2"):
         b.step(0.0, ys)
     with pytest.raises(ValueError, match=r"y have shape \(3, 2\)"):

@@ -1,0 +1,175 @@
+"""Fold a compiled step Function over whole trajectories in native code, without copies.
+
+CasADi's ``mapaccum`` folds a Function too, but copies the accumulated state and every
+output through work vectors at each step (0.30 us a step on top of the 0.18 us of the
+cart-pole EKF step). :class:`NativeFold` compiles, with the step's generated C code, a
+small driver that calls the step in a loop with pointers straight into the caller's
+numpy arrays:
+
+* input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]`` (stride 0: the same
+  array every step), or, for an accumulated input, the row ``k - 1`` of the output that
+  carries it (row ``k = 0`` reads the initial state);
+* output ``j`` of step ``k`` is written at ``res[j] + k * res_stride[j]``;
+* an outer loop runs ``runs`` independent realisations, each with its own base pointers
+  (``arg_run_stride``, ``res_run_stride``).
+
+With the VM backend (no C compiler) the same fold runs through ``mapaccum`` in CasADi's
+virtual machine.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import casadi as ca
+import numpy as np
+
+from ._compiled import compile_functions
+
+__all__ = ["NativeFold"]
+
+_DRIVER = r"""
+#include <stdlib.h>
+/* Generated into the same library as the step: fold it over n_steps for each of runs. */
+int %(name)s_fold(long runs, long n_steps,
+                  const double *const *arg0, const long *arg_stride, const long *arg_run_stride,
+                  double *const *res0, const long *res_stride, const long *res_run_stride,
+                  const long *acc_out, const double *const *init, const long *init_run_stride) {
+    casadi_int sz_arg, sz_res, sz_iw, sz_w;
+    const casadi_real **arg;
+    casadi_real **res, *w;
+    casadi_int *iw;
+    long r, k, i;
+    int n_in = %(n_in)d, n_out = %(n_out)d, flag = 0;
+    %(name)s_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+    arg = (const casadi_real **)malloc(sizeof(casadi_real *) * (sz_arg > n_in ? sz_arg : n_in));
+    res = (casadi_real **)malloc(sizeof(casadi_real *) * (sz_res > n_out ? sz_res : n_out));
+    iw = (casadi_int *)malloc(sizeof(casadi_int) * (sz_iw + 1));
+    w = (casadi_real *)malloc(sizeof(casadi_real) * (sz_w + 1));
+    if (!arg || !res || !iw || !w) { flag = -1; goto done; }
+    for (r = 0; r < runs; r++) {
+        for (k = 0; k < n_steps; k++) {
+            for (i = 0; i < n_in; i++) {
+                if (acc_out[i] >= 0)
+                    arg[i] = k == 0 ? init[i] + r * init_run_stride[i]
+                                    : res0[acc_out[i]] + r * res_run_stride[acc_out[i]] + (k - 1) * res_stride[acc_out[i]];
+                else
+                    arg[i] = arg0[i] + r * arg_run_stride[i] + k * arg_stride[i];
+            }
+            for (i = 0; i < n_out; i++) res[i] = res0[i] + r * res_run_stride[i] + k * res_stride[i];
+            if (%(name)s(arg, res, iw, w, 0)) { flag = 1 + (int)k; goto done; }
+        }
+    }
+done:
+    free(arg); free(res); free(iw); free(w);
+    return flag;
+}
+"""
+
+
+class NativeFold:
+    """A step Function folded over trajectories (see the module documentation).
+
+    Parameters
+    ----------
+    step : casadi.Function
+        The fused step; its first ``n_state`` inputs are the state, carried by the outputs
+        named ``<input>_new``.
+    n_state : int
+        Number of state inputs.
+    backend : {"compiled", "vm"}
+    """
+
+    def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled"):
+        self.step, self.n_state = step, n_state
+        self.names_in = [step.name_in(i) for i in range(step.n_in())]
+        self.names_out = [step.name_out(i) for i in range(step.n_out())]
+        name = "foldstep"
+        code = _DRIVER % {"name": name, "n_in": step.n_in(), "n_out": step.n_out()}
+        _, self.backend, lib = compile_functions([_renamed(step, name)], backend, extra_code=code,
+                                                 return_library=True)
+        self._mapped: dict = {}
+        if self.backend == "compiled":
+            self._fold = getattr(ctypes.CDLL(str(lib)), f"{name}_fold")
+            self._fold.restype = ctypes.c_int
+
+    def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict) -> int:
+        """Fold ``n_steps`` steps for each of ``runs`` realisations.
+
+        Parameters
+        ----------
+        runs, n_steps : int
+        args : dict of name -> ndarray
+            Non-state inputs, shape ``(runs, n_steps, nnz)`` (per step) or ``(runs, nnz)``
+            (the same every step).
+        init : dict of name -> ndarray
+            Initial state, shape ``(runs, nnz)``.
+        outs : dict of name -> ndarray
+            Every output, shape ``(runs, n_steps, nnz)`` (views allowed, e.g. rows 1..N
+            of a larger array); filled in place.
+
+        Every array must be float64 with contiguous last axis. Returns 0, or ``1 + k`` if
+        the step's evaluation failed at step ``k``.
+        """
+        if self.backend != "compiled":
+            return self._vm(runs, n_steps, args, init, outs)
+        n_in, n_out = len(self.names_in), len(self.names_out)
+        P = ctypes.POINTER(ctypes.c_double)
+        L = ctypes.c_long
+        arg0, arg_stride, arg_run, acc = (P * n_in)(), (L * n_in)(), (L * n_in)(), (L * n_in)()
+        ini, ini_run = (P * n_in)(), (L * n_in)()
+        keep = []
+
+        def ptr(a):
+            if a.dtype != np.float64 or (a.shape[-1] > 1 and a.strides[-1] != 8):
+                raise ValueError("fold arrays must be float64 with a contiguous last axis")
+            keep.append(a)
+            return a.ctypes.data_as(P)
+
+        for i, name in enumerate(self.names_in):
+            if i < self.n_state:
+                a = init[name]
+                acc[i] = self.names_out.index(f"{name}_new")
+                ini[i], ini_run[i] = ptr(a), a.strides[0] // 8
+                arg0[i] = ini[i]
+            else:
+                a = args[name]
+                acc[i] = -1
+                arg0[i] = ptr(a)
+                arg_stride[i] = a.strides[1] // 8 if a.ndim == 3 else 0
+                arg_run[i] = a.strides[0] // 8
+        res0, res_stride, res_run = (P * n_out)(), (L * n_out)(), (L * n_out)()
+        for j, name in enumerate(self.names_out):
+            o = outs[name]
+            res0[j], res_stride[j], res_run[j] = ptr(o), o.strides[1] // 8, o.strides[0] // 8
+        return self._fold(L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc,
+                          ini, ini_run)
+
+    def _vm(self, runs, n_steps, args, init, outs) -> int:
+        """The same fold through ``mapaccum`` in CasADi's virtual machine."""
+        if n_steps not in self._mapped:
+            self._mapped[n_steps] = self.step.mapaccum("fold", n_steps, list(range(self.n_state)),
+                                                       list(range(self.n_state)))
+        fn = self._mapped[n_steps]
+        for r in range(runs):
+            call = {}
+            for i, name in enumerate(self.names_in):
+                size = self.step.size_in(i)
+                if i < self.n_state:
+                    call[name] = init[name][r].reshape(size, order="F")
+                elif args[name].ndim == 2:
+                    call[name] = np.tile(args[name][r].reshape(size, order="F"), (1, n_steps))
+                else:
+                    call[name] = np.hstack([row.reshape(size, order="F") for row in args[name][r]])
+            res = fn.call(call)
+            for name in self.names_out:
+                rr, cc = self.step.size_out(name)
+                val = np.asarray(res[name]).reshape(rr, n_steps, cc).transpose(1, 2, 0)   # (n, cc, rr)
+                outs[name][r] = val.reshape(n_steps, rr * cc)
+        return 0
+
+
+def _renamed(fn: ca.Function, name: str) -> ca.Function:
+    """``fn`` under another name (the driver calls it by that name)."""
+    args = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
+    return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],
+                       [fn.name_out(i) for i in range(fn.n_out())])
