@@ -172,50 +172,109 @@ def _models(args) -> int:
 
 
 # ---------------------------------------------------------------------------- experiments
-EXPERIMENTS = ("seed000", "seed001", "seed002")
+EXPERIMENTS = ("seed000", "seed000-sweep", "seed001", "seed002")
+
+
+def _settings(args, base):
+    """``base`` with --settings FILE, --runs, --seed and every --set applied, in that order."""
+    from .experiments.settings import apply_overrides, load_settings
+
+    s = load_settings(base, args.settings) if args.settings else base
+    quick = [f"runs={args.runs}"] if args.runs else []
+    quick += [f"seed={args.seed}"] if args.seed is not None else []
+    return apply_overrides(s, quick + list(args.set or []))
+
+
+def _common(args) -> dict:
+    return dict(backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
 
 
 def _experiment(args) -> int:
     from .results import OutputFolder
 
-    out = Path(args.out or f"out/{args.name}")
     if args.runs is not None and args.runs > 100_000:
         raise ConfigurationError(f"--runs {args.runs} is more than 100000 realisations per scenario")
-    with OutputFolder(out, args.overwrite) as out:
-        if args.name == "seed000":
-            return _seed000(args, out)
-        if args.name == "seed001":
-            return _seed001(args, out)
-        return _seed002(args, out)
+    if args.config and args.name != "seed000" and args.name != "seed000-sweep":
+        raise ConfigurationError(f"--config applies to seed000 and seed000-sweep, not {args.name}")
+    runner = {"seed000": _seed000, "seed000-sweep": _sweep, "seed001": _seed001, "seed002": _seed002}[args.name]
+    settings = runner(args, None)            # validate every setting before touching --out
+    out = Path(args.out or f"out/{args.name}" + (f"-{args.config}" if args.config else ""))
+    with OutputFolder(out, args.overwrite) as folder:
+        return runner(args, (folder, settings))
 
 
-def _common(args) -> dict:
-    return dict(path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
+def _seed000(args, job) -> object:
+    from fmu_models.errors import Interrupted
 
-
-def _overrides(args) -> dict:
-    return {**({"runs": args.runs} if args.runs else {}), **({"seed": args.seed} if args.seed is not None else {})}
-
-
-def _seed000(args, out: Path) -> int:
     from .experiments import seed000 as exp
 
-    settings = exp.Settings(**_overrides(args))
-    per_run, eps, examples, wall = exp.run(settings, **_common(args))
-    md = exp.write_report(per_run, eps, examples, wall, settings, out, args.path)
+    if job is None:
+        config = args.config or "default"
+        if config not in exp.CONFIGS:
+            raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(exp.CONFIGS)}")
+        return _settings(args, exp.CONFIGS[config])
+    out, settings = job
+    config = args.config or "default"
+    try:
+        per_run, eps, examples, wall = exp.run(settings, path=args.path, **_common(args))
+    except Interrupted as e:
+        if e.partial is not None and len(e.partial[0]):
+            md = exp.write_report(*e.partial, settings, out, args.path, config, partial=True)
+            print(f"interrupted: partial results ({e}) in {md}", file=sys.stderr)
+        raise
+    md = exp.write_report(per_run, eps, examples, wall, settings, out, args.path, config)
     table = exp.summary_table(per_run)
     cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *exp.FILTERS]
-    print(f"Seed 000, Table 3 (eta, eq 44): {settings.runs} realisations, {args.path} path, {wall:.2f} s")
+    print(f"Seed 000, Table 3 (eta, eq 44): configuration {config}, {settings.runs} realisations, "
+          f"{args.path} path, {wall:.2f} s")
     print(table[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    print()
+    print("\n".join(exp.agreement(table)))
     print(f"\nwrote {md} and the tables and figures beside it")
     return 0
 
 
-def _seed001(args, out: Path) -> int:
+def _sweep(args, job) -> object:
+    from dataclasses import fields, replace
+
+    from fmu_models.errors import Interrupted
+
+    from .experiments import seed000
+    from .experiments import seed000_sweep as exp
+    from .experiments.settings import apply_overrides
+
+    if job is None:
+        config = args.config or "paper"
+        if config not in seed000.CONFIGS:
+            raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(seed000.CONFIGS)}")
+        own = {f.name for f in fields(exp.SweepSettings)} - {"campaign"}
+        sweep_sets = [x for x in (args.set or []) if x.split("=", 1)[0].strip() in own]
+        args_campaign = argparse.Namespace(**{**vars(args), "set": [x for x in (args.set or []) if x not in sweep_sets]})
+        campaign = _settings(args_campaign, seed000.CONFIGS[config])
+        return apply_overrides(replace(exp.SweepSettings(), campaign=campaign), sweep_sets)
+    out, settings = job
+    try:
+        table, wall = exp.run(settings, **_common(args))
+    except Interrupted as e:
+        if e.partial is not None and len(e.partial[0]):
+            md = exp.write_report(*e.partial, settings, out, partial=True)
+            print(f"interrupted: partial results ({e}) in {md}", file=sys.stderr)
+        raise
+    md = exp.write_report(table, wall, settings, out)
+    print(f"Seed 000 sweep: {len(settings.factors)} x {len(settings.factors)} cells, "
+          f"{settings.campaign.runs} realisations a cell, {wall:.1f} s")
+    print(exp.goals(table, settings).to_string(index=False, float_format=lambda v: f"{v:.3f}"))
+    print(f"\nwrote {md}, sweep.csv and the heat maps beside it")
+    return 0
+
+
+def _seed001(args, job) -> object:
     from .experiments import seed001 as exp
 
-    settings = exp.Settings(**_overrides(args))
-    table, summary, wall = exp.run(settings, **_common(args))
+    if job is None:
+        return _settings(args, exp.Settings())
+    out, settings = job
+    table, summary, wall = exp.run(settings, path=args.path, **_common(args))
     md = exp.write_report(table, summary, wall, settings, out)
     print(f"Seed 001: mean |position error| [m], {settings.runs} realisations, {args.path} path, {wall:.2f} s")
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
@@ -228,11 +287,13 @@ def _seed001(args, out: Path) -> int:
     return 0
 
 
-def _seed002(args, out: Path) -> int:
+def _seed002(args, job) -> object:
     from .experiments import seed002 as exp
 
-    settings = exp.Settings(**_overrides(args))
-    per_run, traces, wall = exp.run(settings, **_common(args))
+    if job is None:
+        return _settings(args, exp.Settings())
+    out, settings = job
+    per_run, traces, wall = exp.run(settings, path=args.path, **_common(args))
     md = exp.write_report(per_run, traces, wall, settings, out, args.path)
     print(f"Seed 002: wheel pendulum through the sensor chain, {settings.runs} realisations, "
           f"{args.path} path, {wall:.2f} s")
@@ -272,7 +333,14 @@ def build_parser() -> argparse.ArgumentParser:
     models.add_argument("--duration", type=positive_float, default=5.0, help="simulated time [s] (default 5)")
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
                                             "campaign; writes tables, figures and summary.md")
-    exp.add_argument("name", choices=EXPERIMENTS, help="which experiment")
+    exp.add_argument("name", choices=EXPERIMENTS, help="which experiment (seed000-sweep: the robustness "
+                                                       "map of EKF, IAE and MF-IAE over wrong Q0 and R0)")
+    exp.add_argument("--config", help="named configuration of seed000: default (Q0 = R0 = 0.01 I, both "
+                                      "readings) or paper (Q0 = 1e-3 I, R0 = 10 I, eqs reading)")
+    exp.add_argument("--set", action="append", metavar="NAME=VALUE",
+                     help="change one setting (repeatable), e.g. --set q0=1e-3 --set mfiae_window=12; "
+                          "summary.md lists them all")
+    exp.add_argument("--settings", metavar="FILE", help="settings from a TOML file (e.g. a run's settings.toml)")
     exp.add_argument("--runs", type=positive_int, help="realisations per scenario (default: the paper's)")
     exp.add_argument("--path", choices=("fast", "master"), default="fast",
                      help="fast: vectorised truth and batched filters; master: every realisation "

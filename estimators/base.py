@@ -8,9 +8,8 @@ compiled to native code (:mod:`estimators._compiled`) and:
 * bound to the filter's numpy arrays (:class:`~estimators._buffered.BufferedFunction`,
   ping-pong between two copies of the state): :meth:`KalmanBase.step` is one native
   call plus the copies of ``u`` and ``y``;
-* folded over a whole trajectory with ``mapaccum`` (:meth:`KalmanBase.run`: one native
-  call per block of :data:`RUN_BLOCK` steps, returning every step's estimate,
-  covariance and diagnostics);
+* folded over a whole trajectory (:meth:`KalmanBase.run`: one native call, returning every
+  step's estimate, covariance and diagnostics; :mod:`estimators._fold`);
 * mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`).
 
 Missing measurements: the step takes a 0/1 ``mask`` per measurement channel; a NaN
@@ -41,14 +40,12 @@ from ._compiled import compile_functions
 from .history import NoiseHistory
 from .system import DiscreteModel
 
-__all__ = ["DIAGNOSTICS", "RUN_BLOCK", "FilterRun", "KalmanBase", "gated_gain", "joseph_update",
+__all__ = ["DIAGNOSTICS", "FilterRun", "KalmanBase", "gated_gain", "joseph_update",
            "mask_measurement", "symmetric"]
 
 OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
 #: Outputs of every fused step besides the state, in order.
 DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
-#: Steps per native call of :meth:`KalmanBase.run`.
-RUN_BLOCK = 256
 #: The step's inputs after the state arrays.
 STEP_INPUTS = ("u", "y", "mask", "gate", "nan_missing")
 
@@ -275,7 +272,8 @@ class KalmanBase:
         self._noise = {} if self.adapts_noise else noise     # fixed Q, R: step parameters
         self._cur = 0
         self._u, self._y, self._mask = np.zeros(m), np.zeros(p), np.ones(p)
-        self._const = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)])}
+        self._const = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
+                       **{k: np.asarray(v, float).ravel() for k, v in self._extra_params().items()}}
         self.k = 0
         key = self.cache_key + (backend,)
         if key not in system.cache:
@@ -294,6 +292,12 @@ class KalmanBase:
 
     def _extra_state_init(self) -> dict:
         """Initial values of extra state arrays (adaptive filters), by name."""
+        return {}
+
+    def _extra_params(self) -> dict:
+        """Values of extra fixed inputs of the step (e.g. adaptation bounds), by name; the
+        subclass adds a symbol of the same name to the step's inputs. Being inputs, not
+        constants, they do not change the compiled code."""
         return {}
 
     def _predict_expr(self, x, P, u, Q):
@@ -320,6 +324,9 @@ class KalmanBase:
         ins = {"u": self._sym("u", s.nu), "y": self._sym("y", s.ny), "mask": self._sym("mask", s.ny),
                "gate": self._sym("gate"), "nan_missing": self._sym("nan_missing")}
         (st if self.adapts_noise else ins).update(noise)
+        #: symbols of the filter-specific fixed inputs (see _extra_params)
+        self._param_syms = {k: self._sym(k, np.size(v)) for k, v in self._extra_params().items()}
+        ins.update(self._param_syms)
         y = ins["y"]
         # a channel is used if its mask is set and (unless NaN is an error) it is not NaN;
         # if_else keeps a NaN of an unused channel out of every expression
@@ -384,9 +391,9 @@ class KalmanBase:
         return {k: v[self._cur].copy() for k, v in self._pairs.items()}
 
     def parameter_arrays(self) -> dict[str, np.ndarray]:
-        """Copies of the step's fixed covariance inputs (``Q, R`` of a non-adaptive
-        filter; empty for an adaptive one), flat column-major."""
-        return {k: v.copy() for k, v in self._noise.items()}
+        """Copies of the step's fixed inputs, flat column-major: ``gate``,
+        ``nan_missing``, ``Q, R`` of a non-adaptive filter and any filter-specific ones."""
+        return {k: v.copy() for k, v in {**self._const, **self._noise}.items()}
 
     def step_function(self) -> ca.Function:
         """The uncompiled fused step (a CasADi Function; see the module documentation)."""
@@ -619,9 +626,8 @@ class KalmanBase:
             if lead:
                 outs[name][0, 0] = state[name[:-4]]
         views = {name: (a[:, 1:] if name.endswith("_new") else a) for name, a in outs.items()}
-        args = {"u": us[None], "y": ys[None], "mask": masks[None], "gate": np.array([[self.gate]]),
-                "nan_missing": np.array([[float(self.nan_is_missing)]]),
-                **{k: v[None] for k, v in self._noise.items()}}
+        args = {"u": us[None], "y": ys[None], "mask": masks[None],
+                **{k: v[None] for k, v in self.parameter_arrays().items()}}
         self.native_fold()(1, N, args, {k: v[None] for k, v in state.items()}, views)
         status = outs["status"][0, :, 0]
         if status.any():

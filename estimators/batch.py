@@ -1,10 +1,10 @@
 """Run many realisations of one filter in lockstep: one native call per step for all, or one
-native call per block of steps for whole trajectories.
+native call for whole trajectories of all.
 
-The filter's fused step Function is mapped over ``n_runs`` realisations
-(``casadi.Function.map``) and compiled, so a Monte Carlo campaign pays the Python
-overhead once per step (:meth:`BatchFilter.step`) or once per block of
-:data:`~estimators.base.RUN_BLOCK` steps (:meth:`BatchFilter.run`), not once per
+:meth:`BatchFilter.step` maps the filter's fused step over ``n_runs`` realisations
+(``casadi.Function.map``, compiled); :meth:`BatchFilter.run` folds it over whole
+trajectories of every realisation in native code (:mod:`estimators._fold`). A Monte
+Carlo campaign pays the Python overhead once per step, or once per campaign, not once per
 realisation.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ from fmu_models.errors import ConfigurationError, InputError, NumericalError, Ty
 
 from ._buffered import BufferedFunction
 from ._compiled import compile_functions
-from .base import BAD_INPUT, RUN_BLOCK, KalmanBase
+from .base import BAD_INPUT, KalmanBase
 
 __all__ = ["BatchFilter", "BatchRun"]
 
@@ -94,10 +94,9 @@ class BatchFilter:
                 raise ConfigurationError(f"x0 must be finite with shape ({self.n}, {self.nx}), got {x0.shape}")
             self._pairs["x"][0][:] = x0.ravel()
         self._cur = 0
-        consts = {"gate": template.gate, "nan_missing": float(template.nan_is_missing)}
         self._params = {k: np.tile(v, self.n) for k, v in template.parameter_arrays().items()}
         self._inputs = {step.name_in(i): (self._params[step.name_in(i)] if step.name_in(i) in self._params
-                                          else np.full(step.nnz_in(i), consts.get(step.name_in(i), 0.0)))
+                                          else np.zeros(step.nnz_in(i)))
                         for i in range(step.n_in()) if step.name_in(i) not in self._pairs}
         self._out = {step.name_out(i): np.zeros(step.nnz_out(i)) for i in range(step.n_out())
                      if not step.name_out(i).endswith("_new")}
@@ -165,7 +164,7 @@ class BatchFilter:
         return self.x
 
     def run(self, us, ys, masks=None) -> BatchRun:
-        """Whole trajectories of every realisation, one native call per block of steps.
+        """Whole trajectories of every realisation in one native call.
 
         Parameters
         ----------
@@ -183,47 +182,34 @@ class BatchFilter:
             ``on_failure="mark"``) or raises, naming it and the step.
         """
         R, nx, ny, nu = self.n, self.nx, self.ny, self.nu
-        ys = checks.float_array(ys, "ys")
+        ys = np.ascontiguousarray(checks.float_array(ys, "ys"))
         if ys.ndim != 3 or ys.shape[0] != R or ys.shape[2] != ny:
             raise InputError(f"ys must have shape ({R}, N, {ny}), got {ys.shape}")
         N = ys.shape[1]
         us = checks.float_array(us, "us")
-        us = np.broadcast_to(us.reshape(-1, N, nu) if us.ndim == 3 else us.reshape(1, N, nu), (R, N, nu))
+        try:
+            us = np.ascontiguousarray(np.broadcast_to(us.reshape(-1, N, nu) if us.ndim == 3
+                                                      else us.reshape(1, N, nu), (R, N, nu)))
+        except ValueError:
+            raise InputError(f"us must have shape (N, {nu}) or ({R}, N, {nu}), got {us.shape}") from None
         if not np.isfinite(us).all():
             raise InputError("us contains NaN or inf")
-        masks = np.ones((R, N, ny)) if masks is None else np.broadcast_to(checks.float_array(masks, "masks"),
-                                                                          (R, N, ny))
+        masks = (np.ones((R, N, ny)) if masks is None else
+                 np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         t = self.template
-        fn = t.folded_step(RUN_BLOCK, R)
-        sizes = {name: t.step_function().size_out(name) for name in
-                 [t.step_function().name_out(i) for i in range(t.step_function().n_out())]}
-        state = {k: v[self._cur].copy() for k, v in self._pairs.items()}
-        size_in = {k: t.step_function().size_in(k) for k in state}
-        keep = (*(f"{k}_new" for k in state), "nis", "accepted", "status")
-        parts: dict = {k: [] for k in keep}
-        for b0 in range(0, N, RUN_BLOCK):
-            n = min(RUN_BLOCK, N - b0)
-
-            def seq(a):  # (R, n, w) -> (w, R * RUN_BLOCK) with each run's block contiguous
-                pad = np.concatenate([a[:, b0:b0 + n], np.zeros((R, RUN_BLOCK - n, a.shape[2]))], axis=1)
-                return pad.transpose(2, 0, 1).reshape(a.shape[2], R * RUN_BLOCK)
-
-            args = {k: _runs_flat(v, R, size_in[k]) for k, v in state.items()}
-            args.update({k: _repeated(v, R, t.step_function().size_in(k), RUN_BLOCK)
-                         for k, v in self._params.items()})
-            args.update(u=seq(us), y=seq(ys), mask=seq(masks),
-                        gate=np.full((1, R * RUN_BLOCK), t.gate),
-                        nan_missing=np.full((1, R * RUN_BLOCK), float(t.nan_is_missing)))
-            res = fn.call(args)
-            for name in keep:
-                r, c = sizes[name]
-                a = np.asarray(res[name]).reshape(r, R, RUN_BLOCK, c)[:, :, :n, :]   # (r, R, n, c)
-                parts[name].append(a.transpose(1, 2, 0, 3))                          # (R, n, r, c)
-            for name in state:
-                last = parts[f"{name}_new"][-1][:, n - 1]                              # (R, r, c)
-                state[name] = last.transpose(0, 2, 1).reshape(R, -1).ravel()
-        cat = {k: np.concatenate(v, axis=1) for k, v in parts.items()}
-        status = cat["status"][:, :, 0, 0]
+        raw = t.step_function()
+        state = {k: v[self._cur].reshape(R, -1) for k, v in self._pairs.items()}
+        outs = {}
+        for i in range(raw.n_out()):
+            name = raw.name_out(i)
+            lead = 1 if name.endswith("_new") else 0
+            outs[name] = np.empty((R, N + lead, raw.nnz_out(i)))
+            if lead:
+                outs[name][:, 0] = state[name[:-4]]
+        views = {name: (a[:, 1:] if name.endswith("_new") else a) for name, a in outs.items()}
+        args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
+        t.native_fold()(R, N, args, state, views)
+        status = outs["status"][:, :, 0]
         bad = status != 0
         if bad.any() and self.on_failure == "raise":
             run, k = map(int, np.argwhere(bad)[0])
@@ -231,34 +217,18 @@ class BatchFilter:
             raise (InputError if status[run, k] == BAD_INPUT else NumericalError)(
                 f"batched {t.name}: {what} in realisation {run} at index {k}; state unchanged")
         self.failed |= bad.any(axis=1)
-        x0 = self.now("x").reshape(R, nx)
-        P0 = self.now("P").reshape(R, nx, nx).transpose(0, 2, 1)
-        Q0 = self.Q.diagonal(axis1=1, axis2=2)
-        R0 = self.R.diagonal(axis1=1, axis2=2)
+
+        def diag(name, n, fixed):
+            if name in outs:
+                return outs[name].reshape(R, N + 1, n, n).diagonal(axis1=2, axis2=3)
+            return np.repeat(fixed.reshape(R, n, n).diagonal(axis1=1, axis2=2)[:, None], N + 1, axis=1)
+
         out = BatchRun(
-            x=np.concatenate([x0[:, None], cat["x_new"][..., 0]], axis=1),
-            P=np.concatenate([P0[:, None], cat["P_new"]], axis=1),
-            nis=cat["nis"][:, :, 0, 0], accepted=cat["accepted"][:, :, 0, 0] != 0,
-            Q=(np.concatenate([Q0[:, None], cat["Q_new"].diagonal(axis1=2, axis2=3)], axis=1) if "Q_new" in cat
-               else np.repeat(Q0[:, None], N + 1, axis=1)),
-            R=(np.concatenate([R0[:, None], cat["R_new"].diagonal(axis1=2, axis2=3)], axis=1) if "R_new" in cat
-               else np.repeat(R0[:, None], N + 1, axis=1)),
+            x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
+            nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
+            Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
             failed=bad.any(axis=1))
-        for name, value in state.items():
-            self._pairs[name][self._cur][:] = value
+        for name in state:
+            self._pairs[name][self._cur][:] = outs[f"{name}_new"][:, -1].ravel()
         self.k += N
         return out
-
-
-def _runs_flat(flat: np.ndarray, runs: int, size) -> np.ndarray:
-    """Run-major flat state (each run's array column-major) as the mapped input matrix."""
-    r, c = size
-    return flat.reshape(runs, c, r).transpose(2, 0, 1).reshape(r, runs * c)
-
-
-def _repeated(flat: np.ndarray, runs: int, size, block: int) -> np.ndarray:
-    """A per-run fixed input (run-major flat, column-major each) repeated for every step
-    of a folded block, as the mapped folded Function's input matrix."""
-    r, c = size
-    per_run = flat.reshape(runs, c, r).transpose(0, 2, 1)             # (runs, r, c)
-    return np.tile(per_run, (1, 1, block)).transpose(1, 0, 2).reshape(r, runs * c * block)

@@ -99,18 +99,22 @@ class IAE(WindowedAdaptiveEKF):
 
     @property
     def cache_key(self):
-        """Type, window, adapted covariances, form and bounds."""
-        return (type(self).__name__, self.window, self.adapt, self.form, self.q_bounds, self.r_bounds)
+        """Type, window, adapted covariances and form (the bounds are step inputs)."""
+        return (type(self).__name__, self.window, self.adapt, self.form)
+
+    def _extra_params(self):
+        return {"q_bounds": self.q_bounds, "r_bounds": self.r_bounds}
 
     def _adapt(self, st, diag, C_I):
         Q, R = st["Q"], st["R"]
         if self.form == "full":          # adapted in numpy after the step
             return Q, R
+        qb, rb = self._param_syms["q_bounds"], self._param_syms["r_bounds"]
         if "R" in self.adapt:
-            R = _project_sym(C_I - (diag["S"] - st["R"]), *self.r_bounds, self.form)   # eq 35
+            R = _project_sym(C_I - (diag["S"] - st["R"]), rb[0], rb[1], self.form)   # eq 35
         if "Q" in self.adapt:
             K = diag["K"]
-            Q = _project_sym(ca.mtimes([K, C_I, K.T]), *self.q_bounds, self.form)     # eq 36
+            Q = _project_sym(ca.mtimes([K, C_I, K.T]), qb[0], qb[1], self.form)     # eq 36
         return Q, R
 
     def _adapted(self):

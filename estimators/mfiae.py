@@ -108,9 +108,12 @@ class MFIAE(WindowedAdaptiveEKF):
 
     @property
     def cache_key(self):
-        """Type, window, fuzzy system, gains, mapping and bounds."""
-        return (type(self).__name__, self.window, self.fuzzy, self.gain_q, self.gain_r, self.q_mapping,
-                self.per_channel, self.q_bounds, self.r_bounds)
+        """Type, window, fuzzy system, mapping and channel mode (gains and bounds are step
+        inputs)."""
+        return (type(self).__name__, self.window, self.fuzzy, self.q_mapping, self.per_channel)
+
+    def _extra_params(self):
+        return {"gains": (self.gain_q, self.gain_r), "q_bounds": self.q_bounds, "r_bounds": self.r_bounds}
 
     def _adapt(self, st, diag, C_I):
         ny, nx = self.system.ny, self.system.nx
@@ -128,10 +131,11 @@ class MFIAE(WindowedAdaptiveEKF):
             madj_q = ca.sum1(madj) / ny                         # eq 41 as printed
         else:
             madj_q = ca.trace(ca.mtimes([K, ca.diag(madj), K.T])) / nx
-        lo_q, hi_q = self.q_bounds
-        lo_r, hi_r = self.r_bounds
-        q_new = ca.fmin(ca.fmax(st["Q"][0, 0] - self.gain_q * madj_q, lo_q), hi_q)
-        r_new = ca.fmin(ca.fmax(ca.diag(st["R"]) - self.gain_r * madj, lo_r), hi_r)
+        p = self._param_syms
+        (lo_q, hi_q), (lo_r, hi_r), (g_q, g_r) = (p["q_bounds"][0], p["q_bounds"][1]), \
+            (p["r_bounds"][0], p["r_bounds"][1]), (p["gains"][0], p["gains"][1])
+        q_new = ca.fmin(ca.fmax(st["Q"][0, 0] - g_q * madj_q, lo_q), hi_q)
+        r_new = ca.fmin(ca.fmax(ca.diag(st["R"]) - g_r * madj, lo_r), hi_r)
         return q_new * ca.SX.eye(nx), ca.diag(r_new)            # eqs 41, 42
 
     def _step_spec(self):

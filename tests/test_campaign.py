@@ -65,7 +65,8 @@ def test_report_is_written(tmp_path):
     per_run, eps, examples, wall = seed000.run(SMALL, backend="serial", progress=False)
     md = seed000.write_report(per_run, eps, examples, wall, SMALL, tmp_path, "fast")
     text = md.read_text()
-    assert "Table 3" in text and "q_nominal" in text and "prose" in text and "4.4782" in text
+    assert "Table 3" in text and "| q0 |" in text and "prose" in text and "4.4782" in text
+    assert "Where we agree with the paper" in text and (tmp_path / "settings.toml").exists()
     for name in ("per_run.csv", "per_run.parquet", "eps_k.csv", "table3.csv", "figure3_eqs.png",
                  "figure4_prose.png"):
         assert (tmp_path / name).exists()

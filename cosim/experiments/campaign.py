@@ -4,14 +4,28 @@ A campaign is a list of independent tasks (e.g. one per scenario and noise readi
 a picklable ``(function, kwargs)``. Random streams are derived per (task, realisation)
 with :func:`realisation_seeds`, never from a shared generator, so results do not depend
 on the order, the partition into tasks or the backend.
+
+Interruption: Ctrl-C (and SIGTERM, which the command line turns into the same) stops a
+campaign at once: the worker processes ignore SIGINT, are terminated by the parent, and
+die with it if it is killed (Linux: ``PR_SET_PDEATHSIG``); :func:`run_tasks` then raises
+:class:`~fmu_models.errors.Interrupted` whose ``partial`` is the list of results with
+``None`` for the tasks that did not finish.
 """
 from __future__ import annotations
 
+import contextlib
+import logging
+import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Sequence
+import signal
+import sys
+from collections.abc import Callable, Sequence
 
 import numpy as np
+
+from fmu_models.errors import Interrupted, UnknownNameError
+
+__all__ = ["BACKENDS", "realisation_seeds", "run_tasks"]
 
 BACKENDS = ("processes", "serial", "dask")
 
@@ -21,6 +35,34 @@ def realisation_seeds(seed: int, *key: int, n: int = 2) -> list[int]:
     e.g. scenario and run index), from ``numpy.random.SeedSequence(seed, spawn_key=key)``."""
     ss = np.random.SeedSequence(seed, spawn_key=tuple(int(k) for k in key))
     return [int(s) for s in ss.generate_state(n)]
+
+
+def _worker_init() -> None:
+    """In each worker: leave Ctrl-C to the parent, and die with the parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+
+
+def _indexed(item):
+    i, (fn, kw) = item
+    return i, fn(**kw)
+
+
+@contextlib.contextmanager
+def _quiet(logger_name: str):
+    """Silence a library's logger for the duration (restored after)."""
+    log = logging.getLogger(logger_name)
+    level = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 
 def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes",
@@ -36,49 +78,78 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
         or a dask.distributed cluster (the current client, or a local one; needs the
         ``dask`` extra).
     n_jobs : int, optional
-        Worker processes for ``"processes"``.
+        Worker processes for ``"processes"`` and a local dask cluster.
     progress : bool
         Show a tqdm progress bar.
     desc : str
         Label of the progress bar.
+
+    Raises
+    ------
+    Interrupted
+        Ctrl-C or SIGTERM; ``partial`` holds the finished results (None elsewhere).
     """
     from tqdm.auto import tqdm
 
     if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        raise UnknownNameError(f"backend must be one of {BACKENDS}, got {backend!r}")
     results: list = [None] * len(tasks)
     bar = tqdm(total=len(tasks), desc=desc, disable=not progress, leave=False)
     try:
-        if backend == "serial" or len(tasks) == 1 or (n_jobs == 1 and backend == "processes"):
+        if backend == "serial" or len(tasks) <= 1 or (n_jobs == 1 and backend == "processes"):
             for i, (fn, kw) in enumerate(tasks):
                 results[i] = fn(**kw)
                 bar.update()
         elif backend == "processes":
-            workers = min(n_jobs or os.cpu_count() or 1, len(tasks))
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = {pool.submit(fn, **kw): i for i, (fn, kw) in enumerate(tasks)}
-                for fut in as_completed(futures):
-                    results[futures[fut]] = fut.result()
-                    bar.update()
+            _run_processes(tasks, results, n_jobs, bar)
         else:
-            try:
-                from dask.distributed import Client, as_completed as dask_completed, get_client
-            except ImportError:
-                raise ImportError("the dask backend needs dask.distributed: "
-                                  "pip install 'pendulum-cosim[dask]'") from None
-            try:
-                client, own = get_client(), False
-            except ValueError:
-                client, own = Client(processes=True, n_workers=n_jobs), True
-            try:
-                futures = [client.submit(fn, **kw, pure=False) for fn, kw in tasks]
-                index = {f.key: i for i, f in enumerate(futures)}
-                for fut in dask_completed(futures):
-                    results[index[fut.key]] = fut.result()
-                    bar.update()
-            finally:
-                if own:
-                    client.close()
+            _run_dask(tasks, results, n_jobs, bar)
+    except KeyboardInterrupt:
+        done = sum(r is not None for r in results)
+        raise Interrupted(f"interrupted after {done} of {len(tasks)} tasks", results) from None
     finally:
         bar.close()
     return results
+
+
+def _run_processes(tasks, results, n_jobs, bar) -> None:
+    workers = min(n_jobs or os.cpu_count() or 1, len(tasks))
+    method = "fork" if sys.platform.startswith("linux") else "spawn"
+    pool = multiprocessing.get_context(method).Pool(workers, initializer=_worker_init)
+    try:
+        for i, res in pool.imap_unordered(_indexed, list(enumerate(tasks))):
+            results[i] = res
+            bar.update()
+        pool.close()
+    except BaseException:
+        pool.terminate()            # kill the workers at once (Ctrl-C, SIGTERM, a task's error)
+        raise
+    finally:
+        pool.join()
+
+
+def _run_dask(tasks, results, n_jobs, bar) -> None:
+    try:
+        from dask.distributed import Client, get_client
+        from dask.distributed import as_completed as dask_completed
+    except ImportError:
+        raise ImportError("the dask backend needs dask.distributed: pip install 'pendulum-cosim[dask]'") from None
+    try:
+        client, own = get_client(), False
+    except ValueError:
+        with _quiet("distributed"):
+            client, own = Client(processes=True, n_workers=n_jobs, dashboard_address=None), True
+    futures = [client.submit(fn, **kw, pure=False) for fn, kw in tasks]
+    index = {f.key: i for i, f in enumerate(futures)}
+    try:
+        for fut in dask_completed(futures):
+            results[index[fut.key]] = fut.result()
+            bar.update()
+    except BaseException:
+        with _quiet("distributed"), contextlib.suppress(Exception):
+            client.cancel(futures)
+        raise
+    finally:
+        if own:
+            with _quiet("distributed"), contextlib.suppress(Exception):
+                client.close(timeout=5)

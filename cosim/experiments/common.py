@@ -39,35 +39,58 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
 
 
 def batch_estimates(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray, x0):
-    """Run one filter batched over the realisations: estimates (runs, N+1, nx) (the initial
-    estimate at k = 0), NEES and NIS (runs, N), and the realisations that failed."""
+    """Run one filter over all realisations in one native call: estimates (runs, N+1, nx)
+    (the initial estimate at k = 0), NEES (from the full covariance) and NIS (runs, N), and
+    the realisations that failed. ``us`` (N+1, nu): ``us[k]`` is held over step k -> k+1."""
     from estimators import BatchFilter
 
-    R, N1, nx = X.shape
-    batch = BatchFilter(make(), R, on_failure="mark")
-    est = np.empty_like(X)
-    est[:, 0] = x0
-    nees, nis = np.zeros((R, N1 - 1)), np.zeros((R, N1 - 1))
-    for k in range(1, N1):
-        est[:, k] = batch.step(us[k - 1], Y[:, k])
-        e = est[:, k] - X[:, k]
-        nees[:, k - 1] = np.einsum("ri,ri->r", e, np.linalg.solve(batch.P, e[..., None])[..., 0])
-        nis[:, k - 1] = batch.nis
-    return est, nees, nis, batch.failed.copy()
+    R = X.shape[0]
+    out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
+    e = out.x[:, 1:] - X[:, 1:]
+    with np.errstate(invalid="ignore", over="ignore"):
+        nees = np.einsum("rki,rki->rk", e, np.linalg.solve(out.P[:, 1:], e[..., None])[..., 0])
+    return out.x, nees, out.nis, out.failed.copy()
+
+
+def nees_from_outputs(err: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """NEES ``e^T P^{-1} e`` for errors (steps, nx) and covariances (steps, nx, nx)."""
+    return np.einsum("ki,ki->k", err, np.linalg.solve(P, err[..., None])[..., 0])
+
+
+def covariance_from_frame(df, tag: str, states) -> np.ndarray:
+    """Full covariances (steps, nx, nx) from an estimator component's outputs
+    (``P_<state>`` diagonal, ``P_<i>_<j>`` above it; ``covariance="full"``)."""
+    n = len(states)
+    P = np.empty((len(df), n, n))
+    for i, s in enumerate(states):
+        P[:, i, i] = df[f"{tag}.P_{s}"].to_numpy()
+        for j in range(i + 1, n):
+            P[:, i, j] = P[:, j, i] = df[f"{tag}.P_{i}_{j}"].to_numpy()
+    return P
+
+
+def new_figure(rows: int = 1, cols: int = 1, figsize=(8, 4), **subplot_kw):
+    """A matplotlib Figure of ``figsize`` (inches) and its ``rows x cols`` axes (2-D array),
+    without pyplot (no global backend or state); ``subplot_kw`` go to ``Figure.subplots``
+    (e.g. ``sharex=True``)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(rows, cols, squeeze=False, **subplot_kw)
 
 
 def master_realisation(plant, source, noise, sensor, makers: dict, T: float, duration: float):
     """One realisation through the co-simulation master: plant FMU, sensor, the filters,
-    then the source (so the filters predict with the input held over the last step) and
-    the process noise. Returns truth (N+1, nx), estimates by filter (N+1, nx), their
-    covariance diagonals and NIS (N,)."""
+    the source and the process noise (the order follows from the wiring). Returns truth
+    (N+1, nx), estimates by filter (N+1, nx), their full covariances (N+1, nx, nx) and
+    NIS (N,)."""
     from ..estimation import EstimatorComponent
     from ..master import Cosimulation
 
     states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
     inp = [p for p in plant.input_names if not p.startswith("w_")]
     tags = {name: f"f{i}" for i, name in enumerate(makers)}
-    ests = [EstimatorComponent(tags[n], makers[n], T) for n in makers]
+    ests = [EstimatorComponent(tags[n], makers[n], T, covariance="full") for n in makers]
     conn = {**{f"plant.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)},
             **{f"sensor.{m}": f"plant.{m}" for m in sensor.input_names},
             **{f"plant.w_{x}": f"noise.w_{x}" for x in states}}
@@ -77,6 +100,6 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
     df = Cosimulation([plant, sensor, *ests, source, noise], conn).run(duration)
     X = df[[f"plant.{x}" for x in states]].to_numpy()
     est = {n: df[[f"{t}.{x}" for x in states]].to_numpy() for n, t in tags.items()}
-    pdiag = {n: df[[f"{t}.P_{x}" for x in states]].to_numpy() for n, t in tags.items()}
+    cov = {n: covariance_from_frame(df, t, states) for n, t in tags.items()}
     nis = {n: df[f"{t}.nis"].to_numpy()[1:] for n, t in tags.items()}
-    return X, est, pdiag, nis
+    return X, est, cov, nis

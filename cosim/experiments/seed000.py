@@ -1,34 +1,43 @@
 """Seed 000 section 5: EKF, IAE and MF-IAE on the cart-pole under four noise scenarios.
 
-Truth (SPEC section 1): the Euler map, ``T = 0.01 s``, ``x0 = [0.5, 0, 1.8, 0.5]``, input
--0.5 N switching to +0.5 N at 2 s (Figure 2), 500 steps; process noise ``w ~ N(0, q I)``
-added each step, measurement ``y = [x, theta] + v``, ``v ~ N(0, r I)``. Scenarios
-``(sigma_q^2, sigma_r^2)``: (0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2). Two readings of
-the names (SPEC): ``"eqs"`` (eqs 24-25: ``q = sigma_q^2``, ``r = sigma_r^2``) and
-``"prose"`` (section 5's text: ``q = sigma_r^2``, ``r = sigma_q^2``).
+Truth (SPEC section 1): the Euler map, ``T = 0.01 s``, ``x0 = [0.5, 0, 1.8, 0.5]``, 500
+steps; process noise ``w ~ N(0, q I)`` added each step, measurement ``y = [x, theta] +
+v``, ``v ~ N(0, r I)``. Input: seed 000 Figure 2's PRBS of +/-0.5 N, -0.5 N until 2 s then
++0.5 N: here the maximal-length LFSR sequence of order 7 (taps 7, 6) started from state
+28, one bit per second (:func:`figure2_prbs`), whose first five bits ``0 0 1 1 1`` are the
+figure. Scenarios ``(sigma_q^2, sigma_r^2)``: (0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2).
+Two readings of the names (SPEC): ``"eqs"`` (eqs 24-25: ``q = sigma_q^2``, ``r =
+sigma_r^2``) and ``"prose"`` (section 5's text: ``q = sigma_r^2``, ``r = sigma_q^2``).
 
 Filters: EKF, IAE and MF-IAE from the same nominal (wrong) noise setting, and the EKF
 given the true Q and R (the bound an adaptive filter tries to reach). The paper gives no
-filter settings: every one is in :class:`Settings` and printed with the results.
+filter settings: every one is in :class:`Settings`, and two configurations are named
+(:data:`CONFIGS`): ``"default"`` (filters from Q = R = 0.01 I, both readings) and
+``"paper"`` (filters from Q0 = 1e-3 I, R0 = 10 I, eqs reading: the regime whose EKF row
+matches the paper's Table 3; MF-IAE as eqs 41-42 print it, unit gains, window 10).
 
-Two paths give the same numbers: ``fast`` (truth and all filters vectorised over the
-realisations) and ``master`` (each realisation through the co-simulation master with the
-plant FMU, process-noise and sensor components and the four filters as components).
-Both draw realisation ``r`` of scenario ``s`` from the seeds
-``realisation_seeds(seed, s, r)``.
+Two paths give the same numbers: ``fast`` (truth and all filters over all realisations in
+native calls) and ``master`` (each realisation through the co-simulation master with the
+plant FMU, process-noise and sensor components and the four filters as components). Both
+draw realisation ``r`` of scenario ``s`` from ``realisation_seeds(seed, s, r)`` and compute
+NEES from the full covariance.
 """
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from fmu_models.checks import positive, positive_int
+from fmu_models.errors import ConfigurationError, UnknownNameError
+
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
-from .common import batch_estimates, master_realisation, noise_components
+from .common import batch_estimates, master_realisation, new_figure, nees_from_outputs, noise_components
 from .common import simulate_truth as common_truth
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
@@ -44,48 +53,93 @@ STATES = ("x", "x_dot", "theta", "theta_dot")
 class Settings:
     """Every choice of the campaign, including those the paper leaves open.
 
-    Attributes: ``runs`` realisations per scenario; ``duration`` [s] and ``T`` [s];
-    ``x0``; the input step (``t_step``, ``u_before``, ``u_after``); filters: initial
-    estimate ``x0`` (the true initial state), ``P0`` (times I), the nominal noise
-    ``q_nominal``, ``r_nominal`` (times I) that EKF, IAE and MF-IAE start from,
-    ``iae_window`` and ``mfiae_window`` (N of eq 37; MF-IAE gains are its defaults);
-    ``seed`` of all random streams; ``divergence_threshold`` [state units].
+    Truth: ``runs`` realisations per scenario of ``duration`` [s] with period ``T`` [s]
+    from ``x0``; input: the PRBS of ``input_amplitude`` [N], LFSR ``input_order`` and
+    ``input_seed``, ``input_bit_time`` [s] per bit; ``scenarios`` and ``readings``.
+    Filters: initial estimate ``x0``, ``P0`` (times I); nominal noise (what EKF, IAE and
+    MF-IAE start from) ``q0``, ``r0`` (times I), or, when ``q0_factor`` / ``r0_factor`` are
+    set, that factor times the scenario's true variance (the robustness sweep); IAE:
+    ``iae_window``, ``iae_adapt`` ("both", "Q", "R"), ``iae_form``; MF-IAE:
+    ``mfiae_window``, ``mfiae_gain_q``, ``mfiae_gain_r``, ``mfiae_q_mapping`` ("literal",
+    "gain"), ``mfiae_per_channel``. ``seed`` of all random streams;
+    ``divergence_threshold`` [state units].
     """
 
     runs: int = 100
     duration: float = 5.0
     T: float = 0.01
     x0: tuple = (0.5, 0.0, 1.8, 0.5)
-    t_step: float = 2.0
-    u_before: float = -0.5
-    u_after: float = 0.5
+    input_amplitude: float = 0.5
+    input_order: int = 7
+    input_seed: int = 28
+    input_bit_time: float = 1.0
+    scenarios: tuple = SCENARIOS
+    readings: tuple = ("eqs", "prose")
     P0: float = 1.0
-    q_nominal: float = 0.01
-    r_nominal: float = 0.01
+    q0: float = 0.01
+    r0: float = 0.01
+    q0_factor: float | None = None
+    r0_factor: float | None = None
     iae_window: int = 20
-    mfiae_window: int = 50
+    iae_adapt: str = "both"
+    iae_form: str = "diagonal"
+    mfiae_window: int = 10
+    mfiae_gain_q: float = 1.0
+    mfiae_gain_r: float = 1.0
+    mfiae_q_mapping: str = "literal"
+    mfiae_per_channel: bool = False
     seed: int = 2026
     divergence_threshold: float = 1e3
-    scenarios: tuple = field(default=SCENARIOS)
+
+    def __post_init__(self):
+        positive_int(self.runs, "runs")
+        for name in ("duration", "T", "P0", "q0", "r0", "input_bit_time", "divergence_threshold",
+                     "mfiae_gain_q", "mfiae_gain_r"):
+            positive(getattr(self, name), name)
+        for name in ("q0_factor", "r0_factor"):
+            if getattr(self, name) is not None:
+                positive(getattr(self, name), name)
+        positive_int(self.seed, "seed", minimum=0)
+        if len(self.x0) != 4:
+            raise ConfigurationError(f"x0 must have 4 entries, got {self.x0}")
+        if not self.scenarios or any(len(sc) != 2 or min(sc) <= 0 for sc in self.scenarios):
+            raise ConfigurationError(f"scenarios must be pairs of positive variances, got {self.scenarios}")
+        bad = [r for r in self.readings if r not in READINGS]
+        if bad or not self.readings:
+            raise UnknownNameError(f"readings must be among {list(READINGS)}, got {self.readings}")
+        if self.steps < 1:
+            raise ConfigurationError("duration must be at least one period T")
 
     @property
     def steps(self) -> int:
         return int(round(self.duration / self.T))
 
 
+#: Named configurations (``--config``).
+CONFIGS = {"default": Settings(),
+           "paper": Settings(q0=1e-3, r0=10.0, readings=("eqs",))}
+
+
 def true_noise(scenario: tuple, reading: str) -> tuple[float, float]:
     """(process variance q, measurement variance r) of a scenario under a reading."""
     sq, sr = scenario
     if reading not in READINGS:
-        raise ValueError(f"reading must be one of {list(READINGS)}, got {reading!r}")
+        raise UnknownNameError(f"reading must be one of {list(READINGS)}, got {reading!r}")
     return (sq, sr) if reading == "eqs" else (sr, sq)
 
 
-def _system(s: Settings):
+def nominal_noise(s: Settings, q: float, r: float) -> tuple[float, float]:
+    """The noise variances (q0, r0) the EKF, IAE and MF-IAE start from."""
+    return (s.q0 if s.q0_factor is None else s.q0_factor * q,
+            s.r0 if s.r0_factor is None else s.r0_factor * r)
+
+
+@lru_cache(maxsize=4)
+def _system(T: float):
     from estimators import discretize
     from fmu_models import get_model
 
-    return discretize(get_model("cartpole"), s.T)
+    return discretize(get_model("cartpole"), T)
 
 
 def make_filters(system, s: Settings, q: float, r: float) -> dict:
@@ -93,20 +147,25 @@ def make_filters(system, s: Settings, q: float, r: float) -> dict:
     from estimators import EKF, IAE, MFIAE
 
     x0 = np.array(s.x0)
-    return {"EKF": lambda: EKF(system, x0, s.P0, s.q_nominal, s.r_nominal),
-            "IAE": lambda: IAE(system, x0, s.P0, s.q_nominal, s.r_nominal, window=s.iae_window),
-            "MF-IAE": lambda: MFIAE(system, x0, s.P0, s.q_nominal, s.r_nominal, window=s.mfiae_window),
+    q0, r0 = nominal_noise(s, q, r)
+    return {"EKF": lambda: EKF(system, x0, s.P0, q0, r0),
+            "IAE": lambda: IAE(system, x0, s.P0, q0, r0, window=s.iae_window, adapt=s.iae_adapt,
+                               form=s.iae_form),
+            "MF-IAE": lambda: MFIAE(system, x0, s.P0, q0, r0, window=s.mfiae_window, gain_q=s.mfiae_gain_q,
+                                    gain_r=s.mfiae_gain_r, q_mapping=s.mfiae_q_mapping,
+                                    per_channel=s.mfiae_per_channel),
             "EKF true Q,R": lambda: EKF(system, x0, s.P0, q, r)}
 
 
-def _input_component(s: Settings):
-    from ..sources import Step
+def figure2_prbs(s: Settings):
+    """The input source: Figure 2's PRBS (see the module documentation)."""
+    from ..sources import PRBS
 
-    return Step("force", s.T, s.t_step, s.u_before, s.u_after)
+    return PRBS("force", s.T, s.input_amplitude, s.input_bit_time, s.input_order, s.input_seed)
 
 
 def _inputs(s: Settings) -> np.ndarray:
-    src = _input_component(s)
+    src = figure2_prbs(s)
     src.reset(0.0)
     return np.array([src.output(k * s.T, None)[0] for k in range(s.steps + 1)])
 
@@ -123,8 +182,7 @@ def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]
     from fmu_models import get_model
 
     u = _inputs(s)
-    X, Y = common_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, ["x", "theta"],
-                        np.sqrt(r), seeds)
+    X, Y = common_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, ["x", "theta"], np.sqrt(r), seeds)
     return X, Y, u
 
 
@@ -134,22 +192,24 @@ def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, e
     for name, err in errors.items():
         e = err[:, 1:]
         div = metrics.diverged(e, s.divergence_threshold) | failed[name]
-        out["eps_k"][name] = metrics.eps_k(e)
-        out["per_run"][name] = {"eta": metrics.eta_per_run(e), "diverged": div,
-                                "rmse": np.sqrt(np.mean(e**2, axis=1)),
-                                "anees": nees[name].mean(axis=1), "anis": nis[name].mean(axis=1)}
+        with np.errstate(invalid="ignore", over="ignore"):
+            out["eps_k"][name] = metrics.eps_k(e)
+            out["per_run"][name] = {"eta": metrics.eta_per_run(e), "diverged": div,
+                                    "rmse": np.sqrt(np.mean(e**2, axis=1)),
+                                    "anees": nees[name].mean(axis=1), "anis": nis[name].mean(axis=1)}
     return out
 
 
 def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) -> dict:
-    """All realisations of one scenario and reading, every filter batched over them."""
+    """All realisations of one scenario and reading, every filter over all of them in
+    native calls."""
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
     seeds = [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in runs]
     X, Y, u = simulate_truth(s, q, r, seeds)
     errors, nees, nis, failed = {}, {}, {}, {}
-    for name, make in make_filters(_system(s), s, q, r).items():
+    for name, make in make_filters(_system(s.T), s, q, r).items():
         est, nees[name], nis[name], failed[name] = batch_estimates(make, X, Y, u[:, None], s.x0)
         errors[name] = est - X
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
@@ -157,10 +217,7 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) 
 
 
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None) -> dict:
-    """The same realisations, each run through the co-simulation master with the plant FMU.
-
-    (NEES on this path uses only the covariance diagonals the estimator components output.)
-    """
+    """The same realisations, each run through the co-simulation master with the plant FMU."""
     import tempfile
 
     from fmu_models.build import build_fmu
@@ -170,7 +227,7 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    makers = make_filters(_system(s), s, q, r)
+    makers = make_filters(_system(s.T), s, q, r)
     X = np.empty((len(runs), s.steps + 1, 4))
     E = {name: np.empty_like(X) for name in makers}
     NIS = {name: np.zeros((len(runs), s.steps)) for name in makers}
@@ -180,11 +237,11 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
                              start=dict(zip(STATES, s.x0)))
         for i, run in enumerate(runs):
             noise, sensor = _noise(s, q, r, *realisation_seeds(s.seed, scenario_index, run))
-            X[i], est, pdiag, nis = master_realisation(plant, _input_component(s), noise, sensor,
-                                                       makers, s.T, s.duration)
+            X[i], est, cov, nis = master_realisation(plant, figure2_prbs(s), noise, sensor, makers, s.T,
+                                                     s.duration)
             for n in makers:
                 E[n][i], NIS[n][i] = est[n], nis[n]
-                NEES[n][i] = np.sum((est[n][1:] - X[i][1:]) ** 2 / pdiag[n][1:], axis=1)
+                NEES[n][i] = nees_from_outputs(est[n][1:] - X[i][1:], cov[n][1:])
     errors = {n: E[n] - X for n in makers}
     failed = {n: np.zeros(len(runs), dtype=bool) for n in makers}
     example = {"truth": X[0], **{f"est {n}": E[n][0] for n in makers}}
@@ -192,50 +249,67 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
 
 
 # ---------------------------------------------------------------------------- campaign
-def run(settings: Settings = Settings(), path: str = "fast", readings=("eqs", "prose"),
+def run(settings: Settings = Settings(), path: str = "fast", readings=None,
         backend: str = "processes", n_jobs=None, progress: bool = True):
     """Run the campaign; returns ``(per_run, eps, examples, wall_time)``.
 
     ``per_run``: tidy DataFrame, one row per (reading, scenario, filter, realisation);
     ``eps``: DataFrame of eps_k (eq 43) by (reading, scenario, filter) and time.
+    ``readings`` defaults to the settings' readings. Interrupted (Ctrl-C, SIGTERM), it
+    raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` holds the same tuple
+    for the tasks that finished.
     """
+    from fmu_models.errors import Interrupted
+
     if path not in ("fast", "master"):
-        raise ValueError(f"path must be 'fast' or 'master', got {path!r}")
+        raise UnknownNameError(f"path must be 'fast' or 'master', got {path!r}")
+    readings = tuple(settings.readings if readings is None else readings)
     fn = fast_task if path == "fast" else master_task
     keys = [(rd, i) for rd in readings for i in range(len(settings.scenarios))]
     t0 = time.perf_counter()
     if path == "master":
         # one task per scenario and slice of realisations, so both cores stay busy
-        chunks = np.array_split(np.arange(settings.runs), max(1, min(settings.runs, 4)))
-        tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings, runs=list(c)))
-                 for rd, i in keys for c in chunks if len(c)]
+        chunks = [c for c in np.array_split(np.arange(settings.runs), max(1, min(settings.runs, 4))) if len(c)]
     else:
         chunks = [np.arange(settings.runs)]
-        tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings)) for rd, i in keys]
-    results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress,
-                        desc=f"seed000 ({path})")
-    wall = time.perf_counter() - t0
+    tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings,
+                       **({"runs": list(c)} if path == "master" else {})))
+             for rd, i in keys for c in chunks]
+    try:
+        results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=f"seed000 ({path})")
+    except Interrupted as e:
+        done = e.partial or [None] * len(tasks)
+        e.partial = _assemble(settings, keys, chunks, done, time.perf_counter() - t0)
+        raise
+    return _assemble(settings, keys, chunks, results, time.perf_counter() - t0)
+
+
+def _assemble(settings: Settings, keys, chunks, results, wall):
+    """The campaign's tables from the task results (None for tasks that did not finish)."""
     rows, eps_rows, examples = [], [], {}
-    nchunk = len([c for c in chunks if len(c)])
+    n = len(chunks)
     for j, (rd, i) in enumerate(keys):
-        parts = results[j * nchunk:(j + 1) * nchunk]
-        run_ids = np.concatenate([c for c in chunks if len(c)])
+        parts = [(c, res) for c, res in zip(chunks, results[j * n:(j + 1) * n]) if res is not None]
+        if not parts:
+            continue
         q, r = true_noise(settings.scenarios[i], rd)
+        q0, r0 = nominal_noise(settings, q, r)
         for name in FILTERS:
-            pr = {k: np.concatenate([p["per_run"][name][k] for p in parts]) for k in parts[0]["per_run"][name]}
-            for n, run_id in enumerate(run_ids):
-                rows.append({"reading": rd, "scenario": i + 1, "sigma_q2": settings.scenarios[i][0],
-                             "sigma_r2": settings.scenarios[i][1], "q_true": q, "r_true": r,
-                             "filter": name, "run": int(run_id), "eta": pr["eta"][n],
-                             "diverged": bool(pr["diverged"][n]), "anees": pr["anees"][n],
-                             "anis": pr["anis"][n],
-                             **{f"rmse_{x}": pr["rmse"][n, a] for a, x in enumerate(STATES)}})
-            w = np.array([len(c) for c in chunks if len(c)], float)
-            eps = sum(p["eps_k"][name] * wi for p, wi in zip(parts, w)) / w.sum()
+            for c, res in parts:
+                pr = res["per_run"][name]
+                for m, run_id in enumerate(c):
+                    rows.append({"reading": rd, "scenario": i + 1, "sigma_q2": settings.scenarios[i][0],
+                                 "sigma_r2": settings.scenarios[i][1], "q_true": q, "r_true": r,
+                                 "q0": q0, "r0": r0, "filter": name, "run": int(run_id), "eta": pr["eta"][m],
+                                 "diverged": bool(pr["diverged"][m]), "anees": pr["anees"][m],
+                                 "anis": pr["anis"][m],
+                                 **{f"rmse_{x}": pr["rmse"][m, a] for a, x in enumerate(STATES)}})
+            w = np.array([len(c) for c, _ in parts], float)
+            eps = sum(res["eps_k"][name] * wi for (_, res), wi in zip(parts, w)) / w.sum()
             for k, e in enumerate(eps, start=1):
                 eps_rows.append({"reading": rd, "scenario": i + 1, "filter": name, "k": k,
                                  "time": k * settings.T, "eps": e})
-        examples[(rd, i + 1)] = parts[0]["example"]
+        examples[(rd, i + 1)] = parts[0][1]["example"]
     return pd.DataFrame(rows), pd.DataFrame(eps_rows), examples, wall
 
 
@@ -243,60 +317,122 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
     """eta (eq 44) per reading, scenario and filter, with the paper's Table 3 beside it.
 
     eta is the mean over all realisations; ``diverged`` counts the runs flagged, and
-    ``eta (no div.)`` excludes them.
+    ``(no div.)`` excludes them; ``<filter> / bound`` is eta over the true-Q,R EKF's.
     """
     rows = []
     for (rd, sc), g in per_run.groupby(["reading", "scenario"], sort=True):
         row = {"reading": rd, "scenario": sc, "sigma_q2": g["sigma_q2"].iloc[0],
-               "sigma_r2": g["sigma_r2"].iloc[0],
+               "sigma_r2": g["sigma_r2"].iloc[0], "q0": g["q0"].iloc[0], "r0": g["r0"].iloc[0],
                "paper EKF": PAPER_ETA["EKF"][sc - 1], "paper MF-IAE": PAPER_ETA["MF-IAE"][sc - 1]}
         for name in FILTERS:
             f = g[g["filter"] == name]
             row[name] = f["eta"].mean()
-            ok = f[~f["diverged"]]
+            row[f"{name} ANEES"] = f["anees"].mean()
             row[f"{name} diverged"] = int(f["diverged"].sum())
             if f["diverged"].any():
+                ok = f[~f["diverged"]]
                 row[f"{name} (no div.)"] = ok["eta"].mean() if len(ok) else np.nan
+        for name in FILTERS[:3]:
+            row[f"{name} / bound"] = row[name] / row["EKF true Q,R"]
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path: str) -> Path:
-    """Tables (CSV, Parquet), figures (PNG) and a markdown summary into ``out_dir``."""
-    import matplotlib
+def agreement(table: pd.DataFrame) -> list[str]:
+    """Plain sentences on where the table agrees with the paper's Table 3 and where not."""
+    lines = []
+    for rd, g in table.groupby("reading", sort=False):
+        for label, ours, paper in (("EKF", "EKF", "paper EKF"), ("MF-IAE", "MF-IAE", "paper MF-IAE")):
+            ratio = g[ours] / g[paper]
+            within = ratio.between(0.9, 1.1)
+            cells = ", ".join(f"{r:.2f}" for r in ratio)
+            verdict = ("agrees with the paper within 10 % in every scenario" if within.all() else
+                       f"agrees within 10 % in {int(within.sum())} of {len(g)} scenarios")
+            lines.append(f"- {rd} reading, {label}: ours / paper = {cells}; {verdict}.")
+        bound = g["MF-IAE / bound"]
+        lines.append(f"- {rd} reading: MF-IAE / true-Q,R bound = {', '.join(f'{b:.2f}' for b in bound)} "
+                     f"(paper's MF-IAE / our bound: {', '.join(f'{p:.2f}' for p in g['paper MF-IAE'] / g['EKF true Q,R'])}); "
+                     f"IAE / bound = {', '.join(f'{b:.2f}' for b in g['IAE / bound'])}; "
+                     f"EKF / bound = {', '.join(f'{b:.2f}' for b in g['EKF / bound'])}.")
+    return lines
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path: str,
+                 config: str = "custom", partial: bool = False) -> Path:
+    """Tables (CSV, Parquet), figures (PNG), ``settings.toml`` and a markdown summary into
+    ``out_dir``; with ``partial`` the summary says the campaign was interrupted."""
+    from ..results import atomic_write
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    per_run.to_csv(out / "per_run.csv", index=False)
-    per_run.to_parquet(out / "per_run.parquet")
-    eps.to_csv(out / "eps_k.csv", index=False)
-    table = summary_table(per_run)
-    table.to_csv(out / "table3.csv", index=False)
-    agg = per_run.groupby(["reading", "filter"])[["anees", "anis"] + [f"rmse_{x}" for x in STATES]].mean()
-    agg.to_csv(out / "consistency_rmse.csv")
+    atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed000")))
+    atomic_write(out / "per_run.csv", lambda p: per_run.to_csv(p, index=False))
+    atomic_write(out / "per_run.parquet", per_run.to_parquet)
+    atomic_write(out / "eps_k.csv", lambda p: eps.to_csv(p, index=False))
+    table = summary_table(per_run) if len(per_run) else pd.DataFrame()
+    atomic_write(out / "table3.csv", lambda p: table.to_csv(p, index=False))
+    agg = (per_run.groupby(["reading", "filter"])[["anees", "anis"] + [f"rmse_{x}" for x in STATES]].mean()
+           if len(per_run) else pd.DataFrame())
+    atomic_write(out / "consistency_rmse.csv", agg.to_csv)
+    _figures(eps, examples, settings, out)
 
-    # Figure 3: scenario 1, first realisation, truth and estimates
+    lines = [f"# Seed 000 campaign ({path} path, configuration: {config})", ""]
+    if partial:
+        lines += ["**PARTIAL RESULTS: the campaign was interrupted; only the tasks that finished "
+                  "are in these tables.**", ""]
+    lines += [f"{settings.runs} realisations x {len(settings.scenarios)} scenarios x {len(FILTERS)} filters "
+              f"x {settings.steps} steps per reading; wall time {wall:.2f} s.", "",
+              "Input: the PRBS of seed 000 Figure 2: maximal-length LFSR of order "
+              f"{settings.input_order} started from state {settings.input_seed}, {settings.input_bit_time:g} s "
+              f"per bit, +/-{settings.input_amplitude:g} N (its first bits 0 0 1 1 1: -0.5 N until 2 s, "
+              "then +0.5 N).", ""]
+    if len(table):
+        cols = ["reading", "scenario", "sigma_q2", "sigma_r2", "paper EKF", "paper MF-IAE", *FILTERS]
+        lines += ["## Table 3: eta (eq 44), mean over realisations", "",
+                  "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        for _, row in table.iterrows():
+            lines.append("| " + " | ".join(f"{row[c]:.4f}" if isinstance(row[c], float) else str(row[c])
+                                           for c in cols) + " |")
+        lines += ["", "## Where we agree with the paper, and where not", "", *agreement(table), ""]
+        div = {c: int(table[c].sum()) for c in table.columns if c.endswith("diverged")}
+        lines += ["Diverged realisations (error not finite or above "
+                  f"{settings.divergence_threshold:g}): " + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), "",
+                  "## Consistency and per-state RMSE (mean over scenarios and realisations)", "",
+                  agg.to_markdown(floatfmt=".4f"), ""]
+    lines += ["## Settings (the paper gives none of the filter settings)", "",
+              "Rerun with `pendulum-cosim experiment seed000 --settings settings.toml` (this folder's file), "
+              "or change one with `--set name=value`.", "", "| setting | value |", "|---|---|"]
+    lines += [f"| {k} | {v} |" for k, v in asdict(settings).items()]
+    lines += ["", "Readings of the noise names:", ""] + [f"- **{k}**: {v}" for k, v in READINGS.items()]
+    lines += ["", "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
+    md = out / "summary.md"
+    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
+    return md
+
+
+def _figures(eps, examples, settings: Settings, out: Path) -> None:
+    from ..results import atomic_write
+
     for rd in sorted({k[0] for k in examples}):
+        if (rd, 1) not in examples:
+            continue
         ex = examples[(rd, 1)]
         t = np.arange(ex["truth"].shape[0]) * settings.T
-        fig, axes = plt.subplots(4, 1, figsize=(8, 8), sharex=True)
-        for a, ax in enumerate(axes):
+        fig, axes = new_figure(4, 1, figsize=(8, 8), sharex=True)
+        for a in range(4):
+            ax = axes[a, 0]
             ax.plot(t, ex["truth"][:, a], "k-", lw=1.2, label="truth")
             for name, style in (("EKF", "b--"), ("MF-IAE", "r-.")):
                 ax.plot(t, ex[f"est {name}"][:, a], style, lw=0.9, label=name)
             ax.set_ylabel(STATES[a])
             ax.grid(alpha=0.3)
-        axes[0].legend(fontsize=8)
-        axes[-1].set_xlabel("time [s]")
+        axes[0, 0].legend(fontsize=8)
+        axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"Seed 000 Figure 3: scenario 1, realisation 0 ({rd} reading)")
-        fig.tight_layout()
-        fig.savefig(out / f"figure3_{rd}.png", dpi=100)
-        plt.close(fig)
-        # Figure 4: eps_k over time
-        fig, ax = plt.subplots(figsize=(8, 3.5))
+        atomic_write(out / f"figure3_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+        fig, axes = new_figure(1, 1, figsize=(8, 3.5))
+        ax = axes[0, 0]
         for name in FILTERS:
             e = eps[(eps.reading == rd) & (eps.scenario == 1) & (eps["filter"] == name)]
             ax.plot(e["time"], e["eps"], lw=1, label=name)
@@ -306,30 +442,5 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         ax.set_title(f"Seed 000 Figure 4: scenario 1, {settings.runs} realisations ({rd} reading)")
-        fig.tight_layout()
-        fig.savefig(out / f"figure4_{rd}.png", dpi=100)
-        plt.close(fig)
+        atomic_write(out / f"figure4_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
 
-    lines = [f"# Seed 000 campaign ({path} path)", "",
-             f"{settings.runs} realisations x {len(settings.scenarios)} scenarios x {len(FILTERS)} filters "
-             f"x {settings.steps} steps per reading; wall time {wall:.2f} s.", "",
-             "## Settings (the paper gives none of the filter settings)", "",
-             "| setting | value |", "|---|---|"]
-    lines += [f"| {k} | {v} |" for k, v in asdict(settings).items()]
-    lines += ["", "Readings of the noise names:", ""] + [f"- **{k}**: {v}" for k, v in READINGS.items()]
-    lines += ["", "## Table 3: eta (eq 44), mean over realisations", ""]
-    cols = ["reading", "scenario", "sigma_q2", "sigma_r2", "paper EKF", "paper MF-IAE", *FILTERS]
-    lines.append("| " + " | ".join(cols) + " |")
-    lines.append("|" + "---|" * len(cols))
-    for _, row in table.iterrows():
-        lines.append("| " + " | ".join(f"{row[c]:.4f}" if isinstance(row[c], float) else str(row[c])
-                                       for c in cols) + " |")
-    div = {c: int(table[c].sum()) for c in table.columns if c.endswith("diverged")}
-    lines += ["", "Diverged realisations (error not finite or above "
-              f"{settings.divergence_threshold:g}): " + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), "",
-              "## Consistency and per-state RMSE (mean over scenarios and realisations)", "",
-              agg.to_markdown(floatfmt=".4f"), "",
-              "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
-    md = out / "summary.md"
-    md.write_text("\n".join(lines) + "\n")
-    return md

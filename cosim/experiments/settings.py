@@ -1,0 +1,117 @@
+"""Experiment settings from the command line and files, and back into the output.
+
+Every experiment keeps its choices in a frozen dataclass (``Settings``). A user changes
+any of them without editing code, from the command line (``--set q0=1e-3 --set
+r0=10``, repeatable) or from a TOML file (``--settings FILE``), and every run writes the
+settings it used to ``settings.toml`` beside its results, so that any table cell can be
+rerun with ``--settings out/.../settings.toml``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import typing
+from collections.abc import Iterable
+from pathlib import Path
+
+from fmu_models.errors import ConfigurationError, UnknownNameError
+
+__all__ = ["apply_overrides", "from_mapping", "load_settings", "to_toml"]
+
+
+def _field_types(cls) -> dict:
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints.get(f.name, type(f.default)) for f in dataclasses.fields(cls)}
+
+
+def _parse(text: str):
+    """A value from its command-line text: TOML syntax (``1e-3``, ``[1, 2]``, ``"eqs"``,
+    ``true``), else the bare text as a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _convert(name: str, value, kind, default):
+    """``value`` as the type of the field ``name`` (its annotation, else its default's)."""
+    origin = typing.get_origin(kind)
+    args = typing.get_args(kind)
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        if value is None or (isinstance(value, str) and value.lower() == "none"):
+            return None
+        kind = next(a for a in args if a is not type(None))
+    if kind is tuple or origin is tuple or isinstance(default, tuple):
+        if not isinstance(value, (list, tuple)):
+            value = [value]
+        return tuple(tuple(v) if isinstance(v, list) else v for v in value)
+    if kind is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigurationError(f"setting {name} must be true or false, got {value!r}")
+    if kind in (int, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigurationError(f"setting {name} must be a number, got {value!r}")
+        if kind is int and float(value) != int(value):
+            raise ConfigurationError(f"setting {name} must be an integer, got {value!r}")
+        return kind(value)
+    if kind is str:
+        return str(value)
+    return value
+
+
+def from_mapping(settings, values: dict):
+    """A copy of the dataclass ``settings`` with the fields in ``values`` replaced
+    (converted to each field's type); unknown names are refused, listing the valid ones."""
+    types = _field_types(type(settings))
+    unknown = sorted(set(values) - set(types))
+    if unknown:
+        raise UnknownNameError(f"unknown setting(s) {', '.join(unknown)}; valid: {', '.join(types)}")
+    new = {k: _convert(k, v, types[k], getattr(settings, k)) for k, v in values.items()}
+    return dataclasses.replace(settings, **new)
+
+
+def apply_overrides(settings, overrides: Iterable[str]):
+    """``settings`` with ``name=value`` overrides (command-line ``--set``) applied."""
+    values = {}
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigurationError(f"--set needs name=value, got {item!r}")
+        name, text = item.split("=", 1)
+        values[name.strip()] = _parse(text.strip())
+    return from_mapping(settings, values)
+
+
+def load_settings(settings, path):
+    """``settings`` with the values of the TOML file ``path`` (a flat table of fields)."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigurationError(f"no settings file {path}") from None
+    except IsADirectoryError:
+        raise ConfigurationError(f"{path} is a folder, not a settings file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigurationError(f"{path}: not valid TOML: {e}") from None
+    data.pop("experiment", None)
+    return from_mapping(settings, data)
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if v is None:
+        return '"none"'
+    return repr(v)
+
+
+def to_toml(settings, experiment: str) -> str:
+    """The dataclass ``settings`` as a TOML file that :func:`load_settings` reads back."""
+    lines = [f'experiment = "{experiment}"']
+    lines += [f"{f.name} = {_toml_value(getattr(settings, f.name))}" for f in dataclasses.fields(settings)]
+    return "\n".join(lines) + "\n"
