@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fmu_models.checks import positive, positive_int
+from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, UnknownNameError
 
 from . import metrics
@@ -92,14 +92,14 @@ class Settings:
     divergence_threshold: float = 1e3
 
     def __post_init__(self):
-        positive_int(self.runs, "runs")
-        for name in ("duration", "T", "P0", "q0", "r0", "input_bit_time", "divergence_threshold",
-                     "mfiae_gain_q", "mfiae_gain_r"):
+        from .settings import check_common
+
+        check_common(self)
+        for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
             positive(getattr(self, name), name)
         for name in ("q0_factor", "r0_factor"):
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
-        positive_int(self.seed, "seed", minimum=0)
         if len(self.x0) != 4:
             raise ConfigurationError(f"x0 must have 4 entries, got {self.x0}")
         if not self.scenarios or any(len(sc) != 2 or min(sc) <= 0 for sc in self.scenarios):
@@ -107,8 +107,6 @@ class Settings:
         bad = [r for r in self.readings if r not in READINGS]
         if bad or not self.readings:
             raise UnknownNameError(f"readings must be among {list(READINGS)}, got {self.readings}")
-        if self.steps < 1:
-            raise ConfigurationError("duration must be at least one period T")
 
     @property
     def steps(self) -> int:

@@ -58,6 +58,11 @@ class Settings:
     divergence_error: float = 0.5
     seed: int = 1
 
+    def __post_init__(self):
+        from .settings import check_common
+
+        check_common(self)
+
     @property
     def steps(self) -> int:
         return int(round(self.duration / self.T))
@@ -153,16 +158,16 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
 
 
 def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..results import atomic_write
+    from .common import new_figure
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    table.to_csv(out / "errors_at_times.csv", index=False)
+    atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed001")))
+    atomic_write(out / "errors_at_times.csv", lambda p: table.to_csv(p, index=False))
     t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = plt.subplots(len(summary), 1, figsize=(8, 3 * len(summary)), squeeze=False)
+    fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
     lines = ["# Seed 001: KF on the linearised model against the EKF", "",
              f"{settings.runs} realisations per case, {settings.duration:g} s; wall time {wall:.2f} s.", "",
              "## Settings", "", "| setting | value |", "|---|---|",
@@ -184,9 +189,7 @@ def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "errors.png", dpi=100)
-    plt.close(fig)
+    atomic_write(out / "errors.png", lambda p: fig.savefig(p, dpi=100, format="png"))
     md = out / "summary.md"
-    md.write_text("\n".join(lines) + "\n")
+    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
     return md

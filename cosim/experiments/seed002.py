@@ -66,6 +66,11 @@ class Settings:
     balanced_within: float = 0.05
     seed: int = 3
 
+    def __post_init__(self):
+        from .settings import check_common
+
+        check_common(self)
+
 
 def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
     from estimators import EKF, augment_rate_bias, discretize
@@ -174,17 +179,17 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..results import atomic_write
+    from .common import new_figure
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    per_run.to_csv(out / "per_run.csv", index=False)
+    atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed002")))
+    atomic_write(out / "per_run.csv", lambda p: per_run.to_csv(p, index=False))
     table = summary_table(per_run)
-    table.to_csv(out / "ekf_vs_inputs.csv", index=False)
-    fig, axes = plt.subplots(3, len(traces), figsize=(5 * len(traces), 7), sharex=True, squeeze=False)
+    atomic_write(out / "ekf_vs_inputs.csv", lambda p: table.to_csv(p, index=False))
+    fig, axes = new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
     for c, (case, df) in enumerate(traces.items()):
         for j, (x, fed) in enumerate(zip(STATES, ("fusion.alpha", "fusion.alpha_dot", "encoder.phi_dot"))):
             ax = axes[j, c]
@@ -196,9 +201,7 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
         axes[0, c].set_title(case)
         axes[0, c].legend(fontsize=7)
         axes[-1, c].set_xlabel("time [s]")
-    fig.tight_layout()
-    fig.savefig(out / "estimates.png", dpi=100)
-    plt.close(fig)
+    atomic_write(out / "estimates.png", lambda p: fig.savefig(p, dpi=100, format="png"))
     agg = per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
                                                "alpha amplitude ratio", "max |i| [A]"]].mean()
     lines = [f"# Seed 002: wheel pendulum, EKF on the sensor chain, LQR on the estimate ({path} path)", "",
@@ -211,5 +214,5 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
              agg.to_markdown(floatfmt=".4g"), "",
              f"The gyroscope offset is {settings.gyro_bias} rad/s.", "", "Figure: estimates.png"]
     md = out / "summary.md"
-    md.write_text("\n".join(lines) + "\n")
+    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
     return md

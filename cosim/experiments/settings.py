@@ -16,7 +16,27 @@ from pathlib import Path
 
 from fmu_models.errors import ConfigurationError, UnknownNameError
 
-__all__ = ["apply_overrides", "from_mapping", "load_settings", "to_toml"]
+__all__ = ["apply_overrides", "check_common", "from_mapping", "load_settings", "to_toml"]
+
+
+def check_common(settings) -> None:
+    """Checks every experiment's settings share: ``runs`` an integer >= 1, ``seed`` an
+    integer >= 0, ``duration`` and ``T`` positive with at least one step, and every other
+    number finite."""
+    import math
+
+    from fmu_models.checks import positive, positive_int
+
+    positive_int(settings.runs, "runs")
+    positive_int(settings.seed, "seed", minimum=0)
+    positive(settings.duration, "duration")
+    positive(settings.T, "T")
+    if round(settings.duration / settings.T) < 1:
+        raise ConfigurationError("duration must be at least one period T")
+    for f in dataclasses.fields(settings):
+        v = getattr(settings, f.name)
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigurationError(f"setting {f.name} must be finite, got {v}")
 
 
 def _field_types(cls) -> dict:
