@@ -417,6 +417,20 @@ class KalmanBase:
     nis = property(lambda self: float(self._diag["nis"][0]))
     accepted = property(lambda self: bool(self._diag["accepted"][0]))
 
+    def reset(self, x0=None, P0=None) -> None:
+        """Start again from ``x0`` (nx,) and ``P0`` (default: keep the current ones), with
+        the current Q and R; the step count and an adaptive filter's window restart too."""
+        n = self.system.nx
+        x = self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError)
+        P = self.P if P0 is None else checks.covariance(P0, n, "P0")
+        init = self._extra_state_init()
+        for name, (a, b) in self._pairs.items():
+            value = {"x": x, "P": P.ravel(order="F")}.get(name, init.get(name, a if self._cur == 0 else b))
+            a[:] = value
+            b[:] = value
+        self._cur, self.k = 0, 0
+        self._record()
+
     def set_noise(self, Q=None, R=None) -> None:
         """Replace Q and/or R (validated first: symmetric positive definite; on a refusal
         nothing changes)."""
@@ -522,8 +536,9 @@ class KalmanBase:
 
     def update(self, y, mask=None) -> np.ndarray:
         """Measurement update alone with ``y`` (ny,) (and ``mask``), taking the current
-        estimate as the prior: x and P are replaced by the update. Q and R do not adapt
-        here. Returns the posterior estimate."""
+        estimate as the prior: x and P are replaced by the update, and the diagnostics
+        (innovation, S, K, nis, accepted) describe it. Q and R do not adapt here. Returns
+        the posterior estimate."""
         s = self.system
         key = ("update", self.cache_key, self.backend)
         if key not in s.cache:
@@ -532,23 +547,29 @@ class KalmanBase:
                                self._sym("nan_missing"))
             valid = ms * ca.if_else(nms, not_nan(ys), 1)
             y_used = ca.if_else(valid, ys, 0)
-            xu, Pu, *_ = self._update_expr(xs, Ps, y_used, Rs, valid, gs)
+            xu, Pu, innov, S, K, nis, acc = self._update_expr(xs, Ps, y_used, Rs, valid, gs)
+            d = ca.densify
             fn = ca.Function("update", [xs, Ps, Rs, ys, ms, gs, nms],
-                             [ca.densify(xu), ca.densify(Pu), _status([y_used], [xu, _upper(Pu)])])
+                             [d(xu), d(Pu), d(innov), d(S), d(K), nis, acc, log_det(S),
+                              _status([y_used], [xu, _upper(Pu)])])
             s.cache[key] = compile_functions([fn], self.backend)[0][0]
         self._set(self._y, y, "y", True)
         if mask is None:
             self._mask[:] = 1.0
         else:
             self._set(self._mask, mask, "mask", True)
-        x, P, st = s.cache[key](self._now("x"), matrix(self._now("P"), s.nx, s.nx),
-                                matrix(self._now("R"), s.ny, s.ny), self._y, self._mask,
-                                self.gate, float(self.nan_is_missing))
-        self._status_arr[0] = float(st)
+        x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
+        res = s.cache[key](self._now("x"), matrix(self._now("P"), s.nx, s.nx),
+                           matrix(self._now("R"), s.ny, s.ny), self._y, self._mask,
+                           self.gate, float(self.nan_is_missing))
+        self._status_arr[0] = float(res[-1])
         if self._status_arr[0]:
             self._explain("update")
-        self._now("x")[:] = np.asarray(x).ravel()
-        self._now("P")[:] = np.asarray(P).ravel(order="F")
+        self._now("x")[:] = np.asarray(res[0]).ravel()
+        self._now("P")[:] = np.asarray(res[1]).ravel(order="F")
+        self._diag["x_prior"][:], self._diag["P_prior"][:] = x_prior, P_prior
+        for name, value in zip(("innov", "S", "K", "nis", "accepted", "logdet_S"), res[2:8]):
+            self._diag[name][:] = np.asarray(value).ravel(order="F")
         return self.x
 
     # ---------------------------------------------------------------- whole trajectories
@@ -564,7 +585,9 @@ class KalmanBase:
             s.cache[key] = NativeFold(self._raw_step, len(self._pairs), self.backend)
         return s.cache[key]
 
-    def _check_sequences(self, us, ys, masks):
+    def check_record(self, us, ys, masks=None):
+        """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
+        (N, ny), or :class:`InputError` / :class:`TypeMismatchError` naming the problem."""
         us = checks.float_array(us, "us")
         ys = checks.float_array(ys, "ys")
         N = ys.shape[0] if ys.ndim else 0
@@ -586,12 +609,17 @@ class KalmanBase:
                 raise InputError(f"{self.name}: masks must have shape ({N}, {self._ny}), got {m.shape}")
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
 
-    def run(self, us, ys, masks=None) -> FilterRun:
+    def run(self, us, ys, masks=None, y0=None) -> FilterRun:
         """Filter whole sequences in one native call: ``step(us[k], ys[k], masks[k])`` for
         ``k = 0..N-1``.
 
         Parameters
         ----------
+        y0 : array_like, shape (ny,), optional
+            A measurement of the initial state: ``update(y0)`` before the first step (the
+            model of pykalman and of EM over a record that starts with a measurement).
+            ``x[0]``, ``P[0]`` of the result are then the updated ones and the
+            log-likelihood includes it.
         us : array_like, shape (N, nu)
             Inputs; ``us[k]`` is held over the step that ends at measurement ``ys[k]``.
         ys : array_like, shape (N, ny)
@@ -610,9 +638,18 @@ class KalmanBase:
         InputError, NumericalError
             As :meth:`step`, naming the step; the filter's state is then unchanged.
         """
-        us, ys, masks = self._check_sequences(us, ys, masks)
+        us, ys, masks = self.check_record(us, ys, masks)
+        y0_ll = 0.0
+        if y0 is not None:
+            self.update(y0)
+            d = self._diag
+            used = int(np.sum((self._mask != 0) & ~(np.isnan(self._y) if self.nan_is_missing else False)))
+            if d["accepted"][0]:
+                y0_ll = -0.5 * float(d["nis"][0] + d["logdet_S"][0] + used * np.log(2 * np.pi))
         if not self.supports_batch:
-            return self._run_by_steps(us, ys, masks)
+            result = self._run_by_steps(us, ys, masks)
+            result.log_likelihood += y0_ll
+            return result
         N = len(ys)
         raw = self._raw_step
         state = self.state_arrays()
@@ -641,6 +678,7 @@ class KalmanBase:
                 self.k = k_saved
         cat = {name: a[0] for name, a in outs.items()}
         result = self._make_run(cat, us, ys, masks, init)
+        result.log_likelihood += y0_ll
         for name in state:                         # the filter now stands at the last step
             self._pairs[name][self._cur][:] = cat[f"{name}_new"][-1]
         for name in DIAGNOSTICS:

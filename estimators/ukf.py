@@ -6,20 +6,8 @@ import casadi as ca
 from fmu_models.checks import finite
 from fmu_models.errors import ConfigurationError
 
-from .base import KalmanBase, gated_gain, mask_measurement, symmetric
+from .base import KalmanBase, cholesky_lower, gated_gain, mask_measurement, symmetric
 from .system import DiscreteModel
-
-
-def cholesky_lower(P: ca.SX) -> ca.SX:
-    """Lower-triangular L with ``P = L L^T``, written out for a symbolic n x n matrix."""
-    n = P.shape[0]
-    L = ca.SX.zeros(n, n)
-    for j in range(n):
-        d = P[j, j] - sum((L[j, k] ** 2 for k in range(j)), ca.SX(0))
-        L[j, j] = ca.sqrt(d)
-        for i in range(j + 1, n):
-            L[i, j] = (P[i, j] - sum((L[i, k] * L[j, k] for k in range(j)), ca.SX(0))) / L[j, j]
-    return L
 
 
 class UKF(KalmanBase):
@@ -73,7 +61,9 @@ class UKF(KalmanBase):
         """Type and sigma-point parameters."""
         return (type(self).__name__, self.alpha, self.beta, self.kappa)
 
-    def _sigma_points(self, x, P):
+    def sigma_points(self, x, P):
+        """The 2n+1 scaled sigma points of (x, P), as CasADi columns (used by the filter and
+        by the unscented RTS smoother)."""
         n = self.system.nx
         L = cholesky_lower((n + self.lam) * P)
         return [x] + [x + L[:, i] for i in range(n)] + [x - L[:, i] for i in range(n)]
@@ -88,14 +78,14 @@ class UKF(KalmanBase):
     def _predict_expr(self, x, P, u, Q):
         s = self.system
         f = ca.Function("f", [s.x, s.u], [s.fx])
-        xp, Pp = self._mean_cov([f(p, u) for p in self._sigma_points(x, P)], self.Wm, self.Wc)
+        xp, Pp = self._mean_cov([f(p, u) for p in self.sigma_points(x, P)], self.Wm, self.Wc)
         return xp, symmetric(Pp + Q)
 
     def _update_expr(self, xp, Pp, y, R, valid, gate):
         s = self.system
         h = ca.Function("h", [s.x], [s.hx])
         # sigma points redrawn from the prior (x^-, P^-), so that Q is in S and Pxy
-        sig = self._sigma_points(xp, Pp)
+        sig = self.sigma_points(xp, Pp)
         sig_y = [h(p) for p in sig]
         yp, S = self._mean_cov(sig_y, self.Wm, self.Wc)
         S, innov, M = mask_measurement(valid, symmetric(S + R), y - yp)

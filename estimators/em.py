@@ -1,0 +1,190 @@
+"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record.
+
+The principled answer to unknown noise covariances (Shumway and Stoffer, 1982; Ghahramani
+and Hinton, 1996): iterate
+
+* E-step: run the filter with the current ``(x0, P0, Q, R)`` (its log-likelihood is the
+  trace), smooth the pass (:func:`~estimators.smoother.rts_smooth`);
+* M-step: with the smoothed ``xs_k, Ps_k`` and lag-one covariances ``Ps_{k+1,k}``,
+  ``e_k = xs_{k+1} - f(xs_k, u_k)``, ``F_k = df/dx(xs_k, u_k)``, ``r_k = y_k - h(xs_k)``,
+  ``H_k = dh/dx(xs_k)``::
+
+      Q  = 1/N sum_k [ e_k e_k^T + F_k Ps_k F_k^T + Ps_{k+1} - Ps_{k+1,k} F_k^T - F_k Ps_{k+1,k}^T ]
+      R  = 1/M sum_k [ r_k r_k^T + H_k Ps_k H_k^T ]           (entries over the valid channels)
+      x0 = xs_0,  P0 = Ps_0
+
+  exact for a linear model (the log-likelihood never decreases), and for a nonlinear one
+  the same formulas on the EKF/extended-RTS linearisation (a first-order approximation).
+
+Each estimate is kept symmetric positive definite (eigenvalues at least ``floor``) in the
+chosen ``structure``: ``"full"``, ``"diagonal"`` or ``"scalar"`` (``sigma^2 I``, the form
+of seed 000 eqs 24-25; the M-step of a scalar covariance is the mean of the diagonal).
+Stopping rule: the relative change of the log-likelihood falls below ``tol``, or
+``n_iter`` iterations.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from fmu_models import checks
+from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+
+from .base import KalmanBase
+from .smoother import rts_smooth
+
+__all__ = ["STRUCTURES", "EMResult", "em_noise"]
+
+STRUCTURES = ("full", "diagonal", "scalar")
+LEARNABLE = ("Q", "R", "x0", "P0")
+
+
+class EMResult:
+    """What :func:`em_noise` learned.
+
+    Attributes
+    ----------
+    Q, R, x0, P0 : ndarray
+        The learned values (unlearned ones as given).
+    log_likelihood : list of float
+        The log-likelihood of the record at each iteration's parameters (the first entry
+        at the starting values, the last at the returned ones).
+    iterations : int
+        M-steps done.
+    converged : bool
+        True if the stopping rule met ``tol`` before ``n_iter``.
+    """
+
+    def __init__(self, **values):
+        self.__dict__.update(values)
+
+
+def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
+    n = M.shape[0]
+    if structure == "scalar":
+        return max(float(np.trace(M)) / n, floor) * np.eye(n)
+    if structure == "diagonal":
+        return np.diag(np.maximum(np.diag(M), floor))
+    w, V = np.linalg.eigh(0.5 * (M + M.T))
+    return (V * np.maximum(w, floor)) @ V.T
+
+
+def _terms(filt: KalmanBase):
+    """Compiled per-step M-step terms (cached on the model): transition ``(xs_k, xs_k1, Ps_k,
+    Ps_k1, Plag, u) -> Q term`` and measurement ``(xs, Ps, y, mask) -> (R term, counts)``."""
+    from ._fold import NativeFold
+
+    s = filt.system
+    key = ("em", filt.cache_key, filt.backend)
+    if key not in s.cache:
+        n, p = s.nx, s.ny
+        x0, x1, u = ca.SX.sym("xs", n), ca.SX.sym("xs1", n), ca.SX.sym("u", s.nu)
+        P0, P1, L = ca.SX.sym("Ps", n, n), ca.SX.sym("Ps1", n, n), ca.SX.sym("Plag", n, n)
+        f = ca.substitute(s.fx, ca.vertcat(s.x, s.u), ca.vertcat(x0, u))
+        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x0, u))
+        e = x1 - f
+        FL = ca.mtimes(F, L.T)
+        q_term = ca.mtimes(e, e.T) + ca.mtimes([F, P0, F.T]) + P1 - FL.T - FL
+        trans = ca.Function("emq", [x0, x1, P0, P1, L, u], [ca.densify(q_term)],
+                            ["xs", "xs1", "Ps", "Ps1", "Plag", "u"], ["q"])
+        y, m = ca.SX.sym("y", p), ca.SX.sym("mask", p)
+        r = m * (y - ca.substitute(s.hx, s.x, x0))
+        H = ca.substitute(ca.jacobian(s.hx, s.x), s.x, x0)
+        M = ca.mtimes(m, m.T)
+        r_term = M * (ca.mtimes(r, r.T) + ca.mtimes([H, P0, H.T]))
+        meas = ca.Function("emr", [x0, P0, y, m], [ca.densify(r_term), ca.densify(M)],
+                           ["xs", "Ps", "y", "mask"], ["r", "count"])
+        s.cache[key] = (NativeFold(trans, 0, filt.backend), NativeFold(meas, 0, filt.backend))
+    return s.cache[key]
+
+
+def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, tol: float = 1e-6,
+             learn=("Q", "R"), structure: str = "full", floor: float = 1e-12) -> EMResult:
+    """Learn Q and R (and optionally x0, P0) of ``filt`` from one record by EM.
+
+    Parameters
+    ----------
+    filt : KF, EKF or UKF
+        The filter; its current x, P, Q, R are the starting values. At the end it holds
+        the learned values, reset to the start of the record.
+    us, ys, masks
+        The record, as :meth:`~estimators.base.KalmanBase.run` takes it.
+    y0 : array_like, shape (ny,), optional
+        A measurement of the initial state (as in :meth:`~estimators.base.KalmanBase.run`).
+    n_iter : int
+        Most iterations (default 50).
+    tol : float
+        Stop when ``|LL_i - LL_{i-1}| <= tol |LL_i|`` (default 1e-6).
+    learn : sequence of {"Q", "R", "x0", "P0"}
+        What to learn (default Q and R).
+    structure : {"full", "diagonal", "scalar"}
+        The form kept for Q and R (and P0).
+    floor : float
+        Smallest eigenvalue allowed in a learned covariance (default 1e-12).
+
+    Returns
+    -------
+    EMResult
+
+    Raises
+    ------
+    TypeMismatchError
+        An adaptive filter (its Q and R are not fixed parameters).
+    """
+    if not isinstance(filt, KalmanBase):
+        raise TypeMismatchError(f"em_noise needs a filter, got {type(filt).__name__}")
+    if filt.adapts_noise or not filt.supports_batch:
+        raise TypeMismatchError(f"{filt.name} adapts Q and R itself; EM learns them for a KF, EKF or UKF")
+    if structure not in STRUCTURES:
+        raise UnknownNameError(f"structure must be one of {STRUCTURES}, got {structure!r}")
+    learn = tuple(learn)
+    if not learn or not set(learn) <= set(LEARNABLE):
+        raise ConfigurationError(f"learn must name some of {LEARNABLE}, got {learn!r}")
+    n_iter = checks.positive_int(n_iter, "n_iter")
+    tol = checks.positive(tol, "tol")
+    floor = checks.positive(floor, "floor")
+    us, ys, masks = filt.check_record(us, ys, masks)
+    x0, P0, Q, R = filt.x, filt.P, filt.Q, filt.R
+    trans, meas = _terms(filt)
+    N, nx, ny = len(ys), filt.system.nx, filt.system.ny
+    y_all = ys if y0 is None else np.vstack([checks.vector(y0, ny, "y0"), ys])
+    m_all = masks if y0 is None else np.vstack([np.ones(ny), masks])
+    m_all = np.ascontiguousarray(m_all * ~np.isnan(y_all))
+    y_all = np.ascontiguousarray(np.nan_to_num(y_all))
+    ll, converged, it = [], False, 0
+    for it in range(n_iter + 1):
+        filt.set_noise(Q, R)
+        filt.reset(x0, P0)
+        run = filt.run(us, ys, masks, y0)
+        ll.append(run.log_likelihood)
+        if it and abs(ll[-1] - ll[-2]) <= tol * abs(ll[-1]):
+            converged = True
+            break
+        if it == n_iter:
+            break
+        sm = rts_smooth(filt, run)
+        xs = np.ascontiguousarray(sm.x)
+        Ps = np.ascontiguousarray(sm.P.transpose(0, 2, 1)).reshape(N + 1, -1)     # column-major rows
+        lag = np.ascontiguousarray(sm.P_lag.transpose(0, 2, 1)).reshape(N, -1)
+        if "Q" in learn:
+            qt = np.empty((1, N, nx * nx))
+            trans(1, N, {"xs": xs[:-1][None], "xs1": xs[1:][None], "Ps": Ps[:-1][None], "Ps1": Ps[1:][None],
+                         "Plag": lag[None], "u": us[None]}, {}, {"q": qt})
+            Q = _project(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, structure, floor)
+        if "R" in learn:
+            first = 0 if y0 is not None else 1
+            K = len(y_all)
+            rt, ct = np.empty((1, K, ny * ny)), np.empty((1, K, ny * ny))
+            meas(1, K, {"xs": xs[first:][None], "Ps": Ps[first:][None], "y": y_all[None], "mask": m_all[None]},
+                 {}, {"r": rt, "count": ct})
+            counts = ct[0].sum(axis=0).reshape(ny, ny, order="F")
+            total = rt[0].sum(axis=0).reshape(ny, ny, order="F")
+            R_new = np.where(counts > 0, total / np.maximum(counts, 1), R)
+            R = _project(R_new, structure, floor)
+        if "x0" in learn:
+            x0 = sm.x[0].copy()
+        if "P0" in learn:
+            P0 = _project(sm.P[0], "full" if structure == "full" else structure, floor)
+    filt.set_noise(Q, R)
+    filt.reset(x0, P0)
+    return EMResult(Q=Q, R=R, x0=x0, P0=P0, log_likelihood=ll, iterations=it, converged=converged)

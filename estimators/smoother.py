@@ -1,0 +1,145 @@
+"""Rauch-Tung-Striebel smoothing of a stored filter pass, in native code.
+
+:func:`rts_smooth` takes a filter and the :class:`~estimators.base.FilterRun` its
+:meth:`~estimators.base.KalmanBase.run` returned, and runs the backward pass from the last
+step to the first (Rauch, Tung and Striebel, 1965), one compiled step per time step,
+folded in native code (:mod:`estimators._fold`), with the filter's own predictions
+``x^-_{k+1}``, ``P^-_{k+1}`` (so time-varying or adapted Q is used as the filter used it):
+
+* KF and EKF-family filters (the extended RTS smoother on the exact CasADi Jacobian
+  ``F_k = df/dx`` at the filtered ``x_k``)::
+
+      C_k  = P_k F_k^T (P^-_{k+1})^{-1}            (by a solve, no inverse)
+      xs_k = x_k + C_k (xs_{k+1} - x^-_{k+1})
+      Ps_k = P_k + C_k (Ps_{k+1} - P^-_{k+1}) C_k^T
+
+* the UKF (the unscented RTS smoother of Särkkä, 2008): ``C_k = D_k (P^-_{k+1})^{-1}``
+  with ``D_k`` the cross-covariance of the sigma points of ``(x_k, P_k)`` and their images
+  under ``f``, the filter's own sigma-point parameters.
+
+The lag-one covariance ``Cov(x_{k+1}, x_k | all) = Ps_{k+1} C_k^T`` comes with it, for EM
+(:mod:`estimators.em`).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from fmu_models.errors import NumericalError, TypeMismatchError
+
+from .base import FilterRun, KalmanBase, symmetric
+from .ukf import UKF
+
+__all__ = ["Smoothed", "rts_smooth", "smoother_step"]
+
+
+class Smoothed:
+    """Smoothed estimates of a record of N steps.
+
+    Attributes
+    ----------
+    x : ndarray, shape (N + 1, nx)
+        Smoothed states ``E[x_k | all measurements]``, k = 0..N.
+    P : ndarray, shape (N + 1, nx, nx)
+        Their covariances.
+    P_lag : ndarray, shape (N, nx, nx)
+        ``Cov(x_{k+1}, x_k | all)`` for k = 0..N-1.
+    C : ndarray, shape (N, nx, nx)
+        Smoother gains.
+    """
+
+    def __init__(self, x, P, P_lag, C):
+        self.x, self.P, self.P_lag, self.C = x, P, P_lag, C
+
+    def to_frame(self, filt: KalmanBase):
+        """DataFrame indexed by step k with the smoothed states and variances."""
+        import pandas as pd
+
+        names = filt.system.state_names
+        data = {n: self.x[:, i] for i, n in enumerate(names)}
+        data.update({f"P_{n}": self.P[:, i, i] for i, n in enumerate(names)})
+        return pd.DataFrame(data, index=pd.RangeIndex(len(self.x), name="k"))
+
+
+def smoother_step(filt: KalmanBase) -> ca.Function:
+    """The backward step ``(xs, Ps, x, P, xp, Pp, u) -> (xs_new, Ps_new, C, Plag)`` for the
+    filter's model: extended RTS, or unscented RTS for a :class:`~estimators.UKF`."""
+    s = filt.system
+    n = s.nx
+    xs, Ps = ca.SX.sym("xs", n), ca.SX.sym("Ps", n, n)
+    x, P, xp, Pp = ca.SX.sym("x", n), ca.SX.sym("P", n, n), ca.SX.sym("xp", n), ca.SX.sym("Pp", n, n)
+    u = ca.SX.sym("u", s.nu)
+    P_, Pp_, Ps_ = symmetric(P), symmetric(Pp), symmetric(Ps)
+    if isinstance(filt, UKF):
+        f = ca.Function("f", [s.x, s.u], [s.fx])
+        sig = filt.sigma_points(x, P_)
+        img = [f(p, u) for p in sig]
+        m = sum((w * p for w, p in zip(filt.Wm, img)), ca.SX.zeros(n))
+        D = sum((w * ca.mtimes(p - x, (q - m).T) for w, p, q in zip(filt.Wc, sig, img)), ca.SX.zeros(n, n))
+    else:
+        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
+        D = ca.mtimes(P_, F.T)
+    C = ca.solve(Pp_, D.T).T                        # C Pp = D, Pp symmetric
+    xs_new = x + ca.mtimes(C, xs - xp)
+    Ps_new = symmetric(P_ + ca.mtimes([C, Ps_ - Pp_, C.T]))
+    lag = ca.mtimes(Ps_, C.T)
+    d = ca.densify
+    return ca.Function("rts", [xs, Ps, x, P, xp, Pp, u], [d(xs_new), d(Ps_new), d(C), d(lag)],
+                       ["xs", "Ps", "x", "P", "xp", "Pp", "u"], ["xs_new", "Ps_new", "C", "Plag"])
+
+
+def _fold(filt: KalmanBase):
+    from ._fold import NativeFold
+
+    s = filt.system
+    key = ("rts", filt.cache_key, filt.backend)
+    if key not in s.cache:
+        s.cache[key] = NativeFold(smoother_step(filt), 2, filt.backend)
+    return s.cache[key]
+
+
+def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
+    """Smooth the filter pass ``run`` that ``filt`` produced (see the module documentation).
+
+    Parameters
+    ----------
+    filt : KalmanBase
+        The filter (its model and, for the UKF, its sigma-point parameters are used).
+    run : FilterRun
+        What ``filt.run(us, ys)`` returned.
+
+    Raises
+    ------
+    NumericalError
+        The smoothed estimate became non-finite (a singular predicted covariance).
+    """
+    if not isinstance(filt, KalmanBase) or not isinstance(run, FilterRun):
+        raise TypeMismatchError("rts_smooth needs a filter and the FilterRun of its run()")
+    N, nx = len(run.x) - 1, filt.system.nx
+
+    def flat(a):                                    # (K, nx, nx) symmetric -> (K, nx*nx) rows
+        return np.ascontiguousarray(a).reshape(len(a), -1)
+
+    X, P = np.ascontiguousarray(run.x), flat(run.P)
+    xp, Pp = np.ascontiguousarray(run.x_prior), flat(run.P_prior)
+    us = np.ascontiguousarray(run.us)
+    xs = np.empty((N + 1, nx))
+    Ps = np.empty((N + 1, nx * nx))
+    C = np.empty((N, nx * nx))
+    lag = np.empty((N, nx * nx))
+    xs[N], Ps[N] = X[N], P[N]
+    if N:
+        # backward: step j handles k = N-1-j; reversed views have negative strides
+        args = {"x": X[N - 1::-1][None], "P": P[N - 1::-1][None], "xp": xp[::-1][None], "Pp": Pp[::-1][None],
+                "u": us[::-1][None]}
+        outs = {"xs_new": xs[N - 1::-1][None], "Ps_new": Ps[N - 1::-1][None], "C": C[::-1][None],
+                "Plag": lag[::-1][None]}
+        _fold(filt)(1, N, args, {"xs": xs[N][None], "Ps": Ps[N][None]}, outs)
+    if not (np.isfinite(xs).all() and np.isfinite(Ps).all()):
+        raise NumericalError(f"{filt.name}: the smoothed estimate became non-finite (singular predicted "
+                             "covariance?)")
+
+    def mats(a):                                    # column-major rows -> (K, nx, nx)
+        return a.reshape(len(a), nx, nx).transpose(0, 2, 1)
+
+    return Smoothed(xs, mats(Ps), mats(lag), mats(C))
