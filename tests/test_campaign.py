@@ -70,7 +70,7 @@ def test_report_is_written(tmp_path):
     for name in ("per_run.csv", "per_run.parquet", "eps_k.csv", "table3.csv", "figure3_eqs.png",
                  "figure4_prose.png"):
         assert (tmp_path / name).exists()
-    assert len(per_run) == 2 * 2 * 4 * 3
+    assert len(per_run) == 2 * 2 * len(seed000.FILTERS) * 3
 
 
 def test_run_tasks_refuses_unknown_backend():

@@ -45,7 +45,9 @@ READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 
             "prose": "section 5 prose: sigma_r^2 is the process variance, sigma_q^2 the measurement variance"}
 #: Table 3 of seed 000 (eta, eq 44).
 PAPER_ETA = {"EKF": (4.4782, 5.2441, 4.4426, 4.9982), "MF-IAE": (2.2153, 2.2109, 2.6581, 2.6800)}
-FILTERS = ("EKF", "IAE", "MF-IAE", "EKF true Q,R")
+FILTERS = ("EKF", "IAE", "MF-IAE", "EKF EM", "EKF true Q,R")
+#: Run index of the training realisation EM learns from (never one of the test runs).
+TRAINING_RUN = 2**31 - 1
 STATES = ("x", "x_dot", "theta", "theta_dot")
 
 
@@ -61,8 +63,10 @@ class Settings:
     set, that factor times the scenario's true variance (the robustness sweep); IAE:
     ``iae_window``, ``iae_adapt`` ("both", "Q", "R"), ``iae_form``; MF-IAE:
     ``mfiae_window``, ``mfiae_gain_q``, ``mfiae_gain_r``, ``mfiae_q_mapping`` ("literal",
-    "gain"), ``mfiae_per_channel``. ``seed`` of all random streams;
-    ``divergence_threshold`` [state units].
+    "gain"), ``mfiae_per_channel``. "EKF EM": an EKF with Q and R learned by EM
+    (:func:`estimators.em_noise`, scalar forms, from the nominal values) on one separate
+    training realisation of the scenario, ``em_iterations`` at most, relative tolerance
+    ``em_tol``. ``seed`` of all random streams; ``divergence_threshold`` [state units].
     """
 
     runs: int = 100
@@ -88,6 +92,8 @@ class Settings:
     mfiae_gain_r: float = 1.0
     mfiae_q_mapping: str = "literal"
     mfiae_per_channel: bool = False
+    em_iterations: int = 100
+    em_tol: float = 1e-6
     seed: int = 2026
     divergence_threshold: float = 1e3
 
@@ -140,18 +146,32 @@ def _system(T: float):
     return discretize(get_model("cartpole"), T)
 
 
-def make_filters(system, s: Settings, q: float, r: float) -> dict:
-    """The four filters, by name, as constructors (called once per realisation or batch)."""
+def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) -> tuple[float, float]:
+    """(q, r) learned by EM from the nominal values on the scenario's training realisation."""
+    from estimators import EKF, em_noise
+
+    X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+    q0, r0 = nominal_noise(s, q, r)
+    f = EKF(system, np.array(s.x0), s.P0, q0, r0)
+    res = em_noise(f, u[:-1, None], Y[0, 1:], n_iter=s.em_iterations, tol=s.em_tol, structure="scalar")
+    return float(res.Q[0, 0]), float(res.R[0, 0])
+
+
+def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
+    """The filters of :data:`FILTERS`, by name, as constructors (called once per realisation
+    or batch); ``learned`` is EM's (q, r) for "EKF EM" (left out if None)."""
     from estimators import EKF, IAE, MFIAE
 
     x0 = np.array(s.x0)
     q0, r0 = nominal_noise(s, q, r)
+    em = {} if learned is None else {"EKF EM": lambda: EKF(system, x0, s.P0, *learned)}
     return {"EKF": lambda: EKF(system, x0, s.P0, q0, r0),
             "IAE": lambda: IAE(system, x0, s.P0, q0, r0, window=s.iae_window, adapt=s.iae_adapt,
                                form=s.iae_form),
             "MF-IAE": lambda: MFIAE(system, x0, s.P0, q0, r0, window=s.mfiae_window, gain_q=s.mfiae_gain_q,
                                     gain_r=s.mfiae_gain_r, q_mapping=s.mfiae_q_mapping,
                                     per_channel=s.mfiae_per_channel),
+            **em,
             "EKF true Q,R": lambda: EKF(system, x0, s.P0, q, r)}
 
 
@@ -206,12 +226,16 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) 
     q, r = true_noise(s.scenarios[scenario_index], reading)
     seeds = [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in runs]
     X, Y, u = simulate_truth(s, q, r, seeds)
+    system = _system(s.T)
+    learned = learn_noise(system, s, scenario_index, q, r)
     errors, nees, nis, failed = {}, {}, {}, {}
-    for name, make in make_filters(_system(s.T), s, q, r).items():
+    for name, make in make_filters(system, s, q, r, learned).items():
         est, nees[name], nis[name], failed[name] = batch_estimates(make, X, Y, u[:, None], s.x0)
         errors[name] = est - X
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
-    return _summarise(errors, nees, nis, failed, s, example)
+    out = _summarise(errors, nees, nis, failed, s, example)
+    out["learned"] = learned
+    return out
 
 
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None) -> dict:
@@ -225,7 +249,9 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    makers = make_filters(_system(s.T), s, q, r)
+    system = _system(s.T)
+    learned = learn_noise(system, s, scenario_index, q, r)
+    makers = make_filters(system, s, q, r, learned)
     X = np.empty((len(runs), s.steps + 1, 4))
     E = {name: np.empty_like(X) for name in makers}
     NIS = {name: np.zeros((len(runs), s.steps)) for name in makers}
@@ -243,7 +269,9 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     errors = {n: E[n] - X for n in makers}
     failed = {n: np.zeros(len(runs), dtype=bool) for n in makers}
     example = {"truth": X[0], **{f"est {n}": E[n][0] for n in makers}}
-    return _summarise(errors, NEES, NIS, failed, s, example)
+    out = _summarise(errors, NEES, NIS, failed, s, example)
+    out["learned"] = learned
+    return out
 
 
 # ---------------------------------------------------------------------------- campaign
@@ -292,13 +320,15 @@ def _assemble(settings: Settings, keys, chunks, results, wall):
             continue
         q, r = true_noise(settings.scenarios[i], rd)
         q0, r0 = nominal_noise(settings, q, r)
+        q_em, r_em = parts[0][1]["learned"]
         for name in FILTERS:
             for c, res in parts:
                 pr = res["per_run"][name]
                 for m, run_id in enumerate(c):
                     rows.append({"reading": rd, "scenario": i + 1, "sigma_q2": settings.scenarios[i][0],
                                  "sigma_r2": settings.scenarios[i][1], "q_true": q, "r_true": r,
-                                 "q0": q0, "r0": r0, "filter": name, "run": int(run_id), "eta": pr["eta"][m],
+                                 "q0": q0, "r0": r0, "q_em": q_em, "r_em": r_em,
+                                 "filter": name, "run": int(run_id), "eta": pr["eta"][m],
                                  "diverged": bool(pr["diverged"][m]), "anees": pr["anees"][m],
                                  "anis": pr["anis"][m],
                                  **{f"rmse_{x}": pr["rmse"][m, a] for a, x in enumerate(STATES)}})
@@ -330,7 +360,8 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
             if f["diverged"].any():
                 ok = f[~f["diverged"]]
                 row[f"{name} (no div.)"] = ok["eta"].mean() if len(ok) else np.nan
-        for name in FILTERS[:3]:
+        row["q_em"], row["r_em"] = g["q_em"].iloc[0], g["r_em"].iloc[0]
+        for name in FILTERS[:4]:
             row[f"{name} / bound"] = row[name] / row["EKF true Q,R"]
         rows.append(row)
     return pd.DataFrame(rows)
@@ -351,7 +382,9 @@ def agreement(table: pd.DataFrame) -> list[str]:
         lines.append(f"- {rd} reading: MF-IAE / true-Q,R bound = {', '.join(f'{b:.2f}' for b in bound)} "
                      f"(paper's MF-IAE / our bound: {', '.join(f'{p:.2f}' for p in g['paper MF-IAE'] / g['EKF true Q,R'])}); "
                      f"IAE / bound = {', '.join(f'{b:.2f}' for b in g['IAE / bound'])}; "
-                     f"EKF / bound = {', '.join(f'{b:.2f}' for b in g['EKF / bound'])}.")
+                     f"EKF / bound = {', '.join(f'{b:.2f}' for b in g['EKF / bound'])}; "
+                     f"EKF with EM-learned Q, R / bound = {', '.join(f'{b:.2f}' for b in g['EKF EM / bound'])} "
+                     f"(learned q / true q = {', '.join(f'{a:.2f}' for a in g['q_em'] / g['sigma_q2' if rd == 'eqs' else 'sigma_r2'])}).")
     return lines
 
 
