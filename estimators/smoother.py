@@ -27,7 +27,7 @@ import numpy as np
 
 from fmu_models.errors import NumericalError, TypeMismatchError
 
-from .base import FilterRun, KalmanBase, symmetric
+from .base import FilterRun, KalmanBase, spd_solve, symmetric
 from .ukf import UKF
 
 __all__ = ["Smoothed", "rts_smooth", "smoother_step"]
@@ -79,7 +79,7 @@ def smoother_step(filt: KalmanBase) -> ca.Function:
     else:
         F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
         D = ca.mtimes(P_, F.T)
-    C = ca.solve(Pp_, D.T).T                        # C Pp = D, Pp symmetric
+    C = spd_solve(Pp_, D.T).T                       # C Pp = D, Pp symmetric positive definite
     xs_new = x + ca.mtimes(C, xs - xp)
     Ps_new = symmetric(P_ + ca.mtimes([C, Ps_ - Pp_, C.T]))
     lag = ca.mtimes(Ps_, C.T)
@@ -142,4 +142,4 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
     def mats(a):                                    # column-major rows -> (K, nx, nx)
         return a.reshape(len(a), nx, nx).transpose(0, 2, 1)
 
-    return Smoothed(xs, mats(Ps), mats(lag), mats(C))
+    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), mats(lag), mats(C))     # Ps is symmetric

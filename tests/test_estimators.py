@@ -193,7 +193,7 @@ def test_bad_covariances_are_refused(cp):
 
 
 def test_divergence_raises_instead_of_returning_nan(cp):
-    f = EKF(cp, [0.5, 0, 1.8, 0.5], 1e300, 1e300, 0.1)
+    f = EKF(cp, [0.5, 0, 1.8, 0.5], 1e308, 1e308, 0.1)     # F P F^T + Q overflows
     with pytest.raises(FloatingPointError, match="non-finite"):
         for _ in range(5):
             f.step([0.0], [0.5, 1.8])
