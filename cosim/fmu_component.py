@@ -49,16 +49,6 @@ _LEVELS = {0: _logging.INFO, 1: _logging.WARNING, 2: _logging.WARNING, 3: _loggi
 _STATUS = {1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
 
-def _platform_dirs() -> tuple[str, str]:
-    """The binaries folder names of this platform in FMI 2.0 and 3.0."""
-    import platform
-
-    system = {"linux": "linux", "darwin": "darwin", "win32": "win"}.get(sys.platform, sys.platform)
-    fmi2 = f"{system}{'64' if sys.maxsize > 2**32 else '32'}"
-    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(platform.machine().lower(), platform.machine().lower())
-    return fmi2, f"{arch}-{system if system != 'win' else 'windows'}"
-
-
 class FMUComponent(Component):
     """An FMU stepped by the master.
 
@@ -173,7 +163,9 @@ class FMUComponent(Component):
     def _check_binary(self, name: str) -> None:
         import zipfile
 
-        plat = _platform_dirs()[self.version - 2]
+        from fmu_models.fmu_pack import platform_dir
+
+        plat = platform_dir(self.version)
         suffix = {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
         want = f"binaries/{plat}/{self.model_identifier}{suffix}"
         with zipfile.ZipFile(self.path) as z:

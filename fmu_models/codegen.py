@@ -9,10 +9,6 @@ from .fmu_layout import DEFAULT_STEP_SIZE, FmuLayout
 from .plant import PlantModel
 from .variables import DOMAINS
 
-#: The generic C files shipped with the package (FMI wrappers and the plant core).
-C_DIR = Path(__file__).parent / "c"
-
-
 def model_functions(model: PlantModel) -> list[ca.Function]:
     """The four functions the FMU needs, with dense outputs (plain column-major arrays in C)."""
     s = model.sym

@@ -36,6 +36,8 @@ class FmuVariable:
     description: str
     derivative_of: int | None = None   # 1-based index of the state
     kind: str = ""                     # param | step | state | der | input | noise | output | int
+    declared_type: str | None = None   # of an Enumeration
+    min: int | None = None             # of an Integer
 
 
 class FmuLayout:
@@ -83,10 +85,10 @@ class FmuLayout:
         add(name="integrator", type="Enumeration", causality="parameter", variability="fixed",
             initial="exact", start=1, unit=None,
             description="Co-Simulation integrator: 1 = euler (seed 000 truth map), 2 = rk4",
-            kind="int")
+            kind="int", declared_type="Integrator")
         add(name="substeps", type="Integer", causality="parameter", variability="fixed",
             initial="exact", start=1, unit=None,
-            description="internal steps per step_size (both integrators)", kind="int")
+            description="internal steps per step_size (both integrators)", kind="int", min=1)
         add(name="time", type="Real", causality="independent", variability="continuous",
             initial=None, start=None, unit="s", description="simulation time", kind="time")
         self.variables = tuple(v)

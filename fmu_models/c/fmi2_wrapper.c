@@ -1,17 +1,17 @@
-/* pendulum-cosim: FMI 2.0 Model Exchange + Co-Simulation wrapper around plant_core.
- * Every refused call returns fmi2Error with a message through the logger callback. */
+/* pendulum-cosim: FMI 2.0 Model Exchange + Co-Simulation wrapper around a model core
+ * (core_api.h: a plant, an estimator or a signal). Every refused call returns fmi2Error with
+ * a message through the logger callback. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 #include "fmi2Functions.h"
-#include "plant_core.h"
+#include "core_api.h"
 #include "wrapper_modes.h"
 
-
 typedef struct {
-    PlantData d;
-    PlantWork wk;
+    CoreData d;
+    CoreWork wk;
     fmi2Type type;
     Mode mode;
     fmi2CallbackFunctions cb;
@@ -39,6 +39,7 @@ static void logmsg(Instance *c, fmi2Status st, const char *cat, const char *fn, 
 #define STATUS fmi2Status
 #define STATUS_OK fmi2OK
 #define STATUS_ERROR fmi2Error
+#define IS_CS(c) ((c)->type == fmi2CoSimulation)
 #include "wrapper_common.h"
 
 #define ALLOW(fn, mask) ALLOW_IN(comp, fn, mask)
@@ -70,13 +71,14 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
         cb->freeMemory(c);
         return NULL;
     }
-    if (type != fmi2ModelExchange && type != fmi2CoSimulation) {
-        fail(c, "fmi2Instantiate", "unknown fmuType %d", (int)type);
+    if (type != fmi2CoSimulation && !(type == fmi2ModelExchange && CORE_HAS_ME)) {
+        fail(c, "fmi2Instantiate", "this FMU has no %s interface",
+             type == fmi2ModelExchange ? "Model Exchange" : "such");
         cb->freeMemory(c);
         return NULL;
     }
     c->type = type;
-    plant_defaults(&c->d);
+    core_defaults(&c->d);
     c->mode = M_INSTANTIATED;
     return c;
 }
@@ -92,7 +94,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean tolDef, fmi2Real 
     (void)tolDef; (void)tol;
     if (!isfinite(start)) return fail(c, "fmi2SetupExperiment", "start time must be finite");
     if (stopDef && !(stop >= start)) return fail(c, "fmi2SetupExperiment", "stop time %g < start time %g", stop, start);
-    c->d.time = start;
+    core_set_time(&c->d, start);
     return fmi2OK;
 }
 
@@ -104,7 +106,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     ALLOW("fmi2ExitInitializationMode", B(M_INIT));
-    if (plant_check_all(&c->d, c->err)) { c->mode = M_ERROR; return core(c, "fmi2ExitInitializationMode", 1); }
+    if (core_exit_init(&c->wk, &c->d, c->err)) { c->mode = M_ERROR; return core(c, "fmi2ExitInitializationMode", 1); }
     c->mode = c->type == fmi2CoSimulation ? M_STEP : M_EVENT;
     return fmi2OK;
 }
@@ -117,7 +119,7 @@ fmi2Status fmi2Terminate(fmi2Component comp) {
 
 fmi2Status fmi2Reset(fmi2Component comp) {
     ALLOW("fmi2Reset", ANY_LIVE | B(M_ERROR));
-    plant_defaults(&c->d);
+    core_defaults(&c->d);
     c->mode = M_INSTANTIATED;
     return fmi2OK;
 }
@@ -125,41 +127,54 @@ fmi2Status fmi2Reset(fmi2Component comp) {
 /* ------------------------------------------------------------------ values */
 fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     ALLOW("fmi2GetReal", ANY_LIVE);
-    return core(c, "fmi2GetReal", plant_get_real(&c->wk, &c->d, vr, n, v, c->err));
+    return core(c, "fmi2GetReal", core_get_real(&c->wk, &c->d, vr, n, v, c->err));
 }
 
 fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
     ALLOW("fmi2SetReal", ANY_LIVE & ~B(M_TERMINATED));
-    return core(c, "fmi2SetReal", plant_set_real(&c->d, vr, n, v, BEFORE_RUN(c), c->err));
+    return core(c, "fmi2SetReal", core_set_real(&c->d, vr, n, v, BEFORE_RUN(c), c->err));
 }
 
 fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
-    long long tmp[8];
+    long long tmp;
     ALLOW("fmi2GetInteger", ANY_LIVE);
     for (size_t i = 0; i < n; i++) {
-        if (plant_get_int(&c->d, &vr[i], 1, tmp, c->err)) return core(c, "fmi2GetInteger", 1);
-        v[i] = (fmi2Integer)tmp[0];
+        if (core_get_int(&c->d, &vr[i], 1, &tmp, INT_NONE, c->err)) return core(c, "fmi2GetInteger", 1);
+        v[i] = (fmi2Integer)tmp;
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) {
-    ALLOW("fmi2SetInteger", B(M_INSTANTIATED) | B(M_INIT));
+    ALLOW("fmi2SetInteger", ANY_LIVE & ~B(M_TERMINATED));
     for (size_t i = 0; i < n; i++) {
         long long tmp = v[i];
-        if (plant_set_int(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, "fmi2SetInteger", 1);
+        if (core_set_int(&c->d, &vr[i], 1, &tmp, INT_NONE, BEFORE_RUN(c), c->err)) return core(c, "fmi2SetInteger", 1);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
+    ALLOW("fmi2GetBoolean", ANY_LIVE);
+    for (size_t i = 0; i < n; i++) {
+        int tmp;
+        if (core_get_bool(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, "fmi2GetBoolean", 1);
+        v[i] = tmp ? fmi2True : fmi2False;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) {
+    ALLOW("fmi2SetBoolean", ANY_LIVE & ~B(M_TERMINATED));
+    for (size_t i = 0; i < n; i++) {
+        int tmp = v[i] ? 1 : 0;
+        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return core(c, "fmi2SetBoolean", 1);
     }
     return fmi2OK;
 }
 
 static fmi2Status no_such(Instance *c, const char *fn, const char *type, size_t n, const fmi2ValueReference vr[]) {
     return n ? fail(c, fn, "no %s variable has value reference %u", type, vr[0]) : fmi2OK;
-}
-fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
-    ALLOW("fmi2GetBoolean", ANY_LIVE); (void)v; return no_such(c, "fmi2GetBoolean", "Boolean", n, vr);
-}
-fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) {
-    ALLOW("fmi2SetBoolean", ANY_LIVE); (void)v; return no_such(c, "fmi2SetBoolean", "Boolean", n, vr);
 }
 fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {
     ALLOW("fmi2GetString", ANY_LIVE); (void)v; return no_such(c, "fmi2GetString", "String", n, vr);
@@ -174,19 +189,13 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *s) {
     if (!s) return fail(c, "fmi2GetFMUstate", "FMUstate pointer is NULL");
     if (!*s && !(*s = c->cb.allocateMemory(1, sizeof(SavedState))))
         return fail(c, "fmi2GetFMUstate", "out of memory");
-    ((SavedState *)*s)->magic = STATE_MAGIC;
-    ((SavedState *)*s)->size = sizeof(SavedState);
-    ((SavedState *)*s)->d = c->d;
+    save_state((SavedState *)*s, c);
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate s) {
-    const SavedState *st = (const SavedState *)s;
     ALLOW("fmi2SetFMUstate", ANY_LIVE);
-    if (!st || st->magic != STATE_MAGIC || st->size != sizeof(SavedState))
-        return fail(c, "fmi2SetFMUstate", "not an FMU state of this FMU");
-    c->d = st->d;
-    return fmi2OK;
+    return restore_state(c, "fmi2SetFMUstate", (const SavedState *)s);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *s) {
@@ -213,7 +222,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate s, fmi2Byte ou
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte in[], size_t size, fmi2FMUstate *s) {
     SavedState tmp;
     ALLOW("fmi2DeSerializeFMUstate", ANY_LIVE);
-    if (plant_deserialize((const unsigned char *)in, size, &tmp, c->err)) return core(c, "fmi2DeSerializeFMUstate", 1);
+    if (deserialize_state((const unsigned char *)in, size, &tmp, c->err)) return core(c, "fmi2DeSerializeFMUstate", 1);
     if (!*s && !(*s = c->cb.allocateMemory(1, sizeof(SavedState))))
         return fail(c, "fmi2DeSerializeFMUstate", "out of memory");
     memcpy(*s, &tmp, sizeof tmp);
@@ -224,8 +233,9 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueRefer
                                         const fmi2ValueReference kn[], size_t nK,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
     ALLOW("fmi2GetDirectionalDerivative", B(M_INIT) | RUNNING);
+    if (!CORE_HAS_DERIVATIVES) return fail(c, "fmi2GetDirectionalDerivative", "not provided by this FMU");
     return core(c, "fmi2GetDirectionalDerivative",
-                plant_directional(&c->wk, &c->d, unk, nU, kn, nK, dvKnown, dvUnknown, c->err));
+                core_directional(&c->wk, &c->d, unk, nU, kn, nK, dvKnown, dvUnknown, c->err));
 }
 
 /* ------------------------------------------------------------------ Model Exchange */
@@ -259,22 +269,19 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetPrio
 fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real t) {
     ALLOW("fmi2SetTime", B(M_EVENT) | B(M_CONT));
     if (!isfinite(t)) return fail(c, "fmi2SetTime", "time %g is not finite", t);
-    c->d.time = t;
+    core_set_time(&c->d, t);
     return fmi2OK;
 }
 
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     ALLOW("fmi2SetContinuousStates", B(M_CONT));
-    return core(c, "fmi2SetContinuousStates", plant_set_states(&c->d, x, nx, c->err));
+    return core(c, "fmi2SetContinuousStates", core_set_states(&c->d, x, nx, c->err));
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real dx[], size_t nx) {
     ALLOW("fmi2GetDerivatives", B(M_INIT) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED));
-    if (nx != NX) return fail(c, "fmi2GetDerivatives", "nx = %zu, this model has %d states", nx, NX);
-    plant_f(&c->wk, &c->d, c->d.x, dx);
-    for (size_t i = 0; i < nx; i++)
-        if (!isfinite(dx[i])) return fail(c, "fmi2GetDerivatives", "der(%s) is not finite", REAL_NAMES[VR_X + i]);
-    return fmi2OK;
+    if (nx != CORE_NX) return fail(c, "fmi2GetDerivatives", "nx = %zu, this model has %d states", nx, CORE_NX);
+    return core(c, "fmi2GetDerivatives", core_derivatives(&c->wk, &c->d, dx, c->err));
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real ind[], size_t ni) {
@@ -285,14 +292,14 @@ fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real ind[], size_t ni)
 
 fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
     ALLOW("fmi2GetContinuousStates", ANY_LIVE);
-    if (nx != NX) return fail(c, "fmi2GetContinuousStates", "nx = %zu, this model has %d states", nx, NX);
-    memcpy(x, c->d.x, sizeof(double) * NX);
+    if (nx != CORE_NX) return fail(c, "fmi2GetContinuousStates", "nx = %zu, this model has %d states", nx, CORE_NX);
+    core_get_states(&c->d, x);
     return fmi2OK;
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nom[], size_t nx) {
     ALLOW("fmi2GetNominalsOfContinuousStates", ANY_LIVE);
-    if (nx != NX) return fail(c, "fmi2GetNominalsOfContinuousStates", "nx = %zu, this model has %d states", nx, NX);
+    if (nx != CORE_NX) return fail(c, "fmi2GetNominalsOfContinuousStates", "nx = %zu, this model has %d states", nx, CORE_NX);
     for (size_t i = 0; i < nx; i++) nom[i] = 1.0;
     return fmi2OK;
 }
@@ -315,7 +322,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     ALLOW("fmi2DoStep", B(M_STEP));
     (void)noSetPrior;
-    return core(c, "fmi2DoStep", plant_do_step(&c->wk, &c->d, t, h, c->err));
+    return core(c, "fmi2DoStep", core_do_step(&c->wk, &c->d, t, h, c->err));
 }
 
 fmi2Status fmi2CancelStep(fmi2Component comp) {

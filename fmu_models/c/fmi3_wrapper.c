@@ -1,20 +1,21 @@
-/* pendulum-cosim: FMI 3.0 Model Exchange + Co-Simulation wrapper around plant_core.
- * Every FMI 3.0 function is exported (importers such as fmpy load them all by name);
- * those this FMU does not support answer fmi3Error with a message. */
+/* pendulum-cosim: FMI 3.0 Model Exchange + Co-Simulation wrapper around a model core
+ * (core_api.h: a plant, an estimator or a signal). Every FMI 3.0 function is exported
+ * (importers such as fmpy load them all by name); those this FMU does not support answer
+ * fmi3Error with a message. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include "fmi3Functions.h"
-#include "plant_core.h"
+#include "core_api.h"
 #include "wrapper_modes.h"
 
 typedef enum { ME, CS } Kind;
 
 typedef struct {
-    PlantData d;
-    PlantWork wk;
+    CoreData d;
+    CoreWork wk;
     Kind kind;
     Mode mode;
     fmi3InstanceEnvironment env;
@@ -33,6 +34,7 @@ static void logmsg(Instance *c, fmi3Status st, const char *cat, const char *fn, 
 #define STATUS fmi3Status
 #define STATUS_OK fmi3OK
 #define STATUS_ERROR fmi3Error
+#define IS_CS(c) ((c)->kind == CS)
 #include "wrapper_common.h"
 
 #define ALLOW(fn, mask) ALLOW_IN(inst, fn, mask)
@@ -61,7 +63,7 @@ static Instance *instantiate(Kind kind, fmi3String token, fmi3Boolean logging,
         return NULL;
     }
     c->kind = kind;
-    plant_defaults(&c->d);
+    core_defaults(&c->d);
     c->mode = M_INSTANTIATED;
     return c;
 }
@@ -70,6 +72,10 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String name, fmi3String token, fmi
                                           fmi3Boolean visible, fmi3Boolean logging,
                                           fmi3InstanceEnvironment env, fmi3LogMessageCallback log) {
     (void)name; (void)res; (void)visible;
+    if (!CORE_HAS_ME) {
+        if (log) log(env, fmi3Error, "logStatusError", "fmi3InstantiateModelExchange: this FMU has no Model Exchange interface");
+        return NULL;
+    }
     return instantiate(ME, token, logging, env, log);
 }
 
@@ -102,14 +108,14 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance inst, fmi3Boolean tolDef, fm
     (void)tolDef; (void)tol;
     if (!isfinite(start)) return fail(c, "fmi3EnterInitializationMode", "start time must be finite");
     if (stopDef && !(stop >= start)) return fail(c, "fmi3EnterInitializationMode", "stop time %g < start time %g", stop, start);
-    c->d.time = start;
+    core_set_time(&c->d, start);
     c->mode = M_INIT;
     return fmi3OK;
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance inst) {
     ALLOW("fmi3ExitInitializationMode", B(M_INIT));
-    if (plant_check_all(&c->d, c->err)) { c->mode = M_ERROR; return core(c, "fmi3ExitInitializationMode", 1); }
+    if (core_exit_init(&c->wk, &c->d, c->err)) { c->mode = M_ERROR; return core(c, "fmi3ExitInitializationMode", 1); }
     c->mode = c->kind == CS ? M_STEP : M_EVENT;
     return fmi3OK;
 }
@@ -128,7 +134,7 @@ fmi3Status fmi3Terminate(fmi3Instance inst) {
 
 fmi3Status fmi3Reset(fmi3Instance inst) {
     ALLOW("fmi3Reset", ANY_LIVE | B(M_ERROR));
-    plant_defaults(&c->d);
+    core_defaults(&c->d);
     c->mode = M_INSTANTIATED;
     return fmi3OK;
 }
@@ -137,36 +143,55 @@ fmi3Status fmi3Reset(fmi3Instance inst) {
 fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv) {
     ALLOW("fmi3GetFloat64", ANY_LIVE);
     if (nv != n) return fail(c, "fmi3GetFloat64", "nValues = %zu differs from nValueReferences = %zu (all variables are scalars)", nv, n);
-    return core(c, "fmi3GetFloat64", plant_get_real(&c->wk, &c->d, vr, n, v, c->err));
+    return core(c, "fmi3GetFloat64", core_get_real(&c->wk, &c->d, vr, n, v, c->err));
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
     ALLOW("fmi3SetFloat64", ANY_LIVE & ~B(M_TERMINATED));
     if (nv != n) return fail(c, "fmi3SetFloat64", "nValues = %zu differs from nValueReferences = %zu (all variables are scalars)", nv, n);
-    return core(c, "fmi3SetFloat64", plant_set_real(&c->d, vr, n, v, BEFORE_RUN(c), c->err));
+    return core(c, "fmi3SetFloat64", core_set_real(&c->d, vr, n, v, BEFORE_RUN(c), c->err));
 }
 
-/* Integer-valued variables: integrator (Enumeration, Int64 API) and substeps (Int32). */
-#define INT_GET(fn, T, vrwanted) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
+/* Integer-valued variables: the core says which width each has (Enumerations use Int64). */
+#define INT_GET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
     long long tmp; ALLOW(#fn, ANY_LIVE); \
     if (nv != n) return fail(c, #fn, "nValues = %zu differs from nValueReferences = %zu", nv, n); \
     for (size_t i = 0; i < n; i++) { \
-        if (vr[i] != (vrwanted)) return fail(c, #fn, "value reference %u is not a variable of this type", vr[i]); \
-        if (plant_get_int(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, #fn, 1); \
+        if (core_get_int(&c->d, &vr[i], 1, &tmp, width, c->err)) return core(c, #fn, 1); \
         v[i] = (T)tmp; } \
     return fmi3OK; }
-#define INT_SET(fn, T, vrwanted) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
-    long long tmp; ALLOW(#fn, B(M_INSTANTIATED) | B(M_INIT)); \
+#define INT_SET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
+    long long tmp; ALLOW(#fn, ANY_LIVE & ~B(M_TERMINATED)); \
     if (nv != n) return fail(c, #fn, "nValues = %zu differs from nValueReferences = %zu", nv, n); \
     for (size_t i = 0; i < n; i++) { \
-        if (vr[i] != (vrwanted)) return fail(c, #fn, "value reference %u is not a variable of this type", vr[i]); \
         tmp = (long long)v[i]; \
-        if (plant_set_int(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, #fn, 1); } \
+        if (core_set_int(&c->d, &vr[i], 1, &tmp, width, BEFORE_RUN(c), c->err)) return core(c, #fn, 1); } \
     return fmi3OK; }
-INT_GET(fmi3GetInt64, fmi3Int64, VR_INTEGRATOR)
-INT_SET(fmi3SetInt64, fmi3Int64, VR_INTEGRATOR)
-INT_GET(fmi3GetInt32, fmi3Int32, VR_SUBSTEPS)
-INT_SET(fmi3SetInt32, fmi3Int32, VR_SUBSTEPS)
+INT_GET(fmi3GetInt64, fmi3Int64, INT_64)
+INT_SET(fmi3SetInt64, fmi3Int64, INT_64)
+INT_GET(fmi3GetInt32, fmi3Int32, INT_32)
+INT_SET(fmi3SetInt32, fmi3Int32, INT_32)
+
+fmi3Status fmi3GetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Boolean v[], size_t nv) {
+    ALLOW("fmi3GetBoolean", ANY_LIVE);
+    if (nv != n) return fail(c, "fmi3GetBoolean", "nValues = %zu differs from nValueReferences = %zu", nv, n);
+    for (size_t i = 0; i < n; i++) {
+        int tmp;
+        if (core_get_bool(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, "fmi3GetBoolean", 1);
+        v[i] = tmp ? fmi3True : fmi3False;
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Boolean v[], size_t nv) {
+    ALLOW("fmi3SetBoolean", ANY_LIVE & ~B(M_TERMINATED));
+    if (nv != n) return fail(c, "fmi3SetBoolean", "nValues = %zu differs from nValueReferences = %zu", nv, n);
+    for (size_t i = 0; i < n; i++) {
+        int tmp = v[i] ? 1 : 0;
+        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return core(c, "fmi3SetBoolean", 1);
+    }
+    return fmi3OK;
+}
 
 /* Types this FMU has no variables of. */
 #define NONE_GET(fn, T) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
@@ -182,7 +207,6 @@ NONE_GET(fmi3GetInt16, fmi3Int16)     NONE_SET(fmi3SetInt16, fmi3Int16)
 NONE_GET(fmi3GetUInt16, fmi3UInt16)   NONE_SET(fmi3SetUInt16, fmi3UInt16)
 NONE_GET(fmi3GetUInt32, fmi3UInt32)   NONE_SET(fmi3SetUInt32, fmi3UInt32)
 NONE_GET(fmi3GetUInt64, fmi3UInt64)   NONE_SET(fmi3SetUInt64, fmi3UInt64)
-NONE_GET(fmi3GetBoolean, fmi3Boolean) NONE_SET(fmi3SetBoolean, fmi3Boolean)
 NONE_GET(fmi3GetString, fmi3String)   NONE_SET(fmi3SetString, fmi3String)
 
 fmi3Status fmi3GetBinary(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, size_t sizes[], fmi3Binary v[], size_t nv) {
@@ -217,19 +241,13 @@ fmi3Status fmi3GetFMUState(fmi3Instance inst, fmi3FMUState *s) {
     ALLOW("fmi3GetFMUState", ANY_LIVE);
     if (!s) return fail(c, "fmi3GetFMUState", "FMUState pointer is NULL");
     if (!*s && !(*s = calloc(1, sizeof(SavedState)))) return fail(c, "fmi3GetFMUState", "out of memory");
-    ((SavedState *)*s)->magic = STATE_MAGIC;
-    ((SavedState *)*s)->size = sizeof(SavedState);
-    ((SavedState *)*s)->d = c->d;
+    save_state((SavedState *)*s, c);
     return fmi3OK;
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance inst, fmi3FMUState s) {
-    const SavedState *st = (const SavedState *)s;
     ALLOW("fmi3SetFMUState", ANY_LIVE);
-    if (!st || st->magic != STATE_MAGIC || st->size != sizeof(SavedState))
-        return fail(c, "fmi3SetFMUState", "not an FMU state of this FMU");
-    c->d = st->d;
-    return fmi3OK;
+    return restore_state(c, "fmi3SetFMUState", (const SavedState *)s);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance inst, fmi3FMUState *s) {
@@ -255,7 +273,7 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance inst, fmi3FMUState s, fmi3Byte out
 fmi3Status fmi3DeserializeFMUState(fmi3Instance inst, const fmi3Byte in[], size_t size, fmi3FMUState *s) {
     SavedState tmp;
     ALLOW("fmi3DeserializeFMUState", ANY_LIVE);
-    if (plant_deserialize((const unsigned char *)in, size, &tmp, c->err)) return core(c, "fmi3DeserializeFMUState", 1);
+    if (deserialize_state((const unsigned char *)in, size, &tmp, c->err)) return core(c, "fmi3DeserializeFMUState", 1);
     if (!*s && !(*s = calloc(1, sizeof(SavedState)))) return fail(c, "fmi3DeserializeFMUState", "out of memory");
     memcpy(*s, &tmp, sizeof tmp);
     return fmi3OK;
@@ -266,20 +284,22 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance inst, const fmi3ValueRefere
                                         const fmi3ValueReference kn[], size_t nK, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sens[], size_t nSens) {
     ALLOW("fmi3GetDirectionalDerivative", B(M_INIT) | RUNNING);
+    if (!CORE_HAS_DERIVATIVES) return fail(c, "fmi3GetDirectionalDerivative", "not provided by this FMU");
     if (nSeed != nK || nSens != nU) return fail(c, "fmi3GetDirectionalDerivative", "nSeed must equal nKnowns and nSensitivity nUnknowns (scalar variables)");
-    return core(c, "fmi3GetDirectionalDerivative", plant_directional(&c->wk, &c->d, unk, nU, kn, nK, seed, sens, c->err));
+    return core(c, "fmi3GetDirectionalDerivative", core_directional(&c->wk, &c->d, unk, nU, kn, nK, seed, sens, c->err));
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance inst, const fmi3ValueReference unk[], size_t nU,
                                     const fmi3ValueReference kn[], size_t nK, const fmi3Float64 seed[],
                                     size_t nSeed, fmi3Float64 sens[], size_t nSens) {
     ALLOW("fmi3GetAdjointDerivative", B(M_INIT) | RUNNING);
+    if (!CORE_HAS_DERIVATIVES) return fail(c, "fmi3GetAdjointDerivative", "not provided by this FMU");
     /* v^T J: accumulate row by row with the directional derivative of each known */
     if (nSeed != nU || nSens != nK) return fail(c, "fmi3GetAdjointDerivative", "nSeed must equal nUnknowns and nSensitivity nKnowns (scalar variables)");
     for (size_t k = 0; k < nK; k++) {
-        double one = 1.0, col[NX + NY + NX];
-        if (nU > NX + NY + NX) return fail(c, "fmi3GetAdjointDerivative", "too many unknowns");
-        if (plant_directional(&c->wk, &c->d, unk, nU, &kn[k], 1, &one, col, c->err)) return core(c, "fmi3GetAdjointDerivative", 1);
+        double one = 1.0, col[256];
+        if (nU > 256) return fail(c, "fmi3GetAdjointDerivative", "too many unknowns (at most 256)");
+        if (core_directional(&c->wk, &c->d, unk, nU, &kn[k], 1, &one, col, c->err)) return core(c, "fmi3GetAdjointDerivative", 1);
         sens[k] = 0;
         for (size_t i = 0; i < nU; i++) sens[k] += seed[i] * col[i];
     }
@@ -334,22 +354,19 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance inst, fmi3Boolean noSetPrior
 fmi3Status fmi3SetTime(fmi3Instance inst, fmi3Float64 t) {
     ALLOW("fmi3SetTime", B(M_EVENT) | B(M_CONT));
     if (!isfinite(t)) return fail(c, "fmi3SetTime", "time %g is not finite", t);
-    c->d.time = t;
+    core_set_time(&c->d, t);
     return fmi3OK;
 }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance inst, const fmi3Float64 x[], size_t nx) {
     ALLOW("fmi3SetContinuousStates", B(M_CONT));
-    return core(c, "fmi3SetContinuousStates", plant_set_states(&c->d, x, nx, c->err));
+    return core(c, "fmi3SetContinuousStates", core_set_states(&c->d, x, nx, c->err));
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance inst, fmi3Float64 dx[], size_t nx) {
     ALLOW("fmi3GetContinuousStateDerivatives", B(M_INIT) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED));
-    if (nx != NX) return fail(c, "fmi3GetContinuousStateDerivatives", "nx = %zu, this model has %d states", nx, NX);
-    plant_f(&c->wk, &c->d, c->d.x, dx);
-    for (size_t i = 0; i < nx; i++)
-        if (!isfinite(dx[i])) return fail(c, "fmi3GetContinuousStateDerivatives", "der(%s) is not finite", REAL_NAMES[VR_X + i]);
-    return fmi3OK;
+    if (nx != CORE_NX) return fail(c, "fmi3GetContinuousStateDerivatives", "nx = %zu, this model has %d states", nx, CORE_NX);
+    return core(c, "fmi3GetContinuousStateDerivatives", core_derivatives(&c->wk, &c->d, dx, c->err));
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance inst, fmi3Float64 ind[], size_t ni) {
@@ -359,14 +376,14 @@ fmi3Status fmi3GetEventIndicators(fmi3Instance inst, fmi3Float64 ind[], size_t n
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance inst, fmi3Float64 x[], size_t nx) {
     ALLOW("fmi3GetContinuousStates", ANY_LIVE);
-    if (nx != NX) return fail(c, "fmi3GetContinuousStates", "nx = %zu, this model has %d states", nx, NX);
-    memcpy(x, c->d.x, sizeof(double) * NX);
+    if (nx != CORE_NX) return fail(c, "fmi3GetContinuousStates", "nx = %zu, this model has %d states", nx, CORE_NX);
+    core_get_states(&c->d, x);
     return fmi3OK;
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance inst, fmi3Float64 nom[], size_t nx) {
     ALLOW("fmi3GetNominalsOfContinuousStates", ANY_LIVE);
-    if (nx != NX) return fail(c, "fmi3GetNominalsOfContinuousStates", "nx = %zu, this model has %d states", nx, NX);
+    if (nx != CORE_NX) return fail(c, "fmi3GetNominalsOfContinuousStates", "nx = %zu, this model has %d states", nx, CORE_NX);
     for (size_t i = 0; i < nx; i++) nom[i] = 1.0;
     return fmi3OK;
 }
@@ -379,7 +396,7 @@ fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance inst, size_t *n) {
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance inst, size_t *n) {
     ALLOW("fmi3GetNumberOfContinuousStates", ANY_LIVE);
-    *n = NX;
+    *n = CORE_NX;
     return fmi3OK;
 }
 
@@ -402,8 +419,8 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
     ALLOW("fmi3DoStep", B(M_STEP)); (void)noSetPrior;
     if (c->kind != CS) return fail(c, "fmi3DoStep", "instance was not instantiated for Co-Simulation");
     *eventNeeded = fmi3False; *term = fmi3False; *early = fmi3False;
-    if (plant_do_step(&c->wk, &c->d, t, h, c->err)) { *last = c->d.time; return core(c, "fmi3DoStep", 1); }
-    *last = c->d.time;
+    if (core_do_step(&c->wk, &c->d, t, h, c->err)) { *last = core_time(&c->d); return core(c, "fmi3DoStep", 1); }
+    *last = core_time(&c->d);
     return fmi3OK;
 }
 

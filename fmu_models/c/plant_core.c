@@ -1,14 +1,14 @@
-/* pendulum-cosim: FMI-independent core of a plant FMU (see plant_core.h). */
+/* pendulum-cosim: FMI-independent core of a plant FMU (see plant_core.h, core_api.h). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
-#include "plant_core.h"
+#include "core_api.h"
 #include "model_funcs.h"
 
 #define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
 #define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
 
-void plant_defaults(PlantData *d) {
+void core_defaults(CoreData *d) {
     memset(d, 0, sizeof(*d));
     for (int k = 0; k < NP; k++) d->p[k] = PARAM_DEFAULT[k];
     for (int k = 0; k < NX; k++) d->x[k] = X_START[k];
@@ -27,19 +27,19 @@ static const char *check_param(int k, double v) {
     }
 }
 
-void plant_f(PlantWork *wk, const PlantData *d, const double *x, double *xdot) {
+static void plant_f(CoreWork *wk, const CoreData *d, const double *x, double *xdot) {
     wk->arg[0] = x; wk->arg[1] = d->u; wk->arg[2] = d->p;
     wk->res[0] = xdot;
     mdl_f(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-void plant_h(PlantWork *wk, const PlantData *d, double *y) {
+static void plant_h(CoreWork *wk, const CoreData *d, double *y) {
     wk->arg[0] = d->x; wk->arg[1] = d->p;
     wk->res[0] = y;
     mdl_h(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-void plant_jacobians(PlantWork *wk, const PlantData *d, double *A, double *B, double *H) {
+static void plant_jacobians(CoreWork *wk, const CoreData *d, double *A, double *B, double *H) {
     wk->arg[0] = d->x; wk->arg[1] = d->u; wk->arg[2] = d->p;
     wk->res[0] = A; wk->res[1] = B;
     mdl_jac_f(wk->arg, wk->res, wk->iw, wk->w, 0);
@@ -48,7 +48,11 @@ void plant_jacobians(PlantWork *wk, const PlantData *d, double *A, double *B, do
     mdl_jac_h(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-int plant_check_all(const PlantData *d, char *err) {
+double core_time(const CoreData *d) { return d->time; }
+void core_set_time(CoreData *d, double t) { d->time = t; }
+
+int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
+    (void)wk;
     for (int k = 0; k < NP; k++) {
         const char *why = check_param(k, d->p[k]);
         if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
@@ -58,7 +62,7 @@ int plant_check_all(const PlantData *d, char *err) {
     return 0;
 }
 
-int plant_get_real(PlantWork *wk, const PlantData *d, const unsigned vr[], size_t n, double v[], char *err) {
+int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
     double xdot[NX], y[NY];
     int have_xdot = 0, have_y = 0;
     for (size_t i = 0; i < n; i++) {
@@ -80,7 +84,7 @@ int plant_get_real(PlantWork *wk, const PlantData *d, const unsigned vr[], size_
     return 0;
 }
 
-int plant_set_real(PlantData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
+int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (r >= N_REAL) FAIL("no settable Real variable has value reference %u", r);
@@ -106,17 +110,27 @@ int plant_set_real(PlantData *d, const unsigned vr[], size_t n, const double v[]
     return 0;
 }
 
-int plant_get_int(const PlantData *d, const unsigned vr[], size_t n, long long v[], char *err) {
+/* integrator is an Enumeration (FMI 3.0: Int64 functions), substeps an Int32 */
+static int int_width(unsigned vr) {
+    return vr == VR_INTEGRATOR ? INT_64 : vr == VR_SUBSTEPS ? INT_32 : INT_NONE;
+}
+
+int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] == VR_INTEGRATOR) v[i] = d->integrator;
-        else if (vr[i] == VR_SUBSTEPS) v[i] = d->substeps;
-        else FAIL("no Integer variable has value reference %u", vr[i]);
+        if (!int_width(vr[i]) || (width && int_width(vr[i]) != width))
+            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
+        v[i] = vr[i] == VR_INTEGRATOR ? d->integrator : d->substeps;
     }
     return 0;
 }
 
-int plant_set_int(PlantData *d, const unsigned vr[], size_t n, const long long v[], char *err) {
+int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
+                 char *err) {
     for (size_t i = 0; i < n; i++) {
+        if (!int_width(vr[i]) || (width && int_width(vr[i]) != width))
+            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
+        if (!before_run) FAIL("%s is fixed: set it before leaving initialization mode",
+                              vr[i] == VR_INTEGRATOR ? "integrator" : "substeps");
         if (vr[i] == VR_INTEGRATOR) {
             if (v[i] != INTEGRATOR_EULER && v[i] != INTEGRATOR_RK4)
                 FAIL("integrator = %lld: valid values are 1 (euler) and 2 (rk4)", v[i]);
@@ -124,12 +138,33 @@ int plant_set_int(PlantData *d, const unsigned vr[], size_t n, const long long v
         } else if (vr[i] == VR_SUBSTEPS) {
             if (v[i] < 1 || v[i] > 1000000) FAIL("substeps = %lld must be in [1, 1000000]", v[i]);
             d->substeps = (int)v[i];
-        } else FAIL("no Integer variable has value reference %u", vr[i]);
+        }
     }
     return 0;
 }
 
-int plant_set_states(PlantData *d, const double x[], size_t nx, char *err) {
+int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {
+    (void)d; (void)v;
+    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
+    return 0;
+}
+
+int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int before_run, char *err) {
+    (void)d; (void)v; (void)before_run;
+    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
+    return 0;
+}
+
+int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
+    plant_f(wk, d, d->x, dx);
+    for (int i = 0; i < NX; i++)
+        if (!isfinite(dx[i])) FAIL("der(%s) is not finite", REAL_NAMES[VR_X + i]);
+    return 0;
+}
+
+void core_get_states(const CoreData *d, double x[]) { memcpy(x, d->x, sizeof(double) * NX); }
+
+int core_set_states(CoreData *d, const double x[], size_t nx, char *err) {
     if (nx != NX) FAIL("%zu states given, this model has %d", nx, NX);
     for (size_t i = 0; i < nx; i++)
         if (!isfinite(x[i])) FAIL("state %s = %g is not finite", REAL_NAMES[VR_X + i], x[i]);
@@ -137,7 +172,7 @@ int plant_set_states(PlantData *d, const double x[], size_t nx, char *err) {
     return 0;
 }
 
-int plant_directional(PlantWork *wk, const PlantData *d, const unsigned unk[], size_t nU,
+int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU,
                       const unsigned kn[], size_t nK, const double seed[], double sens[], char *err) {
     double A[NX * NX], Bm[NX * NU + 1], H[NY * NX];
     for (size_t k = 0; k < nK; k++)
@@ -169,7 +204,7 @@ int plant_directional(PlantWork *wk, const PlantData *d, const unsigned unk[], s
 }
 
 /* One step of length T on x (in place). Same arithmetic as PlantModel.step. */
-static void one_step(PlantWork *wk, const PlantData *d, double T, double *x) {
+static void one_step(CoreWork *wk, const CoreData *d, double T, double *x) {
     double k1[NX], k2[NX], k3[NX], k4[NX], z[NX];
     plant_f(wk, d, x, k1);
     if (d->integrator == INTEGRATOR_EULER) {
@@ -185,7 +220,7 @@ static void one_step(PlantWork *wk, const PlantData *d, double T, double *x) {
     for (int i = 0; i < NX; i++) x[i] = x[i] + (T / 6) * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
 }
 
-int plant_do_step(PlantWork *wk, PlantData *d, double t, double h, char *err) {
+int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     double x[NX];
     double T = d->step_size / d->substeps;
     double ratio, n, rest = 0.0;
@@ -193,6 +228,9 @@ int plant_do_step(PlantWork *wk, PlantData *d, double t, double h, char *err) {
     if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
         FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
     ratio = h / T;
+    if (!(ratio <= (double)MAX_INTERNAL_STEPS))
+        FAIL("communication step %g s needs %.3g internal steps of %g s, more than the limit of %ld: "
+             "use shorter communication steps or a longer step_size", h, ratio, T, MAX_INTERNAL_STEPS);
     n = floor(ratio + 0.5);
     /* a communication step that is not a whole number of internal steps ends with a
      * partial step of the remaining length */
@@ -211,13 +249,5 @@ int plant_do_step(PlantWork *wk, PlantData *d, double t, double h, char *err) {
     }
     memcpy(d->x, x, sizeof(x));
     d->time = t + h;
-    return 0;
-}
-
-int plant_deserialize(const unsigned char *bytes, size_t size, SavedState *out, char *err) {
-    if (size != sizeof(SavedState)) FAIL("%zu bytes given, expected %zu", size, sizeof(SavedState));
-    memcpy(out, bytes, sizeof(SavedState));
-    if (out->magic != STATE_MAGIC || out->size != sizeof(SavedState))
-        FAIL("bytes are not a serialised state of this FMU");
     return 0;
 }

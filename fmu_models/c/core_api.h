@@ -1,0 +1,52 @@
+/* pendulum-cosim: the interface between the FMI wrappers (fmi2_wrapper.c, fmi3_wrapper.c)
+ * and a model core. Three cores implement it:
+ *   plant_core.c   - a plant from the CasADi model (Model Exchange and Co-Simulation)
+ *   filter_core.c  - an estimator: the filter's compiled fused step (Co-Simulation)
+ *   signal_core.c  - a source, a noise generator or a noisy sensor (Co-Simulation)
+ * The generated core.h of an FMU includes the core's header, which defines CoreData (the
+ * whole FMU state, saved and restored as one block), CoreWork (scratch memory) and
+ * CORE_HAS_ME, CORE_NX (continuous states), CORE_HAS_DERIVATIVES.
+ * Every function returning int returns 0 on success, else 1 with a message in err[ERRLEN].
+ */
+#ifndef CORE_API_H
+#define CORE_API_H
+
+#include <stddef.h>
+
+#define ERRLEN 400
+
+/* the core's data types and capabilities */
+#include "core.h"
+
+/* integer-typed variables: the width the FMI 3.0 API must use for them */
+enum { INT_NONE = 0, INT_32 = 32, INT_64 = 64 };
+
+void core_defaults(CoreData *d);
+/* leaving initialization mode: check every value, compute the initial state */
+int core_exit_init(CoreWork *wk, CoreData *d, char *err);
+double core_time(const CoreData *d);
+void core_set_time(CoreData *d, double t);
+
+int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err);
+/* before_run: 1 in the instantiated and initialization modes (parameters may change) */
+int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err);
+/* width: INT_32 or INT_64 in FMI 3.0 (checked against the variable), INT_NONE in FMI 2.0 */
+int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err);
+int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
+                 char *err);
+int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err);
+int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int before_run, char *err);
+
+/* Co-Simulation: advance from t over h with the inputs held */
+int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err);
+
+/* Model Exchange (called only when CORE_HAS_ME) */
+int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err);
+int core_set_states(CoreData *d, const double x[], size_t nx, char *err);
+void core_get_states(const CoreData *d, double x[]);
+/* directional derivatives (called only when CORE_HAS_DERIVATIVES):
+ * sensitivity[i] = sum_k d unknown_i / d known_k * seed[k] */
+int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU, const unsigned kn[],
+                     size_t nK, const double seed[], double sens[], char *err);
+
+#endif

@@ -1,0 +1,195 @@
+/* pendulum-cosim: FMI-independent core of an estimator FMU (see filter_core.h, core_api.h). */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include "core_api.h"
+#include "model_funcs.h"
+
+#define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+#define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
+
+enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_UNIT = 3 };
+/* where a step argument comes from / a step result goes to (model_config.h tables) */
+enum { SRC_STATE = 0, SRC_U = 1, SRC_Y = 2, SRC_MASK = 3, SRC_FIXED = 4 };
+enum { DST_STATE = 0, DST_DIAG = 1, DST_STATUS = 2, DST_DROP = 3 };
+enum { OUT_STATE = 0, OUT_DIAG = 1, OUT_FIXED = 2 };
+
+void core_defaults(CoreData *d) {
+    memset(d, 0, sizeof(*d));
+    for (int k = 0; k < NP; k++) d->p[k] = PARAM_DEFAULT[k];
+    for (int j = 0; j < NY; j++) d->valid[j] = 1;
+}
+
+double core_time(const CoreData *d) { return d->time; }
+void core_set_time(CoreData *d, double t) { d->time = t; }
+
+static const char *check_param(int k, double v) {
+    if (!isfinite(v)) return "is not finite";
+    switch (PARAM_DOMAIN[k]) {
+    case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
+    case DOMAIN_NONNEGATIVE: return v >= 0 ? NULL : "must be >= 0";
+    case DOMAIN_UNIT: return (v > 0 && v <= 1) ? NULL : "must be in (0, 1]";
+    default: return NULL;
+    }
+}
+
+int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
+    double stamp[1];
+    for (int k = 0; k < NP; k++) {
+        const char *why = check_param(k, d->p[k]);
+        if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
+    }
+    for (int i = 0; i < N_LESS; i++)
+        if (!(d->p[LESS_LO[i]] < d->p[LESS_HI[i]]))
+            FAIL("parameter %s = %g must be below %s = %g", REAL_NAMES[VR_P + LESS_LO[i]], d->p[LESS_LO[i]],
+                 REAL_NAMES[VR_P + LESS_HI[i]], d->p[LESS_HI[i]]);
+    /* flt_init(p) -> the state arrays and the fixed inputs, at their offsets */
+    wk->arg[0] = d->p;
+    for (int j = 0; j < INIT_NOUT; j++)
+        wk->res[j] = (INIT_DST[j] == 0 ? d->state : d->fixed) + INIT_OFF[j];
+    wk->res[INIT_NOUT] = stamp;
+    flt_init(wk->arg, wk->res, wk->iw, wk->w, 0);
+    if (stamp[0] != 0) FAIL("the initial covariances are not valid (non-finite after the parameters' mapping)");
+    memset(d->diag, 0, sizeof d->diag);
+    d->started = 0;
+    d->cand_ok = 0;
+    return 0;
+}
+
+/* The step for the current inputs from the committed state, into cand_*. */
+static int candidate(CoreWork *wk, CoreData *d, char *err) {
+    double mask[NY > 0 ? NY : 1];
+    if (d->cand_ok) return 0;
+    for (int j = 0; j < NY; j++) mask[j] = d->valid[j] ? 1.0 : 0.0;
+    for (int i = 0; i < STEP_NIN; i++) {
+        const double *base = STEP_SRC[i] == SRC_STATE ? d->state : STEP_SRC[i] == SRC_U ? d->u_prev
+                           : STEP_SRC[i] == SRC_Y ? d->y : STEP_SRC[i] == SRC_MASK ? mask : d->fixed;
+        wk->arg[i] = base + STEP_OFF[i];
+    }
+    for (int j = 0; j < STEP_NOUT; j++) {
+        switch (STEP_DST[j]) {
+        case DST_STATE: wk->res[j] = d->cand_state + STEP_ROFF[j]; break;
+        case DST_DIAG: wk->res[j] = d->cand_diag + STEP_ROFF[j]; break;
+        case DST_STATUS: wk->res[j] = &wk->status; break;
+        default: wk->res[j] = NULL;        /* CasADi skips a NULL result */
+        }
+    }
+    wk->status = 0;
+    flt_step(wk->arg, wk->res, wk->iw, wk->w, 0);
+    if (wk->status == 1)
+        FAIL("an input or a valid measurement is NaN or inf at t = %g s; estimate kept", d->time);
+    if (wk->status != 0)
+        FAIL("the estimate became non-finite at t = %g s (diverged, or covariances too large); estimate kept",
+             d->time);
+    d->cand_ok = 1;
+    return 0;
+}
+
+int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
+    const double *state = d->state, *diag = d->diag;
+    for (size_t i = 0; i < n; i++) {
+        unsigned r = vr[i];
+        if (IN(r, VR_OUT, NOUT)) {
+            if (d->started) {
+                if (candidate(wk, d, err)) return 1;
+                state = d->cand_state;
+                diag = d->cand_diag;
+            }
+            int k = (int)(r - VR_OUT);
+            const double *base = OUT_SRC[k] == OUT_STATE ? state : OUT_SRC[k] == OUT_DIAG ? diag : d->fixed;
+            v[i] = base[OUT_OFF[k]];
+        } else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
+        else if (IN(r, VR_U, NU)) v[i] = d->u[r - VR_U];
+        else if (IN(r, VR_Y, NY)) v[i] = d->y[r - VR_Y];
+        else if (r == VR_TIME) v[i] = d->time;
+        else FAIL("no Real variable has value reference %u", r);
+    }
+    return 0;
+}
+
+int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
+    for (size_t i = 0; i < n; i++) {
+        unsigned r = vr[i];
+        if (IN(r, VR_P, NP)) {
+            const char *why = check_param((int)(r - VR_P), v[i]);
+            if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", REAL_NAMES[r]);
+            if (why) FAIL("parameter %s = %g %s", REAL_NAMES[r], v[i], why);
+            d->p[r - VR_P] = v[i];
+        } else if (IN(r, VR_U, NU)) {
+            if (!isfinite(v[i])) FAIL("%s: value %g is not finite", REAL_NAMES[r], v[i]);
+            d->u[r - VR_U] = v[i];
+        } else if (IN(r, VR_Y, NY)) {
+            d->y[r - VR_Y] = v[i];               /* NaN: a missing measurement (if the filter says so) */
+            d->cand_ok = 0;
+        } else FAIL("%s is calculated and cannot be set", r < N_REAL ? REAL_NAMES[r] : "this variable");
+    }
+    return 0;
+}
+
+int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
+    (void)d; (void)v; (void)width;
+    if (n) FAIL("no Integer variable has value reference %u", vr[0]);
+    return 0;
+}
+
+int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
+                 char *err) {
+    (void)d; (void)v; (void)width; (void)before_run;
+    if (n) FAIL("no Integer variable has value reference %u", vr[0]);
+    return 0;
+}
+
+int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {
+    for (size_t i = 0; i < n; i++) {
+        if (!IN(vr[i], VR_VALID, NY)) FAIL("no Boolean variable has value reference %u", vr[i]);
+        v[i] = d->valid[vr[i] - VR_VALID];
+    }
+    return 0;
+}
+
+int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int before_run, char *err) {
+    (void)before_run;
+    for (size_t i = 0; i < n; i++) {
+        if (!IN(vr[i], VR_VALID, NY)) FAIL("no Boolean variable has value reference %u", vr[i]);
+        d->valid[vr[i] - VR_VALID] = v[i] ? 1 : 0;
+        d->cand_ok = 0;
+    }
+    return 0;
+}
+
+int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
+    if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
+    if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
+        FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
+    if (fabs(h - PERIOD) > 1e-9 * PERIOD)
+        FAIL("communication step %g s differs from the filter's period %g s: one doStep is one filter step",
+             h, PERIOD);
+    if (d->started) {
+        if (candidate(wk, d, err)) return 1;
+        memcpy(d->state, d->cand_state, sizeof d->state);
+        memcpy(d->diag, d->cand_diag, sizeof d->diag);
+    }
+    memcpy(d->u_prev, d->u, sizeof d->u);
+    d->started = 1;
+    d->cand_ok = 0;
+    d->time = t + h;
+    return 0;
+}
+
+int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
+    (void)wk; (void)d; (void)dx;
+    FAIL("an estimator FMU has no Model Exchange interface");
+}
+
+int core_set_states(CoreData *d, const double x[], size_t nx, char *err) {
+    (void)d; (void)x; (void)nx;
+    FAIL("an estimator FMU has no continuous states");
+}
+
+void core_get_states(const CoreData *d, double x[]) { (void)d; (void)x; }
+
+int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU, const unsigned kn[],
+                     size_t nK, const double seed[], double sens[], char *err) {
+    (void)wk; (void)d; (void)unk; (void)nU; (void)kn; (void)nK; (void)seed; (void)sens;
+    FAIL("directional derivatives are not provided by an estimator FMU");
+}

@@ -1,0 +1,164 @@
+"""Compile and pack an FMU from generated C code, one of the model cores and the shared FMI
+wrappers: the machinery every FMU of the project goes through (plants, estimators,
+signals).
+
+An FMU's C sources are the generic files in ``fmu_models/c`` (``core_api.h``, the wrapper
+``fmi<version>_wrapper.c`` with ``wrapper_modes.h`` and ``wrapper_common.h``, and
+``<core>_core.h/.c``), a ``core.h`` selecting the core, and the files the caller generates
+(``model_config.h`` and CasADi's code). They are compiled into the FMU's shared library and
+shipped in ``sources/`` so that another platform can rebuild it. The GUID is a hash of a
+fingerprint of the model and of every source file, so equal FMUs get equal GUIDs. The
+``.fmu`` is written beside its target and renamed atomically.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import uuid
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+import fmpy
+
+from .errors import BuildError, CompilerNotFoundError, ConfigurationError
+
+__all__ = ["C_DIR", "CORES", "FMI_VERSIONS", "atomic_copy", "find_compiler", "pack_fmu", "platform_dir"]
+
+#: The generic C files shipped with the package (FMI wrappers and the model cores).
+C_DIR = Path(__file__).parent / "c"
+FMI_VERSIONS = (2, 3)
+CORES = ("plant", "filter", "signal")
+_FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
+_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
+
+
+def find_compiler() -> str:
+    """Return the C compiler to use: ``$CC``, else ``cc``, ``gcc`` or ``clang`` on the PATH."""
+    candidates = [os.environ["CC"]] if os.environ.get("CC") else ["cc", "gcc", "clang"]
+    for cand in candidates:
+        path = shutil.which(cand)
+        if path:
+            return path
+    raise CompilerNotFoundError(
+        "no C compiler found (looked for " + ", ".join(candidates) + "). Building an FMU "
+        "compiles generated C code: install gcc (Debian/Ubuntu: 'apt-get install gcc', "
+        "Fedora: 'dnf install gcc', macOS: 'xcode-select --install') or set CC.")
+
+
+def platform_dir(fmi_version: int) -> str:
+    """The binaries folder of this platform (``linux64`` in FMI 2.0, ``x86_64-linux`` in 3.0)."""
+    machine = platform.machine().lower()
+    system = {"linux": "linux", "darwin": "darwin", "win32": "win"}.get(sys.platform, sys.platform)
+    if fmi_version == 2:
+        return f"{system}{'64' if sys.maxsize > 2**32 else '32'}"
+    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
+    return f"{arch}-{system if system != 'win' else 'windows'}"
+
+
+def _library_suffix() -> str:
+    return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
+
+
+def atomic_copy(src: Path, dst: Path) -> None:
+    """Copy ``src`` to ``dst`` through a temporary file in ``dst``'s folder and an atomic
+    rename, so that ``dst`` is at every instant either absent, the old file or the new one."""
+    fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as out, open(src, "rb") as inp:
+            shutil.copyfileobj(inp, out)
+        os.replace(tmp, dst)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _build_description(identifier: str, c_files: list[str]) -> str:
+    files = "".join(f'<SourceFile name="{f}"/>' for f in c_files)
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiBuildDescription fmiVersion="3.0">'
+            f'<BuildConfiguration modelIdentifier="{identifier}">'
+            f'<SourceFileSet language="C99">{files}</SourceFileSet></BuildConfiguration>'
+            "</fmiBuildDescription>\n")
+
+
+def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
+             model_description: Callable[[str, list[str]], str], out_dir, fingerprint: str,
+             file_name: str | None = None) -> Path:
+    """Generate, compile and pack one FMU; returns the ``.fmu`` path.
+
+    Parameters
+    ----------
+    identifier : str
+        The model identifier (library name, C-identifier).
+    core : {"plant", "filter", "signal"}
+        The model core.
+    fmi_version : {2, 3}
+    write_generated : callable
+        ``write_generated(folder, guid) -> [generated C files to compile]``: writes
+        ``model_config.h`` and the generated code into ``folder``.
+    model_description : callable
+        ``model_description(guid, c_files) -> XML text``.
+    out_dir : path
+        Where to write the FMU (created if missing).
+    fingerprint : str
+        What identifies the model's content beyond its sources (names, values).
+    file_name : str, optional
+        The FMU file name (default ``<identifier>.fmu``).
+
+    Raises
+    ------
+    CompilerNotFoundError
+        No C compiler.
+    BuildError
+        The compiler failed (its output is in the message).
+    """
+    if fmi_version not in FMI_VERSIONS:
+        raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
+    if core not in CORES:
+        raise ConfigurationError(f"core must be one of {CORES}, got {core!r}")
+    cc = find_compiler()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    generic = ["core_api.h", "wrapper_modes.h", "wrapper_common.h", f"{core}_core.h", f"{core}_core.c",
+               f"fmi{fmi_version}_wrapper.c"]
+    with tempfile.TemporaryDirectory(prefix=f"{identifier}_") as tmp:
+        tmp = Path(tmp)
+        src = tmp / "sources"
+        src.mkdir()
+        for g in generic:
+            shutil.copy(C_DIR / g, src / g)
+        (src / "core.h").write_text(f'/* Generated: this FMU\'s model core. */\n#include "{core}_core.h"\n')
+        write_generated(src, _PLACEHOLDER)
+        h = hashlib.sha256(f"{identifier}|{core}|{fmi_version}|{fingerprint}".encode())
+        for f in sorted(src.iterdir()):
+            h.update(f.read_bytes())
+        guid = "{" + str(uuid.UUID(h.hexdigest()[:32])) + "}"
+        generated = write_generated(src, guid)          # again, now with the final GUID
+        c_files = [f"{core}_core.c", f"fmi{fmi_version}_wrapper.c", *generated]
+        bindir = tmp / "binaries" / platform_dir(fmi_version)
+        bindir.mkdir(parents=True)
+        lib = bindir / (identifier + _library_suffix())
+        cmd = [cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L",
+               f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o", str(lib), "-lm"]
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if proc.returncode != 0:
+            raise BuildError(f"compiling {identifier} failed:\n{' '.join(cmd)}\n{proc.stderr}")
+        if fmi_version == 3:
+            (src / "buildDescription.xml").write_text(_build_description(identifier, c_files))
+        (tmp / "modelDescription.xml").write_text(model_description(guid, c_files))
+        fmu = out_dir / (file_name or f"{identifier}.fmu")
+        partial = tmp / "packed.fmu"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
+            z.write(tmp / "modelDescription.xml", "modelDescription.xml")
+            z.write(lib, f"binaries/{bindir.name}/{lib.name}")
+            for f in sorted(src.iterdir()):
+                z.write(f, f"sources/{f.name}")
+        atomic_copy(partial, fmu)
+    return fmu

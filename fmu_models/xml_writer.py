@@ -1,0 +1,189 @@
+"""``modelDescription.xml`` for FMI 2.0 and 3.0 from one description of an FMU, shared by
+the plant, estimator and signal FMUs.
+
+An FMU is described by its variables (:class:`~fmu_models.fmu_layout.FmuVariable`, in
+ModelVariables order with value reference = index - 1), its ModelStructure
+(:class:`Unknown` entries), its interfaces and capabilities (:class:`Description`).
+"""
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from xml.sax.saxutils import quoteattr
+
+from .errors import ConfigurationError
+
+__all__ = ["BASE_UNITS", "Description", "Unknown", "fmi2", "fmi3"]
+
+#: SI base-unit exponents of every unit string the project uses (FMI <BaseUnit>).
+BASE_UNITS = {
+    "m": dict(m=1), "m/s": dict(m=1, s=-1), "m/s2": dict(m=1, s=-2),
+    "rad": dict(rad=1), "rad/s": dict(rad=1, s=-1), "rad/s2": dict(rad=1, s=-2),
+    "N": dict(kg=1, m=1, s=-2), "kg": dict(kg=1), "N.s/m": dict(kg=1, s=-1),
+    "N.m.s/rad": dict(kg=1, m=2, s=-1, rad=-1), "kg.m2": dict(kg=1, m=2), "A": dict(A=1),
+    "N.m/A": dict(kg=1, m=2, s=-2, A=-1), "1": {}, "1/s": dict(s=-1), "s": dict(s=1),
+    "m2": dict(m=2), "m2/s2": dict(m=2, s=-2), "rad2": dict(rad=2), "rad2/s2": dict(rad=2, s=-2),
+    "N2": dict(kg=2, m=2, s=-4), "A2": dict(A=2),
+}
+_GENERATION = dict(generationTool="pendulum-cosim (CasADi code generation)",
+                   generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"))
+_LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description="errors"/>'
+                   '<Category name="logAll" description="everything"/></LogCategories>')
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Enumeration": "Enumeration", "Boolean": "Boolean"}
+
+
+def _attrs(**kw) -> str:
+    return "".join(f" {k}={quoteattr(str(v))}" for k, v in kw.items() if v is not None)
+
+
+@dataclass(frozen=True)
+class Unknown:
+    """A ModelStructure entry: variable ``index`` (1-based), ``deps`` the 1-based indices of
+    what it depends on (None: everything, the FMI default), ``kinds`` the FMI 2.0
+    dependenciesKind of each (or None)."""
+
+    index: int
+    deps: Sequence[int] | None = None
+    kinds: Sequence[str] | None = None
+
+
+@dataclass
+class Description:
+    """Everything the XML states about an FMU (see the module documentation)."""
+
+    model_name: str
+    identifier: str
+    guid: str
+    description: str
+    variables: Sequence
+    outputs: Sequence[Unknown] = ()
+    derivatives: Sequence[Unknown] = ()
+    initial_unknowns: Sequence[Unknown] = ()
+    model_exchange: bool = False
+    directional: bool = False
+    variable_step: bool = True
+    default_step: float = 0.01
+    stop_time: float = 5.0
+    enumerations: dict = field(default_factory=dict)
+    source_files: Sequence[str] = ()
+
+
+def _units(variables) -> list[str]:
+    units = sorted({v.unit for v in variables if v.unit})
+    out = ["  <UnitDefinitions>"]
+    for u in units:
+        base = BASE_UNITS.get(u)
+        if base is None:
+            raise ConfigurationError(f"unit {u!r} has no SI base-unit entry in fmu_models.xml_writer.BASE_UNITS")
+        out.append(f"    <Unit{_attrs(name=u)}>" + (f"<BaseUnit{_attrs(**base)}/>" if base else "") + "</Unit>")
+    out.append("  </UnitDefinitions>")
+    return out if units else []
+
+
+def _items(items) -> str:
+    return "".join(f"<Item{_attrs(name=n, value=v, description=d)}/>" for n, v, d in items)
+
+
+def _unknown(tag: str, u: Unknown, key: str, shift: int, indent: int) -> str:
+    a = {key: u.index - shift}
+    if u.deps is not None:
+        order = sorted(range(len(u.deps)), key=lambda i: u.deps[i])
+        a["dependencies"] = " ".join(str(u.deps[i] - shift) for i in order)
+        if u.kinds is not None:
+            a["dependenciesKind"] = " ".join(u.kinds[i] for i in order)
+    return f"{' ' * indent}<{tag}{_attrs(**a)}/>"
+
+
+def fmi2(d: Description) -> str:
+    """The FMI 2.0 model description."""
+    caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUstate="true", canSerializeFMUstate="true",
+                providesDirectionalDerivative="true" if d.directional else "false",
+                canNotUseMemoryManagementFunctions="false")
+    srcs = "".join(f"<File{_attrs(name=f)}/>" for f in d.source_files)
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           "<fmiModelDescription" + _attrs(fmiVersion="2.0", modelName=d.model_name, guid=d.guid,
+                                           description=d.description, **_GENERATION,
+                                           variableNamingConvention="structured", numberOfEventIndicators=0) + ">"]
+    if d.model_exchange:
+        out.append(f"  <ModelExchange{_attrs(**caps, completedIntegratorStepNotNeeded='true')}>"
+                   f"<SourceFiles>{srcs}</SourceFiles></ModelExchange>")
+    out.append(f"  <CoSimulation{_attrs(**caps, canHandleVariableCommunicationStepSize='true' if d.variable_step else 'false', canInterpolateInputs='false', maxOutputDerivativeOrder=0)}>"
+               f"<SourceFiles>{srcs}</SourceFiles></CoSimulation>")
+    out += _units(d.variables)
+    if d.enumerations:
+        out.append("  <TypeDefinitions>")
+        out += [f'    <SimpleType{_attrs(name=n)}><Enumeration>{_items(items)}</Enumeration></SimpleType>'
+                for n, items in d.enumerations.items()]
+        out.append("  </TypeDefinitions>")
+    out += [_LOG_CATEGORIES,
+            f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
+            "  <ModelVariables>"]
+    for v in d.variables:
+        head = _attrs(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
+                      variability=v.variability, initial=v.initial)
+        start = None if v.start is None else (repr(v.start) if v.type == "Real" else
+                                              ("true" if v.start else "false") if v.type == "Boolean" else v.start)
+        if v.type == "Real":
+            inner = f"<Real{_attrs(unit=v.unit, derivative=v.derivative_of, start=start)}/>"
+        elif v.type == "Enumeration":
+            inner = f"<Enumeration{_attrs(declaredType=v.declared_type, start=start)}/>"
+        elif v.type == "Boolean":
+            inner = f"<Boolean{_attrs(start=start)}/>"
+        else:
+            inner = f"<Integer{_attrs(start=start, min=v.min)}/>"
+        out.append(f"    <ScalarVariable{head}>{inner}</ScalarVariable>")
+    out += ["  </ModelVariables>", "  <ModelStructure>"]
+    for tag, entries in (("Outputs", d.outputs), ("Derivatives", d.derivatives),
+                         ("InitialUnknowns", sorted(d.initial_unknowns, key=lambda u: u.index))):
+        if entries:
+            out.append(f"    <{tag}>")
+            out += [_unknown("Unknown", u, "index", 0, 6) for u in entries]
+            out.append(f"    </{tag}>")
+    out += ["  </ModelStructure>", "</fmiModelDescription>"]
+    return "\n".join(out) + "\n"
+
+
+def fmi3(d: Description) -> str:
+    """The FMI 3.0 model description (dependencies are value references, index - 1)."""
+    caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUState="true", canSerializeFMUState="true",
+                providesDirectionalDerivative="true" if d.directional else "false",
+                providesAdjointDerivatives="true" if d.directional else "false")
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           "<fmiModelDescription" + _attrs(fmiVersion="3.0", modelName=d.model_name, instantiationToken=d.guid,
+                                           description=d.description, **_GENERATION,
+                                           variableNamingConvention="structured") + ">"]
+    if d.model_exchange:
+        out.append(f"  <ModelExchange{_attrs(**caps, needsCompletedIntegratorStep='false')}/>")
+    out.append(f"  <CoSimulation{_attrs(**caps, canHandleVariableCommunicationStepSize='true' if d.variable_step else 'false', maxOutputDerivativeOrder=0, hasEventMode='false', providesIntermediateUpdate='false')}/>")
+    out += _units(d.variables)
+    if d.enumerations:
+        out.append("  <TypeDefinitions>" + "".join(
+            f'<EnumerationType{_attrs(name=n)}>{_items(items)}</EnumerationType>' for n, items in d.enumerations.items())
+            + "</TypeDefinitions>")
+    out += [_LOG_CATEGORIES,
+            f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
+            "  <ModelVariables>"]
+    # FMI 3.0 wants the independent variable first; value references stay those of the layout
+    for v in sorted(d.variables, key=lambda v: v.causality != "independent"):
+        a = dict(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
+                 variability=v.variability, initial=v.initial)
+        tag = _FMI3_TYPES[v.type]
+        if v.type == "Real":
+            deriv = None if v.derivative_of is None else v.derivative_of - 1
+            start = None if v.start is None else repr(v.start)
+            out.append(f"    <Float64{_attrs(**a, start=start, unit=v.unit, derivative=deriv)}/>")
+        elif v.type == "Enumeration":
+            out.append(f"    <Enumeration{_attrs(**a, declaredType=v.declared_type, start=v.start)}/>")
+        elif v.type == "Boolean":
+            start = None if v.start is None else ("true" if v.start else "false")
+            out.append(f"    <Boolean{_attrs(**a, start=start)}/>")
+        else:
+            out.append(f"    <{tag}{_attrs(**a, start=v.start, min=v.min)}/>")
+    out += ["  </ModelVariables>", "  <ModelStructure>"]
+    out += [_unknown("Output", u, "valueReference", 1, 4) for u in d.outputs]
+    out += [_unknown("ContinuousStateDerivative", u, "valueReference", 1, 4) for u in d.derivatives]
+    out += [_unknown("InitialUnknown", Unknown(u.index, u.deps, None), "valueReference", 1, 4)
+            for u in sorted(d.initial_unknowns, key=lambda u: u.index)]
+    out += ["  </ModelStructure>", "</fmiModelDescription>"]
+    return "\n".join(out) + "\n"

@@ -1,0 +1,163 @@
+"""Estimators as native FMUs (issue 13): equal to the Python filters through fmpy, valid,
+refusing bad parameters, bit-identical state save/restore, and in the master."""
+import numpy as np
+import pytest
+from fmpy.validation import validate_fmu
+
+from cosim.estimation import EstimatorComponent
+from cosim.fmu_component import FMUComponent
+from cosim.master import Cosimulation
+from cosim.sensors import ProcessNoise, Sensor
+from cosim.sources import PRBS
+from estimators import EKF, IAE, KF, MFIAE, UKF, augment_rate_bias, discretize
+from estimators.fmu_export import export_filter_fmu
+from fmu_helpers import Instance
+from fmu_models import get_model
+
+X0 = [0.5, 0.0, 1.8, 0.5]
+
+
+@pytest.fixture(scope="module")
+def cp():
+    return discretize(get_model("cartpole"), 0.01)
+
+
+@pytest.fixture(scope="module")
+def seed000_record(cp):
+    """500 steps of seed 000 scenario 1 (eqs reading), one realisation."""
+    rng = np.random.default_rng(7)
+    us = np.where(np.arange(501) * 0.01 < 2.0, -0.5, 0.5)
+    x, ys = np.array(X0), [np.full(2, np.nan)]
+    for k in range(500):
+        x = cp.f(x, [us[k]]) + rng.normal(0, np.sqrt(0.2), 4)
+        ys.append(cp.h(x) + rng.normal(0, np.sqrt(0.1), 2))
+    ys = np.array(ys)
+    ys[[37, 210], 1] = np.nan                      # two missing channels on the way
+    return us, ys
+
+
+FILTERS = {"KF": lambda cp: KF(cp, X0, 1.0, 0.2, 0.1, x_op=X0, u_op=[0.0]),
+           "EKF": lambda cp: EKF(cp, X0, 1.0, 0.2, 0.1),
+           "UKF": lambda cp: UKF(cp, X0, 1.0, 0.2, 0.1),
+           "IAE": lambda cp: IAE(cp, X0, 1.0, 1e-3, 10.0),
+           "MF-IAE": lambda cp: MFIAE(cp, X0, 1.0, 1e-3, 10.0),
+           "EKF gated": lambda cp: EKF(cp, X0, 1.0, 0.2, 0.1, gate=9.0)}
+
+
+def run_fmu(path, us, ys, state_names, output_names, input_name, kind="cs"):
+    inst = Instance(str(path), kind=kind)
+    inst.init()
+    est = [inst.get(*state_names)]
+    for k in range(1, len(ys)):
+        step_filter(inst, (k - 1) * 0.01, us[k - 1], dict(zip(output_names, ys[k])), input_name)
+        est.append(inst.get(*state_names))
+    inst.free()
+    return np.array(est)
+
+
+def step_filter(inst, t, u, y, input_name="F"):
+    """One filter step: the input held over [t, t + h], then the measurement at t + h."""
+    inst.set(input_name, u)
+    inst.do_step(t, 0.01)
+    for n, v in y.items():
+        inst.set(n, v)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("name", list(FILTERS))
+def test_estimator_fmu_equals_the_python_filter(cp, seed000_record, tmp_path, name, version):
+    us, ys = seed000_record
+    ref_filter, exported = FILTERS[name](cp), FILTERS[name](cp)
+    ref = [ref_filter.x] + [ref_filter.step([us[k - 1]], ys[k]) for k in range(1, len(ys))]
+    path = export_filter_fmu(exported, tmp_path, fmi_version=version)
+    assert validate_fmu(str(path)) == []
+    got = run_fmu(path, us, ys, cp.state_names, cp.output_names, "F")
+    np.testing.assert_allclose(got, np.array(ref), rtol=0, atol=1e-12)
+
+
+def test_bias_augmented_wheel_pendulum_ekf_as_fmu(tmp_path):
+    iwp = augment_rate_bias(discretize(get_model("iwp"), 0.01), "y_alpha_dot")
+    f = EKF(iwp, [0.1, 0, 0, 0], 0.01, [1e-6, 1e-4, 1e-2, 1e-8], [2.5e-5, 4e-4, 0.25])
+    path = export_filter_fmu(f, tmp_path, fmi_version=3)
+    rng = np.random.default_rng(3)
+    ys = np.vstack([np.full(3, np.nan), np.array([0.1, 0.05, 0.0]) + rng.normal(0, 0.01, (300, 3))])
+    us = np.zeros(301)
+    ref_f = EKF(iwp, [0.1, 0, 0, 0], 0.01, [1e-6, 1e-4, 1e-2, 1e-8], [2.5e-5, 4e-4, 0.25])
+    ref = [ref_f.x] + [ref_f.step([us[k - 1]], ys[k]) for k in range(1, len(ys))]
+    got = run_fmu(path, us, ys, iwp.state_names, iwp.output_names, "i")
+    np.testing.assert_allclose(got, np.array(ref), rtol=0, atol=1e-12)
+
+
+def test_bad_parameters_steps_and_inputs_are_refused_with_a_message(cp, tmp_path):
+    path = export_filter_fmu(MFIAE(cp, X0, 1.0, 1e-3, 10.0), tmp_path, fmi_version=2)
+    for params, msg in (({"P0_x": -1.0}, "P0_x = -1 must be > 0"), ({"gain_q": 2.0}, r"gain_q = 2 must be in \(0, 1\]"),
+                        ({"q_min": 5.0, "q_max": 1.0}, "q_min = 5 must be below q_max = 1")):
+        inst = Instance(str(path))
+        with pytest.raises(Exception):
+            for k, v in params.items():
+                inst.fmu.setReal([inst.vr[k]], [v])
+            inst.init()
+        assert any(msg.replace("\\", "") in m or __import__("re").search(msg, m) for _, m in inst.messages), inst.messages
+        inst.free()
+    inst = Instance(str(path))
+    inst.init()
+    with pytest.raises(Exception):
+        inst.do_step(0.0, 0.02)
+    assert any("differs from the filter's period 0.01 s" in m for _, m in inst.messages)
+    with pytest.raises(Exception):
+        inst.set("F", np.inf)
+    assert any("F: value inf is not finite" in m for _, m in inst.messages)
+    inst.free()
+
+
+def test_estimator_fmu_state_save_restore_is_bit_identical(cp, seed000_record, tmp_path):
+    us, ys = seed000_record
+    path = export_filter_fmu(MFIAE(cp, X0, 1.0, 1e-3, 10.0), tmp_path, fmi_version=2)
+    inst = Instance(str(path))
+    inst.init()
+    names = cp.state_names
+    for k in range(1, 200):
+        step_filter(inst, (k - 1) * 0.01, us[k - 1], dict(zip(cp.output_names, ys[k])))
+    inst.get(*names)
+    state = inst.fmu.getFMUstate()
+    blob = inst.fmu.serializeFMUstate(state)
+    a = []
+    for k in range(200, 300):
+        step_filter(inst, (k - 1) * 0.01, us[k - 1], dict(zip(cp.output_names, ys[k])))
+        a.append(inst.get(*names, "Q_x", "R_y_x"))
+    restored = inst.fmu.deSerializeFMUstate(blob)
+    inst.fmu.setFMUstate(restored)
+    b = []
+    for k in range(200, 300):
+        step_filter(inst, (k - 1) * 0.01, us[k - 1], dict(zip(cp.output_names, ys[k])))
+        b.append(inst.get(*names, "Q_x", "R_y_x"))
+    assert np.array_equal(np.array(a), np.array(b))
+    inst.free()
+
+
+def test_the_master_runs_an_estimator_fmu_exactly_like_the_python_component(cp, fmu_paths, tmp_path):
+    def parts(estimator):
+        model = get_model("cartpole")
+        plant = FMUComponent("plant", fmu_paths["cartpole"], 0.01, start=dict(zip(model.state_names, X0)))
+        return [estimator, plant, Sensor("sensor", 0.01, ["x", "theta"], noise_std=0.3, seed=2),
+                PRBS("force", 0.01, 0.5, 1.0, 7, 28), ProcessNoise("noise", 0.01, model.state_names, 0.2, seed=1)]
+
+    wiring = {"plant.F": "force.out", "sensor.x": "plant.x", "sensor.theta": "plant.theta",
+              "ekf.F": "force.out", "ekf.y_x": "sensor.y_x", "ekf.y_theta": "sensor.y_theta",
+              **{f"plant.w_{s}": f"noise.w_{s}" for s in ("x", "x_dot", "theta", "theta_dot")}}
+    py = Cosimulation(parts(EstimatorComponent("ekf", lambda: MFIAE(cp, X0, 1.0, 1e-3, 10.0))), wiring).run(5.0)
+    path = export_filter_fmu(MFIAE(cp, X0, 1.0, 1e-3, 10.0), tmp_path, fmi_version=3)
+    fmu = FMUComponent("ekf", path, 0.01, inputs=["F", "y_x", "y_theta"])
+    assert fmu.feedthrough["x"] == frozenset({"y_x", "y_theta"})      # from the ModelStructure
+    native = Cosimulation(parts(fmu), wiring).run(5.0)
+    cols = [f"ekf.{s}" for s in cp.state_names]
+    np.testing.assert_allclose(native[cols].to_numpy(), py[cols].to_numpy(), rtol=0, atol=1e-12)
+
+
+def test_export_refusals(cp, tmp_path):
+    with pytest.raises(TypeError, match="cannot be exported"):
+        export_filter_fmu(IAE(cp, X0, 1.0, 0.1, 0.1, form="full"), tmp_path)
+    with pytest.raises(ValueError, match="diagonal Q"):
+        export_filter_fmu(EKF(cp, X0, 1.0, np.full((4, 4), 0.01) + np.eye(4) * 0.1, 0.1), tmp_path)
+    with pytest.raises(TypeError, match="needs a filter"):
+        export_filter_fmu("EKF", tmp_path)
