@@ -5,6 +5,8 @@
     pendulum-cosim scenarios                    list the scenarios shipped with the package
     pendulum-cosim models                       print both plant models and their Jacobians
     pendulum-cosim experiment NAME [--runs N]   reproduce a paper's experiment (seed000, ...)
+    pendulum-cosim export-fmu SCENARIO --out DIR   the scenario's estimators as native FMUs
+    pendulum-cosim export-ssp SCENARIO --out DIR   the whole scenario as an SSP (SSD + FMUs)
 
 Every error of the package's family (:mod:`fmu_models.errors`) and the known library and
 system errors (bad zip, bad XML, OS errors) print one line ``error: ...`` and exit with
@@ -143,6 +145,43 @@ def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool 
               "(including FMU build)")
         for p in paths:
             print(f"wrote {p}")
+    return 0
+
+
+def _export(args) -> int:
+    """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
+    import tempfile
+
+    from .estimation import EstimatorComponent
+    from .results import OutputFolder
+    from .scenario import Scenario
+    from .ssp import export_ssp
+
+    path = _resolve_scenario(args.scenario)
+    with tempfile.TemporaryDirectory() as fmus:
+        sc = Scenario.load(path, fmu_dir=fmus)
+        comps = sc.cosim.by_name
+        if args.command == "export-fmu":
+            names = args.component or [n for n, c in comps.items() if isinstance(c, EstimatorComponent)]
+            unknown = [n for n in names if n not in comps]
+            if unknown:
+                raise ConfigurationError(f"no component {unknown[0]!r} in {path.name}; components: {', '.join(comps)}")
+            if not names:
+                raise ConfigurationError(f"{path.name} has no estimator; name components with --component")
+        with OutputFolder(Path(args.out), args.overwrite) as out:
+            if args.command == "export-ssp":
+                result = export_ssp(sc, out, fmi_version=args.fmi_version, name=args.name or path.stem)
+                print(f"wrote {result.archive} (and {result.ssd.name}, resources/ beside it): "
+                      f"{len(result.fmus)} FMUs, FMI {args.fmi_version}.0")
+                for note in result.notes:
+                    print(f"note: {note}")
+                return 0
+            for n in names:
+                exported = comps[n].export_fmu(out, args.fmi_version)
+                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {args.fmi_version}.0, "
+                      f"period {comps[n].period:g} s)")
+                if exported.note:
+                    print(f"note: {exported.note}")
     return 0
 
 
@@ -352,6 +391,18 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("--out", help="output directory (default out/NAME)")
     exp.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")
+    efmu = sub.add_parser("export-fmu", help="write a scenario's estimators (or other components) as native "
+                                             "Co-Simulation FMUs, no Python inside")
+    essp = sub.add_parser("export-ssp", help="write a scenario as an SSP (SystemStructure.ssd plus an FMU per "
+                                             "component) for other FMI/SSP tools")
+    for p in (efmu, essp):
+        p.add_argument("scenario", help="scenario file, or the name of a shipped scenario")
+        p.add_argument("--out", required=True, help="output directory")
+        p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
+        p.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
+    efmu.add_argument("--component", action="append", metavar="NAME",
+                      help="component to export (repeatable; default: every estimator)")
+    essp.add_argument("--name", help="system name and archive name (default: the scenario file's name)")
     return parser
 
 
@@ -360,6 +411,8 @@ def _dispatch(args) -> int:
         return _experiment(args)
     if args.command == "models":
         return _models(args)
+    if args.command in ("export-fmu", "export-ssp"):
+        return _export(args)
     if args.command == "scenarios":
         for p in sorted(SCENARIO_DIR.glob("*.toml")):
             first = p.read_text().splitlines()[0]

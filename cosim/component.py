@@ -32,19 +32,22 @@ when some output does not depend on every input, and ``reentrant = True`` if
 iterate an algebraic loop through it; ``output`` must then not change the state).
 :meth:`~Component.bind` is an optional fast path for the master's inner loop (the FMU
 components use it to exchange values with the FMU without copies).
+:meth:`~Component.export_fmu` is optional too: a component that can exist as an FMU
+writes it there (what :func:`cosim.ssp.export_ssp` needs to export a scenario).
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, TypeMismatchError
 
-__all__ = ["PORT_TYPES", "Component", "Port", "check_name", "check_period", "port_kind",
+__all__ = ["PORT_TYPES", "Component", "ExportedFMU", "Port", "check_name", "check_period", "port_kind",
            "ports_compatible"]
 
 #: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
@@ -91,6 +94,26 @@ class Port:
     def kind(self) -> str:
         """``"real"``, ``"integer"`` or ``"boolean"``."""
         return port_kind(self.type)
+
+
+@dataclass(frozen=True)
+class ExportedFMU:
+    """A component written as an FMU by :meth:`Component.export_fmu`.
+
+    Attributes
+    ----------
+    path : Path
+        The ``.fmu`` file.
+    parameters : dict
+        Parameter and start values (by FMU variable name) that make the FMU behave as the
+        component: they go into the SSP's parameter bindings.
+    note : str
+        What differs from the component, if anything (empty: nothing).
+    """
+
+    path: Path
+    parameters: dict
+    note: str = ""
 
 
 def check_name(name: str, what: str = "component name") -> str:
@@ -227,6 +250,22 @@ class Component(ABC):
     def close(self) -> None:
         """Release resources (called by the master at the end of every run, also after a
         failure; must be safe to call twice)."""
+
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """Write this component as a Co-Simulation FMU ``<folder>/<name>.fmu`` whose ports
+        have the component's port names. Default: refused (the component has no FMU form).
+
+        Raises
+        ------
+        ConfigurationError
+            The component (or this configuration of it) cannot be an FMU; the message says
+            why and, where there is one, what to use instead.
+        """
+        raise ConfigurationError(f"component {self.name!r} ({type(self).__name__}) has no FMU form")
+
+    def _fmu_identifier(self) -> str:
+        """A model identifier for this component's FMU (``pc_<name>``)."""
+        return f"pc_{self.name}"
 
     def sample(self, t: float, u) -> np.ndarray:
         """One whole instant outside a master: :meth:`output` then :meth:`update` with the

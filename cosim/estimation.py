@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import scipy.linalg
@@ -11,7 +12,7 @@ from fmu_models.checks import float_array
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.plant import PlantModel
 
-from .component import Component
+from .component import Component, ExportedFMU
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
@@ -87,6 +88,17 @@ class EstimatorComponent(Component):
     def update(self, t, u):
         """Keep the input read at ``t`` for the next prediction."""
         self._u_prev = np.array(u[: self._nu])
+
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """The filter as an estimator FMU (:func:`estimators.fmu_export.export_filter_fmu`),
+        with the same timing as this component. Its outputs are the state estimate,
+        ``P_<state>`` and ``nis`` as here (not the off-diagonal ``P_<i>_<j>``), and more."""
+        from estimators.fmu_export import export_filter_fmu, filter_parameters
+
+        filt = self.make_filter()
+        path = export_filter_fmu(filt, folder, fmi_version, name=self._fmu_identifier(),
+                                 file_name=f"{self.name}.fmu")
+        return ExportedFMU(path, filter_parameters(filt))
 
 
 def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:

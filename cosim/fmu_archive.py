@@ -26,20 +26,21 @@ MAX_UNPACKED_BYTES = 1 << 30
 MAX_FILES = 20_000
 
 
-def _open_zip(path: Path) -> zipfile.ZipFile:
+def _open_zip(path: Path, label: str = "FMU") -> zipfile.ZipFile:
     if not path.exists():
-        raise FMUError(f"no FMU file at {path}")
+        raise FMUError(f"no {label} file at {path}")
     if path.is_dir():
-        raise FMUError(f"{path} is a folder, not an .fmu file (an FMU is a zip archive)")
+        raise FMUError(f"{path} is a folder, not an .{label.lower()} file (an {label} is a zip archive)")
     try:
         return zipfile.ZipFile(path)
     except zipfile.BadZipFile:
-        raise FMUError(f"{path} is not an FMU: not a zip archive (damaged or wrong file)") from None
+        raise FMUError(f"{path} is not an {label}: not a zip archive (damaged or wrong file)") from None
     except OSError as e:
         raise FMUError(f"cannot read {path}: {e.strerror or e}") from None
 
 
-def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: int) -> None:
+def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: int,
+                   required: str = "modelDescription.xml", label: str = "FMU") -> None:
     infos = z.infolist()
     if len(infos) > max_files:
         raise FMUError(f"{path.name} holds {len(infos)} files, more than the limit of {max_files}")
@@ -51,8 +52,8 @@ def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: in
         name = i.filename
         if name.startswith(("/", "\\")) or ".." in Path(name).parts or ":" in name.split("/")[0]:
             raise FMUError(f"{path.name} contains the unsafe path {name!r}")
-    if "modelDescription.xml" not in z.namelist():
-        raise FMUError(f"{path.name} is not an FMU: it has no modelDescription.xml")
+    if required not in z.namelist():
+        raise FMUError(f"{path.name} is not an {label}: it has no {required}")
 
 
 def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
@@ -82,7 +83,7 @@ def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int =
 
 
 class Extraction:
-    """An FMU unpacked into a private temporary folder, removed by :meth:`close`.
+    """An FMU (or SSP) unpacked into a private temporary folder, removed by :meth:`close`.
 
     Parameters
     ----------
@@ -91,6 +92,10 @@ class Extraction:
     max_bytes, max_files : int
         Limits on the total unpacked size and the number of files, enforced while
         unpacking (sizes declared in the archive are not trusted).
+    required : str
+        The member the archive must hold (default ``modelDescription.xml``).
+    label : str
+        What the archive is, in messages (default ``"FMU"``).
 
     Attributes
     ----------
@@ -98,13 +103,14 @@ class Extraction:
         The folder (exists until :meth:`close`).
     """
 
-    def __init__(self, path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
+    def __init__(self, path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES,
+                 required: str = "modelDescription.xml", label: str = "FMU"):
         path = Path(path)
-        self.directory = tempfile.mkdtemp(prefix="pendulum_cosim_fmu_")
+        self.directory = tempfile.mkdtemp(prefix=f"pendulum_cosim_{label.lower()}_")
         self._finalizer = weakref.finalize(self, shutil.rmtree, self.directory, True)
         try:
-            with _open_zip(path) as z:
-                _check_members(z, path, max_bytes, max_files)
+            with _open_zip(path, label) as z:
+                _check_members(z, path, max_bytes, max_files, required, label)
                 written = 0
                 for info in z.infolist():
                     target = Path(self.directory, info.filename)

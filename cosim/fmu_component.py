@@ -35,7 +35,7 @@ from fmu_models.errors import (
     UnknownNameError,
 )
 
-from .component import PORT_TYPES, Component, Port
+from .component import PORT_TYPES, Component, ExportedFMU, Port
 from .fmu_archive import Extraction, read_description
 from .fmu_io import Exchange, raw_function
 from .fmu_me import SOLVERS, MEIntegrator
@@ -209,6 +209,21 @@ class FMUComponent(Component):
     def __repr__(self):
         return (f"FMUComponent({self.name!r}, {self.path.name}, FMI {self.version}.0 "
                 f"{self.interface.upper()}, period={self.period})")
+
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """A copy of the FMU file as ``<folder>/<name>.fmu``, with this component's
+        parameters and start values (``fmi_version`` does not apply: the file is kept)."""
+        from fmu_models.fmu_pack import atomic_copy
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        dst = folder / f"{self.name}.fmu"
+        atomic_copy(self.path, dst)
+        note = ""
+        if self.interface == "me":
+            note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
+                    "importer may use its Co-Simulation interface")
+        return ExportedFMU(dst, dict(self.settings), note)
 
     def timing(self) -> str:
         kind = ("Co-Simulation doStep" if self.interface == "cs"

@@ -21,7 +21,8 @@ from fmu_models.checks import finite, positive_int
 from fmu_models.errors import ConfigurationError
 
 from .component import Component
-from .sensors import PerInstantNoise, _per_channel
+from .noise import PerInstantNoise
+from .sensors import _per_channel
 
 G = 9.81
 

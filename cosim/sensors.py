@@ -7,13 +7,15 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
 from fmu_models.checks import float_array, positive_int
 from fmu_models.errors import ConfigurationError
 
-from .component import Component
+from .component import Component, ExportedFMU
+from .noise import make_noise
 
 
 def _per_channel(value, n, what, owner, positive=False):
@@ -25,19 +27,6 @@ def _per_channel(value, n, what, owner, positive=False):
     if not np.all(np.isfinite(a)) or (positive and np.any(a < 0)):
         raise ConfigurationError(f"{owner}: {what} must be finite{' and >= 0' if positive else ''}, got {value!r}")
     return a
-
-
-class PerInstantNoise:
-    """Draws ``n`` standard normal numbers once per instant from a seeded PCG64 stream."""
-
-    def __init__(self, seed: int, n: int):
-        self.rng, self.n, self.t, self.value = np.random.default_rng(seed), n, None, None
-
-    def at(self, t: float) -> np.ndarray:
-        """The draw of instant ``t`` [s] (drawn at the first call for ``t``)."""
-        if t != self.t:
-            self.t, self.value = t, self.rng.standard_normal(self.n)
-        return self.value
 
 
 class Sensor(Component):
@@ -63,13 +52,16 @@ class Sensor(Component):
     delay : int
         Delay in samples (default 0); until filled, the first measurement is repeated.
     seed : int
-        Seed of the noise generator (numpy PCG64; default 0).
+        Seed of the noise generator (default 0).
+    generator : {"pcg64", "counter"}
+        numpy's PCG64 drawn sequentially (default), or the counter-based generator the
+        signal FMUs use (:mod:`cosim.noise`).
     """
 
     reentrant = True
 
     def __init__(self, name: str, period: float, signals: Sequence[str], noise_std=0.0,
-                 bias=0.0, quantization=0.0, delay: int = 0, seed: int = 0):
+                 bias=0.0, quantization=0.0, delay: int = 0, seed: int = 0, generator: str = "pcg64"):
         if isinstance(signals, str):
             signals = [signals]
         signals = list(signals)
@@ -80,10 +72,12 @@ class Sensor(Component):
         self.quantization = _per_channel(quantization, n, "quantization", name, positive=True)
         self.delay = positive_int(delay, f"{name}: delay (samples)", minimum=0)
         self.seed = positive_int(seed, f"{name}: seed", minimum=0)
+        self.generator = generator
+        make_noise(generator, self.seed, n, period, name)          # checks the choice now
 
     def reset(self, t0):
         super().reset(t0)
-        self._noise = PerInstantNoise(self.seed, len(self.input_ports))
+        self._noise = make_noise(self.generator, self.seed, len(self.input_ports), self.period, self.name)
         self._queue = deque(maxlen=max(self.delay, 1))
 
     def _measure(self, t, u):
@@ -106,6 +100,24 @@ class Sensor(Component):
         if self.delay:
             self._queue.append(self._measure(t, u))
 
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """This sensor as a signal FMU (kind ``sensor``, :mod:`cosim.signal_fmu`) drawing
+        from the counter generator; refused with a delay."""
+        from .signal_fmu import SignalSpec, build_signal_fmu, channel_params
+
+        if self.delay:
+            raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
+        sig = self.input_names
+        spec = SignalSpec("sensor", self.period, self.output_names, inputs=sig,
+                          reals=channel_params("std", sig, self.noise_std, "nonnegative", "noise standard deviation")
+                          + channel_params("bias", sig, self.bias, "real", "bias")
+                          + channel_params("quantization", sig, self.quantization, "nonnegative",
+                                           "quantisation step (0: none)"),
+                          ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
+                          description=f"sensor {self.name}: y = q(s + bias + std z) (pendulum-cosim)")
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu")
+        return ExportedFMU(path, spec.parameters(), _generator_note(self))
+
 
 class ProcessNoise(Component):
     """Seeded Gaussian samples ``w ~ N(0, cov)`` for an FMU's process-noise inputs.
@@ -121,14 +133,19 @@ class ProcessNoise(Component):
     states : sequence of str
         State names; output ports are ``w_<state>``.
     cov : float, sequence or ndarray
-        Covariance: scalar (times identity), diagonal, or full matrix.
+        Covariance: scalar (times identity), diagonal, or full matrix. For a diagonal one,
+        channel ``i`` is draw ``i`` times its standard deviation; for a full one,
+        ``L v`` with ``L = V sqrt(Lambda)`` from its eigendecomposition.
     seed : int
-        Seed of the generator (numpy PCG64; default 0).
+        Seed of the generator (default 0).
+    generator : {"pcg64", "counter"}
+        As for :class:`Sensor`.
     """
 
     reentrant = True
 
-    def __init__(self, name: str, period: float, states: Sequence[str], cov, seed: int = 0):
+    def __init__(self, name: str, period: float, states: Sequence[str], cov, seed: int = 0,
+                 generator: str = "pcg64"):
         states = list(states)
         super().__init__(name, period, outputs=[f"w_{s}" for s in states])
         n = len(states)
@@ -140,14 +157,42 @@ class ProcessNoise(Component):
         w, V = np.linalg.eigh(c)
         if w.min() < -1e-12 * max(1.0, w.max()):
             raise ConfigurationError(f"{name}: cov is not positive semi-definite (eigenvalues {w})")
-        self.L = V * np.sqrt(np.clip(w, 0, None))     # L L^T = cov, also for singular cov
+        if np.count_nonzero(c - np.diag(np.diag(c))) == 0:
+            self.L = np.diag(np.sqrt(np.diag(c)))      # diagonal: channel i scales draw i
+        else:
+            self.L = V * np.sqrt(np.clip(w, 0, None))  # L L^T = cov, also for singular cov
         self.cov = c
         self.seed = positive_int(seed, f"{name}: seed", minimum=0)
+        self.generator = generator
+        make_noise(generator, self.seed, n, period, name)
 
     def reset(self, t0):
         super().reset(t0)
-        self._noise = PerInstantNoise(self.seed, len(self.output_ports))
+        self._noise = make_noise(self.generator, self.seed, len(self.output_ports), self.period, self.name)
 
     def output(self, t, u):
         """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
         return self.L @ self._noise.at(t)
+
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """This noise source as a signal FMU (kind ``noise``, :mod:`cosim.signal_fmu`)
+        drawing from the counter generator; refused for a non-diagonal ``cov``."""
+        from .signal_fmu import SignalSpec, build_signal_fmu, channel_params
+
+        if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
+            raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "
+                                     "off-diagonal entries")
+        spec = SignalSpec("noise", self.period, self.output_names,
+                          reals=channel_params("std", self.output_names, np.sqrt(np.diag(self.cov)), "nonnegative",
+                                               "standard deviation"),
+                          ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
+                          description=f"Gaussian noise {self.name} (pendulum-cosim)")
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu")
+        return ExportedFMU(path, spec.parameters(), _generator_note(self))
+
+
+def _generator_note(component) -> str:
+    if component.generator == "counter":
+        return ""
+    return (f"{component.name}: the FMU draws from the counter generator, the component from PCG64 "
+            "(same statistics, another realisation); set generator = \"counter\" for the same noise")

@@ -5,13 +5,15 @@ reentrant and may sit anywhere in a component list.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from fmu_models.checks import finite, positive, positive_int
 from fmu_models.errors import ConfigurationError, UnknownNameError
 
-from .component import Component
+from .component import Component, ExportedFMU
 
 
 class _Source(Component):
@@ -21,6 +23,20 @@ class _Source(Component):
 
     def _value(self, t):
         raise NotImplementedError
+
+    def _signal(self) -> tuple[str, list[tuple], list[tuple]]:
+        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`cosim.signal_fmu`)."""
+        raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
+
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """This source as a signal FMU (:mod:`cosim.signal_fmu`) with output ``out``."""
+        from .signal_fmu import SignalSpec, build_signal_fmu
+
+        kind, reals, ints = self._signal()
+        spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,
+                          description=f"{type(self).__name__} source {self.name} (pendulum-cosim)")
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu")
+        return ExportedFMU(path, spec.parameters())
 
     def output(self, t, u):
         """Outputs at ``t`` [s] (``u`` is empty)."""
@@ -45,6 +61,9 @@ class Constant(_Source):
     def _value(self, t):
         return self.value
 
+    def _signal(self):
+        return "constant", [("value", self.value, "real", "the output")], []
+
 
 class Step(Constant):
     """``before`` until ``t_step`` [s], then ``after`` (seed 000 Figure 2's input is
@@ -67,6 +86,11 @@ class Step(Constant):
 
     def _value(self, t):
         return self.after if t >= self.t_step - 1e-12 else self.before
+
+    def _signal(self):
+        return "step", [("t_step", self.t_step, "real", "switching time [s]"),
+                        ("before", self.before, "real", "output before t_step"),
+                        ("after", self.after, "real", "output from t_step on")], []
 
 
 class Sine(_Source):
@@ -92,6 +116,10 @@ class Sine(_Source):
 
     def _value(self, t):
         return self.off + self.a * np.sin(2 * np.pi * self.f * t + self.ph)
+
+    def _signal(self):
+        return "sine", [("amplitude", self.a, "real", "amplitude"), ("frequency", self.f, "real", "frequency [Hz]"),
+                        ("phase", self.ph, "real", "phase [rad]"), ("offset", self.off, "real", "offset")], []
 
 
 def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
@@ -147,6 +175,12 @@ class PRBS(_Source):
     def _value(self, t):
         b = self.bits[int(np.floor(t / self.bit_time + 1e-9)) % len(self.bits)]
         return self.offset + (self.amplitude if b else -self.amplitude)
+
+    def _signal(self):
+        return "prbs", [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),
+                        ("bit_time", self.bit_time, "positive", "duration of one bit [s]"),
+                        ("offset", self.offset, "real", "offset")], \
+            [("order", self.order, 2, 16, "LFSR length"), ("seed", self.seed % 2**self.order, 0, 2**31 - 1, "LFSR start state")]
 
 
 class Table(_Source):

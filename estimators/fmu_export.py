@@ -40,7 +40,7 @@ from .base import DIAGNOSTICS, STEP_INPUTS, KalmanBase, _finite
 from .iae import IAE
 from .mfiae import MFIAE
 
-__all__ = ["export_filter_fmu"]
+__all__ = ["export_filter_fmu", "filter_parameters"]
 
 _DOMAINS = {"real": 0, "positive": 1, "nonnegative": 2, "unit": 3}
 
@@ -124,7 +124,14 @@ def _parameters(filt: KalmanBase, name: str) -> _Params:
     return prm
 
 
-def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name: str | None = None) -> Path:
+def filter_parameters(filt: KalmanBase) -> dict[str, float]:
+    """The parameters of ``filt``'s FMU with the filter's current values, by name (see
+    the module documentation)."""
+    return {r[0]: r[1] for r in _parameters(filt, filt.name).rows}
+
+
+def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name: str | None = None,
+                      file_name: str | None = None) -> Path:
     """Export ``filt`` (KF, EKF, UKF, IAE, MF-IAE, bias-augmented EKF, on any model) as a
     Co-Simulation FMU; returns the ``.fmu`` path.
 
@@ -138,6 +145,8 @@ def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name:
     fmi_version : {2, 3}
     name : str, optional
         Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``).
+    file_name : str, optional
+        The FMU file name (default ``<name>.fmu``).
 
     Raises
     ------
@@ -287,4 +296,5 @@ def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name:
         return fmi2(d) if fmi_version == 2 else fmi3(d)
 
     return pack_fmu(name, "filter", fmi_version, generate, xml, out_dir,
-                    fingerprint=f"{filt.cache_key}|{prm.rows}|{s.dt}|{STEP_INPUTS}|{DIAGNOSTICS}")
+                    fingerprint=f"{filt.cache_key}|{prm.rows}|{s.dt}|{STEP_INPUTS}|{DIAGNOSTICS}",
+                    file_name=file_name)

@@ -38,6 +38,7 @@ class FmuVariable:
     kind: str = ""                     # param | step | state | der | input | noise | output | int
     declared_type: str | None = None   # of an Enumeration
     min: int | None = None             # of an Integer
+    max: int | None = None             # of an Integer
 
 
 class FmuLayout:

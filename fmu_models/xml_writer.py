@@ -131,7 +131,7 @@ def fmi2(d: Description) -> str:
         elif v.type == "Boolean":
             inner = f"<Boolean{_attrs(start=start)}/>"
         else:
-            inner = f"<Integer{_attrs(start=start, min=v.min)}/>"
+            inner = f"<Integer{_attrs(start=start, min=v.min, max=v.max)}/>"
         out.append(f"    <ScalarVariable{head}>{inner}</ScalarVariable>")
     out += ["  </ModelVariables>", "  <ModelStructure>"]
     for tag, entries in (("Outputs", d.outputs), ("Derivatives", d.derivatives),
@@ -179,7 +179,7 @@ def fmi3(d: Description) -> str:
             start = None if v.start is None else ("true" if v.start else "false")
             out.append(f"    <Boolean{_attrs(**a, start=start)}/>")
         else:
-            out.append(f"    <{tag}{_attrs(**a, start=v.start, min=v.min)}/>")
+            out.append(f"    <{tag}{_attrs(**a, start=v.start, min=v.min, max=v.max)}/>")
     out += ["  </ModelVariables>", "  <ModelStructure>"]
     out += [_unknown("Output", u, "valueReference", 1, 4) for u in d.outputs]
     out += [_unknown("ContinuousStateDerivative", u, "valueReference", 1, 4) for u in d.derivatives]

@@ -1,0 +1,111 @@
+"""Gaussian noise streams for the sensor and process-noise components.
+
+Two generators, chosen per component with ``generator=``:
+
+``"pcg64"`` (default)
+    numpy's PCG64 seeded with ``seed``, drawn sequentially: one vector per sample instant,
+    in the order the instants occur. A run started at another time, or with another
+    period, gets another sequence.
+
+``"counter"``
+    A counter-based generator whose value at sample ``k = round(t / period)`` is computed
+    directly from ``(seed, k, channel)``: :func:`counter_normal`. The signal FMUs
+    (:mod:`cosim.signal_fmu`) use the same generator in C, so a scenario exported as an
+    SSP draws the same noise as the project's master (within one rounding of the
+    libraries' ``log`` and ``cos``), whatever the start time.
+
+The counter generator: channel ``c`` of ``n`` at sample ``k`` takes words
+``i = 2 (k n + c)`` and ``i + 1`` of SplitMix64 seeded with ``seed`` (Steele, Lea and
+Flood, OOPSLA 2014: word ``i`` is ``mix(seed + (i + 1) * 0x9E3779B97F4A7C15)``),
+forms ``u1 = ((a >> 11) + 1) 2^-53`` in (0, 1] and ``u2 = (b >> 11) 2^-53`` in [0, 1),
+and returns the Box-Muller ``z = sqrt(-2 ln u1) cos(2 pi u2)``. SplitMix64 passes
+BigCrush; Box-Muller with 53-bit uniforms is exact up to |z| ~ 8.6.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fmu_models.checks import positive, positive_int
+from fmu_models.errors import ConfigurationError, UnknownNameError
+
+__all__ = ["GENERATORS", "CounterNoise", "PerInstantNoise", "counter_normal", "make_noise"]
+
+GENERATORS = ("pcg64", "counter")
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+#: Largest seed of the counter generator (the signal FMUs hold it in an FMI Int32).
+MAX_COUNTER_SEED = 2**31 - 1
+
+
+def _splitmix64(seed: np.uint64, i: np.ndarray) -> np.ndarray:
+    z = seed + (i + np.uint64(1)) * _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * _M1
+    z = (z ^ (z >> np.uint64(27))) * _M2
+    return z ^ (z >> np.uint64(31))
+
+
+def counter_normal(seed: int, k, n: int) -> np.ndarray:
+    """Standard normal draws of the counter generator (see the module documentation).
+
+    Parameters
+    ----------
+    seed : int
+        0 .. 2**31 - 1.
+    k : int or array of int
+        Sample indices (``round(t / period)``), any sign.
+    n : int
+        Number of channels.
+
+    Returns
+    -------
+    ndarray, shape ``np.shape(k) + (n,)``
+    """
+    kk = np.asarray(k, dtype=np.int64).astype(np.uint64)      # two's complement for k < 0
+    c = np.arange(n, dtype=np.uint64)
+    i = np.uint64(2) * (kk[..., None] * np.uint64(n) + c)
+    s = np.uint64(seed)
+    a, b = _splitmix64(s, i), _splitmix64(s, i + np.uint64(1))
+    u1 = ((a >> np.uint64(11)) + np.uint64(1)).astype(float) * 2.0**-53
+    u2 = (b >> np.uint64(11)).astype(float) * 2.0**-53
+    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2 * np.pi * u2)
+
+
+class PerInstantNoise:
+    """``n`` standard normal numbers per instant from a seeded PCG64 stream, drawn once
+    per instant (a repeated call at the same instant returns the same draw)."""
+
+    def __init__(self, seed: int, n: int):
+        self.rng, self.n, self.t, self.value = np.random.default_rng(seed), n, None, None
+
+    def at(self, t: float) -> np.ndarray:
+        """The draw of instant ``t`` [s], shape (n,)."""
+        if t != self.t:
+            self.t, self.value = t, self.rng.standard_normal(self.n)
+        return self.value
+
+
+class CounterNoise:
+    """``n`` standard normal numbers at sample ``round(t / period)`` of the counter
+    generator (:func:`counter_normal`)."""
+
+    def __init__(self, seed: int, n: int, period: float):
+        self.seed, self.n, self.period = seed, n, period
+        self.t, self.value = None, None
+
+    def at(self, t: float) -> np.ndarray:
+        """The draw of instant ``t`` [s], shape (n,)."""
+        if t != self.t:
+            self.t, self.value = t, counter_normal(self.seed, int(np.rint(t / self.period)), self.n)
+        return self.value
+
+
+def make_noise(generator: str, seed: int, n: int, period: float, owner: str):
+    """A noise stream of ``generator`` (see :data:`GENERATORS`) with checked arguments."""
+    if generator not in GENERATORS:
+        raise UnknownNameError(f"{owner}: generator must be one of {GENERATORS}, got {generator!r}")
+    if generator == "counter":
+        seed = positive_int(seed, f"{owner}: seed", minimum=0)
+        if seed > MAX_COUNTER_SEED:
+            raise ConfigurationError(f"{owner}: seed {seed} of the counter generator must be <= {MAX_COUNTER_SEED}")
+        return CounterNoise(seed, n, positive(period, f"{owner}: period"))
+    return PerInstantNoise(seed, n)

@@ -1,0 +1,198 @@
+/* pendulum-cosim: FMI-independent core of a signal FMU (see signal_core.h, core_api.h). */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+#include "core_api.h"
+
+#define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+#define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
+
+enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2 };
+
+void core_defaults(CoreData *d) {
+    memset(d, 0, sizeof(*d));
+    for (int k = 0; k < NRP; k++) d->rp[k] = RP_DEFAULT[k];
+    for (int k = 0; k < NIP; k++) d->ip[k] = IP_DEFAULT[k];
+}
+
+double core_time(const CoreData *d) { return d->time; }
+void core_set_time(CoreData *d, double t) { d->time = t; }
+
+static const char *check_real(int k, double v) {
+    if (!isfinite(v)) return "is not finite";
+    switch (RP_DOMAIN[k]) {
+    case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
+    case DOMAIN_NONNEGATIVE: return v >= 0 ? NULL : "must be >= 0";
+    default: return NULL;
+    }
+}
+
+#if SIGNAL_KIND == KIND_NOISE || SIGNAL_KIND == KIND_SENSOR
+/* ------------------------------------------------------------------ the noise generator */
+static uint64_t splitmix64_word(uint64_t seed, uint64_t i) {
+    uint64_t z = seed + (i + 1) * 0x9E3779B97F4A7C15ull;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double counter_normal(uint64_t seed, long long k, int c) {
+    uint64_t i = 2 * ((uint64_t)k * (uint64_t)NCH + (uint64_t)c);
+    uint64_t a = splitmix64_word(seed, i), b = splitmix64_word(seed, i + 1);
+    double u1 = (double)((a >> 11) + 1) * 0x1.0p-53, u2 = (double)(b >> 11) * 0x1.0p-53;
+    return sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
+}
+
+/* round half to even, as numpy.rint */
+static long long sample_index(const CoreData *d) { return (long long)nearbyint(d->time / d->rp[RP_PERIOD]); }
+#endif
+
+#if SIGNAL_KIND == KIND_PRBS
+/* Fibonacci LFSR taps of a maximal-length sequence, orders 2..16 (as cosim.sources.prbs_bits) */
+static const int TAPS[17][4] = {{0}, {0}, {2, 1}, {3, 2}, {4, 3}, {5, 3}, {6, 5}, {7, 6}, {8, 6, 5, 4},
+                                {9, 5}, {10, 7}, {11, 9}, {12, 11, 10, 4}, {13, 12, 11, 8}, {14, 13, 12, 2},
+                                {15, 14}, {16, 15, 13, 4}};
+
+static void prbs_fill(CoreData *d) {
+    int order = (int)d->ip[IP_ORDER];
+    unsigned state = (unsigned)(d->ip[IP_SEED] % (1LL << order));
+    if (!state) state = 1;
+    d->nbits = (1 << order) - 1;
+    for (int i = 0; i < d->nbits; i++) {
+        unsigned bit = 0;
+        for (int t = 0; t < 4 && TAPS[order][t]; t++) bit ^= (state >> (TAPS[order][t] - 1)) & 1u;
+        d->bits[i] = (unsigned char)(state & 1u);
+        state = (state >> 1) | (bit << (order - 1));
+    }
+}
+#endif
+
+int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
+    (void)wk;
+    for (int k = 0; k < NRP; k++) {
+        const char *why = check_real(k, d->rp[k]);
+        if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_RP + k], d->rp[k], why);
+    }
+    for (int k = 0; k < NIP; k++)
+        if (d->ip[k] < IP_MIN[k] || d->ip[k] > IP_MAX[k])
+            FAIL("parameter %s = %lld must be in [%lld, %lld]", INT_NAMES[k], d->ip[k], IP_MIN[k], IP_MAX[k]);
+#if SIGNAL_KIND == KIND_PRBS
+    prbs_fill(d);
+#endif
+    return 0;
+}
+
+/* Output channel j at the current time. */
+static double output(const CoreData *d, int j) {
+    const double *p = d->rp;
+    double t = d->time;
+    (void)j; (void)t;
+#if SIGNAL_KIND == KIND_CONSTANT
+    return p[RP_VALUE];
+#elif SIGNAL_KIND == KIND_STEP
+    return t >= p[RP_T_STEP] - 1e-12 ? p[RP_AFTER] : p[RP_BEFORE];
+#elif SIGNAL_KIND == KIND_SINE
+    return p[RP_OFFSET] + p[RP_AMPLITUDE] * sin(2 * 3.141592653589793 * p[RP_FREQUENCY] * t + p[RP_PHASE]);
+#elif SIGNAL_KIND == KIND_PRBS
+    long long i = (long long)floor(t / p[RP_BIT_TIME] + 1e-9) % d->nbits;
+    if (i < 0) i += d->nbits;
+    return p[RP_OFFSET] + (d->bits[i] ? p[RP_AMPLITUDE] : -p[RP_AMPLITUDE]);
+#elif SIGNAL_KIND == KIND_NOISE
+    return p[RP_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
+#else /* KIND_SENSOR: y = q(s + bias + std z) */
+    double y = d->in[j] + p[RP_BIAS + j] + p[RP_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
+    double q = p[RP_QUANT + j];
+    return q > 0 ? nearbyint(y / q) * q : y;
+#endif
+}
+
+int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
+    (void)wk;
+    for (size_t i = 0; i < n; i++) {
+        unsigned r = vr[i];
+        if (IN(r, VR_OUT, NCH)) v[i] = output(d, (int)(r - VR_OUT));
+        else if (IN(r, VR_RP, NRP)) v[i] = d->rp[r - VR_RP];
+        else if (IN(r, VR_IN, NIN)) v[i] = d->in[r - VR_IN];
+        else if (r == VR_TIME) v[i] = d->time;
+        else FAIL("no Real variable has value reference %u", r);
+    }
+    return 0;
+}
+
+int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
+    for (size_t i = 0; i < n; i++) {
+        unsigned r = vr[i];
+        if (IN(r, VR_RP, NRP)) {
+            const char *why = check_real((int)(r - VR_RP), v[i]);
+            if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", REAL_NAMES[r]);
+            if (why) FAIL("parameter %s = %g %s", REAL_NAMES[r], v[i], why);
+            d->rp[r - VR_RP] = v[i];
+        } else if (IN(r, VR_IN, NIN)) {
+            d->in[r - VR_IN] = v[i];          /* a sensor passes NaN and inf on */
+        } else FAIL("%s is calculated and cannot be set", r < N_REAL ? REAL_NAMES[r] : "this variable");
+    }
+    return 0;
+}
+
+int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
+    for (size_t i = 0; i < n; i++) {
+        if (!IN(vr[i], VR_IP, NIP) || (width && width != INT_32))
+            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
+        v[i] = d->ip[vr[i] - VR_IP];
+    }
+    return 0;
+}
+
+int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
+                 char *err) {
+    for (size_t i = 0; i < n; i++) {
+        if (!IN(vr[i], VR_IP, NIP) || (width && width != INT_32))
+            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
+        int k = (int)(vr[i] - VR_IP);
+        if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", INT_NAMES[k]);
+        if (v[i] < IP_MIN[k] || v[i] > IP_MAX[k])
+            FAIL("parameter %s = %lld must be in [%lld, %lld]", INT_NAMES[k], v[i], IP_MIN[k], IP_MAX[k]);
+        d->ip[k] = v[i];
+    }
+    return 0;
+}
+
+int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {
+    (void)d; (void)v;
+    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
+    return 0;
+}
+
+int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int before_run, char *err) {
+    (void)d; (void)v; (void)before_run;
+    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
+    return 0;
+}
+
+int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
+    (void)wk;
+    if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
+    if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
+        FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
+    d->time = t + h;
+    return 0;
+}
+
+int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
+    (void)wk; (void)d; (void)dx;
+    FAIL("a signal FMU has no Model Exchange interface");
+}
+
+int core_set_states(CoreData *d, const double x[], size_t nx, char *err) {
+    (void)d; (void)x; (void)nx;
+    FAIL("a signal FMU has no continuous states");
+}
+
+void core_get_states(const CoreData *d, double x[]) { (void)d; (void)x; }
+
+int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU, const unsigned kn[],
+                     size_t nK, const double seed[], double sens[], char *err) {
+    (void)wk; (void)d; (void)unk; (void)nU; (void)kn; (void)nK; (void)seed; (void)sens;
+    FAIL("directional derivatives are not provided by a signal FMU");
+}
