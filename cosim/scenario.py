@@ -49,6 +49,7 @@ the scenario file. Unknown tables and keys are refused with the valid ones named
 """
 from __future__ import annotations
 
+import re
 import tomllib
 from pathlib import Path
 
@@ -173,7 +174,14 @@ class Scenario:
         except TypeError as e:
             if isinstance(e, TypeMismatchError):
                 raise
-            raise ConfigurationError(f"component {name!r} ({kind}): {e}") from None
+            text = str(e)
+            missing = re.search(r"missing \d+ required (?:positional |keyword-only )?arguments?: (.*)", text)
+            unexpected = re.search(r"unexpected keyword argument '(\w+)'", text)
+            if missing:
+                text = f"needs the key{'s' if ',' in missing.group(1) else ''} {missing.group(1)}"
+            elif unexpected:
+                text = f"has the unknown key {unexpected.group(1)!r}"
+            raise ConfigurationError(f"component {name!r} ({kind}) {text}") from None
         except KeyError as e:
             if isinstance(e, UnknownNameError):
                 raise

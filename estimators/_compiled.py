@@ -173,12 +173,10 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     directory = _writable_cache()
     if directory is None:
         return vm
-    with tempfile.TemporaryDirectory() as tmp:
-        cg = ca.CodeGenerator("fns.c")
-        for f in fns:
-            cg.add(f)
-        cg.generate(tmp + "/")
-        code = Path(tmp, "fns.c").read_text() + extra_code
+    cg = ca.CodeGenerator("fns.c")
+    for f in fns:
+        cg.add(f)
+    code = cg.dump() + extra_code        # in memory: CasADi ignores failed file writes
     key = "\n".join([code, ca.__version__, " ".join(_FLAGS + _STDS), _cpu_identity()])
     lib = directory / f"fns_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
     names = [f.name() for f in fns]
@@ -188,6 +186,11 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
                       "altered); rebuilding it", stacklevel=2)
     if state is not True:
         # never delete an entry: another process may be loading it; replace it atomically
-        _build(code, lib, names, cc)
+        try:
+            _build(code, lib, names, cc)
+        except OSError as e:         # the disk filled up, the folder vanished, ...
+            warnings.warn(f"the compiled-code cache {directory} cannot be written ({e.strerror or e}); running "
+                          "filters in CasADi's virtual machine (same numbers, slower)", stacklevel=2)
+            return vm
     out = [ca.external(n, str(lib)) for n in names]
     return (out, "compiled", lib) if return_library else (out, "compiled")

@@ -275,6 +275,10 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
 
 
 # ---------------------------------------------------------------------------- campaign
+#: Realisations per task on the master path.
+MASTER_CHUNK = 10
+
+
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,
         backend: str = "processes", n_jobs=None, progress: bool = True):
     """Run the campaign; returns ``(per_run, eps, examples, wall_time)``.
@@ -294,8 +298,10 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     keys = [(rd, i) for rd in readings for i in range(len(settings.scenarios))]
     t0 = time.perf_counter()
     if path == "master":
-        # one task per scenario and slice of realisations, so both cores stay busy
-        chunks = [c for c in np.array_split(np.arange(settings.runs), max(1, min(settings.runs, 4))) if len(c)]
+        # one task per scenario and slice of at most MASTER_CHUNK realisations: every core
+        # stays busy, and an interrupted campaign keeps all but the last few seconds
+        n_chunks = max(4, -(-settings.runs // MASTER_CHUNK))
+        chunks = [c for c in np.array_split(np.arange(settings.runs), min(settings.runs, n_chunks)) if len(c)]
     else:
         chunks = [np.arange(settings.runs)]
     tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings,
