@@ -106,7 +106,7 @@ def main():
         b = BatchFilter(cls(sys_, x0, P0, *args), runs)
         Y = np.repeat(ys[:, None, :], runs, axis=1)
 
-        def run_batch(b=b):
+        def run_batch(b=b, Y=Y):
             for k in range(N // 10):
                 b.step(us[k], Y[k])
         results[f"batched {name} ({runs} runs), per realisation-step"] = per_step(run_batch, N // 10) / runs

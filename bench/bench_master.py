@@ -35,7 +35,7 @@ from fmu_models import get_model
 from fmu_models.build import build_fmu
 
 T_END, H, REPEATS = 5.0, 0.001, 7
-N = int(round(T_END / H))
+N = round(T_END / H)
 
 
 def _instance(path):

@@ -195,7 +195,7 @@ def _models(args) -> int:
     for name, u in runs.items():
         m = get_model(name)
         x0 = m.x0 if name == "cartpole" else np.array([0.05, 0.0, 0.0])
-        dt, n = 0.01, int(round(args.duration / 0.01))
+        dt, n = 0.01, round(args.duration / 0.01)
         print(f"== {m.description}")
         print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
         xs = m.simulate(x0, u, dt, n, method="euler")
@@ -288,7 +288,8 @@ def _sweep(args, job) -> object:
             raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(seed000.CONFIGS)}")
         own = {f.name for f in fields(exp.SweepSettings)} - {"campaign"}
         sweep_sets = [x for x in (args.set or []) if x.split("=", 1)[0].strip() in own]
-        args_campaign = argparse.Namespace(**{**vars(args), "set": [x for x in (args.set or []) if x not in sweep_sets]})
+        campaign_sets = [x for x in (args.set or []) if x not in sweep_sets]
+        args_campaign = argparse.Namespace(**{**vars(args), "set": campaign_sets})
         campaign = _settings(args_campaign, seed000.CONFIGS[config])
         return apply_overrides(replace(exp.SweepSettings(), campaign=campaign), sweep_sets)
     out, settings = job

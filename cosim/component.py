@@ -243,11 +243,11 @@ class Component(ABC):
         """Outputs at instant ``t`` [s], shape ``(n_outputs,)``, from the inputs ``u``
         (shape ``(n_connected_inputs,)``; only feedthrough inputs are current)."""
 
-    def update(self, t: float, u: np.ndarray) -> None:
+    def update(self, t: float, u: np.ndarray) -> None:  # noqa: B027 - optional, default does nothing
         """Consume the inputs ``u`` at instant ``t`` [s] (all current) and advance the state
         to the next instant. Default: nothing."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 - optional, default does nothing
         """Release resources (called by the master at the end of every run, also after a
         failure; must be safe to call twice)."""
 

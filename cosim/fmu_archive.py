@@ -76,7 +76,7 @@ def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int =
             raise FMUError(f"{path.name} is damaged: {e}") from None
     try:
         return read_model_description(str(path), validate=False)
-    except Exception as e:   # lxml, attrs and fmpy raise a variety of types for bad XML
+    except Exception as e:  # noqa: BLE001 - lxml, attrs and fmpy raise a variety of types for bad XML
         first = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
                        f"{first}") from None

@@ -282,12 +282,12 @@ class FMUComponent(Component):
                     self._log(status, category, message)
 
                 self.fmu.instantiate(loggingOn=self.logging, logMessage=log3)
-        except Exception as e:
+        except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             fmu, self.fmu = self.fmu, None
             if fmu is not None and getattr(fmu, "dll", None) is not None:
                 try:
                     fmu.freeLibrary()
-                except Exception:  # noqa: BLE001 - best effort while reporting the real error
+                except Exception:
                     LOGGER.debug("freeLibrary failed", exc_info=True)
             log = "; ".join(m for s, m in list(self.messages)[-3:])
             raise FMUError(f"{self.name}: cannot load or instantiate {self.path.name}: {e}"

@@ -75,7 +75,7 @@ class MEIntegrator:
         n = max(self.nx, 1)
         self.x, self.dx = np.zeros(n), np.zeros(n)
         self.z, self.z_new = np.zeros(max(self.nz, 1)), np.zeros(max(self.nz, 1))
-        D, ptr = ctypes.c_double, lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
+        D, ptr = ctypes.c_double, lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         nxs, nzs = ctypes.c_size_t(self.nx), ctypes.c_size_t(self.nz)
         set_time = raw_function(dll, f"{p}SetTime")
         set_x = raw_function(dll, f"{p}SetContinuousStates")
@@ -110,9 +110,9 @@ class MEIntegrator:
         fmu = self.fmu
         for _ in range(1000):
             if self.v3:
-                need, term, _, changed, defined, nxt = fmu.updateDiscreteStates()
+                need, term, _, _changed, defined, nxt = fmu.updateDiscreteStates()
             else:
-                need, term, _, changed, defined, nxt = fmu.newDiscreteStates()
+                need, term, _, _changed, defined, nxt = fmu.newDiscreteStates()
             if term:
                 raise FMUError(f"the FMU requested termination at t = {t:g} s")
             if not need:

@@ -52,7 +52,7 @@ from .component import Component, ports_compatible
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, base_step, evaluation_order
 
-__all__ = ["LOOP_SOLVERS", "LOOPS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
+__all__ = ["LOOPS", "LOOP_SOLVERS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
 
 ORDERS = ("auto", "given", "jacobi")
 LOOPS = ("refuse", "iterate")
@@ -258,7 +258,7 @@ class Cosimulation:
 
     def sample_counts(self, stop_time: float, start_time: float = 0.0) -> dict[str, int]:
         """How many times each component computes its outputs in a run (a planning aid)."""
-        n = int(round((stop_time - start_time) / self.step_size))
+        n = round((stop_time - start_time) / self.step_size)
         return {c.name: n // self._ratio[c.name] + 1 for c in self.components}
 
     # ---------------------------------------------------------------- running

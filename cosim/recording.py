@@ -23,7 +23,7 @@ import pandas as pd
 
 from fmu_models.errors import ConfigurationError, ResourceError, UnknownNameError
 
-__all__ = ["MemorySink", "ParquetSink", "available_memory", "select_signals", "partial_path"]
+__all__ = ["MemorySink", "ParquetSink", "available_memory", "partial_path", "select_signals"]
 
 #: Fraction of the available memory an in-memory recording may take before it is refused.
 MEMORY_FRACTION = 0.5

@@ -15,6 +15,7 @@
 """
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -197,7 +198,7 @@ def _cycle(scc: list, edges: dict, why: dict) -> str:
         seen[nxt] = len(path)
         path.append(nxt)
         node = nxt
-    hops = [f"{why[(a, b)][0]} -> {why[(a, b)][1]}" for a, b in zip(cyc, cyc[1:])]
+    hops = [f"{why[(a, b)][0]} -> {why[(a, b)][1]}" for a, b in itertools.pairwise(cyc)]
     return ", ".join(hops)
 
 
@@ -224,7 +225,8 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
         edges, why = _graph(units, conn)
         cyclic = [s for s in _sccs(units, edges) if len(s) > 1 or s[0] in edges[s[0]]]
         more = {u.comp.name for s in cyclic for u in s
-                if u.comp.reentrant and u.comp.name not in split and len(_units(u.comp, connected[u.comp.name], True)) == 2}
+                if u.comp.reentrant and u.comp.name not in split
+                and len(_units(u.comp, connected[u.comp.name], True)) == 2}
         if not more:
             break
         split |= more

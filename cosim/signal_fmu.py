@@ -95,7 +95,7 @@ def _offsets(spec: SignalSpec) -> list[str]:
     """``#define RP_<NAME> index`` for the named Real parameters ``signal_core.c`` reads."""
     names = ["period"] + [r[0] for r in spec.reals]
     n = len(spec.outputs)
-    out = [f"#define RP_PERIOD 0"]
+    out = ["#define RP_PERIOD 0"]
     if spec.kind in ("noise", "sensor"):
         out.append(f"#define RP_STD {1}")
         if spec.kind == "sensor":

@@ -177,10 +177,12 @@ class PRBS(_Source):
         return self.offset + (self.amplitude if b else -self.amplitude)
 
     def _signal(self):
-        return "prbs", [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),
-                        ("bit_time", self.bit_time, "positive", "duration of one bit [s]"),
-                        ("offset", self.offset, "real", "offset")], \
-            [("order", self.order, 2, 16, "LFSR length"), ("seed", self.seed % 2**self.order, 0, 2**31 - 1, "LFSR start state")]
+        reals = [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),
+                 ("bit_time", self.bit_time, "positive", "duration of one bit [s]"),
+                 ("offset", self.offset, "real", "offset")]
+        ints = [("order", self.order, 2, 16, "LFSR length"),
+                ("seed", self.seed % 2**self.order, 0, 2**31 - 1, "LFSR start state (the same sequence)")]
+        return "prbs", reals, ints
 
 
 class Table(_Source):

@@ -12,10 +12,10 @@ code) and the attributes ``x, P, Q, R, innovation, S, K, nis``. Offline:
 """
 from .base import FilterRun, KalmanBase
 from .batch import BatchFilter, BatchRun
-from .em import EMResult, em_noise
 from .ekf import EKF
-from .iae import IAE
+from .em import EMResult, em_noise
 from .fuzzy import MamdaniFuzzy
+from .iae import IAE
 from .kf import KF
 from .mfiae import MFIAE
 from .smoother import Smoothed, rts_smooth

@@ -51,7 +51,8 @@ int %(name)s_fold(long runs, long n_steps,
             for (i = 0; i < n_in; i++) {
                 if (acc_out[i] >= 0)
                     arg[i] = k == 0 ? init[i] + r * init_run_stride[i]
-                                    : res0[acc_out[i]] + r * res_run_stride[acc_out[i]] + (k - 1) * res_stride[acc_out[i]];
+                                    : res0[acc_out[i]] + r * res_run_stride[acc_out[i]]
+                                      + (k - 1) * res_stride[acc_out[i]];
                 else
                     arg[i] = arg0[i] + r * arg_run_stride[i] + k * arg_stride[i];
             }

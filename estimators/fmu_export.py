@@ -204,7 +204,7 @@ def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name:
     def add(**kw):
         variables.append(FmuVariable(vr=len(variables), **kw))
 
-    for pname, value, domain, unit, descr in prm.rows:
+    for pname, value, _domain, _unit, descr in prm.rows:
         add(name=pname, type="Real", causality="parameter", variability="fixed", initial="exact", start=value,
             unit=None, description=descr, kind="param")
     for n in s.input_names:

@@ -6,7 +6,7 @@ update into one CasADi Function. Build one from a plant with :func:`discretize`.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
@@ -78,7 +78,7 @@ class DiscreteModel:
         """Exact measurement Jacobian, shape ``(ny, nx)``."""
         return np.asarray(self._H(checks.vector(x, self.nx, "x")))
 
-    def linearized(self, x_op, u_op) -> "DiscreteModel":
+    def linearized(self, x_op, u_op) -> DiscreteModel:
         """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001).
 
         ``x_{k+1} = f(x_op, u_op) + F0 (x_k - x_op) + G0 (u_k - u_op)``,

@@ -6,7 +6,7 @@
 """
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 from . import cartpole, iwp
 from .errors import UnknownNameError
@@ -16,10 +16,10 @@ from .variables import Variable
 _BUILDERS = {"cartpole": cartpole.build, "iwp": iwp.build}
 MODEL_NAMES = tuple(_BUILDERS)
 
-__all__ = ["get_model", "PlantModel", "Variable", "MODEL_NAMES", "METHODS"]
+__all__ = ["METHODS", "MODEL_NAMES", "PlantModel", "Variable", "get_model"]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _base(name: str) -> PlantModel:
     return _BUILDERS[name]()
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from .errors import ConfigurationError, InputError, TypeMismatchError
 
-__all__ = ["float_array", "vector", "covariance", "positive", "finite", "positive_int"]
+__all__ = ["covariance", "finite", "float_array", "positive", "positive_int", "vector"]
 
 
 def _describe(value) -> str:

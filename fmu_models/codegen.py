@@ -9,6 +9,7 @@ from .fmu_layout import DEFAULT_STEP_SIZE, FmuLayout
 from .plant import PlantModel
 from .variables import DOMAINS
 
+
 def model_functions(model: PlantModel) -> list[ca.Function]:
     """The four functions the FMU needs, with dense outputs (plain column-major arrays in C)."""
     s = model.sym

@@ -28,9 +28,21 @@ Interrupted               a run was stopped by Ctrl-C or SIGTERM (partial result
 """
 from __future__ import annotations
 
-__all__ = ["PendulumCosimError", "ConfigurationError", "UnknownNameError", "TypeMismatchError",
-           "ResourceError", "InputError", "NumericalError", "FMUError", "BuildError",
-           "CompilerNotFoundError", "RunError", "CosimError", "Interrupted"]
+__all__ = [
+    "BuildError",
+    "CompilerNotFoundError",
+    "ConfigurationError",
+    "CosimError",
+    "FMUError",
+    "InputError",
+    "Interrupted",
+    "NumericalError",
+    "PendulumCosimError",
+    "ResourceError",
+    "RunError",
+    "TypeMismatchError",
+    "UnknownNameError",
+]
 
 
 class PendulumCosimError(Exception):

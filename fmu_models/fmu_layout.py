@@ -108,4 +108,4 @@ class FmuLayout:
                        f"{', '.join(x.name for x in self.variables)}")
 
 
-__all__ = ["FmuLayout", "FmuVariable", "Variable", "derivative_unit", "DEFAULT_STEP_SIZE"]
+__all__ = ["DEFAULT_STEP_SIZE", "FmuLayout", "FmuVariable", "Variable", "derivative_unit"]

@@ -29,7 +29,7 @@ import fmpy
 
 from .errors import BuildError, CompilerNotFoundError, ConfigurationError
 
-__all__ = ["C_DIR", "CORES", "FMI_VERSIONS", "atomic_copy", "find_compiler", "pack_fmu", "platform_dir"]
+__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "pack_fmu", "platform_dir"]
 
 #: The generic C files shipped with the package (FMI wrappers and the model cores).
 C_DIR = Path(__file__).parent / "c"

@@ -6,8 +6,8 @@ and the FMUs (`fmu_models.fmu`).
 """
 from __future__ import annotations
 
-from functools import lru_cache
-from typing import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import cache
 
 import casadi as ca
 import numpy as np
@@ -78,13 +78,13 @@ class _Symbolic:
                 xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         return xk
 
-    @lru_cache(maxsize=None)
+    @cache  # noqa: B019 - one symbolic model per PlantModel, kept as long as it
     def step(self, method: str, substeps: int) -> ca.Function:
         xn = self.step_expr(method, substeps)
         return ca.Function(f"step_{method}_{substeps}", [self.x, self.u, self.p, self.dt], [xn],
                            ["x", "u", "p", "dt"], ["x_next"])
 
-    @lru_cache(maxsize=None)
+    @cache  # noqa: B019 - as step
     def step_jac(self, method: str, substeps: int) -> ca.Function:
         xn = self.step_expr(method, substeps)
         return ca.Function(f"step_jac_{method}_{substeps}", [self.x, self.u, self.p, self.dt],
@@ -166,7 +166,7 @@ class PlantModel:
         """Default initial state (the states' start values), shape ``(nx,)``."""
         return np.array([v.start for v in self.states])
 
-    def with_params(self, **params: float) -> "PlantModel":
+    def with_params(self, **params: float) -> PlantModel:
         """Return a copy of this model with parameters overridden by name.
 
         Raises

@@ -108,7 +108,10 @@ def fmi2(d: Description) -> str:
     if d.model_exchange:
         out.append(f"  <ModelExchange{_attrs(**caps, completedIntegratorStepNotNeeded='true')}>"
                    f"<SourceFiles>{srcs}</SourceFiles></ModelExchange>")
-    out.append(f"  <CoSimulation{_attrs(**caps, canHandleVariableCommunicationStepSize='true' if d.variable_step else 'false', canInterpolateInputs='false', maxOutputDerivativeOrder=0)}>"
+    variable = "true" if d.variable_step else "false"
+    cs = _attrs(**caps, canHandleVariableCommunicationStepSize=variable, canInterpolateInputs="false",
+                maxOutputDerivativeOrder=0)
+    out.append(f"  <CoSimulation{cs}>"
                f"<SourceFiles>{srcs}</SourceFiles></CoSimulation>")
     out += _units(d.variables)
     if d.enumerations:
@@ -155,12 +158,15 @@ def fmi3(d: Description) -> str:
                                            variableNamingConvention="structured") + ">"]
     if d.model_exchange:
         out.append(f"  <ModelExchange{_attrs(**caps, needsCompletedIntegratorStep='false')}/>")
-    out.append(f"  <CoSimulation{_attrs(**caps, canHandleVariableCommunicationStepSize='true' if d.variable_step else 'false', maxOutputDerivativeOrder=0, hasEventMode='false', providesIntermediateUpdate='false')}/>")
+    variable = "true" if d.variable_step else "false"
+    cs = _attrs(**caps, canHandleVariableCommunicationStepSize=variable, maxOutputDerivativeOrder=0,
+                hasEventMode="false", providesIntermediateUpdate="false")
+    out.append(f"  <CoSimulation{cs}/>")
     out += _units(d.variables)
     if d.enumerations:
-        out.append("  <TypeDefinitions>" + "".join(
-            f'<EnumerationType{_attrs(name=n)}>{_items(items)}</EnumerationType>' for n, items in d.enumerations.items())
-            + "</TypeDefinitions>")
+        types = "".join(f"<EnumerationType{_attrs(name=n)}>{_items(items)}</EnumerationType>"
+                        for n, items in d.enumerations.items())
+        out.append(f"  <TypeDefinitions>{types}</TypeDefinitions>")
     out += [_LOG_CATEGORIES,
             f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
             "  <ModelVariables>"]

@@ -3,8 +3,7 @@ from __future__ import annotations
 
 from ctypes import c_double
 
-from fmpy import extract, read_model_description
-from fmpy import fmi2, fmi3
+from fmpy import extract, fmi2, fmi3, read_model_description
 from fmpy.fmi1 import calloc, free
 
 
@@ -94,8 +93,10 @@ class Instance:
         return (self.fmu.deSerializeFMUstate if self.version == 2 else self.fmu.deserializeFMUState)(blob)
 
     def free(self):
+        from fmpy.fmi1 import FMICallException
+
         try:
             self.fmu.terminate()
-        except Exception:
-            pass
+        except FMICallException:    # an instance in the error state cannot terminate; free it anyway
+            self.messages.append((3, "terminate refused"))
         self.fmu.freeInstance()

@@ -1,9 +1,9 @@
 """The cart-pole model against an independent Lagrange derivation and against seed 000 eq 22."""
 import numpy as np
 import pytest
+from oracles import cartpole_lagrange, complex_step_jacobian
 
 from fmu_models import get_model
-from oracles import cartpole_lagrange, complex_step_jacobian
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +40,7 @@ def test_table1_m3_typo_would_be_caught(lagrange):
     """Sanity of the oracle: replacing mp by mc in M3 changes f by far more than 1e-12."""
     f, _ = lagrange
     model = get_model("cartpole")
-    mc, mp, l, Bc, Bp, g = model.p
+    mc, mp, l, _Bc, _Bp, _g = model.p
     x, u = np.array([0.0, 0.3, 0.7, -0.4]), np.array([0.2])
     M2 = mp * l**2 / 3 + mp * l**2
     c = np.cos(x[2])
@@ -53,7 +53,7 @@ def test_table1_m3_typo_would_be_caught(lagrange):
 
 def seed000_eq22_as_printed(p):
     """Seed 000 eq 22 as printed (read from the extraction), kept only to show the error."""
-    mc, mp, l, Bc, Bp, g = p
+    mc, mp, l, _Bc, Bp, g = p
     inertia = mp * l**2 / 3
     M1 = mc + mp
     den = inertia * M1 + mc * mp * l**2
@@ -81,7 +81,7 @@ def test_seed000_eq22_differs_from_the_exact_upright_jacobian():
     # A[1,2] and B[3] have the opposite sign (eq 22's angle convention is not eqs 8-11's).
     assert differ_A == {(1, 1), (1, 2), (1, 3), (3, 1), (3, 2), (3, 3)}
     assert differ_B == {(3, 0)}
-    mc, mp, l, Bc, Bp, g = model.p
+    mc, mp, _l, Bc, Bp, _g = model.p
     M1 = mc + mp
     assert A[3, 2] == pytest.approx(M1 * A22[3, 2], rel=1e-12)       # missing factor M1
     assert A[1, 1] / A22[1, 1] == pytest.approx(Bc / Bp, rel=1e-12)   # Bp in place of Bc

@@ -5,8 +5,18 @@ import pytest
 
 import estimators
 import fmu_models
-from cosim import component, estimation, fmu_component, imu, master, model_component, results
-from cosim import scenario, sensors, sources
+from cosim import (
+    component,
+    estimation,
+    fmu_component,
+    imu,
+    master,
+    model_component,
+    results,
+    scenario,
+    sensors,
+    sources,
+)
 from cosim.experiments import campaign, metrics
 from fmu_models import build
 

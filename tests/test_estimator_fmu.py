@@ -1,8 +1,11 @@
 """Estimators as native FMUs (issue 13): equal to the Python filters through fmpy, valid,
 refusing bad parameters, bit-identical state save/restore, and in the master."""
+import re
+
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
+from fmu_helpers import Instance
 
 from cosim.estimation import EstimatorComponent
 from cosim.fmu_component import FMUComponent
@@ -11,7 +14,6 @@ from cosim.sensors import ProcessNoise, Sensor
 from cosim.sources import PRBS
 from estimators import EKF, IAE, KF, MFIAE, UKF, augment_rate_bias, discretize
 from estimators.fmu_export import export_filter_fmu
-from fmu_helpers import Instance
 from fmu_models import get_model
 
 X0 = [0.5, 0.0, 1.8, 0.5]
@@ -97,7 +99,7 @@ def test_bad_parameters_steps_and_inputs_are_refused_with_a_message(cp, tmp_path
             for k, v in params.items():
                 inst.fmu.setReal([inst.vr[k]], [v])
             inst.init()
-        assert any(msg.replace("\\", "") in m or __import__("re").search(msg, m) for _, m in inst.messages), inst.messages
+        assert any(re.search(msg, m) for _, m in inst.messages), inst.messages
         inst.free()
     inst = Instance(str(path))
     inst.init()

@@ -1,8 +1,7 @@
 """KF, EKF and UKF give filterpy's estimates and covariances on the same model and data."""
 import numpy as np
 import pytest
-from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints
-from filterpy.kalman import UnscentedKalmanFilter
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from estimators import EKF, KF, UKF, discretize
 from fmu_models import get_model

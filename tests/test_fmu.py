@@ -5,9 +5,9 @@ import pytest
 from fmpy import dump, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
+from fmu_helpers import Instance
 
 from fmu_models import MODEL_NAMES, get_model
-from fmu_helpers import Instance
 
 CASES = [(name, v) for v in (2, 3) for name in MODEL_NAMES]
 

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmu_helpers import Instance
 
 from cosim.cli import main
 from cosim.fmu_archive import Extraction
 from cosim.fmu_component import FMUComponent
 from cosim.master import Cosimulation
 from cosim.sources import Constant
-from fmu_helpers import Instance
 from fmu_models.errors import ConfigurationError, FMUError
 
 ROOT = Path(__file__).parents[1]
@@ -136,7 +136,8 @@ def test_a_folder_a_file_and_garbage_as_scenario(tmp_path, capsys):
     (SOURCE.replace('type = "constant"', 'type = "constnat"'), "unknown type 'constnat'"),
     (SOURCE.replace("period = 0.01", "period = -0.01"), "sample period"),
     (SOURCE.replace("    value = 1.0\n", ""), "component 'c' (constant) needs the key 'value'"),
-    (SOURCE.replace("value = 1.0", "value = 1.0\n    vlaue = 2"), "component 'c' (constant) has the unknown key 'vlaue'"),
+    (SOURCE.replace("value = 1.0", "value = 1.0\n    vlaue = 2"),
+     "component 'c' (constant) has the unknown key 'vlaue'"),
     (SOURCE + "    [[component]]\n    name = \"d\"\n    type = \"constant\"\n    period = 0.010001\n    value = 1\n",
      "periods"),
     (SOURCE.replace("period = 0.01", "period = 0.0031415926535").replace("stop_time = 0.1", "stop_time = 1e6")
@@ -302,7 +303,7 @@ def test_temporary_folders_do_not_accumulate(fmu_paths):
 def test_a_huge_communication_step_is_an_error_not_a_hang(fmu_builds):
     for version in (2, 3):
         inst = Instance(fmu_builds["cartpole", version]).init()
-        with pytest.raises(Exception):     # noqa: B017 - fmpy raises its own exception type
+        with pytest.raises(Exception):
             inst.do_step(0.0, 1e12)
         assert any("more than the limit of" in m for _, m in inst.messages), inst.messages
         inst.do_step(0.0, 0.01)            # the instance is still usable

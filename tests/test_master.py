@@ -1,18 +1,14 @@
 """The co-simulation master: reproduction, multi-rate scheduling, orders, third-party FMU,
 refusals and faults."""
-import shutil
-import subprocess
-import zipfile
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
 
 from cosim.component import Component
 from cosim.estimation import EstimatorComponent
 from cosim.fmu_component import FMUComponent
-from cosim.master import ConfigurationError, Cosimulation, CosimError
+from cosim.master import ConfigurationError, CosimError, Cosimulation
 from cosim.scenario import Scenario
 from cosim.sensors import Sensor
 from cosim.sources import Constant, Sine

@@ -1,9 +1,9 @@
 """Exactness of every Jacobian the models expose, at 200+ random points of a wide box."""
 import numpy as np
 import pytest
+from oracles import central_difference_jacobian, complex_step_jacobian, iwp_numpy
 
 from fmu_models import get_model
-from oracles import central_difference_jacobian, complex_step_jacobian, iwp_numpy
 
 N_POINTS = 200
 
@@ -69,7 +69,7 @@ def test_euler_map_jacobian_is_identity_plus_dt_A(model):
         A, B = model.linearize(x, u)
         np.testing.assert_allclose(F, np.eye(model.nx) + dt * A, rtol=1e-14, atol=1e-14)
         np.testing.assert_allclose(G, dt * B, rtol=1e-14, atol=1e-16)
-        Ad, Bd = model.discretize(x, u, dt, method="euler")
+        Ad, _Bd = model.discretize(x, u, dt, method="euler")
         np.testing.assert_allclose(Ad, F, rtol=1e-14, atol=1e-14)
 
 

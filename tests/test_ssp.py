@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
+from fmu_helpers import Instance
 
 from cosim.cli import main
 from cosim.estimation import EstimatorComponent, LQRController
@@ -21,7 +22,6 @@ from cosim.sensors import ProcessNoise, Sensor
 from cosim.sources import PRBS, Constant, Sine, Step
 from cosim.ssp import export_ssp, open_ssp
 from estimators import EKF, discretize
-from fmu_helpers import Instance
 from fmu_models import get_model
 from fmu_models.errors import ConfigurationError, FMUError
 
@@ -117,10 +117,11 @@ def test_noise_and_sensor_fmus_equal_the_python_components(tmp_path, version):
 
 def test_signal_fmu_parameters_are_checked_with_a_message(tmp_path):
     path = PRBS("src", 0.01, 0.5, 0.07, 7, 28).export_fmu(tmp_path, 2).path
-    for name, value, msg in (("order", 20, "order = 20 must be in [2, 16]"), ("bit_time", -1.0, "bit_time = -1 must be > 0"),
+    for name, value, msg in (("order", 20, "order = 20 must be in [2, 16]"),
+                             ("bit_time", -1.0, "bit_time = -1 must be > 0"),
                              ("period", float("nan"), "period = nan is not finite")):
         inst = Instance(str(path))
-        with pytest.raises(Exception):     # noqa: B017 - fmpy raises its own exception type
+        with pytest.raises(Exception):
             inst.set(name, value)
             inst.init()
         assert any(msg in m for _, m in inst.messages), inst.messages
@@ -190,7 +191,8 @@ def test_seed000_ssp_loads_with_fmpy_and_runs_in_the_master_like_the_scenario(se
     names = [e.name for e in ssd.system.elements]
     assert names == ["plant", "sensor", "ekf", "mfiae", "force", "noise"]
     params = {p.name: p.value for p in ssd.system.parameterBindings[0].parameterValues[0].parameters}
-    assert params["plant.theta"] == "1.8" and params["noise.std_w_x"] == repr(float(np.sqrt(0.2))) and params["ekf.Q0_x"] == "0.2"
+    assert params["plant.theta"] == "1.8" and params["ekf.Q0_x"] == "0.2"
+    assert params["noise.std_w_x"] == repr(float(np.sqrt(0.2)))
     for fmu in ssp.fmus.values():
         assert validate_fmu(str(fmu)) == []
     reference = scenario.run()
@@ -205,8 +207,8 @@ def test_seed000_ssp_loads_with_fmpy_and_runs_in_the_master_like_the_scenario(se
 def test_fmpy_simulate_ssp_gives_the_masters_plant_trajectory(seed000_ssp):
     """fmpy's SSP simulation (Jacobi, connectors start at 0: its first step sees no force
     and no noise) equals the project's master started from fmpy's state after that step."""
-    from fmpy.ssp.ssd import read_ssd
     from fmpy.ssp.simulation import simulate_ssp
+    from fmpy.ssp.ssd import read_ssd
 
     from cosim.scenario import Scenario
 

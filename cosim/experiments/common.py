@@ -2,7 +2,7 @@
 the master, vectorised truth, batched filters, and one realisation through the master."""
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

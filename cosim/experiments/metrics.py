@@ -9,12 +9,14 @@ import numpy as np
 
 
 def rms_over_states(err: np.ndarray) -> np.ndarray:
-    """``err`` (runs, steps, states): ``sqrt(1/nx sum_a e[r, k, a]^2)``, shape (runs, steps): the inner term of eqs 43-44."""
+    """``err`` (runs, steps, states): ``sqrt(1/nx sum_a e[r, k, a]^2)``, shape (runs, steps):
+    the inner term of eqs 43-44."""
     return np.sqrt(np.mean(np.square(err), axis=-1))
 
 
 def eps_k(err: np.ndarray) -> np.ndarray:
-    """``err`` (runs, steps, states): Eq 43: mean over realisations of the RMS over the states at each step, shape (steps,)."""
+    """``err`` (runs, steps, states): eq 43, the mean over realisations of the RMS over the
+    states at each step, shape (steps,)."""
     return rms_over_states(err).mean(axis=0)
 
 

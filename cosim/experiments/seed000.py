@@ -37,7 +37,7 @@ from fmu_models.errors import ConfigurationError, UnknownNameError
 
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
-from .common import batch_estimates, master_realisation, new_figure, nees_from_outputs, noise_components
+from .common import batch_estimates, master_realisation, nees_from_outputs, new_figure, noise_components
 from .common import simulate_truth as common_truth
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
@@ -116,7 +116,7 @@ class Settings:
 
     @property
     def steps(self) -> int:
-        return int(round(self.duration / self.T))
+        return round(self.duration / self.T)
 
 
 #: Named configurations (``--config``).
@@ -150,7 +150,7 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) ->
     """(q, r) learned by EM from the nominal values on the scenario's training realisation."""
     from estimators import EKF, em_noise
 
-    X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+    _X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
     q0, r0 = nominal_noise(s, q, r)
     f = EKF(system, np.array(s.x0), s.P0, q0, r0)
     res = em_noise(f, u[:-1, None], Y[0, 1:], n_iter=s.em_iterations, tol=s.em_tol, structure="scalar")
@@ -373,6 +373,10 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _join(values) -> str:
+    return ", ".join(f"{v:.2f}" for v in values)
+
+
 def agreement(table: pd.DataFrame) -> list[str]:
     """Plain sentences on where the table agrees with the paper's Table 3 and where not."""
     lines = []
@@ -380,17 +384,17 @@ def agreement(table: pd.DataFrame) -> list[str]:
         for label, ours, paper in (("EKF", "EKF", "paper EKF"), ("MF-IAE", "MF-IAE", "paper MF-IAE")):
             ratio = g[ours] / g[paper]
             within = ratio.between(0.9, 1.1)
-            cells = ", ".join(f"{r:.2f}" for r in ratio)
+            cells = _join(ratio)
             verdict = ("agrees with the paper within 10 % in every scenario" if within.all() else
                        f"agrees within 10 % in {int(within.sum())} of {len(g)} scenarios")
             lines.append(f"- {rd} reading, {label}: ours / paper = {cells}; {verdict}.")
         bound = g["MF-IAE / bound"]
-        lines.append(f"- {rd} reading: MF-IAE / true-Q,R bound = {', '.join(f'{b:.2f}' for b in bound)} "
-                     f"(paper's MF-IAE / our bound: {', '.join(f'{p:.2f}' for p in g['paper MF-IAE'] / g['EKF true Q,R'])}); "
-                     f"IAE / bound = {', '.join(f'{b:.2f}' for b in g['IAE / bound'])}; "
-                     f"EKF / bound = {', '.join(f'{b:.2f}' for b in g['EKF / bound'])}; "
-                     f"EKF with EM-learned Q, R / bound = {', '.join(f'{b:.2f}' for b in g['EKF EM / bound'])} "
-                     f"(learned q / true q = {', '.join(f'{a:.2f}' for a in g['q_em'] / g['sigma_q2' if rd == 'eqs' else 'sigma_r2'])}).")
+        true_q = g["sigma_q2" if rd == "eqs" else "sigma_r2"]
+        lines.append(f"- {rd} reading: MF-IAE / true-Q,R bound = {_join(bound)} "
+                     f"(paper's MF-IAE / our bound: {_join(g['paper MF-IAE'] / g['EKF true Q,R'])}); "
+                     f"IAE / bound = {_join(g['IAE / bound'])}; EKF / bound = {_join(g['EKF / bound'])}; "
+                     f"EKF with EM-learned Q, R / bound = {_join(g['EKF EM / bound'])} "
+                     f"(learned q / true q = {_join(g['q_em'] / true_q)}).")
     return lines
 
 

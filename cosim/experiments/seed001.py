@@ -65,7 +65,7 @@ class Settings:
 
     @property
     def steps(self) -> int:
-        return int(round(self.duration / self.T))
+        return round(self.duration / self.T)
 
 
 def make_filters(s: Settings, case: str) -> dict:
@@ -95,7 +95,7 @@ def _summary(errors: dict, s: Settings) -> dict:
         # diverged from the first step after which the error stays above the threshold
         stays = np.flip(np.logical_and.accumulate(np.flip(above, axis=1), axis=1), axis=1)
         t_div = np.where(stays.any(axis=1), t[np.argmax(stays, axis=1)], np.nan)
-        idx = [int(round(tr / s.T)) for tr in REPORT_TIMES if tr <= s.duration]
+        idx = [round(tr / s.T) for tr in REPORT_TIMES if tr <= s.duration]
         out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": np.sqrt(np.mean(err[:, 1:] ** 2, axis=1)),
                      "t_div": t_div, "rms_mean": rms.mean(axis=0)}
     return out

@@ -115,7 +115,7 @@ def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
 def _lag_and_gain(truth, est, T, max_lag=50):
     """Lag [s] maximising the cross-correlation of est against truth, and std(est)/std(truth)."""
     a, b = truth - truth.mean(), est - est.mean()
-    lags = range(0, max_lag + 1)
+    lags = range(max_lag + 1)
     corr = [np.dot(a[: len(a) - L], b[L:]) for L in lags]
     return lags[int(np.argmax(corr))] * T, float(b.std() / a.std()) if a.std() > 0 else np.nan
 
