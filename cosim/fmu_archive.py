@@ -57,7 +57,8 @@ def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: in
 
 
 def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
-    """Check the archive at ``path`` and return fmpy's ``ModelDescription`` of it.
+    """Check the archive at ``path`` (at most ``max_bytes`` unpacked, ``max_files`` files)
+    and return fmpy's ``ModelDescription`` of it.
 
     Raises
     ------

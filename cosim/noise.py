@@ -86,7 +86,7 @@ class PerInstantNoise:
 
 class CounterNoise:
     """``n`` standard normal numbers at sample ``round(t / period)`` of the counter
-    generator (:func:`counter_normal`)."""
+    generator (:func:`counter_normal`) with ``seed``."""
 
     def __init__(self, seed: int, n: int, period: float):
         self.seed, self.n, self.period = seed, n, period
@@ -100,7 +100,8 @@ class CounterNoise:
 
 
 def make_noise(generator: str, seed: int, n: int, period: float, owner: str):
-    """A noise stream of ``generator`` (see :data:`GENERATORS`) with checked arguments."""
+    """A noise stream of ``generator`` (see :data:`GENERATORS`), ``seed``, ``n`` channels
+    drawn at ``period`` [s]; errors name ``owner`` (the component)."""
     if generator not in GENERATORS:
         raise UnknownNameError(f"{owner}: generator must be one of {GENERATORS}, got {generator!r}")
     if generator == "counter":

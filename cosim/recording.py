@@ -60,7 +60,8 @@ def available_memory() -> int:
 
 
 def partial_path(path: Path) -> Path:
-    """Where the rows of an interrupted or failed run go: ``<stem>.partial<suffix>``."""
+    """Where the rows of an interrupted or failed run writing ``path`` go:
+    ``<stem>.partial<suffix>``."""
     return path.with_name(f"{path.stem}.partial{path.suffix}")
 
 

@@ -93,7 +93,8 @@ class Unit:
     """One evaluation of a component's ``output`` at an instant.
 
     ``part`` is ``"all"``, or, for a component split to break a component-level cycle,
-    ``"free"`` (its outputs that depend on no input) and later ``"dependent"``.
+    ``"free"`` (its outputs that depend on no input) and later ``"dependent"``; ``ports``
+    are the outputs it computes, ``needs`` the inputs they depend on directly.
     """
 
     comp: Component
@@ -107,7 +108,8 @@ class Unit:
 
 @dataclass(frozen=True)
 class Group:
-    """Units evaluated together: one unit, or an algebraic loop solved by iteration."""
+    """``units`` evaluated together: one unit, or an algebraic loop solved by iteration
+    (``loop``)."""
 
     units: tuple
     loop: bool = False

@@ -285,8 +285,9 @@ def _period(comp: ET.Element, md, name: str) -> float:
 
 @contextlib.contextmanager
 def open_ssp(path) -> Iterator[SSPSystem]:
-    """Open an SSP (``.ssp`` archive, its unpacked folder, or its ``SystemStructure.ssd``)
-    as an :class:`SSPSystem`; a context manager that removes what it unpacked.
+    """Open the SSP at ``path`` (a ``.ssp`` archive, its unpacked folder, or its
+    ``SystemStructure.ssd``) as an :class:`SSPSystem`; a context manager that removes what
+    it unpacked.
 
     Each ``Component`` becomes an :class:`~cosim.fmu_component.FMUComponent` with its
     connectors as ports, the parameter bindings (inline values, system or component

@@ -42,7 +42,8 @@ def vector(value, n: int, what: str, error: type[Exception] = InputError) -> np.
     """``value`` as a finite float vector of shape ``(n,)``.
 
     Scalars are accepted when ``n == 1`` and ``(n, 1)`` columns are flattened. A wrong
-    shape or a NaN/inf entry raises ``error`` (default :class:`InputError`).
+    shape or a NaN/inf entry raises ``error`` (default :class:`InputError`) with a message
+    naming ``what`` (e.g. ``"EKF: y"``).
     """
     a = float_array(value, what)
     if a.ndim == 0 and n == 1:
@@ -60,8 +61,8 @@ def vector(value, n: int, what: str, error: type[Exception] = InputError) -> np.
 
 def covariance(value, n: int, what: str, allow_scalar: bool = True,
                error: type[Exception] = ConfigurationError) -> np.ndarray:
-    """A symmetric positive-definite ``(n, n)`` matrix from a matrix, a vector (diagonal) or
-    a scalar (times identity).
+    """A symmetric positive-definite ``(n, n)`` matrix from ``value``: a matrix, a vector
+    (the diagonal) or, with ``allow_scalar``, a scalar (times identity).
 
     Raises ``error`` (default :class:`ConfigurationError`) naming ``what`` if the shape is
     wrong, an entry is not finite, the matrix is not symmetric (relative 1e-9) or not
@@ -112,7 +113,8 @@ def positive(value, what: str, error: type[Exception] = ConfigurationError) -> f
 
 def positive_int(value, what: str, error: type[Exception] = ConfigurationError,
                  minimum: int = 1) -> int:
-    """``value`` as an int ``>= minimum`` (integral floats such as 3.0 accepted)."""
+    """``value`` as an int ``>= minimum`` (integral floats such as 3.0 accepted); else
+    ``error`` (default :class:`ConfigurationError`) naming ``what``."""
     if isinstance(value, bool):
         raise TypeMismatchError(f"{what} must be an integer, got {value!r}")
     try:

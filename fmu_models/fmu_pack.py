@@ -53,7 +53,8 @@ def find_compiler() -> str:
 
 
 def platform_dir(fmi_version: int) -> str:
-    """The binaries folder of this platform (``linux64`` in FMI 2.0, ``x86_64-linux`` in 3.0)."""
+    """The binaries folder of this platform for ``fmi_version`` 2 or 3 (``linux64`` in FMI 2.0,
+    ``x86_64-linux`` in 3.0)."""
     machine = platform.machine().lower()
     system = {"linux": "linux", "darwin": "darwin", "win32": "win"}.get(sys.platform, sys.platform)
     if fmi_version == 2:

@@ -50,7 +50,29 @@ class Unknown:
 
 @dataclass
 class Description:
-    """Everything the XML states about an FMU (see the module documentation)."""
+    """Everything the XML states about an FMU (see the module documentation).
+
+    Attributes
+    ----------
+    model_name, identifier, guid, description : str
+        ``modelName``, ``modelIdentifier``, ``guid`` / ``instantiationToken``, ``description``.
+    variables : sequence of FmuVariable
+        In ModelVariables order.
+    outputs, derivatives, initial_unknowns : sequence of Unknown
+        The ModelStructure.
+    model_exchange : bool
+        Also a Model Exchange interface (Co-Simulation is always there).
+    directional : bool
+        Provides directional derivatives.
+    variable_step : bool
+        ``canHandleVariableCommunicationStepSize``.
+    default_step, stop_time : float
+        The DefaultExperiment [s].
+    enumerations : dict
+        Enumeration types: name -> [(item, value, description)].
+    source_files : sequence of str
+        The C files of ``sources/`` to compile.
+    """
 
     model_name: str
     identifier: str

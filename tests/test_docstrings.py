@@ -8,20 +8,29 @@ import fmu_models
 from cosim import (
     component,
     estimation,
+    fmu_archive,
     fmu_component,
+    fmu_me,
     imu,
     master,
     model_component,
+    noise,
+    recording,
     results,
     scenario,
+    schedule,
     sensors,
+    signal_fmu,
     sources,
+    ssp,
 )
-from cosim.experiments import campaign, metrics
-from fmu_models import build
+from cosim.experiments import campaign, metrics, settings
+from estimators import batch, em, fmu_export, smoother
+from fmu_models import build, checks, fmu_pack, xml_writer
 
-MODULES = (fmu_models, estimators, build, component, estimation, fmu_component, imu, master,
-           model_component, results, scenario, sensors, sources, campaign, metrics)
+MODULES = (fmu_models, estimators, build, checks, fmu_pack, xml_writer, component, estimation, fmu_archive,
+           fmu_component, fmu_me, imu, master, model_component, noise, recording, results, scenario, schedule,
+           sensors, signal_fmu, sources, ssp, campaign, metrics, settings, batch, em, fmu_export, smoother)
 
 
 def public_objects():

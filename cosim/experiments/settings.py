@@ -131,7 +131,8 @@ def _toml_value(v) -> str:
 
 
 def to_toml(settings, experiment: str) -> str:
-    """The dataclass ``settings`` as a TOML file that :func:`load_settings` reads back."""
+    """The dataclass ``settings`` of ``experiment`` (its name) as a TOML file that
+    :func:`load_settings` reads back."""
     lines = [f'experiment = "{experiment}"']
     lines += [f"{f.name} = {_toml_value(getattr(settings, f.name))}" for f in dataclasses.fields(settings)]
     return "\n".join(lines) + "\n"
