@@ -25,9 +25,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import NumericalError, TypeMismatchError
+from fmu_models.errors import ConfigurationError, NumericalError, TypeMismatchError
 
-from .base import FilterRun, KalmanBase, spd_solve, symmetric
+from .base import CSE, FilterRun, KalmanBase, spd_solve, symmetric
 from .ukf import UKF
 
 __all__ = ["Smoothed", "rts_smooth", "smoother_step"]
@@ -85,7 +85,7 @@ def smoother_step(filt: KalmanBase) -> ca.Function:
     lag = ca.mtimes(Ps_, C.T)
     d = ca.densify
     return ca.Function("rts", [xs, Ps, x, P, xp, Pp, u], [d(xs_new), d(Ps_new), d(C), d(lag)],
-                       ["xs", "Ps", "x", "P", "xp", "Pp", "u"], ["xs_new", "Ps_new", "C", "Plag"])
+                       ["xs", "Ps", "x", "P", "xp", "Pp", "u"], ["xs_new", "Ps_new", "C", "Plag"], CSE)
 
 
 def _fold(filt: KalmanBase):
@@ -115,6 +115,8 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
     """
     if not isinstance(filt, KalmanBase) or not isinstance(run, FilterRun):
         raise TypeMismatchError("rts_smooth needs a filter and the FilterRun of its run()")
+    if run.x_prior is None:
+        raise ConfigurationError("this run kept the estimates only; smoothing needs run(..., keep='all')")
     N, nx = len(run.x) - 1, filt.system.nx
 
     def flat(a):                                    # (K, nx, nx) symmetric -> (K, nx*nx) rows

@@ -220,3 +220,19 @@ def test_em_refusals(cp, record):
         em_noise(EKF(cp, X0, 1.0, 0.01, 0.05), us, ys, structure="banded")
     with pytest.raises(ValueError, match="learn must name"):
         em_noise(EKF(cp, X0, 1.0, 0.01, 0.05), us, ys, learn=("S",))
+
+
+def test_run_keeping_the_estimates_only(cp, record):
+    us, _, ys = record
+    full = EKF(cp, X0, 1.0, 0.2, 0.1).run(us, ys)
+    f = EKF(cp, X0, 1.0, 0.2, 0.1)
+    lean = f.run(us, ys, keep="estimates")
+    np.testing.assert_array_equal(lean.x, full.x)
+    np.testing.assert_array_equal(lean.P, full.P)
+    assert lean.log_likelihood == full.log_likelihood and np.array_equal(lean.nis, full.nis)
+    assert lean.x_prior is None and lean.K is None
+    np.testing.assert_array_equal(f.innovation, full.innovation[-1])      # the filter stands at the last step
+    with pytest.raises(ValueError, match="keep='all'"):
+        rts_smooth(f, lean)
+    with pytest.raises(ValueError, match="keep must be one of"):
+        f.run(us, ys, keep="some")
