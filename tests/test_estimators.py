@@ -99,7 +99,7 @@ def test_mfiae_moves_q_and_r_from_wrong_values_and_lowers_the_error():
     rmse_m, rmse_e, qs, rs = [], [], [], []
     for seed in range(5):
         cp, us, xs, ys = cartpole_truth(q_true, r_true, n=1000, seed=seed)
-        m = MFIAE(cp, [0.5, 0, 1.8, 0.5], np.eye(4) * 0.1, wrong, wrong, gain_q=0.02, gain_r=0.2,
+        m = MFIAE(cp, [0.5, 0, 1.8, 0.5], np.eye(4) * 0.1, wrong, wrong, window=50, gain_q=0.02, gain_r=0.2,
                   q_mapping="gain", q_bounds=(1e-9, 1e6), r_bounds=(1e-9, 1e6))
         e = EKF(cp, [0.5, 0, 1.8, 0.5], np.eye(4) * 0.1, wrong, wrong)
         rmse_m.append(np.sqrt(np.mean((m.run(us, ys).x[1:] - xs)[200:] ** 2)))
