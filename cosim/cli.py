@@ -129,7 +129,10 @@ def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool 
         wall = time.perf_counter() - t0
         paths = save_results(df, out)
         if any(Path(fmus).iterdir()):            # keep the FMUs the scenario built
-            shutil.copytree(fmus, out / "fmus")
+            for fmu in Path(fmus).rglob("*.fmu"):
+                dst = out / "fmus" / fmu.relative_to(fmus)
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(fmu, dst)
         ests = [c.name for c in sc.cosim.components if type(c).__name__ == "EstimatorComponent"]
         table = _rmse_table(df, ests)
         if len(table):

@@ -68,6 +68,9 @@ class EstimatorComponent(Component):
         self._nu, self._nx = sys_.nu, n
         self._u_prev = None
 
+    def timing(self) -> str:
+        return "outputs at t: the estimate after predict(u read at the previous instant) and update(y at t)"
+
     def _outputs(self):
         f = self.filter
         P = f.P

@@ -12,7 +12,6 @@ import contextlib
 import fcntl
 import os
 import shutil
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -26,8 +25,10 @@ __all__ = ["OutputFolder", "atomic_write", "plot_estimates", "save_results"]
 def atomic_write(path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` to write a temporary file beside ``path``, then rename it to
     ``path`` (atomic); the temporary file is removed if ``write`` fails. Returns ``path``."""
+    from fmu_models.fmu_pack import temp_beside
+
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = temp_beside(path)
     os.close(fd)
     try:
         write(Path(tmp))

@@ -16,6 +16,7 @@ import contextlib
 import hashlib
 import os
 import platform
+import secrets
 import shutil
 import subprocess
 import sys
@@ -67,10 +68,23 @@ def _library_suffix() -> str:
     return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
+def temp_beside(dst: Path) -> tuple[int, str]:
+    """A new temporary file in ``dst``'s folder, opened for writing: ``(fd, path)``. Unlike
+    ``tempfile.mkstemp`` (always 0600) its permissions follow the umask, as the final file's
+    would, since it is renamed into place."""
+    for _ in range(100):
+        tmp = str(dst.parent / f".{dst.name}.{secrets.token_hex(6)}.tmp")
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name beside {dst}")
+
+
 def atomic_copy(src: Path, dst: Path) -> None:
     """Copy ``src`` to ``dst`` through a temporary file in ``dst``'s folder and an atomic
     rename, so that ``dst`` is at every instant either absent, the old file or the new one."""
-    fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=".tmp")
+    fd, tmp = temp_beside(Path(dst))
     try:
         with os.fdopen(fd, "wb") as out, open(src, "rb") as inp:
             shutil.copyfileobj(inp, out)

@@ -1,4 +1,6 @@
 """The pendulum-cosim command line."""
+import os
+
 import pandas as pd
 import pytest
 
@@ -21,6 +23,10 @@ def test_demo_writes_results_table_and_plot(tmp_path, capsys):
     df = pd.read_csv(tmp_path / "results.csv", index_col="time")
     assert len(df) == 501 and "ekf.theta" in df.columns and "plant.theta" in df.columns
     assert (tmp_path / "results.parquet").exists() and (tmp_path / "truth_vs_estimate.png").stat().st_size > 10_000
+    umask = os.umask(0)
+    os.umask(umask)
+    for f in ("results.csv", "results.parquet", "truth_vs_estimate.png", "fmus/fmi2/CartPole.fmu"):
+        assert (tmp_path / f).stat().st_mode & 0o777 == 0o666 & ~umask, f     # as any new file, not 0600
     rmse = pd.read_csv(tmp_path / "rmse.csv", index_col=0)
     # the EKF beats the raw measurements on both measured states
     assert rmse.loc["ekf", "x"] < rmse.loc["raw measurement", "x"]
