@@ -194,7 +194,9 @@ def test_a_full_disk_is_an_error_and_leaves_no_half_written_results(tmp_path):
                           timeout=300, env={**os.environ, "PENDULUM_COSIM_CACHE": str(tmp_path / "cache")})
     assert proc.returncode == 2, proc.stderr
     assert "error:" in proc.stderr and "Traceback" not in proc.stderr
-    assert "File too large" in proc.stderr or "No space" in proc.stderr or "cannot be written" in proc.stderr
+    # where the limit strikes first depends on file sizes: the compiler, the cache or the results
+    assert any(m in proc.stderr for m in ("File too large", "File size limit exceeded", "No space",
+                                           "cannot be written")), proc.stderr
     names = [p.name for p in out.rglob("*")] if out.exists() else []
     assert "results.csv" not in names and not any(n.endswith(".tmp") for n in names), names
 
