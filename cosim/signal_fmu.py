@@ -35,12 +35,12 @@ from fmu_models.codegen import _c_array
 from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.fmu_layout import FmuVariable
 from fmu_models.fmu_pack import pack_fmu
+from fmu_models.variables import DOMAINS
 from fmu_models.xml_writer import Description, Unknown, fmi2, fmi3
 
 __all__ = ["KINDS", "SignalSpec", "build_signal_fmu"]
 
 KINDS = ("constant", "step", "sine", "prbs", "noise", "sensor")
-_DOMAINS = {"real": 0, "positive": 1, "nonnegative": 2}
 _INT32_MAX = 2**31 - 1
 
 
@@ -165,7 +165,7 @@ def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier
             f"#define VR_TIME {first('time')}", f"#define VR_IP {n_int_first}", f"#define N_REAL {n_real}",
             *_offsets(spec),
             _c_array("double", "RP_DEFAULT", [repr(float(r[1])) for r in reals]),
-            _c_array("int", "RP_DOMAIN", [str(_DOMAINS[r[2]]) for r in reals]),
+            _c_array("int", "RP_DOMAIN", [str(DOMAINS.index(r[2])) for r in reals]),
             _c_array("long long", "IP_DEFAULT", [f"{int(i[1])}LL" for i in spec.ints]),
             _c_array("long long", "IP_MIN", [f"{int(i[2])}LL" for i in spec.ints]),
             _c_array("long long", "IP_MAX", [f"{int(i[3])}LL" for i in spec.ints]),

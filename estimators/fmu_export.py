@@ -34,6 +34,7 @@ from fmu_models.codegen import _c_array
 from fmu_models.errors import ConfigurationError, TypeMismatchError
 from fmu_models.fmu_layout import FmuVariable
 from fmu_models.fmu_pack import pack_fmu
+from fmu_models.variables import DOMAINS
 from fmu_models.xml_writer import Description, Unknown, fmi2, fmi3
 
 from .base import DIAGNOSTICS, STEP_INPUTS, KalmanBase, _finite
@@ -42,7 +43,6 @@ from .mfiae import MFIAE
 
 __all__ = ["export_filter_fmu", "filter_parameters"]
 
-_DOMAINS = {"real": 0, "positive": 1, "nonnegative": 2, "unit": 3}
 
 
 def _diag(M: np.ndarray, what: str, name: str) -> np.ndarray:
@@ -255,7 +255,7 @@ def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name:
             f"#define VR_TIME {first['time']}", f"#define N_REAL {n_real}",
             *(f"#define WORK_{k.upper()} {v}" for k, v in work.items()),
             _c_array("double", "PARAM_DEFAULT", [repr(r[1]) for r in prm.rows]),
-            _c_array("int", "PARAM_DOMAIN", [str(_DOMAINS[r[2]]) for r in prm.rows]),
+            _c_array("int", "PARAM_DOMAIN", [str(DOMAINS.index(r[2])) for r in prm.rows]),
             f"#define N_LESS {len(prm.less)}",
             _c_array("int", "LESS_LO", [str(a) for a, _ in prm.less]),
             _c_array("int", "LESS_HI", [str(b) for _, b in prm.less]),

@@ -2,7 +2,8 @@
 wrappers: the machinery every FMU of the project goes through (plants, estimators,
 signals).
 
-An FMU's C sources are the generic files in ``fmu_models/c`` (``core_api.h``, the wrapper
+An FMU's C sources are the generic files in ``fmu_models/c`` (``core_api.h``,
+``core_common.h``, the wrapper
 ``fmi<version>_wrapper.c`` with ``wrapper_modes.h`` and ``wrapper_common.h``, and
 ``<core>_core.h/.c``), a ``core.h`` selecting the core, and the files the caller generates
 (``model_config.h`` and CasADi's code). They are compiled into the FMU's shared library and
@@ -141,8 +142,8 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
     cc = find_compiler()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    generic = ["core_api.h", "wrapper_modes.h", "wrapper_common.h", f"{core}_core.h", f"{core}_core.c",
-               f"fmi{fmi_version}_wrapper.c"]
+    generic = ["core_api.h", "core_common.h", "wrapper_modes.h", "wrapper_common.h", f"{core}_core.h",
+               f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
     with tempfile.TemporaryDirectory(prefix=f"{identifier}_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"

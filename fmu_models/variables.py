@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from .errors import ConfigurationError, TypeMismatchError
 
 #: Admissible value sets for a parameter; checked in Python and in the generated FMU.
-DOMAINS = ("real", "positive", "nonnegative", "sign")
+DOMAINS = ("real", "positive", "nonnegative", "unit", "sign")
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,7 @@ class Variable:
     start : float
         Default value (parameter value, state start value, input start value).
     domain : str
-        For parameters: one of :data:`DOMAINS`. ``"sign"`` admits only -1 and +1.
+        For parameters: one of :data:`DOMAINS`. ``"unit"`` is (0, 1], ``"sign"`` admits only -1 and +1.
     """
 
     name: str
@@ -55,6 +55,8 @@ class Variable:
             raise ConfigurationError(f"parameter {self.name!r} [{self.unit}] must be > 0, got {v}")
         if self.domain == "nonnegative" and not v >= 0.0:
             raise ConfigurationError(f"parameter {self.name!r} [{self.unit}] must be >= 0, got {v}")
+        if self.domain == "unit" and not 0.0 < v <= 1.0:
+            raise ConfigurationError(f"parameter {self.name!r} must be in (0, 1], got {v}")
         if self.domain == "sign" and v not in (-1.0, 1.0):
             raise ConfigurationError(f"parameter {self.name!r} must be -1 or +1, got {v}")
         return v

@@ -3,12 +3,12 @@
 #include <stdio.h>
 #include <string.h>
 #include "core_api.h"
+#include "core_common.h"
 #include "model_funcs.h"
 
 #define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
 #define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
 
-enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_UNIT = 3 };
 /* where a step argument comes from / a step result goes to (model_config.h tables) */
 enum { SRC_STATE = 0, SRC_U = 1, SRC_Y = 2, SRC_MASK = 3, SRC_FIXED = 4 };
 enum { DST_STATE = 0, DST_DIAG = 1, DST_STATUS = 2, DST_DROP = 3 };
@@ -23,20 +23,10 @@ void core_defaults(CoreData *d) {
 double core_time(const CoreData *d) { return d->time; }
 void core_set_time(CoreData *d, double t) { d->time = t; }
 
-static const char *check_param(int k, double v) {
-    if (!isfinite(v)) return "is not finite";
-    switch (PARAM_DOMAIN[k]) {
-    case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
-    case DOMAIN_NONNEGATIVE: return v >= 0 ? NULL : "must be >= 0";
-    case DOMAIN_UNIT: return (v > 0 && v <= 1) ? NULL : "must be in (0, 1]";
-    default: return NULL;
-    }
-}
-
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     double stamp[1];
     for (int k = 0; k < NP; k++) {
-        const char *why = check_param(k, d->p[k]);
+        const char *why = domain_violation(PARAM_DOMAIN[k], d->p[k]);
         if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
     }
     for (int i = 0; i < N_LESS; i++)
@@ -111,10 +101,8 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_P, NP)) {
-            const char *why = check_param((int)(r - VR_P), v[i]);
-            if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", REAL_NAMES[r]);
-            if (why) FAIL("parameter %s = %g %s", REAL_NAMES[r], v[i], why);
-            d->p[r - VR_P] = v[i];
+            if (set_parameter(&d->p[r - VR_P], REAL_NAMES[r], PARAM_DOMAIN[r - VR_P], v[i], before_run, err))
+                return 1;
         } else if (IN(r, VR_U, NU)) {
             if (!isfinite(v[i])) FAIL("%s: value %g is not finite", REAL_NAMES[r], v[i]);
             d->u[r - VR_U] = v[i];
@@ -176,20 +164,4 @@ int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     return 0;
 }
 
-int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
-    (void)wk; (void)d; (void)dx;
-    FAIL("an estimator FMU has no Model Exchange interface");
-}
-
-int core_set_states(CoreData *d, const double x[], size_t nx, char *err) {
-    (void)d; (void)x; (void)nx;
-    FAIL("an estimator FMU has no continuous states");
-}
-
-void core_get_states(const CoreData *d, double x[]) { (void)d; (void)x; }
-
-int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU, const unsigned kn[],
-                     size_t nK, const double seed[], double sens[], char *err) {
-    (void)wk; (void)d; (void)unk; (void)nU; (void)kn; (void)nK; (void)seed; (void)sens;
-    FAIL("directional derivatives are not provided by an estimator FMU");
-}
+CORE_NO_MODEL_EXCHANGE("an estimator FMU")

@@ -3,6 +3,7 @@
 #include <stdio.h>
 #include <string.h>
 #include "core_api.h"
+#include "core_common.h"
 #include "model_funcs.h"
 
 #define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
@@ -15,16 +16,6 @@ void core_defaults(CoreData *d) {
     d->step_size = DEFAULT_STEP_SIZE;
     d->integrator = INTEGRATOR_EULER;
     d->substeps = 1;
-}
-
-static const char *check_param(int k, double v) {
-    if (!isfinite(v)) return "is not finite";
-    switch (PARAM_DOMAIN[k]) {
-    case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
-    case DOMAIN_NONNEGATIVE: return v >= 0 ? NULL : "must be >= 0";
-    case DOMAIN_SIGN: return (v == 1.0 || v == -1.0) ? NULL : "must be -1 or +1";
-    default: return NULL;
-    }
 }
 
 static void plant_f(CoreWork *wk, const CoreData *d, const double *x, double *xdot) {
@@ -54,7 +45,7 @@ void core_set_time(CoreData *d, double t) { d->time = t; }
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     (void)wk;
     for (int k = 0; k < NP; k++) {
-        const char *why = check_param(k, d->p[k]);
+        const char *why = domain_violation(PARAM_DOMAIN[k], d->p[k]);
         if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
     }
     for (int i = 0; i < NX; i++)
@@ -90,10 +81,8 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
         if (r >= N_REAL) FAIL("no settable Real variable has value reference %u", r);
         if (!isfinite(v[i])) FAIL("%s: value %g is not finite", REAL_NAMES[r], v[i]);
         if (IN(r, VR_P, NP)) {
-            const char *why = check_param(r - VR_P, v[i]);
-            if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", REAL_NAMES[r]);
-            if (why) FAIL("parameter %s = %g %s", REAL_NAMES[r], v[i], why);
-            d->p[r - VR_P] = v[i];
+            if (set_parameter(&d->p[r - VR_P], REAL_NAMES[r], PARAM_DOMAIN[r - VR_P], v[i], before_run, err))
+                return 1;
         } else if (r == VR_STEP) {
             if (!before_run) FAIL("step_size is fixed: set it before leaving initialization mode");
             if (!(v[i] > 0)) FAIL("step_size = %g must be > 0", v[i]);
@@ -143,17 +132,7 @@ int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[]
     return 0;
 }
 
-int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {
-    (void)d; (void)v;
-    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
-    return 0;
-}
-
-int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int before_run, char *err) {
-    (void)d; (void)v; (void)before_run;
-    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
-    return 0;
-}
+CORE_NO_BOOLEANS
 
 int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
     plant_f(wk, d, d->x, dx);

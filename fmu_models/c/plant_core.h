@@ -18,7 +18,6 @@
 #define CORE_NAME "plant"
 
 enum { INTEGRATOR_EULER = 1, INTEGRATOR_RK4 = 2 };
-enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_SIGN = 3 };
 /* Most internal integration steps in one doStep: a larger communication step is refused
  * (an error instead of a call that never returns). */
 #define MAX_INTERNAL_STEPS 10000000L

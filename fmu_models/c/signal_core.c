@@ -4,11 +4,11 @@
 #include <stdio.h>
 #include <string.h>
 #include "core_api.h"
+#include "core_common.h"
 
 #define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
 #define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
 
-enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2 };
 
 void core_defaults(CoreData *d) {
     memset(d, 0, sizeof(*d));
@@ -18,15 +18,6 @@ void core_defaults(CoreData *d) {
 
 double core_time(const CoreData *d) { return d->time; }
 void core_set_time(CoreData *d, double t) { d->time = t; }
-
-static const char *check_real(int k, double v) {
-    if (!isfinite(v)) return "is not finite";
-    switch (RP_DOMAIN[k]) {
-    case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
-    case DOMAIN_NONNEGATIVE: return v >= 0 ? NULL : "must be >= 0";
-    default: return NULL;
-    }
-}
 
 #if SIGNAL_KIND == KIND_NOISE || SIGNAL_KIND == KIND_SENSOR
 /* ------------------------------------------------------------------ the noise generator */
@@ -71,7 +62,7 @@ static void prbs_fill(CoreData *d) {
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     (void)wk;
     for (int k = 0; k < NRP; k++) {
-        const char *why = check_real(k, d->rp[k]);
+        const char *why = domain_violation(RP_DOMAIN[k], d->rp[k]);
         if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_RP + k], d->rp[k], why);
     }
     for (int k = 0; k < NIP; k++)
@@ -124,10 +115,8 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_RP, NRP)) {
-            const char *why = check_real((int)(r - VR_RP), v[i]);
-            if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", REAL_NAMES[r]);
-            if (why) FAIL("parameter %s = %g %s", REAL_NAMES[r], v[i], why);
-            d->rp[r - VR_RP] = v[i];
+            if (set_parameter(&d->rp[r - VR_RP], REAL_NAMES[r], RP_DOMAIN[r - VR_RP], v[i], before_run, err))
+                return 1;
         } else if (IN(r, VR_IN, NIN)) {
             d->in[r - VR_IN] = v[i];          /* a sensor passes NaN and inf on */
         } else FAIL("%s is calculated and cannot be set", r < N_REAL ? REAL_NAMES[r] : "this variable");
@@ -158,17 +147,7 @@ int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[]
     return 0;
 }
 
-int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {
-    (void)d; (void)v;
-    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
-    return 0;
-}
-
-int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int before_run, char *err) {
-    (void)d; (void)v; (void)before_run;
-    if (n) FAIL("no Boolean variable has value reference %u", vr[0]);
-    return 0;
-}
+CORE_NO_BOOLEANS
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     (void)wk;
@@ -179,20 +158,4 @@ int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     return 0;
 }
 
-int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
-    (void)wk; (void)d; (void)dx;
-    FAIL("a signal FMU has no Model Exchange interface");
-}
-
-int core_set_states(CoreData *d, const double x[], size_t nx, char *err) {
-    (void)d; (void)x; (void)nx;
-    FAIL("a signal FMU has no continuous states");
-}
-
-void core_get_states(const CoreData *d, double x[]) { (void)d; (void)x; }
-
-int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU, const unsigned kn[],
-                     size_t nK, const double seed[], double sens[], char *err) {
-    (void)wk; (void)d; (void)unk; (void)nU; (void)kn; (void)nK; (void)seed; (void)sens;
-    FAIL("directional derivatives are not provided by a signal FMU");
-}
+CORE_NO_MODEL_EXCHANGE("a signal FMU")
