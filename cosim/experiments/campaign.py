@@ -138,7 +138,9 @@ def _run_dask(tasks, results, n_jobs, bar) -> None:
         client, own = get_client(), False
     except ValueError:
         with _quiet("distributed"):
-            client, own = Client(processes=True, n_workers=n_jobs, dashboard_address=None), True
+            # silence_logs: the workers' own loggers (a cancelled task is a WARNING there)
+            client, own = Client(processes=True, n_workers=n_jobs, dashboard_address=None,
+                                 silence_logs=logging.ERROR), True
     futures = [client.submit(fn, **kw, pure=False) for fn, kw in tasks]
     index = {f.key: i for i, f in enumerate(futures)}
     try:
