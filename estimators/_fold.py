@@ -145,6 +145,29 @@ class NativeFold:
         return self._fold(L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc,
                           ini, ini_run)
 
+    def outputs(self, runs: int, n_steps: int, init: dict, drop=()) -> tuple[dict, dict]:
+        """Arrays for the outputs of a fold: ``(stored, views)``.
+
+        ``stored[name]`` has shape ``(runs, n_steps, nnz)``, or ``(runs, n_steps + 1, nnz)``
+        for an output carrying the state (``<input>_new``), whose row 0 holds the initial
+        state ``init[<input>]`` (shape ``(runs, nnz)``). ``views`` are what the fold writes
+        into (those arrays without the initial row). Outputs named in ``drop`` are not
+        stored: their view is one scratch row, overwritten each step.
+        """
+        stored, views = {}, {}
+        for i, name in enumerate(self.names_out):
+            nnz = self.step.nnz_out(i)
+            if name in drop:
+                views[name] = np.lib.stride_tricks.as_strided(np.empty((1, 1, nnz)), (runs, n_steps, nnz),
+                                                              (0, 0, 8))
+                continue
+            lead = 1 if name.endswith("_new") else 0
+            stored[name] = np.empty((runs, n_steps + lead, nnz))
+            if lead:
+                stored[name][:, 0] = init[name[:-4]]
+            views[name] = stored[name][:, 1:] if lead else stored[name]
+        return stored, views
+
     def _vm(self, runs, n_steps, args, init, outs) -> int:
         """The same fold through ``mapaccum`` in CasADi's virtual machine."""
         if n_steps not in self._mapped:

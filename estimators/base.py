@@ -160,6 +160,21 @@ def not_nan(y: ca.SX) -> ca.SX:
     return ca.fabs(y) <= ca.inf
 
 
+def used_measurement(y: ca.SX, mask: ca.SX, nan_missing: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """``(valid, y_used)``: a channel is used if its mask is set and (unless NaN is an error,
+    ``nan_missing`` 0) it is not NaN; ``y_used`` is 0 in the others, so that a NaN of an
+    unused channel stays out of every expression."""
+    valid = mask * ca.if_else(nan_missing, not_nan(y), 1)
+    return valid, ca.if_else(valid, y, 0)
+
+
+def _log_likelihood(nis, logdet_S, n_used, accepted) -> float:
+    """``-1/2 sum (nis + log det S + n_used log 2 pi)`` over the accepted steps (a missing
+    channel contributes 1 to S's diagonal: log 1 = 0)."""
+    terms = np.asarray(nis) + np.asarray(logdet_S) + np.asarray(n_used) * np.log(2 * np.pi)
+    return -0.5 * float(np.sum(terms[np.asarray(accepted, bool)]))
+
+
 def _upper(M: ca.SX) -> ca.SX:
     """The upper-triangular entries of a square matrix, as a column."""
     n = M.shape[0]
@@ -355,11 +370,7 @@ class KalmanBase:
         #: symbols of the filter-specific fixed inputs (see _extra_params)
         self._param_syms = {k: self._sym(k, np.size(v)) for k, v in self._extra_params().items()}
         ins.update(self._param_syms)
-        y = ins["y"]
-        # a channel is used if its mask is set and (unless NaN is an error) it is not NaN;
-        # if_else keeps a NaN of an unused channel out of every expression
-        valid = ins["mask"] * ca.if_else(ins["nan_missing"], not_nan(y), 1)
-        y_used = ca.if_else(valid, y, 0)
+        valid, y_used = used_measurement(ins["y"], ins["mask"], ins["nan_missing"])
         xp, Pp = self._predict_expr(st["x"], st["P"], ins["u"], noise["Q"])
         xu, Pu, innov, S, K, nis, acc = self._update_expr(xp, Pp, y_used, noise["R"], valid, ins["gate"])
         new = {"x": xu, "P": Pu, **({"Q": noise["Q"], "R": noise["R"]} if self.adapts_noise else {})}
@@ -498,6 +509,18 @@ class KalmanBase:
                 raise
             raise TypeMismatchError(f"{self.name}: {what} must be numbers, got {value!r}") from None
 
+    def _set_measurement(self, y, mask) -> None:
+        self._set(self._y, y, "y", True)
+        if mask is None:
+            self._mask[:] = 1.0
+        else:
+            self._set(self._mask, mask, "mask", True)
+
+    def _used_channels(self, ys: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """Which channels of ``ys`` (..., ny) an update uses: masked in and (unless NaN is an
+        error) not NaN."""
+        return (masks != 0) & (~np.isnan(ys) if self.nan_is_missing else True)
+
     def _explain(self, what: str) -> None:
         """Raise the error of a failed step (the state is unchanged)."""
         st = self._status_arr[0]
@@ -543,11 +566,7 @@ class KalmanBase:
             self._y[:] = 0.0
             self._mask[:] = 0.0
         else:
-            self._set(self._y, y, "y", True)
-            if mask is None:
-                self._mask[:] = 1.0
-            else:
-                self._set(self._mask, mask, "mask", True)
+            self._set_measurement(y, mask)
         self._prepare_step()
         self._fsteps[self._cur].trigger()
         if self._status_arr[0]:
@@ -573,19 +592,14 @@ class KalmanBase:
             xs, Ps, Rs = self._sym("x", s.nx), self._sym("P", s.nx, s.nx), self._sym("R", s.ny, s.ny)
             ys, ms, gs, nms = (self._sym("y", s.ny), self._sym("mask", s.ny), self._sym("gate"),
                                self._sym("nan_missing"))
-            valid = ms * ca.if_else(nms, not_nan(ys), 1)
-            y_used = ca.if_else(valid, ys, 0)
+            valid, y_used = used_measurement(ys, ms, nms)
             xu, Pu, innov, S, K, nis, acc = self._update_expr(xs, Ps, y_used, Rs, valid, gs)
             d = ca.densify
             fn = ca.Function("update", [xs, Ps, Rs, ys, ms, gs, nms],
                              [d(xu), d(Pu), d(innov), d(S), d(K), nis, acc, log_det(S),
                               _status([y_used], [xu, _upper(Pu)])], CSE)
             s.cache[key] = compile_functions([fn], self.backend)[0][0]
-        self._set(self._y, y, "y", True)
-        if mask is None:
-            self._mask[:] = 1.0
-        else:
-            self._set(self._mask, mask, "mask", True)
+        self._set_measurement(y, mask)
         x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
         res = s.cache[key](self._now("x"), matrix(self._now("P"), s.nx, s.nx),
                            matrix(self._now("R"), s.ny, s.ny), self._y, self._mask,
@@ -678,33 +692,21 @@ class KalmanBase:
         if y0 is not None:
             self.update(y0)
             d = self._diag
-            used = int(np.sum((self._mask != 0) & ~(np.isnan(self._y) if self.nan_is_missing else False)))
-            if d["accepted"][0]:
-                y0_ll = -0.5 * float(d["nis"][0] + d["logdet_S"][0] + used * np.log(2 * np.pi))
+            y0_ll = _log_likelihood(d["nis"], d["logdet_S"], [self._used_channels(self._y, self._mask).sum()],
+                                    d["accepted"] != 0)
         if not self.supports_batch:
             result = self._run_by_steps(us, ys, masks)
             result.log_likelihood += y0_ll
             return result
         N = len(ys)
-        raw = self._raw_step
-        state = self.state_arrays()
+        state = {k: v[None] for k, v in self.state_arrays().items()}
         init = self._initial_for_run
+        fold = self.native_fold()
         # outputs carrying the state get a leading row for the initial state (FilterRun.x, .P)
-        outs, views = {}, {}
-        for i in range(raw.n_out()):
-            name = raw.name_out(i)
-            if keep == "estimates" and name in DROPPABLE:       # one scratch row, overwritten each step
-                views[name] = np.lib.stride_tricks.as_strided(np.empty((1, 1, raw.nnz_out(i))),
-                                                              (1, N, raw.nnz_out(i)), (0, 0, 8))
-                continue
-            lead = 1 if name.endswith("_new") else 0
-            outs[name] = np.empty((1, N + lead, raw.nnz_out(i)))
-            if lead:
-                outs[name][0, 0] = state[name[:-4]]
-            views[name] = outs[name][:, 1:] if lead else outs[name]
+        outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else ())
         args = {"u": us[None], "y": ys[None], "mask": masks[None],
                 **{k: v[None] for k, v in self.parameter_arrays().items()}}
-        self.native_fold()(1, N, args, {k: v[None] for k, v in state.items()}, views)
+        fold(1, N, args, state, views)
         status = outs["status"][0, :, 0]
         if status.any():
             k = int(np.flatnonzero(status)[0])
@@ -718,7 +720,7 @@ class KalmanBase:
         cat = {name: a[0] for name, a in outs.items()}
         result = self._make_run(cat, us, ys, masks, init)
         result.log_likelihood += y0_ll
-        for name in state:                         # the filter now stands at the last step
+        for name in self._pairs:                   # the filter now stands at the last step
             self._pairs[name][self._cur][:] = cat[f"{name}_new"][-1]
         for name in DIAGNOSTICS:
             self._diag[name][:] = cat[name][-1] if name in cat else views[name][0, -1]
@@ -738,10 +740,8 @@ class KalmanBase:
 
         acc = cat["accepted"].ravel() != 0
         nis = cat["nis"].ravel()
-        used = (masks != 0) & (~np.isnan(ys) if self.nan_is_missing else True)
-        n_used = used.sum(axis=1)
-        # missing channels contribute 1 to S's diagonal: log 1 = 0, no effect on logdet
-        loglik = -0.5 * float(np.sum((nis + cat["logdet_S"].ravel() + n_used * np.log(2 * np.pi))[acc]))
+        used = self._used_channels(ys, masks)
+        loglik = _log_likelihood(nis, cat["logdet_S"].ravel(), used.sum(axis=1), acc)
         N = len(nis)
 
         def with_initial(name, r, c, first):

@@ -197,18 +197,11 @@ class BatchFilter:
         masks = (np.ones((R, N, ny)) if masks is None else
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         t = self.template
-        raw = t.step_function()
+        fold = t.native_fold()
         state = {k: v[self._cur].reshape(R, -1) for k, v in self._pairs.items()}
-        outs = {}
-        for i in range(raw.n_out()):
-            name = raw.name_out(i)
-            lead = 1 if name.endswith("_new") else 0
-            outs[name] = np.empty((R, N + lead, raw.nnz_out(i)))
-            if lead:
-                outs[name][:, 0] = state[name[:-4]]
-        views = {name: (a[:, 1:] if name.endswith("_new") else a) for name, a in outs.items()}
+        outs, views = fold.outputs(R, N, state)
         args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
-        t.native_fold()(R, N, args, state, views)
+        fold(R, N, args, state, views)
         status = outs["status"][:, :, 0]
         bad = status != 0
         if bad.any() and self.on_failure == "raise":
