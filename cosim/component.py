@@ -47,8 +47,8 @@ import numpy as np
 from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, TypeMismatchError
 
-__all__ = ["PORT_TYPES", "Component", "ExportedFMU", "Port", "check_name", "check_period", "port_kind",
-           "ports_compatible"]
+__all__ = ["PORT_TYPES", "Component", "ExportedFMU", "Port", "bind_protocol", "check_name", "check_period",
+           "port_kind", "ports_compatible"]
 
 #: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
 PORT_TYPES = {
@@ -287,24 +287,34 @@ class Component(ABC):
         ``values[inputs]``. The default wraps :meth:`output` and :meth:`update` and checks
         the number of outputs (the master checks that every signal is finite).
         """
-        n_out = outputs.stop - outputs.start
-        last = [np.nan]
-        output = self.output
+        return bind_protocol(self, values, values, inputs, outputs)
 
-        def output_fn(t: float) -> None:
-            y = output(t, values[inputs])
-            try:
-                ok = len(y) == n_out
-            except TypeError:
-                ok = False
-            if not ok:
-                raise ConfigurationError(f"output returned {y!r}, expected {n_out} value(s)")
-            values[outputs] = y
-            if t != last[0]:
-                last[0] = t
-                self.n_samples += 1
 
-        def update_fn(t: float) -> None:
-            self.update(t, values[inputs])
+def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, inputs, outputs: slice
+                  ) -> tuple[Callable[[float], None], Callable[[float], None]]:
+    """``(output_fn, update_fn)`` calling ``comp``'s :meth:`~Component.output` and
+    :meth:`~Component.update` with its inputs read from ``source[inputs]`` and its outputs
+    written to ``values[outputs]`` (the number checked): :meth:`Component.bind`'s default
+    (``source is values``), and the Jacobi order's binding of any component (``source``:
+    the values before the instant)."""
+    n_out = outputs.stop - outputs.start
+    last = [np.nan]
+    output, update = comp.output, comp.update
 
-        return output_fn, update_fn
+    def output_fn(t: float) -> None:
+        y = output(t, source[inputs])
+        try:
+            ok = len(y) == n_out
+        except TypeError:
+            ok = False
+        if not ok:
+            raise ConfigurationError(f"output returned {y!r}, expected {n_out} value(s)")
+        values[outputs] = y
+        if t != last[0]:
+            last[0] = t
+            comp.n_samples += 1
+
+    def update_fn(t: float) -> None:
+        update(t, source[inputs])
+
+    return output_fn, update_fn

@@ -30,7 +30,6 @@ a linear loop) or by fixed-point iteration (``loop_solver="fixed-point"``), to
 """
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
@@ -48,7 +47,7 @@ from fmu_models.errors import (
     UnknownNameError,
 )
 
-from .component import Component, ports_compatible
+from .component import Component, bind_protocol, ports_compatible
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, base_step, evaluation_order
 
@@ -340,7 +339,7 @@ class Cosimulation:
         for c in self.components:
             inp, out = self._in_specs[c.name][1], self._out_slices[c.name]
             bound[c.name] = (c.bind(values, inp, out) if source is values
-                             else _bind_reading(c, values, source, inp, out))
+                             else bind_protocol(c, values, source, inp, out))
         return bound
 
     def _entries(self, bound, values):
@@ -531,25 +530,4 @@ class Cosimulation:
         sink.flush(j)
         raise CosimError(f"signal {sig} is {values[col]} {when} (component {sig.split('.')[0]!r})",
                          sig.split(".")[0], t_bad, sink.abort())
-
-
-def _bind_reading(comp: Component, values, source, inputs, outputs):
-    """Bind ``comp`` writing its outputs to ``values`` but reading its inputs from ``source``
-    (the Jacobi order), through the public protocol."""
-    n_out = outputs.stop - outputs.start
-    last = [math.nan]
-
-    def output_fn(t):
-        y = np.asarray(comp.output(t, source[inputs]), dtype=float)
-        if y.shape != (n_out,):
-            raise ConfigurationError(f"output returned shape {y.shape}, expected ({n_out},)")
-        values[outputs] = y
-        if t != last[0]:
-            last[0] = t
-            comp.n_samples += 1
-
-    def update_fn(t):
-        comp.update(t, source[inputs])
-
-    return output_fn, update_fn
 
