@@ -245,25 +245,38 @@ def _experiment(args) -> int:
         return runner(args, (folder, settings))
 
 
-def _seed000(args, job) -> object:
-    from fmu_models.errors import Interrupted
+def _seed000_config(args, default: str):
+    """The seed 000 configuration --config names (or ``default``): its name and settings."""
+    from .experiments import seed000
 
-    from .experiments import seed000 as exp
+    config = args.config or default
+    if config not in seed000.CONFIGS:
+        raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(seed000.CONFIGS)}")
+    return config, seed000.CONFIGS[config]
 
-    if job is None:
-        config = args.config or "default"
-        if config not in exp.CONFIGS:
-            raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(exp.CONFIGS)}")
-        return _settings(args, exp.CONFIGS[config])
-    out, settings = job
-    config = args.config or "default"
+
+def _run_with_partial_report(run, write_partial):
+    """``run()``; on an interruption with finished results, ``write_partial(*partial)``
+    writes them as a partial report (named on stderr) before the error goes on."""
     try:
-        per_run, eps, examples, wall = exp.run(settings, path=args.path, **_common(args))
+        return run()
     except Interrupted as e:
         if e.partial is not None and len(e.partial[0]):
-            md = exp.write_report(*e.partial, settings, out, args.path, config, partial=True)
+            md = write_partial(*e.partial)
             print(f"interrupted: partial results ({e}) in {md}", file=sys.stderr)
         raise
+
+
+def _seed000(args, job) -> object:
+    from .experiments import seed000 as exp
+
+    config, base = _seed000_config(args, "default")
+    if job is None:
+        return _settings(args, base)
+    out, settings = job
+    per_run, eps, examples, wall = _run_with_partial_report(
+        lambda: exp.run(settings, path=args.path, **_common(args)),
+        lambda *partial: exp.write_report(*partial, settings, out, args.path, config, partial=True))
     md = exp.write_report(per_run, eps, examples, wall, settings, out, args.path, config)
     table = exp.summary_table(per_run)
     cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *exp.FILTERS]
@@ -279,30 +292,21 @@ def _seed000(args, job) -> object:
 def _sweep(args, job) -> object:
     from dataclasses import fields, replace
 
-    from fmu_models.errors import Interrupted
-
-    from .experiments import seed000
     from .experiments import seed000_sweep as exp
     from .experiments.settings import apply_overrides
 
     if job is None:
-        config = args.config or "paper"
-        if config not in seed000.CONFIGS:
-            raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(seed000.CONFIGS)}")
+        _, base = _seed000_config(args, "paper")
         own = {f.name for f in fields(exp.SweepSettings)} - {"campaign"}
         sweep_sets = [x for x in (args.set or []) if x.split("=", 1)[0].strip() in own]
         campaign_sets = [x for x in (args.set or []) if x not in sweep_sets]
         args_campaign = argparse.Namespace(**{**vars(args), "set": campaign_sets})
-        campaign = _settings(args_campaign, seed000.CONFIGS[config])
+        campaign = _settings(args_campaign, base)
         return apply_overrides(replace(exp.SweepSettings(), campaign=campaign), sweep_sets)
     out, settings = job
-    try:
-        table, wall = exp.run(settings, **_common(args))
-    except Interrupted as e:
-        if e.partial is not None and len(e.partial[0]):
-            md = exp.write_report(*e.partial, settings, out, partial=True)
-            print(f"interrupted: partial results ({e}) in {md}", file=sys.stderr)
-        raise
+    table, wall = _run_with_partial_report(
+        lambda: exp.run(settings, **_common(args)),
+        lambda *partial: exp.write_report(*partial, settings, out, partial=True))
     md = exp.write_report(table, wall, settings, out)
     print(f"Seed 000 sweep: {len(settings.factors)} x {len(settings.factors)} cells, "
           f"{settings.campaign.runs} realisations a cell, {wall:.1f} s")
