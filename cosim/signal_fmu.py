@@ -31,7 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fmu_models.codegen import _c_array
+from fmu_models.codegen import c_array, c_strings
 from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.fmu_layout import FmuVariable
 from fmu_models.fmu_pack import pack_fmu
@@ -164,14 +164,13 @@ def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier
             f"#define VR_RP {first('param')}", f"#define VR_IN {first('input')}", f"#define VR_OUT {first('output')}",
             f"#define VR_TIME {first('time')}", f"#define VR_IP {n_int_first}", f"#define N_REAL {n_real}",
             *_offsets(spec),
-            _c_array("double", "RP_DEFAULT", [repr(float(r[1])) for r in reals]),
-            _c_array("int", "RP_DOMAIN", [str(DOMAINS.index(r[2])) for r in reals]),
-            _c_array("long long", "IP_DEFAULT", [f"{int(i[1])}LL" for i in spec.ints]),
-            _c_array("long long", "IP_MIN", [f"{int(i[2])}LL" for i in spec.ints]),
-            _c_array("long long", "IP_MAX", [f"{int(i[3])}LL" for i in spec.ints]),
-            _c_array("char *", "REAL_NAMES", [f'"{v.name}"' for v in variables[:n_real]]).replace(
-                "const char *", "char *const"),
-            _c_array("char *", "INT_NAMES", [f'"{i[0]}"' for i in spec.ints]).replace("const char *", "char *const"),
+            c_array("double", "RP_DEFAULT", [repr(float(r[1])) for r in reals]),
+            c_array("int", "RP_DOMAIN", [str(DOMAINS.index(r[2])) for r in reals]),
+            c_array("long long", "IP_DEFAULT", [f"{int(i[1])}LL" for i in spec.ints]),
+            c_array("long long", "IP_MIN", [f"{int(i[2])}LL" for i in spec.ints]),
+            c_array("long long", "IP_MAX", [f"{int(i[3])}LL" for i in spec.ints]),
+            c_strings("REAL_NAMES", [v.name for v in variables[:n_real]]),
+            c_strings("INT_NAMES", [i[0] for i in spec.ints]),
             "#endif", ""])
 
     def generate(folder: Path, guid: str) -> list[str]:

@@ -37,9 +37,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
-from xml.sax.saxutils import quoteattr
 
 from fmu_models.errors import ConfigurationError, FMUError
+from fmu_models.xml_writer import xml_attrs
 
 from .component import PORT_TYPES, ExportedFMU
 from .fmu_archive import Extraction, read_description
@@ -77,10 +77,6 @@ class SSPExport:
     notes: list = field(default_factory=list)
 
 
-def _attrs(**kw) -> str:
-    return "".join(f" {k}={quoteattr(str(v))}" for k, v in kw.items() if v is not None)
-
-
 def _value_xml(kind: str, value) -> str:
     if kind == "boolean":
         return f'<ssv:Boolean value="{"true" if value else "false"}"/>'
@@ -93,9 +89,9 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
               start_time: float, stop_time: float | None, description: str) -> str:
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
-             f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{_PC_NS}" version="1.0"{_attrs(name=name)}'
-             f'{_attrs(generationTool="pendulum-cosim")}>',
-             f"  <ssd:System{_attrs(name=name, description=description or None)}>"]
+             f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{_PC_NS}" version="1.0"{xml_attrs(name=name)}'
+             f'{xml_attrs(generationTool="pendulum-cosim")}>',
+             f"  <ssd:System{xml_attrs(name=name, description=description or None)}>"]
     params = []
     for c in components:
         variables = {v.name: v for v in descriptions[c.name].modelVariables}
@@ -104,36 +100,36 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
     if params:
         lines += ["    <ssd:ParameterBindings>", "      <ssd:ParameterBinding>", "        <ssd:ParameterValues>",
                   '          <ssv:ParameterSet version="1.0" name="parameters">', "            <ssv:Parameters>"]
-        lines += [f"              <ssv:Parameter{_attrs(name=n)}>{_value_xml(k, v)}</ssv:Parameter>"
+        lines += [f"              <ssv:Parameter{xml_attrs(name=n)}>{_value_xml(k, v)}</ssv:Parameter>"
                   for n, k, v in params]
         lines += ["            </ssv:Parameters>", "          </ssv:ParameterSet>", "        </ssd:ParameterValues>",
                   "      </ssd:ParameterBinding>", "    </ssd:ParameterBindings>"]
     lines.append("    <ssd:Elements>")
     for c in components:
         variables = {v.name: v for v in descriptions[c.name].modelVariables}
-        lines.append(f'      <ssd:Component{_attrs(name=c.name, type="application/x-fmu-sharedlibrary")}'
-                     f'{_attrs(source=f"resources/{c.name}.fmu")}>')
+        lines.append(f'      <ssd:Component{xml_attrs(name=c.name, type="application/x-fmu-sharedlibrary")}'
+                     f'{xml_attrs(source=f"resources/{c.name}.fmu")}>')
         conns = [(p, "input") for p in c.input_names if p in variables]
         conns += [(p, "output") for p in c.output_names if p in variables]
         if conns:
             lines.append("        <ssd:Connectors>")
-            lines += [f"          <ssd:Connector{_attrs(name=p, kind=k)}>"
+            lines += [f"          <ssd:Connector{xml_attrs(name=p, kind=k)}>"
                       f"<ssc:{_SSP_TYPES[PORT_TYPES[variables[p].type]]}/></ssd:Connector>" for p, k in conns]
             lines.append("        </ssd:Connectors>")
         lines += ["        <ssd:Annotations>",
-                  f'          <ssc:Annotation type="{ANNOTATION}"><pc:Timing{_attrs(period=repr(c.period))}/>'
+                  f'          <ssc:Annotation type="{ANNOTATION}"><pc:Timing{xml_attrs(period=repr(c.period))}/>'
                   "</ssc:Annotation>",
                   "        </ssd:Annotations>", "      </ssd:Component>"]
     lines.append("    </ssd:Elements>")
     if connections:
         lines.append("    <ssd:Connections>")
         for (dc, dp), (sc, sp) in connections.items():
-            lines.append(f"      <ssd:Connection{_attrs(startElement=sc, startConnector=sp, endElement=dc)}"
-                         f"{_attrs(endConnector=dp)}/>")
+            lines.append(f"      <ssd:Connection{xml_attrs(startElement=sc, startConnector=sp, endElement=dc)}"
+                         f"{xml_attrs(endConnector=dp)}/>")
         lines.append("    </ssd:Connections>")
     lines += ["  </ssd:System>",
-              f"  <ssd:DefaultExperiment{_attrs(startTime=repr(float(start_time)))}"
-              f"{_attrs(stopTime=None if stop_time is None else repr(float(stop_time)))}/>",
+              f"  <ssd:DefaultExperiment{xml_attrs(startTime=repr(float(start_time)))}"
+              f"{xml_attrs(stopTime=None if stop_time is None else repr(float(stop_time)))}/>",
               "</ssd:SystemStructureDescription>"]
     return "\n".join(lines) + "\n"
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from fmu_models.codegen import _c_array
+from fmu_models.codegen import c_array, c_strings
 from fmu_models.errors import ConfigurationError, TypeMismatchError
 from fmu_models.fmu_layout import FmuVariable
 from fmu_models.fmu_pack import pack_fmu
@@ -240,7 +240,7 @@ def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name:
     work = {k: max(getattr(f, f"sz_{k}")() for f in (init, run_step)) for k in ("arg", "res", "iw", "w")}
     work["arg"] = max(work["arg"], run_step.n_in(), 1)
     work["res"] = max(work["res"], run_step.n_out(), init.n_out())
-    reals = [f'"{v.name}"' for v in variables[:n_real]]
+    reals = [v.name for v in variables[:n_real]]
 
     def config(guid: str) -> str:
         return "\n".join([
@@ -254,23 +254,23 @@ def export_filter_fmu(filt: KalmanBase, out_dir=".", fmi_version: int = 2, name:
             f"#define VR_OUT {first['output']}", f"#define VR_VALID {first['valid']}",
             f"#define VR_TIME {first['time']}", f"#define N_REAL {n_real}",
             *(f"#define WORK_{k.upper()} {v}" for k, v in work.items()),
-            _c_array("double", "PARAM_DEFAULT", [repr(r[1]) for r in prm.rows]),
-            _c_array("int", "PARAM_DOMAIN", [str(DOMAINS.index(r[2])) for r in prm.rows]),
+            c_array("double", "PARAM_DEFAULT", [repr(r[1]) for r in prm.rows]),
+            c_array("int", "PARAM_DOMAIN", [str(DOMAINS.index(r[2])) for r in prm.rows]),
             f"#define N_LESS {len(prm.less)}",
-            _c_array("int", "LESS_LO", [str(a) for a, _ in prm.less]),
-            _c_array("int", "LESS_HI", [str(b) for _, b in prm.less]),
+            c_array("int", "LESS_LO", [str(a) for a, _ in prm.less]),
+            c_array("int", "LESS_HI", [str(b) for _, b in prm.less]),
             f"#define INIT_NOUT {len(state_names) + len(fixed_names)}",
-            _c_array("int", "INIT_DST", ["0"] * len(state_names) + ["1"] * len(fixed_names)),
-            _c_array("int", "INIT_OFF", [str(st_off[n]) for n in state_names] + [str(fx_off[n]) for n in fixed_names]),
+            c_array("int", "INIT_DST", ["0"] * len(state_names) + ["1"] * len(fixed_names)),
+            c_array("int", "INIT_OFF", [str(st_off[n]) for n in state_names] + [str(fx_off[n]) for n in fixed_names]),
             f"#define STEP_NIN {len(names_in)}",
-            _c_array("int", "STEP_SRC", [str(a) for a, _ in step_src]),
-            _c_array("int", "STEP_OFF", [str(b) for _, b in step_src]),
+            c_array("int", "STEP_SRC", [str(a) for a, _ in step_src]),
+            c_array("int", "STEP_OFF", [str(b) for _, b in step_src]),
             f"#define STEP_NOUT {len(names_out)}",
-            _c_array("int", "STEP_DST", [str(a) for a, _ in step_dst]),
-            _c_array("int", "STEP_ROFF", [str(b) for _, b in step_dst]),
-            _c_array("int", "OUT_SRC", [str(o[1]) for o in outs]),
-            _c_array("int", "OUT_OFF", [str(o[2]) for o in outs]),
-            _c_array("char *", "REAL_NAMES", reals).replace("const char *", "char *const"),
+            c_array("int", "STEP_DST", [str(a) for a, _ in step_dst]),
+            c_array("int", "STEP_ROFF", [str(b) for _, b in step_dst]),
+            c_array("int", "OUT_SRC", [str(o[1]) for o in outs]),
+            c_array("int", "OUT_OFF", [str(o[2]) for o in outs]),
+            c_strings("REAL_NAMES", reals),
             "#endif", ""])
 
     def generate(folder: Path, guid: str) -> list[str]:

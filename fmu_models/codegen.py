@@ -23,9 +23,17 @@ def model_functions(model: PlantModel) -> list[ca.Function]:
             ca.Function("mdl_jac_h", [x, p], [d(H)])]
 
 
-def _c_array(ctype: str, name: str, values) -> str:
+def c_array(ctype: str, name: str, values) -> str:
+    """``static const <ctype> <name>[] = {values};`` (values as C literals; ``{0}`` if none),
+    for the generated ``model_config.h`` of every FMU."""
     body = ", ".join(values) if values else "0"
     return f"static const {ctype} {name}[] = {{{body}}};\n"
+
+
+def c_strings(name: str, strings) -> str:
+    """``static char *const <name>[] = {"a", ...};``: a table of names for messages."""
+    body = ", ".join(f'"{s}"' for s in strings) if strings else "0"
+    return f"static char *const {name}[] = {{{body}}};\n"
 
 
 def config_header(model: PlantModel, guid: str, funcs: list[ca.Function]) -> str:
@@ -48,11 +56,10 @@ def config_header(model: PlantModel, guid: str, funcs: list[ca.Function]) -> str
         f"#define VR_TIME {lay.by_name('time').vr}",
         f"#define DEFAULT_STEP_SIZE {DEFAULT_STEP_SIZE!r}",
         *(f"#define WORK_{k.upper()} {n}" for k, n in work.items()),
-        _c_array("int", "PARAM_DOMAIN", [str(DOMAINS.index(p.domain)) for p in model.parameters]),
-        _c_array("double", "PARAM_DEFAULT", [repr(float(v)) for v in model.p]),
-        _c_array("double", "X_START", [repr(float(s.start)) for s in model.states]),
-        _c_array("char *", "REAL_NAMES",
-                 [f'"{v.name}"' for v in lay.variables[: lay.n_real]]).replace("const char *", "char *const"),
+        c_array("int", "PARAM_DOMAIN", [str(DOMAINS.index(p.domain)) for p in model.parameters]),
+        c_array("double", "PARAM_DEFAULT", [repr(float(v)) for v in model.p]),
+        c_array("double", "X_START", [repr(float(s.start)) for s in model.states]),
+        c_strings("REAL_NAMES", [v.name for v in lay.variables[: lay.n_real]]),
         "#endif", "",
     ]
     return "\n".join(lines)

@@ -14,7 +14,7 @@ from xml.sax.saxutils import quoteattr
 
 from .errors import ConfigurationError
 
-__all__ = ["BASE_UNITS", "Description", "Unknown", "fmi2", "fmi3"]
+__all__ = ["BASE_UNITS", "Description", "Unknown", "fmi2", "fmi3", "xml_attrs"]
 
 #: SI base-unit exponents of every unit string the project uses (FMI <BaseUnit>).
 BASE_UNITS = {
@@ -33,7 +33,8 @@ _LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description
 _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Enumeration": "Enumeration", "Boolean": "Boolean"}
 
 
-def _attrs(**kw) -> str:
+def xml_attrs(**kw) -> str:
+    """`` name="value"`` for each keyword whose value is not None, quoted and escaped."""
     return "".join(f" {k}={quoteattr(str(v))}" for k, v in kw.items() if v is not None)
 
 
@@ -98,13 +99,13 @@ def _units(variables) -> list[str]:
         base = BASE_UNITS.get(u)
         if base is None:
             raise ConfigurationError(f"unit {u!r} has no SI base-unit entry in fmu_models.xml_writer.BASE_UNITS")
-        out.append(f"    <Unit{_attrs(name=u)}>" + (f"<BaseUnit{_attrs(**base)}/>" if base else "") + "</Unit>")
+        out.append(f"    <Unit{xml_attrs(name=u)}>" + (f"<BaseUnit{xml_attrs(**base)}/>" if base else "") + "</Unit>")
     out.append("  </UnitDefinitions>")
     return out if units else []
 
 
 def _items(items) -> str:
-    return "".join(f"<Item{_attrs(name=n, value=v, description=d)}/>" for n, v, d in items)
+    return "".join(f"<Item{xml_attrs(name=n, value=v, description=d)}/>" for n, v, d in items)
 
 
 def _unknown(tag: str, u: Unknown, key: str, shift: int, indent: int) -> str:
@@ -114,7 +115,7 @@ def _unknown(tag: str, u: Unknown, key: str, shift: int, indent: int) -> str:
         a["dependencies"] = " ".join(str(u.deps[i] - shift) for i in order)
         if u.kinds is not None:
             a["dependenciesKind"] = " ".join(u.kinds[i] for i in order)
-    return f"{' ' * indent}<{tag}{_attrs(**a)}/>"
+    return f"{' ' * indent}<{tag}{xml_attrs(**a)}/>"
 
 
 def fmi2(d: Description) -> str:
@@ -122,41 +123,41 @@ def fmi2(d: Description) -> str:
     caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUstate="true", canSerializeFMUstate="true",
                 providesDirectionalDerivative="true" if d.directional else "false",
                 canNotUseMemoryManagementFunctions="false")
-    srcs = "".join(f"<File{_attrs(name=f)}/>" for f in d.source_files)
+    srcs = "".join(f"<File{xml_attrs(name=f)}/>" for f in d.source_files)
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
-           "<fmiModelDescription" + _attrs(fmiVersion="2.0", modelName=d.model_name, guid=d.guid,
+           "<fmiModelDescription" + xml_attrs(fmiVersion="2.0", modelName=d.model_name, guid=d.guid,
                                            description=d.description, **_GENERATION,
                                            variableNamingConvention="structured", numberOfEventIndicators=0) + ">"]
     if d.model_exchange:
-        out.append(f"  <ModelExchange{_attrs(**caps, completedIntegratorStepNotNeeded='true')}>"
+        out.append(f"  <ModelExchange{xml_attrs(**caps, completedIntegratorStepNotNeeded='true')}>"
                    f"<SourceFiles>{srcs}</SourceFiles></ModelExchange>")
     variable = "true" if d.variable_step else "false"
-    cs = _attrs(**caps, canHandleVariableCommunicationStepSize=variable, canInterpolateInputs="false",
+    cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=variable, canInterpolateInputs="false",
                 maxOutputDerivativeOrder=0)
     out.append(f"  <CoSimulation{cs}>"
                f"<SourceFiles>{srcs}</SourceFiles></CoSimulation>")
     out += _units(d.variables)
     if d.enumerations:
         out.append("  <TypeDefinitions>")
-        out += [f'    <SimpleType{_attrs(name=n)}><Enumeration>{_items(items)}</Enumeration></SimpleType>'
+        out += [f'    <SimpleType{xml_attrs(name=n)}><Enumeration>{_items(items)}</Enumeration></SimpleType>'
                 for n, items in d.enumerations.items()]
         out.append("  </TypeDefinitions>")
     out += [_LOG_CATEGORIES,
-            f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
+            f"  <DefaultExperiment{xml_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
             "  <ModelVariables>"]
     for v in d.variables:
-        head = _attrs(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
+        head = xml_attrs(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
                       variability=v.variability, initial=v.initial)
         start = None if v.start is None else (repr(v.start) if v.type == "Real" else
                                               ("true" if v.start else "false") if v.type == "Boolean" else v.start)
         if v.type == "Real":
-            inner = f"<Real{_attrs(unit=v.unit, derivative=v.derivative_of, start=start)}/>"
+            inner = f"<Real{xml_attrs(unit=v.unit, derivative=v.derivative_of, start=start)}/>"
         elif v.type == "Enumeration":
-            inner = f"<Enumeration{_attrs(declaredType=v.declared_type, start=start)}/>"
+            inner = f"<Enumeration{xml_attrs(declaredType=v.declared_type, start=start)}/>"
         elif v.type == "Boolean":
-            inner = f"<Boolean{_attrs(start=start)}/>"
+            inner = f"<Boolean{xml_attrs(start=start)}/>"
         else:
-            inner = f"<Integer{_attrs(start=start, min=v.min, max=v.max)}/>"
+            inner = f"<Integer{xml_attrs(start=start, min=v.min, max=v.max)}/>"
         out.append(f"    <ScalarVariable{head}>{inner}</ScalarVariable>")
     out += ["  </ModelVariables>", "  <ModelStructure>"]
     for tag, entries in (("Outputs", d.outputs), ("Derivatives", d.derivatives),
@@ -175,22 +176,22 @@ def fmi3(d: Description) -> str:
                 providesDirectionalDerivative="true" if d.directional else "false",
                 providesAdjointDerivatives="true" if d.directional else "false")
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
-           "<fmiModelDescription" + _attrs(fmiVersion="3.0", modelName=d.model_name, instantiationToken=d.guid,
+           "<fmiModelDescription" + xml_attrs(fmiVersion="3.0", modelName=d.model_name, instantiationToken=d.guid,
                                            description=d.description, **_GENERATION,
                                            variableNamingConvention="structured") + ">"]
     if d.model_exchange:
-        out.append(f"  <ModelExchange{_attrs(**caps, needsCompletedIntegratorStep='false')}/>")
+        out.append(f"  <ModelExchange{xml_attrs(**caps, needsCompletedIntegratorStep='false')}/>")
     variable = "true" if d.variable_step else "false"
-    cs = _attrs(**caps, canHandleVariableCommunicationStepSize=variable, maxOutputDerivativeOrder=0,
+    cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=variable, maxOutputDerivativeOrder=0,
                 hasEventMode="false", providesIntermediateUpdate="false")
     out.append(f"  <CoSimulation{cs}/>")
     out += _units(d.variables)
     if d.enumerations:
-        types = "".join(f"<EnumerationType{_attrs(name=n)}>{_items(items)}</EnumerationType>"
+        types = "".join(f"<EnumerationType{xml_attrs(name=n)}>{_items(items)}</EnumerationType>"
                         for n, items in d.enumerations.items())
         out.append(f"  <TypeDefinitions>{types}</TypeDefinitions>")
     out += [_LOG_CATEGORIES,
-            f"  <DefaultExperiment{_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
+            f"  <DefaultExperiment{xml_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
             "  <ModelVariables>"]
     # FMI 3.0 wants the independent variable first; value references stay those of the layout
     for v in sorted(d.variables, key=lambda v: v.causality != "independent"):
@@ -200,14 +201,14 @@ def fmi3(d: Description) -> str:
         if v.type == "Real":
             deriv = None if v.derivative_of is None else v.derivative_of - 1
             start = None if v.start is None else repr(v.start)
-            out.append(f"    <Float64{_attrs(**a, start=start, unit=v.unit, derivative=deriv)}/>")
+            out.append(f"    <Float64{xml_attrs(**a, start=start, unit=v.unit, derivative=deriv)}/>")
         elif v.type == "Enumeration":
-            out.append(f"    <Enumeration{_attrs(**a, declaredType=v.declared_type, start=v.start)}/>")
+            out.append(f"    <Enumeration{xml_attrs(**a, declaredType=v.declared_type, start=v.start)}/>")
         elif v.type == "Boolean":
             start = None if v.start is None else ("true" if v.start else "false")
-            out.append(f"    <Boolean{_attrs(**a, start=start)}/>")
+            out.append(f"    <Boolean{xml_attrs(**a, start=start)}/>")
         else:
-            out.append(f"    <{tag}{_attrs(**a, start=v.start, min=v.min, max=v.max)}/>")
+            out.append(f"    <{tag}{xml_attrs(**a, start=v.start, min=v.min, max=v.max)}/>")
     out += ["  </ModelVariables>", "  <ModelStructure>"]
     out += [_unknown("Output", u, "valueReference", 1, 4) for u in d.outputs]
     out += [_unknown("ContinuousStateDerivative", u, "valueReference", 1, 4) for u in d.derivatives]
