@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import ctypes
 import logging as _logging
-import sys
 from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -163,11 +162,9 @@ class FMUComponent(Component):
     def _check_binary(self, name: str) -> None:
         import zipfile
 
-        from fmu_models.fmu_pack import platform_dir
+        from fmu_models.fmu_pack import library_suffix, platform_dir
 
-        plat = platform_dir(self.version)
-        suffix = {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
-        want = f"binaries/{plat}/{self.model_identifier}{suffix}"
+        want = f"binaries/{platform_dir(self.version)}/{self.model_identifier}{library_suffix()}"
         with zipfile.ZipFile(self.path) as z:
             names = z.namelist()
         if want not in names:

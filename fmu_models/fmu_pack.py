@@ -31,7 +31,8 @@ import fmpy
 
 from .errors import BuildError, CompilerNotFoundError, ConfigurationError
 
-__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "pack_fmu", "platform_dir"]
+__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "library_suffix", "pack_fmu",
+           "platform_dir", "temp_beside"]
 
 #: The generic C files shipped with the package (FMI wrappers and the model cores).
 C_DIR = Path(__file__).parent / "c"
@@ -65,7 +66,8 @@ def platform_dir(fmi_version: int) -> str:
     return f"{arch}-{system if system != 'win' else 'windows'}"
 
 
-def _library_suffix() -> str:
+def library_suffix() -> str:
+    """The shared-library file suffix of this platform (``.so``, ``.dylib``, ``.dll``)."""
     return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
@@ -160,7 +162,7 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
         c_files = [f"{core}_core.c", f"fmi{fmi_version}_wrapper.c", *generated]
         bindir = tmp / "binaries" / platform_dir(fmi_version)
         bindir.mkdir(parents=True)
-        lib = bindir / (identifier + _library_suffix())
+        lib = bindir / (identifier + library_suffix())
         cmd = [cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L",
                f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o", str(lib), "-lm"]
         proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
