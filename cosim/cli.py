@@ -165,7 +165,8 @@ def _export(args) -> int:
         sc = Scenario.load(path, fmu_dir=fmus)
         comps = sc.cosim.by_name
         if args.command == "export-fmu":
-            names = args.component or [n for n, c in comps.items() if isinstance(c, EstimatorComponent)]
+            names = list(dict.fromkeys(args.component or [n for n, c in comps.items()
+                                                          if isinstance(c, EstimatorComponent)]))
             unknown = [n for n in names if n not in comps]
             if unknown:
                 raise ConfigurationError(f"no component {unknown[0]!r} in {path.name}; components: {', '.join(comps)}")
