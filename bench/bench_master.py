@@ -28,9 +28,9 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.fmu_component import FMUComponent
-from cosim.master import Cosimulation
-from cosim.sources import Step
+from cosim.components.sources import Step
+from cosim.core.master import Cosimulation
+from cosim.fmi.component import FMUComponent
 from fmu_models import get_model
 from fmu_models.build import build_fmu
 
@@ -113,9 +113,9 @@ def long_run(path, steps: int) -> str:
     """Peak RSS [MiB] of a fresh process streaming ``steps`` base steps to Parquet."""
     code = f"""
 import resource, tempfile, sys
-from cosim.fmu_component import FMUComponent
-from cosim.master import Cosimulation
-from cosim.sources import Step
+from cosim.fmi.component import FMUComponent
+from cosim.core.master import Cosimulation
+from cosim.components.sources import Step
 plant = FMUComponent("plant", {str(path)!r}, {H}, parameters={{"step_size": {H}}})
 cs = Cosimulation([plant, Step("force", 0.01, 2.0, -0.5, 0.5)], {{"plant.F": "force.out"}})
 with tempfile.TemporaryDirectory() as d:

@@ -95,9 +95,9 @@ def interruption(repeats: int) -> None:
 
 
 def temp_folders() -> None:
-    from cosim.fmu_component import FMUComponent
-    from cosim.master import Cosimulation
-    from cosim.sources import Constant
+    from cosim.components.sources import Constant
+    from cosim.core.master import Cosimulation
+    from cosim.fmi.component import FMUComponent
     from fmu_models.build import build_fmu
 
     with tempfile.TemporaryDirectory() as tmp:

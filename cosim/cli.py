@@ -92,8 +92,8 @@ def _resolve_scenario(name: str) -> Path:
 
 def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
                   stream: bool | None = None, progress: bool | None = None) -> int:
-    from .results import OutputFolder, atomic_write, plot_estimates, save_results
-    from .scenario import Scenario
+    from cosim.results import OutputFolder, atomic_write, plot_estimates, save_results
+    from cosim.scenario import Scenario
 
     if dry_run:
         import tempfile
@@ -155,10 +155,10 @@ def _export(args) -> int:
     """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
     import tempfile
 
-    from .estimation import EstimatorComponent
-    from .results import OutputFolder
-    from .scenario import Scenario
-    from .ssp import export_ssp
+    from cosim.components.estimation import EstimatorComponent
+    from cosim.results import OutputFolder
+    from cosim.scenario import Scenario
+    from cosim.ssp import export_ssp
 
     path = _resolve_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as fmus:
@@ -220,7 +220,7 @@ EXPERIMENTS = ("seed000", "seed000-sweep", "seed001", "seed002")
 
 def _settings(args, base):
     """``base`` with --settings FILE, --runs, --seed and every --set applied, in that order."""
-    from .experiments.settings import apply_overrides, load_settings
+    from cosim.experiments.settings import apply_overrides, load_settings
 
     s = load_settings(base, args.settings) if args.settings else base
     quick = [f"runs={args.runs}"] if args.runs else []
@@ -233,7 +233,7 @@ def _common(args) -> dict:
 
 
 def _experiment(args) -> int:
-    from .results import OutputFolder
+    from cosim.results import OutputFolder
 
     if args.runs is not None and args.runs > 100_000:
         raise ConfigurationError(f"--runs {args.runs} is more than 100000 realisations per scenario")
@@ -248,7 +248,7 @@ def _experiment(args) -> int:
 
 def _seed000_config(args, default: str):
     """The seed 000 configuration --config names (or ``default``): its name and settings."""
-    from .experiments import seed000
+    from cosim.experiments import seed000
 
     config = args.config or default
     if config not in seed000.CONFIGS:
@@ -269,7 +269,7 @@ def _run_with_partial_report(run, write_partial):
 
 
 def _seed000(args, job) -> object:
-    from .experiments import seed000 as exp
+    from cosim.experiments import seed000 as exp
 
     config, base = _seed000_config(args, "default")
     if job is None:
@@ -293,8 +293,8 @@ def _seed000(args, job) -> object:
 def _sweep(args, job) -> object:
     from dataclasses import fields, replace
 
-    from .experiments import seed000_sweep as exp
-    from .experiments.settings import apply_overrides
+    from cosim.experiments import seed000_sweep as exp
+    from cosim.experiments.settings import apply_overrides
 
     if job is None:
         _, base = _seed000_config(args, "paper")
@@ -317,7 +317,7 @@ def _sweep(args, job) -> object:
 
 
 def _seed001(args, job) -> object:
-    from .experiments import seed001 as exp
+    from cosim.experiments import seed001 as exp
 
     if job is None:
         return _settings(args, exp.Settings())
@@ -336,7 +336,7 @@ def _seed001(args, job) -> object:
 
 
 def _seed002(args, job) -> object:
-    from .experiments import seed002 as exp
+    from cosim.experiments import seed002 as exp
 
     if job is None:
         return _settings(args, exp.Settings())

@@ -53,15 +53,14 @@ import re
 import tomllib
 from pathlib import Path
 
+from cosim.components.estimation import EstimatorComponent, LQRController
+from cosim.components.sensors import ProcessNoise, Sensor
+from cosim.components.sources import PRBS, Constant, Sine, Step, Table
+from cosim.core.component import Component
+from cosim.core.master import Cosimulation
+from cosim.fmi.component import FMUComponent
 from fmu_models.checks import finite
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
-
-from .component import Component
-from .estimation import EstimatorComponent, LQRController
-from .fmu_component import FMUComponent
-from .master import Cosimulation
-from .sensors import ProcessNoise, Sensor
-from .sources import PRBS, Constant, Sine, Step, Table
 
 SIMPLE = {"constant": Constant, "step": Step, "sine": Sine, "prbs": PRBS}
 TABLES = ("title", "simulation", "recording", "component", "connections", "plot")

@@ -3,12 +3,12 @@ FMUs (FMI 2.0 or 3.0), built by the same machinery as the plant and estimator FM
 (:func:`fmu_models.fmu_pack.pack_fmu` with ``fmu_models/c/signal_core.c``).
 
 A :class:`SignalSpec` describes one FMU: its kind, its channels and its parameters (with
-the component's values as defaults). The components of :mod:`cosim.sources` and
-:mod:`cosim.sensors` build theirs in ``export_fmu`` (see :class:`cosim.component.Component`);
+the component's values as defaults). The components of :mod:`cosim.components.sources` and
+:mod:`cosim.components.sensors` build theirs in ``export_fmu`` (see :class:`cosim.core.component.Component`);
 :func:`build_signal_fmu` compiles and packs it.
 
 Kinds and variables (``period`` [s] is a parameter of every kind; noise is drawn at sample
-``round(t / period)``, see :mod:`cosim.noise`):
+``round(t / period)``, see :mod:`cosim.components.noise`):
 
 =========  ==========================================  ============================================
 kind       parameters                                   outputs (inputs)

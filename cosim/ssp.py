@@ -1,7 +1,7 @@
 """A co-simulation as an SSP (System Structure and Parameterization 1.0), and back.
 
 :func:`export_ssp` writes a scenario whose every component is an FMU or can be written as
-one (:meth:`cosim.component.Component.export_fmu`: FMUs, estimators, sources, process
+one (:meth:`cosim.core.component.Component.export_fmu`: FMUs, estimators, sources, process
 noise and sensors) as
 
 * ``SystemStructure.ssd``: one ``Component`` per component (``source`` =
@@ -12,13 +12,13 @@ noise and sensors) as
 * ``resources/<name>.fmu``: the FMUs;
 * ``<name>.ssp``: the same two as one archive (what most tools open).
 
-Noise components draw from the counter generator in their FMUs (:mod:`cosim.noise`):
+Noise components draw from the counter generator in their FMUs (:mod:`cosim.components.noise`):
 give them ``generator = "counter"`` for the scenario to draw the same noise in the
 project's master; otherwise the export says so in its notes.
 
 :func:`open_ssp` reads such an SSP (a ``.ssp`` archive or its unpacked folder, flat
-systems of Co-Simulation FMUs) into a :class:`~cosim.master.Cosimulation` of
-:class:`~cosim.fmu_component.FMUComponent` objects, so the project's master runs what other
+systems of Co-Simulation FMUs) into a :class:`~cosim.core.master.Cosimulation` of
+:class:`~cosim.fmi.component.FMUComponent` objects, so the project's master runs what other
 tools run.
 
 Importers differ in how they order the FMUs within a step. fmpy's ``simulate_ssp``
@@ -38,11 +38,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from cosim.core.component import PORT_TYPES, ExportedFMU
+from cosim.fmi.archive import Extraction, read_description
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.xml_writer import xml_attrs
-
-from .component import PORT_TYPES, ExportedFMU
-from .fmu_archive import Extraction, read_description
 
 __all__ = ["SSPExport", "SSPSystem", "export_ssp", "open_ssp"]
 
@@ -160,7 +159,7 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         Components without an FMU form (all named at once), or a connection to a port the
         exported FMU lacks.
     """
-    from .master import Cosimulation
+    from cosim.core.master import Cosimulation
 
     cosim = system if isinstance(system, Cosimulation) else system.cosim
     start = getattr(system, "start_time", 0.0)
@@ -229,7 +228,7 @@ class SSPSystem:
 
     def run(self, stop_time: float | None = None, **kw):
         """Run to ``stop_time`` (default the SSD's) from the SSD's start time; keywords go
-        to :meth:`cosim.master.Cosimulation.run`. Returns the results DataFrame."""
+        to :meth:`cosim.core.master.Cosimulation.run`. Returns the results DataFrame."""
         stop = stop_time if stop_time is not None else self.stop_time
         if stop is None:
             raise ConfigurationError(f"{self.name}: the SSD has no stop time; give stop_time")
@@ -285,7 +284,7 @@ def open_ssp(path) -> Iterator[SSPSystem]:
     ``SystemStructure.ssd``) as an :class:`SSPSystem`; a context manager that removes what
     it unpacked.
 
-    Each ``Component`` becomes an :class:`~cosim.fmu_component.FMUComponent` with its
+    Each ``Component`` becomes an :class:`~cosim.fmi.component.FMUComponent` with its
     connectors as ports, the parameter bindings (inline values, system or component
     level) as parameters and start values, and the period of the
     ``org.pendulum-cosim`` annotation (else the FMU's default step size).
@@ -298,8 +297,8 @@ def open_ssp(path) -> Iterator[SSPSystem]:
         What this reader does not support (nested systems, parameter files or mappings,
         transformations, connections to the system's own connectors), named.
     """
-    from .fmu_component import FMUComponent
-    from .master import Cosimulation
+    from cosim.core.master import Cosimulation
+    from cosim.fmi.component import FMUComponent
 
     path = Path(path)
     extraction = None

@@ -20,7 +20,7 @@ Variables (names from the model):
   IAE and MF-IAE ``q_min, q_max, r_min, r_max`` (bounds of the adapted variances);
   MF-IAE ``q0``, ``r0`` (or ``r0_<measurement>`` per channel), ``gain_q``, ``gain_r``.
 
-Timing: as :class:`~cosim.estimation.EstimatorComponent`; see ``filter_core.h``. One
+Timing: as :class:`~cosim.components.estimation.EstimatorComponent`; see ``filter_core.h``. One
 ``doStep`` is one filter step and must last the filter's period.
 """
 from __future__ import annotations

@@ -1,46 +1,43 @@
-"""Every public class and function documents each of its parameters (python-control style)."""
+"""Every public class and function documents each of its parameters (python-control style).
+
+The modules are found by walking the three packages, so a new module is covered without
+being listed here.
+"""
+import importlib
 import inspect
+import pkgutil
 
 import pytest
 
-import estimators
-import fmu_models
-from cosim import (
-    component,
-    estimation,
-    fmu_archive,
-    fmu_component,
-    fmu_me,
-    imu,
-    master,
-    model_component,
-    noise,
-    recording,
-    results,
-    scenario,
-    schedule,
-    sensors,
-    signal_fmu,
-    sources,
-    ssp,
-)
-from cosim.experiments import campaign, metrics, settings
-from estimators import batch, em, fmu_export, smoother
-from fmu_models import build, checks, fmu_pack, xml_writer
+PACKAGES = ("fmu_models", "estimators", "cosim")
 
-MODULES = (fmu_models, estimators, build, checks, fmu_pack, xml_writer, component, estimation, fmu_archive,
-           fmu_component, fmu_me, imu, master, model_component, noise, recording, results, scenario, schedule,
-           sensors, signal_fmu, sources, ssp, campaign, metrics, settings, batch, em, fmu_export, smoother)
+
+def modules():
+    for pkg_name in PACKAGES:
+        pkg = importlib.import_module(pkg_name)
+        yield pkg
+        for info in pkgutil.walk_packages(pkg.__path__, prefix=f"{pkg_name}."):
+            if info.name.endswith("__main__"):
+                continue
+            yield importlib.import_module(info.name)
 
 
 def public_objects():
-    for mod in MODULES:
-        for name in getattr(mod, "__all__", []) or [n for n in dir(mod) if not n.startswith("_")]:
+    seen = set()
+    for mod in modules():
+        names = getattr(mod, "__all__", None)
+        if names is None:
+            names = [n for n in dir(mod) if not n.startswith("_")]
+        for name in names:
             obj = getattr(mod, name)
-            if inspect.isclass(obj) or inspect.isfunction(obj):
-                defined_here = obj.__module__ == mod.__name__ or hasattr(mod, "__all__")
-                if defined_here and obj.__module__.split(".")[0] in ("fmu_models", "estimators", "cosim"):
-                    yield f"{mod.__name__}.{name}", obj
+            if not (inspect.isclass(obj) or inspect.isfunction(obj)):
+                continue
+            if obj.__module__.split(".")[0] not in PACKAGES or obj.__name__.startswith("_"):
+                continue
+            key = (obj.__module__, obj.__qualname__)
+            if key not in seen:
+                seen.add(key)
+                yield f"{obj.__module__}.{obj.__qualname__}", obj
 
 
 def parameters(obj):

@@ -7,11 +7,11 @@ import pytest
 from fmpy.validation import validate_fmu
 from fmu_helpers import Instance
 
-from cosim.estimation import EstimatorComponent
-from cosim.fmu_component import FMUComponent
-from cosim.master import Cosimulation
-from cosim.sensors import ProcessNoise, Sensor
-from cosim.sources import PRBS
+from cosim.components.estimation import EstimatorComponent
+from cosim.components.sensors import ProcessNoise, Sensor
+from cosim.components.sources import PRBS
+from cosim.core.master import Cosimulation
+from cosim.fmi.component import FMUComponent
 from estimators import EKF, IAE, KF, MFIAE, UKF, augment_rate_bias, discretize
 from estimators.fmu_export import export_filter_fmu
 from fmu_models import get_model

@@ -15,10 +15,10 @@ import pytest
 from fmu_helpers import Instance
 
 from cosim.cli import main
-from cosim.fmu_archive import Extraction
-from cosim.fmu_component import FMUComponent
-from cosim.master import Cosimulation
-from cosim.sources import Constant
+from cosim.components.sources import Constant
+from cosim.core.master import Cosimulation
+from cosim.fmi.archive import Extraction
+from cosim.fmi.component import FMUComponent
 from fmu_models.errors import ConfigurationError, FMUError
 
 ROOT = Path(__file__).parents[1]

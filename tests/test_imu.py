@@ -3,7 +3,7 @@ the seed 002 experiment through it."""
 import numpy as np
 import pytest
 
-from cosim.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
+from cosim.components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
 
 
 def test_accelerometer_matches_the_analytic_specific_force():

@@ -5,13 +5,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.component import Component
-from cosim.estimation import EstimatorComponent
-from cosim.fmu_component import FMUComponent
-from cosim.master import ConfigurationError, CosimError, Cosimulation
+from cosim.components.estimation import EstimatorComponent
+from cosim.components.sensors import Sensor
+from cosim.components.sources import Constant, Sine
+from cosim.core.component import Component
+from cosim.core.master import ConfigurationError, CosimError, Cosimulation
+from cosim.fmi.component import FMUComponent
 from cosim.scenario import Scenario
-from cosim.sensors import Sensor
-from cosim.sources import Constant, Sine
 from estimators import EKF, discretize
 from fmu_models import get_model
 

@@ -8,15 +8,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import cosim.component as protocol
-from cosim.component import Component
-from cosim.estimation import EstimatorComponent, LQRController
-from cosim.fmu_component import FMUComponent
-from cosim.master import Cosimulation
-from cosim.model_component import ModelComponent
+import cosim.core.component as protocol
+from cosim.components.estimation import EstimatorComponent, LQRController
+from cosim.components.plant_model import ModelComponent
+from cosim.components.sensors import ProcessNoise, Sensor
+from cosim.components.sources import Constant, Sine, Step
+from cosim.core.component import Component
+from cosim.core.master import Cosimulation
+from cosim.fmi.component import FMUComponent
 from cosim.scenario import Scenario
-from cosim.sensors import ProcessNoise, Sensor
-from cosim.sources import Constant, Sine, Step
 from estimators import EKF, discretize
 from fmu_models import get_model
 from fmu_models.errors import ConfigurationError, CosimError, TypeMismatchError
@@ -303,7 +303,7 @@ def test_the_component_protocol_is_documented_and_is_all_a_new_component_needs()
     for name in ("output", "update", "reset", "close", "bind", "sample"):
         assert inspect.getdoc(getattr(Component, name)), name
     # every component of the package implements the protocol
-    from cosim import imu, sources
+    from cosim.components import imu, sources
 
     classes = [FMUComponent, ModelComponent, EstimatorComponent, LQRController, Sensor, ProcessNoise,
                imu.Accelerometer, imu.Gyroscope, imu.Encoder, imu.TiltFusion, sources.Constant,
@@ -328,5 +328,5 @@ def test_the_component_protocol_is_documented_and_is_all_a_new_component_needs()
     df = Cosimulation([Integrator(), Affine("err", 0.1, a=1.0, b=-1.0)],
                       {"i.u": "err.y", "err.u": "i.y"}).run(1.0)
     np.testing.assert_allclose(df["i.y"], 1 - 0.9 ** np.arange(11), rtol=1e-12)
-    with pytest.raises(TypeError, match="not a cosim.component.Component"):
+    with pytest.raises(TypeError, match="not a cosim.core.component.Component"):
         Cosimulation([object()], {})

@@ -14,12 +14,12 @@ from fmpy.validation import validate_fmu
 from fmu_helpers import Instance
 
 from cosim.cli import main
-from cosim.estimation import EstimatorComponent, LQRController
-from cosim.fmu_component import FMUComponent
-from cosim.master import Cosimulation
-from cosim.noise import CounterNoise, counter_normal
-from cosim.sensors import ProcessNoise, Sensor
-from cosim.sources import PRBS, Constant, Sine, Step
+from cosim.components.estimation import EstimatorComponent, LQRController
+from cosim.components.noise import CounterNoise, counter_normal
+from cosim.components.sensors import ProcessNoise, Sensor
+from cosim.components.sources import PRBS, Constant, Sine, Step
+from cosim.core.master import Cosimulation
+from cosim.fmi.component import FMUComponent
 from cosim.ssp import export_ssp, open_ssp
 from estimators import EKF, discretize
 from fmu_models import get_model

@@ -1,6 +1,6 @@
 """Seed 002: the inertia-wheel pendulum's EKF fed by the sensor chain, balanced by LQR.
 
-The chain (issue: sensor chain; :mod:`cosim.imu`): accelerometer and gyroscope on the
+The chain (issue: sensor chain; :mod:`cosim.components.imu`): accelerometer and gyroscope on the
 pendulum, fused by a Kalman filter into the tilt; the gyroscope's rate goes on with its
 offset; an incremental encoder gives the wheel speed. The EKF (state augmented with the
 gyro offset, :func:`estimators.augment_rate_bias`) takes ``[fused tilt, gyro rate,
@@ -14,7 +14,7 @@ raw gyro, raw encoder), the lag (cross-correlation) and amplitude ratio of the
 estimated angle, the offset estimate, and whether the loop stayed balanced.
 
 Paths: ``master`` steps the plant FMU; ``fast`` steps the same CasADi model in Python
-(:class:`cosim.model_component.ModelComponent`); they give the same numbers.
+(:class:`cosim.components.plant_model.ModelComponent`); they give the same numbers.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .campaign import realisation_seeds, run_tasks
+from cosim.experiments.campaign import realisation_seeds, run_tasks
 
 CASES = {"Q = R = 0.01": (0.01, 0.01), "Q = 0.01, R = 0.1": (0.01, 0.1)}
 STATES = ("alpha", "alpha_dot", "phi_dot")
@@ -67,19 +67,18 @@ class Settings:
     seed: int = 3
 
     def __post_init__(self):
-        from .settings import check_common
+        from cosim.experiments.settings import check_common
 
         check_common(self)
 
 
 def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
+    from cosim.components.estimation import EstimatorComponent, LQRController
+    from cosim.components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
+    from cosim.components.plant_model import ModelComponent
+    from cosim.fmi.component import FMUComponent
     from estimators import EKF, augment_rate_bias, discretize
     from fmu_models import get_model
-
-    from ..estimation import EstimatorComponent, LQRController
-    from ..fmu_component import FMUComponent
-    from ..imu import Accelerometer, Encoder, Gyroscope, TiltFusion
-    from ..model_component import ModelComponent
 
     model = get_model("iwp")
     outs = list(STATES) + ["der(alpha_dot)"]
@@ -124,9 +123,8 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
     """Run realisations ``runs`` of one case; returns one dict of metrics per realisation."""
     import tempfile
 
+    from cosim.core.master import Cosimulation
     from fmu_models.build import build_fmu
-
-    from ..master import Cosimulation
 
     s = settings
     out = []
@@ -179,9 +177,9 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) -> Path:
-    from ..results import atomic_write
-    from .common import new_figure
-    from .settings import to_toml
+    from cosim.experiments.common import new_figure
+    from cosim.experiments.settings import to_toml
+    from cosim.results import atomic_write
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -11,11 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.components.noise import make_noise
+from cosim.core.component import Component, ExportedFMU
 from fmu_models.checks import float_array, positive_int
 from fmu_models.errors import ConfigurationError
-
-from .component import Component, ExportedFMU
-from .noise import make_noise
 
 
 def _per_channel(value, n, what, owner, positive=False):
@@ -55,7 +54,7 @@ class Sensor(Component):
         Seed of the noise generator (default 0).
     generator : {"pcg64", "counter"}
         numpy's PCG64 drawn sequentially (default), or the counter-based generator the
-        signal FMUs use (:mod:`cosim.noise`).
+        signal FMUs use (:mod:`cosim.components.noise`).
     """
 
     reentrant = True
@@ -103,7 +102,7 @@ class Sensor(Component):
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """This sensor as a signal FMU (kind ``sensor``, :mod:`cosim.signal_fmu`) drawing
         from the counter generator; refused with a delay."""
-        from .signal_fmu import SignalSpec, build_signal_fmu, channel_params
+        from cosim.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
         if self.delay:
             raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
@@ -177,7 +176,7 @@ class ProcessNoise(Component):
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """This noise source as a signal FMU (kind ``noise``, :mod:`cosim.signal_fmu`)
         drawing from the counter generator; refused for a non-diagonal ``cov``."""
-        from .signal_fmu import SignalSpec, build_signal_fmu, channel_params
+        from cosim.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
         if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "

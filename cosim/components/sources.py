@@ -10,10 +10,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cosim.core.component import Component, ExportedFMU
 from fmu_models.checks import finite, positive, positive_int
 from fmu_models.errors import ConfigurationError, UnknownNameError
-
-from .component import Component, ExportedFMU
 
 
 class _Source(Component):
@@ -30,7 +29,7 @@ class _Source(Component):
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """This source as a signal FMU (:mod:`cosim.signal_fmu`) with output ``out``."""
-        from .signal_fmu import SignalSpec, build_signal_fmu
+        from cosim.signal_fmu import SignalSpec, build_signal_fmu
 
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,

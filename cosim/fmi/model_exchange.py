@@ -24,9 +24,8 @@ import ctypes
 
 import numpy as np
 
+from cosim.fmi.exchange import raw_function
 from fmu_models.errors import ConfigurationError, FMUError
-
-from .fmu_io import raw_function
 
 __all__ = ["SOLVERS", "MEIntegrator"]
 

@@ -1,6 +1,6 @@
 """An FMI 2.0 or 3.0 FMU (Co-Simulation or Model Exchange) as a co-simulation component.
 
-Timing (see :mod:`cosim.component`): at an instant ``t`` the component's outputs are the
+Timing (see :mod:`cosim.core.component`): at an instant ``t`` the component's outputs are the
 FMU's outputs at ``t``. With ``feedthrough="model"`` (default) the inputs the
 ``ModelStructure`` lists as direct dependencies of an output are set to their values at
 ``t`` before the outputs are read, so a feed-through FMU passes its input on at the same
@@ -9,11 +9,11 @@ left limit at ``t``: computed with the inputs held over the previous step), whic
 algebraic loops through the FMU at the price of one step of latency, as a sensor that
 samples just before the actuator updates. Then ``update`` sets all connected inputs and
 advances the FMU over ``[t, t + period]`` with the inputs held: ``doStep`` in
-Co-Simulation, the solver of :mod:`cosim.fmu_me` in Model Exchange.
+Co-Simulation, the solver of :mod:`cosim.fmi.model_exchange` in Model Exchange.
 
 Ports may be of any FMI numeric type (Float64/Real, Float32, the integer types,
 Enumeration, Boolean); values travel as floats in the master and are converted exactly at
-the FMU boundary (:mod:`cosim.fmu_io`). FMU log messages go to the Python logger
+the FMU boundary (:mod:`cosim.fmi.exchange`). FMU log messages go to the Python logger
 ``cosim.fmu`` (warnings and errors always; everything with ``logging=True``), and the
 last ones are kept in :attr:`FMUComponent.messages` and quoted in errors.
 """
@@ -27,17 +27,16 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.core.component import PORT_TYPES, Component, ExportedFMU, Port
+from cosim.fmi.archive import Extraction, read_description
+from cosim.fmi.exchange import Exchange, raw_function
+from cosim.fmi.model_exchange import SOLVERS, MEIntegrator
 from fmu_models.errors import (
     ConfigurationError,
     FMUError,
     TypeMismatchError,
     UnknownNameError,
 )
-
-from .component import PORT_TYPES, Component, ExportedFMU, Port
-from .fmu_archive import Extraction, read_description
-from .fmu_io import Exchange, raw_function
-from .fmu_me import SOLVERS, MEIntegrator
 
 __all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "FMUComponent", "FMUError"]
 
@@ -72,7 +71,7 @@ class FMUComponent(Component):
     interface : {"auto", "cs", "me"}
         Co-Simulation or Model Exchange; ``"auto"`` takes Co-Simulation if the FMU has it.
     solver : {"cvode", "euler", "rk4"}
-        Model Exchange solver (see :mod:`cosim.fmu_me`; default CVODE).
+        Model Exchange solver (see :mod:`cosim.fmi.model_exchange`; default CVODE).
     solver_step : float, optional
         Model Exchange: fixed step [s] of Euler/RK4, largest step of CVODE (default: the
         period).

@@ -14,11 +14,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from cosim.core.component import Component
 from fmu_models.checks import finite
 from fmu_models.errors import NumericalError, UnknownNameError
 from fmu_models.plant import PlantModel, check_method
-
-from .component import Component
 
 
 class ModelComponent(Component):
@@ -39,7 +38,7 @@ class ModelComponent(Component):
     outputs : sequence of str, optional
         Output ports; default: states and measured outputs. ``der(<state>)`` allowed.
     feedthrough : {"model", "none"}
-        As :class:`~cosim.fmu_component.FMUComponent`: ``der(<state>)`` at ``t`` uses the
+        As :class:`~cosim.fmi.component.FMUComponent`: ``der(<state>)`` at ``t`` uses the
         input at ``t`` ("model", default) or the input of the previous step ("none").
     """
 

@@ -7,12 +7,11 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
+from cosim.core.component import Component, ExportedFMU
 from estimators.base import KalmanBase
 from fmu_models.checks import float_array
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.plant import PlantModel
-
-from .component import Component, ExportedFMU
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 

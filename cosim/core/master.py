@@ -1,9 +1,9 @@
 """The co-simulation master: steps FMUs and Python components, each at its own period.
 
 Time runs on a base step ``h`` that divides every component's period (their greatest
-common divisor unless given; see :func:`cosim.schedule.base_step`). At each base time
+common divisor unless given; see :func:`cosim.core.schedule.base_step`). At each base time
 ``t_k = t0 + k h``, for the components due at ``t_k`` (the protocol of
-:mod:`cosim.component`):
+:mod:`cosim.core.component`):
 
 1. their outputs at ``t_k`` are computed (``output``) in an order derived from the
    connections and each component's declared direct feedthrough (``order="auto"``,
@@ -38,6 +38,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cosim.core.component import Component, bind_protocol, ports_compatible
+from cosim.core.recording import MemorySink, ParquetSink, select_signals
+from cosim.core.schedule import Group, base_step, evaluation_order
 from fmu_models.errors import (
     ConfigurationError,
     CosimError,
@@ -46,10 +49,6 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
-
-from .component import Component, bind_protocol, ports_compatible
-from .recording import MemorySink, ParquetSink, select_signals
-from .schedule import Group, base_step, evaluation_order
 
 __all__ = ["LOOPS", "LOOP_SOLVERS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
 
@@ -75,13 +74,13 @@ class Cosimulation:
     Parameters
     ----------
     components : sequence of Component
-        FMUs (:class:`~cosim.fmu_component.FMUComponent`), plant models
-        (:class:`~cosim.model_component.ModelComponent`) and Python components. With the
+        FMUs (:class:`~cosim.fmi.component.FMUComponent`), plant models
+        (:class:`~cosim.components.plant_model.ModelComponent`) and Python components. With the
         default order the list order does not change results.
     connections : mapping or iterable of pairs
         ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input
         gets at most one source, of a compatible type (see
-        :func:`cosim.component.ports_compatible`). Every input of a Python component must
+        :func:`cosim.core.component.ports_compatible`). Every input of a Python component must
         be connected; unconnected FMU inputs keep their start values.
     step_size : float, optional
         Base step [s]; every period must be an integer multiple of it. Default: the
@@ -105,7 +104,7 @@ class Cosimulation:
     signal_names : list of str
         ``component.port`` of every output, the columns of the results.
     schedule : list of Group
-        The evaluation order (see :mod:`cosim.schedule`).
+        The evaluation order (see :mod:`cosim.core.schedule`).
     timings : dict
         Wall times [s] of the last run: ``setup``, ``loop``, ``teardown``.
 
@@ -133,7 +132,7 @@ class Cosimulation:
         self.components = list(components)
         for c in self.components:
             if not isinstance(c, Component):
-                raise TypeMismatchError(f"{c!r} is not a cosim.component.Component")
+                raise TypeMismatchError(f"{c!r} is not a cosim.core.component.Component")
         names = [c.name for c in self.components]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -146,7 +145,7 @@ class Cosimulation:
         if order == "auto":
             self.schedule = evaluation_order(self.components, self.connections, loops)
         else:
-            from .schedule import Unit
+            from cosim.core.schedule import Unit
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
         self.timings: dict[str, float] = {}

@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from cosim.components.noise import PerInstantNoise
+from cosim.components.sensors import _per_channel
+from cosim.core.component import Component
 from fmu_models.checks import finite, positive_int
 from fmu_models.errors import ConfigurationError
-
-from .component import Component
-from .noise import PerInstantNoise
-from .sensors import _per_channel
 
 G = 9.81
 
