@@ -12,7 +12,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from fmu_models.build import build_fmu
+from fmu_models import build_fmu
 
 
 def time_steps(path, version, n=20_000, with_input=True):

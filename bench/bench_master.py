@@ -31,8 +31,7 @@ from fmpy.fmi2 import FMU2Slave
 from cosim.components.sources import Step
 from cosim.core.master import Cosimulation
 from cosim.fmi.component import FMUComponent
-from fmu_models import get_model
-from fmu_models.build import build_fmu
+from fmu_models import build_fmu, get_model
 
 T_END, H, REPEATS = 5.0, 0.001, 7
 N = round(T_END / H)

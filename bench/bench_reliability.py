@@ -98,7 +98,7 @@ def temp_folders() -> None:
     from cosim.components.sources import Constant
     from cosim.core.master import Cosimulation
     from cosim.fmi.component import FMUComponent
-    from fmu_models.build import build_fmu
+    from fmu_models import build_fmu
 
     with tempfile.TemporaryDirectory() as tmp:
         fmu = build_fmu("cartpole", tmp)

@@ -25,7 +25,7 @@ __all__ = ["OutputFolder", "atomic_write", "plot_estimates", "save_results"]
 def atomic_write(path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` to write a temporary file beside ``path``, then rename it to
     ``path`` (atomic); the temporary file is removed if ``write`` fails. Returns ``path``."""
-    from fmu_models.fmu_pack import temp_beside
+    from fmu_models.export.pack import temp_beside
 
     path = Path(path)
     fd, tmp = temp_beside(path)

@@ -198,8 +198,7 @@ class Scenario:
             raise ConfigurationError(f"component {name!r}: give either model (this project's "
                                      "plant, built on the fly) or path (an .fmu file)")
         if "model" in c:
-            from fmu_models import get_model
-            from fmu_models.build import build_fmu
+            from fmu_models import build_fmu, get_model
 
             version = c.pop("fmi_version", 2)
             model = get_model(c.pop("model"))

@@ -41,7 +41,7 @@ from xml.etree import ElementTree as ET
 from cosim.core.component import PORT_TYPES, ExportedFMU
 from cosim.fmi.archive import Extraction, read_description
 from fmu_models.errors import ConfigurationError, FMUError
-from fmu_models.xml_writer import xml_attrs
+from fmu_models.export.description import xml_attrs
 
 __all__ = ["SSPExport", "SSPSystem", "export_ssp", "open_ssp"]
 

@@ -4,24 +4,37 @@ Every filter has the interface of :class:`~estimators.base.KalmanBase`:
 ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)`` (a whole record in native
 code) and the attributes ``x, P, Q, R, innovation, S, K, nis``. Offline:
 :func:`rts_smooth` (RTS smoothing of a run) and :func:`em_noise` (EM learning of Q, R).
+A new filter implements the hooks of :mod:`estimators.protocol` in one file and registers
+itself by name (:data:`FILTERS`).
 
 >>> from fmu_models import get_model
 >>> from estimators import EKF, discretize
 >>> sys_ = discretize(get_model("cartpole"), dt=0.01)
 >>> ekf = EKF(sys_, x0=[0.5, 0, 1.8, 0.5], P0=1.0, Q=0.2, R=0.1)
 """
-from .base import FilterRun, KalmanBase
-from .batch import BatchFilter, BatchRun
+from .base import FILTERS, KalmanBase
+from .batch import BatchFilter
 from .ekf import EKF
-from .em import EMResult, em_noise
+from .em import em_noise
 from .fuzzy import MamdaniFuzzy
 from .iae import IAE
 from .kf import KF
 from .mfiae import MFIAE
-from .smoother import Smoothed, rts_smooth
+from .protocol import Parameter, StepContext, StepResult, Update
+from .results import BatchRun, EMResult, FilterRun, Smoothed
+from .smoother import rts_smooth
 from .system import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ukf import UKF
 
-__all__ = ["EKF", "IAE", "KF", "MFIAE", "UKF", "BatchFilter", "BatchRun", "DiscreteModel", "EMResult",
-           "FilterRun", "KalmanBase", "MamdaniFuzzy", "Smoothed", "augment_rate_bias", "discretize",
-           "em_noise", "linear_model", "rts_smooth"]
+__all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "UKF", "BatchFilter", "BatchRun", "DiscreteModel", "EMResult",
+           "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed", "StepContext", "StepResult", "Update",
+           "augment_rate_bias", "discretize", "em_noise", "export_fmu", "linear_model", "rts_smooth"]
+
+
+def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):
+    """Export the filter ``filt`` as a Co-Simulation FMU; see
+    :func:`fmu_models.export.filter.export_filter_fmu` (parameters ``filt``, ``out_dir``,
+    ``fmi_version``, ``name``, ``file_name``)."""
+    from fmu_models.export.filter import export_filter_fmu
+
+    return export_filter_fmu(filt, out_dir, fmi_version, name, file_name)

@@ -163,7 +163,7 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     vm = (fns, "vm", None) if return_library else (fns, "vm")
     if backend == "vm":
         return vm
-    from fmu_models.build import find_compiler
+    from fmu_models.export.pack import find_compiler
 
     try:
         cc = find_compiler()

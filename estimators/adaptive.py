@@ -4,9 +4,9 @@
 innovations (a ``ny x window`` ring, part of the filter's state) and their covariance
 ``C_I = (1/N) sum I_j I_j^T`` (eq 37), recomputed from the ring at every step (no
 running sum that could drift), and hands ``C_I`` to the subclass's
-:meth:`~WindowedAdaptiveEKF._adapt`, which returns the next Q and R as CasADi
-expressions. The whole adaptation is compiled with the filter, so it runs batched and in
-the native :meth:`~estimators.base.KalmanBase.run`.
+:meth:`~WindowedAdaptiveEKF.adapt_noise`, which returns the next Q and R as CasADi
+expressions. The whole adaptation is compiled with the filter, so it runs batched, in
+the native :meth:`~estimators.base.KalmanBase.run` and as an FMU.
 
 Only complete, accepted measurement vectors enter the window (a step with a missing
 channel or a gated measurement leaves it, and Q and R, unchanged); until ``window``
@@ -22,9 +22,10 @@ from fmu_models.errors import ConfigurationError
 
 from ._buffered import matrix
 from .ekf import EKF
+from .protocol import Parameter, StepContext, StepResult
 from .system import DiscreteModel
 
-__all__ = ["WindowedAdaptiveEKF", "bounds_around"]
+__all__ = ["WindowedAdaptiveEKF", "bound_parameters", "bounds_around"]
 
 #: Default bounds: this factor either side of the initial variances.
 BOUND_FACTOR = 1e4
@@ -32,13 +33,25 @@ BOUND_FACTOR = 1e4
 
 def bounds_around(initial: np.ndarray, given, what: str) -> tuple[float, float]:
     """``(low, high)`` bounds for adapted variances: ``given``, or a factor
-    :data:`BOUND_FACTOR` below the smallest and above the largest ``initial`` variance."""
+    :data:`BOUND_FACTOR` below the smallest and above the largest ``initial`` variance
+    (``what`` names them in errors)."""
     if given is None:
         return float(np.min(initial)) / BOUND_FACTOR, float(np.max(initial)) * BOUND_FACTOR
     b = float_array(given, what)
     if b.shape != (2,) or not (np.isfinite(b).all() and 0 < b[0] < b[1]):
         raise ConfigurationError(f"{what} must be (low, high) with 0 < low < high, got {given!r}")
     return float(b[0]), float(b[1])
+
+
+def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
+    """The step parameters ``q_bounds`` and ``r_bounds`` (FMU parameters ``q_min``, ``q_max``,
+    ``r_min``, ``r_max``) of an adaptive filter."""
+    return [Parameter("q_bounds", q_bounds, "positive", ("smallest adapted process variance",
+                                                          "largest adapted process variance"),
+                      ("q_min", "q_max"), increasing=True),
+            Parameter("r_bounds", r_bounds, "positive", ("smallest adapted measurement variance",
+                                                          "largest adapted measurement variance"),
+                      ("r_min", "r_max"), increasing=True)]
 
 
 class WindowedAdaptiveEKF(EKF):
@@ -51,6 +64,11 @@ class WindowedAdaptiveEKF(EKF):
     window : int
         N, the number of innovations in ``C_I`` (eq 37). Until N are stored, Q and R
         keep their initial values.
+
+    Notes
+    -----
+    A subclass implements :meth:`adapt_noise`; :meth:`on_adapted` runs after each step
+    from Python that adapted.
     """
 
     adapts_noise = True
@@ -60,31 +78,34 @@ class WindowedAdaptiveEKF(EKF):
         self.window = positive_int(window, "window")
         super().__init__(system, x0, P0, Q, R, gate, nan_is_missing, backend)
 
-    def _adapt(self, st: dict, diag: dict, C_I):
-        """Return ``(Q_new, R_new)`` expressions from the state symbols ``st`` (x, P, Q, R),
-        the step's diagnostics ``diag`` (innov, S, K, ...) and ``C_I``. Subclasses implement."""
+    def config_key(self) -> tuple:
+        """The window length."""
+        return (self.window,)
+
+    def adapt_noise(self, ctx: StepContext, result: StepResult, C_I: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """Return ``(Q_new, R_new)`` expressions from the step's symbols ``ctx``, its
+        ``result`` and ``C_I`` (eq 37). Subclasses implement."""
         raise NotImplementedError
 
-    def _extra_state_init(self):
+    def extra_state(self) -> dict:
+        """The innovation window (``ring``, ny x window) and the count of innovations stored."""
         return {"ring": np.zeros(self.system.ny * self.window), "count": np.zeros(1)}
 
-    def _step_spec(self):
-        st, ins, new, diag, extra = super()._step_spec()
+    def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
+        """Push a complete, accepted innovation into the window; once it is full, Q and R from
+        :meth:`adapt_noise`. Declares the output ``adapted``."""
         ny, N = self.system.ny, self.window
-        ring, count = self._sym("ring", ny, N), self._sym("count")
-        st.update(ring=ring, count=count)
-        # a complete, accepted measurement vector enters the window
-        push = diag["accepted"] * ca.mmin(self._valid_expr)
-        shifted = ca.horzcat(ring[:, 1:], diag["innov"]) if N > 1 else diag["innov"]
+        ring, count = ca.reshape(ctx.state["ring"], ny, N), ctx.state["count"]
+        push = result.accepted * ca.mmin(ctx.valid)      # a complete, accepted vector enters
+        shifted = ca.horzcat(ring[:, 1:], result.innovation) if N > 1 else result.innovation
         ring_new = ca.if_else(push, shifted, ring)
         count_new = count + push
-        C_I = ca.mtimes(ring_new, ring_new.T) / N                         # eq 37
-        Q_new, R_new = self._adapt(st, diag, C_I)
+        C_I = ca.mtimes(ring_new, ring_new.T) / N                          # eq 37
+        Q_new, R_new = self.adapt_noise(ctx, result, C_I)
         adapted = push * (count_new >= N)
-        new.update(Q=ca.if_else(adapted, Q_new, st["Q"]), R=ca.if_else(adapted, R_new, st["R"]),
-                   ring=ring_new, count=count_new)
-        extra["adapted"] = adapted
-        return st, ins, new, diag, extra
+        ctx.output("adapted", adapted)
+        return {"Q": ca.if_else(adapted, Q_new, ctx.Q), "R": ca.if_else(adapted, R_new, ctx.R),
+                "ring": ring_new, "count": count_new}
 
     def innovation_covariance(self) -> np.ndarray:
         """C_I of eq 37 from the innovations stored so far (at most ``window``), (ny, ny)."""
@@ -93,19 +114,21 @@ class WindowedAdaptiveEKF(EKF):
         ring = matrix(self._now("ring"), ny, self.window)[:, self.window - n:]
         return ring @ ring.T / max(n, 1)
 
-    def _after_step(self):
-        if self._extra["adapted"][0]:
-            self._adapted()
+    def after_step(self) -> None:
+        """After a step that adapted: :meth:`on_adapted`."""
+        if self._out("adapted")[0]:
+            self.on_adapted()
 
-    def _adapted(self):
-        """Runs after every step that adapted Q and R: records them."""
+    def on_adapted(self) -> None:
+        """Runs after every step from Python that adapted Q and R: records them."""
         self._record()
 
-    def _after_run(self, cat: dict) -> None:
+    def after_run(self, outputs: dict) -> None:
+        """Records the Q and R of every step of a native run that adapted."""
         nx, ny = self.system.nx, self.system.ny
-        adapted = np.flatnonzero(cat["adapted"].ravel())
-        N = len(cat["adapted"])
-        Q = cat["Q_new"].reshape(-1, nx, nx).diagonal(axis1=1, axis2=2)
-        R = cat["R_new"].reshape(-1, ny, ny).diagonal(axis1=1, axis2=2)
+        adapted = np.flatnonzero(outputs["adapted"].ravel())
+        N = len(outputs["adapted"])
+        Q = outputs["Q_new"].reshape(-1, nx, nx).diagonal(axis1=1, axis2=2)
+        R = outputs["R_new"].reshape(-1, ny, ny).diagonal(axis1=1, axis2=2)
         for i in adapted:
             self.history.append(self.k - N + i + 1, np.concatenate([Q[i], R[i]]))

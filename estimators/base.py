@@ -1,239 +1,56 @@
-"""The interface and machinery shared by every Gaussian filter in this package.
+"""The base class of every filter: its public interface, and the defaults of the protocol.
 
-A filter is a *state* (arrays ``x, P, Q, R`` and, for adaptive filters, more) and one
-CasADi Function built once per model and filter configuration, the fused ``step``, which
-maps the state and ``(u, y, mask)`` to the next state and the step's diagnostics. It is
-compiled to native code (:mod:`estimators._compiled`) and:
+A filter (:class:`KalmanBase` subclass) implements the hooks of :mod:`estimators.protocol`;
+from them one CasADi Function is built per model and configuration, the fused ``step``,
+mapping the state and ``(u, y, mask)`` to the next state and the step's diagnostics. It is
+compiled to native code (:mod:`estimators._compiled`) and
 
-* bound to the filter's numpy arrays (:class:`~estimators._buffered.BufferedFunction`,
-  ping-pong between two copies of the state): :meth:`KalmanBase.step` is one native
-  call plus the copies of ``u`` and ``y``;
-* folded over a whole trajectory (:meth:`KalmanBase.run`: one native call, returning every
-  step's estimate, covariance and diagnostics; :mod:`estimators._fold`);
-* mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`).
+* bound to the filter's numpy arrays (:class:`~estimators.runtime.BoundStep`): :meth:`KalmanBase.step`
+  is one native call plus the copies of ``u`` and ``y``;
+* folded over a whole trajectory (:meth:`KalmanBase.run`: one native call, every step's
+  estimate, covariance and diagnostics; :mod:`estimators._fold`);
+* mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`);
+* exported as an FMU (:func:`fmu_models.export.filter.export_filter_fmu`).
 
 Missing measurements: the step takes a 0/1 ``mask`` per measurement channel; a NaN
 measurement counts as missing too (unless ``nan_is_missing=False``). The update then uses
-the valid channels only (rows of ``H`` and of the innovation zeroed, ``S`` padded with
-ones on the missing diagonal: exactly the update of the reduced measurement vector), and
-with no valid channel the step is a prediction. An optional chi-square gate refuses a
+the valid channels only (exactly the update of the reduced measurement vector), and with
+no valid channel the step is a prediction. An optional chi-square gate refuses a
 measurement vector whose NIS exceeds ``gate`` (the step is then a prediction, and
-``accepted`` is 0). Every step also returns a status: 1 if ``u`` or a valid ``y`` entry
-was NaN or inf, 2 if the result was not finite; the filter then raises and keeps its
-previous state. Finiteness is tested entry by entry, so no finite value can overflow the test.
+``accepted`` is 0). A step whose ``u`` or used ``y`` is NaN or inf, or whose result is not
+finite, raises and keeps the previous state. Finiteness is tested entry by entry, so no
+finite value can overflow the test.
 """
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import casadi as ca
 import numpy as np
 
 from fmu_models import checks
-from fmu_models.errors import (
-    ConfigurationError,
-    InputError,
-    NumericalError,
-    TypeMismatchError,
-    UnknownNameError,
-)
+from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+from fmu_models.registry import Registry
 
-from ._buffered import BufferedFunction, matrix
+from ._buffered import matrix
 from ._compiled import compile_functions
 from .history import NoiseHistory
+from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
+from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
+from .results import FilterRun
+from .runtime import BoundStep, VectorInput, explain_status
 from .system import DiscreteModel
 
-__all__ = ["DIAGNOSTICS", "FilterRun", "KalmanBase", "gated_gain", "joseph_update",
-           "mask_measurement", "symmetric"]
+__all__ = ["DIAGNOSTICS", "FILTERS", "KEEP", "FilterRun", "KalmanBase", "Parameter", "StepContext", "StepResult",
+           "Update"]
 
-OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
-#: Outputs of every fused step besides the state, in order.
-DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
+#: The filters usable by name (scenario files, the command line): ``class F(KalmanBase, register="F")``.
+FILTERS: Registry = Registry("filter")
 #: Outputs that are symmetric matrices (exactly: their lower triangle mirrors the upper).
 SYMMETRIC = ("P_new", "P_prior", "S", "Q_new", "R_new")
 #: What run(keep="estimates") does not store.
 DROPPABLE = ("x_prior", "P_prior", "innov", "S", "K")
 KEEP = ("all", "estimates")
-#: The step's inputs after the state arrays.
-STEP_INPUTS = ("u", "y", "mask", "gate", "nan_missing")
-#: Options of the compiled Functions: common subexpressions merged once more after the
-#: Jacobians (AD re-creates e.g. cos(theta) beside the model's own; 6 transcendental calls
-#: become 2 in the cart-pole EKF step, 0.31 -> 0.2x us).
-CSE = {"cse": True}
-
-
-def symmetric(M: ca.SX) -> ca.SX:
-    """The symmetric matrix with ``M``'s upper triangle: a covariance exactly symmetric by
-    construction, and only the upper triangle of ``M`` is ever computed (the generated
-    code drops the other half; 16 % fewer operations in the cart-pole EKF step)."""
-    n = M.shape[0]
-    out = ca.SX(n, n)
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = M[min(i, j), max(i, j)]
-    return out
-
-
-def cholesky_lower(P: ca.SX) -> ca.SX:
-    """Lower-triangular L with ``P = L L^T``, written out for a symbolic n x n matrix."""
-    n = P.shape[0]
-    L = ca.SX.zeros(n, n)
-    for j in range(n):
-        d = P[j, j] - sum((L[j, k] ** 2 for k in range(j)), ca.SX(0))
-        L[j, j] = ca.sqrt(d)
-        for i in range(j + 1, n):
-            L[i, j] = (P[i, j] - sum((L[i, k] * L[j, k] for k in range(j)), ca.SX(0))) / L[j, j]
-    return L
-
-
-def spd_solve(A: ca.SX, B: ca.SX) -> ca.SX:
-    """``X`` with ``A X = B`` for a symmetric positive-definite ``A``, by its Cholesky
-    factor (forward and back substitution; about 40 % fewer operations than CasADi's
-    general symbolic solve for a 4 x 4 system). A matrix that is not positive definite
-    gives NaN, which the filters' status reports."""
-    L = cholesky_lower(A)
-    n, m = A.shape[0], B.shape[1]
-    Y = ca.SX.zeros(n, m)
-    for i in range(n):
-        row = B[i, :] - (ca.mtimes(L[i, :i], Y[:i, :]) if i else 0)
-        Y[i, :] = row / L[i, i]
-    X = ca.SX.zeros(n, m)
-    for i in range(n - 1, -1, -1):
-        row = Y[i, :] - (ca.mtimes(L[i + 1:, i].T, X[i + 1:, :]) if i < n - 1 else 0)
-        X[i, :] = row / L[i, i]
-    return X
-
-
-def log_det(S: ca.SX) -> ca.SX:
-    """``log det S`` of a symmetric positive-definite matrix: one log of the expanded
-    determinant up to 3 x 3, the Cholesky factor's diagonal beyond."""
-    n = S.shape[0]
-    if n <= 3:
-        return ca.log(ca.det(S))
-    L = cholesky_lower(S)
-    return 2 * sum((ca.log(L[i, i]) for i in range(n)), ca.SX(0))
-
-
-def gated_gain(S, B, innov, gate):
-    """Gain ``K = B^T S^{-1}``, ``nis = innov^T S^{-1} innov`` and the gate's verdict
-    ``nis <= gate``, from one Cholesky solve ``S Z = [B, innov]`` (no inverse)."""
-    Z = spd_solve(S, ca.horzcat(B, innov))
-    K = Z[:, : B.shape[1]].T
-    nis = ca.dot(innov, Z[:, B.shape[1]])
-    return K, nis, nis <= gate
-
-
-def mask_measurement(valid, S_raw, innov_raw):
-    """The update of the valid channels only, at fixed size: ``S`` with the rows and
-    columns of missing channels replaced by those of the identity, and their innovation
-    zeroed. Returns ``(S, innov, M)`` with ``M = diag(valid)``."""
-    M = ca.diag(valid)
-    S = symmetric(ca.mtimes([M, S_raw, M]) + ca.diag(1 - valid))
-    return S, valid * innov_raw, M
-
-
-def joseph_update(xp, Pp, innov, H, S, R, gate=ca.inf):
-    """Kalman gain and Joseph-form update (seed 002 eqs 13-16; stable for any gain).
-
-    ``K = Pp H^T S^{-1}`` (by a solve, no inverse); with ``Ka = K`` if the NIS passes the
-    ``gate``, else 0: ``x = xp + Ka innov``, ``P = (I - Ka H) Pp (I - Ka H)^T + Ka R Ka^T``.
-    Returns ``(x, P, K, nis, accepted)``.
-    """
-    n = xp.numel()
-    K, nis, acc = gated_gain(S, ca.mtimes(H, Pp), innov, gate)
-    Ka = acc * K
-    IKH = ca.SX.eye(n) - ca.mtimes(Ka, H)
-    P = symmetric(ca.mtimes([IKH, Pp, IKH.T]) + ca.mtimes([Ka, R, Ka.T]))
-    return xp + ca.mtimes(Ka, innov), P, K, nis, acc
-
-
-def _finite(expr_list) -> ca.SX:
-    """1 if every entry is finite, else 0. Each entry is tested on its own (``|e| < inf``
-    is 0 for NaN and inf) and the 0/1 results are counted, so nothing can overflow (a sum
-    of the entries would, for finite values such as 1.5e308). (``e - e == 0`` would not
-    do: CasADi simplifies ``e - e`` to 0.)"""
-    count = sum(ca.sum1(ca.vec(ca.fabs(e) < ca.inf)) for e in expr_list)
-    return count == sum(e.numel() for e in expr_list)
-
-
-def not_nan(y: ca.SX) -> ca.SX:
-    """1 where ``y`` is not NaN (inf included), per entry (``y == y`` would be simplified
-    to 1 by CasADi)."""
-    return ca.fabs(y) <= ca.inf
-
-
-def used_measurement(y: ca.SX, mask: ca.SX, nan_missing: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """``(valid, y_used)``: a channel is used if its mask is set and (unless NaN is an error,
-    ``nan_missing`` 0) it is not NaN; ``y_used`` is 0 in the others, so that a NaN of an
-    unused channel stays out of every expression."""
-    valid = mask * ca.if_else(nan_missing, not_nan(y), 1)
-    return valid, ca.if_else(valid, y, 0)
-
-
-def _log_likelihood(nis, logdet_S, n_used, accepted) -> float:
-    """``-1/2 sum (nis + log det S + n_used log 2 pi)`` over the accepted steps (a missing
-    channel contributes 1 to S's diagonal: log 1 = 0)."""
-    terms = np.asarray(nis) + np.asarray(logdet_S) + np.asarray(n_used) * np.log(2 * np.pi)
-    return -0.5 * float(np.sum(terms[np.asarray(accepted, bool)]))
-
-
-def _upper(M: ca.SX) -> ca.SX:
-    """The upper-triangular entries of a square matrix, as a column."""
-    n = M.shape[0]
-    return ca.vertcat(*[M[i, j] for j in range(n) for i in range(j + 1)])
-
-
-def _status(inputs, outputs):
-    return ca.if_else(_finite(inputs), ca.if_else(_finite(outputs), OK, BAD_RESULT), BAD_INPUT)
-
-
-class FilterRun:
-    """The result of :meth:`KalmanBase.run`: every step's estimate and diagnostics.
-
-    Attributes (``N`` steps; arrays indexed by step ``k = 1..N`` in row ``k - 1``, except
-    ``x`` and ``P`` which also hold the initial estimate in row 0):
-
-    x : ndarray, shape (N + 1, nx)
-        Estimates, row 0 the initial one.
-    P : ndarray, shape (N + 1, nx, nx)
-        Their covariances.
-    x_prior, P_prior : ndarray, shapes (N, nx), (N, nx, nx)
-        Predictions.
-    innovation : ndarray, shape (N, ny)
-        Innovations (0 in missing channels).
-    S : ndarray, shape (N, ny, ny)
-        Innovation covariances (1 on the diagonal of missing channels).
-    K : ndarray, shape (N, nx, ny)
-        Gains.
-    nis : ndarray, shape (N,)
-    accepted : ndarray of bool, shape (N,)
-        False where the gate refused the measurement.
-    mask : ndarray of bool, shape (N, ny)
-        The channels used (valid and not NaN).
-    us : ndarray, shape (N, nu)
-        The inputs (the smoother needs them).
-    Q, R : ndarray, shapes (N + 1, nx), (N + 1, ny)
-        Diagonals of Q and R in force after each step (row 0: initial).
-    log_likelihood : float
-        Gaussian log-likelihood of the measurements,
-        ``-1/2 sum_k (nis_k + log det(2 pi S_k))`` over the valid channels.
-    """
-
-    def __init__(self, **arrays):
-        self.__dict__.update(arrays)
-
-    def to_frame(self, filt: KalmanBase):
-        """Tidy DataFrame indexed by step ``k`` (0..N) with the estimate, the covariance
-        diagonal, the innovation and NIS (NaN at k = 0)."""
-        import pandas as pd
-
-        s = filt.system
-        n = len(self.x)
-        data = {name: self.x[:, i] for i, name in enumerate(s.state_names)}
-        data.update({f"P_{name}": self.P[:, i, i] for i, name in enumerate(s.state_names)})
-        for j, name in enumerate(s.output_names):
-            data[f"innovation_{name}"] = np.r_[np.nan, self.innovation[:, j]]
-        data["nis"] = np.r_[np.nan, self.nis]
-        data["accepted"] = np.r_[True, self.accepted]
-        return pd.DataFrame(data, index=pd.RangeIndex(n, name="k"))
 
 
 class KalmanBase:
@@ -287,187 +104,212 @@ class KalmanBase:
         Record of the diagonals of Q and R: the initial values, each :meth:`set_noise`,
         and every adaptation of an adaptive filter; :meth:`noise_history` gives it as a
         DataFrame.
+
+    Notes
+    -----
+    A new filter overrides the hooks of the protocol (:mod:`estimators.protocol`): at least
+    :meth:`predict_expr` and :meth:`update_expr`; :meth:`adapt_expr`, :meth:`extra_state`,
+    :meth:`step_parameters` and :meth:`config_key` to adapt and to carry more state; and
+    registers itself with a class keyword (``register="Name"``).
     """
 
     name = "base"
-    #: Whether the fused step holds the whole filter (BatchFilter and native run use it).
+    #: Whether the fused step holds the whole filter (BatchFilter, native run, FMU use it).
     supports_batch = True
     #: Whether Q and R are part of the state (adaptive filters) or fixed parameters of
     #: the step (then they are not carried from step to step).
     adapts_noise = False
+
+    def __init_subclass__(cls, register: str | None = None, aliases: tuple[str, ...] = (), **kwargs):
+        super().__init_subclass__(**kwargs)
+        if register is not None:
+            FILTERS.register(register, cls, aliases=aliases)
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, gate: float | None = None,
                  nan_is_missing: bool = True, backend: str = "compiled"):
         if not isinstance(system, DiscreteModel):
             raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
         self.system = system
-        n, m, p = system.nx, system.nu, system.ny
-        self._nu, self._ny = m, p
+        n, p = system.nx, system.ny
         self.gate = np.inf if gate is None else checks.positive(gate, "gate")
         self.nan_is_missing = bool(nan_is_missing)
         noise = {"Q": checks.covariance(Q, n, "Q").ravel(order="F"),
                  "R": checks.covariance(R, p, "R").ravel(order="F")}
-        init = {"x": checks.vector(x0, n, "x0", ConfigurationError),
-                "P": checks.covariance(P0, n, "P0").ravel(order="F"),
-                **(noise if self.adapts_noise else {}), **self._extra_state_init()}
-        # two copies of the state; self._cur says which holds the current one
-        self._pairs = {k: (np.array(v, float), np.array(v, float)) for k, v in init.items()}
-        self._noise = {} if self.adapts_noise else noise     # fixed Q, R: step parameters
-        self._cur = 0
-        self._u, self._y, self._mask = np.zeros(m), np.zeros(p), np.ones(p)
-        self._const = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
-                       **{k: np.asarray(v, float).ravel() for k, v in self._extra_params().items()}}
+        extra = {k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}
+        params = list(self.step_parameters())
+        state = {"x": checks.vector(x0, n, "x0", ConfigurationError),
+                 "P": checks.covariance(P0, n, "P0").ravel(order="F"),
+                 **(noise if self.adapts_noise else {}), **extra}
+        # fixed inputs of the step, shared with the bound step: changed in place (set_noise)
+        self._fixed = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
+                       **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in params}}
+        self._extra_names = list(extra)
+        self._params = params
+
+        def build():
+            raw = build_step(self, extra, params)
+            (fn,), used = compile_functions([raw], backend)
+            return fn, used, raw
+
+        step, self.backend, self._raw_step = system.compiled("step", self.cache_key, backend, build)
+        self._rt = BoundStep(step, state, self._fixed)
+        ins = self._rt.inputs
+        self._u, self._y, self._mask = ins["u"], ins["y"], ins["mask"]
+        self._fill_u = VectorInput(self._u, self.name, "u")
+        self._fill_y = VectorInput(self._y, self.name, "y")
+        self._fill_mask = VectorInput(self._mask, self.name, "mask")
+        self._mask[:] = 1.0
+        self._mask_dirty = False
+        self._after = type(self).after_step is not KalmanBase.after_step
         self.k = 0
-        key = self.cache_key + (backend,)
-        if key not in system.cache:
-            raw = self._build_step()
-            system.cache[key] = compile_functions([raw], backend) + (raw,)
-        (step,), self.backend, self._raw_step = system.cache[key]
-        self._bind(step)
         self.history = NoiseHistory(n, p)
         self._record()
 
-    # ---------------------------------------------------------------- symbolic parts
+    # ================================================================ the protocol (defaults)
+    def config_key(self) -> tuple:
+        """What identifies this configuration's compiled step beyond the class (e.g. a window
+        length); default none. Values that are step inputs (bounds, gains) do not belong here."""
+        return ()
+
     @property
     def cache_key(self) -> tuple:
-        """What identifies this filter's compiled step (type and configuration)."""
-        return (type(self).__name__,)
+        """The class (module and name) and :meth:`config_key`: what identifies the compiled step."""
+        cls = type(self)
+        return (cls.__module__, cls.__qualname__, *self.config_key())
 
-    def _extra_state_init(self) -> dict:
-        """Initial values of extra state arrays (adaptive filters), by name."""
+    def extra_state(self) -> dict:
+        """Initial values of the filter's extra state arrays, by name (default none)."""
         return {}
 
-    def _extra_params(self) -> dict:
-        """Values of extra fixed inputs of the step (e.g. adaptation bounds), by name; the
-        subclass adds a symbol of the same name to the step's inputs. Being inputs, not
-        constants, they do not change the compiled code."""
+    def step_parameters(self) -> list[Parameter]:
+        """The fixed inputs of the step beyond Q and R, with their values (default none); each
+        is also an FMU parameter."""
+        return []
+
+    def predict_expr(self, ctx: StepContext) -> tuple[ca.SX, ca.SX]:
+        """The time update ``(x_prior, P_prior)`` from the symbols of ``ctx`` (required)."""
+        raise NotImplementedError(f"{type(self).__name__} must implement predict_expr (see estimators.protocol)")
+
+    def update_expr(self, ctx: StepContext, x_prior: ca.SX, P_prior: ca.SX) -> Update:
+        """The measurement update of the valid channels (required; see
+        :class:`~estimators.protocol.Update`)."""
+        raise NotImplementedError(f"{type(self).__name__} must implement update_expr (see estimators.protocol)")
+
+    def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
+        """New values of Q, R (if the filter adapts them) and of the extra state, from the
+        step's ``result`` (default: none change)."""
         return {}
 
-    def _predict_expr(self, x, P, u, Q):
-        """Return (x_prior, P_prior) expressions. Subclasses implement."""
-        raise NotImplementedError
+    def after_step(self) -> None:
+        """Runtime hook after every :meth:`step` from Python, with the new state current
+        (default: nothing)."""
 
-    def _update_expr(self, xp, Pp, y, R, valid, gate):
-        """Return (x, P, innovation, S, K, nis, accepted) expressions for the valid channels
-        (``valid``: 0/1 per channel; a NIS above ``gate`` refuses the update). Subclasses
-        implement (with :func:`mask_measurement` and :func:`gated_gain`)."""
-        raise NotImplementedError
+    def after_run(self, outputs: dict) -> None:
+        """Runtime hook after a native :meth:`run`, with every step's flat outputs by name
+        (``x_new`` ... rows ``k = 1..N``); default: nothing."""
 
-    def _sym(self, name, rows=1, cols=1):
-        return ca.SX.sym(name, rows, cols)
-
-    def _step_spec(self):
-        """Fused step: ``(state symbols, input symbols, new state, diagnostics, extra outputs)``.
-
-        Adaptive filters extend it: the new Q and R become functions of the step.
-        """
+    def smoother_cross_covariance(self, x: ca.SX, P: ca.SX, u: ca.SX) -> ca.SX:
+        """The RTS smoother's ``D_k = Cov(x_k, x_{k+1} | y_1..k)`` at the filtered ``(x, P)``
+        and input ``u`` (SX): ``P F^T`` with the model's exact Jacobian (EKF-type filters)."""
         s = self.system
-        st = {"x": self._sym("x", s.nx), "P": self._sym("P", s.nx, s.nx)}
-        noise = {"Q": self._sym("Q", s.nx, s.nx), "R": self._sym("R", s.ny, s.ny)}
-        ins = {"u": self._sym("u", s.nu), "y": self._sym("y", s.ny), "mask": self._sym("mask", s.ny),
-               "gate": self._sym("gate"), "nan_missing": self._sym("nan_missing")}
-        (st if self.adapts_noise else ins).update(noise)
-        #: symbols of the filter-specific fixed inputs (see _extra_params)
-        self._param_syms = {k: self._sym(k, np.size(v)) for k, v in self._extra_params().items()}
-        ins.update(self._param_syms)
-        valid, y_used = used_measurement(ins["y"], ins["mask"], ins["nan_missing"])
-        xp, Pp = self._predict_expr(st["x"], st["P"], ins["u"], noise["Q"])
-        xu, Pu, innov, S, K, nis, acc = self._update_expr(xp, Pp, y_used, noise["R"], valid, ins["gate"])
-        new = {"x": xu, "P": Pu, **({"Q": noise["Q"], "R": noise["R"]} if self.adapts_noise else {})}
-        diag = dict(zip(DIAGNOSTICS, (xp, Pp, innov, S, K, nis, acc, log_det(S))))
-        self._valid_expr, self._inputs_checked = valid, [ins["u"], y_used]
-        return st, ins, new, diag, {}
+        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
+        return ca.mtimes(P, F.T)
 
-    def _build_step(self) -> ca.Function:
-        d = ca.densify
-        st, ins, new, diag, extra = self._step_spec()
-        outs = [d(new[k]) for k in st] + [d(diag[k]) for k in DIAGNOSTICS] + [d(v) for v in extra.values()]
-        # each distinct entry once (a symmetric matrix's lower triangle repeats the upper)
-        checked = [new["x"]] + [_upper(new[k]) for k in ("P", "Q", "R") if k in new]
-        status = _status(self._inputs_checked, checked)
-        return ca.Function("step", list(st.values()) + list(ins.values()), outs + [status],
-                           list(st) + list(ins),
-                           [f"{k}_new" for k in st] + list(DIAGNOSTICS) + list(extra) + ["status"], CSE)
+    def fmu_noise_parameters(self) -> list[Parameter]:
+        """The FMU parameters Q and R come from (default: their diagonals ``Q0_<state>`` and
+        ``R0_<measurement>``)."""
+        s = self.system
+        extra = " (initial)" if self.adapts_noise else ""
+        return [Parameter("Q0", _diagonal(self.Q, "Q", self.name), "positive", "process noise variance" + extra,
+                          tuple(f"Q0_{n}" for n in s.state_names), of=tuple(s.state_names)),
+                Parameter("R0", _diagonal(self.R, "R", self.name), "positive", "measurement noise variance" + extra,
+                          tuple(f"R0_{n}" for n in s.output_names), of=tuple(s.output_names))]
 
-    # ---------------------------------------------------------------- binding
-    def _bind(self, step: ca.Function) -> None:
-        self._inputs = {"u": self._u, "y": self._y, "mask": self._mask, **self._const}
-        self._diag = {name: np.zeros(step.nnz_out(name)) for name in DIAGNOSTICS}
-        self._extra = {step.name_out(i): np.zeros(step.nnz_out(i)) for i in range(step.n_out())
-                       if step.name_out(i) not in DIAGNOSTICS and step.name_out(i) != "status"
-                       and not step.name_out(i).endswith("_new")}
-        self._status_arr = np.zeros(1)
-        self._fsteps = tuple(self._bind_step(step, i) for i in (0, 1))
+    def fmu_noise(self, p: Mapping[str, ca.SX]) -> tuple[ca.SX, ca.SX]:
+        """``(Q, R)`` as expressions of the FMU parameters ``p`` (by parameter name, column
+        vectors) of :meth:`fmu_noise_parameters`."""
+        return ca.diag(p["Q0"]), ca.diag(p["R0"])
 
-    def _bind_step(self, step, i):
-        """The fused step reading state copy ``i`` and writing copy ``1 - i``."""
-        args, res = {}, {}
-        for j in range(step.n_in()):
-            name = step.name_in(j)
-            args[j] = (self._pairs[name][i] if name in self._pairs else
-                       self._noise[name] if name in self._noise else self._inputs[name])
-        for j in range(step.n_out()):
-            name = step.name_out(j)
-            if name.endswith("_new"):
-                res[j] = self._pairs[name[:-4]][1 - i]
-            elif name == "status":
-                res[j] = self._status_arr
-            elif name in self._diag:
-                res[j] = self._diag[name]
-            else:
-                res[j] = self._extra[name]
-        return BufferedFunction(step, args, res)
+    def fmu_parameters(self) -> list[Parameter]:
+        """The parameters of this filter's FMU, with the filter's current values: ``x0``,
+        ``P0`` (diagonal), ``gate`` (0: none), :meth:`fmu_noise_parameters` and the
+        :meth:`step_parameters`."""
+        s = self.system
+        return [Parameter("x0", self.x, "real", "initial estimate", tuple(f"x0_{n}" for n in s.state_names),
+                          of=tuple(s.state_names)),
+                Parameter("P0", _diagonal(self.P, "P0", self.name), "positive", "initial variance",
+                          tuple(f"P0_{n}" for n in s.state_names), of=tuple(s.state_names)),
+                Parameter("gate", self.gate if np.isfinite(self.gate) else 0.0, "nonnegative",
+                          "chi-square gate on the NIS: a measurement with a larger NIS is refused (0: no gate)"),
+                *self.fmu_noise_parameters(), *self._params]
 
-    def _now(self, key: str) -> np.ndarray:
-        """The current copy of state array ``key`` (or of the fixed Q or R; shared)."""
-        return self._pairs[key][self._cur] if key in self._pairs else self._noise[key]
+    def fmu_initial(self, p: Mapping[str, ca.SX]) -> dict[str, ca.SX]:
+        """The initial state arrays and the fixed step inputs as expressions of the FMU
+        parameters ``p`` (by parameter name, column vectors)."""
+        Q, R = self.fmu_noise(p)
+        out = {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
+               "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing))}
+        out.update({k: ca.SX(ca.DM(v)) for k, v in self.extra_state().items()})
+        out.update({q.name: p[q.name] for q in self._params})
+        return out
 
-    # ---------------------------------------------------------------- public state
+    # ================================================================ state and settings
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the flat state arrays (CasADi column-major), by name: ``x, P``, and
         ``Q, R`` with any other adaptive state; what :class:`~estimators.BatchFilter`
         starts from."""
-        return {k: v[self._cur].copy() for k, v in self._pairs.items()}
+        return {k: v[self._rt.cur].copy() for k, v in self._rt.pairs.items()}
 
     def parameter_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the step's fixed inputs, flat column-major: ``gate``,
-        ``nan_missing``, ``Q, R`` of a non-adaptive filter and any filter-specific ones."""
-        return {k: v.copy() for k, v in {**self._const, **self._noise}.items()}
+        ``nan_missing``, ``Q, R`` of a non-adaptive filter and the step parameters."""
+        return {k: v.copy() for k, v in self._fixed.items()}
 
     def step_function(self) -> ca.Function:
-        """The uncompiled fused step (a CasADi Function; see the module documentation)."""
+        """The uncompiled fused step (a CasADi Function; see :func:`~estimators.protocol.build_step`)."""
         return self._raw_step
+
+    def _now(self, key: str) -> np.ndarray:
+        """The current state array ``key`` (or the fixed Q or R; shared)."""
+        return self._rt.now(key) if key in self._rt.pairs else self._fixed[key]
 
     def _mat(self, key, rows, cols):
         return matrix(self._now(key), rows, cols).copy()
 
-    x = property(lambda self: self._now("x").copy(), doc="State estimate, shape (nx,).")
+    def _out(self, name: str) -> np.ndarray:
+        return self._rt.outputs[name]
+
+    x = property(lambda self: self._rt.now("x").copy(), doc="State estimate, shape (nx,).")
     P = property(lambda self: self._mat("P", self.system.nx, self.system.nx),
                  doc="State covariance, shape (nx, nx).")
     Q = property(lambda self: self._mat("Q", self.system.nx, self.system.nx),
                  doc="Process noise covariance, shape (nx, nx).")
     R = property(lambda self: self._mat("R", self.system.ny, self.system.ny),
                  doc="Measurement noise covariance, shape (ny, ny).")
-    x_prior = property(lambda self: self._diag["x_prior"].copy())
-    P_prior = property(lambda self: matrix(self._diag["P_prior"], self.system.nx, self.system.nx).copy())
-    innovation = property(lambda self: self._diag["innov"].copy())
-    S = property(lambda self: matrix(self._diag["S"], self.system.ny, self.system.ny).copy())
-    K = property(lambda self: matrix(self._diag["K"], self.system.nx, self.system.ny).copy())
-    nis = property(lambda self: float(self._diag["nis"][0]))
-    accepted = property(lambda self: bool(self._diag["accepted"][0]))
+    x_prior = property(lambda self: self._out("x_prior").copy(), doc="Prediction of the last step, (nx,).")
+    P_prior = property(lambda self: matrix(self._out("P_prior"), self.system.nx, self.system.nx).copy(),
+                       doc="Covariance of the prediction, (nx, nx).")
+    innovation = property(lambda self: self._out("innov").copy(), doc="Last innovation, (ny,).")
+    S = property(lambda self: matrix(self._out("S"), self.system.ny, self.system.ny).copy(),
+                 doc="Last innovation covariance, (ny, ny).")
+    K = property(lambda self: matrix(self._out("K"), self.system.nx, self.system.ny).copy(),
+                 doc="Last gain, (nx, ny).")
+    nis = property(lambda self: float(self._out("nis")[0]), doc="Last normalised innovation squared.")
+    accepted = property(lambda self: bool(self._out("accepted")[0]), doc="The gate passed the last measurement.")
 
     def reset(self, x0=None, P0=None) -> None:
         """Start again from ``x0`` (nx,) and ``P0`` (default: keep the current ones), with
-        the current Q and R; the step count and an adaptive filter's window restart too."""
+        the current Q and R; the step count and an adaptive filter's extra state restart too."""
         n = self.system.nx
         x = self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError)
         P = self.P if P0 is None else checks.covariance(P0, n, "P0")
-        init = self._extra_state_init()
-        for name, (a, b) in self._pairs.items():
-            value = {"x": x, "P": P.ravel(order="F")}.get(name, init.get(name, a if self._cur == 0 else b))
-            a[:] = value
-            b[:] = value
-        self._cur, self.k = 0, 0
+        init = self.extra_state()
+        rt = self._rt
+        values = {"x": x, "P": P.ravel(order="F"),
+                  **{k: np.array(v, float).ravel(order="F") for k, v in init.items()}}
+        for name in rt.pairs:
+            rt.set_state(name, values.get(name, rt.now(name).copy()))
+        rt.cur, self.k = 0, 0
         self._record()
 
     def set_noise(self, Q=None, R=None) -> None:
@@ -489,60 +331,16 @@ class KalmanBase:
         """How Q and R changed: DataFrame indexed by step with their diagonals."""
         return self.history.to_frame(self.system.state_names, self.system.output_names)
 
-    # ---------------------------------------------------------------- stepping
-    def _set(self, buf: np.ndarray, value, what: str, allow_scalar: bool) -> None:
-        if value is None:
-            raise TypeMismatchError(f"{self.name}: {what} is None; expected {len(buf)} number(s)")
-        if isinstance(value, (str, bytes)):
-            raise TypeMismatchError(f"{self.name}: {what} must be numbers, got the string {value!r}")
-        scalar = np.ndim(value) == 0
-        if scalar and not (allow_scalar and len(buf) == 1):
-            raise InputError(f"{self.name}: {what} must have shape ({len(buf)},), got the scalar {value!r}")
-        try:
-            if not scalar and len(value) != len(buf):
-                raise InputError(f"{self.name}: {what} must have shape ({len(buf)},), got shape {np.shape(value)}")
-            buf[:] = value
-        except TypeError:
-            raise TypeMismatchError(f"{self.name}: {what} must be {len(buf)} number(s), got {value!r}") from None
-        except ValueError as e:
-            if isinstance(e, InputError):
-                raise
-            raise TypeMismatchError(f"{self.name}: {what} must be numbers, got {value!r}") from None
-
-    def _set_measurement(self, y, mask) -> None:
-        self._set(self._y, y, "y", True)
-        if mask is None:
-            self._mask[:] = 1.0
-        else:
-            self._set(self._mask, mask, "mask", True)
+    # ================================================================ stepping
+    def _explain(self, what: str) -> None:
+        """Raise the error of a failed step (the state is unchanged)."""
+        explain_status(self._rt.status[0], self.name, self.k, self._u, self._y, self._mask, self.nan_is_missing,
+                       what)
 
     def _used_channels(self, ys: np.ndarray, masks: np.ndarray) -> np.ndarray:
         """Which channels of ``ys`` (..., ny) an update uses: masked in and (unless NaN is an
         error) not NaN."""
         return (masks != 0) & (~np.isnan(ys) if self.nan_is_missing else True)
-
-    def _explain(self, what: str) -> None:
-        """Raise the error of a failed step (the state is unchanged)."""
-        st = self._status_arr[0]
-        if st == BAD_INPUT:
-            bad_u = np.flatnonzero(~np.isfinite(self._u))
-            if len(bad_u):
-                raise InputError(f"{self.name}: u contains NaN or inf at index {bad_u.tolist()} at step {self.k} "
-                                 f"(u = {self._u}); filter state unchanged")
-            used = self._mask != 0
-            bad_y = np.flatnonzero(used & np.isinf(self._y) | (used & np.isnan(self._y) & ~self.nan_is_missing))
-            raise InputError(f"{self.name}: y contains {'inf' if np.isinf(self._y[bad_y]).any() else 'NaN'} at "
-                             f"index {bad_y.tolist()} at step {self.k} (y = {self._y}); filter state unchanged"
-                             + ("" if self.nan_is_missing else " (nan_is_missing=False)"))
-        if st == BAD_RESULT:
-            raise NumericalError(f"{self.name}: the estimate became non-finite at step {self.k} ({what}); "
-                                 "filter state unchanged (diverged, or covariances too large)")
-
-    def _prepare_step(self):
-        """Hook: fill extra step inputs before the fused step (none by default)."""
-
-    def _after_step(self):
-        """Hook: runs after every fused step, once the new state is current."""
 
     def step(self, u, y, mask=None) -> np.ndarray:
         """Predict with ``u`` (nu,), then update with ``y`` (ny,).
@@ -561,25 +359,45 @@ class KalmanBase:
         NumericalError
             The estimate became non-finite (the state is unchanged).
         """
-        self._set(self._u, u, "u", True)
+        self._fill_u(u)
         if y is None:
-            self._y[:] = 0.0
             self._mask[:] = 0.0
+            self._mask_dirty = True
         else:
-            self._set_measurement(y, mask)
-        self._prepare_step()
-        self._fsteps[self._cur].trigger()
-        if self._status_arr[0]:
+            self._fill_y(y)
+            if mask is not None:
+                self._fill_mask(mask)
+                self._mask_dirty = True
+            elif self._mask_dirty:
+                self._mask[:] = 1.0
+                self._mask_dirty = False
+        rt = self._rt
+        if rt.trigger():
             self._explain("step")
-        self._cur ^= 1
+        rt.commit()
         self.k += 1
-        self._after_step()
-        return self._pairs["x"][self._cur].copy()
+        if self._after:
+            self.after_step()
+        return rt.now("x").copy()
 
     def predict(self, u) -> np.ndarray:
         """Time update with input ``u`` (nu,): a step without measurement; returns the
         prior state estimate."""
         return self.step(u, None)
+
+    def _update_function(self):
+        s = self.system
+        x, P, R = ca.SX.sym("x", s.nx), ca.SX.sym("P", s.nx, s.nx), ca.SX.sym("R", s.ny, s.ny)
+        y, mask, gate, nan_missing = (ca.SX.sym("y", s.ny), ca.SX.sym("mask", s.ny), ca.SX.sym("gate"),
+                                      ca.SX.sym("nan_missing"))
+        valid, y_used = used_measurement(y, mask, nan_missing)
+        ctx = StepContext(s, x, P, ca.SX.zeros(s.nx, s.nx), R, ca.SX.zeros(s.nu), y_used, valid, gate)
+        upd = Update(*self.update_expr(ctx, x, P))
+        d = ca.densify
+        fn = ca.Function("update", [x, P, R, y, mask, gate, nan_missing],
+                         [d(upd.x), d(upd.P), d(upd.innovation), d(upd.S), d(upd.K), upd.nis, upd.accepted,
+                          log_det(upd.S), status_flag([y_used], [upd.x, upper_entries(upd.P)])], CSE)
+        return compile_functions([fn], self.backend)[0][0]
 
     def update(self, y, mask=None) -> np.ndarray:
         """Measurement update alone with ``y`` (ny,) (and ``mask``), taking the current
@@ -587,68 +405,64 @@ class KalmanBase:
         (innovation, S, K, nis, accepted) describe it. Q and R do not adapt here. Returns
         the posterior estimate."""
         s = self.system
-        key = ("update", self.cache_key, self.backend)
-        if key not in s.cache:
-            xs, Ps, Rs = self._sym("x", s.nx), self._sym("P", s.nx, s.nx), self._sym("R", s.ny, s.ny)
-            ys, ms, gs, nms = (self._sym("y", s.ny), self._sym("mask", s.ny), self._sym("gate"),
-                               self._sym("nan_missing"))
-            valid, y_used = used_measurement(ys, ms, nms)
-            xu, Pu, innov, S, K, nis, acc = self._update_expr(xs, Ps, y_used, Rs, valid, gs)
-            d = ca.densify
-            fn = ca.Function("update", [xs, Ps, Rs, ys, ms, gs, nms],
-                             [d(xu), d(Pu), d(innov), d(S), d(K), nis, acc, log_det(S),
-                              _status([y_used], [xu, _upper(Pu)])], CSE)
-            s.cache[key] = compile_functions([fn], self.backend)[0][0]
-        self._set_measurement(y, mask)
+        fn = s.compiled("update", self.cache_key, self.backend, self._update_function)
+        self._fill_y.checked(y)
+        if mask is None:
+            self._mask[:] = 1.0
+        else:
+            self._fill_mask.checked(mask)
+        self._mask_dirty = True
         x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
-        res = s.cache[key](self._now("x"), matrix(self._now("P"), s.nx, s.nx),
-                           matrix(self._now("R"), s.ny, s.ny), self._y, self._mask,
-                           self.gate, float(self.nan_is_missing))
-        self._status_arr[0] = float(res[-1])
-        if self._status_arr[0]:
+        res = fn(self._now("x"), matrix(self._now("P"), s.nx, s.nx), matrix(self._now("R"), s.ny, s.ny), self._y,
+                 self._mask, self.gate, float(self.nan_is_missing))
+        self._rt.status[0] = float(res[-1])
+        if self._rt.status[0]:
             self._explain("update")
         self._now("x")[:] = np.asarray(res[0]).ravel()
         self._now("P")[:] = np.asarray(res[1]).ravel(order="F")
-        self._diag["x_prior"][:], self._diag["P_prior"][:] = x_prior, P_prior
+        out = self._rt.outputs
+        out["x_prior"][:], out["P_prior"][:] = x_prior, P_prior
         for name, value in zip(("innov", "S", "K", "nis", "accepted", "logdet_S"), res[2:8]):
-            self._diag[name][:] = np.asarray(value).ravel(order="F")
+            out[name][:] = np.asarray(value).ravel(order="F")
         return self.x
 
-    # ---------------------------------------------------------------- whole trajectories
+    # ================================================================ whole trajectories
     def native_fold(self):
         """The fused step folded over trajectories in native code
         (:class:`~estimators._fold.NativeFold`), compiled and cached on the model: what
         :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
         from ._fold import NativeFold
 
-        s = self.system
-        key = ("fold", self.cache_key, self.backend)
-        if key not in s.cache:
-            s.cache[key] = NativeFold(self._raw_step, len(self._pairs), self.backend)
-        return s.cache[key]
+        return self.system.compiled("fold", self.cache_key, self.backend,
+                                    lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend))
 
     def check_record(self, us, ys, masks=None):
         """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
         (N, ny), or :class:`InputError` / :class:`TypeMismatchError` naming the problem."""
+        from fmu_models.errors import InputError
+
+        nu, ny = self.system.nu, self.system.ny
         us = checks.float_array(us, "us")
         ys = checks.float_array(ys, "ys")
         N = ys.shape[0] if ys.ndim else 0
-        if us.ndim == 1 and self._nu == 1:
+        if us.ndim == 1 and nu == 1:
             us = us[:, None]
-        if ys.ndim == 1 and self._ny == 1:
+        if ys.ndim == 1 and ny == 1:
             ys = ys[:, None]
-        if ys.shape != (N, self._ny) or us.shape != (N, self._nu):
-            raise InputError(f"{self.name}: run needs us of shape (N, {self._nu}) and ys of shape "
-                             f"(N, {self._ny}); got {us.shape} and {ys.shape}")
+        if ys.shape != (N, ny) or us.shape != (N, nu):
+            raise InputError(f"{self.name}: run needs us of shape (N, {nu}) and ys of shape "
+                             f"(N, {ny}); got {us.shape} and {ys.shape}")
+        if N == 0:
+            raise InputError(f"{self.name}: the record is empty (N = 0 steps)")
         if not np.isfinite(us).all():
             k = int(np.flatnonzero(~np.isfinite(us).all(axis=1))[0])
             raise InputError(f"{self.name}: us contains NaN or inf at index {k}")
         if masks is None:
-            m = np.ones((N, self._ny))
+            m = np.ones((N, ny))
         else:
             m = checks.float_array(masks, "masks")
-            if m.shape != (N, self._ny):
-                raise InputError(f"{self.name}: masks must have shape ({N}, {self._ny}), got {m.shape}")
+            if m.shape != (N, ny):
+                raise InputError(f"{self.name}: masks must have shape ({N}, {ny}), got {m.shape}")
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
 
     def run(self, us, ys, masks=None, y0=None, keep: str = "all") -> FilterRun:
@@ -657,17 +471,17 @@ class KalmanBase:
 
         Parameters
         ----------
-        y0 : array_like, shape (ny,), optional
-            A measurement of the initial state: ``update(y0)`` before the first step (the
-            model of pykalman and of EM over a record that starts with a measurement).
-            ``x[0]``, ``P[0]`` of the result are then the updated ones and the
-            log-likelihood includes it.
         us : array_like, shape (N, nu)
             Inputs; ``us[k]`` is held over the step that ends at measurement ``ys[k]``.
         ys : array_like, shape (N, ny)
             Measurements; NaN entries are missing (all NaN: a prediction only).
         masks : array_like of bool, shape (N, ny), optional
             False marks further missing channels.
+        y0 : array_like, shape (ny,), optional
+            A measurement of the initial state: ``update(y0)`` before the first step (the
+            model of pykalman and of EM over a record that starts with a measurement).
+            ``x[0]``, ``P[0]`` of the result are then the updated ones and the
+            log-likelihood includes it.
         keep : {"all", "estimates"}
             Keep every diagnostic (default; what :func:`~estimators.rts_smooth` needs), or
             only the estimates ``x``, ``P`` (and the NIS, the acceptance and the
@@ -691,18 +505,18 @@ class KalmanBase:
         y0_ll = 0.0
         if y0 is not None:
             self.update(y0)
-            d = self._diag
-            y0_ll = _log_likelihood(d["nis"], d["logdet_S"], [self._used_channels(self._y, self._mask).sum()],
-                                    d["accepted"] != 0)
+            out = self._rt.outputs
+            y0_ll = log_likelihood(out["nis"], out["logdet_S"], [self._used_channels(self._y, self._mask).sum()],
+                                   out["accepted"] != 0)
         if not self.supports_batch:
             result = self._run_by_steps(us, ys, masks)
             result.log_likelihood += y0_ll
             return result
         N = len(ys)
+        rt = self._rt
         state = {k: v[None] for k, v in self.state_arrays().items()}
         init = self._initial_for_run
         fold = self.native_fold()
-        # outputs carrying the state get a leading row for the initial state (FilterRun.x, .P)
         outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else ())
         args = {"u": us[None], "y": ys[None], "mask": masks[None],
                 **{k: v[None] for k, v in self.parameter_arrays().items()}}
@@ -710,8 +524,9 @@ class KalmanBase:
         status = outs["status"][0, :, 0]
         if status.any():
             k = int(np.flatnonzero(status)[0])
-            self._status_arr[0] = status[k]
+            rt.status[0] = status[k]
             self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
+            self._mask_dirty = True
             k_saved, self.k = self.k, self.k + k
             try:
                 self._explain(f"run index {k}")
@@ -720,18 +535,20 @@ class KalmanBase:
         cat = {name: a[0] for name, a in outs.items()}
         result = self._make_run(cat, us, ys, masks, init)
         result.log_likelihood += y0_ll
-        for name in self._pairs:                   # the filter now stands at the last step
-            self._pairs[name][self._cur][:] = cat[f"{name}_new"][-1]
-        for name in DIAGNOSTICS:
-            self._diag[name][:] = cat[name][-1] if name in cat else views[name][0, -1]
+        for name in rt.pairs:                      # the filter now stands at the last step
+            rt.now(name)[:] = cat[f"{name}_new"][-1]
+        for name in rt.outputs:
+            if name != "status":
+                rt.outputs[name][:] = cat[name][-1] if name in cat else views[name][0, -1]
         self.k += N
-        self._after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()})
+        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()})
         return result
 
     def _make_run(self, cat: dict, us, ys, masks, init: dict) -> FilterRun:
         """A FilterRun from per-step outputs ``cat`` (row ``k``: step k's output, flat in
         CasADi's column-major layout) and the state ``init`` before the first step."""
-        nx, ny = self.system.nx, self.system.ny
+        s = self.system
+        nx, ny = s.nx, s.ny
 
         def mats(name, r, c):
             if name in SYMMETRIC:      # mirrored by construction: the column-major rows are row-major
@@ -741,7 +558,7 @@ class KalmanBase:
         acc = cat["accepted"].ravel() != 0
         nis = cat["nis"].ravel()
         used = self._used_channels(ys, masks)
-        loglik = _log_likelihood(nis, cat["logdet_S"].ravel(), used.sum(axis=1), acc)
+        loglik = log_likelihood(nis, cat["logdet_S"].ravel(), used.sum(axis=1), acc)
         N = len(nis)
 
         def with_initial(name, r, c, first):
@@ -764,7 +581,8 @@ class KalmanBase:
             P_prior=mats("P_prior", nx, nx) if kept else None,
             innovation=cat["innov"].reshape(-1, ny) if kept else None, S=mats("S", ny, ny) if kept else None,
             K=mats("K", nx, ny) if kept else None, nis=nis,
-            accepted=acc, mask=used & acc[:, None], us=us, Q=Qd, R=Rd, log_likelihood=loglik)
+            accepted=acc, mask=used & acc[:, None], us=us, Q=Qd, R=Rd, log_likelihood=loglik,
+            state_names=list(s.state_names), output_names=list(s.output_names), filter_name=self.name)
 
     @property
     def _initial_for_run(self) -> dict:
@@ -780,10 +598,15 @@ class KalmanBase:
         for k in range(len(ys)):
             self.step(us[k], ys[k], masks[k] != 0)
             for key, val in (("x_new", self.x), ("P_new", self.P), ("Q_new", self.Q), ("R_new", self.R),
-                             *((name, self._diag[name]) for name in DIAGNOSTICS)):
+                             *((name, self._out(name)) for name in DIAGNOSTICS)):
                 rec[key].append(np.array(val, float).ravel(order="F"))
         return self._make_run({k: np.array(v) for k, v in rec.items()}, us, ys, masks, init)
 
-    def _after_run(self, cat: dict) -> None:
-        """Hook: after a native run, with the per-step outputs ``cat`` (adaptive filters
-        record their Q, R history)."""
+
+def _diagonal(M: np.ndarray, what: str, owner: str) -> np.ndarray:
+    """The diagonal of ``M``, refused (ConfigurationError) if ``M`` has off-diagonal entries
+    (the FMU's parameters are diagonals)."""
+    if np.abs(M - np.diag(np.diag(M))).max() > 0:
+        raise ConfigurationError(f"{owner}: the FMU takes a diagonal {what}; this filter's {what} has "
+                                 "off-diagonal entries")
+    return np.diag(M).copy()

@@ -13,36 +13,17 @@ import numpy as np
 
 from fmu_models import checks
 from fmu_models.errors import ConfigurationError, InputError, NumericalError, TypeMismatchError
+from fmu_models.memory import check_fits
 
-from ._buffered import BufferedFunction
 from ._compiled import compile_functions
-from .base import BAD_INPUT, KalmanBase
+from .base import KalmanBase
+from .linalg import BAD_INPUT
+from .results import BatchRun
+from .runtime import BoundStep
 
 __all__ = ["BatchFilter", "BatchRun"]
 
 ON_FAILURE = ("raise", "mark")
-
-
-class BatchRun:
-    """The result of :meth:`BatchFilter.run` (``R`` realisations, ``N`` steps).
-
-    Attributes
-    ----------
-    x : ndarray, shape (R, N + 1, nx)
-        Estimates, with the initial one at index 0.
-    P : ndarray, shape (R, N + 1, nx, nx)
-        Their covariances.
-    nis : ndarray, shape (R, N)
-    accepted : ndarray of bool, shape (R, N)
-    Q, R : ndarray, shapes (R, N + 1, nx), (R, N + 1, ny)
-        Diagonals of Q and R after each step (row 0: initial).
-    failed : ndarray of bool, shape (R,)
-        Realisations whose input or estimate became non-finite (their values from that
-        step on are not meaningful).
-    """
-
-    def __init__(self, **arrays):
-        self.__dict__.update(arrays)
 
 
 class BatchFilter:
@@ -82,37 +63,30 @@ class BatchFilter:
         self.template, self.n = template, checks.positive_int(n_runs, "n_runs")
         s = template.system
         self.nx, self.nu, self.ny = s.nx, s.nu, s.ny
-        key = ("batch", template.cache_key, self.n, template.backend)
-        if key not in s.cache:
-            s.cache[key] = compile_functions([template.step_function().map(self.n, "serial")], template.backend)
-        (step,), _ = s.cache[key]
-        state = template.state_arrays()
-        self._pairs = {k: (np.tile(v, self.n), np.tile(v, self.n)) for k, v in state.items()}
+        step_fn = template.step_function()
+        per_run = 8 * (sum(step_fn.nnz_in(i) for i in range(step_fn.n_in()))
+                       + sum(step_fn.nnz_out(i) for i in range(step_fn.n_out())) + step_fn.nnz_out("x_new"))
+        check_fits(self.n * per_run, f"n_runs = {self.n} realisations of {template.name} ({per_run} bytes each)",
+                   "use fewer realisations per batch")
+        (step,), _ = s.compiled("batch", (*template.cache_key, self.n), template.backend,
+                                lambda: compile_functions([step_fn.map(self.n, "serial")], template.backend))
+        state = {k: np.tile(v, self.n) for k, v in template.state_arrays().items()}
         if x0 is not None:
             x0 = checks.float_array(x0, "x0")
             if x0.shape != (self.n, self.nx) or not np.all(np.isfinite(x0)):
                 raise ConfigurationError(f"x0 must be finite with shape ({self.n}, {self.nx}), got {x0.shape}")
-            self._pairs["x"][0][:] = x0.ravel()
-        self._cur = 0
+            state["x"] = x0.ravel()
         self._params = {k: np.tile(v, self.n) for k, v in template.parameter_arrays().items()}
-        self._inputs = {step.name_in(i): (self._params[step.name_in(i)] if step.name_in(i) in self._params
-                                          else np.zeros(step.nnz_in(i)))
-                        for i in range(step.n_in()) if step.name_in(i) not in self._pairs}
-        self._out = {step.name_out(i): np.zeros(step.nnz_out(i)) for i in range(step.n_out())
-                     if not step.name_out(i).endswith("_new")}
-        self._steps = []
-        for i in (0, 1):
-            args = {j: (self._pairs[step.name_in(j)][i] if step.name_in(j) in self._pairs
-                        else self._inputs[step.name_in(j)]) for j in range(step.n_in())}
-            res = {j: (self._pairs[step.name_out(j)[:-4]][1 - i] if step.name_out(j).endswith("_new")
-                       else self._out[step.name_out(j)]) for j in range(step.n_out())}
-            self._steps.append(BufferedFunction(step, args, res))
+        self._rt = BoundStep(step, state, self._params)
+        self._pairs = self._rt.pairs
+        self._inputs = self._rt.inputs
+        self._out = self._rt.outputs
         self.k = 0
         self.failed = np.zeros(self.n, dtype=bool)
 
     def now(self, key: str) -> np.ndarray:
         """Current flat state array ``key`` (all realisations, run-major)."""
-        return self._pairs[key][self._cur]
+        return self._rt.now(key)
 
     x = property(lambda self: self.now("x").reshape(self.n, self.nx).copy())
     P = property(lambda self: self.now("P").reshape(self.n, self.nx, self.nx).transpose(0, 2, 1).copy())
@@ -120,7 +94,7 @@ class BatchFilter:
     R = property(lambda self: self._cov("R", self.ny), doc="Measurement noise covariances, (n_runs, ny, ny).")
 
     def _cov(self, key: str, n: int) -> np.ndarray:
-        flat = self._pairs[key][self._cur] if key in self._pairs else self._params[key]
+        flat = self._rt.now(key) if key in self._pairs else self._params[key]
         return flat.reshape(self.n, n, n).transpose(0, 2, 1).copy()
     nis = property(lambda self: self._out["nis"].copy())
     innovation = property(lambda self: self._out["innov"].reshape(self.n, self.ny).copy())
@@ -146,12 +120,13 @@ class BatchFilter:
         naming the realisation (with ``on_failure="raise"``); the state is then unchanged.
         """
         self._inputs_for(u, y, mask)
-        self._steps[self._cur].trigger()
+        rt = self._rt
+        rt.trigger()
         status = self._out["status"]
         if status.any() and self.on_failure == "mark":
             bad = status != 0
             for pair in self._pairs.values():     # failed runs keep their previous state
-                old, new = pair[self._cur], pair[1 - self._cur]
+                old, new = pair[rt.cur], pair[1 - rt.cur]
                 new.reshape(self.n, -1)[bad] = old.reshape(self.n, -1)[bad]
             self.failed |= bad
         elif status.any():
@@ -159,7 +134,7 @@ class BatchFilter:
             what = "u or y contains NaN or inf" if status[run] == BAD_INPUT else "the estimate became non-finite"
             raise (InputError if status[run] == BAD_INPUT else NumericalError)(
                 f"batched {self.template.name}: {what} in realisation {run} at step {self.k}; state unchanged")
-        self._cur ^= 1
+        rt.commit()
         self.k += 1
         return self.x
 
@@ -198,7 +173,7 @@ class BatchFilter:
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         t = self.template
         fold = t.native_fold()
-        state = {k: v[self._cur].reshape(R, -1) for k, v in self._pairs.items()}
+        state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
         outs, views = fold.outputs(R, N, state)
         args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
         fold(R, N, args, state, views)
@@ -220,8 +195,8 @@ class BatchFilter:
             x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
             nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
-            failed=bad.any(axis=1))
+            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names))
         for name in state:
-            self._pairs[name][self._cur][:] = outs[f"{name}_new"][:, -1].ravel()
+            self._rt.now(name)[:] = outs[f"{name}_new"][:, -1].ravel()
         self.k += N
         return out

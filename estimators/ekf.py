@@ -3,10 +3,14 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .base import KalmanBase, joseph_update, mask_measurement, symmetric
+from .base import KalmanBase
+from .linalg import joseph_update, mask_measurement, symmetric
+from .protocol import StepContext, Update
+
+__all__ = ["EKF"]
 
 
-class EKF(KalmanBase):
+class EKF(KalmanBase, register="EKF"):
     """Extended Kalman filter.
 
     Prediction ``x^- = f(x, u)``, ``P^- = F P F^T + Q`` with ``F = df/dx`` exact (CasADi
@@ -18,17 +22,20 @@ class EKF(KalmanBase):
 
     name = "EKF"
 
-    def _predict_expr(self, x, P, u, Q):
+    def predict_expr(self, ctx: StepContext):
+        """``x^- = f(x, u)``, ``P^- = F P F^T + Q`` (seed 002 eqs 10-11)."""
         s = self.system
-        xp = ca.substitute(s.fx, ca.vertcat(s.x, s.u), ca.vertcat(x, u))
-        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
-        return xp, symmetric(ca.mtimes([F, P, F.T]) + Q)
+        xu = ca.vertcat(ctx.x, ctx.u)
+        xp = ca.substitute(s.fx, ca.vertcat(s.x, s.u), xu)
+        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), xu)
+        return xp, symmetric(ca.mtimes([F, ctx.P, F.T]) + ctx.Q)
 
-    def _update_expr(self, xp, Pp, y, R, valid, gate):
+    def update_expr(self, ctx: StepContext, x_prior, P_prior) -> Update:
+        """Gain, Joseph-form update of the valid channels (seed 002 eqs 12-16)."""
         s = self.system
-        yp = ca.substitute(s.hx, s.x, xp)
-        H = ca.substitute(ca.jacobian(s.hx, s.x), s.x, xp)
-        S, innov, M = mask_measurement(valid, ca.mtimes([H, Pp, H.T]) + R, y - yp)
-        Hm, Rm = ca.mtimes(M, H), ca.mtimes([M, R, M])
-        xu, Pu, K, nis, acc = joseph_update(xp, Pp, innov, Hm, S, Rm, gate)
-        return xu, Pu, innov, S, K, nis, acc
+        yp = ca.substitute(s.hx, s.x, x_prior)
+        H = ca.substitute(ca.jacobian(s.hx, s.x), s.x, x_prior)
+        S, innov, M = mask_measurement(ctx.valid, ca.mtimes([H, P_prior, H.T]) + ctx.R, ctx.y - yp)
+        Hm, Rm = ca.mtimes(M, H), ca.mtimes([M, ctx.R, M])
+        xu, Pu, K, nis, acc = joseph_update(x_prior, P_prior, innov, Hm, S, Rm, ctx.gate)
+        return Update(xu, Pu, innov, S, K, nis, acc)

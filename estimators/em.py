@@ -31,32 +31,13 @@ from fmu_models import checks
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 
 from .base import KalmanBase
+from .results import EMResult
 from .smoother import rts_smooth
 
 __all__ = ["STRUCTURES", "EMResult", "em_noise"]
 
 STRUCTURES = ("full", "diagonal", "scalar")
 LEARNABLE = ("Q", "R", "x0", "P0")
-
-
-class EMResult:
-    """What :func:`em_noise` learned.
-
-    Attributes
-    ----------
-    Q, R, x0, P0 : ndarray
-        The learned values (unlearned ones as given).
-    log_likelihood : list of float
-        The log-likelihood of the record at each iteration's parameters (the first entry
-        at the starting values, the last at the returned ones).
-    iterations : int
-        M-steps done.
-    converged : bool
-        True if the stopping rule met ``tol`` before ``n_iter``.
-    """
-
-    def __init__(self, **values):
-        self.__dict__.update(values)
 
 
 def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
@@ -75,8 +56,8 @@ def _terms(filt: KalmanBase):
     from ._fold import NativeFold
 
     s = filt.system
-    key = ("em", filt.cache_key, filt.backend)
-    if key not in s.cache:
+
+    def build():
         n, p = s.nx, s.ny
         x0, x1, u = ca.SX.sym("xs", n), ca.SX.sym("xs1", n), ca.SX.sym("u", s.nu)
         P0, P1, L = ca.SX.sym("Ps", n, n), ca.SX.sym("Ps1", n, n), ca.SX.sym("Plag", n, n)
@@ -94,8 +75,9 @@ def _terms(filt: KalmanBase):
         r_term = M * (ca.mtimes(r, r.T) + ca.mtimes([H, P0, H.T]))
         meas = ca.Function("emr", [x0, P0, y, m], [ca.densify(r_term), ca.densify(M)],
                            ["xs", "Ps", "y", "mask"], ["r", "count"])
-        s.cache[key] = (NativeFold(trans, 0, filt.backend), NativeFold(meas, 0, filt.backend))
-    return s.cache[key]
+        return NativeFold(trans, 0, filt.backend), NativeFold(meas, 0, filt.backend)
+
+    return s.compiled("em", filt.cache_key, filt.backend, build)
 
 
 def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, tol: float = 1e-6,

@@ -6,15 +6,18 @@ import numpy as np
 
 from fmu_models.errors import ConfigurationError, UnknownNameError
 
-from .adaptive import WindowedAdaptiveEKF, bounds_around
+from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
 from .system import DiscreteModel
+
+__all__ = ["ADAPT", "FORMS", "IAE", "project_pd"]
 
 FORMS = ("diagonal", "scalar", "full")
 ADAPT = {"both": ("Q", "R"), "Q": ("Q",), "R": ("R",)}
 
 
 def project_pd(M: np.ndarray, low: float, high: float, form: str) -> np.ndarray:
-    """Nearest admissible covariance of the given form with eigenvalues in ``[low, high]``.
+    """Nearest admissible covariance of the given form with eigenvalues in ``[low, high]``
+    (``M`` square, ``low < high``).
 
     ``"diagonal"``: keep the diagonal, clip it; ``"scalar"``: ``sigma^2 I`` with
     ``sigma^2 = trace/n`` clipped (the form of seed 000 eqs 24-25); ``"full"``: symmetrise
@@ -37,7 +40,7 @@ def _project_sym(M, low, high, form):
     return ca.fmin(ca.fmax(ca.trace(M) / n, low), high) * ca.SX.eye(n)
 
 
-class IAE(WindowedAdaptiveEKF):
+class IAE(WindowedAdaptiveEKF, register="IAE"):
     """EKF whose Q and R follow the innovation sequence (Mohamed and Schwarz, 1999).
 
     After each update, with ``I_j`` the innovations of the last ``window`` steps:
@@ -97,27 +100,29 @@ class IAE(WindowedAdaptiveEKF):
         """False for ``form="full"`` (its projection runs in numpy)."""
         return self.form != "full"
 
-    @property
-    def cache_key(self):
-        """Type, window, adapted covariances and form (the bounds are step inputs)."""
-        return (type(self).__name__, self.window, self.adapt, self.form)
+    def config_key(self) -> tuple:
+        """Window, adapted covariances and form (the bounds are step inputs)."""
+        return (self.window, self.adapt, self.form)
 
-    def _extra_params(self):
-        return {"q_bounds": self.q_bounds, "r_bounds": self.r_bounds}
+    def step_parameters(self):
+        """The bounds of the adapted variances (``q_bounds``, ``r_bounds``)."""
+        return bound_parameters(self.q_bounds, self.r_bounds)
 
-    def _adapt(self, st, diag, C_I):
-        Q, R = st["Q"], st["R"]
+    def adapt_noise(self, ctx, result, C_I):
+        """Eqs 35-36, projected on the form and the bounds."""
+        Q, R = ctx.Q, ctx.R
         if self.form == "full":          # adapted in numpy after the step
             return Q, R
-        qb, rb = self._param_syms["q_bounds"], self._param_syms["r_bounds"]
+        qb, rb = ctx.params["q_bounds"], ctx.params["r_bounds"]
         if "R" in self.adapt:
-            R = _project_sym(C_I - (diag["S"] - st["R"]), rb[0], rb[1], self.form)   # eq 35
+            R = _project_sym(C_I - (result.S - ctx.R), rb[0], rb[1], self.form)   # eq 35
         if "Q" in self.adapt:
-            K = diag["K"]
-            Q = _project_sym(ca.mtimes([K, C_I, K.T]), qb[0], qb[1], self.form)     # eq 36
+            K = result.K
+            Q = _project_sym(ca.mtimes([K, C_I, K.T]), qb[0], qb[1], self.form)   # eq 36
         return Q, R
 
-    def _adapted(self):
+    def on_adapted(self):
+        """The ``full`` form's projection (in numpy), then the record."""
         if self.form == "full":
             C_I = self.innovation_covariance()
             HPH = self.S - self.R             # the step left R unchanged in this form

@@ -4,8 +4,10 @@ from __future__ import annotations
 from .ekf import EKF
 from .system import DiscreteModel
 
+__all__ = ["KF"]
 
-class KF(EKF):
+
+class KF(EKF, register="KF"):
     """Kalman filter on the affine model tangent to ``system`` at ``(x_op, u_op)``.
 
     The model is :meth:`DiscreteModel.linearized`; with constant Jacobians the EKF

@@ -7,15 +7,18 @@ import numpy as np
 from fmu_models import checks
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 
-from .adaptive import WindowedAdaptiveEKF, bounds_around
+from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
 from .fuzzy import MamdaniFuzzy
+from .protocol import Parameter
 from .system import DiscreteModel
+
+__all__ = ["MFIAE", "Q_MAPPINGS"]
 
 #: How the fuzzy adjustment reaches the process noise (see :class:`MFIAE`).
 Q_MAPPINGS = ("literal", "gain")
 
 
-class MFIAE(WindowedAdaptiveEKF):
+class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     """EKF whose scalar Q and R are tuned online by a Mamdani fuzzy system (seed 000 sec. 4).
 
     Each step, after the EKF update: ``C_I`` is the mean of ``I_j I_j^T`` over the last
@@ -107,18 +110,37 @@ class MFIAE(WindowedAdaptiveEKF):
         super().__init__(system, x0, P0, q0 * np.eye(system.nx), np.diag(r0), window, gate,
                          nan_is_missing, backend)
 
-    @property
-    def cache_key(self):
-        """Type, window, fuzzy system, mapping and channel mode (gains and bounds are step
-        inputs)."""
-        return (type(self).__name__, self.window, self.fuzzy, self.q_mapping, self.per_channel)
+    def config_key(self) -> tuple:
+        """Window, fuzzy system, mapping and channel mode (gains and bounds are step inputs)."""
+        return (self.window, self.fuzzy, self.q_mapping, self.per_channel)
 
-    def _extra_params(self):
-        return {"gains": (self.gain_q, self.gain_r), "q_bounds": self.q_bounds, "r_bounds": self.r_bounds}
+    def step_parameters(self):
+        """The gains (``gain_q``, ``gain_r``) and the bounds of the adapted variances."""
+        return [Parameter("gains", (self.gain_q, self.gain_r), "unit",
+                          ("step size of sigma_q^2 (eq 41), in (0, 1]", "step size of sigma_r^2 (eq 42), in (0, 1]"),
+                          ("gain_q", "gain_r")),
+                *bound_parameters(self.q_bounds, self.r_bounds)]
 
-    def _adapt(self, st, diag, C_I):
+    def fmu_noise_parameters(self):
+        """``q0`` and ``r0`` (one per channel with ``per_channel``): Q = q0 I, R = r0 I."""
+        s = self.system
+        r = np.diag(self.R)
+        q = Parameter("q0", self.Q[0, 0], "positive", "initial process noise variance sigma_q^2 (Q = q0 I)")
+        if self.per_channel:
+            return [q, Parameter("r0", r, "positive", "initial measurement noise variance",
+                                 tuple(f"r0_{n}" for n in s.output_names), of=tuple(s.output_names))]
+        return [q, Parameter("r0", r[0], "positive", "initial measurement noise variance sigma_r^2 (R = r0 I)")]
+
+    def fmu_noise(self, p):
+        """``Q = q0 I``, ``R = diag(r0)`` (r0 repeated unless per channel)."""
+        s = self.system
+        r = p["r0"] if self.per_channel else ca.repmat(p["r0"], s.ny, 1)
+        return p["q0"] * ca.SX.eye(s.nx), ca.diag(r)
+
+    def adapt_noise(self, ctx, result, C_I):
+        """Eqs 38-42: the fuzzy adjustment of sigma_q^2 and sigma_r^2. Declares the output ``m``."""
         ny, nx = self.system.ny, self.system.nx
-        C_T, K = diag["S"], diag["K"]                            # eq 39: C_T = H P^- H^T + R
+        C_T, K = result.S, result.K                              # eq 39: C_T = H P^- H^T + R
         if self.per_channel:
             c_t, c_i = ca.diag(C_T), ca.diag(C_I)
             m = ca.vertcat(*[self.fuzzy.expression(c_t[j], c_i[j]) for j in range(ny)])
@@ -126,22 +148,24 @@ class MFIAE(WindowedAdaptiveEKF):
             c_t, c_i = ca.trace(C_T) / ny, ca.trace(C_I) / ny
             m = ca.repmat(self.fuzzy.expression(c_t, c_i), ny, 1)
             c_t, c_i = ca.repmat(c_t, ny, 1), ca.repmat(c_i, ny, 1)
-        self._m_expr = m
         madj = m * (c_t + c_i) / 2                              # eq 38, measurement units
         if self.q_mapping == "literal":
             madj_q = ca.sum1(madj) / ny                         # eq 41 as printed
         else:
             madj_q = ca.trace(ca.mtimes([K, ca.diag(madj), K.T])) / nx
-        p = self._param_syms
-        (lo_q, hi_q), (lo_r, hi_r), (g_q, g_r) = (p["q_bounds"][0], p["q_bounds"][1]), \
-            (p["r_bounds"][0], p["r_bounds"][1]), (p["gains"][0], p["gains"][1])
-        q_new = ca.fmin(ca.fmax(st["Q"][0, 0] - g_q * madj_q, lo_q), hi_q)
-        r_new = ca.fmin(ca.fmax(ca.diag(st["R"]) - g_r * madj, lo_r), hi_r)
+        p = ctx.params
+        lo_q, hi_q = p["q_bounds"][0], p["q_bounds"][1]
+        lo_r, hi_r = p["r_bounds"][0], p["r_bounds"][1]
+        g_q, g_r = p["gains"][0], p["gains"][1]
+        q_new = ca.fmin(ca.fmax(ctx.Q[0, 0] - g_q * madj_q, lo_q), hi_q)
+        r_new = ca.fmin(ca.fmax(ca.diag(ctx.R) - g_r * madj, lo_r), hi_r)
+        ctx.output("m", m)
         return q_new * ca.SX.eye(nx), ca.diag(r_new)            # eqs 41, 42
 
-    def _step_spec(self):
-        st, ins, new, diag, extra = super()._step_spec()
-        extra["m"] = ca.if_else(extra["adapted"], self._m_expr, ca.SX.zeros(self.system.ny))
-        return st, ins, new, diag, extra
+    def adapt_expr(self, ctx, result):
+        """The windowed adaptation; ``m`` is 0 until the window is full."""
+        changes = super().adapt_expr(ctx, result)
+        ctx.outputs["m"] = ca.if_else(ctx.outputs["adapted"], ctx.outputs["m"], ca.SX.zeros(self.system.ny))
+        return changes
 
-    m = property(lambda self: self._extra["m"].copy())
+    m = property(lambda self: self._out("m").copy(), doc="The last normalised fuzzy adjustment, (ny,).")

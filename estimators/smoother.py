@@ -27,58 +27,25 @@ import numpy as np
 
 from fmu_models.errors import ConfigurationError, NumericalError, TypeMismatchError
 
-from .base import CSE, FilterRun, KalmanBase, spd_solve, symmetric
-from .ukf import UKF
+from .base import KalmanBase
+from .linalg import CSE, spd_solve, symmetric
+from .results import FilterRun, Smoothed
 
 __all__ = ["Smoothed", "rts_smooth", "smoother_step"]
 
 
-class Smoothed:
-    """Smoothed estimates of a record of N steps.
-
-    Attributes
-    ----------
-    x : ndarray, shape (N + 1, nx)
-        Smoothed states ``E[x_k | all measurements]``, k = 0..N.
-    P : ndarray, shape (N + 1, nx, nx)
-        Their covariances.
-    P_lag : ndarray, shape (N, nx, nx)
-        ``Cov(x_{k+1}, x_k | all)`` for k = 0..N-1.
-    C : ndarray, shape (N, nx, nx)
-        Smoother gains.
-    """
-
-    def __init__(self, x, P, P_lag, C):
-        self.x, self.P, self.P_lag, self.C = x, P, P_lag, C
-
-    def to_frame(self, filt: KalmanBase):
-        """DataFrame indexed by step k with the smoothed states and variances."""
-        import pandas as pd
-
-        names = filt.system.state_names
-        data = {n: self.x[:, i] for i, n in enumerate(names)}
-        data.update({f"P_{n}": self.P[:, i, i] for i, n in enumerate(names)})
-        return pd.DataFrame(data, index=pd.RangeIndex(len(self.x), name="k"))
-
-
 def smoother_step(filt: KalmanBase) -> ca.Function:
     """The backward step ``(xs, Ps, x, P, xp, Pp, u) -> (xs_new, Ps_new, C, Plag)`` for the
-    filter's model: extended RTS, or unscented RTS for a :class:`~estimators.UKF`."""
+    filter's model, with the filter's
+    :meth:`~estimators.base.KalmanBase.smoother_cross_covariance` (extended RTS for the
+    EKF family, unscented RTS for the UKF)."""
     s = filt.system
     n = s.nx
     xs, Ps = ca.SX.sym("xs", n), ca.SX.sym("Ps", n, n)
     x, P, xp, Pp = ca.SX.sym("x", n), ca.SX.sym("P", n, n), ca.SX.sym("xp", n), ca.SX.sym("Pp", n, n)
     u = ca.SX.sym("u", s.nu)
     P_, Pp_, Ps_ = symmetric(P), symmetric(Pp), symmetric(Ps)
-    if isinstance(filt, UKF):
-        f = ca.Function("f", [s.x, s.u], [s.fx])
-        sig = filt.sigma_points(x, P_)
-        img = [f(p, u) for p in sig]
-        m = sum((w * p for w, p in zip(filt.Wm, img)), ca.SX.zeros(n))
-        D = sum((w * ca.mtimes(p - x, (q - m).T) for w, p, q in zip(filt.Wc, sig, img)), ca.SX.zeros(n, n))
-    else:
-        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
-        D = ca.mtimes(P_, F.T)
+    D = filt.smoother_cross_covariance(x, P_, u)
     C = spd_solve(Pp_, D.T).T                       # C Pp = D, Pp symmetric positive definite
     xs_new = x + ca.mtimes(C, xs - xp)
     Ps_new = symmetric(P_ + ca.mtimes([C, Ps_ - Pp_, C.T]))
@@ -91,11 +58,8 @@ def smoother_step(filt: KalmanBase) -> ca.Function:
 def _fold(filt: KalmanBase):
     from ._fold import NativeFold
 
-    s = filt.system
-    key = ("rts", filt.cache_key, filt.backend)
-    if key not in s.cache:
-        s.cache[key] = NativeFold(smoother_step(filt), 2, filt.backend)
-    return s.cache[key]
+    return filt.system.compiled("rts", filt.cache_key, filt.backend,
+                                lambda: NativeFold(smoother_step(filt), 2, filt.backend))
 
 
 def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
@@ -117,6 +81,10 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
         raise TypeMismatchError("rts_smooth needs a filter and the FilterRun of its run()")
     if run.x_prior is None:
         raise ConfigurationError("this run kept the estimates only; smoothing needs run(..., keep='all')")
+    if run.filter_name != filt.name or run.state_names != filt.system.state_names or \
+            run.us.shape[1] != filt.system.nu:
+        raise ConfigurationError(f"this run was made by {run.filter_name or 'another filter'} on states "
+                                 f"{run.state_names}, not by {filt.name} on {filt.system.state_names}")
     N, nx = len(run.x) - 1, filt.system.nx
 
     def flat(a):                                    # (K, nx, nx) symmetric -> (K, nx*nx) rows
@@ -144,4 +112,5 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
     def mats(a):                                    # column-major rows -> (K, nx, nx)
         return a.reshape(len(a), nx, nx).transpose(0, 2, 1)
 
-    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), mats(lag), mats(C))     # Ps is symmetric
+    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), mats(lag), mats(C),   # Ps is symmetric
+                    list(filt.system.state_names))

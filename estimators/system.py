@@ -12,6 +12,7 @@ import casadi as ca
 import numpy as np
 
 from fmu_models import checks
+from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.plant import PlantModel, check_method
 
 
@@ -43,16 +44,26 @@ class DiscreteModel:
         self.output_names, self.description = list(output_names), description
         self.nx, self.nu, self.ny = x.numel(), u.numel(), h.numel()
         if f.numel() != self.nx:
-            raise ValueError(f"f has {f.numel()} entries, expected nx = {self.nx}")
+            raise ConfigurationError(f"f has {f.numel()} entries, expected nx = {self.nx}")
         if ca.depends_on(self.hx, u):
-            raise ValueError("h must not depend on the input u (no feed-through)")
+            raise ConfigurationError("h must not depend on the input u (no feed-through)")
         F, G = ca.jacobian(self.fx, x), ca.jacobian(self.fx, u)
         H = ca.jacobian(self.hx, x)
         self._f = ca.Function("f", [x, u], [self.fx])
         self._h = ca.Function("h", [x], [self.hx])
         self._jac = ca.Function("jac_fu", [x, u], [ca.densify(F), ca.densify(G)])
         self._H = ca.Function("jac_h", [x], [ca.densify(H)])
-        self.cache: dict = {}   # filters keep their compiled functions here, per model
+        self._compiled: dict = {}
+
+    def compiled(self, kind: str, key: tuple, backend: str, build):
+        """The compiled object ``kind`` (``"step"``, ``"fold"``, ``"update"``, ``"batch"``,
+        ``"rts"``, ``"em"``) of the filter configuration ``key`` with ``backend`` on this model,
+        built by ``build()`` the first time: filters share compiled code per model, under
+        this one key scheme ``(kind, key, backend)``."""
+        k = (kind, key, backend)
+        if k not in self._compiled:
+            self._compiled[k] = build()
+        return self._compiled[k]
 
     def __repr__(self):
         return (f"DiscreteModel({self.description!r}, dt={self.dt}, states={self.state_names}, "
@@ -110,8 +121,7 @@ def discretize(model: PlantModel, dt: float, method: str = "euler", substeps: in
         Integration substeps per period.
     """
     check_method(method, substeps)
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+    dt = checks.positive(dt, "sample period dt [s]")
     x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
     p = ca.DM(model.p)
     f = model.sym.step(method, int(substeps))(x, u, p, dt)
@@ -128,7 +138,7 @@ def augment_rate_bias(system: DiscreteModel, output: str) -> DiscreteModel:
     (``output="y_alpha_dot"`` on the wheel pendulum).
     """
     if output not in system.output_names:
-        raise KeyError(f"no output {output!r}; valid outputs: {', '.join(system.output_names)}")
+        raise UnknownNameError(f"no output {output!r}; valid outputs: {', '.join(system.output_names)}")
     j = system.output_names.index(output)
     xa = ca.SX.sym("xa", system.nx + 1)
     x, b = xa[: system.nx], xa[system.nx]
@@ -151,7 +161,7 @@ def linear_model(A, B, C, dt: float = 1.0, state_names=None, input_names=None,
     A, B, C = (np.atleast_2d(np.asarray(M, float)) for M in (A, B, C))
     nx, nu, ny = A.shape[0], B.shape[1], C.shape[0]
     if A.shape != (nx, nx) or B.shape[0] != nx or C.shape[1] != nx:
-        raise ValueError(f"inconsistent shapes A {A.shape}, B {B.shape}, C {C.shape}")
+        raise ConfigurationError(f"inconsistent shapes A {A.shape}, B {B.shape}, C {C.shape}")
     x, u = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
     return DiscreteModel(x, u, ca.mtimes(ca.DM(A), x) + ca.mtimes(ca.DM(B), u),
                          ca.mtimes(ca.DM(C), x), dt,

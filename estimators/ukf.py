@@ -6,11 +6,15 @@ import casadi as ca
 from fmu_models.checks import finite
 from fmu_models.errors import ConfigurationError
 
-from .base import KalmanBase, cholesky_lower, gated_gain, mask_measurement, symmetric
+from .base import KalmanBase
+from .linalg import cholesky_lower, gated_gain, mask_measurement, symmetric
+from .protocol import StepContext, Update
 from .system import DiscreteModel
 
+__all__ = ["UKF"]
 
-class UKF(KalmanBase):
+
+class UKF(KalmanBase, register="UKF"):
     """Unscented Kalman filter (Julier; scaled sigma points of van der Merwe).
 
     ``2n+1`` sigma points ``x``, ``x +/- sqrt(n + lambda) L_i`` with ``P = L L^T``
@@ -56,10 +60,9 @@ class UKF(KalmanBase):
         self.Wc = [lam / (n + lam) + 1 - alpha**2 + beta] + [0.5 / (n + lam)] * (2 * n)
         super().__init__(system, x0, P0, Q, R, gate, nan_is_missing, backend)
 
-    @property
-    def cache_key(self) -> tuple:
-        """Type and sigma-point parameters."""
-        return (type(self).__name__, self.alpha, self.beta, self.kappa)
+    def config_key(self) -> tuple:
+        """The sigma-point parameters."""
+        return (self.alpha, self.beta, self.kappa)
 
     def sigma_points(self, x, P):
         """The 2n+1 scaled sigma points of (x, P), as CasADi columns (used by the filter and
@@ -75,14 +78,17 @@ class UKF(KalmanBase):
                   ca.SX.zeros(points[0].numel(), points[0].numel()))
         return mean, cov
 
-    def _predict_expr(self, x, P, u, Q):
+    def predict_expr(self, ctx: StepContext):
+        """The unscented transform of ``(x, P)`` through ``f``, plus Q."""
         s = self.system
         f = ca.Function("f", [s.x, s.u], [s.fx])
-        xp, Pp = self._mean_cov([f(p, u) for p in self.sigma_points(x, P)], self.Wm, self.Wc)
-        return xp, symmetric(Pp + Q)
+        xp, Pp = self._mean_cov([f(p, ctx.u) for p in self.sigma_points(ctx.x, ctx.P)], self.Wm, self.Wc)
+        return xp, symmetric(Pp + ctx.Q)
 
-    def _update_expr(self, xp, Pp, y, R, valid, gate):
+    def update_expr(self, ctx: StepContext, xp, Pp) -> Update:
+        """Sigma points redrawn from the prior; ``K = Pxy S^{-1}``, ``P = P^- - K S K^T``."""
         s = self.system
+        y, R, valid, gate = ctx.y, ctx.R, ctx.valid, ctx.gate
         h = ca.Function("h", [s.x], [s.hx])
         # sigma points redrawn from the prior (x^-, P^-), so that Q is in S and Pxy
         sig = self.sigma_points(xp, Pp)
@@ -93,4 +99,14 @@ class UKF(KalmanBase):
                   ca.SX.zeros(s.nx, s.ny))
         K, nis, acc = gated_gain(S, ca.mtimes(Pxy, M).T, innov, gate)
         Ka = acc * K
-        return xp + ca.mtimes(Ka, innov), symmetric(Pp - ca.mtimes([Ka, S, Ka.T])), innov, S, K, nis, acc
+        return Update(xp + ca.mtimes(Ka, innov), symmetric(Pp - ca.mtimes([Ka, S, Ka.T])), innov, S, K, nis, acc)
+
+    def smoother_cross_covariance(self, x, P, u):
+        """The unscented RTS smoother's ``D_k`` (Särkkä, 2008): the cross-covariance of the
+        sigma points of ``(x, P)`` and their images under ``f``."""
+        s = self.system
+        f = ca.Function("f", [s.x, s.u], [s.fx])
+        sig = self.sigma_points(x, P)
+        img = [f(p, u) for p in sig]
+        m = sum((w * p for w, p in zip(self.Wm, img)), ca.SX.zeros(s.nx))
+        return sum((w * ca.mtimes(p - x, (q - m).T) for w, p, q in zip(self.Wc, sig, img)), ca.SX.zeros(s.nx, s.nx))

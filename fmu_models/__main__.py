@@ -1,4 +1,4 @@
-"""``python -m fmu_models build --out DIR [--fmi-version 2]``: build the plant FMUs."""
+"""``python -m fmu_models build --out DIR [--fmi-version 2] [--model NAME]``: build the plant FMUs."""
 from __future__ import annotations
 
 import argparse
@@ -6,25 +6,31 @@ import sys
 import time
 
 
-def main(argv=None) -> int:
-    from . import MODEL_NAMES
-    from .build import FMI_VERSIONS, CompilerNotFoundError, build_fmus
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m fmu_models``; returns the exit status (0, 2 on an error,
+    130 when interrupted)."""
+    from . import build_fmus, model_names
+    from .errors import PendulumCosimError
+    from .export.pack import FMI_VERSIONS
 
     parser = argparse.ArgumentParser(prog="python -m fmu_models",
                                      description="Build the plant FMUs from the CasADi models.")
     sub = parser.add_subparsers(dest="command", required=True)
-    b = sub.add_parser("build", help="compile and pack CartPole.fmu and InertiaWheelPendulum.fmu")
+    b = sub.add_parser("build", help="compile and pack the FMU of every registered plant model")
     b.add_argument("--out", default=".", help="output directory (default: current directory)")
     b.add_argument("--fmi-version", type=int, choices=FMI_VERSIONS, default=2,
                    help="FMI version, 2 (default) or 3; both hold Model Exchange and Co-Simulation")
-    b.add_argument("--model", action="append", choices=MODEL_NAMES,
+    b.add_argument("--model", action="append", choices=model_names(),
                    help="build only this model (repeatable; default: all)")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     try:
-        paths = build_fmus(args.out, args.fmi_version, tuple(args.model or MODEL_NAMES))
-    except CompilerNotFoundError as e:
-        print(f"error: {e}", file=sys.stderr)
+        paths = build_fmus(args.out, args.fmi_version, tuple(args.model or model_names()))
+    except KeyboardInterrupt:
+        print("interrupted: no FMU was left half-written", file=sys.stderr)
+        return 130
+    except (PendulumCosimError, OSError) as e:
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
     for p in paths:
         print(p)

@@ -16,8 +16,11 @@ from __future__ import annotations
 
 import casadi as ca
 
+from . import register_model
 from .plant import PlantModel
 from .variables import Variable
+
+__all__ = ["build", "dynamics", "measurement"]
 
 STATES = (
     Variable("x", "m", "cart position (seed 000 x1)", 0.5),
@@ -62,7 +65,9 @@ def measurement(x, p):
     return ca.vertcat(x[0], x[2])
 
 
+@register_model("cartpole")
 def build() -> PlantModel:
+    """The model with its default parameters (registered as ``"cartpole"``)."""
     return PlantModel("cartpole", "CartPole",
                       "Cart-inverted pendulum (seed 000 eqs 8-11, SPEC section 1)",
                       STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement)

@@ -24,8 +24,11 @@ from __future__ import annotations
 
 import casadi as ca
 
+from . import register_model
 from .plant import PlantModel
 from .variables import Variable
+
+__all__ = ["build", "dynamics", "measurement"]
 
 STATES = (
     Variable("alpha", "rad", "pendulum angle from upright vertical", 0.0),
@@ -72,7 +75,9 @@ def measurement(x, p):
     return ca.vertcat(x[0], x[1], x[2])
 
 
+@register_model("iwp")
 def build() -> PlantModel:
+    """The model with its default parameters (registered as ``"iwp"``)."""
     return PlantModel("iwp", "InertiaWheelPendulum",
                       "Inertia-wheel pendulum (seed 002 eqs 1-2, SPEC section 3)",
                       STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement)

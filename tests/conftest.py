@@ -54,13 +54,12 @@ def bouncing_me_fmu(tmp_path_factory):
 @pytest.fixture(scope="session")
 def fmu_builds(tmp_path_factory):
     """Both plant FMUs in FMI 2.0 and 3.0, built once per session: {(name, version): path}."""
-    from fmu_models import MODEL_NAMES
-    from fmu_models.build import build_fmu
+    from fmu_models import build_fmu, model_names
 
     paths = {}
     for version in (2, 3):
         out = tmp_path_factory.mktemp(f"fmi{version}")
-        for name in MODEL_NAMES:
+        for name in model_names():
             paths[name, version] = str(build_fmu(name, out, fmi_version=version))
     return paths
 

@@ -13,8 +13,8 @@ from cosim.components.sources import PRBS
 from cosim.core.master import Cosimulation
 from cosim.fmi.component import FMUComponent
 from estimators import EKF, IAE, KF, MFIAE, UKF, augment_rate_bias, discretize
-from estimators.fmu_export import export_filter_fmu
 from fmu_models import get_model
+from fmu_models.export.filter import export_filter_fmu
 
 X0 = [0.5, 0.0, 1.8, 0.5]
 

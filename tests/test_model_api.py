@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fmu_models import MODEL_NAMES, get_model
+from fmu_models import get_model, model_names
 
 
 def test_names_and_defaults():
@@ -14,7 +14,7 @@ def test_names_and_defaults():
     iwp = get_model("iwp")
     assert iwp.state_names == ["alpha", "alpha_dot", "phi_dot"]
     assert iwp.params["s"] == -1.0
-    for name in MODEL_NAMES:
+    for name in model_names():
         m = get_model(name)
         for v in m.states + m.inputs + m.outputs + m.parameters:
             assert v.unit and v.description

@@ -58,7 +58,7 @@ def test_run_equals_repeated_step(cp, record, name, missing):
     np.testing.assert_allclose(b.R, a.R, rtol=0, atol=1e-12)
     assert b.k == a.k and len(b.noise_history()) == len(a.noise_history())
     assert np.isfinite(out.log_likelihood)
-    df = out.to_frame(b)
+    df = out.to_frame()
     assert len(df) == len(ys) + 1 and "innovation_y_x" in df.columns
     if missing:
         assert not out.mask[5, 0] and out.mask[5, 1] and not out.mask[100].any()
@@ -149,7 +149,7 @@ def test_extended_rts_equals_a_numpy_reference(cp, record):
     err_f = np.sqrt(np.mean((run.x[1:] - xs) ** 2))
     err_s = np.sqrt(np.mean((sm.x[1:] - xs) ** 2))
     assert err_s < err_f                                  # smoothing helps
-    assert sm.to_frame(f).shape == (len(ys) + 1, 8)
+    assert sm.to_frame().shape == (len(ys) + 1, 8)
 
 
 def test_unscented_rts_equals_a_reference_on_filterpy_sigma_points(cp, record):

@@ -143,7 +143,7 @@ def test_shipped_sources_rebuild_the_fmu(tmp_path):
     """An FMU's sources/ compile on their own (what another platform does)."""
     import fmpy
 
-    from fmu_models.fmu_pack import find_compiler
+    from fmu_models.export.pack import find_compiler
 
     ekf = EKF(discretize(get_model("cartpole"), 0.01), [0.5, 0, 1.8, 0.5], 1.0, 0.2, 0.1)
     comp = EstimatorComponent("ekf", lambda: ekf)

@@ -92,10 +92,10 @@ class EstimatorComponent(Component):
         self._u_prev = np.array(u[: self._nu])
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """The filter as an estimator FMU (:func:`estimators.fmu_export.export_filter_fmu`),
+        """The filter as an estimator FMU (:func:`fmu_models.export.filter.export_filter_fmu`),
         with the same timing as this component. Its outputs are the state estimate,
         ``P_<state>`` and ``nis`` as here (not the off-diagonal ``P_<i>_<j>``), and more."""
-        from estimators.fmu_export import export_filter_fmu, filter_parameters
+        from fmu_models.export.filter import export_filter_fmu, filter_parameters
 
         filt = self.make_filter()
         path = export_filter_fmu(filt, folder, fmi_version, name=self._fmu_identifier(),

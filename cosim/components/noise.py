@@ -10,7 +10,7 @@ Two generators, chosen per component with ``generator=``:
 ``"counter"``
     A counter-based generator whose value at sample ``k = round(t / period)`` is computed
     directly from ``(seed, k, channel)``: :func:`counter_normal`. The signal FMUs
-    (:mod:`cosim.signal_fmu`) use the same generator in C, so a scenario exported as an
+    (:mod:`fmu_models.export.signal`) use the same generator in C, so a scenario exported as an
     SSP draws the same noise as the project's master (within one rounding of the
     libraries' ``log`` and ``cos``), whatever the start time.
 

@@ -100,9 +100,9 @@ class Sensor(Component):
             self._queue.append(self._measure(t, u))
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This sensor as a signal FMU (kind ``sensor``, :mod:`cosim.signal_fmu`) drawing
+        """This sensor as a signal FMU (kind ``sensor``, :mod:`fmu_models.export.signal`) drawing
         from the counter generator; refused with a delay."""
-        from cosim.signal_fmu import SignalSpec, build_signal_fmu, channel_params
+        from fmu_models.export.signal import SignalSpec, build_signal_fmu, channel_params
 
         if self.delay:
             raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
@@ -174,9 +174,9 @@ class ProcessNoise(Component):
         return self.L @ self._noise.at(t)
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This noise source as a signal FMU (kind ``noise``, :mod:`cosim.signal_fmu`)
+        """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal`)
         drawing from the counter generator; refused for a non-diagonal ``cov``."""
-        from cosim.signal_fmu import SignalSpec, build_signal_fmu, channel_params
+        from fmu_models.export.signal import SignalSpec, build_signal_fmu, channel_params
 
         if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "

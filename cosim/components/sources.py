@@ -24,12 +24,12 @@ class _Source(Component):
         raise NotImplementedError
 
     def _signal(self) -> tuple[str, list[tuple], list[tuple]]:
-        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`cosim.signal_fmu`)."""
+        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`fmu_models.export.signal`)."""
         raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This source as a signal FMU (:mod:`cosim.signal_fmu`) with output ``out``."""
-        from cosim.signal_fmu import SignalSpec, build_signal_fmu
+        """This source as a signal FMU (:mod:`fmu_models.export.signal`) with output ``out``."""
+        from fmu_models.export.signal import SignalSpec, build_signal_fmu
 
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,

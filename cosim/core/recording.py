@@ -22,11 +22,10 @@ import numpy as np
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError, ResourceError, UnknownNameError
+from fmu_models.memory import MEMORY_FRACTION, available_memory
 
-__all__ = ["MemorySink", "ParquetSink", "available_memory", "partial_path", "select_signals"]
+__all__ = ["MemorySink", "ParquetSink", "partial_path", "select_signals"]
 
-#: Fraction of the available memory an in-memory recording may take before it is refused.
-MEMORY_FRACTION = 0.5
 
 
 def select_signals(names: Sequence[str], patterns: Sequence[str] | str | None) -> list[int]:
@@ -44,19 +43,6 @@ def select_signals(names: Sequence[str], patterns: Sequence[str] | str | None) -
             raise UnknownNameError(f"signal pattern {pat!r} matches no signal; signals: {', '.join(names)}")
         chosen.update(hits)
     return sorted(chosen)
-
-
-def available_memory() -> int:
-    """Bytes of memory available to this process (Linux: MemAvailable; elsewhere a
-    conservative 2 GiB)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 2 * 1024**3
 
 
 def partial_path(path: Path) -> Path:

@@ -248,7 +248,7 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     import tempfile
 
     from cosim.fmi.component import FMUComponent
-    from fmu_models.build import build_fmu
+    from fmu_models import build_fmu
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)

@@ -119,8 +119,7 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
     import tempfile
 
     from cosim.fmi.component import FMUComponent
-    from fmu_models import get_model
-    from fmu_models.build import build_fmu
+    from fmu_models import build_fmu, get_model
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)

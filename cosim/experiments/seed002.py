@@ -124,7 +124,7 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
     import tempfile
 
     from cosim.core.master import Cosimulation
-    from fmu_models.build import build_fmu
+    from fmu_models import build_fmu
 
     s = settings
     out = []

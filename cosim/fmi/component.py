@@ -161,7 +161,7 @@ class FMUComponent(Component):
     def _check_binary(self, name: str) -> None:
         import zipfile
 
-        from fmu_models.fmu_pack import library_suffix, platform_dir
+        from fmu_models.export.pack import library_suffix, platform_dir
 
         want = f"binaries/{platform_dir(self.version)}/{self.model_identifier}{library_suffix()}"
         with zipfile.ZipFile(self.path) as z:
@@ -209,7 +209,7 @@ class FMUComponent(Component):
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """A copy of the FMU file as ``<folder>/<name>.fmu``, with this component's
         parameters and start values (``fmi_version`` does not apply: the file is kept)."""
-        from fmu_models.fmu_pack import atomic_copy
+        from fmu_models.export.pack import atomic_copy
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)

@@ -6,16 +6,15 @@
 #include "core_common.h"
 #include "model_funcs.h"
 
-#define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+#define IN IN_GROUP
 #define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
 
 void core_defaults(CoreData *d) {
     memset(d, 0, sizeof(*d));
     for (int k = 0; k < NP; k++) d->p[k] = PARAM_DEFAULT[k];
+    for (int k = 0; k < NIP; k++) d->ip[k] = IP_DEFAULT[k];
     for (int k = 0; k < NX; k++) d->x[k] = X_START[k];
     d->step_size = DEFAULT_STEP_SIZE;
-    d->integrator = INTEGRATOR_EULER;
-    d->substeps = 1;
 }
 
 static void plant_f(CoreWork *wk, const CoreData *d, const double *x, double *xdot) {
@@ -44,12 +43,9 @@ void core_set_time(CoreData *d, double t) { d->time = t; }
 
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     (void)wk;
-    for (int k = 0; k < NP; k++) {
-        const char *why = domain_violation(PARAM_DOMAIN[k], d->p[k]);
-        if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
-    }
+    if (check_parameters(d->p, d->ip, err)) return 1;
     for (int i = 0; i < NX; i++)
-        if (!isfinite(d->x[i])) FAIL("start value of %s is not finite", REAL_NAMES[VR_X + i]);
+        if (!isfinite(d->x[i])) FAIL("start value of %s is not finite", VAR_NAMES[VR_X + i]);
     return 0;
 }
 
@@ -78,11 +74,12 @@ int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, doub
 int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
-        if (r >= N_REAL) FAIL("no settable Real variable has value reference %u", r);
-        if (!isfinite(v[i])) FAIL("%s: value %g is not finite", REAL_NAMES[r], v[i]);
+        if (!(IN(r, VR_P, NP) || r == VR_STEP || IN(r, VR_X, NX) || IN(r, VR_DX, NX) || IN(r, VR_U, NU)
+              || IN(r, VR_W, NX) || IN(r, VR_Y, NY)))
+            FAIL("no settable Real variable has value reference %u", r);
+        if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(&d->p[r - VR_P], REAL_NAMES[r], PARAM_DOMAIN[r - VR_P], v[i], before_run, err))
-                return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
         } else if (r == VR_STEP) {
             if (!before_run) FAIL("step_size is fixed: set it before leaving initialization mode");
             if (!(v[i] > 0)) FAIL("step_size = %g must be > 0", v[i]);
@@ -90,46 +87,23 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
         } else if (IN(r, VR_X, NX)) {
             if (!before_run)
                 FAIL("start value of state %s can only be set before leaving initialization mode "
-                     "(use the FMU state or SetContinuousStates)", REAL_NAMES[r]);
+                     "(use the FMU state or SetContinuousStates)", VAR_NAMES[r]);
             d->x[r - VR_X] = v[i];
         } else if (IN(r, VR_U, NU)) d->u[r - VR_U] = v[i];
         else if (IN(r, VR_W, NX)) d->w[r - VR_W] = v[i];
-        else FAIL("%s is calculated and cannot be set", REAL_NAMES[r]);
+        else FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
     }
     return 0;
 }
 
-/* integrator is an Enumeration (FMI 3.0: Int64 functions), substeps an Int32 */
-static int int_width(unsigned vr) {
-    return vr == VR_INTEGRATOR ? INT_64 : vr == VR_SUBSTEPS ? INT_32 : INT_NONE;
-}
-
+/* integrator is an Enumeration (FMI 3.0: Int64 functions), substeps an Int32 (model_config.h IP_WIDTH) */
 int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
-    for (size_t i = 0; i < n; i++) {
-        if (!int_width(vr[i]) || (width && int_width(vr[i]) != width))
-            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
-        v[i] = vr[i] == VR_INTEGRATOR ? d->integrator : d->substeps;
-    }
-    return 0;
+    return get_int_parameters(d->ip, vr, n, v, width, err);
 }
 
 int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
                  char *err) {
-    for (size_t i = 0; i < n; i++) {
-        if (!int_width(vr[i]) || (width && int_width(vr[i]) != width))
-            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
-        if (!before_run) FAIL("%s is fixed: set it before leaving initialization mode",
-                              vr[i] == VR_INTEGRATOR ? "integrator" : "substeps");
-        if (vr[i] == VR_INTEGRATOR) {
-            if (v[i] != INTEGRATOR_EULER && v[i] != INTEGRATOR_RK4)
-                FAIL("integrator = %lld: valid values are 1 (euler) and 2 (rk4)", v[i]);
-            d->integrator = (int)v[i];
-        } else if (vr[i] == VR_SUBSTEPS) {
-            if (v[i] < 1 || v[i] > 1000000) FAIL("substeps = %lld must be in [1, 1000000]", v[i]);
-            d->substeps = (int)v[i];
-        }
-    }
-    return 0;
+    return set_int_parameters(d->ip, vr, n, v, width, before_run, err);
 }
 
 CORE_NO_BOOLEANS
@@ -137,7 +111,7 @@ CORE_NO_BOOLEANS
 int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
     plant_f(wk, d, d->x, dx);
     for (int i = 0; i < NX; i++)
-        if (!isfinite(dx[i])) FAIL("der(%s) is not finite", REAL_NAMES[VR_X + i]);
+        if (!isfinite(dx[i])) FAIL("der(%s) is not finite", VAR_NAMES[VR_X + i]);
     return 0;
 }
 
@@ -146,7 +120,7 @@ void core_get_states(const CoreData *d, double x[]) { memcpy(x, d->x, sizeof(dou
 int core_set_states(CoreData *d, const double x[], size_t nx, char *err) {
     if (nx != NX) FAIL("%zu states given, this model has %d", nx, NX);
     for (size_t i = 0; i < nx; i++)
-        if (!isfinite(x[i])) FAIL("state %s = %g is not finite", REAL_NAMES[VR_X + i], x[i]);
+        if (!isfinite(x[i])) FAIL("state %s = %g is not finite", VAR_NAMES[VR_X + i], x[i]);
     memcpy(d->x, x, sizeof(double) * NX);
     return 0;
 }
@@ -186,7 +160,7 @@ int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size
 static void one_step(CoreWork *wk, const CoreData *d, double T, double *x) {
     double k1[NX], k2[NX], k3[NX], k4[NX], z[NX];
     plant_f(wk, d, x, k1);
-    if (d->integrator == INTEGRATOR_EULER) {
+    if (INTEGRATOR(d) == INTEGRATOR_EULER) {
         for (int i = 0; i < NX; i++) x[i] = x[i] + T * k1[i];
         return;
     }
@@ -201,7 +175,7 @@ static void one_step(CoreWork *wk, const CoreData *d, double T, double *x) {
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     double x[NX];
-    double T = d->step_size / d->substeps;
+    double T = d->step_size / (double)SUBSTEPS(d);
     double ratio, n, rest = 0.0;
     if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
     if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
@@ -224,7 +198,7 @@ int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
         x[i] += d->w[i];
         if (!isfinite(x[i]))
             FAIL("the state became non-finite (%s) in the step from t = %g s to %g s; state kept at t = %g s",
-                 REAL_NAMES[VR_X + i], t, t + h, t);
+                 VAR_NAMES[VR_X + i], t, t + h, t);
     }
     memcpy(d->x, x, sizeof(x));
     d->time = t + h;

@@ -1,7 +1,8 @@
 /* pendulum-cosim: what the model cores share. Include after core_api.h.
  *
- * Parameter domains (the generated tables of model_config.h use these codes) and the checked
- * setting of a Real parameter; and, used at file scope, the core API functions that cores
+ * Parameter domains (the codes of model_config.h's PARAM_DOMAIN), the checked setting of the
+ * Real parameters (group P of model_config.h) and the Integer/Enumeration parameters (group
+ * IP: IP_MIN, IP_MAX, IP_WIDTH); and, used at file scope, the core API functions that cores
  * without some capability implement alike:
  *   CORE_NO_MODEL_EXCHANGE("an estimator FMU")   Co-Simulation only: no states, no derivatives
  *   CORE_NO_BOOLEANS                             no Boolean variables
@@ -15,8 +16,10 @@
 /* the order of fmu_models.variables.DOMAINS */
 enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_UNIT = 3, DOMAIN_SIGN = 4 };
 
+#define IN_GROUP(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+
 /* NULL if v is in the domain, else why not ("must be > 0", ...). */
-static const char *domain_violation(int domain, double v) {
+static inline const char *domain_violation(int domain, double v) {
     if (!isfinite(v)) return "is not finite";
     switch (domain) {
     case DOMAIN_POSITIVE: return v > 0 ? NULL : "must be > 0";
@@ -27,19 +30,79 @@ static const char *domain_violation(int domain, double v) {
     }
 }
 
-/* *slot = v for the parameter `name` of `domain`, if the mode allows it and v is valid;
- * else 1 with the message in err. */
-static int set_parameter(double *slot, const char *name, int domain, double v, int before_run, char *err) {
-    const char *why = domain_violation(domain, v);
+/* p[k] = v for the Real parameter with value reference VR_P + k, if the mode allows it and v
+ * is in its domain; else 1 with the message in err. */
+static inline int set_parameter(double p[], int k, double v, int before_run, char *err) {
+    const char *why = domain_violation(PARAM_DOMAIN[k], v);
     if (!before_run) {
-        snprintf(err, ERRLEN, "parameter %s is fixed: set it before leaving initialization mode", name);
+        snprintf(err, ERRLEN, "parameter %s is fixed: set it before leaving initialization mode", VAR_NAMES[VR_P + k]);
         return 1;
     }
     if (why) {
-        snprintf(err, ERRLEN, "parameter %s = %g %s", name, v, why);
+        snprintf(err, ERRLEN, "parameter %s = %g %s", VAR_NAMES[VR_P + k], v, why);
         return 1;
     }
-    *slot = v;
+    p[k] = v;
+    return 0;
+}
+
+/* Every Real parameter in its domain, every Integer parameter in its range (leaving
+ * initialization mode); else 1 with the first violation in err. */
+static inline int check_parameters(const double p[], const long long ip[], char *err) {
+    for (int k = 0; k < NP; k++) {
+        const char *why = domain_violation(PARAM_DOMAIN[k], p[k]);
+        if (why) {
+            snprintf(err, ERRLEN, "parameter %s = %g %s", VAR_NAMES[VR_P + k], p[k], why);
+            return 1;
+        }
+    }
+    for (int k = 0; k < NIP; k++)
+        if (ip[k] < IP_MIN[k] || ip[k] > IP_MAX[k]) {
+            snprintf(err, ERRLEN, "parameter %s = %lld must be in [%lld, %lld]", VAR_NAMES[VR_IP + k], ip[k],
+                     IP_MIN[k], IP_MAX[k]);
+            return 1;
+        }
+    return 0;
+}
+
+/* The index k of the Integer parameter with value reference vr (-1 with the message in err if
+ * there is none of this width: INT_32 or INT_64 in FMI 3.0, INT_NONE in FMI 2.0). */
+static inline int int_parameter(unsigned vr, int width, char *err) {
+    int k = (int)vr - VR_IP;
+    if (!IN_GROUP(vr, VR_IP, NIP) || (width != INT_NONE && IP_WIDTH[k] != width)) {
+        snprintf(err, ERRLEN, "no Int%d variable has value reference %u", width ? width : 32, vr);
+        return -1;
+    }
+    return k;
+}
+
+static inline int get_int_parameters(const long long ip[], const unsigned vr[], size_t n, long long v[], int width,
+                                     char *err) {
+    for (size_t i = 0; i < n; i++) {
+        int k = int_parameter(vr[i], width, err);
+        if (k < 0) return 1;
+        v[i] = ip[k];
+    }
+    return 0;
+}
+
+static inline int set_int_parameters(long long ip[], const unsigned vr[], size_t n, const long long v[], int width,
+                                     int before_run, char *err) {
+    for (size_t i = 0; i < n; i++) {
+        int k = int_parameter(vr[i], width, err);
+        if (k < 0) return 1;
+        if (!before_run) {
+            snprintf(err, ERRLEN, "parameter %s is fixed: set it before leaving initialization mode",
+                     VAR_NAMES[VR_IP + k]);
+            return 1;
+        }
+        if (v[i] < IP_MIN[k] || v[i] > IP_MAX[k]) {
+            snprintf(err, ERRLEN, "parameter %s = %lld must be in [%lld, %lld]", VAR_NAMES[VR_IP + k], v[i],
+                     IP_MIN[k], IP_MAX[k]);
+            return 1;
+        }
+        ip[k] = v[i];
+    }
     return 0;
 }
 

@@ -2,14 +2,15 @@
 wrappers: the machinery every FMU of the project goes through (plants, estimators,
 signals).
 
-An FMU's C sources are the generic files in ``fmu_models/c`` (``core_api.h``,
+An FMU's C sources are the generic files in ``fmu_models/export/c`` (``core_api.h``,
 ``core_common.h``, the wrapper
 ``fmi<version>_wrapper.c`` with ``wrapper_modes.h`` and ``wrapper_common.h``, and
 ``<core>_core.h/.c``), a ``core.h`` selecting the core, and the files the caller generates
-(``model_config.h`` and CasADi's code). They are compiled into the FMU's shared library and
-shipped in ``sources/`` so that another platform can rebuild it. The GUID is a hash of a
-fingerprint of the model and of every source file, so equal FMUs get equal GUIDs. The
-``.fmu`` is written beside its target and renamed atomically.
+(``model_config.h``, :mod:`fmu_models.export.config`, and CasADi's code). They are compiled
+into the FMU's shared library and shipped in ``sources/`` so that another platform can
+rebuild it. The GUID is a hash of a fingerprint of the model and of every source file, so
+equal FMUs get equal GUIDs. The ``.fmu`` is written beside its target and renamed
+atomically.
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import fmpy
 
-from .errors import BuildError, CompilerNotFoundError, ConfigurationError
+from ..errors import BuildError, CompilerNotFoundError, ConfigurationError
 
 __all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "library_suffix", "pack_fmu",
            "platform_dir", "temp_beside"]

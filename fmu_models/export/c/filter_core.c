@@ -6,7 +6,7 @@
 #include "core_common.h"
 #include "model_funcs.h"
 
-#define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+#define IN IN_GROUP
 #define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
 
 /* where a step argument comes from / a step result goes to (model_config.h tables) */
@@ -25,14 +25,11 @@ void core_set_time(CoreData *d, double t) { d->time = t; }
 
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     double stamp[1];
-    for (int k = 0; k < NP; k++) {
-        const char *why = domain_violation(PARAM_DOMAIN[k], d->p[k]);
-        if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_P + k], d->p[k], why);
-    }
+    if (check_parameters(d->p, NULL, err)) return 1;
     for (int i = 0; i < N_LESS; i++)
         if (!(d->p[LESS_LO[i]] < d->p[LESS_HI[i]]))
-            FAIL("parameter %s = %g must be below %s = %g", REAL_NAMES[VR_P + LESS_LO[i]], d->p[LESS_LO[i]],
-                 REAL_NAMES[VR_P + LESS_HI[i]], d->p[LESS_HI[i]]);
+            FAIL("parameter %s = %g must be below %s = %g", VAR_NAMES[VR_P + LESS_LO[i]], d->p[LESS_LO[i]],
+                 VAR_NAMES[VR_P + LESS_HI[i]], d->p[LESS_HI[i]]);
     /* flt_init(p) -> the state arrays and the fixed inputs, at their offsets */
     wk->arg[0] = d->p;
     for (int j = 0; j < INIT_NOUT; j++)
@@ -101,15 +98,14 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(&d->p[r - VR_P], REAL_NAMES[r], PARAM_DOMAIN[r - VR_P], v[i], before_run, err))
-                return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
         } else if (IN(r, VR_U, NU)) {
-            if (!isfinite(v[i])) FAIL("%s: value %g is not finite", REAL_NAMES[r], v[i]);
+            if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
             d->u[r - VR_U] = v[i];
         } else if (IN(r, VR_Y, NY)) {
             d->y[r - VR_Y] = v[i];               /* NaN: a missing measurement (if the filter says so) */
             d->cand_ok = 0;
-        } else FAIL("%s is calculated and cannot be set", r < N_REAL ? REAL_NAMES[r] : "this variable");
+        } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
     }
     return 0;
 }

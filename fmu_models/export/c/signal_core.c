@@ -6,13 +6,17 @@
 #include "core_api.h"
 #include "core_common.h"
 
-#define IN(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+#define IN IN_GROUP
 #define FAIL(...) do { snprintf(err, ERRLEN, __VA_ARGS__); return 1; } while (0)
+
+#if SIGNAL_KIND == KIND_CUSTOM
+#include "signal_custom.h"
+#endif
 
 
 void core_defaults(CoreData *d) {
     memset(d, 0, sizeof(*d));
-    for (int k = 0; k < NRP; k++) d->rp[k] = RP_DEFAULT[k];
+    for (int k = 0; k < NP; k++) d->p[k] = PARAM_DEFAULT[k];
     for (int k = 0; k < NIP; k++) d->ip[k] = IP_DEFAULT[k];
 }
 
@@ -36,7 +40,7 @@ static double counter_normal(uint64_t seed, long long k, int c) {
 }
 
 /* round half to even, as numpy.rint */
-static long long sample_index(const CoreData *d) { return (long long)nearbyint(d->time / d->rp[RP_PERIOD]); }
+static long long sample_index(const CoreData *d) { return (long long)nearbyint(d->time / d->p[P_PERIOD]); }
 #endif
 
 #if SIGNAL_KIND == KIND_PRBS
@@ -61,13 +65,7 @@ static void prbs_fill(CoreData *d) {
 
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     (void)wk;
-    for (int k = 0; k < NRP; k++) {
-        const char *why = domain_violation(RP_DOMAIN[k], d->rp[k]);
-        if (why) FAIL("parameter %s = %g %s", REAL_NAMES[VR_RP + k], d->rp[k], why);
-    }
-    for (int k = 0; k < NIP; k++)
-        if (d->ip[k] < IP_MIN[k] || d->ip[k] > IP_MAX[k])
-            FAIL("parameter %s = %lld must be in [%lld, %lld]", INT_NAMES[k], d->ip[k], IP_MIN[k], IP_MAX[k]);
+    if (check_parameters(d->p, d->ip, err)) return 1;
 #if SIGNAL_KIND == KIND_PRBS
     prbs_fill(d);
 #endif
@@ -76,25 +74,27 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
 
 /* Output channel j at the current time. */
 static double output(const CoreData *d, int j) {
-    const double *p = d->rp;
+    const double *p = d->p;
     double t = d->time;
     (void)j; (void)t;
 #if SIGNAL_KIND == KIND_CONSTANT
-    return p[RP_VALUE];
+    return p[P_VALUE];
 #elif SIGNAL_KIND == KIND_STEP
-    return t >= p[RP_T_STEP] - 1e-12 ? p[RP_AFTER] : p[RP_BEFORE];
+    return t >= p[P_T_STEP] - 1e-12 ? p[P_AFTER] : p[P_BEFORE];
 #elif SIGNAL_KIND == KIND_SINE
-    return p[RP_OFFSET] + p[RP_AMPLITUDE] * sin(2 * 3.141592653589793 * p[RP_FREQUENCY] * t + p[RP_PHASE]);
+    return p[P_OFFSET] + p[P_AMPLITUDE] * sin(2 * 3.141592653589793 * p[P_FREQUENCY] * t + p[P_PHASE]);
 #elif SIGNAL_KIND == KIND_PRBS
-    long long i = (long long)floor(t / p[RP_BIT_TIME] + 1e-9) % d->nbits;
+    long long i = (long long)floor(t / p[P_BIT_TIME] + 1e-9) % d->nbits;
     if (i < 0) i += d->nbits;
-    return p[RP_OFFSET] + (d->bits[i] ? p[RP_AMPLITUDE] : -p[RP_AMPLITUDE]);
+    return p[P_OFFSET] + (d->bits[i] ? p[P_AMPLITUDE] : -p[P_AMPLITUDE]);
 #elif SIGNAL_KIND == KIND_NOISE
-    return p[RP_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
-#else /* KIND_SENSOR: y = q(s + bias + std z) */
-    double y = d->in[j] + p[RP_BIAS + j] + p[RP_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
-    double q = p[RP_QUANT + j];
+    return p[SIG_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
+#elif SIGNAL_KIND == KIND_SENSOR /* y = q(s + bias + std z) */
+    double y = d->in[j] + p[SIG_BIAS + j] + p[SIG_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
+    double q = p[SIG_QUANT + j];
     return q > 0 ? nearbyint(y / q) * q : y;
+#else /* KIND_CUSTOM: the registered C expression (signal_custom.h) */
+    return custom_output(d, j, p, t);
 #endif
 }
 
@@ -103,7 +103,7 @@ int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, doub
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_OUT, NCH)) v[i] = output(d, (int)(r - VR_OUT));
-        else if (IN(r, VR_RP, NRP)) v[i] = d->rp[r - VR_RP];
+        else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
         else if (IN(r, VR_IN, NIN)) v[i] = d->in[r - VR_IN];
         else if (r == VR_TIME) v[i] = d->time;
         else FAIL("no Real variable has value reference %u", r);
@@ -114,37 +114,22 @@ int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, doub
 int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
-        if (IN(r, VR_RP, NRP)) {
-            if (set_parameter(&d->rp[r - VR_RP], REAL_NAMES[r], RP_DOMAIN[r - VR_RP], v[i], before_run, err))
-                return 1;
+        if (IN(r, VR_P, NP)) {
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
         } else if (IN(r, VR_IN, NIN)) {
             d->in[r - VR_IN] = v[i];          /* a sensor passes NaN and inf on */
-        } else FAIL("%s is calculated and cannot be set", r < N_REAL ? REAL_NAMES[r] : "this variable");
+        } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
     }
     return 0;
 }
 
 int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
-    for (size_t i = 0; i < n; i++) {
-        if (!IN(vr[i], VR_IP, NIP) || (width && width != INT_32))
-            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
-        v[i] = d->ip[vr[i] - VR_IP];
-    }
-    return 0;
+    return get_int_parameters(d->ip, vr, n, v, width, err);
 }
 
 int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
                  char *err) {
-    for (size_t i = 0; i < n; i++) {
-        if (!IN(vr[i], VR_IP, NIP) || (width && width != INT_32))
-            FAIL("no Int%d variable has value reference %u", width ? width : 32, vr[i]);
-        int k = (int)(vr[i] - VR_IP);
-        if (!before_run) FAIL("parameter %s is fixed: set it before leaving initialization mode", INT_NAMES[k]);
-        if (v[i] < IP_MIN[k] || v[i] > IP_MAX[k])
-            FAIL("parameter %s = %lld must be in [%lld, %lld]", INT_NAMES[k], v[i], IP_MIN[k], IP_MAX[k]);
-        d->ip[k] = v[i];
-    }
-    return 0;
+    return set_int_parameters(d->ip, vr, n, v, width, before_run, err);
 }
 
 CORE_NO_BOOLEANS

@@ -1,7 +1,7 @@
 """``modelDescription.xml`` for FMI 2.0 and 3.0 from one description of an FMU, shared by
 the plant, estimator and signal FMUs.
 
-An FMU is described by its variables (:class:`~fmu_models.fmu_layout.FmuVariable`, in
+An FMU is described by its variables (:class:`~fmu_models.export.variables.FmuVariable`, in
 ModelVariables order with value reference = index - 1), its ModelStructure
 (:class:`Unknown` entries), its interfaces and capabilities (:class:`Description`).
 """
@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import quoteattr
 
-from .errors import ConfigurationError
+from ..errors import ConfigurationError
 
 __all__ = ["BASE_UNITS", "Description", "Unknown", "fmi2", "fmi3", "xml_attrs"]
 
@@ -98,7 +98,8 @@ def _units(variables) -> list[str]:
     for u in units:
         base = BASE_UNITS.get(u)
         if base is None:
-            raise ConfigurationError(f"unit {u!r} has no SI base-unit entry in fmu_models.xml_writer.BASE_UNITS")
+            raise ConfigurationError(f"unit {u!r} has no SI base-unit entry in "
+                                     "fmu_models.export.description.BASE_UNITS")
         out.append(f"    <Unit{xml_attrs(name=u)}>" + (f"<BaseUnit{xml_attrs(**base)}/>" if base else "") + "</Unit>")
     out.append("  </UnitDefinitions>")
     return out if units else []

@@ -1,0 +1,251 @@
+"""The filter protocol: what a filter of this package declares, the hooks it implements, and
+how they become one compiled step.
+
+Every filter is a subclass of :class:`~estimators.base.KalmanBase` and is described by
+
+**Declarations** (class attributes)
+    ``name`` (for messages), ``adapts_noise`` (Q and R are part of the state and may be
+    changed by :meth:`~estimators.base.KalmanBase.adapt_expr`; otherwise they are fixed
+    inputs of the step that :meth:`~estimators.base.KalmanBase.set_noise` changes without a
+    rebuild), ``supports_batch`` (the whole filter is in the fused step, so it runs batched,
+    natively over a record and as an FMU). A filter registers itself for scenario files with
+    a class keyword: ``class MyEKF(EKF, register="MyEKF")`` (see :data:`estimators.FILTERS`).
+
+**Symbolic hooks** (called once per configuration, when the fused step is built, with a
+:class:`StepContext`; they return CasADi SX expressions and must not keep state)
+    * ``predict_expr(ctx) -> (x_prior, P_prior)`` (required): the time update from ``ctx.x``,
+      ``ctx.P``, ``ctx.u``, ``ctx.Q``;
+    * ``update_expr(ctx, x_prior, P_prior) -> Update`` (required): the measurement update
+      with ``ctx.y`` (0 in unused channels), ``ctx.valid`` (1 for a used channel),
+      ``ctx.R`` and ``ctx.gate`` (see :func:`~estimators.linalg.mask_measurement`,
+      :func:`~estimators.linalg.joseph_update`);
+    * ``adapt_expr(ctx, result) -> dict`` (optional): new values of ``Q``, ``R`` (if
+      ``adapts_noise``) and of the filter's extra state, from the :class:`StepResult`;
+      extra outputs of the step are declared with :meth:`StepContext.output`;
+    * ``extra_state() -> dict`` (optional): the initial values of extra state arrays (a
+      window of innovations, a counter), carried from step to step;
+    * ``step_parameters() -> list[Parameter]`` (optional): fixed inputs of the step
+      (bounds, gains) with their values; being inputs, not constants, changing them needs
+      no rebuild, and each becomes an FMU parameter;
+    * ``config_key() -> tuple`` (optional): what identifies the compiled step beyond the
+      class (window length, sigma-point parameters), for the cache of compiled functions.
+
+**Runtime hooks** (optional)
+    ``after_step()`` after every step from Python, once the new state is current;
+    ``after_run(outputs)`` after a native run with every step's outputs.
+
+**Smoothing and export hooks** (optional, with defaults for EKF-type filters)
+    ``smoother_cross_covariance(x, P, u)`` (the RTS smoother's ``D_k``);
+    ``fmu_noise_parameters()`` and ``fmu_noise(p)`` (how the FMU's parameters give Q and R).
+
+What a hook may assume: ``ctx.P`` (and ``ctx.Q``, ``ctx.R``) are symmetric (their lower
+triangles are their upper triangles), the system's ``fx``/``hx`` expressions are in
+``ctx.system``, and every non-finite result is caught by the step's status (the filter
+raises and keeps its previous state), so a hook need not test for NaN.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import casadi as ca
+import numpy as np
+
+from fmu_models.errors import ConfigurationError
+from fmu_models.variables import DOMAINS
+
+from .linalg import CSE, log_det, status_flag, symmetric, upper_entries, used_measurement
+from .system import DiscreteModel
+
+__all__ = ["DIAGNOSTICS", "STEP_INPUTS", "Parameter", "StepContext", "StepResult", "Update", "build_step"]
+
+#: Outputs of every fused step after the new state, in order.
+DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
+#: The step's inputs after the state arrays (then Q, R of a non-adaptive filter, then the
+#: step parameters).
+STEP_INPUTS = ("u", "y", "mask", "gate", "nan_missing")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A fixed input of a filter's step, or an FMU parameter.
+
+    Attributes
+    ----------
+    name : str
+        Identifier (the step input's name).
+    value : ndarray
+        Its value, flat (``np.atleast_1d`` of what was given).
+    domain : str
+        Admissible values of every entry (:data:`fmu_models.variables.DOMAINS`).
+    description : str or tuple of str
+        One line for users (and the FMU's ``modelDescription.xml``), or one per entry.
+    labels : tuple of str
+        The FMU parameter name of each entry (default: ``name`` for a scalar,
+        ``name_0``, ``name_1``, ... otherwise).
+    increasing : bool
+        The entries must increase (e.g. ``(low, high)`` bounds); checked by the FMU too.
+    of : tuple of str
+        What each entry is of (a state or measurement name), for the FMU's descriptions
+        (``"<description> of <of[i]>"``); default: nothing.
+    """
+
+    name: str
+    value: np.ndarray
+    domain: str = "real"
+    description: str | tuple[str, ...] = ""
+    labels: tuple[str, ...] = ()
+    increasing: bool = False
+    of: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if not self.name.isidentifier():
+            raise ConfigurationError(f"parameter name {self.name!r} must be an identifier")
+        if self.domain not in DOMAINS:
+            raise ConfigurationError(f"parameter {self.name}: domain {self.domain!r} not in {DOMAINS}")
+        value = np.atleast_1d(np.asarray(self.value, dtype=float)).ravel()
+        object.__setattr__(self, "value", value)
+        labels = tuple(self.labels) or ((self.name,) if value.size == 1 else
+                                        tuple(f"{self.name}_{i}" for i in range(value.size)))
+        if len(labels) != value.size:
+            raise ConfigurationError(f"parameter {self.name}: {len(labels)} labels for {value.size} values")
+        object.__setattr__(self, "labels", labels)
+        if self.of and len(self.of) != value.size:
+            raise ConfigurationError(f"parameter {self.name}: {len(self.of)} names in 'of' for {value.size} values")
+
+    def describe(self, i: int) -> str:
+        """The description of entry ``i``."""
+        if isinstance(self.description, tuple):
+            return self.description[i]
+        return f"{self.description} of {self.of[i]}" if self.of else self.description
+
+    @property
+    def size(self) -> int:
+        """Number of entries."""
+        return int(self.value.size)
+
+
+class Update(NamedTuple):
+    """What ``update_expr`` returns (SX expressions): the posterior ``x`` (nx, 1) and ``P``
+    (nx, nx), the ``innovation`` (ny, 1), its covariance ``S`` (ny, ny), the gain ``K``
+    (nx, ny), the ``nis`` and ``accepted`` (1: the gate passed the measurement)."""
+
+    x: ca.SX
+    P: ca.SX
+    innovation: ca.SX
+    S: ca.SX
+    K: ca.SX
+    nis: ca.SX
+    accepted: ca.SX
+
+
+class StepResult(NamedTuple):
+    """The step so far, as ``adapt_expr`` sees it: the prior, the :class:`Update` and
+    ``logdet_S``."""
+
+    x_prior: ca.SX
+    P_prior: ca.SX
+    x: ca.SX
+    P: ca.SX
+    innovation: ca.SX
+    S: ca.SX
+    K: ca.SX
+    nis: ca.SX
+    accepted: ca.SX
+    logdet_S: ca.SX
+
+
+@dataclass
+class StepContext:
+    """The symbols a filter's hooks build its step from (see the module documentation).
+
+    Attributes
+    ----------
+    system : DiscreteModel
+    x, P : SX
+        The state estimate (nx, 1) and its covariance (nx, nx; symmetric).
+    Q, R : SX
+        The noise covariances (nx, nx), (ny, ny).
+    u : SX
+        The input (nu, 1) held over the prediction.
+    y : SX
+        The measurement (ny, 1), 0 in unused channels.
+    valid : SX
+        1 for a used channel (masked in, and not NaN unless NaN is an error), else 0.
+    gate : SX
+        The chi-square gate on the NIS (``inf``: none).
+    state : dict of str to SX
+        The extra state arrays (``extra_state``), by name.
+    params : dict of str to SX
+        The step parameters (``step_parameters``), by name, as column vectors.
+    outputs : dict of str to SX
+        Extra outputs declared with :meth:`output`.
+    """
+
+    system: DiscreteModel
+    x: ca.SX
+    P: ca.SX
+    Q: ca.SX
+    R: ca.SX
+    u: ca.SX
+    y: ca.SX
+    valid: ca.SX
+    gate: ca.SX
+    state: dict = field(default_factory=dict)
+    params: dict = field(default_factory=dict)
+    outputs: dict = field(default_factory=dict)
+
+    def output(self, name: str, expr) -> None:
+        """Declare an extra output ``name`` of the step (a diagnostic the filter reads back,
+        e.g. whether it adapted); it must not collide with a state or diagnostic name."""
+        if not name.isidentifier() or name in DIAGNOSTICS or name == "status" or name.endswith("_new"):
+            raise ConfigurationError(f"extra step output name {name!r} is reserved or not an identifier")
+        self.outputs[name] = ca.SX(expr)
+
+
+def _symbol(name: str, shape) -> ca.SX:
+    return ca.SX.sym(name, *shape)
+
+
+def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parameter]) -> ca.Function:
+    """The fused step Function of ``filt`` from its hooks (see the module documentation).
+
+    Inputs, in order: the state arrays (``x``, ``P``, ``Q`` and ``R`` if the filter adapts
+    them, then the extra state in ``extra_state`` order), ``u``, ``y``, ``mask``, ``gate``,
+    ``nan_missing``, ``Q`` and ``R`` of a non-adaptive filter, the step parameters. Outputs:
+    ``<state>_new`` for each state array, :data:`DIAGNOSTICS`, the extra outputs and
+    ``status`` (:func:`~estimators.linalg.status_flag`).
+    """
+    s = filt.system
+    n, m, p = s.nx, s.nu, s.ny
+    x, P = _symbol("x", (n, 1)), _symbol("P", (n, n))
+    Q, R = _symbol("Q", (n, n)), _symbol("R", (p, p))
+    u, y, mask = _symbol("u", (m, 1)), _symbol("y", (p, 1)), _symbol("mask", (p, 1))
+    gate, nan_missing = _symbol("gate", (1, 1)), _symbol("nan_missing", (1, 1))
+    extra = {k: _symbol(k, (np.size(v), 1)) for k, v in extra_state.items()}
+    psym = {q.name: _symbol(q.name, (q.size, 1)) for q in params}
+    valid, y_used = used_measurement(y, mask, nan_missing)
+    ctx = StepContext(s, x, symmetric(P), symmetric(Q), symmetric(R), u, y_used, valid, gate, dict(extra), psym)
+    xp, Pp = filt.predict_expr(ctx)
+    upd = Update(*filt.update_expr(ctx, xp, Pp))
+    result = StepResult(xp, Pp, *upd, log_det(upd.S))
+    state = {"x": x, "P": P, **({"Q": Q, "R": R} if filt.adapts_noise else {}), **extra}
+    new = {k: sym for k, sym in state.items()}
+    new.update(x=upd.x, P=upd.P)
+    changes = filt.adapt_expr(ctx, result) or {}
+    unknown = sorted(set(changes) - (set(state) - {"x", "P"}))
+    if unknown:
+        raise ConfigurationError(f"{filt.name}: adapt_expr returned {unknown}, which are not its adaptable state "
+                                 f"({', '.join(k for k in state if k not in ('x', 'P')) or 'none'})")
+    new.update(changes)
+    inputs = {**state, "u": u, "y": y, "mask": mask, "gate": gate, "nan_missing": nan_missing,
+              **({} if filt.adapts_noise else {"Q": Q, "R": R}), **psym}
+    diag = dict(zip(DIAGNOSTICS, (xp, Pp, upd.innovation, upd.S, upd.K, upd.nis, upd.accepted, result.logdet_S)))
+    checked = [new["x"]] + [upper_entries(symmetric(new[k])) for k in ("P", "Q", "R") if k in new]
+    status = status_flag([u, y_used], checked)
+    d = ca.densify
+    outs = ([d(ca.reshape(new[k], state[k].shape)) for k in state] + [d(diag[k]) for k in DIAGNOSTICS]
+            + [d(v) for v in ctx.outputs.values()] + [status])
+    return ca.Function("step", list(inputs.values()), outs, list(inputs),
+                       [f"{k}_new" for k in state] + list(DIAGNOSTICS) + list(ctx.outputs) + ["status"], CSE)

@@ -1,0 +1,184 @@
+"""The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and
+the errors of a failed step.
+
+:class:`BoundStep` binds a fused step (one filter, or one mapped over realisations) to
+flat float arrays once: the state in two copies (the step reads one and writes the other;
+:meth:`BoundStep.commit` makes the written copy current, so a failed step leaves the state
+as it was), the inputs, the diagnostics and the status. Evaluating it is one native call.
+
+:class:`VectorInput` puts a user's vector into an input buffer. The good path costs a
+length check and one assignment per entry (a list, a tuple or a float array of the right
+length); anything else (a scalar, a string, a wrong length, ``None``, something that is
+not numbers) goes through the full check, which names the problem. NaN and inf are not
+tested here: the compiled step reports them in its status, and :func:`explain_status`
+then says which entry it was.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import casadi as ca
+import numpy as np
+
+from fmu_models.errors import InputError, NumericalError, TypeMismatchError
+
+from ._buffered import BufferedFunction
+from .linalg import BAD_INPUT, BAD_RESULT
+
+__all__ = ["BoundStep", "VectorInput", "explain_status"]
+
+
+class BoundStep:
+    """A step Function bound to arrays (see the module documentation).
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        The step: its inputs named ``s`` with an output ``s_new`` are state, carried from
+        evaluation to evaluation.
+    state : mapping of str to ndarray
+        Initial values of the state inputs (flat, column-major), copied.
+    shared : mapping of str to ndarray
+        Arrays bound as they are (not copied) to inputs of these names: fixed inputs whose
+        values the owner changes in place (Q, R, bounds).
+
+    Attributes
+    ----------
+    inputs : dict of str to ndarray
+        The array bound to every non-state input (``u``, ``y``, ...).
+    outputs : dict of str to ndarray
+        The array bound to every output that is not state (diagnostics, ``status``).
+    """
+
+    def __init__(self, fn: ca.Function, state: Mapping[str, np.ndarray], shared: Mapping[str, np.ndarray]):
+        names_in = [fn.name_in(i) for i in range(fn.n_in())]
+        self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in names_in if k in state}
+        self.inputs = {k: (shared[k] if k in shared else np.zeros(fn.nnz_in(k))) for k in names_in
+                       if k not in self.pairs}
+        self.outputs = {fn.name_out(j): np.zeros(fn.nnz_out(j)) for j in range(fn.n_out())
+                        if not fn.name_out(j).endswith("_new")}
+        self.cur = 0
+        self._steps = tuple(self._bind(fn, i) for i in (0, 1))
+        self.status = self.outputs["status"]
+
+    def _bind(self, fn: ca.Function, i: int) -> BufferedFunction:
+        args = {j: self.pairs[n][i] if n in self.pairs else self.inputs[n]
+                for j, n in enumerate(fn.name_in(k) for k in range(fn.n_in()))}
+        res = {j: self.pairs[n[:-4]][1 - i] if n.endswith("_new") else self.outputs[n]
+               for j, n in enumerate(fn.name_out(k) for k in range(fn.n_out()))}
+        return BufferedFunction(fn, args, res)
+
+    def now(self, name: str) -> np.ndarray:
+        """The current copy of state array ``name`` (a view: writing it changes the state)."""
+        return self.pairs[name][self.cur]
+
+    def trigger(self) -> float:
+        """Evaluate the step from the current state into the other copy; returns the status
+        (0: fine; the state is then committed only by :meth:`commit`)."""
+        self._steps[self.cur].trigger()
+        return self.status[0]
+
+    def commit(self) -> None:
+        """Make the state the last :meth:`trigger` wrote the current one."""
+        self.cur ^= 1
+
+    def set_state(self, name: str, value) -> None:
+        """Set both copies of state array ``name``."""
+        for a in self.pairs[name]:
+            a[:] = value
+
+
+class VectorInput:
+    """Writes a vector of ``n`` numbers into ``buffer`` (see the module documentation).
+
+    Parameters
+    ----------
+    buffer : ndarray
+        The float buffer (length ``n``).
+    owner, what : str
+        For messages: the filter's name and the input's (``"u"``, ``"y"``, ``"mask"``).
+    allow_scalar : bool
+        Accept a bare number when ``n == 1``.
+    """
+
+    def __init__(self, buffer: np.ndarray, owner: str, what: str, allow_scalar: bool = True):
+        self.buffer, self.owner, self.what = buffer, owner, what
+        self.n, self.allow_scalar = len(buffer), allow_scalar
+        self._range = range(self.n)
+
+    def __call__(self, value) -> None:
+        """Copy ``value`` into the buffer (raises InputError / TypeMismatchError naming the
+        problem; the buffer may then hold part of it)."""
+        buf = self.buffer
+        try:
+            if value.__class__ is str or len(value) != self.n:
+                raise ValueError
+            for i in self._range:
+                buf[i] = value[i]
+        except (TypeError, ValueError, IndexError, KeyError):
+            self.checked(value)
+
+    def checked(self, value) -> None:
+        """The full check of ``value`` (the slow path): a named error, or the copy."""
+        n, what, owner = self.n, self.what, self.owner
+        if value is None:
+            raise TypeMismatchError(f"{owner}: {what} is None; expected {n} number(s)")
+        if isinstance(value, (str, bytes)):
+            raise TypeMismatchError(f"{owner}: {what} must be numbers, got the string {value!r}")
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeMismatchError(f"{owner}: {what} must be numbers ({n}), got {_short(value)}") from None
+        if a.ndim == 0:
+            if not (self.allow_scalar and n == 1):
+                raise InputError(f"{owner}: {what} must have shape ({n},), got the scalar {_short(value)}")
+            a = a.reshape(1)
+        if a.shape != (n,):
+            raise InputError(f"{owner}: {what} must have shape ({n},), got shape {a.shape}")
+        self.buffer[:] = a
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarray, mask: np.ndarray,
+                   nan_is_missing: bool, what: str) -> None:
+    """Raise the error of a step whose status is not 0 (the filter's state is unchanged).
+
+    Parameters
+    ----------
+    status : float
+        The step's status (:data:`~estimators.linalg.BAD_INPUT` or ``BAD_RESULT``).
+    owner : str
+        The filter's name.
+    k : int
+        The step's index.
+    u, y, mask : ndarray
+        The step's inputs.
+    nan_is_missing : bool
+        Whether a NaN measurement is a missing channel.
+    what : str
+        What was running (``"step"``, ``"run index 12"``).
+
+    Raises
+    ------
+    InputError
+        ``u`` or a used ``y`` entry was NaN or inf.
+    NumericalError
+        The estimate became non-finite.
+    """
+    if status == BAD_INPUT:
+        bad_u = np.flatnonzero(~np.isfinite(u))
+        if len(bad_u):
+            raise InputError(f"{owner}: u contains NaN or inf at index {bad_u.tolist()} at step {k} "
+                             f"(u = {u}); filter state unchanged")
+        used = mask != 0
+        bad_y = np.flatnonzero(used & np.isinf(y) | (used & np.isnan(y) & (not nan_is_missing)))
+        kind = "inf" if np.isinf(y[bad_y]).any() else "NaN"
+        raise InputError(f"{owner}: y contains {kind} at index {bad_y.tolist()} at step {k} (y = {y}); filter "
+                         "state unchanged" + ("" if nan_is_missing else " (nan_is_missing=False)"))
+    if status == BAD_RESULT:
+        raise NumericalError(f"{owner}: the estimate became non-finite at step {k} ({what}); filter state "
+                             "unchanged (diverged, or covariances too large)")

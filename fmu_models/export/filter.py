@@ -1,0 +1,233 @@
+"""A configured filter as a native Co-Simulation FMU (FMI 2.0 or 3.0), no Python inside.
+
+:func:`export_filter_fmu` generates C code for the filter's compiled fused step (the very
+CasADi Function the filter's ``step`` runs) and for a function mapping the FMU's
+parameters to the filter's initial state, and packs them with the estimator core
+(``c/filter_core.c``) and the project's FMI wrappers (:mod:`fmu_models.export.pack`): the
+same machinery as the plant FMUs. It works on any filter of the protocol of
+:mod:`estimators.protocol` (it never asks which filter it is):
+
+* the FMU's parameters are the filter's ``fmu_parameters()`` (one FMU variable per entry,
+  named by the parameter's labels, checked against its domain as in Python);
+* ``fmu_initial(p)`` gives the initial state arrays and the step's fixed inputs as
+  expressions of those parameters.
+
+Variables (names from the model):
+
+* inputs: the model's inputs ``u`` (e.g. ``F``) and measurements ``y`` (e.g. ``y_x``), and
+  one Boolean ``valid_<measurement>`` per channel (false: that channel's update is skipped;
+  a NaN measurement is missing too unless the filter has ``nan_is_missing=False``);
+* outputs: the estimate (one variable per state, the state names), the diagonal of P
+  (``P_<state>``), the innovation (``innov_<measurement>``), ``nis``, and for adaptive
+  filters their current Q and R diagonals (``Q_<state>``, ``R_<measurement>``);
+* parameters (with the exported filter's values as defaults): for the built-in filters
+  ``x0_<state>``, ``P0_<state>`` (diagonal), ``gate`` (chi-square gate on the NIS, 0: none),
+  ``Q0_<state>``, ``R0_<measurement>`` (diagonals; MF-IAE: ``q0``, ``r0``), and the step
+  parameters (IAE and MF-IAE: ``q_min, q_max, r_min, r_max``; MF-IAE ``gain_q``, ``gain_r``).
+
+Timing: as :class:`~cosim.components.estimation.EstimatorComponent`; see ``filter_core.h``.
+One ``doStep`` is one filter step and must last the filter's period.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import casadi as ca
+
+from ..errors import ConfigurationError, TypeMismatchError
+from .config import c_array, config_header, work_sizes
+from .description import Description, Unknown, fmi2, fmi3
+from .pack import pack_fmu
+from .variables import VariableList
+
+__all__ = ["export_filter_fmu", "filter_parameters"]
+
+#: The step's measurement inputs, set by the FMU from its variables.
+_FED = ("u", "y", "mask")
+
+
+def _is_filter(filt) -> bool:
+    return all(hasattr(filt, a) for a in ("fmu_parameters", "fmu_initial", "step_function", "state_arrays",
+                                          "system", "supports_batch"))
+
+
+def _flat_parameters(filt) -> list[tuple]:
+    """``(label, value, domain, description, parameter name, entry)`` of every FMU parameter."""
+    rows, seen = [], set()
+    for prm in filt.fmu_parameters():
+        for i, label in enumerate(prm.labels):
+            if label in seen:
+                raise ConfigurationError(f"{filt.name}: two FMU parameters are named {label!r}")
+            seen.add(label)
+            rows.append((label, float(prm.value[i]), prm.domain, prm.describe(i), prm.name, i))
+    return rows
+
+
+def filter_parameters(filt) -> dict[str, float]:
+    """The parameters of ``filt``'s FMU with the filter's current values, by FMU name (see
+    the module documentation)."""
+    return {r[0]: r[1] for r in _flat_parameters(filt)}
+
+
+def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None = None,
+                      file_name: str | None = None) -> Path:
+    """Export ``filt`` (any filter of :mod:`estimators`, on any model) as a Co-Simulation FMU;
+    returns the ``.fmu`` path.
+
+    Parameters
+    ----------
+    filt : KalmanBase
+        The configured filter; its current estimate, covariances and settings become the
+        FMU's parameter defaults (P0, Q, R must be diagonal).
+    out_dir : path
+        Folder to write ``<name>.fmu`` into.
+    fmi_version : {2, 3}
+    name : str, optional
+        Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``).
+    file_name : str, optional
+        The FMU file name (default ``<name>.fmu``).
+
+    Raises
+    ------
+    TypeMismatchError
+        Not a filter, or a filter whose adaptation is not all in its step (an IAE with
+        ``form="full"``).
+    ConfigurationError
+        A non-diagonal P, Q or R, a bad name, or parameters the FMU cannot hold.
+    """
+    if not _is_filter(filt):
+        raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
+    if not filt.supports_batch:
+        raise TypeMismatchError(f"{filt.name} adapts part of its state in numpy and cannot be exported"
+                                + ("; use form='diagonal' or 'scalar'" if hasattr(filt, "form") else ""))
+    s = filt.system
+    model = s.description.split(" ")[0].capitalize() or "Model"
+    name = name or "".join(ch for ch in f"{filt.name.replace('-', '')}{model}" if ch.isalnum())
+    if not name.isidentifier() or not name.isascii():
+        raise ConfigurationError(f"FMU name {name!r} must be an ASCII identifier")
+    rows = _flat_parameters(filt)
+    psym = ca.SX.sym("p", len(rows))
+    by_param: dict[str, list] = {}
+    for k, r in enumerate(rows):
+        by_param.setdefault(r[4], []).append(psym[k])
+    p = {n: ca.vertcat(*entries) for n, entries in by_param.items()}
+    initial = filt.fmu_initial(p)
+    step = filt.step_function()
+    names_in = [step.name_in(i) for i in range(step.n_in())]
+    names_out = [step.name_out(i) for i in range(step.n_out())]
+    state_names = list(filt.state_arrays())
+    fixed_names = [n for n in names_in if n not in state_names and n not in _FED]
+    missing = [n for n in state_names + fixed_names if n not in initial]
+    if missing:
+        raise ConfigurationError(f"{filt.name}: fmu_initial gives no value for {missing}")
+    # buffers: state (the filter's state arrays), fixed (the step's fixed inputs), diag
+    off, st_off, fx_off, dg_off = 0, {}, {}, {}
+    for n in state_names:
+        st_off[n], off = off, off + step.nnz_in(n)
+    nstate, off = off, 0
+    for n in fixed_names:
+        fx_off[n], off = off, off + step.nnz_in(n)
+    nfixed, off = off, 0
+    for n in names_out:
+        if not n.endswith("_new") and n != "status":
+            dg_off[n], off = off, off + step.nnz_out(n)
+    ndiag = off
+    init_out = []
+    for n in state_names + fixed_names:
+        expr = ca.SX(initial[n])
+        if expr.numel() != step.nnz_in(n):
+            raise ConfigurationError(f"{filt.name}: fmu_initial gives {expr.numel()} values for {n!r}, the step "
+                                     f"takes {step.nnz_in(n)}")
+        init_out.append(ca.densify(ca.reshape(expr, step.size_in(n))))
+    from estimators.linalg import finite_flag
+
+    # the gate may be inf (no gate); everything else must be finite
+    bad = 1 - finite_flag([e for e, n in zip(init_out, state_names + fixed_names) if n != "gate"])
+    init = ca.Function("flt_init", [psym], init_out + [bad])
+    args = [ca.SX.sym(n, step.sparsity_in(i)) for i, n in enumerate(names_in)]
+    run_step = ca.Function("flt_step", args, step.call(args), names_in, names_out)
+    src = {"u": (1, 0), "y": (2, 0), "mask": (3, 0)}
+    step_src = [(0, st_off[n]) if n in st_off else src.get(n, (4, fx_off.get(n, 0))) for n in names_in]
+    step_dst = [(0, st_off[n[:-4]]) if n.endswith("_new") else (2, 0) if n == "status" else (1, dg_off[n])
+                for n in names_out]
+    v = VariableList()
+    for label, value, domain, descr, _, _ in rows:
+        v.add(name=label, type="Real", causality="parameter", variability="fixed", initial="exact", start=value,
+              unit=None, description=descr, group="P", domain=domain)
+    for n in s.input_names:
+        v.add(name=n, type="Real", causality="input", variability="discrete", initial=None, start=0.0, unit=None,
+              description=f"input {n}, held over the prediction that starts now", group="U")
+    for n in s.output_names:
+        v.add(name=n, type="Real", causality="input", variability="discrete", initial=None, start=0.0, unit=None,
+              description=f"measurement {n} (NaN: missing)", group="Y")
+    nx, ny = s.nx, s.ny
+    outs = [(n, 0, st_off["x"] + i, f"estimate of {n}") for i, n in enumerate(s.state_names)]
+    outs += [(f"P_{n}", 0, st_off["P"] + i * (nx + 1), f"variance of the estimate of {n}")
+             for i, n in enumerate(s.state_names)]
+    outs += [(f"innov_{n}", 1, dg_off["innov"] + j, f"innovation of {n}") for j, n in enumerate(s.output_names)]
+    outs += [("nis", 1, dg_off["nis"], "normalised innovation squared")]
+    if "Q" in st_off:
+        outs += [(f"Q_{n}", 0, st_off["Q"] + i * (nx + 1), f"adapted process variance of {n}")
+                 for i, n in enumerate(s.state_names)]
+        outs += [(f"R_{n}", 0, st_off["R"] + j * (ny + 1), f"adapted measurement variance of {n}")
+                 for j, n in enumerate(s.output_names)]
+    for oname, _, _, descr in outs:
+        v.add(name=oname, type="Real", causality="output", variability="discrete", initial="calculated", start=None,
+              unit=None, description=descr, group="OUT")
+    for n in s.output_names:
+        v.add(name=f"valid_{n}", type="Boolean", causality="input", variability="discrete", initial=None, start=True,
+              unit=None, description=f"measurement {n} is valid (false: its update is skipped)", group="VALID")
+    v.add(name="time", type="Real", causality="independent", variability="continuous", initial=None, start=None,
+          unit="s", description="simulation time", group="TIME")
+    names = [x.name for x in v.variables]
+    if len(set(names)) != len(names):
+        dup = sorted({x for x in names if names.count(x) > 1})
+        raise ConfigurationError(f"{filt.name}: FMU variable names collide: {dup} (rename the model's variables "
+                                 "or the filter's parameters)")
+    less, first = [], {}
+    for k, r in enumerate(rows):
+        first.setdefault(r[4], k)
+    for prm in filt.fmu_parameters():
+        if prm.increasing:
+            k0 = first[prm.name]
+            less += [(k0 + i, k0 + i + 1) for i in range(prm.size - 1)]
+    work = work_sizes([init, run_step], minimum_res=init.n_out())
+
+    def generate(folder: Path, guid: str) -> list[str]:
+        cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
+        cg.add(init)
+        cg.add(run_step)
+        cg.generate(str(folder) + "/")
+        header = config_header(
+            v, name, guid, "fmu_models.export.filter", groups=("U", "Y", "OUT", "VALID", "TIME"), work=work,
+            defines=[("NSTATE", max(nstate, 1)), ("NFIXED", max(nfixed, 1)), ("NDIAG", max(ndiag, 1)),
+                     ("PERIOD", repr(s.dt)), ("N_LESS", len(less)),
+                     ("INIT_NOUT", len(state_names) + len(fixed_names)), ("STEP_NIN", len(names_in)),
+                     ("STEP_NOUT", len(names_out))],
+            tables=[c_array("int", "LESS_LO", [a for a, _ in less]), c_array("int", "LESS_HI", [b for _, b in less]),
+                    c_array("int", "INIT_DST", [0] * len(state_names) + [1] * len(fixed_names)),
+                    c_array("int", "INIT_OFF", [st_off[n] for n in state_names] + [fx_off[n] for n in fixed_names]),
+                    c_array("int", "STEP_SRC", [a for a, _ in step_src]),
+                    c_array("int", "STEP_OFF", [b for _, b in step_src]),
+                    c_array("int", "STEP_DST", [a for a, _ in step_dst]),
+                    c_array("int", "STEP_ROFF", [b for _, b in step_dst]),
+                    c_array("int", "OUT_SRC", [o[1] for o in outs]), c_array("int", "OUT_OFF", [o[2] for o in outs])])
+        (folder / "model_config.h").write_text(header)
+        return ["model_funcs.c"]
+
+    y_idx = v.indices(["Y", "VALID"])
+    p_idx = v.indices(["P"])
+    out_idx = v.indices(["OUT"])
+
+    def xml(guid: str, c_files: list[str]) -> str:
+        d = Description(model_name=name, identifier=name, guid=guid,
+                        description=f"{filt.name} on {s.description}: a filter step per communication step "
+                                    f"of {s.dt:g} s (pendulum-cosim)",
+                        variables=v.variables,
+                        outputs=[Unknown(k, y_idx, ["dependent"] * len(y_idx)) for k in out_idx],
+                        initial_unknowns=[Unknown(k, p_idx) for k in out_idx],
+                        variable_step=False, default_step=s.dt, source_files=c_files)
+        return fmi2(d) if fmi_version == 2 else fmi3(d)
+
+    return pack_fmu(name, "filter", fmi_version, generate, xml, out_dir,
+                    fingerprint=f"{filt.cache_key}|{rows}|{s.dt}|{names_in}|{names_out}", file_name=file_name)

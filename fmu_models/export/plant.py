@@ -1,0 +1,193 @@
+"""The plant FMUs: variables, C sources and model description of a :class:`~fmu_models.PlantModel`,
+compiled and packed by :func:`fmu_models.export.pack.pack_fmu` with the plant core
+(``c/plant_core.c``).
+
+Variables, in value-reference order (group in brackets, see :mod:`fmu_models.export.config`):
+the parameters [P], ``step_size`` [STEP], the states [X], ``der(state)`` [DX], the inputs
+[U], one process-noise input ``w_<state>`` per state [W], the measured outputs [Y], the
+Enumeration ``integrator`` and the Integer ``substeps`` [IP], and ``time`` [TIME]. The
+ModelStructure comes from the structural sparsity of the CasADi expressions; the C code
+of the model's f, h and Jacobians is CasADi's. Each FMU holds Model Exchange and
+Co-Simulation, in FMI 2.0 or 3.0, and its C sources (``sources/``).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import casadi as ca
+
+from ..plant import PlantModel
+from .config import c_array, config_header, work_sizes
+from .description import Description, Unknown, fmi2, fmi3
+from .pack import pack_fmu
+from .variables import VariableList
+
+__all__ = ["DEFAULT_STEP_SIZE", "build_fmu", "build_fmus", "derivative_unit", "plant_variables"]
+
+#: Default internal step [s]: seed 000's sampling period T.
+DEFAULT_STEP_SIZE = 0.01
+_ITEMS = (("euler", 1, "forward Euler (seed 000 eqs 14-17)"), ("rk4", 2, "classical Runge-Kutta 4"))
+
+
+def derivative_unit(unit: str) -> str:
+    """Unit of the time derivative of a quantity in ``unit`` (``"m/s"`` -> ``"m/s2"``)."""
+    if unit.endswith("/s"):
+        return unit + "2"
+    return "1/s" if unit == "1" else unit + "/s"
+
+
+def plant_variables(model: PlantModel) -> VariableList:
+    """The FMU variables of ``model`` (see the module documentation)."""
+    v = VariableList()
+    for p, val in zip(model.parameters, model.p):
+        v.add(name=p.name, type="Real", causality="parameter", variability="fixed", initial="exact",
+              start=float(val), unit=p.unit, description=p.description, group="P", domain=p.domain)
+    v.add(name="step_size", type="Real", causality="parameter", variability="fixed", initial="exact",
+          start=DEFAULT_STEP_SIZE, unit="s", group="STEP", domain="positive",
+          description="internal integration step is step_size/substeps; a communication step that is not a "
+                      "multiple of it ends with a partial step")
+    first_state = len(v.variables) + 1
+    for s in model.states:
+        v.add(name=s.name, type="Real", causality="output", variability="continuous", initial="exact",
+              start=float(s.start), unit=s.unit, description=s.description + " (continuous state)", group="X")
+    for i, s in enumerate(model.states):
+        v.add(name=f"der({s.name})", type="Real", causality="local", variability="continuous",
+              initial="calculated", start=None, unit=derivative_unit(s.unit),
+              description=f"time derivative of {s.name}", derivative_of=first_state + i, group="DX")
+    for u in model.inputs:
+        v.add(name=u.name, type="Real", causality="input", variability="continuous", initial=None,
+              start=float(u.start), unit=u.unit, description=u.description, group="U")
+    for s in model.states:
+        v.add(name=f"w_{s.name}", type="Real", causality="input", variability="continuous", initial=None,
+              start=0.0, unit=s.unit, group="W",
+              description=f"process noise added to {s.name} at the end of each Co-Simulation step (seed 000 "
+                          "eq 12); not used in Model Exchange")
+    for y in model.outputs:
+        v.add(name=y.name, type="Real", causality="output", variability="continuous", initial="calculated",
+              start=None, unit=y.unit, description=y.description, group="Y")
+    v.add(name="integrator", type="Enumeration", causality="parameter", variability="fixed", initial="exact",
+          start=1, unit=None, description="Co-Simulation integrator: 1 = euler (seed 000 truth map), 2 = rk4",
+          group="IP", declared_type="Integrator", min=1, max=2)
+    v.add(name="substeps", type="Integer", causality="parameter", variability="fixed", initial="exact",
+          start=1, unit=None, description="internal steps per step_size (both integrators)", group="IP",
+          min=1, max=1_000_000)
+    v.add(name="time", type="Real", causality="independent", variability="continuous", initial=None,
+          start=None, unit="s", description="simulation time", group="TIME")
+    return v
+
+
+def _functions(model: PlantModel) -> list[ca.Function]:
+    """The four functions the plant core calls, with dense outputs (column-major arrays in C)."""
+    s = model.sym
+    x, u, p = s.x, s.u, s.p
+    d = ca.densify
+    return [ca.Function("mdl_f", [x, u, p], [d(s.xdot)]),
+            ca.Function("mdl_h", [x, p], [d(s.y)]),
+            ca.Function("mdl_jac_f", [x, u, p], [d(ca.jacobian(s.xdot, x)), d(ca.jacobian(s.xdot, u))]),
+            ca.Function("mdl_jac_h", [x, p], [d(ca.jacobian(s.y, x))])]
+
+
+def _write_sources(model: PlantModel, variables: VariableList, guid: str, folder: Path) -> list[str]:
+    funcs = _functions(model)
+    cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
+    for f in funcs:
+        cg.add(f)
+    cg.generate(str(folder) + "/")
+    header = config_header(variables, model.fmu_name, guid, "fmu_models.export.plant", work=work_sizes(funcs, 3, 2),
+                           defines=[("DEFAULT_STEP_SIZE", repr(DEFAULT_STEP_SIZE))],
+                           tables=[c_array("double", "X_START", [repr(float(s.start)) for s in model.states])])
+    (folder / "model_config.h").write_text(header)
+    return ["model_funcs.c"]
+
+
+def _dependency_kind(entry: ca.SX, model: PlantModel) -> str:
+    """FMI 2.0 dependenciesKind of one Jacobian entry."""
+    s = model.sym
+    if ca.depends_on(entry, ca.vertcat(s.x, s.u)):
+        return "dependent"
+    return "fixed" if ca.depends_on(entry, s.p) else "constant"
+
+
+def _dependencies(model: PlantModel, J: ca.SX, row: int, known: list[int]) -> tuple[list[int], list[str]]:
+    deps, kinds = [], []
+    for col, k in enumerate(known):
+        if J.sparsity().has_nz(row, col) and not J[row, col].is_zero():
+            deps.append(k)
+            kinds.append(_dependency_kind(J[row, col], model))
+    return deps, kinds
+
+
+def _description(model: PlantModel, variables: VariableList, guid: str, source_files=()) -> Description:
+    s = model.sym
+    index = {v.name: v.vr + 1 for v in variables.variables}
+    states = [index[n] for n in model.state_names]
+    inputs = [index[n] for n in model.input_names]
+    params = [index[p.name] for p in model.parameters]
+    Jf, Jh = ca.jacobian(s.xdot, ca.vertcat(s.x, s.u)), ca.jacobian(s.y, s.x)
+    Jfp, Jhp = ca.jacobian(s.xdot, s.p), ca.jacobian(s.y, s.p)
+    outputs = [Unknown(k, [k], ["constant"]) for k in states]
+    outputs += [Unknown(index[n], *_dependencies(model, Jh, j, states)) for j, n in enumerate(model.output_names)]
+    derivatives = [Unknown(index[f"der({n})"], *_dependencies(model, Jf, i, states + inputs))
+                   for i, n in enumerate(model.state_names)]
+    initial = [Unknown(index[f"der({n})"], _dependencies(model, Jf, i, states + inputs)[0]
+                       + _dependencies(model, Jfp, i, params)[0]) for i, n in enumerate(model.state_names)]
+    initial += [Unknown(index[n], _dependencies(model, Jh, j, states)[0] + _dependencies(model, Jhp, j, params)[0])
+                for j, n in enumerate(model.output_names)]
+    return Description(model_name=model.fmu_name, identifier=model.fmu_name, guid=guid,
+                       description=model.description, variables=variables.variables, outputs=outputs,
+                       derivatives=derivatives, initial_unknowns=initial, model_exchange=True,
+                       directional=True, enumerations={"Integrator": _ITEMS}, source_files=source_files)
+
+
+def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: int = 2) -> Path:
+    """Build the FMU of one plant model into ``out_dir``; returns the ``.fmu`` path.
+
+    Parameters
+    ----------
+    model : PlantModel or str
+        The model (its current parameter values become the FMU's start values) or a name
+        for :func:`fmu_models.get_model`.
+    out_dir : path
+        Directory to write ``<fmu_name>.fmu`` into (created if missing).
+    fmi_version : int
+        2 or 3; either way Model Exchange and Co-Simulation in one FMU.
+
+    Raises
+    ------
+    CompilerNotFoundError
+        No C compiler is available.
+    BuildError
+        The compiler failed (its output is in the message).
+    """
+    from .. import get_model
+
+    if isinstance(model, str):
+        model = get_model(model)
+    variables = plant_variables(model)
+
+    def generate(folder: Path, guid: str) -> list[str]:
+        return _write_sources(model, variables, guid, folder)
+
+    def xml(guid: str, c_files: list[str]) -> str:
+        d = _description(model, variables, guid, c_files if fmi_version == 2 else ())
+        return fmi2(d) if fmi_version == 2 else fmi3(d)
+
+    return pack_fmu(model.fmu_name, "plant", fmi_version, generate, xml, out_dir, fingerprint=f"{model.p.tolist()}")
+
+
+def build_fmus(out_dir: str | Path = ".", fmi_version: int = 2, models: tuple[str, ...] | None = None) -> list[Path]:
+    """Build the FMUs of the registered plant models (default: all, see
+    :func:`fmu_models.model_names`) into ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output directory (created if missing).
+    fmi_version : int
+        2 or 3 (see :func:`build_fmu`).
+    models : tuple of str, optional
+        Registry names of the models to build.
+    """
+    from .. import get_model, model_names
+
+    return [build_fmu(get_model(name), out_dir, fmi_version) for name in (models or model_names())]

@@ -1,0 +1,227 @@
+"""Signal FMUs: the sources, the process noise and the noisy sensor as native Co-Simulation
+FMUs (FMI 2.0 or 3.0), built by the same machinery as the plant and estimator FMUs
+(:func:`fmu_models.export.pack.pack_fmu` with ``c/signal_core.c``).
+
+A :class:`SignalSpec` describes one FMU: its kind, its channels and its parameters (with
+the component's values as defaults). The components of :mod:`cosim.components.sources` and
+:mod:`cosim.components.sensors` build theirs in ``export_fmu`` (see :class:`cosim.core.component.Component`);
+:func:`build_signal_fmu` compiles and packs it.
+
+Kinds and variables (``period`` [s] is a parameter of every kind; noise is drawn at sample
+``round(t / period)``, see :mod:`cosim.components.noise`):
+
+=========  ==========================================  ============================================
+kind       parameters                                   outputs (inputs)
+=========  ==========================================  ============================================
+constant   ``value``                                    ``out``
+step       ``t_step``, ``before``, ``after``            ``out``
+sine       ``amplitude``, ``frequency``, ``phase``,     ``out``
+           ``offset``
+prbs       ``amplitude``, ``bit_time``, ``offset``;     ``out``
+           Integer ``order`` (2..16), ``seed``
+noise      ``std_<port>`` per channel; Integer          ``w_<state>`` per channel
+           ``seed``
+sensor     ``std_<signal>``, ``bias_<signal>``,         ``y_<signal>`` (inputs ``<signal>``)
+           ``quantization_<signal>``; Integer ``seed``
+=========  ==========================================  ============================================
+
+The kinds are a registry (:data:`SIGNAL_KINDS`): the six above are built into
+``signal_core.c``; :func:`register_signal_kind` adds one whose output is a C expression
+(see there), so a new signal FMU is one definition in Python.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import ConfigurationError
+from ..registry import Registry
+from .config import config_header
+from .description import Description, Unknown, fmi2, fmi3
+from .pack import pack_fmu
+from .variables import VariableList
+
+__all__ = ["KINDS", "SIGNAL_KINDS", "SignalKind", "SignalSpec", "build_signal_fmu", "channel_params",
+           "register_signal_kind"]
+
+_INT32_MAX = 2**31 - 1
+#: ``SIGNAL_KIND`` of a kind defined by its C expression (``signal_custom.h``).
+KIND_CUSTOM = 99
+
+
+@dataclass(frozen=True)
+class SignalKind:
+    """A kind of signal FMU.
+
+    Attributes
+    ----------
+    name : str
+    code : int
+        Its ``SIGNAL_KIND`` in ``signal_core.c`` (:data:`KIND_CUSTOM` for a C expression).
+    c_output : str
+        For a custom kind: the C expression of output channel ``j`` at time ``t``, from the
+        Real parameters ``p[P_<NAME>]`` (``P_`` and the upper-cased parameter name), the
+        Integer parameters ``d->ip[IP_<NAME>]`` and the inputs ``d->in[j]``; ``<math.h>``
+        is available.
+    inputs : bool
+        The kind has one input per output channel (a sensor).
+    """
+
+    name: str
+    code: int
+    c_output: str = ""
+    inputs: bool = False
+
+
+#: The signal FMU kinds by name.
+SIGNAL_KINDS: Registry[SignalKind] = Registry("signal kind")
+for _code, _name in enumerate(("constant", "step", "sine", "prbs", "noise", "sensor")):
+    SIGNAL_KINDS.register(_name, SignalKind(_name, _code, inputs=_name == "sensor"))
+#: The built-in kinds (``signal_core.c``).
+KINDS = tuple(SIGNAL_KINDS.names())
+
+
+def register_signal_kind(name: str, c_output: str, inputs: bool = False) -> SignalKind:
+    """Register a signal FMU kind ``name`` whose output channel ``j`` is the C expression
+    ``c_output`` (see :class:`SignalKind`); ``inputs``: one input per channel. Returns it.
+
+    >>> register_signal_kind("ramp", "p[P_SLOPE] * t")        # doctest: +SKIP
+    """
+    if not isinstance(c_output, str) or not c_output.strip() or ";" in c_output or "}" in c_output:
+        raise ConfigurationError(f"signal kind {name!r}: c_output must be one C expression, got {c_output!r}")
+    return SIGNAL_KINDS.register(name, SignalKind(name, KIND_CUSTOM, c_output, bool(inputs)))
+
+
+@dataclass
+class SignalSpec:
+    """One signal FMU.
+
+    Attributes
+    ----------
+    kind : str
+        A registered kind (:data:`SIGNAL_KINDS`).
+    period : float
+        Sample period [s] (the FMU's default communication step and the noise's sample).
+    outputs : list of str
+        Output names, one per channel.
+    inputs : list of str
+        Input names (the sensor's measured signals), one per channel; else empty.
+    reals : list of (name, value, domain, description)
+        Real parameters after ``period``, in the order ``signal_core.c`` reads them
+        (domain ``"real"``, ``"positive"`` or ``"nonnegative"``).
+    ints : list of (name, value, min, max, description)
+        Integer parameters.
+    description : str
+        The FMU's description.
+    """
+
+    kind: str
+    period: float
+    outputs: list[str]
+    reals: list[tuple] = field(default_factory=list)
+    ints: list[tuple] = field(default_factory=list)
+    inputs: list[str] = field(default_factory=list)
+    description: str = ""
+
+    def parameters(self) -> dict:
+        """Every parameter's value by name (``period`` included)."""
+        return {"period": self.period, **{r[0]: r[1] for r in self.reals}, **{i[0]: i[1] for i in self.ints}}
+
+
+def _check(spec: SignalSpec) -> SignalKind:
+    kind = SIGNAL_KINDS.get(spec.kind)
+    if not spec.outputs or (kind.inputs and len(spec.inputs) != len(spec.outputs)) or \
+            (not kind.inputs and spec.inputs):
+        raise ConfigurationError(f"{spec.kind} FMU: needs outputs (and, for a kind with inputs, one input per output)")
+    for name, value, lo, hi, _ in spec.ints:
+        if not lo <= value <= hi or hi > _INT32_MAX:
+            raise ConfigurationError(f"{spec.kind} FMU: {name} = {value} must be in [{lo}, {min(hi, _INT32_MAX)}] "
+                                     "(an FMI Int32)")
+    return kind
+
+
+def _variables(spec: SignalSpec) -> VariableList:
+    v = VariableList()
+    reals = [("period", spec.period, "positive", "sample period of the noise [s]")] + list(spec.reals)
+    for name, value, domain, descr in reals:
+        v.add(name=name, type="Real", causality="parameter", variability="fixed", initial="exact",
+              start=float(value), unit=None, description=descr, group="P", domain=domain)
+    for name in spec.inputs:
+        v.add(name=name, type="Real", causality="input", variability="continuous", initial=None, start=0.0,
+              unit=None, description=f"measured signal {name}", group="IN")
+    for name in spec.outputs:
+        v.add(name=name, type="Real", causality="output", variability="continuous", initial="calculated",
+              start=None, unit=None, description=f"{spec.kind} output {name}", group="OUT")
+    v.add(name="time", type="Real", causality="independent", variability="continuous", initial=None, start=None,
+          unit=None, description="simulation time", group="TIME")
+    for name, value, lo, hi, descr in spec.ints:
+        v.add(name=name, type="Integer", causality="parameter", variability="fixed", initial="exact",
+              start=int(value), unit=None, description=descr, group="IP", min=int(lo), max=int(hi))
+    return v
+
+
+def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier: str = "Signal",
+                     file_name: str | None = None) -> Path:
+    """Compile and pack the signal FMU ``spec``; returns the ``.fmu`` path.
+
+    Parameters
+    ----------
+    spec : SignalSpec
+    out_dir : path
+    fmi_version : {2, 3}
+    identifier : str
+        Model identifier (a C identifier).
+    file_name : str, optional
+        Default ``<identifier>.fmu``.
+
+    Raises
+    ------
+    ConfigurationError
+        An inconsistent spec or a bad identifier.
+    """
+    kind = _check(spec)
+    if not identifier.isidentifier() or not identifier.isascii():
+        raise ConfigurationError(f"FMU identifier {identifier!r} must be an ASCII C identifier")
+    variables = _variables(spec)
+    n = len(spec.outputs)
+    defines = [("SIGNAL_KIND", kind.code)]
+    if spec.kind in ("noise", "sensor"):          # per-channel parameter blocks after period
+        defines.append(("SIG_STD", 1))
+        if spec.kind == "sensor":
+            defines += [("SIG_BIAS", 1 + n), ("SIG_QUANT", 1 + 2 * n)]
+
+    def generate(folder: Path, guid: str) -> list[str]:
+        (folder / "model_config.h").write_text(config_header(variables, identifier, guid, "fmu_models.export.signal",
+                                                             groups=("IN", "OUT", "TIME"), defines=defines))
+        custom = kind.c_output or "0.0"
+        (folder / "signal_custom.h").write_text(
+            "/* Generated by pendulum-cosim (fmu_models.export.signal): the output of a custom signal kind. */\n"
+            "static double custom_output(const CoreData *d, int j, const double *p, double t) {\n"
+            "    (void)d; (void)j; (void)p; (void)t;\n"
+            f"    return ({custom});\n}}\n")
+        return []
+
+    in_idx = variables.indices(["IN"])
+    p_idx = variables.indices(["P", "IP"])
+    outs = variables.indices(["OUT"])
+    if kind.inputs:                 # channel j depends on input j only
+        o_unknowns = [Unknown(o, [i], ["dependent"]) for o, i in zip(outs, in_idx, strict=True)]
+    else:
+        o_unknowns = [Unknown(o, []) for o in outs]
+
+    def xml(guid: str, c_files: list[str]) -> str:
+        d = Description(model_name=identifier, identifier=identifier, guid=guid,
+                        description=spec.description or f"{spec.kind} signal (pendulum-cosim)",
+                        variables=variables.variables, outputs=o_unknowns,
+                        initial_unknowns=[Unknown(o, p_idx + in_idx) for o in outs],
+                        variable_step=True, default_step=spec.period, source_files=c_files)
+        return fmi2(d) if fmi_version == 2 else fmi3(d)
+
+    return pack_fmu(identifier, "signal", fmi_version, generate, xml, out_dir, fingerprint=f"{spec}",
+                    file_name=file_name)
+
+
+def channel_params(prefix: str, names: Sequence[str], values, domain: str, what: str) -> list[tuple]:
+    """Real parameter rows ``<prefix>_<name>`` for per-channel ``values``."""
+    return [(f"{prefix}_{n}", float(v), domain, f"{what} of {n}") for n, v in zip(names, values, strict=True)]

@@ -1,0 +1,107 @@
+"""The variables of an FMU the project writes: one list feeds both the ``modelDescription.xml``
+(:mod:`fmu_models.export.description`) and the C core's ``model_config.h``
+(:mod:`fmu_models.export.config`).
+
+Every variable belongs to a *group* (``group``): the consecutive value references a core
+reads as one array (``"P"`` the Real parameters, ``"X"`` the states, ``"OUT"`` the outputs,
+...). A group becomes ``VR_<group>`` (its first value reference) and ``N_<group>`` (its
+size) in ``model_config.h``.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ..errors import ConfigurationError
+
+__all__ = ["FmuVariable", "VariableList"]
+
+
+@dataclass(frozen=True)
+class FmuVariable:
+    """One FMU variable.
+
+    Attributes
+    ----------
+    name : str
+        FMI name.
+    vr : int
+        Value reference (the ModelVariables index is ``vr + 1``).
+    type : {"Real", "Integer", "Enumeration", "Boolean"}
+        FMI 2.0 type name (FMI 3.0: Float64, Int32, Enumeration, Boolean).
+    causality, variability, initial : str
+        As the FMI standard (``initial`` may be None).
+    start : float, int, bool or None
+        Start value.
+    unit : str or None
+    description : str
+    group : str
+        The value-reference group of the C core (see the module documentation).
+    domain : str
+        Admissible values of a Real parameter (:data:`fmu_models.variables.DOMAINS`).
+    derivative_of : int, optional
+        1-based index of the state this variable is the derivative of.
+    declared_type : str, optional
+        The type of an Enumeration.
+    min, max : int, optional
+        Range of an Integer or Enumeration.
+    """
+
+    name: str
+    vr: int
+    type: str
+    causality: str
+    variability: str
+    initial: str | None
+    start: float | int | bool | None
+    unit: str | None
+    description: str
+    group: str = ""
+    domain: str = "real"
+    derivative_of: int | None = None
+    declared_type: str | None = None
+    min: int | None = None
+    max: int | None = None
+
+
+class VariableList:
+    """Variables added in value-reference order (``vr`` = position), grouped.
+
+    Use :meth:`add` with the :class:`FmuVariable` fields except ``vr``; then
+    :attr:`variables` is the list, :meth:`group` the variables of a group and
+    :meth:`first` the value reference of a group's first variable.
+    """
+
+    def __init__(self):
+        self.variables: list[FmuVariable] = []
+
+    def add(self, **fields) -> FmuVariable:
+        """Append a variable (``vr`` is its position); returns it."""
+        v = FmuVariable(vr=len(self.variables), **fields)
+        self.variables.append(v)
+        return v
+
+    def group(self, name: str) -> list[FmuVariable]:
+        """The variables of group ``name``, in order."""
+        return [v for v in self.variables if v.group == name]
+
+    def first(self, name: str, default: int | None = None) -> int:
+        """Value reference of the first variable of group ``name`` (``default`` if the group
+        is empty; an empty group without a default is an error)."""
+        members = self.group(name)
+        if members:
+            return members[0].vr
+        if default is None:
+            raise ConfigurationError(f"no FMU variable in group {name!r}")
+        return default
+
+    def index(self, name: str) -> int:
+        """The 1-based ModelVariables index of the variable ``name``."""
+        for v in self.variables:
+            if v.name == name:
+                return v.vr + 1
+        raise ConfigurationError(f"no FMU variable {name!r}")
+
+    def indices(self, groups: Sequence[str]) -> list[int]:
+        """1-based ModelVariables indices of every variable in ``groups``."""
+        return [v.vr + 1 for v in self.variables if v.group in groups]
