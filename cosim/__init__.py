@@ -1,1 +1,54 @@
-"""Co-simulation master, components, campaigns and command line of pendulum-cosim."""
+"""Co-simulation of FMUs and Python components, each at its own sample period.
+
+The names a user needs, in one place::
+
+    from cosim import Cosimulation, FMUComponent, EstimatorComponent, Sensor, Step, Scenario
+
+Sub-packages: :mod:`cosim.core` (the component protocol, the master, its schedule and
+recording), :mod:`cosim.fmi` (FMUs as components), :mod:`cosim.components` (the component
+library), :mod:`cosim.experiments` (the papers' experiments); modules: :mod:`cosim.scenario`
+(scenario files), :mod:`cosim.ssp` (SSP export and import), :mod:`cosim.results` (output
+folders, files, plots), :mod:`cosim.cli` (the command line). Every error is one of
+:mod:`fmu_models.errors` (re-exported here).
+"""
+from fmu_models.errors import (
+    BuildError,
+    ConfigurationError,
+    CosimError,
+    FMUError,
+    InputError,
+    Interrupted,
+    NumericalError,
+    PendulumCosimError,
+    ResourceError,
+    TypeMismatchError,
+    UnknownNameError,
+)
+
+from .components import (
+    PRBS,
+    Accelerometer,
+    Constant,
+    Encoder,
+    EstimatorComponent,
+    Gyroscope,
+    LQRController,
+    ModelComponent,
+    ProcessNoise,
+    Sensor,
+    Sine,
+    Step,
+    Table,
+    TiltFusion,
+)
+from .core import COMPONENTS, Component, Cosimulation, ExportedFMU, ExportsFMU, FastBinding, Port, StateEstimator
+from .fmi import FMUComponent
+from .scenario import Scenario, ScenarioContext
+from .ssp import export_ssp, open_ssp
+
+__all__ = ["COMPONENTS", "PRBS", "Accelerometer", "BuildError", "Component", "ConfigurationError", "Constant",
+           "CosimError", "Cosimulation", "Encoder", "EstimatorComponent", "ExportedFMU", "ExportsFMU", "FMUComponent",
+           "FMUError", "FastBinding", "Gyroscope", "InputError", "Interrupted", "LQRController", "ModelComponent",
+           "NumericalError", "PendulumCosimError", "Port", "ProcessNoise", "ResourceError", "Scenario",
+           "ScenarioContext", "Sensor", "Sine", "StateEstimator", "Step", "Table", "TiltFusion", "TypeMismatchError",
+           "UnknownNameError", "export_ssp", "open_ssp"]

@@ -92,8 +92,9 @@ def _resolve_scenario(name: str) -> Path:
 
 def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
                   stream: bool | None = None, progress: bool | None = None) -> int:
-    from cosim.results import OutputFolder, atomic_write, plot_estimates, save_results
-    from cosim.scenario import Scenario
+    from .core.component import StateEstimator
+    from .results import OutputFolder, atomic_write, plot_estimates, save_results
+    from .scenario import Scenario
 
     if dry_run:
         import tempfile
@@ -133,7 +134,7 @@ def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool 
                 dst = out / "fmus" / fmu.relative_to(fmus)
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(fmu, dst)
-        ests = [c.name for c in sc.cosim.components if type(c).__name__ == "EstimatorComponent"]
+        ests = [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)]
         table = _rmse_table(df, ests)
         if len(table):
             print("\nRMSE against the plant's true states:")
@@ -155,10 +156,10 @@ def _export(args) -> int:
     """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
     import tempfile
 
-    from cosim.components.estimation import EstimatorComponent
-    from cosim.results import OutputFolder
-    from cosim.scenario import Scenario
-    from cosim.ssp import export_ssp
+    from .core.component import ExportsFMU, StateEstimator
+    from .results import OutputFolder
+    from .scenario import Scenario
+    from .ssp import export_ssp
 
     path = _resolve_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as fmus:
@@ -166,12 +167,16 @@ def _export(args) -> int:
         comps = sc.cosim.by_name
         if args.command == "export-fmu":
             names = list(dict.fromkeys(args.component or [n for n, c in comps.items()
-                                                          if isinstance(c, EstimatorComponent)]))
+                                                          if isinstance(c, StateEstimator)]))
             unknown = [n for n in names if n not in comps]
             if unknown:
                 raise ConfigurationError(f"no component {unknown[0]!r} in {path.name}; components: {', '.join(comps)}")
             if not names:
                 raise ConfigurationError(f"{path.name} has no estimator; name components with --component")
+            no_form = [n for n in names if not isinstance(comps[n], ExportsFMU)]
+            if no_form:
+                raise ConfigurationError(f"component {no_form[0]!r} ({type(comps[no_form[0]]).__name__}) has no FMU "
+                                         "form")
         with OutputFolder(Path(args.out), args.overwrite) as out:
             if args.command == "export-ssp":
                 result = export_ssp(sc, out, fmi_version=args.fmi_version, name=args.name or path.stem)
@@ -190,28 +195,31 @@ def _export(args) -> int:
 
 
 def _models(args) -> int:
-    """Simulate both models (Euler truth map and RK4) and print trajectories and Jacobians."""
-    from fmu_models import get_model
+    """Simulate every registered model (Euler truth map and RK4) from its example state and
+    input, and print trajectories and Jacobians."""
+    from fmu_models import get_model, model_names
 
-    np.set_printoptions(precision=5, suppress=True, linewidth=110)
-    runs = {"cartpole": (lambda t: [-0.5 if t < 2.0 else 0.5]),
-            "iwp": (lambda t: [0.05 * np.sin(2 * np.pi * t)])}
-    for name, u in runs.items():
-        m = get_model(name)
-        x0 = m.x0 if name == "cartpole" else np.array([0.05, 0.0, 0.0])
-        dt, n = 0.01, round(args.duration / 0.01)
-        print(f"== {m.description}")
-        print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
-        xs = m.simulate(x0, u, dt, n, method="euler")
-        xr = m.simulate(x0, u, dt, n, method="rk4", substeps=4)
-        print(f"   t [s] | Euler (T = {dt} s) state | RK4 (4 substeps) state")
-        for k in range(0, n + 1, max(1, n // 10)):
-            print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
-        A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
-        print("   exact A = df/dx at the upright equilibrium:\n", A)
-        print("   exact B = df/du:", B.ravel())
-        print()
+    for name in model_names():
+        with np.printoptions(precision=5, suppress=True, linewidth=110):
+            _model_report(get_model(name), args.duration)
     return 0
+
+
+def _model_report(m, duration: float) -> None:
+    x0 = m.x0 if m.example_x0 is None else np.asarray(m.example_x0, float)
+    u = m.example_input or (lambda t: np.zeros(m.nu))
+    dt, n = 0.01, round(duration / 0.01)
+    print(f"== {m.description}")
+    print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
+    xs = m.simulate(x0, u, dt, n, method="euler")
+    xr = m.simulate(x0, u, dt, n, method="rk4", substeps=4)
+    print(f"   t [s] | Euler (T = {dt} s) state | RK4 (4 substeps) state")
+    for k in range(0, n + 1, max(1, n // 10)):
+        print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
+    A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
+    print("   exact A = df/dx at x = 0, u = 0:\n", A)
+    print("   exact B = df/du:", B.ravel())
+    print()
 
 
 # ---------------------------------------------------------------------------- experiments
@@ -220,7 +228,7 @@ EXPERIMENTS = ("seed000", "seed000-sweep", "seed001", "seed002")
 
 def _settings(args, base):
     """``base`` with --settings FILE, --runs, --seed and every --set applied, in that order."""
-    from cosim.experiments.settings import apply_overrides, load_settings
+    from .experiments.settings import apply_overrides, load_settings
 
     s = load_settings(base, args.settings) if args.settings else base
     quick = [f"runs={args.runs}"] if args.runs else []
@@ -233,7 +241,7 @@ def _common(args) -> dict:
 
 
 def _experiment(args) -> int:
-    from cosim.results import OutputFolder
+    from .results import OutputFolder
 
     if args.runs is not None and args.runs > 100_000:
         raise ConfigurationError(f"--runs {args.runs} is more than 100000 realisations per scenario")
@@ -248,7 +256,7 @@ def _experiment(args) -> int:
 
 def _seed000_config(args, default: str):
     """The seed 000 configuration --config names (or ``default``): its name and settings."""
-    from cosim.experiments import seed000
+    from .experiments import seed000
 
     config = args.config or default
     if config not in seed000.CONFIGS:
@@ -269,7 +277,7 @@ def _run_with_partial_report(run, write_partial):
 
 
 def _seed000(args, job) -> object:
-    from cosim.experiments import seed000 as exp
+    from .experiments import seed000 as exp
 
     config, base = _seed000_config(args, "default")
     if job is None:
@@ -293,8 +301,8 @@ def _seed000(args, job) -> object:
 def _sweep(args, job) -> object:
     from dataclasses import fields, replace
 
-    from cosim.experiments import seed000_sweep as exp
-    from cosim.experiments.settings import apply_overrides
+    from .experiments import seed000_sweep as exp
+    from .experiments.settings import apply_overrides
 
     if job is None:
         _, base = _seed000_config(args, "paper")
@@ -317,7 +325,7 @@ def _sweep(args, job) -> object:
 
 
 def _seed001(args, job) -> object:
-    from cosim.experiments import seed001 as exp
+    from .experiments import seed001 as exp
 
     if job is None:
         return _settings(args, exp.Settings())
@@ -336,7 +344,7 @@ def _seed001(args, job) -> object:
 
 
 def _seed002(args, job) -> object:
-    from cosim.experiments import seed002 as exp
+    from .experiments import seed002 as exp
 
     if job is None:
         return _settings(args, exp.Settings())

@@ -3,6 +3,7 @@
 Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
 
     title = "what this scenario shows"
+    plugins = ["my_filters.py"]     # optional: modules or .py files that register more types
 
     [simulation]
     stop_time = 5.0
@@ -20,15 +21,13 @@ Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
     model = "cartpole"              # build this project's FMU; or path = "other.fmu"
     fmi_version = 2                 # of the built FMU
     interface = "auto"              # or "cs", "me" (then solver, solver_step, rtol)
-    feedthrough = "model"           # or "none": outputs as left limits
-    logging = false                 # FMU debug messages to the console
     period = 0.01
     start = { x = 0.5, theta = 1.8 }
 
     [[component]]
     name = "ekf"
     type = "estimator"
-    filter = "EKF"                  # KF, EKF, UKF, IAE, MFIAE
+    filter = "EKF"                  # any registered filter: KF, EKF, UKF, IAE, MFIAE, ...
     model = "cartpole"
     period = 0.01
     x0 = [0.5, 0, 1.8, 0.5]
@@ -42,40 +41,125 @@ Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
     [plot]                          # optional: truth/estimate figure
     truth = ["plant.x"]
     estimate = ["ekf.x"]
+    measured = ["sensor.y_x"]       # optional, "" where a state is not measured
 
-Component types: ``fmu``, ``estimator``, ``lqr``, ``sensor``, ``process_noise``,
-``constant``, ``step``, ``sine``, ``prbs``, ``table``. Relative paths are relative to
-the scenario file. Unknown tables and keys are refused with the valid ones named.
+Component types are the registry :data:`cosim.core.component.COMPONENTS` (``pendulum-cosim
+scenarios`` lists them): each component class declares its ``kind`` and builds itself from
+its table (:meth:`~cosim.core.component.Component.from_scenario`); by default the table's
+keys are the constructor's keyword arguments, checked against its signature, so an unknown
+or missing key is refused with the valid ones named. Relative paths are relative to the
+scenario file. Unknown tables and keys are refused with the valid ones named.
 """
 from __future__ import annotations
 
-import re
+import inspect
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
-from cosim.components.estimation import EstimatorComponent, LQRController
-from cosim.components.sensors import ProcessNoise, Sensor
-from cosim.components.sources import PRBS, Constant, Sine, Step, Table
-from cosim.core.component import Component
-from cosim.core.master import Cosimulation
-from cosim.fmi.component import FMUComponent
 from fmu_models.checks import finite
-from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+from fmu_models.errors import ConfigurationError, PendulumCosimError, TypeMismatchError, UnknownNameError
+from fmu_models.registry import load_plugin
 
-SIMPLE = {"constant": Constant, "step": Step, "sine": Sine, "prbs": PRBS}
-TABLES = ("title", "simulation", "recording", "component", "connections", "plot")
+from . import components as _library  # noqa: F401 - the library's components register themselves
+from .core.component import COMPONENTS, Component
+from .core.master import Cosimulation
+from .fmi import component as _fmu  # noqa: F401 - registers the fmu component type
+
+__all__ = ["RECORDING_KEYS", "SIMULATION_KEYS", "TABLES", "Scenario", "ScenarioContext", "component_types"]
+
+TABLES = ("title", "plugins", "simulation", "recording", "component", "connections", "plot")
 SIMULATION_KEYS = ("stop_time", "start_time", "step_size", "order", "loops", "loop_tolerance",
                    "loop_max_iter", "loop_solver")
 RECORDING_KEYS = ("signals", "output_interval", "stream")
-FILTERS = ("KF", "EKF", "UKF", "IAE", "MFIAE")
+PLOT_KEYS = ("truth", "estimate", "measured")
 
 
-def _known(table: dict, valid, where: str) -> None:
+def _known(table, valid, where: str) -> None:
     if not isinstance(table, dict):
-        raise ConfigurationError(f"{where} must be a table")
+        raise ConfigurationError(f"{where} must be a table, got {type(table).__name__}")
     unknown = sorted(set(table) - set(valid))
     if unknown:
         raise UnknownNameError(f"{where} has unknown keys {unknown}; valid: {', '.join(valid)}")
+
+
+def _strings(value, what: str, allow_empty: bool = False) -> list[str]:
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value) or (not value and not allow_empty):
+        raise TypeMismatchError(f"{what} must be a list of strings, got {value!r}")
+    return list(value)
+
+
+class ScenarioContext:
+    """What a component needs to build itself from a scenario table
+    (:meth:`~cosim.core.component.Component.from_scenario`).
+
+    Parameters
+    ----------
+    base_dir : path
+        The scenario file's folder (relative paths refer to it).
+    fmu_dir : path
+        Where to build this project's FMUs.
+
+    Attributes
+    ----------
+    base_dir, fmu_dir : Path
+    """
+
+    def __init__(self, base_dir, fmu_dir):
+        self.base_dir, self.fmu_dir = Path(base_dir), Path(fmu_dir)
+
+    def path(self, p, what: str = "path") -> Path:
+        """``p`` as a path, relative to the scenario file's folder unless absolute."""
+        if not isinstance(p, str) or not p:
+            raise TypeMismatchError(f"{what} must be a file name (a string), got {p!r}")
+        q = Path(p)
+        return q if q.is_absolute() else self.base_dir / q
+
+    def model(self, name, parameters=None):
+        """The registered plant model ``name`` with ``parameters`` (a table) overridden."""
+        from fmu_models import get_model
+
+        if parameters is None:
+            parameters = {}
+        if not isinstance(parameters, dict):
+            raise TypeMismatchError(f"model_parameters must be a table, got {parameters!r}")
+        return get_model(name, **parameters)
+
+    @staticmethod
+    def check_keys(target: Callable, table: dict, where: str, skip: tuple[str, ...] = ()) -> dict:
+        """``table`` if its keys are keyword arguments of ``target`` (a class or a function)
+        and every required one (besides ``skip``) is there; else UnknownNameError /
+        ConfigurationError naming the keys (``where`` says whose)."""
+        fn = target.__init__ if inspect.isclass(target) else target
+        params = [p for p in list(inspect.signature(fn).parameters.values())[1 if inspect.isclass(target) else 0:]
+                  if p.name not in skip and p.kind not in (p.VAR_POSITIONAL,)]
+        if any(p.kind == p.VAR_KEYWORD for p in params):
+            return dict(table)
+        names = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        unknown = sorted(set(table) - set(names))
+        if unknown:
+            raise UnknownNameError(f"{where} has the unknown key{'s' if len(unknown) > 1 else ''} "
+                                   f"{', '.join(map(repr, unknown))}; valid keys: {', '.join(names)}")
+        missing = [p.name for p in params if p.default is p.empty and p.name not in table
+                   and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        if missing:
+            raise ConfigurationError(f"{where} needs the key{'s' if len(missing) > 1 else ''} "
+                                     f"{', '.join(map(repr, missing))}")
+        return dict(table)
+
+    def construct(self, cls: type, name: str, table: dict, **extra) -> Component:
+        """``cls(name, **table, **extra)`` with the keys checked (:meth:`check_keys`); an
+        error of the constructor that is not the package's own is named with the component."""
+        where = f"component {name!r} ({getattr(cls, 'kind', cls.__name__)})"
+        kwargs = self.check_keys(cls, {**table, **extra}, where, skip=("name",))
+        try:
+            return cls(name, **kwargs)
+        except PendulumCosimError:
+            raise
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as e:
+            raise ConfigurationError(f"{where}: {type(e).__name__}: {e}") from None
 
 
 class Scenario:
@@ -94,13 +178,20 @@ class Scenario:
     Attributes
     ----------
     recording : dict
-        The ``[recording]`` table (``signals``, ``output_interval``, ``stream``).
+        The ``[recording]`` table (``signals``, ``output_interval``, ``stream``), checked.
+    plot : dict or None
+        The ``[plot]`` table, checked against the recorded signals.
+    title : str
     """
 
     def __init__(self, spec: dict, base_dir, fmu_dir=None):
+        if not isinstance(spec, dict):
+            raise ConfigurationError("a scenario must be a TOML table")
         self.spec, self.base_dir = spec, Path(base_dir)
         self.fmu_dir = Path(fmu_dir) if fmu_dir else self.base_dir / ".fmus"
         _known(spec, TABLES, "the scenario")
+        for plugin in _strings(spec.get("plugins", []), "plugins", allow_empty=True):
+            load_plugin(plugin, self.base_dir)
         sim = spec.get("simulation")
         if sim is None:
             raise ConfigurationError("the scenario has no [simulation] table (it needs stop_time)")
@@ -109,18 +200,56 @@ class Scenario:
             raise ConfigurationError("[simulation] needs stop_time")
         self.stop_time = finite(sim["stop_time"], "[simulation] stop_time [s]")
         self.start_time = finite(sim.get("start_time", 0.0), "[simulation] start_time [s]")
-        self.recording = dict(spec.get("recording", {}))
-        _known(self.recording, RECORDING_KEYS, "[recording]")
+        self.recording = self._recording(spec.get("recording", {}))
         comps = spec.get("component", [])
         if not isinstance(comps, list) or not comps:
             raise ConfigurationError("the scenario needs at least one [[component]]")
-        components = [self._component(c) for c in comps]
+        context = ScenarioContext(self.base_dir, self.fmu_dir)
+        components = [self._component(c, context) for c in comps]
         options = {k: sim[k] for k in ("order", "loops", "loop_tolerance", "loop_max_iter", "loop_solver")
                    if k in sim}
-        self.cosim = Cosimulation(components, spec.get("connections", {}), step_size=sim.get("step_size"),
-                                  **options)
-        self.plot = spec.get("plot")
-        self.title = str(spec.get("title", ""))
+        connections = spec.get("connections", {})
+        if not isinstance(connections, dict):
+            raise ConfigurationError("[connections] must be a table of \"input\" = \"output\"")
+        self.cosim = Cosimulation(components, connections, step_size=sim.get("step_size"), **options)
+        self.plot = self._plot(spec.get("plot"))
+        title = spec.get("title", "")
+        if not isinstance(title, str):
+            raise TypeMismatchError(f"title must be a string, got {title!r}")
+        self.title = title
+
+    @staticmethod
+    def _recording(table) -> dict:
+        _known(table, RECORDING_KEYS, "[recording]")
+        rec = dict(table)
+        if "signals" in rec:
+            rec["signals"] = _strings(rec["signals"], "[recording] signals")
+        if "output_interval" in rec:
+            rec["output_interval"] = finite(rec["output_interval"], "[recording] output_interval [s]")
+        if "stream" in rec and not isinstance(rec["stream"], bool):
+            raise TypeMismatchError(f"[recording] stream must be true or false, got {rec['stream']!r}")
+        return rec
+
+    def _plot(self, table) -> dict | None:
+        if table is None:
+            return None
+        _known(table, PLOT_KEYS, "[plot]")
+        for key in ("truth", "estimate"):
+            if key not in table:
+                raise ConfigurationError(f"[plot] needs {key} (a list of signals)")
+        plot = {k: _strings(table[k], f"[plot] {k}", allow_empty=(k == "measured")) for k in table}
+        if len(plot["truth"]) != len(plot["estimate"]):
+            raise ConfigurationError(f"[plot] truth and estimate must name as many signals ({len(plot['truth'])} "
+                                     f"and {len(plot['estimate'])})")
+        if "measured" in plot and plot["measured"] and len(plot["measured"]) != len(plot["truth"]):
+            raise ConfigurationError("[plot] measured must name one signal (or \"\") per truth signal")
+        known = set(self.cosim.signal_names)
+        for key, names in plot.items():
+            bad = [n for n in names if n and n not in known]
+            if bad:
+                raise UnknownNameError(f"[plot] {key} names {bad}, not signals; signals: "
+                                       f"{', '.join(self.cosim.signal_names)}")
+        return plot
 
     @classmethod
     def load(cls, path, fmu_dir=None) -> Scenario:
@@ -152,92 +281,23 @@ class Scenario:
         return self.cosim.run(self.stop_time, self.start_time, **rec)
 
     # ---------------------------------------------------------------- builders
-    def _component(self, c: dict) -> Component:
+    @staticmethod
+    def _component(c, context: ScenarioContext) -> Component:
         if not isinstance(c, dict):
             raise ConfigurationError(f"a [[component]] must be a table, got {c!r}")
         c = dict(c)
-        try:
-            name, kind = c.pop("name"), c.pop("type")
-        except KeyError as e:
-            raise ConfigurationError(f"a [[component]] lacks {e.args[0]!r}: {c}") from None
-        builders = {"fmu": self._fmu, "estimator": self._estimator, "lqr": self._lqr,
-                    "sensor": lambda n, c: Sensor(n, **c),
-                    "process_noise": lambda n, c: ProcessNoise(n, **c),
-                    "table": self._table,
-                    **{k: (lambda n, c, cls=v: cls(n, **c)) for k, v in SIMPLE.items()}}
-        if kind not in builders:
+        for key in ("name", "type"):
+            if key not in c:
+                raise ConfigurationError(f"a [[component]] lacks {key!r}: {c}")
+        name, kind = c.pop("name"), c.pop("type")
+        if not isinstance(name, str):
+            raise TypeMismatchError(f"a component name must be a string, got {name!r}")
+        if not isinstance(kind, str) or kind not in COMPONENTS:
             raise UnknownNameError(f"component {name!r}: unknown type {kind!r}; valid types: "
-                                   f"{', '.join(builders)}")
-        try:
-            return builders[kind](name, c)
-        except TypeError as e:
-            if isinstance(e, TypeMismatchError):
-                raise
-            text = str(e)
-            missing = re.search(r"missing \d+ required (?:positional |keyword-only )?arguments?: (.*)", text)
-            unexpected = re.search(r"unexpected keyword argument '(\w+)'", text)
-            if missing:
-                text = f"needs the key{'s' if ',' in missing.group(1) else ''} {missing.group(1)}"
-            elif unexpected:
-                text = f"has the unknown key {unexpected.group(1)!r}"
-            raise ConfigurationError(f"component {name!r} ({kind}) {text}") from None
-        except KeyError as e:
-            if isinstance(e, UnknownNameError):
-                raise
-            raise ConfigurationError(f"component {name!r} ({kind}) needs the key {e.args[0]!r}") from None
-
-    def _path(self, p):
-        p = Path(p)
-        return p if p.is_absolute() else self.base_dir / p
-
-    def _table(self, name, c):
-        return Table(name, c.pop("period"), self._path(c.pop("data")), **c)
-
-    def _fmu(self, name, c):
-        if ("model" in c) == ("path" in c):
-            raise ConfigurationError(f"component {name!r}: give either model (this project's "
-                                     "plant, built on the fly) or path (an .fmu file)")
-        if "model" in c:
-            from fmu_models import build_fmu, get_model
-
-            version = c.pop("fmi_version", 2)
-            model = get_model(c.pop("model"))
-            path = build_fmu(model, self.fmu_dir / f"fmi{version}", fmi_version=version)
-        else:
-            if "fmi_version" in c:
-                raise ConfigurationError(f"component {name!r}: fmi_version applies to a built model, "
-                                         "not to an FMU file")
-            path = self._path(c.pop("path"))
-        return FMUComponent(name, path, c.pop("period"), c.pop("inputs", None), c.pop("outputs", None),
-                            c.pop("parameters", None), c.pop("start", None), **c)
-
-    def _estimator(self, name, c):
-        import estimators
-        from fmu_models import get_model
-
-        filt = c.pop("filter")
-        if filt not in FILTERS:
-            raise UnknownNameError(f"component {name!r}: unknown filter {filt!r}; valid: {', '.join(FILTERS)}")
-        model = get_model(c.pop("model"), **c.pop("model_parameters", {}))
-        period = c.pop("period")
-        system = estimators.discretize(model, period, c.pop("method", "euler"), c.pop("substeps", 1))
-        bias = c.pop("bias_on", None)
-        if bias:
-            system = estimators.augment_rate_bias(system, bias)
-        covariance = c.pop("covariance", "diagonal")
-        cls = getattr(estimators, filt)
-        return EstimatorComponent(name, lambda: cls(system, **c), period, covariance=covariance)
-
-    def _lqr(self, name, c):
-        from fmu_models import get_model
-
-        model = get_model(c.pop("model"), **c.pop("model_parameters", {}))
-        return LQRController(name, model, **c)
+                                   f"{', '.join(component_types())}")
+        return COMPONENTS.get(kind).from_scenario(name, c, context)
 
 
 def component_types() -> list[str]:
-    """Names of the component types a scenario file may use."""
-    return ["fmu", "estimator", "lqr", "sensor", "process_noise", "table", *SIMPLE]
-
-
-__all__ = ["Component", "Scenario", "component_types"]
+    """Names of the component types a scenario file may use (the registered ``kind``s)."""
+    return COMPONENTS.names()

@@ -38,10 +38,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from cosim.core.component import PORT_TYPES, ExportedFMU
-from cosim.fmi.archive import Extraction, read_description
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.description import xml_attrs
+
+from .core.component import PORT_TYPES, ExportedFMU, ExportsFMU
+from .fmi.archive import Extraction, read_description
 
 __all__ = ["SSPExport", "SSPSystem", "export_ssp", "open_ssp"]
 
@@ -159,7 +160,7 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         Components without an FMU form (all named at once), or a connection to a port the
         exported FMU lacks.
     """
-    from cosim.core.master import Cosimulation
+    from .core.master import Cosimulation
 
     cosim = system if isinstance(system, Cosimulation) else system.cosim
     start = getattr(system, "start_time", 0.0)
@@ -176,6 +177,9 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         resources.mkdir()
         exported, refused = {}, []
         for c in cosim.components:
+            if not isinstance(c, ExportsFMU):
+                refused.append(f"component {c.name!r} ({type(c).__name__}) has no FMU form")
+                continue
             try:
                 exported[c.name] = c.export_fmu(resources, fmi_version)
             except ConfigurationError as e:
@@ -297,8 +301,8 @@ def open_ssp(path) -> Iterator[SSPSystem]:
         What this reader does not support (nested systems, parameter files or mappings,
         transformations, connections to the system's own connectors), named.
     """
-    from cosim.core.master import Cosimulation
-    from cosim.fmi.component import FMUComponent
+    from .core.master import Cosimulation
+    from .fmi.component import FMUComponent
 
     path = Path(path)
     extraction = None

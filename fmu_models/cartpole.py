@@ -70,4 +70,5 @@ def build() -> PlantModel:
     """The model with its default parameters (registered as ``"cartpole"``)."""
     return PlantModel("cartpole", "CartPole",
                       "Cart-inverted pendulum (seed 000 eqs 8-11, SPEC section 1)",
-                      STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement)
+                      STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement,
+                      example_input=lambda t: [-0.5 if t < 2.0 else 0.5])       # seed 000 Figure 2

@@ -22,6 +22,8 @@ section 3: ``I_k = Iw``, ``I_r = Ib + mw lw^2``, ``m_c = mb + mw``,
 """
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 
 from . import register_model
@@ -80,4 +82,5 @@ def build() -> PlantModel:
     """The model with its default parameters (registered as ``"iwp"``)."""
     return PlantModel("iwp", "InertiaWheelPendulum",
                       "Inertia-wheel pendulum (seed 002 eqs 1-2, SPEC section 3)",
-                      STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement)
+                      STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement,
+                      example_x0=[0.05, 0.0, 0.0], example_input=lambda t: [0.05 * math.sin(2 * math.pi * t)])

@@ -109,6 +109,11 @@ class PlantModel:
         of parameter symbols by name; returns the nx time derivatives.
     measurement : callable
         ``measurement(x, p) -> y`` (ny entries).
+    example_x0 : array_like, optional
+        An initial state that shows the model's behaviour (default: the states' starts).
+    example_input : callable, optional
+        ``example_input(t) -> u``: an input that shows it (default: zero); what
+        ``pendulum-cosim models`` simulates.
 
     Attributes
     ----------
@@ -129,8 +134,10 @@ class PlantModel:
                  states: Sequence[Variable], inputs: Sequence[Variable],
                  outputs: Sequence[Variable], parameters: Sequence[Variable],
                  dynamics: Dynamics | None = None, measurement: Measurement | None = None,
+                 example_x0=None, example_input: Callable[[float], Sequence[float]] | None = None,
                  *, _symbolic: _Symbolic | None = None, _values: np.ndarray | None = None):
         self.name, self.fmu_name, self.description = name, fmu_name, description
+        self.example_x0, self.example_input = example_x0, example_input
         self.states, self.inputs = tuple(states), tuple(inputs)
         self.outputs, self.parameters = tuple(outputs), tuple(parameters)
         names = [v.name for v in self.states + self.inputs + self.outputs + self.parameters]
@@ -184,7 +191,8 @@ class PlantModel:
                                f"valid parameters: {', '.join(self.param_names)}")
             values[index[key]] = self.parameters[index[key]].check(val)
         return PlantModel(self.name, self.fmu_name, self.description, self.states, self.inputs,
-                          self.outputs, self.parameters, _symbolic=self.sym, _values=values)
+                          self.outputs, self.parameters, example_x0=self.example_x0,
+                          example_input=self.example_input, _symbolic=self.sym, _values=values)
 
     def __repr__(self) -> str:
         return (f"PlantModel({self.name!r}, states={self.state_names}, "
@@ -272,11 +280,27 @@ class PlantModel:
             if us.shape != (n_steps, self.nu) or not np.all(np.isfinite(us)):
                 raise InputError(f"input sequence must be finite with shape ({n_steps}, {self.nu}), "
                                  f"got {ua.shape}")
-        if n_steps == 0:
-            return x[None, :].copy()
-        # one mapped call over the whole horizon: CasADi's mapaccum folds the step
-        xs = fn.mapaccum(n_steps)(x, us.T, self._p, dt)
-        return np.vstack([x, np.asarray(xs).T])
+        from .memory import check_fits
+
+        check_fits(8.0 * n_steps * (2 * self.nx + self.nu), f"simulating {n_steps} steps of {self.name}",
+                   "simulate fewer steps at a time")
+        out = np.empty((n_steps + 1, self.nx))
+        out[0] = x
+        # CasADi's mapaccum folds the step natively, in chunks of at most CHUNK steps
+        for k0 in range(0, n_steps, SIMULATE_CHUNK):
+            k1 = min(k0 + SIMULATE_CHUNK, n_steps)
+            xs = _folded(fn, k1 - k0)(out[k0], us[k0:k1].T, self._p, dt)
+            out[k0 + 1: k1 + 1] = np.asarray(xs).T
+        return out
+
+
+#: Steps folded in one native call by :meth:`PlantModel.simulate`.
+SIMULATE_CHUNK = 10_000
+
+
+@cache
+def _folded(fn: ca.Function, n: int) -> ca.Function:
+    return fn.mapaccum(n)
 
 
 def _check_dt(dt) -> float:

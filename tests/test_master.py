@@ -205,7 +205,7 @@ def test_refusals_name_the_problem(fmu_paths, spring_damper_fmu):
 def test_scenario_refusals(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[simulation]\nstop_time = 1\n[[component]]\nname = "a"\ntype = "magic"\nperiod = 0.1\n')
-    with pytest.raises(ConfigurationError, match="unknown type 'magic'; valid types: fmu, estimator"):
+    with pytest.raises(ConfigurationError, match="unknown type 'magic'; valid types: .*fmu"):
         Scenario.load(bad)
     bad.write_text('[simulation]\nstop_time = 1\n[[component]]\nname = "e"\ntype = "estimator"\n'
                    'filter = "PF"\nmodel = "cartpole"\nperiod = 0.01\n')

@@ -300,8 +300,11 @@ def test_the_component_protocol_is_documented_and_is_all_a_new_component_needs()
     doc = inspect.getdoc(protocol)
     for word in ("output", "update", "feedthrough", "reentrant", "bind", "reset", "close"):
         assert word in doc
-    for name in ("output", "update", "reset", "close", "bind", "sample"):
+    for name in ("output", "update", "reset", "close", "sample", "from_scenario"):
         assert inspect.getdoc(getattr(Component, name)), name
+    from cosim.core.component import ExportsFMU, FastBinding
+
+    assert inspect.getdoc(FastBinding.bind) and inspect.getdoc(ExportsFMU.export_fmu)
     # every component of the package implements the protocol
     from cosim.components import imu, sources
 

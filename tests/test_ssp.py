@@ -133,9 +133,14 @@ def test_components_without_an_fmu_form_are_refused(tmp_path):
         Sensor("s", 0.01, ["x"], 0.1, delay=2).export_fmu(tmp_path)
     with pytest.raises(ConfigurationError, match="takes a diagonal cov"):
         ProcessNoise("n", 0.01, ["a", "b"], [[1.0, 0.5], [0.5, 1.0]]).export_fmu(tmp_path)
+    from cosim import Cosimulation, ExportsFMU, Step
+
     lqr = LQRController("lqr", get_model("cartpole"), x_op=[0, 0, 0, 0], u_op=[0], period=0.01, Q=1.0, R=1.0)
+    assert not isinstance(lqr, ExportsFMU)                  # a declared capability, not a refusal at run time
+    src = Step("src", 0.01, 0.0, 0.0, 0.0)
+    sim = Cosimulation([lqr, src], {f"lqr.{s}": "src.out" for s in lqr.input_names})
     with pytest.raises(ConfigurationError, match=r"component 'lqr' \(LQRController\) has no FMU form"):
-        lqr.export_fmu(tmp_path)
+        export_ssp(sim, tmp_path / "ssp")
     assert "generator" in Sensor("s", 0.01, ["x"], 0.1).export_fmu(tmp_path).note     # pcg64: said so
 
 

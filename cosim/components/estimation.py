@@ -7,16 +7,17 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-from cosim.core.component import Component, ExportedFMU
 from estimators.base import KalmanBase
 from fmu_models.checks import float_array
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.plant import PlantModel
 
+from ..core.component import Component, ExportedFMU
+
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
 
-class EstimatorComponent(Component):
+class EstimatorComponent(Component, kind="estimator"):
     """Runs a filter of :mod:`estimators` at its model's sample period.
 
     Input ports: the model's inputs (e.g. ``F``) and outputs (e.g. ``y_x, y_theta``: the
@@ -66,6 +67,33 @@ class EstimatorComponent(Component):
         self.make_filter, self.filter = make_filter, probe
         self._nu, self._nx = sys_.nu, n
         self._u_prev = None
+        self.estimated_states = list(sys_.state_names)
+
+    @classmethod
+    def from_scenario(cls, name, table, context):
+        """The keys ``filter`` (a registered filter, :data:`estimators.FILTERS`), ``model``
+        (with ``model_parameters``), ``period``, optional ``method`` and ``substeps`` of the
+        discretisation, ``bias_on`` (augment the state with the offset of this output),
+        ``covariance``; every other key is an argument of the filter's constructor, checked
+        against its signature."""
+        import estimators
+        from fmu_models.checks import positive
+
+        t = dict(table)
+        for key in ("filter", "model", "period"):
+            if key not in t:
+                raise ConfigurationError(f"component {name!r} (estimator) needs the key {key!r}")
+        filt = estimators.FILTERS.get(t.pop("filter"))
+        model = context.model(t.pop("model"), t.pop("model_parameters", None))
+        period = positive(t.pop("period"), f"component {name!r}: period [s]")
+        system = estimators.discretize(model, period, t.pop("method", "euler"), t.pop("substeps", 1))
+        bias = t.pop("bias_on", None)
+        if bias is not None:
+            system = estimators.augment_rate_bias(system, bias)
+        covariance = t.pop("covariance", "diagonal")
+        kwargs = context.check_keys(filt, t, f"component {name!r} (estimator, filter {filt.__name__})",
+                                    skip=("system",))
+        return cls(name, lambda: filt(system, **kwargs), period, covariance=covariance)
 
     def timing(self) -> str:
         return "outputs at t: the estimate after predict(u read at the previous instant) and update(y at t)"
@@ -124,7 +152,7 @@ def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
     return np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
 
 
-class LQRController(Component):
+class LQRController(Component, kind="lqr"):
     """State feedback ``u = u_op - K (x_hat - x_op)`` with a discrete LQR gain.
 
     Input ports: the model's state names (connect them to an estimator's outputs, as in
@@ -146,6 +174,15 @@ class LQRController(Component):
     """
 
     reentrant = True
+
+    @classmethod
+    def from_scenario(cls, name, table, context):
+        """``model`` by name (with ``model_parameters``), the other keys as the constructor's."""
+        t = dict(table)
+        if "model" not in t:
+            raise ConfigurationError(f"component {name!r} (lqr) needs the key 'model'")
+        model = context.model(t.pop("model"), t.pop("model_parameters", None))
+        return context.construct(cls, name, t, model=model)
 
     def __init__(self, name: str, model: PlantModel, period: float, Q, R, x_op=None,
                  u_op=None, u_limits=None):

@@ -17,16 +17,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.components.noise import PerInstantNoise
-from cosim.components.sensors import _per_channel
-from cosim.core.component import Component
 from fmu_models.checks import finite, positive_int
 from fmu_models.errors import ConfigurationError
+
+from ..core.component import Component
+from .noise import PerInstantNoise
+from .sensors import _per_channel
 
 G = 9.81
 
 
-class Accelerometer(Component):
+class Accelerometer(Component, kind="accelerometer"):
     """3-axis accelerometer at distance ``r`` [m] from the pivot, in body axes.
 
     Input ports ``alpha`` [rad], ``alpha_dot`` [rad/s], ``alpha_ddot`` [rad/s^2]; output
@@ -74,7 +75,7 @@ class Accelerometer(Component):
         return a + self.bias + self.noise_std * self._noise.at(t)
 
 
-class Gyroscope(Component):
+class Gyroscope(Component, kind="gyroscope"):
     """Rate gyroscope: ``omega = alpha_dot + b(t) + v``.
 
     The offset ``b`` starts at ``bias`` and, with ``drift_std > 0``, drifts as a random
@@ -124,7 +125,7 @@ class Gyroscope(Component):
         return np.array([u[0] + self.b + self.noise_std * v])
 
 
-class Encoder(Component):
+class Encoder(Component, kind="encoder"):
     """Incremental encoder on the wheel: speed from counted increments over each period.
 
     The wheel angle is integrated from the input ``phi_dot`` at the encoder's own rate
@@ -170,7 +171,7 @@ class Encoder(Component):
         self.phi += float(u[0]) * self.period
 
 
-class TiltFusion(Component):
+class TiltFusion(Component, kind="tilt_fusion"):
     """Kalman filter fusing accelerometer tilt and gyro rate: state ``[alpha, b]`` (tilt and
     gyro offset), ``alpha_{k+1} = alpha_k + T (omega_k - b_k)``, ``b_{k+1} = b_k``;
     measurement ``atan2(-a_t, a_r)`` (the tilt at rest).

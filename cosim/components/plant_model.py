@@ -14,13 +14,14 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from cosim.core.component import Component
 from fmu_models.checks import finite
-from fmu_models.errors import NumericalError, UnknownNameError
+from fmu_models.errors import ConfigurationError, NumericalError, UnknownNameError
 from fmu_models.plant import PlantModel, check_method
 
+from ..core.component import Component
 
-class ModelComponent(Component):
+
+class ModelComponent(Component, kind="plant_model"):
     """A :class:`~fmu_models.PlantModel` as a continuous co-simulation component.
 
     Parameters
@@ -43,6 +44,16 @@ class ModelComponent(Component):
     """
 
     reentrant = True
+    holds_inputs = True
+
+    @classmethod
+    def from_scenario(cls, name, table, context):
+        """``model`` by name (with ``model_parameters``), the other keys as the constructor's."""
+        table = dict(table)
+        if "model" not in table:
+            raise ConfigurationError(f"component {name!r} (plant_model) needs the key 'model'")
+        model = context.model(table.pop("model"), table.pop("model_parameters", None))
+        return context.construct(cls, name, table, model=model)
 
     def __init__(self, name: str, model: PlantModel, period: float, method: str = "euler",
                  substeps: int = 1, start: Mapping[str, float] | None = None,

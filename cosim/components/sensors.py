@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.components.noise import make_noise
-from cosim.core.component import Component, ExportedFMU
 from fmu_models.checks import float_array, positive_int
 from fmu_models.errors import ConfigurationError
+
+from ..core.component import Component, ExportedFMU
+from .noise import make_noise
 
 
 def _per_channel(value, n, what, owner, positive=False):
@@ -28,7 +29,7 @@ def _per_channel(value, n, what, owner, positive=False):
     return a
 
 
-class Sensor(Component):
+class Sensor(Component, kind="sensor"):
     """Samples signals and adds seeded Gaussian noise, a bias, quantisation and a delay.
 
     ``y = q(s + bias + v)``, ``v ~ N(0, noise_std^2)``, quantised to ``quantization``
@@ -118,7 +119,7 @@ class Sensor(Component):
         return ExportedFMU(path, spec.parameters(), _generator_note(self))
 
 
-class ProcessNoise(Component):
+class ProcessNoise(Component, kind="process_noise"):
     """Seeded Gaussian samples ``w ~ N(0, cov)`` for an FMU's process-noise inputs.
 
     Connect its ports ``w_<state>`` to the plant FMU's inputs of the same names; the

@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.core.component import Component, ExportedFMU
 from fmu_models.checks import finite, positive, positive_int
 from fmu_models.errors import ConfigurationError, UnknownNameError
+
+from ..core.component import Component, ExportedFMU
 
 
 class _Source(Component):
@@ -42,7 +43,7 @@ class _Source(Component):
         return np.atleast_1d(self._value(t))
 
 
-class Constant(_Source):
+class Constant(_Source, kind="constant"):
     """Constant output ``value`` on port ``out``.
 
     Parameters
@@ -64,7 +65,7 @@ class Constant(_Source):
         return "constant", [("value", self.value, "real", "the output")], []
 
 
-class Step(Constant):
+class Step(Constant, kind="step"):
     """``before`` until ``t_step`` [s], then ``after`` (seed 000 Figure 2's input is
     ``Step(t_step=2, before=-0.5, after=0.5)``).
 
@@ -92,7 +93,7 @@ class Step(Constant):
                         ("after", self.after, "real", "output from t_step on")], []
 
 
-class Sine(_Source):
+class Sine(_Source, kind="sine"):
     """``offset + amplitude * sin(2 pi frequency t + phase)`` on port ``out``.
 
     Parameters
@@ -140,7 +141,7 @@ def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
     return out
 
 
-class PRBS(_Source):
+class PRBS(_Source, kind="prbs"):
     """Pseudo-random binary sequence ``+/- amplitude`` (a maximal-length LFSR sequence).
 
     The level is held for ``bit_time`` seconds per bit; the sequence repeats after
@@ -184,7 +185,7 @@ class PRBS(_Source):
         return "prbs", reals, ints
 
 
-class Table(_Source):
+class Table(_Source, kind="table"):
     """Signals read from a table: a pandas DataFrame or a CSV file with a time column.
 
     Parameters
@@ -224,6 +225,14 @@ class Table(_Source):
         if not (np.all(np.isfinite(self.v)) and np.all(np.isfinite(self.t))):
             raise ConfigurationError(f"{name}: table contains NaN or inf")
         self.interpolation = interpolation
+
+    @classmethod
+    def from_scenario(cls, name, table, context):
+        """As the default, with ``data`` a CSV file relative to the scenario."""
+        table = dict(table)
+        if "data" in table:
+            table["data"] = str(context.path(table["data"], f"component {name!r}: data"))
+        return context.construct(cls, name, table)
 
     def _value(self, t):
         if self.interpolation == "linear":

@@ -29,11 +29,25 @@ implement :meth:`~Component.output` (and :meth:`~Component.update`,
 :meth:`~Component.reset`, :meth:`~Component.close` when needed). Set ``feedthrough``
 when some output does not depend on every input, and ``reentrant = True`` if
 ``output`` may be called several times at one instant with improving inputs (needed to
-iterate an algebraic loop through it; ``output`` must then not change the state).
-:meth:`~Component.bind` is an optional fast path for the master's inner loop (the FMU
-components use it to exchange values with the FMU without copies).
-:meth:`~Component.export_fmu` is optional too: a component that can exist as an FMU
-writes it there (what :func:`cosim.ssp.export_ssp` needs to export a scenario).
+iterate an algebraic loop through it; ``output`` must then not change the state). Give
+the class a ``kind`` keyword (``class Thermometer(Component, kind="thermometer")``) to use
+it from scenario files (:data:`COMPONENTS`); :meth:`~Component.from_scenario` builds it
+from its table (default: the constructor, with the table's keys checked against its
+signature).
+
+Optional capabilities, declared by implementing a protocol (the master and the exporters
+test ``isinstance(component, Protocol)``, never the class):
+
+* :class:`FastBinding`: ``bind(values, inputs, outputs)``, a fast path for the master's
+  inner loop (the FMU components exchange values with the FMU without copies);
+* :class:`ExportsFMU`: ``export_fmu(folder, fmi_version)``, the component as an FMU (what
+  :func:`cosim.ssp.export_ssp` and ``pendulum-cosim export-fmu`` need);
+* :class:`StateEstimator`: ``estimated_states``, the names of the states whose estimates
+  the component outputs (the command line compares them with the plant's).
+
+``holds_inputs = True`` declares that the inputs :meth:`~Component.update` consumes are
+held over ``[t, t + period]`` (a plant integrating them) rather than used at the next
+instant. The master counts every component's instants itself (:attr:`Component.n_samples`).
 """
 from __future__ import annotations
 
@@ -41,14 +55,16 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, TypeMismatchError
+from fmu_models.registry import Registry
 
-__all__ = ["PORT_TYPES", "Component", "ExportedFMU", "Port", "bind_protocol", "check_name", "check_period",
-           "port_kind", "ports_compatible"]
+__all__ = ["COMPONENTS", "PORT_TYPES", "Component", "ExportedFMU", "ExportsFMU", "FastBinding", "Port",
+           "StateEstimator", "bind_protocol", "check_name", "check_period", "port_kind", "ports_compatible"]
 
 #: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
 PORT_TYPES = {
@@ -117,9 +133,10 @@ class ExportedFMU:
 
 
 def check_name(name: str, what: str = "component name") -> str:
-    """``name`` if it is an identifier, else :class:`ConfigurationError` naming ``what`` it is."""
-    if not isinstance(name, str) or not name.isidentifier():
-        raise ConfigurationError(f"{what} {name!r} must be an identifier (letters, digits, _)")
+    """``name`` if it is an ASCII identifier, else :class:`ConfigurationError` naming ``what`` it is
+    (FMU, SSP and C names must be ASCII)."""
+    if not isinstance(name, str) or not name.isidentifier() or not name.isascii():
+        raise ConfigurationError(f"{what} {name!r} must be an ASCII identifier (letters, digits, _)")
     return name
 
 
@@ -141,6 +158,38 @@ def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Por
     if len(set(names)) != len(names):
         raise ConfigurationError(f"{owner}: duplicate {direction} port names in {names}")
     return tuple(out)
+
+
+#: The component types usable in scenario files, by their ``kind``.
+COMPONENTS: Registry = Registry("component type")
+
+
+@runtime_checkable
+class FastBinding(Protocol):
+    """A component with a fast path for the master's inner loop (see :meth:`bind`)."""
+
+    def bind(self, values: np.ndarray, inputs, outputs: slice) -> tuple[Callable[[float], None],
+                                                                         Callable[[float], None]]:
+        """Return ``(output_fn, update_fn)``, each taking ``t``: ``output_fn(t)`` writes the
+        outputs at ``t`` into ``values[outputs]``; ``update_fn(t)`` consumes
+        ``values[inputs]`` (a slice or an int index array of the connected inputs)."""
+
+
+@runtime_checkable
+class ExportsFMU(Protocol):
+    """A component that can be written as a Co-Simulation FMU."""
+
+    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+        """Write the component as ``<folder>/<name>.fmu`` with the component's port names
+        (FMI ``fmi_version`` 2 or 3); raises ConfigurationError (saying why) for a
+        configuration without an FMU form."""
+
+
+@runtime_checkable
+class StateEstimator(Protocol):
+    """A component whose outputs include state estimates (named as the plant's states)."""
+
+    estimated_states: list
 
 
 class Component(ABC):
@@ -175,11 +224,31 @@ class Component(ABC):
     reentrant : bool
         ``output`` may be called several times at one instant (class attribute, default
         False).
+    holds_inputs : bool
+        The inputs consumed by ``update`` are held over ``[t, t + period]`` (class
+        attribute, default False).
     n_samples : int
-        Instants at which ``output`` was called since the last reset.
+        Instants of the last run at which the component computed its outputs (counted by
+        the master, or by :meth:`sample`).
     """
 
     reentrant: bool = False
+    holds_inputs: bool = False
+
+    def __init_subclass__(cls, kind: str | None = None, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if kind is not None:
+            COMPONENTS.register(kind, cls)
+            cls.kind = kind
+
+    @classmethod
+    def from_scenario(cls, name: str, table: dict, context) -> Component:
+        """Build the component ``name`` from its scenario table (the keys besides ``name`` and
+        ``type``); ``context`` is the :class:`~cosim.scenario.ScenarioContext` (paths relative to
+        the scenario, models by name, the checked constructor call). Default:
+        ``context.construct(cls, name, table)``, the constructor with the keys as keyword
+        arguments, refused with the valid keys named if one is unknown or missing."""
+        return context.construct(cls, name, table)
 
     def __init__(self, name: str, period: float, inputs: Sequence = (), outputs: Sequence = (),
                  feedthrough: Mapping[str, Sequence[str]] | bool = True,
@@ -251,18 +320,6 @@ class Component(ABC):
         """Release resources (called by the master at the end of every run, also after a
         failure; must be safe to call twice)."""
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """Write this component as a Co-Simulation FMU ``<folder>/<name>.fmu`` whose ports
-        have the component's port names. Default: refused (the component has no FMU form).
-
-        Raises
-        ------
-        ConfigurationError
-            The component (or this configuration of it) cannot be an FMU; the message says
-            why and, where there is one, what to use instead.
-        """
-        raise ConfigurationError(f"component {self.name!r} ({type(self).__name__}) has no FMU form")
-
     def _fmu_identifier(self) -> str:
         """A model identifier for this component's FMU (``pc_<name>``)."""
         return f"pc_{self.name}"
@@ -276,29 +333,15 @@ class Component(ABC):
         self.n_samples += 1
         return y
 
-    def bind(self, values: np.ndarray, inputs, outputs: slice
-             ) -> tuple[Callable[[float], None], Callable[[float], None]]:
-        """The master's fast path: return ``(output_fn, update_fn)``, each taking ``t``.
-
-        ``values`` is the master's array of all signals, ``inputs`` the index (slice or
-        int array) of this component's connected inputs in it, ``outputs`` the slice of
-        its outputs. ``output_fn(t)`` must write the outputs at ``t`` into
-        ``values[outputs]``; ``update_fn(t)`` must call the update with
-        ``values[inputs]``. The default wraps :meth:`output` and :meth:`update` and checks
-        the number of outputs (the master checks that every signal is finite).
-        """
-        return bind_protocol(self, values, values, inputs, outputs)
-
 
 def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, inputs, outputs: slice
                   ) -> tuple[Callable[[float], None], Callable[[float], None]]:
     """``(output_fn, update_fn)`` calling ``comp``'s :meth:`~Component.output` and
     :meth:`~Component.update` with its inputs read from ``source[inputs]`` and its outputs
-    written to ``values[outputs]`` (the number checked): :meth:`Component.bind`'s default
-    (``source is values``), and the Jacobi order's binding of any component (``source``:
-    the values before the instant)."""
+    written to ``values[outputs]`` (the number checked): the binding of a component without
+    :class:`FastBinding` (``source is values``), and the Jacobi order's binding of any
+    component (``source``: the values before the instant)."""
     n_out = outputs.stop - outputs.start
-    last = [np.nan]
     output, update = comp.output, comp.update
 
     def output_fn(t: float) -> None:
@@ -310,9 +353,6 @@ def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, input
         if not ok:
             raise ConfigurationError(f"output returned {y!r}, expected {n_out} value(s)")
         values[outputs] = y
-        if t != last[0]:
-            last[0] = t
-            comp.n_samples += 1
 
     def update_fn(t: float) -> None:
         update(t, source[inputs])

@@ -38,9 +38,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.core.component import Component, bind_protocol, ports_compatible
-from cosim.core.recording import MemorySink, ParquetSink, select_signals
-from cosim.core.schedule import Group, base_step, evaluation_order
 from fmu_models.errors import (
     ConfigurationError,
     CosimError,
@@ -49,6 +46,10 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
+
+from .component import Component, FastBinding, bind_protocol, ports_compatible
+from .recording import MemorySink, ParquetSink, select_signals
+from .schedule import Group, base_step, evaluation_order
 
 __all__ = ["LOOPS", "LOOP_SOLVERS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
 
@@ -145,7 +146,7 @@ class Cosimulation:
         if order == "auto":
             self.schedule = evaluation_order(self.components, self.connections, loops)
         else:
-            from cosim.core.schedule import Unit
+            from .schedule import Unit
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
         self.timings: dict[str, float] = {}
@@ -249,7 +250,7 @@ class Cosimulation:
                         else "read at t before the source's output at t (list order): one source period old")
             else:
                 when = ("consumed at t by update (no direct feedthrough): "
-                        + ("held over the FMU's step [t, t + period]" if hasattr(dst, "interface")
+                        + ("held over the component's step [t, t + period]" if dst.holds_inputs
                            else "used for the component's next instant"))
             lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {when}{hold}")
         return "\n".join(lines)
@@ -337,7 +338,7 @@ class Cosimulation:
         bound = {}
         for c in self.components:
             inp, out = self._in_specs[c.name][1], self._out_slices[c.name]
-            bound[c.name] = (c.bind(values, inp, out) if source is values
+            bound[c.name] = (c.bind(values, inp, out) if source is values and isinstance(c, FastBinding)
                              else bind_protocol(c, values, source, inp, out))
         return bound
 
@@ -503,6 +504,9 @@ class Cosimulation:
         finally:
             if bar is not None:
                 bar.close()
+            reached = k if phase in ("output", "update") else -1
+            for c in self.components:              # the instants each component computed
+                c.n_samples = reached // self._ratio[c.name] + 1 if reached >= 0 else 0
             clock = time.perf_counter()
             for c in self.components:
                 c.close()

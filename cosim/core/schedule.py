@@ -21,8 +21,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 
-from cosim.core.component import Component
 from fmu_models.errors import ConfigurationError, ResourceError
+
+from .component import Component
 
 __all__ = ["MAX_HYPERPERIOD", "MAX_RATIO", "Group", "Unit", "base_step", "evaluation_order"]
 

@@ -6,7 +6,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from cosim.components.sensors import ProcessNoise, Sensor
+from ..components.sensors import ProcessNoise, Sensor
 
 
 def noise_components(model, T: float, q, measured: Sequence[str], r_std, seed_w: int, seed_v: int):
@@ -84,8 +84,8 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
     the source and the process noise (the order follows from the wiring). Returns truth
     (N+1, nx), estimates by filter (N+1, nx), their full covariances (N+1, nx, nx) and
     NIS (N,)."""
-    from cosim.components.estimation import EstimatorComponent
-    from cosim.core.master import Cosimulation
+    from ..components.estimation import EstimatorComponent
+    from ..core.master import Cosimulation
 
     states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
     inp = [p for p in plant.input_names if not p.startswith("w_")]

@@ -32,18 +32,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.experiments import metrics
-from cosim.experiments.campaign import realisation_seeds, run_tasks
-from cosim.experiments.common import (
+from fmu_models.checks import positive
+from fmu_models.errors import ConfigurationError, UnknownNameError
+
+from . import metrics
+from .campaign import realisation_seeds, run_tasks
+from .common import (
     batch_estimates,
     master_realisation,
     nees_from_outputs,
     new_figure,
     noise_components,
 )
-from cosim.experiments.common import simulate_truth as common_truth
-from fmu_models.checks import positive
-from fmu_models.errors import ConfigurationError, UnknownNameError
+from .common import simulate_truth as common_truth
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
 READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 the measurement variance (R)",
@@ -103,7 +104,7 @@ class Settings:
     divergence_threshold: float = 1e3
 
     def __post_init__(self):
-        from cosim.experiments.settings import check_common
+        from .settings import check_common
 
         check_common(self)
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
@@ -182,7 +183,7 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
 def figure2_prbs(s: Settings):
     """The input source: Figure 2's PRBS (see the module documentation)."""
-    from cosim.components.sources import PRBS
+    from ..components.sources import PRBS
 
     return PRBS("force", s.T, s.input_amplitude, s.input_bit_time, s.input_order, s.input_seed)
 
@@ -247,8 +248,9 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     """The same realisations, each run through the co-simulation master with the plant FMU."""
     import tempfile
 
-    from cosim.fmi.component import FMUComponent
     from fmu_models import build_fmu
+
+    from ..fmi.component import FMUComponent
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -406,8 +408,8 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
                  config: str = "custom", partial: bool = False) -> Path:
     """Tables (CSV, Parquet), figures (PNG), ``settings.toml`` and a markdown summary into
     ``out_dir``; with ``partial`` the summary says the campaign was interrupted."""
-    from cosim.experiments.settings import to_toml
-    from cosim.results import atomic_write
+    from ..results import atomic_write
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -457,7 +459,7 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
 
 
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
-    from cosim.results import atomic_write
+    from ..results import atomic_write
 
     for rd in sorted({k[0] for k in examples}):
         if (rd, 1) not in examples:

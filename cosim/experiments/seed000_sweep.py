@@ -20,11 +20,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.experiments import seed000
-from cosim.experiments.campaign import run_tasks
-from cosim.experiments.common import new_figure
 from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, Interrupted
+
+from . import seed000
+from .campaign import run_tasks
+from .common import new_figure
 
 ADAPTIVE = ("IAE", "MF-IAE", "EKF EM")
 FILTERS = ("EKF", *ADAPTIVE)
@@ -112,8 +113,8 @@ def goals(table: pd.DataFrame, settings: SweepSettings, nx: int = 4) -> pd.DataF
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
     """``sweep.csv|parquet``, heat maps (``heatmap_<metric>.png``), ``settings.toml`` and
     ``summary.md`` into ``out_dir``."""
-    from cosim.experiments.settings import to_toml
-    from cosim.results import atomic_write
+    from ..results import atomic_write
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -162,7 +163,7 @@ def _grid(table: pd.DataFrame, name: str, metric: str) -> pd.DataFrame:
 
 
 def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
-    from cosim.results import atomic_write
+    from ..results import atomic_write
 
     labels = [f"{f:g}" for f in settings.factors]
     for metric, title, log in (("eta_over_bound", "eta / true-Q,R bound", False),

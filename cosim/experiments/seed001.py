@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.experiments import metrics
-from cosim.experiments.campaign import realisation_seeds, run_tasks
-from cosim.experiments.common import batch_estimates, master_realisation, noise_components, simulate_truth
+from . import metrics
+from .campaign import realisation_seeds, run_tasks
+from .common import batch_estimates, master_realisation, noise_components, simulate_truth
 
 CASES = {"hanging": (0.0, 0.0, np.pi, 0.0), "upright": (0.0, 0.0, 0.1, 0.0)}
 REPORT_TIMES = (1.0, 30.0, 60.0, 90.0, 100.0, 120.0)
@@ -59,7 +59,7 @@ class Settings:
     seed: int = 1
 
     def __post_init__(self):
-        from cosim.experiments.settings import check_common
+        from .settings import check_common
 
         check_common(self)
 
@@ -81,7 +81,7 @@ def make_filters(s: Settings, case: str) -> dict:
 
 
 def _source(s: Settings):
-    from cosim.components.sources import Constant
+    from ..components.sources import Constant
 
     return Constant("force", s.T, s.force)
 
@@ -118,8 +118,9 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
     """The same realisations through the co-simulation master with the plant FMU."""
     import tempfile
 
-    from cosim.fmi.component import FMUComponent
     from fmu_models import build_fmu, get_model
+
+    from ..fmi.component import FMUComponent
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -156,9 +157,9 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
 
 
 def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
-    from cosim.experiments.common import new_figure
-    from cosim.experiments.settings import to_toml
-    from cosim.results import atomic_write
+    from ..results import atomic_write
+    from .common import new_figure
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.experiments.campaign import realisation_seeds, run_tasks
+from .campaign import realisation_seeds, run_tasks
 
 CASES = {"Q = R = 0.01": (0.01, 0.01), "Q = 0.01, R = 0.1": (0.01, 0.1)}
 STATES = ("alpha", "alpha_dot", "phi_dot")
@@ -67,18 +67,19 @@ class Settings:
     seed: int = 3
 
     def __post_init__(self):
-        from cosim.experiments.settings import check_common
+        from .settings import check_common
 
         check_common(self)
 
 
 def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
-    from cosim.components.estimation import EstimatorComponent, LQRController
-    from cosim.components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
-    from cosim.components.plant_model import ModelComponent
-    from cosim.fmi.component import FMUComponent
     from estimators import EKF, augment_rate_bias, discretize
     from fmu_models import get_model
+
+    from ..components.estimation import EstimatorComponent, LQRController
+    from ..components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
+    from ..components.plant_model import ModelComponent
+    from ..fmi.component import FMUComponent
 
     model = get_model("iwp")
     outs = list(STATES) + ["der(alpha_dot)"]
@@ -123,8 +124,9 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
     """Run realisations ``runs`` of one case; returns one dict of metrics per realisation."""
     import tempfile
 
-    from cosim.core.master import Cosimulation
     from fmu_models import build_fmu
+
+    from ..core.master import Cosimulation
 
     s = settings
     out = []
@@ -177,9 +179,9 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) -> Path:
-    from cosim.experiments.common import new_figure
-    from cosim.experiments.settings import to_toml
-    from cosim.results import atomic_write
+    from ..results import atomic_write
+    from .common import new_figure
+    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -27,16 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.core.component import PORT_TYPES, Component, ExportedFMU, Port
-from cosim.fmi.archive import Extraction, read_description
-from cosim.fmi.exchange import Exchange, raw_function
-from cosim.fmi.model_exchange import SOLVERS, MEIntegrator
 from fmu_models.errors import (
     ConfigurationError,
     FMUError,
     TypeMismatchError,
     UnknownNameError,
 )
+
+from ..core.component import PORT_TYPES, Component, ExportedFMU, Port
+from .archive import Extraction, read_description
+from .exchange import Exchange, raw_function
+from .model_exchange import SOLVERS, MEIntegrator
 
 __all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "FMUComponent", "FMUError"]
 
@@ -47,7 +48,7 @@ _LEVELS = {0: _logging.INFO, 1: _logging.WARNING, 2: _logging.WARNING, 3: _loggi
 _STATUS = {1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
 
-class FMUComponent(Component):
+class FMUComponent(Component, kind="fmu"):
     """An FMU stepped by the master.
 
     Parameters
@@ -97,6 +98,7 @@ class FMUComponent(Component):
     """
 
     reentrant = True
+    holds_inputs = True
 
     def __init__(self, name: str, path, period: float, inputs: Sequence[str] | None = None,
                  outputs: Sequence[str] | None = None, parameters: Mapping[str, float] | None = None,
@@ -156,6 +158,33 @@ class FMUComponent(Component):
         self._extraction: Extraction | None = None
         self.connected_inputs = list(self.input_names)
         self._private, self._me, self._initialized = None, None, False
+
+    @classmethod
+    def from_scenario(cls, name, table, context):
+        """Either ``model`` (this project's plant, built into the scenario's FMU folder as FMI
+        ``fmi_version``, with ``model_parameters``) or ``path`` (an FMU file); the other keys
+        as the constructor's."""
+        table = dict(table)
+        if ("model" in table) == ("path" in table):
+            raise ConfigurationError(f"component {name!r}: give either model (this project's plant, built on "
+                                     "the fly) or path (an .fmu file)")
+        if "model" in table:
+            from fmu_models.export.pack import FMI_VERSIONS
+            from fmu_models.export.plant import build_fmu
+
+            version = table.pop("fmi_version", 2)
+            if isinstance(version, bool) or version not in FMI_VERSIONS:
+                raise ConfigurationError(f"component {name!r}: fmi_version must be one of {FMI_VERSIONS}, "
+                                         f"got {version!r}")
+            model = context.model(table.pop("model"), table.pop("model_parameters", None))
+            path = build_fmu(model, context.fmu_dir / f"fmi{version}", fmi_version=version)
+        else:
+            for key in ("fmi_version", "model_parameters"):
+                if key in table:
+                    raise ConfigurationError(f"component {name!r}: {key} applies to a built model, not to an FMU "
+                                             "file")
+            path = context.path(table.pop("path"), f"component {name!r}: path")
+        return context.construct(cls, name, table, path=path)
 
     # ------------------------------------------------------------------ description
     def _check_binary(self, name: str) -> None:

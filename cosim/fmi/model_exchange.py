@@ -24,8 +24,9 @@ import ctypes
 
 import numpy as np
 
-from cosim.fmi.exchange import raw_function
 from fmu_models.errors import ConfigurationError, FMUError
+
+from .exchange import raw_function
 
 __all__ = ["SOLVERS", "MEIntegrator"]
 
