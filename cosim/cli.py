@@ -223,141 +223,29 @@ def _model_report(m, duration: float) -> None:
 
 
 # ---------------------------------------------------------------------------- experiments
-EXPERIMENTS = ("seed000", "seed000-sweep", "seed001", "seed002")
-
-
-def _settings(args, base):
-    """``base`` with --settings FILE, --runs, --seed and every --set applied, in that order."""
-    from .experiments.settings import apply_overrides, load_settings
-
-    s = load_settings(base, args.settings) if args.settings else base
-    quick = [f"runs={args.runs}"] if args.runs else []
-    quick += [f"seed={args.seed}"] if args.seed is not None else []
-    return apply_overrides(s, quick + list(args.set or []))
-
-
-def _common(args) -> dict:
-    return dict(backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
-
-
 def _experiment(args) -> int:
+    """Any registered experiment (:mod:`cosim.experiments.base`): its settings are validated
+    before ``--out`` is touched; an interrupted run writes a partial report."""
+    from .experiments import EXPERIMENTS
     from .results import OutputFolder
 
-    if args.runs is not None and args.runs > 100_000:
-        raise ConfigurationError(f"--runs {args.runs} is more than 100000 realisations per scenario")
-    if args.config and args.name != "seed000" and args.name != "seed000-sweep":
-        raise ConfigurationError(f"--config applies to seed000 and seed000-sweep, not {args.name}")
-    runner = {"seed000": _seed000, "seed000-sweep": _sweep, "seed001": _seed001, "seed002": _seed002}[args.name]
-    settings = runner(args, None)            # validate every setting before touching --out
+    exp = EXPERIMENTS.get(args.name)()
+    exp.check_path(args.path)
+    config = args.config or exp.default_config
+    settings = exp.settings(config, args.settings, args.set, args.runs, args.seed)
+    common = dict(path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
     out = Path(args.out or f"out/{args.name}" + (f"-{args.config}" if args.config else ""))
     with OutputFolder(out, args.overwrite) as folder:
-        return runner(args, (folder, settings))
-
-
-def _seed000_config(args, default: str):
-    """The seed 000 configuration --config names (or ``default``): its name and settings."""
-    from .experiments import seed000
-
-    config = args.config or default
-    if config not in seed000.CONFIGS:
-        raise ConfigurationError(f"unknown --config {config!r}; valid: {', '.join(seed000.CONFIGS)}")
-    return config, seed000.CONFIGS[config]
-
-
-def _run_with_partial_report(run, write_partial):
-    """``run()``; on an interruption with finished results, ``write_partial(*partial)``
-    writes them as a partial report (named on stderr) before the error goes on."""
-    try:
-        return run()
-    except Interrupted as e:
-        if e.partial is not None and len(e.partial[0]):
-            md = write_partial(*e.partial)
-            print(f"interrupted: partial results ({e}) in {md}", file=sys.stderr)
-        raise
-
-
-def _seed000(args, job) -> object:
-    from .experiments import seed000 as exp
-
-    config, base = _seed000_config(args, "default")
-    if job is None:
-        return _settings(args, base)
-    out, settings = job
-    per_run, eps, examples, wall = _run_with_partial_report(
-        lambda: exp.run(settings, path=args.path, **_common(args)),
-        lambda *partial: exp.write_report(*partial, settings, out, args.path, config, partial=True))
-    md = exp.write_report(per_run, eps, examples, wall, settings, out, args.path, config)
-    table = exp.summary_table(per_run)
-    cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *exp.FILTERS]
-    print(f"Seed 000, Table 3 (eta, eq 44): configuration {config}, {settings.runs} realisations, "
-          f"{args.path} path, {wall:.2f} s")
-    print(table[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
-    print()
-    print("\n".join(exp.agreement(table)))
-    print(f"\nwrote {md} and the tables and figures beside it")
-    return 0
-
-
-def _sweep(args, job) -> object:
-    from dataclasses import fields, replace
-
-    from .experiments import seed000_sweep as exp
-    from .experiments.settings import apply_overrides
-
-    if job is None:
-        _, base = _seed000_config(args, "paper")
-        own = {f.name for f in fields(exp.SweepSettings)} - {"campaign"}
-        sweep_sets = [x for x in (args.set or []) if x.split("=", 1)[0].strip() in own]
-        campaign_sets = [x for x in (args.set or []) if x not in sweep_sets]
-        args_campaign = argparse.Namespace(**{**vars(args), "set": campaign_sets})
-        campaign = _settings(args_campaign, base)
-        return apply_overrides(replace(exp.SweepSettings(), campaign=campaign), sweep_sets)
-    out, settings = job
-    table, wall = _run_with_partial_report(
-        lambda: exp.run(settings, **_common(args)),
-        lambda *partial: exp.write_report(*partial, settings, out, partial=True))
-    md = exp.write_report(table, wall, settings, out)
-    print(f"Seed 000 sweep: {len(settings.factors)} x {len(settings.factors)} cells, "
-          f"{settings.campaign.runs} realisations a cell, {wall:.1f} s")
-    print(exp.goals(table, settings).to_string(index=False, float_format=lambda v: f"{v:.3f}"))
-    print(f"\nwrote {md}, sweep.csv and the heat maps beside it")
-    return 0
-
-
-def _seed001(args, job) -> object:
-    from .experiments import seed001 as exp
-
-    if job is None:
-        return _settings(args, exp.Settings())
-    out, settings = job
-    table, summary, wall = exp.run(settings, path=args.path, **_common(args))
-    md = exp.write_report(table, summary, wall, settings, out)
-    print(f"Seed 001: mean |position error| [m], {settings.runs} realisations, {args.path} path, {wall:.2f} s")
-    print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
-    for case, res in summary.items():
-        td = res["KF"]["t_div"]
-        when = f"median {np.nanmedian(td):.2f} s" if np.isfinite(td).any() else "never"
-        print(f"{case}: KF diverged in {int(np.isfinite(td).sum())} of {len(td)} runs ({when}); "
-              f"EKF in {int(np.isfinite(res['EKF']['t_div']).sum())}")
-    print(f"\nwrote {md}")
-    return 0
-
-
-def _seed002(args, job) -> object:
-    from .experiments import seed002 as exp
-
-    if job is None:
-        return _settings(args, exp.Settings())
-    out, settings = job
-    per_run, traces, wall = exp.run(settings, path=args.path, **_common(args))
-    md = exp.write_report(per_run, traces, wall, settings, out, args.path)
-    print(f"Seed 002: wheel pendulum through the sensor chain, {settings.runs} realisations, "
-          f"{args.path} path, {wall:.2f} s")
-    print(exp.summary_table(per_run).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
-    agg = per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
-                                               "alpha amplitude ratio"]].mean()
-    print(agg.to_string(float_format=lambda v: f"{v:.4g}"))
-    print(f"\nwrote {md}")
+        try:
+            result = exp.run(settings, **common)
+        except Interrupted as e:
+            if e.partial is not None and len(e.partial[0]):
+                md = exp.write_report(e.partial, settings, folder, args.path, config, partial=True)
+                print(f"interrupted: partial results ({e}) in {md}", file=sys.stderr)
+            raise
+        md = exp.write_report(result, settings, folder, args.path, config)
+        print(exp.summary(result, settings, args.path, config))
+        print(f"\nwrote {md} and the tables and figures beside it")
     return 0
 
 
@@ -387,12 +275,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("scenarios", help="list the shipped scenario files")
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
     models.add_argument("--duration", type=positive_float, default=5.0, help="simulated time [s] (default 5)")
+    from .experiments import EXPERIMENTS
+
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
                                             "campaign; writes tables, figures and summary.md")
-    exp.add_argument("name", choices=EXPERIMENTS, help="which experiment (seed000-sweep: the robustness "
-                                                       "map of EKF, IAE and MF-IAE over wrong Q0 and R0)")
-    exp.add_argument("--config", help="named configuration of seed000: default (Q0 = R0 = 0.01 I, both "
-                                      "readings) or paper (Q0 = 1e-3 I, R0 = 10 I, eqs reading)")
+    exp.add_argument("name", choices=EXPERIMENTS.names(), help="which experiment: " + "; ".join(
+        f"{n}: {EXPERIMENTS.get(n).description}" for n in EXPERIMENTS.names()))
+    exp.add_argument("--config", help="named configuration (seed000: default = Q0 = R0 = 0.01 I, both readings; "
+                                      "paper = Q0 = 1e-3 I, R0 = 10 I, eqs reading)")
     exp.add_argument("--set", action="append", metavar="NAME=VALUE",
                      help="change one setting (repeatable), e.g. --set q0=1e-3 --set mfiae_window=12; "
                           "summary.md lists them all")

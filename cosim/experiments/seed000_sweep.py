@@ -14,8 +14,9 @@ R0. The goals of issue 11 are checked cell by cell and summarised in ``summary.m
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -24,6 +25,7 @@ from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, Interrupted
 
 from . import seed000
+from .base import Experiment
 from .campaign import run_tasks
 from .common import new_figure
 
@@ -72,6 +74,14 @@ def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: s
     return rows
 
 
+class SweepResult(NamedTuple):
+    """What :func:`run` returns: the ``table`` (one row per scenario, cell and filter) and the
+    ``wall`` time [s]."""
+
+    table: pd.DataFrame
+    wall: float
+
+
 def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n_jobs=None,
         progress: bool = True):
     """Run the sweep; returns ``(table, wall_time)``: one row per scenario, cell and
@@ -86,10 +96,10 @@ def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n
     try:
         results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc="seed000 sweep")
     except Interrupted as e:
-        e.partial = (pd.DataFrame([r for rows in (e.partial or []) if rows for r in rows]),
-                     time.perf_counter() - t0)
+        e.partial = SweepResult(pd.DataFrame([r for rows in (e.partial or []) if rows for r in rows]),
+                                time.perf_counter() - t0)
         raise
-    return pd.DataFrame([r for rows in results for r in rows]), time.perf_counter() - t0
+    return SweepResult(pd.DataFrame([r for rows in results for r in rows]), time.perf_counter() - t0)
 
 
 def goals(table: pd.DataFrame, settings: SweepSettings, nx: int = 4) -> pd.DataFrame:
@@ -188,3 +198,42 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
         fig.colorbar(im, ax=list(axes[0]), shrink=0.8, label=("log10 " if log else "") + title)
         fig.suptitle(f"Seed 000 sweep: {title}, mean over scenarios")
         atomic_write(out / f"heatmap_{metric}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+
+
+class Sweep(Experiment, register="seed000-sweep"):
+    """The robustness map of EKF, IAE and MF-IAE over wrong starting Q0 and R0 (beyond the
+    paper; see the module documentation). ``--set`` names either a sweep setting
+    (``factors``, the goal margins) or a setting of every cell's seed 000 campaign."""
+
+    description = "beyond the paper: EKF, IAE and MF-IAE over a 7 x 7 map of wrong Q0, R0"
+    configs = seed000.CONFIGS
+    default_config = "paper"
+    paths = ("fast",)
+
+    def settings(self, config=None, settings_file=None, overrides=(), runs=None, seed=None):
+        """The campaign settings of ``config`` (default ``paper``) with the file, ``runs``,
+        ``seed`` and the ``overrides`` that name campaign settings; the others set the
+        sweep's own fields."""
+        from .settings import apply_overrides
+
+        own = {f.name for f in fields(SweepSettings)} - {"campaign"}
+        overrides = list(overrides or ())
+        mine = [x for x in overrides if x.split("=", 1)[0].strip() in own]
+        campaign = Experiment.settings(self, config, settings_file, [x for x in overrides if x not in mine],
+                                       runs, seed)
+        return apply_overrides(replace(SweepSettings(), campaign=campaign), mine)
+
+    def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
+        """:func:`run` (the fast path only)."""
+        self.check_path(path)
+        return run(settings, backend=backend, n_jobs=n_jobs, progress=progress)
+
+    def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
+        """:func:`write_report`."""
+        return write_report(*result, settings, out_dir, partial=partial)
+
+    def summary(self, result, settings, path="fast", config="custom"):
+        """The goals table."""
+        return "\n".join([f"Seed 000 sweep: {len(settings.factors)} x {len(settings.factors)} cells, "
+                          f"{settings.campaign.runs} realisations a cell, {result.wall:.1f} s",
+                          goals(result.table, settings).to_string(index=False, float_format=lambda v: f"{v:.3f}")])

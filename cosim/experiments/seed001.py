@@ -22,11 +22,13 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 import pandas as pd
 
 from . import metrics
+from .base import Experiment
 from .campaign import realisation_seeds, run_tasks
 from .common import batch_estimates, master_realisation, noise_components, simulate_truth
 
@@ -153,7 +155,17 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
         for j, tr in enumerate(times):
             rows.append({"case": case, "time": tr, **{f"{n} |x error| [m]": r[n]["pos_err"][:, j].mean()
                                                       for n in FILTERS}})
-    return pd.DataFrame(rows), dict(zip(CASES, res)), wall
+    return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall)
+
+
+class Seed001Result(NamedTuple):
+    """What :func:`run` returns: the ``table`` of mean position errors at the report times,
+    the ``summary`` per case (per filter: errors, divergence times, RMSE) and the ``wall``
+    time [s]."""
+
+    table: pd.DataFrame
+    summary: dict
+    wall: float
 
 
 def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
@@ -192,3 +204,29 @@ def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
     md = out / "summary.md"
     atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
     return md
+
+
+class Seed001(Experiment, register="seed001"):
+    """Seed 001: the KF on the linearised cart-pole against the EKF under a constant force."""
+
+    description = "seed 001: KF on the linearised cart-pole against the EKF, constant force, 120 s"
+    configs: ClassVar[dict] = {"default": Settings()}
+
+    def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
+        """:func:`run`."""
+        return run(settings, path=self.check_path(path), backend=backend, n_jobs=n_jobs, progress=progress)
+
+    def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
+        """:func:`write_report`."""
+        return write_report(*result, settings, out_dir)
+
+    def summary(self, result, settings, path="fast", config="custom"):
+        """The errors at the report times, and the divergence of each filter."""
+        lines = [f"Seed 001: mean |position error| [m], {settings.runs} realisations, {path} path, "
+                 f"{result.wall:.2f} s", result.table.to_string(index=False, float_format=lambda v: f"{v:.4g}")]
+        for case, res in result.summary.items():
+            td = res["KF"]["t_div"]
+            when = f"median {np.nanmedian(td):.2f} s" if np.isfinite(td).any() else "never"
+            lines.append(f"{case}: KF diverged in {int(np.isfinite(td).sum())} of {len(td)} runs ({when}); "
+                         f"EKF in {int(np.isfinite(res['EKF']['t_div']).sum())}")
+        return "\n".join(lines)
