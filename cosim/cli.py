@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
+from fmu_models.registry import load_plugin
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
@@ -258,6 +259,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "Plants run as FMUs built from CasADi models; estimators and other components "
                     "run in Python, each at its own sample period.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
+    parser.add_argument("--plugin", action="append", metavar="MODULE_OR_FILE",
+                        help="import a module or .py file first (repeatable): the models, filters, components "
+                             "and experiments it defines register themselves")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run the seed 000 cart-pole scenario (EKF and MF-IAE): "
                                        "results table, CSV/Parquet and a truth-vs-estimate plot")
@@ -350,6 +354,18 @@ def _sigterm(signum, frame):
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
     when interrupted)."""
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--plugin", action="append", default=[])
+    pre.add_argument("--debug", action="store_true")
+    known, _ = pre.parse_known_args(argv)
+    try:
+        for plugin in known.plugin:           # before the parser: their experiments become choices
+            load_plugin(plugin)
+    except PendulumCosimError as e:
+        if known.debug:
+            raise
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
+        return EXIT_ERROR
     args = build_parser().parse_args(argv)
     previous = signal.getsignal(signal.SIGTERM)
     in_main = True

@@ -1,13 +1,21 @@
+"""Shared fixtures. The test folders mirror the packages (``tests/fmu_models``,
+``tests/estimators``, ``tests/cosim``); the project's packages are imported before this
+folder is put on ``sys.path`` (for the helper modules beside this file), so a test folder
+named like a package can never shadow it."""
 import shutil
 import subprocess
 import sys
 import zipfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parent))
-
 import fmpy
 import pytest
+
+import cosim  # noqa: F401 - the real packages first
+import estimators  # noqa: F401
+import fmu_models  # noqa: F401
+
+sys.path.append(str(Path(__file__).parent))
 
 DATA = Path(__file__).parent / "data"
 

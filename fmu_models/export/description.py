@@ -12,20 +12,37 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import quoteattr
 
-from ..errors import ConfigurationError
+__all__ = ["SYMBOLS", "Description", "Unknown", "base_units", "fmi2", "fmi3", "xml_attrs"]
 
-__all__ = ["BASE_UNITS", "Description", "Unknown", "fmi2", "fmi3", "xml_attrs"]
+#: SI base-unit exponents of the unit symbols a unit string is made of (FMI <BaseUnit>);
+#: ``rad`` is kept as FMI's own base "unit" of angles.
+SYMBOLS = {"m": dict(m=1), "kg": dict(kg=1), "s": dict(s=1), "A": dict(A=1), "K": dict(K=1), "mol": dict(mol=1),
+           "cd": dict(cd=1), "rad": dict(rad=1), "N": dict(kg=1, m=1, s=-2), "J": dict(kg=1, m=2, s=-2),
+           "W": dict(kg=1, m=2, s=-3), "V": dict(kg=1, m=2, s=-3, A=-1), "Pa": dict(kg=1, m=-1, s=-2),
+           "Hz": dict(s=-1), "1": {}}
 
-#: SI base-unit exponents of every unit string the project uses (FMI <BaseUnit>).
-BASE_UNITS = {
-    "m": dict(m=1), "m/s": dict(m=1, s=-1), "m/s2": dict(m=1, s=-2),
-    "rad": dict(rad=1), "rad/s": dict(rad=1, s=-1), "rad/s2": dict(rad=1, s=-2),
-    "N": dict(kg=1, m=1, s=-2), "kg": dict(kg=1), "N.s/m": dict(kg=1, s=-1),
-    "N.m.s/rad": dict(kg=1, m=2, s=-1, rad=-1), "kg.m2": dict(kg=1, m=2), "A": dict(A=1),
-    "N.m/A": dict(kg=1, m=2, s=-2, A=-1), "1": {}, "1/s": dict(s=-1), "s": dict(s=1),
-    "m2": dict(m=2), "m2/s2": dict(m=2, s=-2), "rad2": dict(rad=2), "rad2/s2": dict(rad=2, s=-2),
-    "N2": dict(kg=2, m=2, s=-4), "A2": dict(A=2),
-}
+
+def base_units(unit: str) -> dict | None:
+    """The SI base-unit exponents of ``unit`` written as symbols of :data:`SYMBOLS` joined by
+    ``.`` and one ``/`` with integer powers (``"N.m.s/rad"``, ``"m/s2"``, ``"kg.m2"``), or
+    None for a unit this does not read (it is then declared without a ``<BaseUnit>``)."""
+    import re
+
+    num, _, den = unit.partition("/")
+    total: dict[str, int] = {}
+    for part, sign in ((num, 1), (den, -1)):
+        if not part and sign == 1:
+            return None
+        for token in part.split(".") if part else []:
+            m = re.fullmatch(r"([A-Za-z]+|1)(-?\d+)?", token)
+            if not m or m.group(1) not in SYMBOLS:
+                return None
+            power = sign * int(m.group(2) or 1)
+            for base, e in SYMBOLS[m.group(1)].items():
+                total[base] = total.get(base, 0) + e * power
+    return {k: v for k, v in total.items() if v}
+
+
 _GENERATION = dict(generationTool="pendulum-cosim (CasADi code generation)",
                    generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"))
 _LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description="errors"/>'
@@ -96,10 +113,7 @@ def _units(variables) -> list[str]:
     units = sorted({v.unit for v in variables if v.unit})
     out = ["  <UnitDefinitions>"]
     for u in units:
-        base = BASE_UNITS.get(u)
-        if base is None:
-            raise ConfigurationError(f"unit {u!r} has no SI base-unit entry in "
-                                     "fmu_models.export.description.BASE_UNITS")
+        base = base_units(u)
         out.append(f"    <Unit{xml_attrs(name=u)}>" + (f"<BaseUnit{xml_attrs(**base)}/>" if base else "") + "</Unit>")
     out.append("  </UnitDefinitions>")
     return out if units else []

@@ -25,7 +25,7 @@ from estimators import EKF, discretize
 from fmu_models import get_model
 from fmu_models.errors import ConfigurationError, FMUError
 
-SCENARIO = Path(__file__).parents[1] / "cosim" / "scenarios" / "seed000_cartpole.toml"
+SCENARIO = Path(__file__).parents[2] / "cosim" / "scenarios" / "seed000_cartpole.toml"
 
 
 # ---------------------------------------------------------------------------- the generator

@@ -15,7 +15,7 @@ from cosim.scenario import Scenario
 from estimators import EKF, discretize
 from fmu_models import get_model
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 
 
 class Recorder(Component):
