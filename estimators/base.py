@@ -38,7 +38,7 @@ from .history import NoiseHistory
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
 from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
 from .results import FilterRun
-from .runtime import BoundStep, VectorInput, explain_status
+from .runtime import BoundStep, VectorInput, explain_status, lean_step
 from .system import DiscreteModel
 
 __all__ = ["DIAGNOSTICS", "FILTERS", "KEEP", "FilterRun", "KalmanBase", "Parameter", "StepContext", "StepResult",
@@ -158,14 +158,25 @@ class KalmanBase:
         self._fill_u = VectorInput(self._u, self.name, "u")
         self._fill_y = VectorInput(self._y, self.name, "y")
         self._fill_mask = VectorInput(self._mask, self.name, "mask")
-        self._mask[:] = 1.0
-        self._mask_dirty = False
+        self._mask[:] = 1.0                    # between calls the mask buffer is all ones
+        self._count = [0]                      # the step count k
         self._after = type(self).after_step is not KalmanBase.after_step
-        self.k = 0
+        if type(self).step is KalmanBase.step:      # the lean path, specialised for nu and ny
+            self.step = lean_step(self._rt, self._fill_u, self._fill_y, self._count, self._step, self._explain,
+                                  self.after_step if self._after else None)
         self.history = NoiseHistory(n, p)
         self._record()
 
     # ================================================================ the protocol (defaults)
+    @property
+    def k(self) -> int:
+        """Number of steps done."""
+        return self._count[0]
+
+    @k.setter
+    def k(self, value: int) -> None:
+        self._count[0] = int(value)
+
     def config_key(self) -> tuple:
         """What identifies this configuration's compiled step beyond the class (e.g. a window
         length); default none. Values that are step inputs (bounds, gains) do not belong here."""
@@ -359,26 +370,31 @@ class KalmanBase:
         NumericalError
             The estimate became non-finite (the state is unchanged).
         """
+        return self._step(u, y, mask)
+
+    def _step(self, u, y, mask=None) -> np.ndarray:
+        """:meth:`step` for every call; the instance's own ``step`` (runtime.lean_step) takes
+        the common one (a measurement, no mask) without the attribute lookups."""
         self._fill_u(u)
-        if y is None:
-            self._mask[:] = 0.0
-            self._mask_dirty = True
-        else:
-            self._fill_y(y)
-            if mask is not None:
-                self._fill_mask(mask)
-                self._mask_dirty = True
-            elif self._mask_dirty:
-                self._mask[:] = 1.0
-                self._mask_dirty = False
-        rt = self._rt
-        if rt.trigger():
-            self._explain("step")
-        rt.commit()
-        self.k += 1
+        try:
+            if y is None:
+                self._mask[:] = 0.0
+            else:
+                self._fill_y(y)
+                if mask is not None:
+                    self._fill_mask(mask)
+            rt = self._rt
+            cur = rt.cur
+            rt.triggers[cur]()
+            if rt.status[0]:
+                self._explain("step")
+        finally:
+            self._mask[:] = 1.0
+        rt.cur = cur ^ 1
+        self._count[0] += 1
         if self._after:
             self.after_step()
-        return rt.now("x").copy()
+        return rt.pairs["x"][cur ^ 1].copy()
 
     def predict(self, u) -> np.ndarray:
         """Time update with input ``u`` (nu,): a step without measurement; returns the
@@ -407,17 +423,17 @@ class KalmanBase:
         s = self.system
         fn = s.compiled("update", self.cache_key, self.backend, self._update_function)
         self._fill_y.checked(y)
-        if mask is None:
+        try:
+            if mask is not None:
+                self._fill_mask.checked(mask)
+            x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
+            res = fn(self._now("x"), matrix(self._now("P"), s.nx, s.nx), matrix(self._now("R"), s.ny, s.ny),
+                     self._y, self._mask, self.gate, float(self.nan_is_missing))
+            self._rt.status[0] = float(res[-1])
+            if self._rt.status[0]:
+                self._explain("update")
+        finally:
             self._mask[:] = 1.0
-        else:
-            self._fill_mask.checked(mask)
-        self._mask_dirty = True
-        x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
-        res = fn(self._now("x"), matrix(self._now("P"), s.nx, s.nx), matrix(self._now("R"), s.ny, s.ny), self._y,
-                 self._mask, self.gate, float(self.nan_is_missing))
-        self._rt.status[0] = float(res[-1])
-        if self._rt.status[0]:
-            self._explain("update")
         self._now("x")[:] = np.asarray(res[0]).ravel()
         self._now("P")[:] = np.asarray(res[1]).ravel(order="F")
         out = self._rt.outputs
@@ -526,12 +542,12 @@ class KalmanBase:
             k = int(np.flatnonzero(status)[0])
             rt.status[0] = status[k]
             self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
-            self._mask_dirty = True
             k_saved, self.k = self.k, self.k + k
             try:
                 self._explain(f"run index {k}")
             finally:
                 self.k = k_saved
+                self._mask[:] = 1.0
         cat = {name: a[0] for name, a in outs.items()}
         result = self._make_run(cat, us, ys, masks, init)
         result.log_likelihood += y0_ll

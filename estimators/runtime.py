@@ -15,7 +15,7 @@ then says which entry it was.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import casadi as ca
 import numpy as np
@@ -25,7 +25,7 @@ from fmu_models.errors import InputError, NumericalError, TypeMismatchError
 from ._buffered import BufferedFunction
 from .linalg import BAD_INPUT, BAD_RESULT
 
-__all__ = ["BoundStep", "VectorInput", "explain_status"]
+__all__ = ["BoundStep", "VectorInput", "explain_status", "lean_step"]
 
 
 class BoundStep:
@@ -57,8 +57,11 @@ class BoundStep:
                        if k not in self.pairs}
         self.outputs = {fn.name_out(j): np.zeros(fn.nnz_out(j)) for j in range(fn.n_out())
                         if not fn.name_out(j).endswith("_new")}
-        self.cur = 0
+        #: which copy of the state is current, in a cell the lean step shares
+        self.cell = [0]
         self._steps = tuple(self._bind(fn, i) for i in (0, 1))
+        #: the two evaluations (from copy 0, from copy 1), for callers that inline trigger()
+        self.triggers = tuple(s.trigger for s in self._steps)
         self.status = self.outputs["status"]
 
     def _bind(self, fn: ca.Function, i: int) -> BufferedFunction:
@@ -68,9 +71,18 @@ class BoundStep:
                for j, n in enumerate(fn.name_out(k) for k in range(fn.n_out()))}
         return BufferedFunction(fn, args, res)
 
+    @property
+    def cur(self) -> int:
+        """Which copy of the state is current (0 or 1)."""
+        return self.cell[0]
+
+    @cur.setter
+    def cur(self, value: int) -> None:
+        self.cell[0] = value
+
     def now(self, name: str) -> np.ndarray:
         """The current copy of state array ``name`` (a view: writing it changes the state)."""
-        return self.pairs[name][self.cur]
+        return self.pairs[name][self.cell[0]]
 
     def trigger(self) -> float:
         """Evaluate the step from the current state into the other copy; returns the status
@@ -104,19 +116,13 @@ class VectorInput:
     def __init__(self, buffer: np.ndarray, owner: str, what: str, allow_scalar: bool = True):
         self.buffer, self.owner, self.what = buffer, owner, what
         self.n, self.allow_scalar = len(buffer), allow_scalar
-        self._range = range(self.n)
+        self.fill = _fast_fill(buffer, self.checked)
 
     def __call__(self, value) -> None:
         """Copy ``value`` into the buffer (raises InputError / TypeMismatchError naming the
-        problem; the buffer may then hold part of it)."""
-        buf = self.buffer
-        try:
-            if value.__class__ is str or len(value) != self.n:
-                raise ValueError
-            for i in self._range:
-                buf[i] = value[i]
-        except (TypeError, ValueError, IndexError, KeyError):
-            self.checked(value)
+        problem; the buffer may then hold part of it). :attr:`fill` is the same function
+        without the method call (what the filters' step calls)."""
+        self.fill(value)
 
     def checked(self, value) -> None:
         """The full check of ``value`` (the slow path): a named error, or the copy."""
@@ -136,6 +142,106 @@ class VectorInput:
         if a.shape != (n,):
             raise InputError(f"{owner}: {what} must have shape ({n},), got shape {a.shape}")
         self.buffer[:] = a
+
+
+_SLOW = (TypeError, ValueError, IndexError, KeyError)
+
+
+def _fast_fill(buf: np.ndarray, slow: Callable[[object], None]) -> Callable[[object], None]:
+    """``fill(value)``: the good path of :class:`VectorInput` for a buffer of ``n`` entries (the
+    length checked, one assignment per entry; the common sizes written out, since a loop
+    costs more than the assignments), ``slow(value)`` for everything else."""
+    n = len(buf)
+    if n == 1:
+        def fill(v):
+            try:
+                if v.__class__ is str or len(v) != 1:
+                    raise ValueError
+                buf[0] = v[0]
+            except _SLOW:
+                slow(v)
+    elif n == 2:
+        def fill(v):
+            try:
+                if v.__class__ is str or len(v) != 2:
+                    raise ValueError
+                buf[0] = v[0]
+                buf[1] = v[1]
+            except _SLOW:
+                slow(v)
+    elif n == 3:
+        def fill(v):
+            try:
+                if v.__class__ is str or len(v) != 3:
+                    raise ValueError
+                buf[0] = v[0]
+                buf[1] = v[1]
+                buf[2] = v[2]
+            except _SLOW:
+                slow(v)
+    else:
+        entries = range(n)
+
+        def fill(v):
+            try:
+                if v.__class__ is str or len(v) != n:
+                    raise ValueError
+                for i in entries:
+                    buf[i] = v[i]
+            except _SLOW:
+                slow(v)
+    return fill
+
+
+def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: list, general: Callable,
+              explain: Callable[[str], None], after: Callable[[], None] | None) -> Callable:
+    """A filter's ``step(u, y, mask=None)`` specialised for its sizes: for the common call (a
+    measurement, no mask) ``u`` and ``y`` (lists, tuples or float arrays) are unpacked into
+    their entries and these copied one by one (written out for the filter's ``nu`` and
+    ``ny``, as the standard library's dataclasses write their methods), the step is one
+    native call, and nothing else is checked unless the conversion fails (a wrong length or
+    a non-number: then ``fill_u``/``fill_y`` name the problem) or the step's status is not 0
+    (NaN or inf: then ``explain`` does); other calls (``y=None``, a mask) go to
+    ``general(u, y, mask)``, which leaves the mask buffer all ones again.
+
+    ``count`` is a one-element list holding the step count, ``after`` the runtime hook to
+    call after a step (or None).
+    """
+    nu, ny = fill_u.n, fill_y.n
+    us, ys = [f"u{i}" for i in range(nu)], [f"y{j}" for j in range(ny)]
+    # memoryviews: an entry that is not a number (a string, None, a sequence) is a TypeError,
+    # and reading the status gives a float, both cheaper than through numpy; an array is
+    # unpacked through tolist() (unpacking it directly makes numpy scalars)
+    src = ["def step(u, y, mask=None):",
+           "    if mask is not None or y is None:",
+           "        return general(u, y, mask)",
+           "    try:",
+           "        if u.__class__ is ndarray:",
+           "            u = u.tolist()",
+           "        if y.__class__ is ndarray:",
+           "            y = y.tolist()",
+           f"        {', '.join(us)}, = u",
+           f"        {', '.join(ys)}, = y",
+           *[f"        ub[{i}] = {v}" for i, v in enumerate(us)],
+           *[f"        yb[{j}] = {v}" for j, v in enumerate(ys)],
+           "    except SLOW:",
+           "        slow_u(u)",
+           "        slow_y(y)",
+           "    c = cell[0]",
+           "    triggers[c]()",
+           "    if status[0]:",
+           "        explain('step')",
+           "    c ^= 1",
+           "    cell[0] = c",
+           "    count[0] += 1",
+           *(["    after()"] if after is not None else []),
+           "    return copies[c]()"]
+    scope = dict(general=general, ndarray=np.ndarray, ub=memoryview(fill_u.buffer), yb=memoryview(fill_y.buffer),
+                 SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked, cell=rt.cell, triggers=rt.triggers,
+                 status=memoryview(rt.status), explain=explain, count=count, after=after,
+                 copies=tuple(x.copy for x in rt.pairs["x"]))
+    exec("\n".join(src), scope)             # generated from integers only, as dataclasses does
+    return scope["step"]
 
 
 def _short(value) -> str:
