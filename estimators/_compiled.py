@@ -2,33 +2,23 @@
 
 A filter's fused step compiled by the C compiler runs about 10x faster than in CasADi's
 virtual machine. The library is keyed by a hash of the generated C code, the CasADi
-version and the compiler flags, and kept in the cache folder: ``$PENDULUM_COSIM_CACHE``,
-else ``$XDG_CACHE_HOME/pendulum-cosim``, else ``~/.cache/pendulum-cosim``.
-
-Safe under concurrency and damage:
-
-* every build happens in a private temporary folder inside the cache; the finished
-  library is checked (it loads and exports every function) and then renamed into place
-  atomically, so processes filling an empty cache at once never read a half-written file;
-* each library has a ``.sha256`` sidecar written after it; an entry whose hash does not
-  match (truncated, zero-length, overwritten) is reported with a warning and rebuilt
-  before anything loads it;
-* a cache that cannot be written (read-only, not a folder) falls back to CasADi's virtual
-  machine with a warning (same numbers, slower); so does a machine without a C compiler.
+version, the compiler flags and the CPU, and kept in the project's compiled-code cache
+(:mod:`fmu_models.cache`: private builds, atomic rename, a SHA-256 sidecar, damaged
+entries rebuilt). A machine without a C compiler, a compiler that fails, or a cache that
+cannot be written falls back to CasADi's virtual machine with a warning (same numbers,
+slower).
 """
 from __future__ import annotations
 
 import ctypes
 import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
 import warnings
 from pathlib import Path
 
 import casadi as ca
 
+from fmu_models.cache import cache_dir, cached_file, writable_cache
+from fmu_models.compiler import find_compiler, run_compiler
 from fmu_models.errors import BuildError, CompilerNotFoundError, UnknownNameError
 
 __all__ = ["BACKENDS", "cache_dir", "compile_functions"]
@@ -40,6 +30,7 @@ BACKENDS = ("compiled", "vm")
 # part of the cache key, so a cache shared between different CPUs never mixes them.
 _FLAGS = ("-O3", "-march=native", "-shared", "-fPIC")
 _STDS = ("-std=gnu89", "-std=gnu99")
+_VM = "running filters in CasADi's virtual machine (same numbers, slower)"
 
 
 def _cpu_identity() -> str:
@@ -54,52 +45,6 @@ def _cpu_identity() -> str:
         return platform.machine()
 
 
-def cache_dir() -> Path:
-    """The cache folder (see the module documentation); not created here."""
-    env = os.environ.get("PENDULUM_COSIM_CACHE")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "pendulum-cosim"
-
-
-def _writable_cache() -> Path | None:
-    d = cache_dir()
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=d, prefix=".probe-")
-        os.close(fd)
-        os.unlink(probe)
-        return d
-    except OSError as e:
-        warnings.warn(f"the compiled-code cache {d} cannot be written ({e.strerror or e}); running "
-                      "filters in CasADi's virtual machine (same numbers, slower). Set "
-                      "PENDULUM_COSIM_CACHE to a writable folder to compile them.", stacklevel=3)
-        return None
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def _valid(lib: Path) -> bool | None:
-    """True: a complete entry; False: a damaged one (its hash does not match); None: no
-    complete entry (absent, or being written by another process)."""
-    sig = lib.with_name(lib.name + ".sha256")
-    try:
-        want = sig.read_text().strip()
-    except OSError:
-        return None
-    try:
-        return want == _sha256(lib)
-    except OSError:
-        return False
-
-
 def _check_loads(lib: Path, names: list[str]) -> None:
     try:
         handle = ctypes.CDLL(str(lib))
@@ -110,25 +55,18 @@ def _check_loads(lib: Path, names: list[str]) -> None:
         raise BuildError(f"the compiled library {lib.name} lacks {missing}")
 
 
-def _build(code: str, lib: Path, names: list[str], cc: str) -> None:
-    work = Path(tempfile.mkdtemp(dir=lib.parent, prefix=".build-"))
-    try:
-        src, tmp_lib = work / "fns.c", work / "fns.so"
+def _compile(code: str, cc: str):
+    def build(lib: Path) -> None:
+        src = lib.with_suffix(".c")
         src.write_text(code)
-        for std in _STDS:
-            proc = subprocess.run([cc, *_FLAGS, std, str(src), "-o", str(tmp_lib), "-lm"],
-                                  capture_output=True, text=True, check=False)
-            if proc.returncode == 0:
-                break
-        else:
-            raise BuildError(f"compiling filter functions failed:\n{proc.stderr}")
-        _check_loads(tmp_lib, names)
-        sig = work / "fns.sha256"
-        sig.write_text(_sha256(tmp_lib))
-        os.replace(tmp_lib, lib)                               # atomic: whole library or none
-        os.replace(sig, lib.with_name(lib.name + ".sha256"))   # written last: marks it complete
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+        for i, std in enumerate(_STDS):
+            try:
+                run_compiler([cc, *_FLAGS, std, str(src), "-o", str(lib), "-lm"], "filter functions")
+                return
+            except BuildError:
+                if i == len(_STDS) - 1:
+                    raise
+    return build
 
 
 def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_code: str = "",
@@ -155,22 +93,18 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     ------
     UnknownNameError
         An unknown backend.
-    BuildError
-        The compiler failed on the generated code (its output is in the message).
     """
     if backend not in BACKENDS:
         raise UnknownNameError(f"backend must be one of {BACKENDS}, got {backend!r}")
     vm = (fns, "vm", None) if return_library else (fns, "vm")
     if backend == "vm":
         return vm
-    from fmu_models.export.pack import find_compiler
-
     try:
         cc = find_compiler()
     except CompilerNotFoundError as e:
-        warnings.warn(f"running filters in CasADi's virtual machine (slower): {e}", stacklevel=2)
+        warnings.warn(f"{_VM}: {e}", stacklevel=2)
         return vm
-    directory = _writable_cache()
+    directory = writable_cache(_VM)
     if directory is None:
         return vm
     cg = ca.CodeGenerator("fns.c")
@@ -180,17 +114,14 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     key = "\n".join([code, ca.__version__, " ".join(_FLAGS + _STDS), _cpu_identity()])
     lib = directory / f"fns_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
     names = [f.name() for f in fns]
-    state = _valid(lib)
-    if state is False:
-        warnings.warn(f"damaged entry {lib.name} in the compiled-code cache {directory} (truncated or "
-                      "altered); rebuilding it", stacklevel=2)
-    if state is not True:
-        # never delete an entry: another process may be loading it; replace it atomically
-        try:
-            _build(code, lib, names, cc)
-        except OSError as e:         # the disk filled up, the folder vanished, ...
-            warnings.warn(f"the compiled-code cache {directory} cannot be written ({e.strerror or e}); running "
-                          "filters in CasADi's virtual machine (same numbers, slower)", stacklevel=2)
-            return vm
+    try:
+        cached_file(lib, _compile(code, cc), lambda p: _check_loads(p, names))
+    except OSError as e:             # the disk filled up, the folder vanished, ...
+        warnings.warn(f"the compiled-code cache {directory} cannot be written ({e.strerror or e}); {_VM}",
+                      stacklevel=2)
+        return vm
+    except BuildError as e:          # a broken compiler ($CC=/bin/false, a missing libm, ...)
+        warnings.warn(f"{_VM}: {' '.join(str(e).split())[:400]}", stacklevel=2)
+        return vm
     out = [ca.external(n, str(lib)) for n in names]
     return (out, "compiled", lib) if return_library else (out, "compiled")

@@ -276,6 +276,47 @@ class KalmanBase:
         ``nan_missing``, ``Q, R`` of a non-adaptive filter and the step parameters."""
         return {k: v.copy() for k, v in self._fixed.items()}
 
+    def bind_summary(self, out: np.ndarray, covariance: str = "diagonal"):
+        """A call that writes the current estimate ``x`` (nx), the variances ``diag P`` (nx),
+        with ``covariance="full"`` the upper off-diagonal entries of P (row by row, ``i < j``),
+        and the last NIS into the float array ``out`` (contiguous, bound once: a
+        co-simulation component's slice of the master's signals), in one native call.
+
+        Raises
+        ------
+        UnknownNameError
+            ``covariance`` is not ``"diagonal"`` or ``"full"``.
+        ConfigurationError
+            ``out`` has the wrong size or is not a contiguous float array.
+        """
+        from ._buffered import BufferedFunction
+
+        if covariance not in ("diagonal", "full"):
+            raise UnknownNameError(f"{self.name}: covariance must be 'diagonal' or 'full', got {covariance!r}")
+        n = self.system.nx
+        upper = [(i, j) for i in range(n) for j in range(i + 1, n)] if covariance == "full" else []
+        size = 2 * n + len(upper) + 1
+        if not (isinstance(out, np.ndarray) and out.dtype == np.float64 and out.shape == (size,)
+                and out.flags.c_contiguous):
+            raise ConfigurationError(f"{self.name}: the summary needs a contiguous float array of {size} entries")
+
+        def build():
+            x, P, nis = ca.SX.sym("x", n), ca.SX.sym("P", n, n), ca.SX.sym("nis")
+            fn = ca.Function("summary", [x, P, nis],
+                             [ca.vertcat(x, ca.diag(P), *[P[i, j] for i, j in upper], nis)])
+            return compile_functions([fn], self.backend)[0][0]
+
+        fn = self.system.compiled("summary", (covariance, n), self.backend, build)
+        rt = self._rt
+        nis = rt.outputs["nis"]
+        bound = [BufferedFunction(fn, {0: rt.pairs["x"][i], 1: rt.pairs["P"][i], 2: nis}, {0: out}) for i in (0, 1)]
+        triggers = tuple(b.trigger for b in bound)
+        cell = rt.cell
+
+        def write(_keep=bound) -> None:      # _keep: the buffers must live as long as their triggers
+            triggers[cell[0]]()
+        return write
+
     def step_function(self) -> ca.Function:
         """The uncompiled fused step (a CasADi Function; see :func:`~estimators.protocol.build_step`)."""
         return self._raw_step
@@ -335,8 +376,7 @@ class KalmanBase:
         self._record()
 
     def _record(self) -> None:
-        n, p = self.system.nx, self.system.ny
-        self.history.append(self.k, np.concatenate([self._now("Q")[:: n + 1], self._now("R")[:: p + 1]]))
+        self.history.append_flat(self.k, self._now("Q"), self._now("R"))
 
     def noise_history(self):
         """How Q and R changed: DataFrame indexed by step with their diagonals."""

@@ -6,7 +6,15 @@ import pandas as pd
 
 
 class NoiseHistory:
-    """Rows ``(k, diag Q, diag R)``; append costs one array write."""
+    """Rows ``(k, diag Q, diag R)``; append costs one array write.
+
+    Parameters
+    ----------
+    nx, ny : int
+        Sizes of Q and R.
+    capacity : int
+        Rows allocated at first (doubled when full).
+    """
 
     def __init__(self, nx: int, ny: int, capacity: int = 1024):
         self.nx, self.ny = nx, ny
@@ -15,12 +23,23 @@ class NoiseHistory:
 
     def append(self, k: int, qr_diag) -> None:
         """Add the row ``k, qr_diag`` where ``qr_diag = [diag Q, diag R]`` (nx + ny)."""
+        self._row(k)[1:] = qr_diag
+
+    def append_flat(self, k: int, Q: np.ndarray, R: np.ndarray) -> None:
+        """Add the row of step ``k`` from the flat (column-major) ``Q`` (nx*nx) and ``R``
+        (ny*ny), taking their diagonals without building an intermediate array."""
+        row = self._row(k)
+        row[1:1 + self.nx] = Q[:: self.nx + 1]
+        row[1 + self.nx:] = R[:: self.ny + 1]
+
+    def _row(self, k: int) -> np.ndarray:
         n = self._n
         if n == len(self._rows):
             self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
-        self._rows[n, 0] = k
-        self._rows[n, 1:] = qr_diag
+        row = self._rows[n]
+        row[0] = k
         self._n = n + 1
+        return row
 
     def __len__(self):
         return self._n

@@ -59,8 +59,9 @@ class EstimatorComponent(Component, kind="estimator"):
             raise ConfigurationError(f"{name}: period {period} s differs from the filter model's dt "
                                      f"{sys_.dt} s; discretise the model with dt = period")
         n = sys_.nx
-        self._upper = np.triu_indices(n, 1) if covariance == "full" else (np.array([], int),) * 2
-        off = [f"P_{i}_{j}" for i, j in zip(*self._upper)]
+        self.covariance = covariance
+        upper = np.triu_indices(n, 1) if covariance == "full" else (np.array([], int),) * 2
+        off = [f"P_{i}_{j}" for i, j in zip(*upper)]
         outputs = sys_.state_names + [f"P_{s}" for s in sys_.state_names] + off + ["nis"]
         super().__init__(name, period, inputs=sys_.input_names + sys_.output_names, outputs=outputs,
                          feedthrough={o: sys_.output_names for o in outputs})
@@ -99,9 +100,34 @@ class EstimatorComponent(Component, kind="estimator"):
         return "outputs at t: the estimate after predict(u read at the previous instant) and update(y at t)"
 
     def _outputs(self):
-        f = self.filter
-        P = f.P
-        return np.concatenate([f.x, np.diag(P), P[self._upper], [f.nis]])
+        out = np.empty(len(self.output_ports))
+        self.filter.bind_summary(out, self.covariance)()
+        return out
+
+    def bind(self, values, inputs, outputs):
+        """The master's fast path (:class:`~cosim.core.component.FastBinding`): the filter's
+        step reads the measurements from ``values``, and its summary (estimate, covariance
+        entries, NIS) is written straight into ``values[outputs]``."""
+        f, nu = self.filter, self._nu
+        summary = f.bind_summary(values[outputs], self.covariance)
+        if isinstance(inputs, slice):
+            u_at, y_at = slice(inputs.start, inputs.start + nu), slice(inputs.start + nu, inputs.stop)
+        else:
+            u_at, y_at = inputs[:nu], inputs[nu:]
+        u_prev = np.zeros(nu)
+        started = [False]
+        step = f.step
+
+        def output_fn(t: float) -> None:
+            if started[0]:
+                step(u_prev, values[y_at])
+            summary()
+
+        def update_fn(t: float) -> None:
+            u_prev[:] = values[u_at]
+            started[0] = True
+
+        return output_fn, update_fn
 
     def reset(self, t0):
         super().reset(t0)

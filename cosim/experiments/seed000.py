@@ -246,8 +246,10 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) 
     return out
 
 
-def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None) -> dict:
-    """The same realisations, each run through the co-simulation master with the plant FMU."""
+def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None,
+                learned=None) -> dict:
+    """The same realisations, each run through the co-simulation master with the plant FMU
+    (``learned``: the EM-learned ``(q, r)`` of the scenario, if the caller has them)."""
     import tempfile
 
     from fmu_models import build_fmu
@@ -258,7 +260,7 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
     system = _system(s.T)
-    learned = learn_noise(system, s, scenario_index, q, r)
+    learned = learn_noise(system, s, scenario_index, q, r) if learned is None else learned
     makers = make_filters(system, s, q, r, learned)
     X = np.empty((len(runs), s.steps + 1, 4))
     E = {name: np.empty_like(X) for name in makers}
@@ -323,8 +325,13 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
         chunks = [c for c in np.array_split(np.arange(settings.runs), min(settings.runs, n_chunks)) if len(c)]
     else:
         chunks = [np.arange(settings.runs)]
+    extra = {}
+    if path == "master":         # EM learns once per scenario, not once per task
+        system = _system(settings.T)
+        extra = {(rd, i): {"learned": learn_noise(system, settings, i, *true_noise(settings.scenarios[i], rd))}
+                 for rd, i in keys}
     tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings,
-                       **({"runs": list(c)} if path == "master" else {})))
+                       **({"runs": list(c), **extra[(rd, i)]} if path == "master" else {})))
              for rd, i in keys for c in chunks]
     try:
         results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=f"seed000 ({path})")

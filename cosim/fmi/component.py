@@ -283,7 +283,8 @@ class FMUComponent(Component, kind="fmu"):
         from fmpy import fmi2, fmi3
         from fmpy.fmi1 import calloc, free
 
-        self._extraction = Extraction(self.path)
+        if self._extraction is None or self._extraction.closed:   # unpacked once, reused by every run
+            self._extraction = Extraction(self.path)
         args = dict(guid=self.md.guid, unzipDirectory=self._extraction.directory,
                     modelIdentifier=self.model_identifier, instanceName=self.name)
         cs = self.interface == "cs"
@@ -463,6 +464,11 @@ class FMUComponent(Component, kind="fmu"):
                 fmu.freeInstance()
             except Exception:  # noqa: BLE001
                 LOGGER.debug("%s: freeInstance failed", self.name)
+
+    def release(self) -> None:
+        """:meth:`close`, and remove the unpacked FMU (kept between runs otherwise; removed
+        anyway when the component is garbage-collected or at interpreter exit)."""
+        self.close()
         if self._extraction is not None:
             self._extraction.close()
             self._extraction = None

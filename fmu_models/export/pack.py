@@ -20,7 +20,6 @@ import os
 import platform
 import secrets
 import shutil
-import subprocess
 import sys
 import tempfile
 import uuid
@@ -30,7 +29,9 @@ from pathlib import Path
 
 import fmpy
 
-from ..errors import BuildError, CompilerNotFoundError, ConfigurationError
+from ..cache import cached_file, writable_cache
+from ..compiler import find_compiler, run_compiler
+from ..errors import ConfigurationError
 
 __all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "library_suffix", "pack_fmu",
            "platform_dir", "temp_beside"]
@@ -41,19 +42,6 @@ FMI_VERSIONS = (2, 3)
 CORES = ("plant", "filter", "signal")
 _FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 _PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
-
-
-def find_compiler() -> str:
-    """Return the C compiler to use: ``$CC``, else ``cc``, ``gcc`` or ``clang`` on the PATH."""
-    candidates = [os.environ["CC"]] if os.environ.get("CC") else ["cc", "gcc", "clang"]
-    for cand in candidates:
-        path = shutil.which(cand)
-        if path:
-            return path
-    raise CompilerNotFoundError(
-        "no C compiler found (looked for " + ", ".join(candidates) + "). Building an FMU "
-        "compiles generated C code: install gcc (Debian/Ubuntu: 'apt-get install gcc', "
-        "Fedora: 'dnf install gcc', macOS: 'xcode-select --install') or set CC.")
 
 
 def platform_dir(fmi_version: int) -> str:
@@ -97,6 +85,35 @@ def atomic_copy(src: Path, dst: Path) -> None:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+#: Flags of the native build (the binary for this machine's platform).
+_CFLAGS = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L")
+
+
+def _compile_library(cc: str, src: Path, c_files: list[str], lib: Path, identifier: str) -> None:
+    """Compile the FMU's library ``lib`` from the sources in ``src``, through the
+    compiled-code cache (:mod:`fmu_models.cache`): an FMU built before from the same sources,
+    compiler and flags is not compiled again."""
+    def build(out: Path) -> None:
+        run_compiler([cc, *_CFLAGS, f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o",
+                      str(out), "-lm"], identifier)
+
+    h = hashlib.sha256("|".join([cc, *_CFLAGS, platform_dir(3)]).encode())
+    with contextlib.suppress(OSError):
+        st = os.stat(cc)
+        h.update(f"{st.st_size}|{st.st_mtime_ns}".encode())
+    for f in sorted(src.iterdir()):
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    directory = writable_cache("FMUs are compiled without caching")
+    if directory is not None:
+        try:
+            entry = cached_file(directory / f"fmu_{h.hexdigest()[:24]}{library_suffix()}", build)
+            shutil.copyfile(entry, lib)
+            return
+        except OSError:             # a full or vanished cache: build without it
+            pass
+    build(lib)
 
 
 def _build_description(identifier: str, c_files: list[str]) -> str:
@@ -164,11 +181,7 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
         bindir = tmp / "binaries" / platform_dir(fmi_version)
         bindir.mkdir(parents=True)
         lib = bindir / (identifier + library_suffix())
-        cmd = [cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L",
-               f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o", str(lib), "-lm"]
-        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if proc.returncode != 0:
-            raise BuildError(f"compiling {identifier} failed:\n{' '.join(cmd)}\n{proc.stderr}")
+        _compile_library(cc, src, c_files, lib, identifier)
         if fmi_version == 3:
             (src / "buildDescription.xml").write_text(_build_description(identifier, c_files))
         (tmp / "modelDescription.xml").write_text(model_description(guid, c_files))

@@ -1,0 +1,113 @@
+"""The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under
+concurrency and damage.
+
+The folder is ``$PENDULUM_COSIM_CACHE``, else ``$XDG_CACHE_HOME/pendulum-cosim``, else
+``~/.cache/pendulum-cosim``; where there is no home folder (a container with an arbitrary
+user id and no ``HOME``), ``<temp>/pendulum-cosim-<uid>``. Entries are named by a hash of
+everything that went into them (code, compiler, flags, CPU), so a stale entry is never
+found. An entry is written in a private temporary folder inside the cache, checked, and
+renamed into place atomically; a ``.sha256`` sidecar written after it marks it complete.
+An entry whose hash does not match (truncated, zero-length, overwritten) is reported and
+rebuilt; an entry is never deleted (another process may be loading it), only replaced
+atomically. A cache that cannot be written is reported once, and the callers fall back
+(the filters to CasADi's virtual machine, the FMU builder to building without caching).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["cache_dir", "cached_file", "file_digest", "writable_cache"]
+
+
+def cache_dir() -> Path:
+    """The cache folder (see the module documentation); not created here."""
+    env = os.environ.get("PENDULUM_COSIM_CACHE")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    if xdg:
+        return Path(xdg) / "pendulum-cosim"
+    try:
+        home = Path.home()
+    except (RuntimeError, KeyError, OSError):       # no HOME and no passwd entry for this uid
+        home = None
+    if home is None or str(home) in ("", "/"):
+        uid = os.getuid() if hasattr(os, "getuid") else "user"
+        return Path(tempfile.gettempdir()) / f"pendulum-cosim-{uid}"
+    return home / ".cache" / "pendulum-cosim"
+
+
+def writable_cache(purpose: str) -> Path | None:
+    """The cache folder, created, if it can be written; else None, with a warning naming
+    ``purpose`` (what falls back)."""
+    d = cache_dir()
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=d, prefix=".probe-")
+        os.close(fd)
+        os.unlink(probe)
+        return d
+    except OSError as e:
+        warnings.warn(f"the compiled-code cache {d} cannot be written ({e.strerror or e}); {purpose}. Set "
+                      "PENDULUM_COSIM_CACHE to a writable folder.", stacklevel=3)
+        return None
+
+
+def file_digest(path: Path) -> str:
+    """The SHA-256 of the file at ``path`` (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _state(entry: Path) -> bool | None:
+    """True: a complete entry; False: a damaged one (its hash does not match); None: no
+    complete entry (absent, or being written by another process)."""
+    try:
+        want = entry.with_name(entry.name + ".sha256").read_text().strip()
+    except OSError:
+        return None
+    try:
+        return want == file_digest(entry)
+    except OSError:
+        return False
+
+
+def cached_file(entry: Path, build: Callable[[Path], None], check: Callable[[Path], None] | None = None) -> Path:
+    """The cache entry ``entry`` (a file in the cache folder), built by ``build(path)`` into a
+    private temporary path if it is absent or damaged, checked by ``check(path)`` (which
+    raises if the file is unusable), then renamed into place with its sidecar. Returns
+    ``entry``.
+
+    Raises
+    ------
+    OSError
+        The cache cannot be written (full disk, the folder vanished): the caller falls back.
+    """
+    state = _state(entry)
+    if state is True:
+        return entry
+    if state is False:
+        warnings.warn(f"damaged entry {entry.name} in the compiled-code cache {entry.parent} (truncated or "
+                      "altered); rebuilding it", stacklevel=3)
+    work = Path(tempfile.mkdtemp(dir=entry.parent, prefix=".build-"))
+    try:
+        tmp = work / entry.name
+        build(tmp)
+        if check is not None:
+            check(tmp)
+        sig = work / "entry.sha256"
+        sig.write_text(file_digest(tmp))
+        os.replace(tmp, entry)                                   # atomic: whole file or none
+        os.replace(sig, entry.with_name(entry.name + ".sha256"))  # written last: marks it complete
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return entry
