@@ -50,9 +50,9 @@ def _number(kind, low=None, what="value", strict=False):
     return parse
 
 
-positive_int = _number(int, 1, "the number")
-nonneg_int = _number(int, 0, "the seed")
-positive_float = _number(float, 0, "the duration", strict=True)
+_positive_int = _number(int, 1, "the number")
+_nonneg_int = _number(int, 0, "the seed")
+_positive_float = _number(float, 0, "the duration", strict=True)
 
 
 # ---------------------------------------------------------------------------- run / demo
@@ -278,7 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("scenarios", help="list the shipped scenario files")
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
-    models.add_argument("--duration", type=positive_float, default=5.0, help="simulated time [s] (default 5)")
+    models.add_argument("--duration", type=_positive_float, default=5.0, help="simulated time [s] (default 5)")
     from .experiments import EXPERIMENTS
 
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
@@ -291,14 +291,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="change one setting (repeatable), e.g. --set q0=1e-3 --set mfiae_window=12; "
                           "summary.md lists them all")
     exp.add_argument("--settings", metavar="FILE", help="settings from a TOML file (e.g. a run's settings.toml)")
-    exp.add_argument("--runs", type=positive_int, help="realisations per scenario (default: the paper's)")
+    exp.add_argument("--runs", type=_positive_int, help="realisations per scenario (default: the paper's)")
     exp.add_argument("--path", choices=("fast", "master"), default="fast",
                      help="fast: vectorised truth and batched filters; master: every realisation "
                           "through the co-simulation master with the plant FMU (same numbers)")
     exp.add_argument("--backend", choices=("processes", "serial", "dask"), default="processes",
                      help="parallel backend (dask needs the 'dask' extra)")
-    exp.add_argument("--jobs", type=positive_int, help="worker processes (default: all cores)")
-    exp.add_argument("--seed", type=nonneg_int, help="seed of all random streams")
+    exp.add_argument("--jobs", type=_positive_int, help="worker processes (default: all cores)")
+    exp.add_argument("--seed", type=_nonneg_int, help="seed of all random streams")
     exp.add_argument("--out", help="output directory (default out/NAME)")
     exp.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -353,7 +353,13 @@ def _sigterm(signum, frame):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
-    when interrupted)."""
+    when interrupted).
+
+    Parameters
+    ----------
+    argv
+        The arguments (default: ``sys.argv[1:]``).
+    """
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--plugin", action="append", default=[])
     pre.add_argument("--debug", action="store_true")

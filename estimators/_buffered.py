@@ -46,5 +46,15 @@ class BufferedFunction:
 
 
 def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """2-D view (column-major, shares memory) of a flat CasADi matrix array."""
+    """2-D view (column-major, shares memory) of a flat CasADi matrix array.
+
+    Parameters
+    ----------
+    flat
+        The flat array (CasADi's column-major layout).
+    rows
+        Rows of the matrix.
+    cols
+        Columns of the matrix.
+    """
     return flat.reshape((rows, cols), order="F")

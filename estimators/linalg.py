@@ -129,7 +129,13 @@ def finite_flag(expr_list) -> ca.SX:
     """1 if every entry is finite, else 0. Each entry is tested on its own (``|e| < inf``
     is 0 for NaN and inf) and the 0/1 results are counted, so nothing can overflow (a sum
     of the entries would, for finite values such as 1.5e308). (``e - e == 0`` would not
-    do: CasADi simplifies ``e - e`` to 0.)"""
+    do: CasADi simplifies ``e - e`` to 0.)
+
+    Parameters
+    ----------
+    expr_list
+        SX expressions whose entries are tested.
+    """
     count = sum(ca.sum1(ca.vec(ca.fabs(e) < ca.inf)) for e in expr_list)
     return count == sum(e.numel() for e in expr_list)
 
@@ -159,7 +165,13 @@ def log_likelihood(nis, logdet_S, n_used, accepted) -> float:
 
 
 def upper_entries(M: ca.SX) -> ca.SX:
-    """The upper-triangular entries of a square matrix, as a column."""
+    """The upper-triangular entries of a square matrix, as a column.
+
+    Parameters
+    ----------
+    M
+        A square SX matrix.
+    """
     n = M.shape[0]
     return ca.vertcat(*[M[i, j] for j in range(n) for i in range(j + 1)])
 

@@ -216,6 +216,15 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     ``nan_missing``, ``Q`` and ``R`` of a non-adaptive filter, the step parameters. Outputs:
     ``<state>_new`` for each state array, :data:`DIAGNOSTICS`, the extra outputs and
     ``status`` (:func:`~estimators.linalg.status_flag`).
+
+    Parameters
+    ----------
+    filt
+        The filter (its hooks and declarations).
+    extra_state
+        Initial values of its extra state arrays, by name (``extra_state()``).
+    params
+        Its step parameters (``step_parameters()``).
     """
     s = filt.system
     n, m, p = s.nx, s.nu, s.ny

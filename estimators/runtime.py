@@ -206,6 +206,23 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
 
     ``count`` is a one-element list holding the step count, ``after`` the runtime hook to
     call after a step (or None).
+
+    Parameters
+    ----------
+    rt
+        The filter's bound step.
+    fill_u
+        The checked conversion of ``u``.
+    fill_y
+        The checked conversion of ``y``.
+    count
+        One-element list holding the step count.
+    general
+        The filter's general step, for the other calls.
+    explain
+        Raises the error of a failed step (given what ran).
+    after
+        The runtime hook after a step, or None.
     """
     nu, ny = fill_u.n, fill_y.n
     us, ys = [f"u{i}" for i in range(nu)], [f"y{j}" for j in range(ny)]

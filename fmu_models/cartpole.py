@@ -45,7 +45,17 @@ PARAMETERS = (
 
 
 def dynamics(x, u, p):
-    """Seed 000 eqs 8-11 with ``M3 = M1 M2 - mp^2 l^2 cos^2 x3`` (Table 1 erratum fixed)."""
+    """Seed 000 eqs 8-11 with ``M3 = M1 M2 - mp^2 l^2 cos^2 x3`` (Table 1 erratum fixed).
+
+    Parameters
+    ----------
+    x
+        The state (x, x_dot, theta, theta_dot), SX column.
+    u
+        The input (force F), SX column.
+    p
+        The parameter symbols by name.
+    """
     mc, mp, l, Bc, Bp, g = (p[k] for k in ("mc", "mp", "l", "Bc", "Bp", "g"))
     x2, x3, x4, F = x[1], x[2], x[3], u[0]
     s, c = ca.sin(x3), ca.cos(x3)
@@ -61,7 +71,15 @@ def dynamics(x, u, p):
 
 
 def measurement(x, p):
-    """Eq 23: cart position and pole angle (y_k = [x1_k, x3_k]; SPEC fixes eqs 18-19's index)."""
+    """Eq 23: cart position and pole angle (y_k = [x1_k, x3_k]; SPEC fixes eqs 18-19's index).
+
+    Parameters
+    ----------
+    x
+        The state, SX column.
+    p
+        The parameter symbols by name (unused).
+    """
     return ca.vertcat(x[0], x[2])
 
 

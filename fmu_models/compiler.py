@@ -64,6 +64,17 @@ def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, t
     BuildError
         The compiler failed, timed out (``timeout`` [s]) or could not be started; the
         message has its output.
+
+    Parameters
+    ----------
+    cmd
+        The command: the compiler and its arguments.
+    what
+        What it builds (for messages).
+    cwd
+        Working directory (default: the current one).
+    timeout
+        Longest time [s] the compiler may take.
     """
     with tempfile.TemporaryDirectory(prefix="pendulum_cosim_cc_") as tmp:
         env = {**os.environ, "TMPDIR": tmp, "TMP": tmp, "TEMP": tmp}

@@ -60,7 +60,17 @@ PARAMETERS = (
 
 
 def dynamics(x, u, p):
-    """Seed 002 eqs 1-2 with the Cubli parameter map of SPEC section 3."""
+    """Seed 002 eqs 1-2 with the Cubli parameter map of SPEC section 3.
+
+    Parameters
+    ----------
+    x
+        The state (alpha, alpha_dot, phi_dot), SX column.
+    u
+        The input (motor current i), SX column.
+    p
+        The parameter symbols by name.
+    """
     alpha, alpha_dot, phi_dot, i = x[0], x[1], x[2], u[0]
     I_k = p["Iw"]
     I_r = p["Ib"] + p["mw"] * p["lw"] ** 2
@@ -73,7 +83,15 @@ def dynamics(x, u, p):
 
 
 def measurement(x, p):
-    """C = I: all three states are measured (seed 002)."""
+    """C = I: all three states are measured (seed 002).
+
+    Parameters
+    ----------
+    x
+        The state, SX column.
+    p
+        The parameter symbols by name (unused).
+    """
     return ca.vertcat(x[0], x[1], x[2])
 
 

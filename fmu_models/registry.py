@@ -64,6 +64,13 @@ def load_plugin(spec: str, base_dir: str | Path | None = None):
     ------
     ConfigurationError
         The module cannot be found or fails to import (the message says why).
+
+    Parameters
+    ----------
+    spec
+        A module name or the path of a .py file.
+    base_dir
+        The folder a relative .py path refers to (default: the working directory).
     """
     if not isinstance(spec, str) or not spec:
         raise ConfigurationError(f"a plugin must be a module name or a .py file, got {spec!r}")

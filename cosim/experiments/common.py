@@ -11,7 +11,25 @@ from ..components.sensors import ProcessNoise, Sensor
 
 def noise_components(model, T: float, q, measured: Sequence[str], r_std, seed_w: int, seed_v: int):
     """The ProcessNoise (covariance ``q`` on every state) and Sensor (``measured`` states,
-    standard deviations ``r_std``) components of one realisation."""
+    standard deviations ``r_std``) components of one realisation.
+
+    Parameters
+    ----------
+    model
+        The plant model.
+    T
+        Sample period [s].
+    q
+        Process noise covariance (scalar, diagonal or matrix).
+    measured
+        The measured states.
+    r_std
+        Measurement noise standard deviations.
+    seed_w
+        Seed of the process noise.
+    seed_v
+        Seed of the measurement noise.
+    """
     return (ProcessNoise("noise", T, model.state_names, q, seed=seed_w),
             Sensor("sensor", T, list(measured), noise_std=r_std, seed=seed_v))
 
@@ -21,7 +39,31 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
     """Truth ``X`` (runs, N+1, nx) and measurements ``Y`` (runs, N+1, ny) for inputs ``us``
     (N+1, nu), drawing exactly the numbers the ProcessNoise and Sensor components draw in
     the master path (same seeds, same order). ``Y`` uses the model's measurement if
-    ``measured`` equals its measured states, else it picks the named states."""
+    ``measured`` equals its measured states, else it picks the named states.
+
+    Parameters
+    ----------
+    model
+        The plant model.
+    x0
+        Initial state.
+    us
+        Inputs, shape (N+1, nu).
+    T
+        Sample period [s].
+    q
+        Process noise covariance.
+    measured
+        The measured states.
+    r_std
+        Measurement noise standard deviations.
+    seeds
+        (process, measurement) seed pairs, one per realisation.
+    method
+        Integration method of the truth map.
+    substeps
+        Its substeps.
+    """
     R, N = len(seeds), len(us) - 1
     noise, sensor = noise_components(model, T, q, measured, r_std, 0, 0)
     W = np.stack([np.random.default_rng(sw).standard_normal((N + 1, model.nx)) @ noise.L.T
@@ -41,7 +83,21 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
 def batch_estimates(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray, x0):
     """Run one filter over all realisations in one native call: estimates (runs, N+1, nx)
     (the initial estimate at k = 0), NEES (from the full covariance) and NIS (runs, N), and
-    the realisations that failed. ``us`` (N+1, nu): ``us[k]`` is held over step k -> k+1."""
+    the realisations that failed. ``us`` (N+1, nu): ``us[k]`` is held over step k -> k+1.
+
+    Parameters
+    ----------
+    make
+        Returns a new filter (the template of every realisation).
+    X
+        Truth, shape (runs, N+1, nx).
+    Y
+        Measurements, shape (runs, N+1, ny); row 0 is not used.
+    us
+        Inputs, shape (N+1, nu).
+    x0
+        The initial estimate (unused: the template carries it; kept for the callers' symmetry).
+    """
     from estimators import BatchFilter
 
     R = X.shape[0]
@@ -59,7 +115,17 @@ def nees_from_outputs(err: np.ndarray, P: np.ndarray) -> np.ndarray:
 
 def covariance_from_frame(df, tag: str, states) -> np.ndarray:
     """Full covariances (steps, nx, nx) from an estimator component's outputs
-    (``P_<state>`` diagonal, ``P_<i>_<j>`` above it; ``covariance="full"``)."""
+    (``P_<state>`` diagonal, ``P_<i>_<j>`` above it; ``covariance="full"``).
+
+    Parameters
+    ----------
+    df
+        The co-simulation results.
+    tag
+        The estimator component's name.
+    states
+        The state names.
+    """
     n = len(states)
     P = np.empty((len(df), n, n))
     for i, s in enumerate(states):
@@ -83,7 +149,25 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
     """One realisation through the co-simulation master: plant FMU, sensor, the filters,
     the source and the process noise (the order follows from the wiring). Returns truth
     (N+1, nx), estimates by filter (N+1, nx), their full covariances (N+1, nx, nx) and
-    NIS (N,)."""
+    NIS (N,).
+
+    Parameters
+    ----------
+    plant
+        The plant FMU component.
+    source
+        The input source component.
+    noise
+        The process-noise component.
+    sensor
+        The sensor component.
+    makers
+        Filter factories by name.
+    T
+        Sample period [s].
+    duration
+        Simulated time [s].
+    """
     from ..components.estimation import EstimatorComponent
     from ..core.master import Cosimulation
 

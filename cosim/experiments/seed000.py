@@ -155,7 +155,21 @@ def _system(T: float):
 
 
 def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) -> tuple[float, float]:
-    """(q, r) learned by EM from the nominal values on the scenario's training realisation."""
+    """(q, r) learned by EM from the nominal values on the scenario's training realisation.
+
+    Parameters
+    ----------
+    system
+        The discrete model.
+    s
+        The campaign's settings.
+    scenario_index
+        Which scenario (its training realisation).
+    q
+        True process variance.
+    r
+        True measurement variance.
+    """
     from estimators import EKF, em_noise
 
     _X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
@@ -167,7 +181,21 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) ->
 
 def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
     """The filters of :data:`FILTERS`, by name, as constructors (called once per realisation
-    or batch); ``learned`` is EM's (q, r) for "EKF EM" (left out if None)."""
+    or batch); ``learned`` is EM's (q, r) for "EKF EM" (left out if None).
+
+    Parameters
+    ----------
+    system
+        The discrete model.
+    s
+        The campaign's settings.
+    q
+        True process variance.
+    r
+        True measurement variance.
+    learned
+        The EM-learned (q, r), for the EM EKF.
+    """
     from estimators import EKF, IAE, MFIAE
 
     x0 = np.array(s.x0)
@@ -204,7 +232,19 @@ def _noise(s: Settings, q: float, r: float, seed_w: int, seed_v: int):
 
 def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]):
     """Truth ``X`` (runs, steps+1, 4), measurements ``Y`` (runs, steps+1, 2) and the input
-    sequence, drawing the same numbers as the components of the master path."""
+    sequence, drawing the same numbers as the components of the master path.
+
+    Parameters
+    ----------
+    s
+        The campaign's settings.
+    q
+        True process variance.
+    r
+        True measurement variance.
+    seeds
+        (process, measurement) seed pairs, one per realisation.
+    """
     from fmu_models import get_model
 
     u = _inputs(s)
@@ -228,7 +268,19 @@ def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, e
 
 def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) -> dict:
     """All realisations of one scenario and reading, every filter over all of them in
-    native calls."""
+    native calls.
+
+    Parameters
+    ----------
+    scenario_index
+        Which scenario (0-based).
+    reading
+        Which reading of the noise names (``eqs`` or ``prose``).
+    settings
+        The campaign's settings.
+    runs
+        Which realisations (default all).
+    """
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
@@ -249,7 +301,23 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) 
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None,
                 learned=None) -> dict:
     """The same realisations, each run through the co-simulation master with the plant FMU
-    (``learned``: the EM-learned ``(q, r)`` of the scenario, if the caller has them)."""
+    (``learned``: the EM-learned ``(q, r)`` of the scenario, if the caller has them).
+
+    Parameters
+    ----------
+    scenario_index
+        Which scenario (0-based).
+    reading
+        Which reading of the noise names.
+    settings
+        The campaign's settings.
+    runs
+        Which realisations (default all).
+    fmu_dir
+        Where to build the plant FMU (default a temporary folder).
+    learned
+        The EM-learned (q, r) (default: learned here).
+    """
     import tempfile
 
     from fmu_models import build_fmu
@@ -309,6 +377,21 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     ``readings`` defaults to the settings' readings. Interrupted (Ctrl-C, SIGTERM), it
     raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` holds the same tuple
     for the tasks that finished.
+
+    Parameters
+    ----------
+    settings
+        The campaign's settings.
+    path
+        ``fast`` or ``master``.
+    readings
+        The readings to run (default the settings').
+    backend
+        Parallel backend (:func:`~cosim.experiments.campaign.run_tasks`).
+    n_jobs
+        Worker processes.
+    progress
+        Show a progress bar.
     """
     from fmu_models.errors import Interrupted
 
@@ -378,6 +461,11 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
     eta is the mean over all realisations; ``diverged`` counts the runs flagged, and
     ``(no div.)`` excludes them; ``<filter> / bound`` is eta over the true-Q,R EKF's.
+
+    Parameters
+    ----------
+    per_run
+        The per-realisation table of :func:`run`.
     """
     rows = []
     for (rd, sc), g in per_run.groupby(["reading", "scenario"], sort=True):
@@ -427,7 +515,29 @@ def agreement(table: pd.DataFrame) -> list[str]:
 def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path: str,
                  config: str = "custom", partial: bool = False) -> Path:
     """Tables (CSV, Parquet), figures (PNG), ``settings.toml`` and a markdown summary into
-    ``out_dir``; with ``partial`` the summary says the campaign was interrupted."""
+    ``out_dir``; with ``partial`` the summary says the campaign was interrupted.
+
+    Parameters
+    ----------
+    per_run
+        The per-realisation table.
+    eps
+        eps_k by reading, scenario, filter and time.
+    examples
+        Example trajectories for Figure 3.
+    wall
+        Wall time [s].
+    settings
+        The settings used.
+    out_dir
+        Output folder.
+    path
+        The path that ran.
+    config
+        The configuration's name.
+    partial
+        The campaign was interrupted.
+    """
     from ..results import atomic_write
     from .settings import to_toml
 

@@ -56,7 +56,17 @@ class SweepSettings:
 
 
 def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: seed000.Settings) -> list[dict]:
-    """The rows of several cells of one scenario (one process task)."""
+    """The rows of several cells of one scenario (one process task).
+
+    Parameters
+    ----------
+    scenario_index
+        Which scenario (0-based).
+    cells
+        (Q0 factor, R0 factor) of each cell.
+    settings
+        The campaign settings of every cell.
+    """
     rows = []
     for fq, fr in cells:
         s = replace(settings, q0_factor=fq, r0_factor=fr, readings=("eqs",))
@@ -86,7 +96,19 @@ def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n
         progress: bool = True):
     """Run the sweep; returns ``(table, wall_time)``: one row per scenario, cell and
     filter (see the module documentation). Interrupted, it raises
-    :class:`~fmu_models.errors.Interrupted` with the rows of the finished tasks."""
+    :class:`~fmu_models.errors.Interrupted` with the rows of the finished tasks.
+
+    Parameters
+    ----------
+    settings
+        The sweep's settings.
+    backend
+        Parallel backend.
+    n_jobs
+        Worker processes.
+    progress
+        Show a progress bar.
+    """
     s = settings.campaign
     cells = [(fq, fr) for fq in settings.factors for fr in settings.factors]
     chunks = [cells[i:i + len(settings.factors)] for i in range(0, len(cells), len(settings.factors))]
@@ -105,7 +127,17 @@ def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n
 def goals(table: pd.DataFrame, settings: SweepSettings, nx: int = 4) -> pd.DataFrame:
     """Per adaptive filter: the share of cells (mean over scenarios) within the bound margin,
     the cells more than ``ekf_margin`` worse than the EKF, and those with an average NEES
-    beyond ``nees_factor * nx``."""
+    beyond ``nees_factor * nx``.
+
+    Parameters
+    ----------
+    table
+        The sweep's table.
+    settings
+        The sweep's settings (its goal margins).
+    nx
+        State dimension.
+    """
     cell = table.groupby(["filter", "q_factor", "r_factor"]).mean(numeric_only=True).reset_index()
     rows = []
     for name in ADAPTIVE:
@@ -122,7 +154,21 @@ def goals(table: pd.DataFrame, settings: SweepSettings, nx: int = 4) -> pd.DataF
 
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
     """``sweep.csv|parquet``, heat maps (``heatmap_<metric>.png``), ``settings.toml`` and
-    ``summary.md`` into ``out_dir``."""
+    ``summary.md`` into ``out_dir``.
+
+    Parameters
+    ----------
+    table
+        The sweep's table.
+    wall
+        Wall time [s].
+    settings
+        The sweep's settings.
+    out_dir
+        Output folder.
+    partial
+        The sweep was interrupted.
+    """
     from ..results import atomic_write
     from .settings import to_toml
 

@@ -71,6 +71,15 @@ class Settings:
 
 
 def make_filters(s: Settings, case: str) -> dict:
+    """The KF (linearised at the case's initial state) and the EKF, started at the true state.
+
+    Parameters
+    ----------
+    s
+        The settings.
+    case
+        Which case (its initial state and KF linearisation point).
+    """
     from estimators import EKF, KF, discretize
     from fmu_models import get_model
 
@@ -104,7 +113,17 @@ def _summary(errors: dict, s: Settings) -> dict:
 
 
 def fast_task(case: str, settings: Settings, runs=None) -> dict:
-    """All realisations of one case, both filters batched."""
+    """All realisations of one case, both filters batched.
+
+    Parameters
+    ----------
+    case
+        Which case (``hanging`` or ``upright``).
+    settings
+        The settings.
+    runs
+        Which realisations (default all).
+    """
     from fmu_models import get_model
 
     s = settings
@@ -117,7 +136,17 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
 
 
 def master_task(case: str, settings: Settings, runs=None) -> dict:
-    """The same realisations through the co-simulation master with the plant FMU."""
+    """The same realisations through the co-simulation master with the plant FMU.
+
+    Parameters
+    ----------
+    case
+        Which case.
+    settings
+        The settings.
+    runs
+        Which realisations (default all).
+    """
     import tempfile
 
     from fmu_models import build_fmu, get_model
@@ -143,7 +172,21 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True):
-    """Both cases; returns (table of errors at the report times, summary per case, wall time)."""
+    """Both cases; returns (table of errors at the report times, summary per case, wall time).
+
+    Parameters
+    ----------
+    settings
+        The settings.
+    path
+        ``fast`` or ``master``.
+    backend
+        Parallel backend.
+    n_jobs
+        Worker processes.
+    progress
+        Show a progress bar.
+    """
     fn = fast_task if path == "fast" else master_task
     t0 = time.perf_counter()
     res = run_tasks([(fn, dict(case=c, settings=settings)) for c in CASES], backend=backend,
@@ -169,6 +212,21 @@ class Seed001Result(NamedTuple):
 
 
 def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
+    """The tables, the error figure, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
+
+    Parameters
+    ----------
+    table
+        Errors at the report times.
+    summary
+        Per case and filter: errors, divergence, RMSE.
+    wall
+        Wall time [s].
+    settings
+        The settings.
+    out_dir
+        Output folder.
+    """
     from ..results import atomic_write
     from .common import new_figure
     from .settings import to_toml

@@ -123,7 +123,19 @@ def _lag_and_gain(truth, est, T, max_lag=50):
 
 
 def realisations(case: str, settings: Settings, runs, path: str = "fast") -> list[dict]:
-    """Run realisations ``runs`` of one case; returns one dict of metrics per realisation."""
+    """Run realisations ``runs`` of one case; returns one dict of metrics per realisation.
+
+    Parameters
+    ----------
+    case
+        Which case (noise setting of the EKF).
+    settings
+        The settings.
+    runs
+        Which realisations.
+    path
+        ``fast`` (plant model in Python) or ``master`` (plant FMU).
+    """
     import tempfile
 
     from fmu_models import build_fmu
@@ -157,7 +169,21 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True):
-    """Both cases; returns (per-realisation DataFrame, example traces by case, wall time)."""
+    """Both cases; returns (per-realisation DataFrame, example traces by case, wall time).
+
+    Parameters
+    ----------
+    settings
+        The settings.
+    path
+        ``fast`` or ``master``.
+    backend
+        Parallel backend.
+    n_jobs
+        Worker processes.
+    progress
+        Show a progress bar.
+    """
     t0 = time.perf_counter()
     chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
     tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
@@ -179,7 +205,13 @@ class Seed002Result(NamedTuple):
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
-    """Per case and state: RMSE of the EKF and of its input, and what the EKF adds."""
+    """Per case and state: RMSE of the EKF and of its input, and what the EKF adds.
+
+    Parameters
+    ----------
+    per_run
+        The per-realisation table of :func:`run`.
+    """
     rows = []
     for case, g in per_run.groupby("case", sort=False):
         for x, fed in zip(STATES, ("fused tilt", "raw gyro (with offset)", "raw encoder")):
@@ -190,6 +222,24 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) -> Path:
+    """The tables, the figure of the estimates, ``settings.toml`` and ``summary.md`` into
+    ``out_dir``; returns ``summary.md``.
+
+    Parameters
+    ----------
+    per_run
+        The per-realisation table.
+    traces
+        Example traces by case.
+    wall
+        Wall time [s].
+    settings
+        The settings.
+    out_dir
+        Output folder.
+    path
+        The path that ran.
+    """
     from ..results import atomic_write
     from .common import new_figure
     from .settings import to_toml

@@ -43,7 +43,15 @@ def c_array(ctype: str, name: str, values: Iterable) -> str:
 
 
 def c_strings(name: str, strings: Iterable[str]) -> str:
-    """``static const char *const <name>[] = {"a", ...};``: a table of names for messages."""
+    """``static const char *const <name>[] = {"a", ...};``: a table of names for messages.
+
+    Parameters
+    ----------
+    name
+        Name of the C table.
+    strings
+        The strings (printable, without quotes or backslashes).
+    """
     strings = list(strings)
     for s in strings:
         if '"' in s or "\\" in s or not s.isprintable():

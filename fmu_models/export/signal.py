@@ -223,5 +223,19 @@ def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier
 
 
 def channel_params(prefix: str, names: Sequence[str], values, domain: str, what: str) -> list[tuple]:
-    """Real parameter rows ``<prefix>_<name>`` for per-channel ``values``."""
+    """Real parameter rows ``<prefix>_<name>`` for per-channel ``values``.
+
+    Parameters
+    ----------
+    prefix
+        Name prefix (``std``, ``bias``, ...).
+    names
+        Channel names.
+    values
+        One value per channel.
+    domain
+        Domain of every value (:data:`fmu_models.variables.DOMAINS`).
+    what
+        What the values are, for the descriptions.
+    """
     return [(f"{prefix}_{n}", float(v), domain, f"{what} of {n}") for n, v in zip(names, values, strict=True)]
