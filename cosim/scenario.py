@@ -299,5 +299,5 @@ class Scenario:
 
 
 def component_types() -> list[str]:
-    """Names of the component types a scenario file may use (the registered ``kind``s)."""
+    """Names of the component types a scenario file may use (the registered kinds)."""
     return COMPONENTS.names()

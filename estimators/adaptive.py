@@ -77,6 +77,7 @@ class WindowedAdaptiveEKF(EKF):
                  nan_is_missing: bool = True, backend: str = "compiled"):
         self.window = positive_int(window, "window")
         super().__init__(system, x0, P0, Q, R, gate, nan_is_missing, backend)
+        self._adapted_flag = memoryview(self._out("adapted"))
 
     def config_key(self) -> tuple:
         """The window length."""
@@ -116,7 +117,7 @@ class WindowedAdaptiveEKF(EKF):
 
     def after_step(self) -> None:
         """After a step that adapted: :meth:`on_adapted`."""
-        if self._out("adapted")[0]:
+        if self._adapted_flag[0]:
             self.on_adapted()
 
     def on_adapted(self) -> None:

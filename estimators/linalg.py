@@ -98,9 +98,13 @@ def mask_measurement(valid: ca.SX, S_raw: ca.SX, innov_raw: ca.SX) -> tuple[ca.S
     innov_raw : SX, shape (ny, 1)
         The innovation of all channels.
 
-    Returns ``(S, innov, M)``: ``S`` with the rows and columns of missing channels replaced
-    by those of the identity, the innovation with those channels zeroed, and
-    ``M = diag(valid)``."""
+    Returns
+    -------
+    tuple
+        ``(S, innov, M)``: ``S`` with the rows and columns of missing channels replaced by
+        those of the identity, the innovation with those channels zeroed, and
+        ``M = diag(valid)``.
+    """
     M = ca.diag(valid)
     S = symmetric(ca.mtimes([M, S_raw, M]) + ca.diag(1 - valid))
     return S, valid * innov_raw, M

@@ -13,6 +13,7 @@ Every filter is a subclass of :class:`~estimators.base.KalmanBase` and is descri
 
 **Symbolic hooks** (called once per configuration, when the fused step is built, with a
 :class:`StepContext`; they return CasADi SX expressions and must not keep state)
+
     * ``predict_expr(ctx) -> (x_prior, P_prior)`` (required): the time update from ``ctx.x``,
       ``ctx.P``, ``ctx.u``, ``ctx.Q``;
     * ``update_expr(ctx, x_prior, P_prior) -> Update`` (required): the measurement update
@@ -31,10 +32,12 @@ Every filter is a subclass of :class:`~estimators.base.KalmanBase` and is descri
       class (window length, sigma-point parameters), for the cache of compiled functions.
 
 **Runtime hooks** (optional)
+
     ``after_step()`` after every step from Python, once the new state is current;
     ``after_run(outputs)`` after a native run with every step's outputs.
 
 **Smoothing and export hooks** (optional, with defaults for EKF-type filters)
+
     ``smoother_cross_covariance(x, P, u)`` (the RTS smoother's ``D_k``);
     ``fmu_noise_parameters()`` and ``fmu_noise(p)`` (how the FMU's parameters give Q and R).
 

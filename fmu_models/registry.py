@@ -2,15 +2,11 @@
 
 Every kind of thing a user can add has one registry, filled where each thing is defined:
 
-=====================================  ==========================================================
-registry                               filled by
-=====================================  ==========================================================
-:data:`fmu_models.MODELS`              :func:`fmu_models.register_model` on a model's build function
-:data:`estimators.FILTERS`             ``class MyFilter(EKF, register="MyFilter")``
-:data:`cosim.COMPONENTS`               ``class MySensor(Component, kind="my_sensor")``
-:data:`fmu_models.export.SIGNAL_KINDS`  :func:`fmu_models.export.signal.register_signal_kind`
-:data:`cosim.experiments.EXPERIMENTS`  ``class MyStudy(Experiment, register="my-study")``
-=====================================  ==========================================================
+* :data:`fmu_models.MODELS`: :func:`fmu_models.register_model` on a model's build function;
+* :data:`estimators.FILTERS`: ``class MyFilter(EKF, register="MyFilter")``;
+* :data:`cosim.COMPONENTS`: ``class MySensor(Component, kind="my_sensor")``;
+* :data:`fmu_models.export.SIGNAL_KINDS`: :func:`fmu_models.export.signal.register_signal_kind`;
+* :data:`cosim.experiments.EXPERIMENTS`: ``class MyStudy(Experiment, register="my-study")``.
 
 So adding a model, a filter, a component or an experiment is one file: its definition
 registers it, and every entry point (scenario files, the command line, FMU export) finds

@@ -22,9 +22,13 @@ def modules():
             yield importlib.import_module(info.name)
 
 
-def public_objects():
+def public_objects(private_modules: bool = True):
+    """``(qualified name, object)`` of every public class and function (also those of private
+    modules such as ``estimators._fold`` unless ``private_modules`` is False)."""
     seen = set()
     for mod in modules():
+        if not private_modules and any(part.startswith("_") for part in mod.__name__.split(".")):
+            continue
         names = getattr(mod, "__all__", None)
         if names is None:
             names = [n for n in dir(mod) if not n.startswith("_")]

@@ -210,6 +210,35 @@ def _wait_for(proc, path: Path, timeout=120.0):
         time.sleep(0.05)
 
 
+class _Stderr:
+    """The stderr of a process read as it comes (a thread), to wait for a sign of progress."""
+
+    def __init__(self, proc):
+        import threading
+
+        self.text, self.proc = "", proc
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self):
+        while chunk := self.proc.stderr.read(1):
+            self.text += chunk
+
+    def wait_for(self, pattern: str, timeout: float = 180.0) -> None:
+        """Until ``pattern`` (a regex) is in the stderr so far."""
+        import re
+
+        t0 = time.monotonic()
+        while not re.search(pattern, self.text):
+            if self.proc.poll() is not None or time.monotonic() - t0 > timeout:
+                raise AssertionError(f"no {pattern!r} in the stderr: {self.text[-2000:]}")
+            time.sleep(0.05)
+
+    def rest(self) -> str:
+        self._thread.join(timeout=60)
+        return self.text
+
+
 def _processes_mentioning(text: str) -> list[int]:
     pids = []
     for d in Path("/proc").glob("[0-9]*"):
@@ -227,16 +256,17 @@ def _processes_mentioning(text: str) -> list[int]:
 def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp_path, sig, backend):
     out = tmp_path / f"campaign-{sig.name}-{backend}"
     proc = subprocess.Popen([*CLI, "experiment", "seed000", "--path", "master", "--runs", "200", "--jobs", "2",
-                             "--backend", backend, "--quiet", "--out", str(out)], stdout=subprocess.PIPE,
+                             "--backend", backend, "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    _wait_for(proc, out)                          # the campaign has started
-    time.sleep(3.0 if backend == "processes" else 8.0)   # a dask cluster takes a few seconds to start
+    err = _Stderr(proc)
+    err.wait_for(r"\b[1-9][0-9]*/[0-9]+ ")         # the progress bar: at least one task has finished
     proc.send_signal(sig)
     try:
-        _, err = proc.communicate(timeout=60)
+        proc.wait(timeout=60)
     except subprocess.TimeoutExpired:
         proc.kill()
         raise
+    err = err.rest()
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "WARNING" not in err and "interrupted" in err, err
     summary = out / "summary.md"
@@ -264,12 +294,13 @@ def test_interrupting_a_run_writes_partial_results_not_finished_ones(tmp_path):
         "plant.F" = "f.out"
     """)
     out = tmp_path / "out"
-    proc = subprocess.Popen([*CLI, "run", str(sc), "--out", str(out), "--no-progress"], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([*CLI, "run", str(sc), "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    _wait_for(proc, out)
-    time.sleep(3.0)
+    err = _Stderr(proc)
+    err.wait_for(r"co-simulation: +[0-9]+%")         # the progress bar: rows are being recorded
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    proc.wait(timeout=60)
+    err = err.rest()
     assert proc.returncode == 130 and "Traceback" not in err
     names = sorted(p.name for p in out.iterdir())
     assert "results.csv" not in names and "results.partial.csv" in names, names

@@ -19,7 +19,7 @@ The counter generator: channel ``c`` of ``n`` at sample ``k`` takes words
 Flood, OOPSLA 2014: word ``i`` is ``mix(seed + (i + 1) * 0x9E3779B97F4A7C15)``),
 forms ``u1 = ((a >> 11) + 1) 2^-53`` in (0, 1] and ``u2 = (b >> 11) 2^-53`` in [0, 1),
 and returns the Box-Muller ``z = sqrt(-2 ln u1) cos(2 pi u2)``. SplitMix64 passes
-BigCrush; Box-Muller with 53-bit uniforms is exact up to |z| ~ 8.6.
+BigCrush; Box-Muller with 53-bit uniforms is exact up to ``|z|`` ~ 8.6.
 """
 from __future__ import annotations
 

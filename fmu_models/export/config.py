@@ -88,10 +88,10 @@ def config_header(variables: VariableList, identifier: str, guid: str, source: s
     source : str
         What generated the header (a module name, for the comment at its top).
     groups : sequence of str
-        Groups the core reads even when they are empty (``P`` and ``IP`` always are) (``VR_<G>`` is then the number of
-        variables, ``N_<G>`` 0).
+        Groups the core reads even when they are empty (``P`` and ``IP`` always are;
+        ``VR_<G>`` is then the number of variables, ``N_<G>`` 0).
     defines : sequence of (name, value)
-        The core's own ``#define``s.
+        The core's own defines (``#define name value``).
     tables : sequence of str
         The core's own tables (from :func:`c_array`, :func:`c_strings`).
     work : dict, optional

@@ -10,20 +10,14 @@ the component's values as defaults). The components of :mod:`cosim.components.so
 Kinds and variables (``period`` [s] is a parameter of every kind; noise is drawn at sample
 ``round(t / period)``, see :mod:`cosim.components.noise`):
 
-=========  ==========================================  ============================================
-kind       parameters                                   outputs (inputs)
-=========  ==========================================  ============================================
-constant   ``value``                                    ``out``
-step       ``t_step``, ``before``, ``after``            ``out``
-sine       ``amplitude``, ``frequency``, ``phase``,     ``out``
-           ``offset``
-prbs       ``amplitude``, ``bit_time``, ``offset``;     ``out``
-           Integer ``order`` (2..16), ``seed``
-noise      ``std_<port>`` per channel; Integer          ``w_<state>`` per channel
-           ``seed``
-sensor     ``std_<signal>``, ``bias_<signal>``,         ``y_<signal>`` (inputs ``<signal>``)
-           ``quantization_<signal>``; Integer ``seed``
-=========  ==========================================  ============================================
+* ``constant``: parameter ``value``; output ``out``;
+* ``step``: ``t_step``, ``before``, ``after``; output ``out``;
+* ``sine``: ``amplitude``, ``frequency``, ``phase``, ``offset``; output ``out``;
+* ``prbs``: ``amplitude``, ``bit_time``, ``offset``, Integer ``order`` (2..16), ``seed``;
+  output ``out``;
+* ``noise``: ``std_<port>`` per channel, Integer ``seed``; outputs ``w_<state>``;
+* ``sensor``: ``std_<signal>``, ``bias_<signal>``, ``quantization_<signal>`` per channel,
+  Integer ``seed``; inputs ``<signal>``, outputs ``y_<signal>``.
 
 The kinds are a registry (:data:`SIGNAL_KINDS`): the six above are built into
 ``signal_core.c``; :func:`register_signal_kind` adds one whose output is a C expression
