@@ -1,12 +1,12 @@
 """Benchmark: microseconds per filter step on the cart-pole, against filterpy.
 
 Run: python bench/bench_estimators.py
-Every filter runs the same data (seed 000 scenario-like truth); figures are medians of
-the fastest of 7 repeats of 5000 steps (this shared machine's speed varies by up to
-50 % between runs; the fastest repeat is the least disturbed), each filter warmed up first. ``step`` is timed with the inputs as
-Python lists (``[0.5]``, ``[0.52, 1.79]``) and as rows of numpy arrays. filterpy's EKF and
-UKF get the exact Jacobians/model from the same CasADi model (numpy calls), so the
-comparison is of the filter machinery.
+Every filter runs the same data (seed 000 scenario-like truth); each figure is the
+fastest of 7 repeats of 5000 steps (this shared machine's speed varies by up to 50 %
+between runs; the fastest repeat is the least disturbed), each filter warmed up first.
+``step`` is timed with the inputs as Python lists (``[0.5]``, ``[0.52, 1.79]``) and as
+rows of numpy arrays. filterpy's EKF and UKF get the exact Jacobians/model from the same
+CasADi model (numpy calls), so the comparison is of the filter machinery.
 """
 from __future__ import annotations
 
