@@ -663,6 +663,6 @@ def _diagonal(M: np.ndarray, what: str, owner: str) -> np.ndarray:
     """The diagonal of ``M``, refused (ConfigurationError) if ``M`` has off-diagonal entries
     (the FMU's parameters are diagonals)."""
     if np.abs(M - np.diag(np.diag(M))).max() > 0:
-        raise ConfigurationError(f"{owner}: the FMU takes a diagonal {what}; this filter's {what} has "
-                                 "off-diagonal entries")
+        raise ConfigurationError(f"{owner}: the FMU takes a diagonal {what}; this filter's current {what} has "
+                                 "off-diagonal entries (export a filter before it steps, or reset it first)")
     return np.diag(M).copy()

@@ -38,11 +38,11 @@ def run_block(name: str, cwd: Path) -> str:
 
 
 def test_every_marked_block_is_known():
-    assert set(blocks()) == {"estimators", "offline", "cosim", "another-tool-export", "another-tool-loop",
-                             "another-tool-ssp", "another-tool-fmpy-ssp"}
+    assert set(blocks()) == {"estimators", "offline", "cosim", "writing-a-filter", "another-tool-export",
+                             "another-tool-loop", "another-tool-ssp", "another-tool-fmpy-ssp"}
 
 
-@pytest.mark.parametrize("name", ["estimators", "cosim"])
+@pytest.mark.parametrize("name", ["estimators", "cosim", "writing-a-filter"])
 def test_api_examples_run(tmp_path, name):
     run_block(name, tmp_path)
 
