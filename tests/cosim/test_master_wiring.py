@@ -333,3 +333,98 @@ def test_the_component_protocol_is_documented_and_is_all_a_new_component_needs()
     np.testing.assert_allclose(df["i.y"], 1 - 0.9 ** np.arange(11), rtol=1e-12)
     with pytest.raises(TypeError, match="not a cosim.core.component.Component"):
         Cosimulation([object()], {})
+
+
+def test_every_shipped_component_type_is_usable_from_a_scenario_file(tmp_path):
+    """The seed 002 loop (plant model, accelerometer, gyroscope, encoder, tilt fusion, bias
+    EKF, LQR) written as a scenario file gives the experiment's own numbers."""
+    from cosim import COMPONENTS, Cosimulation, Scenario
+    from cosim.experiments import seed002
+    from cosim.experiments.campaign import realisation_seeds
+
+    s = seed002.Settings()
+    sa, sg = realisation_seeds(s.seed, 0, 0)
+    (tmp_path / "loop.toml").write_text(f"""
+        [simulation]
+        stop_time = 2.0
+        [[component]]
+        name = "plant"
+        type = "plant_model"
+        model = "iwp"
+        period = {s.T}
+        method = "rk4"
+        substeps = {s.substeps}
+        start = {{ alpha = {s.alpha0} }}
+        outputs = ["alpha", "alpha_dot", "phi_dot", "der(alpha_dot)"]
+        feedthrough = "none"
+        [[component]]
+        name = "acc"
+        type = "accelerometer"
+        period = {s.T}
+        r = {s.r_acc}
+        noise_std = {s.acc_std}
+        seed = {sa}
+        [[component]]
+        name = "gyro"
+        type = "gyroscope"
+        period = {s.T}
+        noise_std = {s.gyro_std}
+        bias = {s.gyro_bias}
+        seed = {sg}
+        [[component]]
+        name = "encoder"
+        type = "encoder"
+        period = {s.T}
+        counts_per_rev = {s.counts_per_rev}
+        [[component]]
+        name = "fusion"
+        type = "tilt_fusion"
+        period = {s.T}
+        q_angle = {s.fusion_q_angle}
+        q_bias = {s.fusion_q_bias}
+        r_tilt = {s.fusion_r}
+        [[component]]
+        name = "ekf"
+        type = "estimator"
+        filter = "EKF"
+        model = "iwp"
+        bias_on = "y_alpha_dot"
+        period = {s.T}
+        x0 = [0.0, 0.0, 0.0, 0.0]
+        P0 = {s.P0}
+        Q = 0.01
+        R = 0.01
+        [[component]]
+        name = "lqr"
+        type = "lqr"
+        model = "iwp"
+        period = {s.T}
+        Q = {list(s.lqr_q)}
+        R = [[{s.lqr_r}]]
+        u_limits = [{-s.i_max}, {s.i_max}]
+        [connections]
+        "plant.i" = "lqr.i"
+        "acc.alpha" = "plant.alpha"
+        "acc.alpha_dot" = "plant.alpha_dot"
+        "acc.alpha_ddot" = "plant.der(alpha_dot)"
+        "gyro.alpha_dot" = "plant.alpha_dot"
+        "encoder.phi_dot" = "plant.phi_dot"
+        "fusion.a_t" = "acc.a_t"
+        "fusion.a_r" = "acc.a_r"
+        "fusion.omega" = "gyro.omega"
+        "ekf.i" = "lqr.i"
+        "ekf.y_alpha" = "fusion.alpha"
+        "ekf.y_alpha_dot" = "fusion.alpha_dot"
+        "ekf.y_phi_dot" = "encoder.phi_dot"
+        "lqr.alpha" = "ekf.alpha"
+        "lqr.alpha_dot" = "ekf.alpha_dot"
+        "lqr.phi_dot" = "ekf.phi_dot"
+    """.replace("\n        ", "\n"))
+    sc = Scenario.load(tmp_path / "loop.toml")
+    kinds = {type(c).kind for c in sc.cosim.components}
+    assert kinds == {"plant_model", "accelerometer", "gyroscope", "encoder", "tilt_fusion", "estimator", "lqr"}
+    assert kinds <= set(COMPONENTS.names())
+    comps, conn = seed002._components(s, "Q = R = 0.01", 0, "fast")
+    ref = Cosimulation(comps, conn).run(2.0)
+    got = sc.run()
+    np.testing.assert_allclose(got.to_numpy(), ref[got.columns].to_numpy(), rtol=0, atol=1e-12)
