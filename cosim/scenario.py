@@ -149,6 +149,15 @@ class ScenarioContext:
                                      f"{', '.join(map(repr, missing))}")
         return dict(table)
 
+    def construct_with_model(self, cls: type, name: str, table: dict) -> Component:
+        """:meth:`construct` with the table's ``model`` (a registered model's name) and
+        ``model_parameters`` turned into the constructor's ``model`` argument."""
+        t = dict(table)
+        if "model" not in t:
+            raise ConfigurationError(f"component {name!r} ({getattr(cls, 'kind', cls.__name__)}) needs the key "
+                                     "'model'")
+        return self.construct(cls, name, t, model=self.model(t.pop("model"), t.pop("model_parameters", None)))
+
     def construct(self, cls: type, name: str, table: dict, **extra) -> Component:
         """``cls(name, **table, **extra)`` with the keys checked (:meth:`check_keys`); an
         error of the constructor that is not the package's own is named with the component."""

@@ -20,7 +20,8 @@ from collections.abc import Callable, Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import InputError, NumericalError, TypeMismatchError
+from fmu_models.checks import float_array
+from fmu_models.errors import InputError, NumericalError
 
 from ._buffered import BufferedFunction
 from .linalg import BAD_INPUT, BAD_RESULT
@@ -116,28 +117,27 @@ class VectorInput:
     def __init__(self, buffer: np.ndarray, owner: str, what: str, allow_scalar: bool = True):
         self.buffer, self.owner, self.what = buffer, owner, what
         self.n, self.allow_scalar = len(buffer), allow_scalar
-        self.fill = _fast_fill(buffer, self.checked)
+        self._entries = range(self.n)
 
     def __call__(self, value) -> None:
         """Copy ``value`` into the buffer (raises InputError / TypeMismatchError naming the
-        problem; the buffer may then hold part of it). :attr:`fill` is the same function
-        without the method call (what the filters' step calls)."""
-        self.fill(value)
+        problem; the buffer may then hold part of it)."""
+        buf = self.buffer
+        try:
+            if value.__class__ is str or len(value) != self.n:
+                raise ValueError
+            for i in self._entries:
+                buf[i] = value[i]
+        except _SLOW:
+            self.checked(value)
 
     def checked(self, value) -> None:
         """The full check of ``value`` (the slow path): a named error, or the copy."""
         n, what, owner = self.n, self.what, self.owner
-        if value is None:
-            raise TypeMismatchError(f"{owner}: {what} is None; expected {n} number(s)")
-        if isinstance(value, (str, bytes)):
-            raise TypeMismatchError(f"{owner}: {what} must be numbers, got the string {value!r}")
-        try:
-            a = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise TypeMismatchError(f"{owner}: {what} must be numbers ({n}), got {_short(value)}") from None
+        a = float_array(value, f"{owner}: {what}")
         if a.ndim == 0:
             if not (self.allow_scalar and n == 1):
-                raise InputError(f"{owner}: {what} must have shape ({n},), got the scalar {_short(value)}")
+                raise InputError(f"{owner}: {what} must have shape ({n},), got the scalar {value!r}")
             a = a.reshape(1)
         if a.shape != (n,):
             raise InputError(f"{owner}: {what} must have shape ({n},), got shape {a.shape}")
@@ -145,52 +145,6 @@ class VectorInput:
 
 
 _SLOW = (TypeError, ValueError, IndexError, KeyError)
-
-
-def _fast_fill(buf: np.ndarray, slow: Callable[[object], None]) -> Callable[[object], None]:
-    """``fill(value)``: the good path of :class:`VectorInput` for a buffer of ``n`` entries (the
-    length checked, one assignment per entry; the common sizes written out, since a loop
-    costs more than the assignments), ``slow(value)`` for everything else."""
-    n = len(buf)
-    if n == 1:
-        def fill(v):
-            try:
-                if v.__class__ is str or len(v) != 1:
-                    raise ValueError
-                buf[0] = v[0]
-            except _SLOW:
-                slow(v)
-    elif n == 2:
-        def fill(v):
-            try:
-                if v.__class__ is str or len(v) != 2:
-                    raise ValueError
-                buf[0] = v[0]
-                buf[1] = v[1]
-            except _SLOW:
-                slow(v)
-    elif n == 3:
-        def fill(v):
-            try:
-                if v.__class__ is str or len(v) != 3:
-                    raise ValueError
-                buf[0] = v[0]
-                buf[1] = v[1]
-                buf[2] = v[2]
-            except _SLOW:
-                slow(v)
-    else:
-        entries = range(n)
-
-        def fill(v):
-            try:
-                if v.__class__ is str or len(v) != n:
-                    raise ValueError
-                for i in entries:
-                    buf[i] = v[i]
-            except _SLOW:
-                slow(v)
-    return fill
 
 
 def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: list, general: Callable,
@@ -259,11 +213,6 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
                  copies=tuple(x.copy for x in rt.pairs["x"]))
     exec("\n".join(src), scope)             # generated from integers only, as dataclasses does
     return scope["step"]
-
-
-def _short(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarray, mask: np.ndarray,

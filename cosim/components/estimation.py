@@ -204,11 +204,7 @@ class LQRController(Component, kind="lqr"):
     @classmethod
     def from_scenario(cls, name, table, context):
         """``model`` by name (with ``model_parameters``), the other keys as the constructor's."""
-        t = dict(table)
-        if "model" not in t:
-            raise ConfigurationError(f"component {name!r} (lqr) needs the key 'model'")
-        model = context.model(t.pop("model"), t.pop("model_parameters", None))
-        return context.construct(cls, name, t, model=model)
+        return context.construct_with_model(cls, name, table)
 
     def __init__(self, name: str, model: PlantModel, period: float, Q, R, x_op=None,
                  u_op=None, u_limits=None):

@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from fmu_models.checks import finite
-from fmu_models.errors import ConfigurationError, NumericalError, UnknownNameError
+from fmu_models.errors import NumericalError, UnknownNameError
 from fmu_models.plant import PlantModel, check_method
 
 from ..core.component import Component
@@ -49,11 +49,7 @@ class ModelComponent(Component, kind="plant_model"):
     @classmethod
     def from_scenario(cls, name, table, context):
         """``model`` by name (with ``model_parameters``), the other keys as the constructor's."""
-        table = dict(table)
-        if "model" not in table:
-            raise ConfigurationError(f"component {name!r} (plant_model) needs the key 'model'")
-        model = context.model(table.pop("model"), table.pop("model_parameters", None))
-        return context.construct(cls, name, table, model=model)
+        return context.construct_with_model(cls, name, table)
 
     def __init__(self, name: str, model: PlantModel, period: float, method: str = "euler",
                  substeps: int = 1, start: Mapping[str, float] | None = None,

@@ -125,6 +125,20 @@ static inline int set_int_parameters(long long ip[], const unsigned vr[], size_t
         return 1;                                                                                       \
     }
 
+/* core_get_int / core_set_int over the Integer parameters at IP (the CoreData field holding
+ * them; NULL for a core without any): every core's Integer variables are its parameters. */
+#define CORE_INT_PARAMETERS(IP)                                                                        \
+    int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width,       \
+                     char *err) {                                                                       \
+        (void)d;                                                                                        \
+        return get_int_parameters(IP, vr, n, v, width, err);                                            \
+    }                                                                                                   \
+    int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width,       \
+                     int before_run, char *err) {                                                       \
+        (void)d;                                                                                        \
+        return set_int_parameters(IP, vr, n, v, width, before_run, err);                               \
+    }
+
 #define CORE_NO_BOOLEANS                                                                               \
     int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {           \
         (void)d; (void)v;                                                                               \

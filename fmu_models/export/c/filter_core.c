@@ -110,18 +110,7 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     return 0;
 }
 
-int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
-    (void)d; (void)v; (void)width;
-    if (n) FAIL("no Integer variable has value reference %u", vr[0]);
-    return 0;
-}
-
-int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
-                 char *err) {
-    (void)d; (void)v; (void)width; (void)before_run;
-    if (n) FAIL("no Integer variable has value reference %u", vr[0]);
-    return 0;
-}
+CORE_INT_PARAMETERS(NULL)          /* no Integer variables */
 
 int core_get_bool(const CoreData *d, const unsigned vr[], size_t n, int v[], char *err) {
     for (size_t i = 0; i < n; i++) {

@@ -97,14 +97,7 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
 }
 
 /* integrator is an Enumeration (FMI 3.0: Int64 functions), substeps an Int32 (model_config.h IP_WIDTH) */
-int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
-    return get_int_parameters(d->ip, vr, n, v, width, err);
-}
-
-int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
-                 char *err) {
-    return set_int_parameters(d->ip, vr, n, v, width, before_run, err);
-}
+CORE_INT_PARAMETERS(d->ip)
 
 CORE_NO_BOOLEANS
 

@@ -123,14 +123,7 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     return 0;
 }
 
-int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err) {
-    return get_int_parameters(d->ip, vr, n, v, width, err);
-}
-
-int core_set_int(CoreData *d, const unsigned vr[], size_t n, const long long v[], int width, int before_run,
-                 char *err) {
-    return set_int_parameters(d->ip, vr, n, v, width, before_run, err);
-}
+CORE_INT_PARAMETERS(d->ip)
 
 CORE_NO_BOOLEANS
 
