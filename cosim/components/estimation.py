@@ -104,10 +104,11 @@ class EstimatorComponent(Component, kind="estimator"):
         self.filter.bind_summary(out, self.covariance)()
         return out
 
-    def bind(self, values, inputs, outputs):
+    def bind(self, values, inputs, outputs, integers=None):
         """The master's fast path (:class:`~cosim.core.component.FastBinding`): the filter's
         step reads the measurements from ``values``, and its summary (estimate, covariance
-        entries, NIS) is written straight into ``values[outputs]``."""
+        entries, NIS) is written straight into ``values[outputs]`` (``integers``: unused,
+        every port is real)."""
         f, nu = self.filter, self._nu
         summary = f.bind_summary(values[outputs], self.covariance)
         if isinstance(inputs, slice):

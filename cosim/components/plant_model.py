@@ -84,8 +84,9 @@ class ModelComponent(Component, kind="plant_model"):
         """None: unconnected inputs stay zero."""
         return []
 
-    def use_inputs(self, names: Sequence[str]) -> None:
-        """Inputs set at each step (the connected ones), in this order; the others stay zero."""
+    def use_inputs(self, names: Sequence[str], sources=None) -> None:
+        """Inputs set at each step (the connected ones), in this order; the others stay zero
+        (``sources``: not needed, every port is real)."""
         self.connected_inputs = list(names)
         model_in = self.model.input_names
         self._in_index = [("u", model_in.index(p)) if p in model_in else ("w", self.model.state_names.index(p[2:]))

@@ -48,6 +48,14 @@ test ``isinstance(component, Protocol)``, never the class):
 ``holds_inputs = True`` declares that the inputs :meth:`~Component.update` consumes are
 held over ``[t, t + period]`` (a plant integrating them) rather than used at the next
 instant. The master counts every component's instants itself (:attr:`Component.n_samples`).
+
+Signals: the master keeps every signal as a float and every integer or Boolean signal
+also as an exact int64 (a UInt64 as its bit pattern), so 64-bit integers travel exactly
+between components that exchange them (:class:`FastBinding` receives both arrays).
+
+A component that wants the run to end (an FMU asking to terminate) raises
+:class:`StopRequest` from :meth:`~Component.update`: the run then ends normally, its last
+row at the time the component asked for.
 """
 from __future__ import annotations
 
@@ -64,7 +72,8 @@ from fmu_models.errors import ConfigurationError, TypeMismatchError
 from fmu_models.registry import Registry
 
 __all__ = ["COMPONENTS", "PORT_TYPES", "Component", "ExportedFMU", "ExportsFMU", "FastBinding", "Port",
-           "StateEstimator", "bind_protocol", "check_name", "check_period", "port_kind", "ports_compatible"]
+           "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
+           "ports_compatible"]
 
 #: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
 PORT_TYPES = {
@@ -160,6 +169,25 @@ def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Por
     return tuple(out)
 
 
+class StopRequest(Exception):           # a request, not an error: the run ends normally
+    """Raised by a component's ``update`` to end the run normally at ``time`` (see the module
+    documentation).
+
+    Parameters
+    ----------
+    component : str
+        Who asks.
+    time : float
+        When [s] (within the component's step).
+    reason : str
+        Why, in words.
+    """
+
+    def __init__(self, component: str, time: float, reason: str = ""):
+        super().__init__(f"{component} asked to stop at t = {time:g} s" + (f" ({reason})" if reason else ""))
+        self.component, self.time, self.reason = component, float(time), reason
+
+
 #: The component types usable in scenario files, by their ``kind``.
 COMPONENTS: Registry = Registry("component type")
 
@@ -168,11 +196,12 @@ COMPONENTS: Registry = Registry("component type")
 class FastBinding(Protocol):
     """A component with a fast path for the master's inner loop (see :meth:`bind`)."""
 
-    def bind(self, values: np.ndarray, inputs, outputs: slice) -> tuple[Callable[[float], None],
-                                                                         Callable[[float], None]]:
+    def bind(self, values: np.ndarray, inputs, outputs: slice, integers: np.ndarray | None = None
+             ) -> tuple[Callable[[float], None], Callable[[float], None]]:
         """Return ``(output_fn, update_fn)``, each taking ``t``: ``output_fn(t)`` writes the
-        outputs at ``t`` into ``values[outputs]``; ``update_fn(t)`` consumes
-        ``values[inputs]`` (a slice or an int index array of the connected inputs)."""
+        outputs at ``t`` into ``values[outputs]`` (and the exact ones of integer and Boolean
+        ports into ``integers[outputs]``); ``update_fn(t)`` consumes ``values[inputs]`` (a
+        slice or an int index array of the connected inputs) and ``integers[inputs]``."""
 
 
 @runtime_checkable
@@ -288,9 +317,10 @@ class Component(ABC):
         unconnected inputs keep their start values."""
         return self.input_names
 
-    def use_inputs(self, names: Sequence[str]) -> None:
+    def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
         """Called by the master before a run with the names of the connected inputs, in
-        the order their values appear in ``u`` (default: every input, in port order)."""
+        the order their values appear in ``u`` (default: every input, in port order), and
+        each one's source signal and its FMI type (``sources``, for range checks)."""
         if list(names) != self.input_names:
             raise ConfigurationError(f"{self.name}: every input must be connected")
 
@@ -334,15 +364,33 @@ class Component(ABC):
         return y
 
 
-def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, inputs, outputs: slice
-                  ) -> tuple[Callable[[float], None], Callable[[float], None]]:
+def _exact(value, type_name: str, owner: str, port: str) -> int:
+    """An integer or Boolean output's exact value (a Python int stays exact at any size)."""
+    if isinstance(value, (bool, int, np.integer)):
+        v = int(value)
+    else:
+        v = float(value)
+        if not np.isfinite(v) or v != int(v):
+            raise TypeMismatchError(f"{owner}.{port} ({type_name}) output {value!r}, not an integer")
+        v = int(v)
+    if type_name == "UInt64" and v >= 2**63:       # kept as its bit pattern in int64
+        v -= 2**64
+    return v
+
+
+def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, inputs, outputs: slice,
+                  integers: np.ndarray | None = None) -> tuple[Callable[[float], None], Callable[[float], None]]:
     """``(output_fn, update_fn)`` calling ``comp``'s :meth:`~Component.output` and
     :meth:`~Component.update` with its inputs read from ``source[inputs]`` and its outputs
     written to ``values[outputs]`` (the number checked): the binding of a component without
     :class:`FastBinding` (``source is values``), and the Jacobi order's binding of any
-    component (``source``: the values before the instant)."""
+    component (``source``: the values before the instant). The exact values of integer and
+    Boolean output ports also go to ``integers[outputs]``."""
     n_out = outputs.stop - outputs.start
     output, update = comp.output, comp.update
+    exact = [(j, outputs.start + j, p.type) for j, p in enumerate(comp.output_ports) if p.kind != "real"]
+    if integers is None:
+        exact = []
 
     def output_fn(t: float) -> None:
         y = output(t, source[inputs])
@@ -353,6 +401,8 @@ def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, input
         if not ok:
             raise ConfigurationError(f"output returned {y!r}, expected {n_out} value(s)")
         values[outputs] = y
+        for j, at, type_name in exact:           # integer and Boolean ports: their exact values too
+            integers[at] = _exact(y[j], type_name, comp.name, comp.output_names[j])
 
     def update_fn(t: float) -> None:
         update(t, source[inputs])

@@ -47,7 +47,7 @@ from fmu_models.errors import (
     UnknownNameError,
 )
 
-from .component import Component, FastBinding, bind_protocol, ports_compatible
+from .component import Component, FastBinding, StopRequest, bind_protocol, ports_compatible
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, base_step, evaluation_order
 
@@ -204,11 +204,14 @@ class Cosimulation:
                 slots[(c.name, p)] = n
                 n += 1
         self.signal_names = [f"{c}.{p}" for (c, p) in slots]
+        self.signal_types = [p.type for c in self.components for p in c.output_ports]
         self._n_signals = n
         self._in_specs = {}
         for c in self.components:
             ports = [p for p in c.input_names if (c.name, p) in self.connections]
-            c.use_inputs(ports)
+            srcs = [self.connections[(c.name, p)] for p in ports]
+            sources = [(".".join(s), self.signal_types[slots[s]]) for s in srcs]
+            c.use_inputs(ports, sources)
             idx = np.array([slots[self.connections[(c.name, p)]] for p in ports], dtype=np.intp)
             if len(idx) and np.all(np.diff(idx) == 1):
                 self._in_specs[c.name] = (ports, slice(int(idx[0]), int(idx[-1]) + 1))
@@ -315,7 +318,8 @@ class Cosimulation:
         """
         n, m = self._steps(stop_time, start_time, output_interval)
         sel = select_signals(self.signal_names, signals)
-        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 1, float(start_time), self.step_size, m)
+        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 2, float(start_time), self.step_size, m,
+                          self._integer_columns(sel))
         return self._simulate(sink, sel, n, m, float(start_time), progress)
 
     def run_to_parquet(self, path, stop_time: float, start_time: float = 0.0, *, signals=None,
@@ -330,16 +334,27 @@ class Cosimulation:
         """
         n, m = self._steps(stop_time, start_time, output_interval)
         sel = select_signals(self.signal_names, signals)
-        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 1, float(start_time),
-                           self.step_size, m, chunk_rows)
+        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 2, float(start_time),
+                           self.step_size, m, chunk_rows, self._integer_columns(sel))
         return self._simulate(sink, sel, n, m, float(start_time), progress)
 
-    def _bind_all(self, values, source):
+    def _integer_columns(self, sel) -> dict[int, str]:
+        """The recorded columns of integer signals (position in ``sel``: FMI type), kept exact."""
+        from .component import port_kind
+
+        return {pos: self.signal_types[i] for pos, i in enumerate(sel) if port_kind(self.signal_types[i]) == "integer"}
+
+    def _bind_all(self, values, source, integers):
         bound = {}
         for c in self.components:
             inp, out = self._in_specs[c.name][1], self._out_slices[c.name]
-            bound[c.name] = (c.bind(values, inp, out) if source is values and isinstance(c, FastBinding)
-                             else bind_protocol(c, values, source, inp, out))
+            try:
+                bound[c.name] = (c.bind(values, inp, out, integers) if source is values and isinstance(c, FastBinding)
+                                 else bind_protocol(c, values, source, inp, out, integers))
+            except Exception as e:
+                if isinstance(e, CosimError):
+                    raise
+                raise CosimError(f"component {c.name!r} failed before the run (bind): {e}", c.name) from e
         return bound
 
     def _entries(self, bound, values):
@@ -422,23 +437,41 @@ class Cosimulation:
 
         hf = self.step_size
         values = np.zeros(self._n_signals)
+        integers = np.zeros(self._n_signals, dtype=np.int64)      # exact integer and Boolean signals
         jacobi = self.order == "jacobi"
         source = np.zeros_like(values) if jacobi else values
         sel_idx = np.asarray(sel, dtype=np.intp)
         all_sel = len(sel) == self._n_signals
-        buf = sink.buffer
+        int_cols = sink.int_positions
+        int_idx = sel_idx[int_cols] if len(int_cols) else None
+        buf, ibuf = sink.buffer, sink.ibuffer
         cap = len(buf)
         clock = time.perf_counter()
         self.timings = {}
+        self.stopped = None
         owner: dict = {}
         k0, k, j, phase, f = 0, 0, 0, "reset", None
         bar = None
+
+        def record(row: int) -> int:
+            if all_sel:
+                buf[row] = values
+            else:
+                np.take(values, sel_idx, out=buf[row])
+            if int_idx is not None:
+                np.take(integers, int_idx, out=ibuf[row])
+            row += 1
+            if row == cap:
+                sink.flush(row)
+                row = 0
+            return row
+
         try:
             for c in self.components:
                 f = c
                 c.reset(t0)
             phase = "bind"
-            bound = self._bind_all(values, source)
+            bound = self._bind_all(values, source, integers)
             for name, (o, u) in bound.items():
                 owner[o], owner[u] = name, name
             schedule = self._entries(bound, values)
@@ -447,6 +480,7 @@ class Cosimulation:
             clock = time.perf_counter()
             bar = tqdm(total=n + 1, unit="step", delay=0 if progress else 2.0, disable=progress is False,
                        leave=False, desc="co-simulation", mininterval=0.5)
+            stop = None
             for k0 in range(0, n + 1, BLOCK):
                 k1 = min(k0 + BLOCK, n + 1)
                 for k in range(k0, k1):
@@ -458,25 +492,32 @@ class Cosimulation:
                     for f in outs:
                         f(t)
                     if k % m == 0:
-                        if all_sel:
-                            buf[j] = values
-                        else:
-                            np.take(values, sel_idx, out=buf[j])
-                        j += 1
-                        if j == cap:
-                            sink.flush(j)
-                            j = 0
+                        j = record(j)
                     if k == n:
                         break
                     phase = "update"
-                    for f in upds:
-                        f(t)
+                    try:
+                        for f in upds:
+                            f(t)
+                    except StopRequest as request:
+                        stop = request
+                        j = self._finish_stop(request, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
+                                              values, jacobi, source, owner)
+                        break
                 if not np.isfinite(values).all():
                     j = self._raise_nonfinite(values, sink, sel_idx, j, k0, k, m, t0)
                 bar.update(k1 - k0)
+                if stop is not None:
+                    break
             sink.flush(j)
             self.timings["loop"] = time.perf_counter() - clock
-            return sink.finish()
+            result = sink.finish()
+            if stop is not None:
+                self.stopped = stop
+                if isinstance(result, pd.DataFrame):
+                    result.attrs["stopped"] = {"component": stop.component, "time": stop.time,
+                                               "reason": stop.reason}
+            return result
         except KeyboardInterrupt:
             sink.flush(j)
             partial = sink.abort()
@@ -511,6 +552,41 @@ class Cosimulation:
             for c in self.components:
                 c.close()
             self.timings["teardown"] = time.perf_counter() - clock
+
+    def _finish_stop(self, request: StopRequest, upds, at: int, bound, schedule, k: int, t0: float, record,
+                     j: int, sink, values, jacobi, source, owner) -> int:
+        """A component asked to stop while stepping from ``t_k``: the other components finish
+        the instant; if it stops at ``t_{k+1}`` (within rounding) the instant ``t_{k+1}`` is
+        computed and recorded, else the stopping component's outputs at its stop time are
+        recorded as the last row (the others hold theirs). Logged as a warning."""
+        import logging
+
+        h = self.step_size
+        t = t0 + k * h
+        t_next = t + h
+        for g in upds[at + 1:]:
+            try:
+                g(t)
+            except StopRequest:
+                pass
+        ts = request.time
+        if not np.isfinite(ts) or abs(ts - t_next) <= 1e-9 * max(1.0, abs(t_next)) or ts > t_next:
+            ts = t_next
+            outs, _ = schedule[(k + 1) % self._hyper]
+            if jacobi:
+                source[:] = values
+            for g in outs:
+                g(t_next)
+            sink.last_time = None
+        else:
+            out_fn = bound[request.component][0] if request.component in bound else None
+            if out_fn is not None:
+                out_fn(ts)
+            sink.last_time = ts
+        request.time = ts
+        logging.getLogger("cosim").warning("%s asked to stop the run at t = %g s%s; the run ends there",
+                                           request.component, ts, f" ({request.reason})" if request.reason else "")
+        return record(j)
 
     def _raise_nonfinite(self, values, sink, sel_idx, j: int, k0: int, k: int, m: int, t0: float) -> int:
         """Raise CosimError for the first NaN/inf signal found after base steps ``k0..k``.

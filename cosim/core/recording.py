@@ -8,6 +8,10 @@ chunks of ``chunk_rows`` rows (:class:`ParquetSink`): memory stays constant howe
 the run. The Parquet file is written under a temporary name and renamed when the run
 ends; an interrupted or failed run leaves ``<name>.partial.parquet`` with the rows
 recorded so far, never a file that looks complete.
+
+Integer signals are recorded exactly (``int64``, ``uint64`` for UInt64 columns), beside the
+float columns of everything else. The last row of a run that a component stopped may lie
+between two recording instants (``last_time``).
 """
 from __future__ import annotations
 
@@ -51,11 +55,17 @@ def partial_path(path: Path) -> Path:
     return path.with_name(f"{path.stem}.partial{path.suffix}")
 
 
+def _integer_layout(columns: Sequence[str], int_columns) -> tuple[np.ndarray, list[str]]:
+    positions = np.array(sorted(int_columns or {}), dtype=np.intp)
+    return positions, [int_columns[p] for p in positions]
+
+
 class MemorySink:
     """Rows kept in memory: a preallocated array, a DataFrame at the end.
 
-    The writer fills :attr:`buffer` row by row and calls :meth:`flush` with the number of
-    rows written whenever the buffer is full and at the end (the protocol of both sinks).
+    The writer fills :attr:`buffer` (and :attr:`ibuffer`, the exact integer columns at
+    :attr:`int_positions`) row by row and calls :meth:`flush` with the number of rows
+    written whenever the buffer is full and at the end (the protocol of both sinks).
 
     Parameters
     ----------
@@ -68,10 +78,12 @@ class MemorySink:
     every : int
         Base steps between rows (row ``i`` is at ``t0 + step * (every * i)``, the master's
         own arithmetic).
+    int_columns : dict of int to str, optional
+        Columns (positions) of integer signals and their FMI types, kept exactly.
     """
 
     def __init__(self, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
-                 every: int = 1):
+                 every: int = 1, int_columns: dict | None = None):
         need = n_rows * (len(columns) + 1) * 8
         avail = available_memory()
         if need > MEMORY_FRACTION * avail:
@@ -81,7 +93,11 @@ class MemorySink:
                 "a longer output_interval, or stream to a Parquet file (run_to_parquet / --stream)")
         self.columns = list(columns)
         self.buffer = np.empty((n_rows, len(columns)))
+        self.int_positions, self._int_types = _integer_layout(columns, int_columns)
+        self.ibuffer = np.empty((n_rows, len(self.int_positions)), dtype=np.int64)
         self.t0, self.step, self.every, self.n = t0, step, every, 0
+        #: the time of the last row, if it is not on the recording grid (a stopped run)
+        self.last_time = None
 
     def flush(self, rows: int) -> None:
         """``rows`` more rows of :attr:`buffer` are complete (the buffer holds the whole run,
@@ -91,7 +107,13 @@ class MemorySink:
     def frame(self) -> pd.DataFrame:
         """The rows recorded so far, indexed by ``time``."""
         times = self.t0 + self.step * (self.every * np.arange(self.n))
-        return pd.DataFrame(self.buffer[: self.n], index=pd.Index(times, name="time"), columns=self.columns)
+        if self.last_time is not None and self.n:
+            times[-1] = self.last_time
+        df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(times, name="time"), columns=self.columns)
+        for k, (pos, type_name) in enumerate(zip(self.int_positions, self._int_types)):
+            col = self.ibuffer[: self.n, k]
+            df[self.columns[pos]] = col.view(np.uint64) if type_name == "UInt64" else col.copy()
+        return df
 
     def finish(self) -> pd.DataFrame:
         """End of a successful run: the whole recording."""
@@ -117,10 +139,12 @@ class ParquetSink:
         As :class:`MemorySink`.
     chunk_rows : int
         Rows per Parquet row group (default 8192).
+    int_columns : dict of int to str, optional
+        As :class:`MemorySink`.
     """
 
     def __init__(self, path, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
-                 every: int = 1, chunk_rows: int = 8192):
+                 every: int = 1, chunk_rows: int = 8192, int_columns: dict | None = None):
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -136,10 +160,19 @@ class ParquetSink:
         self.columns = list(columns)
         self.chunk = int(chunk_rows)
         self.buffer = np.empty((self.chunk, len(columns)))
+        self.int_positions, self._int_types = _integer_layout(columns, int_columns)
+        self.ibuffer = np.empty((self.chunk, len(self.int_positions)), dtype=np.int64)
+        self._exact = {int(p): (k, t) for k, (p, t) in enumerate(zip(self.int_positions, self._int_types))}
         self.t0, self.step, self.every, self.total = t0, step, every, 0
+        self.last_time = None
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        fields = [pa.field("time", pa.float64())] + [pa.field(c, pa.float64()) for c in self.columns]
-        meta = {b"pandas": _pandas_metadata(self.columns)}
+
+        def kind(j):
+            if j not in self._exact:
+                return pa.float64()
+            return pa.uint64() if self._exact[j][1] == "UInt64" else pa.int64()
+        fields = [pa.field("time", pa.float64())] + [pa.field(c, kind(j)) for j, c in enumerate(self.columns)]
+        meta = {b"pandas": _pandas_metadata(self.columns, {self.columns[p]: str(kind(p)) for p in self._exact})}
         self.schema = pa.schema(fields, metadata=meta)
         self._pa = pa
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
@@ -150,7 +183,16 @@ class ParquetSink:
             return
         pa = self._pa
         times = self.t0 + self.step * (self.every * np.arange(self.total, self.total + rows))
-        arrays = [pa.array(times)] + [pa.array(self.buffer[:rows, j]) for j in range(len(self.columns))]
+        if self.last_time is not None:
+            times[-1] = self.last_time
+
+        def column(j):
+            if j not in self._exact:
+                return pa.array(self.buffer[:rows, j])
+            k, type_name = self._exact[j]
+            col = self.ibuffer[:rows, k]
+            return pa.array(col.view(np.uint64) if type_name == "UInt64" else col)
+        arrays = [pa.array(times)] + [column(j) for j in range(len(self.columns))]
         self.writer.write_table(pa.Table.from_arrays(arrays, schema=self.schema))
         self.total += rows
 
@@ -173,13 +215,15 @@ class ParquetSink:
         return target
 
 
-def _pandas_metadata(columns: Sequence[str]) -> bytes:
-    """pandas' Parquet metadata for a float frame indexed by ``time``, so that
-    ``pandas.read_parquet`` restores the index."""
+def _pandas_metadata(columns: Sequence[str], exact: dict | None = None) -> bytes:
+    """pandas' Parquet metadata for a frame indexed by ``time`` (float columns, and the exact
+    integer ones named in ``exact`` with their types), so that ``pandas.read_parquet``
+    restores the index."""
     import json
 
-    cols = [{"name": c, "field_name": c, "pandas_type": "float64", "numpy_type": "float64",
-             "metadata": None} for c in columns]
+    exact = exact or {}
+    cols = [{"name": c, "field_name": c, "pandas_type": exact.get(c, "float64"),
+             "numpy_type": exact.get(c, "float64"), "metadata": None} for c in columns]
     cols.append({"name": "time", "field_name": "time", "pandas_type": "float64",
                  "numpy_type": "float64", "metadata": None})
     return json.dumps({"index_columns": ["time"], "column_indexes": [], "columns": cols,

@@ -9,13 +9,26 @@ left limit at ``t``: computed with the inputs held over the previous step), whic
 algebraic loops through the FMU at the price of one step of latency, as a sensor that
 samples just before the actuator updates. Then ``update`` sets all connected inputs and
 advances the FMU over ``[t, t + period]`` with the inputs held: ``doStep`` in
-Co-Simulation, the solver of :mod:`cosim.fmi.model_exchange` in Model Exchange.
+Co-Simulation, the integrator of :mod:`cosim.fmi.model_exchange` in Model Exchange (which
+sets discrete-time inputs only in Event Mode, as the standard requires).
 
-Ports may be of any FMI numeric type (Float64/Real, Float32, the integer types,
-Enumeration, Boolean); values travel as floats in the master and are converted exactly at
-the FMU boundary (:mod:`cosim.fmi.exchange`). FMU log messages go to the Python logger
-``cosim.fmu`` (warnings and errors always; everything with ``logging=True``), and the
-last ones are kept in :attr:`FMUComponent.messages` and quoted in errors.
+Ports (:mod:`cosim.fmi.ports`) may be of any FMI numeric type (Float64/Real, Float32, the
+integer types, Enumeration, Boolean); an FMI 3.0 array variable is one port per element
+(``y[1]``, ``y[2]``, ...), its size from its dimensions or structural parameters (set in
+Configuration Mode where the FMU has one). Integer values travel exactly and are checked
+against their destination's range (:mod:`cosim.fmi.exchange`), start values too.
+Parameters and start values of arrays are lists.
+
+The FMI rules of an instance's life are kept on every path (:mod:`cosim.fmi.instance`):
+after a call returned Error only FreeInstance follows; after Fatal nothing. An FMU that
+asks to terminate ends the run normally (:class:`~cosim.core.component.StopRequest`).
+Scheduled Execution (clocks) is refused with its reason. With ``isolate=True`` the FMU
+runs in a process of its own (:mod:`cosim.fmi.isolated`): a crash of its code ends the run
+with an error naming the FMU, the call and the signal, not the process.
+
+FMU log messages go to the Python logger ``cosim.fmu`` (warnings and errors always;
+everything with ``logging=True``), and the last ones are kept in
+:attr:`FMUComponent.messages` and quoted in errors.
 """
 from __future__ import annotations
 
@@ -27,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fmu_models.checks import finite
 from fmu_models.errors import (
     ConfigurationError,
     FMUError,
@@ -34,18 +48,22 @@ from fmu_models.errors import (
     UnknownNameError,
 )
 
-from ..core.component import PORT_TYPES, Component, ExportedFMU, Port
+from ..core.component import PORT_TYPES, Component, ExportedFMU, Port, StopRequest
 from .archive import Extraction, read_description
-from .exchange import Exchange, raw_function
-from .model_exchange import SOLVERS, MEIntegrator
+from .exchange import Exchange
+from .instance import FMUInstance
+from .model_exchange import SOLVERS, FMUModel, MEIntegrator
+from .ports import array_shape, check_integer, element_ports, parse_start
 
 __all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "FMUComponent", "FMUError"]
 
 INTERFACES = ("auto", "cs", "me")
 FEEDTHROUGH_MODES = ("model", "none")
 LOGGER = _logging.getLogger("cosim.fmu")
-_LEVELS = {0: _logging.INFO, 1: _logging.WARNING, 2: _logging.WARNING, 3: _logging.ERROR, 4: _logging.CRITICAL}
-_STATUS = {1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
+
+
+def _has_clocks(md) -> bool:
+    return any(v.type == "Clock" for v in md.modelVariables) or getattr(md, "scheduledExecution", None) is not None
 
 
 class FMUComponent(Component, kind="fmu"):
@@ -60,13 +78,15 @@ class FMUComponent(Component, kind="fmu"):
     period : float
         Communication step [s].
     inputs : sequence of str, optional
-        FMU variables (causality input) offered as input ports; default: all inputs of a
-        numeric type. Unconnected ones keep their start values.
+        FMU variables (causality input) offered as input ports (an array's name means all
+        its elements, ``u[2]`` one); default: all inputs of a numeric type. Unconnected ones
+        keep their start values.
     outputs : sequence of str, optional
-        FMU variables offered as output ports; default: all outputs of a numeric type.
-        Local variables such as ``der(alpha_dot)`` may be listed too.
+        FMU variables offered as output ports (as ``inputs``); default: all outputs of a
+        numeric type. Local variables such as ``der(alpha_dot)`` may be listed too.
     parameters : mapping, optional
-        Parameter values by name, set before initialisation.
+        Parameter values by name (lists for arrays), set before initialisation; structural
+        parameters are set in Configuration Mode (FMI 3.0) and decide the arrays' sizes.
     start : mapping, optional
         Start values by name (e.g. initial states), set before initialisation.
     interface : {"auto", "cs", "me"}
@@ -74,8 +94,8 @@ class FMUComponent(Component, kind="fmu"):
     solver : {"cvode", "euler", "rk4"}
         Model Exchange solver (see :mod:`cosim.fmi.model_exchange`; default CVODE).
     solver_step : float, optional
-        Model Exchange: fixed step [s] of Euler/RK4, largest step of CVODE (default: the
-        period).
+        Model Exchange: the fixed step [s] of Euler/RK4 (default: the period), or CVODE's
+        largest step (default: none).
     rtol : float
         Model Exchange: CVODE's relative tolerance (default 1e-6).
     feedthrough : {"model", "none"}
@@ -85,6 +105,10 @@ class FMUComponent(Component, kind="fmu"):
     logging : bool
         Ask the FMU for debug messages (``SetDebugLogging``) and log them at INFO level;
         warnings and errors are always logged (default False).
+    isolate : bool
+        Run the FMU in a process of its own, so that a crash of its code ends the run with
+        a named error instead of the process (default False; costs a round trip between
+        the processes per call, see the README's performance section).
 
     Attributes
     ----------
@@ -95,22 +119,29 @@ class FMUComponent(Component, kind="fmu"):
         ``"cs"`` or ``"me"``, as resolved.
     messages : collections.deque of (int, str)
         The last 200 log messages of the FMU (status, text).
+    integrator : MEIntegrator or None
+        The Model Exchange integrator of the current run.
     """
 
     reentrant = True
     holds_inputs = True
 
     def __init__(self, name: str, path, period: float, inputs: Sequence[str] | None = None,
-                 outputs: Sequence[str] | None = None, parameters: Mapping[str, float] | None = None,
-                 start: Mapping[str, float] | None = None, interface: str = "auto",
+                 outputs: Sequence[str] | None = None, parameters: Mapping[str, object] | None = None,
+                 start: Mapping[str, object] | None = None, interface: str = "auto",
                  solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6,
-                 feedthrough: str = "model", logging: bool = False):
+                 feedthrough: str = "model", logging: bool = False, isolate: bool = False):
+        from fmu_models.checks import positive
+
         self.path = Path(path)
         md = read_description(self.path)
         self.md, self.version = md, 3 if str(md.fmiVersion).startswith("3") else 2
         if interface not in INTERFACES:
             raise UnknownNameError(f"{name}: interface must be one of {INTERFACES}, got {interface!r}")
         has = {"cs": md.coSimulation is not None, "me": md.modelExchange is not None}
+        if _has_clocks(md) and not any(has.values()):
+            raise FMUError(f"{name}: {self.path.name} is a Scheduled Execution FMU (clocks): the master steps "
+                           "periodic components and does not schedule clocked partitions; not supported")
         if interface == "auto":
             interface = "cs" if has["cs"] else "me" if has["me"] else ""
             if not interface:
@@ -121,43 +152,126 @@ class FMUComponent(Component, kind="fmu"):
             raise ConfigurationError(f"{name}: {self.path.name} has no "
                                      f"{'Co-Simulation' if interface == 'cs' else 'Model Exchange'} "
                                      f"interface; it has: {', '.join(have) or 'none'}")
+        if _has_clocks(md):
+            raise FMUError(f"{name}: {self.path.name} declares clocks: clocked (Scheduled Execution) variables "
+                           "are not supported by the master")
         self.interface = interface
         if solver not in SOLVERS:
             raise UnknownNameError(f"{name}: solver must be one of {SOLVERS}, got {solver!r}")
         if feedthrough not in FEEDTHROUGH_MODES:
             raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
-        from fmu_models.checks import positive
-
         self.solver, self.rtol = solver, positive(rtol, f"{name}: rtol")
-        self.solver_step = positive(solver_step if solver_step is not None else period, f"{name}: solver_step")
+        self.solver_step = None if solver_step is None else positive(solver_step, f"{name}: solver_step")
         self.feedthrough_mode, self.logging = feedthrough, bool(logging)
+        if not isinstance(isolate, bool):
+            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
+        self.isolate = isolate
         self.variables = {v.name: v for v in md.modelVariables}
         ident = (md.coSimulation if interface == "cs" else md.modelExchange).modelIdentifier
         self.model_identifier = ident
         self._check_binary(name)
-        all_in = [v.name for v in md.modelVariables if v.causality == "input"]
-        all_out = [v.name for v in md.modelVariables if v.causality == "output"]
-        readable = all_out + [v.name for v in md.modelVariables if v.causality == "local"]
-        numeric = lambda names: [n for n in names if self.variables[n].type in PORT_TYPES]  # noqa: E731
-        ins = self._ports(name, numeric(all_in) if inputs is None else inputs, all_in, "input")
-        outs = self._ports(name, numeric(all_out) if outputs is None else outputs, readable, "output")
+        self.settings, self.structural = self._settings(name, parameters or {}, start or {})
+        self.element_ports = element_ports(md, self.structural)
+        ins = self._ports(name, inputs, ("input",), "input")
+        outs = self._ports(name, outputs, ("output", "local"), "output", default=("output",))
         ft = self._model_feedthrough(outs, ins) if feedthrough == "model" else False
         super().__init__(name, period, ins, outs, feedthrough=ft, port_names_are_identifiers=False)
-        self.settings = {}
-        for kind, values in (("parameter", parameters or {}), ("start", start or {})):
-            for key, val in values.items():
-                if key not in self.variables:
-                    raise UnknownNameError(f"{name}: FMU {md.modelName} has no variable {key!r} (for {kind}); "
-                                           f"valid names: {', '.join(self.variables)}")
-                if self.variables[key].type not in PORT_TYPES:
-                    raise TypeMismatchError(f"{name}: {key!r} is of type {self.variables[key].type}; only "
-                                            "numeric and Boolean variables can be set")
-                self.settings[key] = val
-        self.fmu = None
+        self.instance: FMUInstance | None = None
+        self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
         self._extraction: Extraction | None = None
         self.connected_inputs = list(self.input_names)
-        self._private, self._me, self._initialized = None, None, False
+        self._sources: list | None = None
+        self._private = None
+        self._remote = None
+
+    # ------------------------------------------------------------------ description
+    def _settings(self, name: str, parameters: Mapping, start: Mapping) -> tuple[dict, dict]:
+        """Checked parameter and start values (exact integers, finite reals, lists for arrays),
+        and the structural parameters' values (start values, overridden)."""
+        if not isinstance(parameters, Mapping) or not isinstance(start, Mapping):
+            raise TypeMismatchError(f"{name}: parameters and start must be tables of name = value")
+        structural = {v.name: int(parse_start(v, 1)[0]) for v in self.md.modelVariables
+                      if v.causality == "structuralParameter" and v.type.startswith(("Int", "UInt"))}
+        settings: dict = {}
+        for kind, values in (("parameter", parameters), ("start", start)):
+            for key, val in values.items():
+                v = self.variables.get(key)
+                if v is None:
+                    raise UnknownNameError(f"{name}: FMU {self.md.modelName} has no variable {key!r} (for {kind}); "
+                                           f"valid names: {', '.join(self.variables)}")
+                if v.type not in PORT_TYPES:
+                    raise TypeMismatchError(f"{name}: {key!r} is of type {v.type}; only numeric and Boolean "
+                                            "variables can be set")
+                what = f"{name}: {kind} {key}"
+                if v.causality == "structuralParameter":
+                    structural[key] = check_integer(val, v.type, self.version, what)
+                    settings[key] = structural[key]
+                    continue
+                settings[key] = val
+        for key, val in list(settings.items()):
+            v = self.variables[key]
+            if v.causality == "structuralParameter":
+                continue
+            shape = array_shape(v, structural)
+            count = int(np.prod(shape)) if shape else 1
+            items = list(val) if isinstance(val, (list, tuple)) else [val]
+            if len(items) != count:
+                raise ConfigurationError(f"{name}: {key} takes {count} value(s) (shape {shape or 'scalar'}), "
+                                         f"got {len(items)}")
+            what = f"{name}: {key}"
+            if PORT_TYPES[v.type] == "real":
+                items = [finite(x, what) for x in items]
+            elif PORT_TYPES[v.type] == "boolean":
+                if not all(isinstance(x, bool) or x in (0, 1) for x in items):
+                    raise TypeMismatchError(f"{what}: a Boolean takes true or false, got {val!r}")
+                items = [bool(x) for x in items]
+            else:
+                items = [check_integer(x, v.type, self.version, what) for x in items]
+            settings[key] = items if shape else items[0]
+        return settings, structural
+
+    def _ports(self, name, chosen, causalities, what, default=None) -> list[Port]:
+        default = default or causalities
+        available = {p.name: p for p in self.element_ports.values() if p.variable.causality in causalities}
+        if chosen is None:
+            chosen = [n for n, p in available.items() if p.variable.causality in default and p.type in PORT_TYPES]
+        elif isinstance(chosen, str) or not all(isinstance(c, str) for c in chosen):
+            raise TypeMismatchError(f"{name}: {what}s must be a list of variable names, got {chosen!r}")
+        ports, seen = [], set()
+        for p in chosen:
+            names = [p] if p in available else [n for n, e in available.items() if e.variable.name == p and n != p]
+            if not names:
+                raise UnknownNameError(f"{name}: {p!r} is not an FMU {what}; valid {what}s: "
+                                       f"{', '.join(available)}")
+            for n in names:
+                e = available[n]
+                if e.type not in PORT_TYPES:
+                    raise TypeMismatchError(f"{name}: {what} {n!r} is of type {e.type}; ports can be "
+                                            f"{', '.join(sorted(set(PORT_TYPES)))}")
+                if n not in seen:
+                    seen.add(n)
+                    ports.append(Port(n, e.type, getattr(e.variable, "unit", None) or "", e.variable.description or ""))
+        return ports
+
+    def _model_feedthrough(self, outs: list[Port], ins: list[Port]) -> dict:
+        """Direct dependencies of each output port on input ports, from the ModelStructure
+        (by variable: an array element depends on every element of what its array does)."""
+        declared = {}
+        for unknown in list(self.md.outputs) + list(getattr(self.md, "derivatives", [])):
+            if unknown.variable is not None:
+                declared[unknown.variable.name] = unknown.dependencies
+        by_variable: dict[str, list[str]] = {}
+        for p in ins:
+            by_variable.setdefault(self.element_ports[p.name].variable.name, []).append(p.name)
+        result = {}
+        for p in outs:
+            deps = declared.get(self.element_ports[p.name].variable.name)
+            if deps is None:           # not declared: depends on every input (FMI default)
+                result[p.name] = sorted(q.name for q in ins)
+            else:
+                result[p.name] = sorted(n for d in deps for n in by_variable.get(d.name, []))
+        return result
 
     @classmethod
     def from_scenario(cls, name, table, context):
@@ -202,35 +316,6 @@ class FMUComponent(Component, kind="fmu"):
             raise FMUError(f"{name}: {self.path.name} has no binary for this platform ({want}); it has "
                            f"binaries for: {', '.join(have) or 'none'}.{hint}")
 
-    def _ports(self, name, chosen, available, what) -> list[Port]:
-        ports = []
-        for p in chosen:
-            if p not in available:
-                raise UnknownNameError(f"{name}: {p!r} is not an FMU {what}; valid {what}s: "
-                                       f"{', '.join(available)}")
-            v = self.variables[p]
-            if v.type not in PORT_TYPES:
-                raise TypeMismatchError(f"{name}: {what} {p!r} is of type {v.type}; ports can be "
-                                        f"{', '.join(sorted(set(PORT_TYPES)))}")
-            ports.append(Port(p, v.type, getattr(v, "unit", None) or "", v.description or ""))
-        return ports
-
-    def _model_feedthrough(self, outs: list[Port], ins: list[Port]) -> dict:
-        """Direct dependencies of each output port on input ports, from the ModelStructure."""
-        declared = {}
-        for unknown in list(self.md.outputs) + list(getattr(self.md, "derivatives", [])):
-            if unknown.variable is not None:
-                declared[unknown.variable.name] = unknown.dependencies
-        in_names = {p.name for p in ins}
-        result = {}
-        for p in outs:
-            deps = declared.get(p.name)
-            if deps is None:           # not declared: depends on every input (FMI default)
-                result[p.name] = sorted(in_names)
-            else:
-                result[p.name] = sorted(d.name for d in deps if d.name in in_names)
-        return result
-
     def __repr__(self):
         return (f"FMUComponent({self.name!r}, {self.path.name}, FMI {self.version}.0 "
                 f"{self.interface.upper()}, period={self.period})")
@@ -260,210 +345,225 @@ class FMUComponent(Component, kind="fmu"):
         """None: unconnected FMU inputs keep their start values."""
         return []
 
-    def use_inputs(self, names: Sequence[str]) -> None:
-        """Set, at each step, only these input ports (the connected ones), in this order."""
+    def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
+        """Set, at each step, only these input ports (the connected ones), in this order;
+        ``sources``: each one's source signal and FMI type (for the integer range checks)."""
         unknown = [n for n in names if n not in self.input_names]
         if unknown:
             raise UnknownNameError(f"{self.name}: not input ports: {unknown}")
         self.connected_inputs = list(names)
+        self._sources = list(sources) if sources is not None else None
 
     # ------------------------------------------------------------------ lifecycle
-    def _log(self, status: int, category, message) -> None:
-        text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
-        self.messages.append((int(status), text))
-        if status >= 1 or self.logging:
-            LOGGER.log(_LEVELS.get(int(status), _logging.ERROR), "[%s] %s", self.name, text)
-
     def _fail(self, what: str, status: int):
-        label = _STATUS.get(status, f"status {status}")
-        log = "; ".join(m for s, m in list(self.messages)[-3:]) or "no message from the FMU"
-        raise FMUError(f"{self.name}: {what} returned {label}: {log}")
-
-    def _instantiate(self, t0: float) -> None:
-        from fmpy import fmi2, fmi3
-        from fmpy.fmi1 import calloc, free
-
-        if self._extraction is None or self._extraction.closed:   # unpacked once, reused by every run
-            self._extraction = Extraction(self.path)
-        args = dict(guid=self.md.guid, unzipDirectory=self._extraction.directory,
-                    modelIdentifier=self.model_identifier, instanceName=self.name)
-        cs = self.interface == "cs"
-        try:
-            if self.version == 2:
-                self.fmu = (fmi2.FMU2Slave if cs else fmi2.FMU2Model)(**args)
-
-                def logger(env, inst, status, category, message):
-                    self._log(status, category, message)
-
-                cb = fmi2.fmi2CallbackFunctions()
-                cb.logger = fmi2.fmi2CallbackLoggerTYPE(logger)
-                cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
-                cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
-                self._callbacks = cb
-                self.fmu.instantiate(callbacks=cb, loggingOn=self.logging)
-            else:
-                self.fmu = (fmi3.FMU3Slave if cs else fmi3.FMU3Model)(**args)
-
-                def log3(env, status, category, message):
-                    self._log(status, category, message)
-
-                self.fmu.instantiate(loggingOn=self.logging, logMessage=log3)
-        except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
-            fmu, self.fmu = self.fmu, None
-            if fmu is not None and getattr(fmu, "dll", None) is not None:
-                try:
-                    fmu.freeLibrary()
-                except Exception:
-                    LOGGER.debug("freeLibrary failed", exc_info=True)
-            log = "; ".join(m for s, m in list(self.messages)[-3:])
-            raise FMUError(f"{self.name}: cannot load or instantiate {self.path.name}: {e}"
-                           + (f" ({log})" if log else "")) from None
-        if self.logging:
-            try:
-                self.fmu.setDebugLogging(True, [])
-            except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
-                LOGGER.debug("%s: setDebugLogging refused", self.name)
-
-    def _set_setting(self, name, value):
-        v = self.variables[name]
-        vr = [v.valueReference]
-        kind = PORT_TYPES[v.type]
-        if kind == "boolean":
-            self.fmu.setBoolean(vr, [bool(value)])
-        elif kind == "integer":
-            if float(value) != int(value):
-                raise ConfigurationError(f"{self.name}: {name} is an integer variable, got {value!r}")
-            if self.version == 2:
-                setter = self.fmu.setInteger
-            else:
-                setter = getattr(self.fmu, "setInt64" if v.type == "Enumeration" else f"set{v.type}")
-            setter(vr, [int(value)])
-        else:
-            (self.fmu.setReal if self.version == 2 else getattr(self.fmu, f"set{v.type}"))(vr, [float(value)])
+        self.instance.fail(what, status)
 
     def reset(self, t0: float) -> None:
-        """Unpack and instantiate the FMU, apply parameters and start values and initialise
-        it at ``t0``."""
-        from fmpy.fmi1 import FMICallException
-
+        """Unpack (once) and instantiate the FMU, apply the structural parameters (in
+        Configuration Mode), the parameters and start values, initialise it at ``t0`` and,
+        in Model Exchange, start its integrator."""
         self.close()
         super().reset(t0)
-        self.messages.clear()
-        self._instantiate(t0)
+        if self.isolate:
+            from .isolated import RemoteFMU
+
+            self._remote = RemoteFMU(self)
+            self._remote.reset(t0)
+            return
+        if self._extraction is None or self._extraction.closed:   # unpacked once, reused by every run
+            self._extraction = Extraction(self.path)
+        inst = FMUInstance(self.name, self.md, self._extraction.directory, self.interface, self.logging)
+        self.instance = inst
+        self.messages = inst.messages
+        fmu = inst.fmu
         try:
             if self.version == 2:
-                self.fmu.setupExperiment(startTime=t0)
+                inst.call("SetupExperiment", fmu.setupExperiment, None, t0)
+            structural = {k: v for k, v in self.settings.items()
+                          if self.variables[k].causality == "structuralParameter"}
+            if structural:
+                inst.call("EnterConfigurationMode", fmu.enterConfigurationMode)
+                for key, val in structural.items():
+                    self._set_setting(key, val)
+                inst.call("ExitConfigurationMode", fmu.exitConfigurationMode)
             for key, val in self.settings.items():
-                self._set_setting(key, val)
+                if key not in structural:
+                    self._set_setting(key, val)
             if self.version == 2:
-                self.fmu.enterInitializationMode()
+                inst.call("EnterInitializationMode", fmu.enterInitializationMode)
             else:
-                self.fmu.enterInitializationMode(startTime=t0)
-            self.fmu.exitInitializationMode()
-            self._initialized = True
-            self._me = None
+                inst.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
+            inst.call("ExitInitializationMode", fmu.exitInitializationMode)
+            inst.initialized = True
             if self.interface == "me":
-                self._me = MEIntegrator(self.fmu, self.md, self.solver, self.solver_step, self.rtol, self._fail)
-                self._me.start(t0)
-        except FMICallException as e:
-            what = str(e).split(" failed")[0] if " failed" in str(e) else "initialisation"
-            self._fail(what, 3)
+                self.integrator = MEIntegrator(FMUModel(inst), self.solver, self.solver_step, self.rtol)
+                self.integrator.start(t0)
         except (TypeError, ValueError, OverflowError) as e:
             raise ConfigurationError(f"{self.name}: bad parameter or start value: {e}") from None
         self._private = None
 
-    def bind(self, values, inputs, outputs):
-        """Output and update closures over the raw FMI functions, exchanging values with
-        ``values`` in place (see :meth:`Component.bind`)."""
-        if self.fmu is None:
-            raise FMUError(f"{self.name}: reset() must be called before bind()")
-        inst, dll = self.fmu.component, self.fmu.dll
-        var = self.variables
-        in_vars = [var[n] for n in self.connected_inputs]
-        idx = np.arange(len(values))[inputs] if isinstance(inputs, slice) else np.asarray(inputs, np.intp)
-        set_all = Exchange(dll, inst, self.version, in_vars, "set", self._fail).bind(values, inputs)
-        ft_names = sorted(set().union(*self.feedthrough.values()) & set(self.connected_inputs)) \
-            if self.feedthrough else []
-        pos = [self.connected_inputs.index(n) for n in sorted(ft_names, key=self.connected_inputs.index)]
-        set_ft = (Exchange(dll, inst, self.version, [in_vars[i] for i in pos], "set", self._fail)
-                  .bind(values, idx[pos]) if pos else None)
-        get_out = Exchange(dll, inst, self.version, [var[n] for n in self.output_names], "get",
-                           self._fail).bind(values, outputs)
-        h, fail = self.period, self._fail
-
-        if set_ft is None:
-            output_fn = lambda t: get_out()  # noqa: E731 - the hot path: one FMI call
+    def _set_setting(self, name: str, value) -> None:
+        v, inst = self.variables[name], self.instance
+        fmu, vr = inst.fmu, [v.valueReference]
+        items = list(value) if isinstance(value, list) else [value]
+        kind = PORT_TYPES[v.type]
+        if self.version == 2:
+            setter = {"boolean": fmu.setBoolean, "integer": fmu.setInteger, "real": fmu.setReal}[kind]
         else:
-            def output_fn(t: float) -> None:
-                set_ft()
-                get_out()
+            suffix = "Int64" if v.type == "Enumeration" else v.type
+            setter = getattr(fmu, f"set{suffix}")
+        inst.call(f"Set {name}", setter, vr, items)
 
+    def bind(self, values, inputs, outputs, integers=None):
+        """Output and update closures over the raw FMI functions, exchanging values with
+        ``values`` (and ``integers``, the exact integer signals) in place (see
+        :class:`~cosim.core.component.FastBinding`)."""
+        if self._remote is not None:
+            return self._remote.bind(values, inputs, outputs, integers)
+        if self.instance is None:
+            raise FMUError(f"{self.name}: reset() must be called before bind()")
+        inst = self.instance
+        if integers is None:
+            integers = np.zeros(len(values), dtype=np.int64)
+        idx = np.arange(len(values))[inputs] if isinstance(inputs, slice) else np.asarray(inputs, np.intp)
+        ports = [self.element_ports[n] for n in self.connected_inputs]
+        sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
+
+        from .exchange import no_exchange as _nothing
+
+        def exchange(positions, direction, index, changes=False):
+            if not positions:
+                return _nothing
+            ex = Exchange(inst.dll, inst.handle, self.version, [ports[i] for i in positions], direction, self._fail,
+                          self.name, [sources[i] for i in positions])
+            ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
+            return ex.bind(values, idx[positions], integers, changes)
+
+        all_pos = list(range(len(ports)))
+        ft_names = set().union(*self.feedthrough.values()) if self.feedthrough else set()
+        ft_pos = [i for i, n in enumerate(self.connected_inputs) if n in ft_names]
+        get_out = Exchange(inst.dll, inst.handle, self.version, [self.element_ports[n] for n in self.output_names],
+                           "get", self._fail, self.name).bind(values, outputs, integers)
         if self.interface == "me":
-            me = self._me
+            return self._bind_me(ports, exchange, all_pos, ft_pos, get_out)
+        set_all = exchange(all_pos, "set", inputs if isinstance(inputs, slice) else None)
+        set_ft = exchange(ft_pos, "set", None) if ft_pos else None
+        return self._output_fn(set_ft, get_out), self._cs_update(set_all)
 
-            def update_fn(t: float) -> None:
-                set_all()
-                me.advance(t, h)
-            return output_fn, update_fn
+    def _input_starts(self) -> list:
+        """The start value of every connected input element (what an array's unconnected
+        elements are sent as)."""
+        out = []
+        for n in self.connected_inputs:
+            p = self.element_ports[n]
+            out.append(parse_start(p.variable, p.size)[p.offset])
+        return out
 
-        do_step, D = raw_function(dll, f"fmi{self.version}DoStep"), ctypes.c_double
-        c, Dh = ctypes.c_void_p(inst), ctypes.c_double(h)
+    @staticmethod
+    def _output_fn(set_ft, get_out):
+        if set_ft is None:
+            return lambda t: get_out()
+
+        def output_fn(t: float) -> None:
+            set_ft()
+            get_out()
+        return output_fn
+
+    def _cs_update(self, set_all):
+        inst, h, name = self.instance, self.period, self.name
+        do_step, D = inst.raw(f"fmi{self.version}DoStep"), ctypes.c_double
+        c, Dh = ctypes.c_void_p(inst.handle), ctypes.c_double(h)
         if self.version == 2:
             def update_fn(t: float) -> None:
                 set_all()
                 st = do_step(c, D(t), Dh, 1)
                 if st > 1:
-                    fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
-        else:
-            flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
-            refs = [ctypes.byref(x) for x in flags]
-            term = flags[1]
+                    if st == 2:
+                        when = inst.discard_reason()
+                        if when is not None:
+                            raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
+                    inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
+            return update_fn
+        flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
+        refs = [ctypes.byref(x) for x in flags]
+        term, last = flags[1], flags[3]
 
-            def update_fn(t: float) -> None:
-                set_all()
-                st = do_step(c, D(t), Dh, True, *refs)
-                if st > 1:
-                    fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
-                if term.value:
-                    raise FMUError(f"{self.name}: the FMU requested termination at t = {t + h:g} s")
+        def update_fn(t: float) -> None:
+            set_all()
+            st = do_step(c, D(t), Dh, True, *refs)
+            if st > 1 and not (st == 2 and term.value):
+                inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
+            if term.value:
+                when = last.value if st == 2 or last.value > t else t + h
+                raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
+        return update_fn
+
+    def _bind_me(self, ports, exchange, all_pos, ft_pos, get_out):
+        """Model Exchange: continuous inputs set in Continuous-Time Mode, discrete ones in
+        Event Mode (an event at the communication point where one changed); the solver is
+        reinitialised where a continuous input jumped."""
+        me, h = self.integrator, self.period
+        cont = [i for i in all_pos if not ports[i].discrete]
+        disc = [i for i in all_pos if ports[i].discrete]
+        set_cont = exchange(cont, "set", None, changes=True)
+        set_disc = exchange(disc, "set", None, changes=True)
+        ft_cont = exchange([i for i in ft_pos if not ports[i].discrete], "set", None, changes=True)
+        ft_disc = exchange([i for i in ft_pos if ports[i].discrete], "set", None, changes=True)
+        pending = [False]                        # a continuous input jumped since the last advance
+
+        def output_fn(t: float) -> None:
+            if ft_pos:
+                pending[0] |= bool(ft_cont())
+                if ft_disc.differs():
+                    me.at_event(t, ft_disc)
+            get_out()
+
+        def update_fn(t: float) -> None:
+            pending[0] |= bool(set_cont())
+            if disc and set_disc.differs():      # discrete inputs change only in Event Mode
+                me.at_event(t, set_disc)
+            me.advance(t, h, pending[0])
+            pending[0] = False
         return output_fn, update_fn
 
     def _private_binding(self):
         if self._private is None:
             n_in, n_out = len(self.connected_inputs), len(self.output_names)
             buf = np.zeros(n_in + n_out)
-            self._private = (buf, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out)))
+            ints = np.zeros(n_in + n_out, dtype=np.int64)
+            self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
         return self._private
+
+    def _set_private_inputs(self, buf, ints, u) -> None:
+        n_in = len(self.connected_inputs)
+        buf[:n_in] = u
+        for i, n in enumerate(self.connected_inputs):
+            if PORT_TYPES[self.element_ports[n].type] != "real":
+                ints[i] = int(u[i])
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
         """Outputs at ``t`` with the connected inputs ``u`` (see the module documentation)."""
-        buf, out_fn, _ = self._private_binding()
-        n_in = len(self.connected_inputs)
-        buf[:n_in] = u
+        buf, ints, out_fn, _ = self._private_binding()
+        self._set_private_inputs(buf, ints, u)
         out_fn(t)
-        return buf[n_in:].copy()
+        return buf[len(self.connected_inputs):].copy()
 
     def update(self, t: float, u: np.ndarray) -> None:
         """Set the connected inputs ``u`` and advance over ``[t, t + period]``."""
-        buf, _, upd_fn = self._private_binding()
-        buf[: len(self.connected_inputs)] = u
+        buf, ints, _, upd_fn = self._private_binding()
+        self._set_private_inputs(buf, ints, u)
         upd_fn(t)
 
     def close(self) -> None:
-        """Terminate and free the FMU instance and remove its unpacked files (safe twice)."""
-        fmu, self.fmu = self.fmu, None
-        self._private, self._me = None, None
-        initialized, self._initialized = self._initialized, False
-        if fmu is not None:
-            if initialized:
-                try:
-                    fmu.terminate()
-                except Exception:  # noqa: BLE001 - an FMU in error state may refuse; free it anyway
-                    LOGGER.debug("%s: terminate refused", self.name)
-            try:
-                fmu.freeInstance()
-            except Exception:  # noqa: BLE001
-                LOGGER.debug("%s: freeInstance failed", self.name)
+        """End and free the FMU instance as the FMI rules allow (see :mod:`cosim.fmi.instance`);
+        the unpacked files stay for the next run (:meth:`release` removes them). Safe twice."""
+        remote, self._remote = self._remote, None
+        if remote is not None:
+            remote.close()
+        inst, self.instance = self.instance, None
+        self._private, self.integrator = None, None
+        if inst is not None:
+            inst.finish()
 
     def release(self) -> None:
         """:meth:`close`, and remove the unpacked FMU (kept between runs otherwise; removed

@@ -1,13 +1,20 @@
 """Typed value exchange with an FMU through its raw FMI functions, every argument prebuilt.
 
-An :class:`Exchange` moves the values of a list of FMU variables between a float64
-numpy array (the master's signals) and the FMU, one FMI call per variable type:
+An :class:`Exchange` moves the values of a list of element ports (:mod:`cosim.fmi.ports`)
+between the master's signal arrays and the FMU, one FMI call per variable type:
 ``fmi2GetReal``/``fmi2GetInteger``/``fmi2GetBoolean`` in FMI 2.0, ``fmi3GetFloat64``,
 ``fmi3GetFloat32``, ``fmi3GetInt8`` ... ``fmi3GetUInt64`` and ``fmi3GetBoolean`` in FMI
-3.0 (Enumerations use the Integer/Int64 functions). The functions are fresh pointers
-from the library without ``argtypes`` (ctypes' per-call conversion costs about 1.5 us a
-call), so the call costs what the FMU costs. Integer and Boolean values are converted
-exactly; a non-integral value sent to an integer variable is refused.
+3.0 (Enumerations use the Integer/Int64 functions), with the value count of array
+variables. The functions are fresh pointers from the library without ``argtypes``
+(ctypes' per-call conversion costs about 1.5 us a call), so a call costs what the FMU
+costs.
+
+The master keeps every signal as a float (``values``) and every integer or Boolean
+signal also exactly (``integers``, int64; a UInt64 as its bit pattern), so 64-bit
+integers travel exactly. Getting an integer variable writes both; setting one reads the
+exact value, checks it against the destination type's range (knowing whether the source
+is a UInt64) and refuses, naming the ports, the value and the range, what does not fit,
+instead of wrapping it. A real destination takes the float.
 """
 from __future__ import annotations
 
@@ -17,6 +24,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from fmu_models.errors import FMUError, InputError, TypeMismatchError
+
+from .ports import ElementPort, integer_range
 
 __all__ = ["Exchange", "raw_function"]
 
@@ -29,7 +38,7 @@ _FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "F
          "Int32": (ctypes.c_int32, "Int32"), "UInt32": (ctypes.c_uint32, "UInt32"),
          "Int64": (ctypes.c_int64, "Int64"), "UInt64": (ctypes.c_uint64, "UInt64"),
          "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")}
-_REAL = ("Real", "Float64")
+_REAL = ("Real", "Float64", "Float32")
 
 
 def raw_function(dll, name: str):
@@ -45,20 +54,34 @@ def raw_function(dll, name: str):
 
 
 class _Group:
-    """Variables of one FMI type: one call moves them all."""
+    """The variables of one FMI type: one call moves them all (every element of an array)."""
 
-    def __init__(self, ctype, positions: list[int], vrs: list[int]):
-        n = len(vrs)
-        self.positions = np.array(positions, dtype=np.intp)
-        self.vr = (ctypes.c_uint32 * n)(*vrs)
-        self.buf = (ctype * n)()
-        self.view = np.ctypeslib.as_array(self.buf)
-        self.n = ctypes.c_size_t(n)
-        self.integral = ctype not in (ctypes.c_double, ctypes.c_float)
+    def __init__(self, ctype, type_name: str, ports: list[tuple[int, ElementPort]]):
+        variables = list(dict.fromkeys(p.variable.valueReference for _, p in ports))
+        sizes = {p.variable.valueReference: p.size for _, p in ports}
+        start, base = 0, {}
+        for vr in variables:
+            base[vr] = start
+            start += sizes[vr]
+        self.n_values = start
+        self.positions = np.array([pos for pos, _ in ports], dtype=np.intp)      # in the port list
+        self.offsets = np.array([base[p.variable.valueReference] + p.offset for _, p in ports], dtype=np.intp)
+        self.vr = (ctypes.c_uint32 * len(variables))(*variables)
+        self.n_vr = ctypes.c_size_t(len(variables))
+        self.n = ctypes.c_size_t(self.n_values)
+        self.buf = (ctype * max(self.n_values, 1))()
+        self.view = np.ctypeslib.as_array(self.buf)[: self.n_values]
+        #: the ports are the group's values in order (no gather needed)
+        self.identity = bool(np.array_equal(self.offsets, np.arange(self.n_values)))
+        self.type_name = type_name
+        self.real = type_name in _REAL
+        self.boolean = type_name == "Boolean"
+        self.unsigned64 = type_name == "UInt64"
+        self.ports = [p for _, p in ports]
 
 
 class Exchange:
-    """Get or set a fixed list of FMU variables.
+    """Get or set a fixed list of element ports.
 
     Parameters
     ----------
@@ -68,57 +91,73 @@ class Exchange:
         The instance pointer.
     version : {2, 3}
         FMI version.
-    variables : sequence
-        fmpy ``ModelVariable`` objects, in the order of the values array.
+    ports : sequence of ElementPort
+        In the order of the index given to :meth:`bind`.
     direction : {"get", "set"}
     fail : callable
         ``fail(what, status)`` raises the component's FMUError.
+    owner : str
+        The component's name, for messages.
+    sources : sequence of (str, str), optional
+        For ``"set"``: each port's source signal name and FMI type (default: unknown, taken
+        as signed).
 
     Attributes
     ----------
     direct : bool
-        True if every variable is a Float64/Real (one call, no conversion).
+        True if every port is a scalar Float64/Real (one call, no conversion).
     """
 
-    def __init__(self, dll, instance, version: int, variables: Sequence, direction: str,
-                 fail: Callable[[str, int], None]):
+    def __init__(self, dll, instance, version: int, ports: Sequence[ElementPort], direction: str,
+                 fail: Callable[[str, int], None], owner: str = "", sources: Sequence[tuple[str, str]] | None = None):
         table = _FMI2 if version == 2 else _FMI3
-        groups: dict[str, tuple] = {}
-        for pos, v in enumerate(variables):
-            if v.type not in table:
-                raise TypeMismatchError(f"variable {v.name!r} of type {v.type} cannot be exchanged "
+        by_suffix: dict[str, tuple] = {}
+        for pos, p in enumerate(ports):
+            if p.type not in table:
+                raise TypeMismatchError(f"variable {p.name!r} of type {p.type} cannot be exchanged "
                                         f"(supported: {', '.join(table)})")
-            ctype, suffix = table[v.type]
-            groups.setdefault(suffix, (ctype, [], []))
-            groups[suffix][1].append(pos)
-            groups[suffix][2].append(v.valueReference)
-        self.version, self.direction, self._fail = version, direction, fail
+            ctype, suffix = table[p.type]
+            by_suffix.setdefault(suffix, (ctype, p.type, []))[2].append((pos, p))
+        self.version, self.direction, self._fail, self.owner = version, direction, fail, owner
         self.inst = ctypes.c_void_p(instance)
-        self.n = len(variables)
-        self.names = [v.name for v in variables]
+        self.n = len(ports)
+        self.ports = list(ports)
+        self.sources = list(sources) if sources is not None else [("?", "Int64")] * len(ports)
         self.groups = []
-        for suffix, (ctype, pos, vrs) in groups.items():
+        for suffix, (ctype, type_name, members) in by_suffix.items():
             fn = raw_function(dll, f"fmi{version}{direction.capitalize()}{suffix}")
-            self.groups.append((fn, f"{direction.capitalize()}{suffix}", _Group(ctype, pos, vrs)))
-        self.direct = all(v.type in _REAL for v in variables)
+            self.groups.append((fn, f"{direction.capitalize()}{suffix}", _Group(ctype, type_name, members)))
+        self.direct = all(p.type in ("Real", "Float64") and p.size == 1 for p in ports)
 
     def _args(self, g: _Group, buf):
         if self.version == 2:
-            return (self.inst, g.vr, g.n, buf)
-        return (self.inst, g.vr, g.n, buf, g.n)
+            return (self.inst, g.vr, g.n_vr, buf)
+        return (self.inst, g.vr, g.n_vr, buf, g.n)
 
-    def bind(self, array: np.ndarray, index) -> Callable[[], None]:
-        """A call that moves the values between the FMU and ``array[index]``.
+    def preset(self, values_by_port: dict[str, float]) -> None:
+        """Start values of array elements that no connection sets (a set of an array sends
+        all its elements)."""
+        for _, _, g in self.groups:
+            for off, p in zip(g.offsets, g.ports):
+                if p.name in values_by_port:
+                    g.view[off] = values_by_port[p.name]
 
-        ``index`` is a slice or an int array into the float64 ``array``. With one Real
-        group and a contiguous slice the FMU reads or writes ``array`` in place.
+    def bind(self, values: np.ndarray, index, integers: np.ndarray | None = None,
+             changes: bool = False) -> Callable[[], bool | None]:
+        """A call that moves the values between the FMU and ``values[index]`` (floats) and,
+        for integer and Boolean ports, ``integers[index]`` (exact int64).
+
+        ``index`` is a slice or an int array. With one scalar Real group and a contiguous
+        slice the FMU reads or writes ``values`` in place. With ``changes`` (a setter), the
+        call returns whether any value differs from the one set before (what Model
+        Exchange needs to know: an input that jumped).
         """
         if self.n == 0:
-            return lambda: None
+            return no_exchange
         fail = self._fail
-        if self.direct and isinstance(index, slice) and len(self.groups) == 1:
+        if self.direct and isinstance(index, slice) and len(self.groups) == 1 and not changes:
             fn, label, g = self.groups[0]
-            ptr = ctypes.cast(array.ctypes.data + 8 * index.start, ctypes.POINTER(ctypes.c_double))
+            ptr = ctypes.cast(values.ctypes.data + 8 * index.start, ctypes.POINTER(ctypes.c_double))
             args = self._args(g, ptr)
 
             def call():
@@ -126,31 +165,109 @@ class Exchange:
                 if st > 1:
                     fail(label, st)
             return call
-        idx = np.arange(len(array))[index] if isinstance(index, slice) else np.asarray(index, np.intp)
+        if integers is None:
+            integers = np.zeros(len(values), dtype=np.int64)
+        idx = np.arange(len(values))[index] if isinstance(index, slice) else np.asarray(index, np.intp)
         parts = [(fn, label, g, self._args(g, g.buf), idx[g.positions]) for fn, label, g in self.groups]
         if self.direction == "get":
-            def call():
-                for fn, label, g, args, where in parts:
-                    st = fn(*args)
-                    if st > 1:
-                        fail(label, st)
-                    array[where] = g.view
-            return call
-        names = self.names
+            return self._getter(parts, values, integers)
+        return self._setter(parts, values, integers, changes)
+
+    def _getter(self, parts, values, integers):
+        fail = self._fail
 
         def call():
             for fn, label, g, args, where in parts:
-                src = array[where]
-                if g.integral:
-                    rounded = np.rint(src)
-                    if not np.array_equal(rounded, src):
-                        bad = int(np.flatnonzero(rounded != src)[0])
-                        raise InputError(f"{names[g.positions[bad]]}: value {src[bad]} sent to an "
-                                         "integer or Boolean variable is not integral")
-                    g.view[:] = rounded
-                else:
-                    g.view[:] = src
                 st = fn(*args)
                 if st > 1:
                     fail(label, st)
+                vals = g.view if g.identity else g.view[g.offsets]
+                values[where] = vals
+                if not g.real:
+                    integers[where] = vals.view(np.int64) if g.unsigned64 else vals.astype(np.int64)
         return call
+
+    def _setter(self, parts, values, integers, changes: bool):
+        plans = []
+        for fn, label, g, args, where in parts:
+            plans.append((fn, label, g, args, where, g.offsets, self._range_plan(g)))
+        owner, sources, fail = self.owner, self.sources, self._fail
+
+        def new_values(g, where, plan):
+            if g.real:
+                return values[where]
+            src = integers[where]
+            if plan is not None:
+                _check_range(src, plan, g, owner, sources)
+            return src.view(np.uint64) if g.unsigned64 else (src != 0 if g.boolean else src)
+
+        def call():
+            changed = False
+            for fn, label, g, args, where, offs, plan in plans:
+                new = new_values(g, where, plan)
+                if changes and not changed:
+                    changed = not np.array_equal(g.view[offs], new)
+                g.view[offs] = new
+                st = fn(*args)
+                if st > 1:
+                    fail(label, st)
+            return changed
+
+        def differs() -> bool:
+            """Whether a call now would change a value (no FMI call is made)."""
+            return any(not np.array_equal(g.view[offs], new_values(g, where, plan))
+                       for _, _, g, _, where, offs, plan in plans)
+
+        call.differs = differs
+        return call
+
+    def _range_plan(self, g: _Group):
+        """What a set of group ``g`` must check: None if every source's range fits the
+        destination's, else ``(signed positions, lo, hi, unsigned positions, hi_u)``."""
+        if g.real:
+            return None
+        lo_d, hi_d = integer_range(g.type_name, self.version)
+        signed, unsigned = [], []
+        for k, pos in enumerate(g.positions):
+            _, src_type = self.sources[pos]
+            try:
+                lo_s, hi_s = integer_range(src_type, self.version)
+            except KeyError:            # a source of another kind (a Python component's float)
+                lo_s, hi_s = -2**63, 2**63 - 1
+            if lo_d <= lo_s and hi_s <= hi_d:
+                continue
+            (unsigned if src_type == "UInt64" else signed).append(k)
+        if not signed and not unsigned:
+            return None
+        clip = lambda x: max(min(x, 2**63 - 1), -2**63)  # noqa: E731
+        return (np.array(signed, np.intp), np.int64(clip(lo_d)), np.int64(clip(hi_d)),
+                np.array(unsigned, np.intp), np.uint64(hi_d), lo_d, hi_d)
+
+
+def no_exchange() -> bool:
+    """The exchange of no port."""
+    return False
+
+
+no_exchange.differs = no_exchange
+
+
+def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:
+    signed, lo, hi, unsigned, hi_u, lo_d, hi_d = plan
+    bad = None
+    if len(signed):
+        s = src[signed]
+        out = np.flatnonzero((s < lo) | (s > hi))
+        if len(out):
+            bad = (int(signed[out[0]]), int(s[out[0]]))
+    if bad is None and len(unsigned):
+        u = src[unsigned].view(np.uint64)
+        out = np.flatnonzero(u > hi_u)
+        if len(out):
+            bad = (int(unsigned[out[0]]), int(u[out[0]]))
+    if bad is not None:
+        k, value = bad
+        port = g.ports[k]
+        src_name, src_type = sources[g.positions[k]]
+        raise InputError(f"{owner}.{port.name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
+                         f"{src_name} ({src_type}): it does not fit (a value is never wrapped)")

@@ -1,214 +1,453 @@
-"""Integrating a Model Exchange FMU between communication points, with its events.
+"""Integrating Model Exchange FMUs between communication points, with their events.
 
-The master holds the FMU's inputs constant over ``[t, t + h]`` (as for Co-Simulation) and
-:class:`MEIntegrator` advances the FMU's continuous states over that interval with one of
-three solvers:
+A :class:`ContinuousModel` is what the integrator needs: continuous states, derivatives,
+event indicators and the FMI event machinery. :class:`FMUModel` is one ME FMU;
+:class:`cosim.fmi.system.MESystem` is several connected ones integrated as one.
 
-* ``"euler"``: explicit Euler with step ``solver_step`` (a last partial step ends on the
-  communication point);
-* ``"rk4"``: classical Runge-Kutta, same stepping;
-* ``"cvode"``: SUNDIALS CVODE (BDF, variable step, relative tolerance ``rtol``) through
-  fmpy's binding, with root finding on the event indicators.
+:class:`MEIntegrator` advances a model over ``[t, t + h]`` with one of three solvers:
 
-Events: time events (``nextEventTime``) end an integration step exactly; step events
-(``completedIntegratorStep``) and state events (a sign change of an event indicator)
-trigger the FMI event iteration (``enterEventMode``, ``newDiscreteStates`` /
-``updateDiscreteStates`` until done, ``enterContinuousTimeMode``). CVODE locates state
-events by root finding; the fixed-step solvers handle a state event at the end of the
-step in which the sign changed (no localisation, documented). An FMU that requests
-termination raises :class:`~fmu_models.errors.FMUError`.
+* ``"cvode"``: SUNDIALS CVODE (BDF, variable step, relative tolerance ``rtol``, absolute
+  tolerance ``rtol`` times the states' nominal values) through fmpy's binding, with root
+  finding on the event indicators. The solver integrates **across** communication points:
+  its step-size and order history is kept, and it is reinitialised only at events and
+  where an input of the model actually changed (a continuous input's jump is a
+  discontinuity of the right-hand side). Its largest step is ``max_step`` (default none).
+* ``"euler"``, ``"rk4"``: fixed steps of ``solver_step`` (a last partial step ends on the
+  communication point); a state event is handled at the end of the step in which an
+  indicator changed sign (no localisation).
+
+Events follow the standard: time events (``nextEventTime``) end an integration step
+exactly; state events (CVODE's roots of the event indicators) and step events
+(``CompletedIntegratorStep`` asking for Event Mode) are handled where they occur: Event
+Mode, the event iteration (``NewDiscreteStates``/``UpdateDiscreteStates`` until no more is
+needed), Continuous-Time Mode, the states read again (they may jump), the solver
+reinitialised. Discrete-time inputs change only in Event Mode (:meth:`MEIntegrator.at_event`).
+A model that asks to terminate ends the run at that time
+(:class:`~cosim.core.component.StopRequest`).
 """
 from __future__ import annotations
 
 import ctypes
+import math
+from collections.abc import Callable
 
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError
 
-from .exchange import raw_function
+from ..core.component import StopRequest
 
-__all__ = ["SOLVERS", "MEIntegrator"]
+__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator"]
 
 SOLVERS = ("cvode", "euler", "rk4")
+_DP = ctypes.POINTER(ctypes.c_double)
+
+
+class ContinuousModel:
+    """The interface :class:`MEIntegrator` integrates (see the module documentation).
+
+    Attributes
+    ----------
+    nx, nz : int
+        Numbers of continuous states and event indicators.
+    name : str
+        For messages.
+    needs_completed_step : bool
+        ``CompletedIntegratorStep`` must be called after every integrator step.
+    """
+
+    nx = 0
+    nz = 0
+    name = ""
+    needs_completed_step = False
+
+    def set_time(self, t: float) -> None:
+        """Set the time [s]."""
+        raise NotImplementedError
+
+    def get_states(self, x: np.ndarray) -> None:
+        """Write the continuous states into ``x`` (nx)."""
+        raise NotImplementedError
+
+    def set_states(self, x: np.ndarray) -> None:
+        """Set the continuous states from ``x`` (nx)."""
+        raise NotImplementedError
+
+    def derivatives(self, dx: np.ndarray) -> None:
+        """Write the state derivatives at the current time and states into ``dx`` (nx)."""
+        raise NotImplementedError
+
+    def indicators(self, z: np.ndarray) -> None:
+        """Write the event indicators into ``z`` (nz)."""
+        raise NotImplementedError
+
+    def nominals(self, out: np.ndarray) -> None:
+        """Write the states' nominal values into ``out`` (nx)."""
+        out[:] = 1.0
+
+    def completed_step(self) -> tuple[bool, bool]:
+        """After an integrator step: ``(enter_event_mode, terminate)``."""
+        return False, False
+
+    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
+        """Event Mode at ``t`` [s]: ``set_inputs()`` (discrete inputs), the event iteration,
+        Continuous-Time Mode. Returns ``(terminate, next event time or None)``."""
+        raise NotImplementedError
+
+    def initial_event(self, t: float) -> tuple[bool, float | None]:
+        """After ``ExitInitializationMode`` (already in Event Mode): the event iteration and
+        Continuous-Time Mode. Returns ``(terminate, next event time or None)``."""
+        raise NotImplementedError
+
+
+class FMUModel(ContinuousModel):
+    """One Model Exchange FMU instance (after ``ExitInitializationMode``) as a
+    :class:`ContinuousModel`, through its raw FMI functions.
+
+    Parameters
+    ----------
+    instance : FMUInstance
+        The instance (:mod:`cosim.fmi.instance`).
+    """
+
+    def __init__(self, instance):
+        md = instance.md
+        self.inst, self.name = instance, instance.owner
+        self.v3 = instance.version == 3
+        self.nx = int(md.numberOfContinuousStates)
+        self.nz = int(md.numberOfEventIndicators)
+        me = md.modelExchange
+        self.needs_completed_step = bool(getattr(me, "needsCompletedIntegratorStep", True))
+        p = "fmi3" if self.v3 else "fmi2"
+        c = ctypes.c_void_p(instance.handle)
+        fail = instance.fail
+        set_time = instance.raw(f"{p}SetTime")
+        set_x = instance.raw(f"{p}SetContinuousStates")
+        get_x = instance.raw(f"{p}GetContinuousStates")
+        get_dx = instance.raw(f"{p}GetContinuousStateDerivatives" if self.v3 else f"{p}GetDerivatives")
+        get_z = instance.raw(f"{p}GetEventIndicators")
+        get_nom = instance.raw(f"{p}GetNominalsOfContinuousStates")
+        completed = instance.raw(f"{p}CompletedIntegratorStep")
+        nx, nz = ctypes.c_size_t(self.nx), ctypes.c_size_t(self.nz)
+        D = ctypes.c_double
+
+        def check(st, what):
+            if st > 1:
+                fail(what, st)
+
+        self._set_time = lambda t: check(set_time(c, D(t)), "SetTime")
+        self._set_x = lambda ptr: check(set_x(c, ptr, nx), "SetContinuousStates")
+        self._get_x = lambda ptr: check(get_x(c, ptr, nx), "GetContinuousStates")
+        self._get_dx = lambda ptr: check(get_dx(c, ptr, nx), "GetDerivatives")
+        self._get_z = lambda ptr: check(get_z(c, ptr, nz), "GetEventIndicators")
+        self._get_nom = lambda ptr: check(get_nom(c, ptr, nx), "GetNominalsOfContinuousStates")
+        flag = ctypes.c_bool if self.v3 else ctypes.c_int
+        self._enter, self._term = flag(0), flag(0)
+        args = (c, 1, ctypes.byref(self._enter), ctypes.byref(self._term))
+        self._completed = lambda: check(completed(*args), "CompletedIntegratorStep")
+
+    def set_time(self, t):
+        """Set the time [s]."""
+        self._set_time(t)
+
+    def get_states(self, x):
+        """Write the continuous states into ``x``."""
+        if self.nx:
+            self._get_x(x.ctypes.data_as(_DP))
+
+    def set_states(self, x):
+        """Set the continuous states from ``x``."""
+        if self.nx:
+            self._set_x(x.ctypes.data_as(_DP))
+
+    def derivatives(self, dx):
+        """Write the derivatives into ``dx``."""
+        if self.nx:
+            self._get_dx(dx.ctypes.data_as(_DP))
+
+    def indicators(self, z):
+        """Write the event indicators into ``z``."""
+        if self.nz:
+            self._get_z(z.ctypes.data_as(_DP))
+
+    def nominals(self, out):
+        """Write the nominal values into ``out``."""
+        if self.nx:
+            self._get_nom(out.ctypes.data_as(_DP))
+
+    def completed_step(self):
+        """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)``."""
+        self._completed()
+        return bool(self._enter.value), bool(self._term.value)
+
+    def event(self, t, set_inputs=None):
+        """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
+        fmu, inst = self.inst.fmu, self.inst
+        inst.call("EnterEventMode", fmu.enterEventMode)
+        if set_inputs is not None:
+            set_inputs()
+        terminate, nxt = self.iterate(t)
+        if not terminate:
+            inst.call("EnterContinuousTimeMode", fmu.enterContinuousTimeMode)
+        return terminate, nxt
+
+    def initial_event(self, t):
+        """The event iteration after initialisation, then Continuous-Time Mode."""
+        terminate, nxt = self.iterate(t)
+        if not terminate:
+            self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
+        return terminate, nxt
+
+    def iterate(self, t: float) -> tuple[bool, float | None]:
+        """In Event Mode: update the discrete states until no more update is needed
+        (at most 1000 rounds); returns ``(terminate, next event time or None)``."""
+        fmu, inst = self.inst.fmu, self.inst
+        update = fmu.updateDiscreteStates if self.v3 else fmu.newDiscreteStates
+        name = "UpdateDiscreteStates" if self.v3 else "NewDiscreteStates"
+        for _ in range(1000):
+            need, term, _nominals, _values, defined, nxt = inst.call(name, update)
+            if term:
+                return True, None
+            if not need:
+                return False, (float(nxt) if defined else None)
+        raise FMUError(f"{self.name}: the event iteration at t = {t:g} s did not converge in 1000 rounds")
+
+
+class _Callbacks:
+    """The functions fmpy's CVODE binding calls, for a :class:`ContinuousModel`; an exception
+    inside one (a failing FMU call) is kept and raised after CVODE returns (a ctypes
+    callback cannot raise)."""
+
+    def __init__(self, model: ContinuousModel):
+        self.m = model
+        self.pending: BaseException | None = None
+        n = max(model.nx, 1)
+        self.x, self.dx = np.zeros(n), np.zeros(n)
+        self.z = np.zeros(max(model.nz, 1))
+
+    def _guard(self, fn):
+        try:
+            fn()
+            return 0
+        except BaseException as e:  # noqa: BLE001 - kept, raised after CVODE returns
+            self.pending = e
+            return -1
+
+    def get_x(self, ptr, n):
+        self.m.get_states(self.x)
+        ctypes.memmove(ptr, self.x.ctypes.data, 8 * n)
+
+    def set_x(self, ptr, n):
+        ctypes.memmove(self.x.ctypes.data, ptr, 8 * n)
+        self.m.set_states(self.x)
+
+    def get_dx(self, ptr, n):
+        self.m.derivatives(self.dx)
+        ctypes.memmove(ptr, self.dx.ctypes.data, 8 * n)
+
+    def get_z(self, ptr, n):
+        self.m.indicators(self.z)
+        ctypes.memmove(ptr, self.z.ctypes.data, 8 * n)
+
+    def get_nominals(self, ptr, n):
+        nom = np.ones(max(self.m.nx, 1))
+        self.m.nominals(nom)
+        ctypes.memmove(ptr, nom.ctypes.data, 8 * n)
 
 
 class _NoInput:
-    """fmpy's CVodeSolver re-applies inputs at each root evaluation; ours are held."""
+    """fmpy's CVODE binding applies inputs at each root evaluation; the master holds ours."""
 
     @staticmethod
     def apply(t, **kw):
         return None
 
 
+def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
+    """fmpy's CVodeSolver for ``model``, with its callbacks guarded (see :class:`_Callbacks`)."""
+    from fmpy.sundials import NV_DATA_S, CVodeSolver
+
+    cb = _Callbacks(model)
+
+    class _Solver(CVodeSolver):
+        def f(self, t, y, ydot, user_data):
+            def run():
+                model.set_time(t)
+                if model.nx:
+                    cb.set_x(NV_DATA_S(y), self.nx)
+                    cb.get_dx(NV_DATA_S(ydot), self.nx)
+                else:
+                    np.ctypeslib.as_array(NV_DATA_S(ydot), (self.nx,))[:] = 0.0
+            return cb._guard(run)
+
+        def g(self, t, y, gout, user_data):
+            def run():
+                model.set_time(t)
+                if model.nx:
+                    cb.set_x(NV_DATA_S(y), self.nx)
+                cb.get_z(gout, self.nz)
+            return cb._guard(run)
+
+    solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
+                     get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
+                     startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+    return solver, cb
+
+
 class MEIntegrator:
-    """Advance an instantiated, initialised Model Exchange FMU.
+    """Advance a :class:`ContinuousModel` between communication points (see the module
+    documentation).
 
     Parameters
     ----------
-    fmu : fmpy FMU2Model or FMU3Model
-        The instance (after ``exitInitializationMode``).
-    md : fmpy ModelDescription
+    model : ContinuousModel
     solver : {"cvode", "euler", "rk4"}
-    solver_step : float
-        Step [s] of the fixed-step solvers; the largest step of CVODE.
+    solver_step : float, optional
+        The fixed step [s] of Euler and RK4 (default: the communication step given to
+        :meth:`advance`), or CVODE's largest step (default: none).
     rtol : float
-        Relative tolerance of CVODE.
-    fail : callable
-        ``fail(what, status)`` raises the component's FMUError.
+        CVODE's relative tolerance.
     """
 
     #: Most integration steps plus events within one communication step.
     MAX_ROUNDS = 10_000_000
 
-    def __init__(self, fmu, md, solver: str, solver_step: float, rtol: float, fail):
+    def __init__(self, model: ContinuousModel, solver: str, solver_step: float | None, rtol: float):
         if solver not in SOLVERS:
             raise ConfigurationError(f"unknown solver {solver!r}; valid: {', '.join(SOLVERS)}")
-        self.fmu, self.md, self.solver, self.h_int, self.rtol = fmu, md, solver, solver_step, rtol
-        self.v3 = md.fmiVersion.startswith("3")
-        self.nx, self.nz = md.numberOfContinuousStates, md.numberOfEventIndicators
-        self.needs_completed = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
-        self._fail = fail
-        p = "fmi3" if self.v3 else "fmi2"
-        dll, c = fmu.dll, ctypes.c_void_p(fmu.component)
-        self._c = c
-        n = max(self.nx, 1)
-        self.x, self.dx = np.zeros(n), np.zeros(n)
-        self.z, self.z_new = np.zeros(max(self.nz, 1)), np.zeros(max(self.nz, 1))
-        D, ptr = ctypes.c_double, lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        nxs, nzs = ctypes.c_size_t(self.nx), ctypes.c_size_t(self.nz)
-        set_time = raw_function(dll, f"{p}SetTime")
-        set_x = raw_function(dll, f"{p}SetContinuousStates")
-        get_dx = raw_function(dll, f"{p}GetContinuousStateDerivatives" if self.v3 else f"{p}GetDerivatives")
-        get_z = raw_function(dll, f"{p}GetEventIndicators")
-        get_x = raw_function(dll, f"{p}GetContinuousStates")
-        completed = raw_function(dll, f"{p}CompletedIntegratorStep")
-        flag_t = ctypes.c_bool if self.v3 else ctypes.c_int
-        self._enter, self._term = flag_t(0), flag_t(0)
-        self._scratch = np.zeros(n)
-        xp, dxp, sp = ptr(self.x), ptr(self.dx), ptr(self._scratch)
-
-        def check(st, what):
-            if st > 1:
-                fail(what, st)
-
-        self.set_time = lambda t: check(set_time(c, D(t)), "SetTime")
-        self.set_x = lambda: check(set_x(c, xp, nxs), "SetContinuousStates") if self.nx else None
-        self.set_scratch = lambda: check(set_x(c, sp, nxs), "SetContinuousStates") if self.nx else None
-        self.get_x = lambda: check(get_x(c, xp, nxs), "GetContinuousStates") if self.nx else None
-        self.get_dx = lambda: check(get_dx(c, dxp, nxs), "GetDerivatives") if self.nx else None
-        self._zp = {id(a): ptr(a) for a in (self.z, self.z_new)}
-        self.get_z = lambda a: check(get_z(c, self._zp[id(a)], nzs), "GetEventIndicators") if self.nz else None
-        enter, term = ctypes.byref(self._enter), ctypes.byref(self._term)
-        self.completed = lambda: check(completed(c, 1, enter, term), "CompletedIntegratorStep")
-        self.next_event = None
+        self.model, self.solver, self.h_int, self.rtol = model, solver, solver_step, rtol
+        n = max(model.nx, 1)
+        self.x, self.dx, self.scratch = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.z, self.z_new = np.zeros(max(model.nz, 1)), np.zeros(max(model.nz, 1))
+        self.next_event: float | None = None
         self.cvode = None
+        self._cb = None
+        self.resets = 0
+        self.t = float("nan")
 
     # ------------------------------------------------------------------ events
-    def event_iteration(self, t: float) -> None:
-        """In event mode: iterate the discrete states, then enter continuous-time mode."""
-        fmu = self.fmu
-        for _ in range(1000):
-            if self.v3:
-                need, term, _, _changed, defined, nxt = fmu.updateDiscreteStates()
-            else:
-                need, term, _, _changed, defined, nxt = fmu.newDiscreteStates()
-            if term:
-                raise FMUError(f"the FMU requested termination at t = {t:g} s")
-            if not need:
-                break
-        else:
-            raise FMUError(f"the FMU's event iteration at t = {t:g} s did not converge in 1000 rounds")
-        self.next_event = nxt if defined else None
-        fmu.enterContinuousTimeMode()
-        self.get_x()
-        self.get_z(self.z)
-        if self.cvode is not None:
-            self.cvode.reset(t)
+    def _after_event(self, t: float, terminate: bool, nxt: float | None) -> None:
+        if terminate:
+            raise StopRequest(self.model.name, t, "the FMU requested termination in its event update")
+        self.next_event = nxt
+        m = self.model
+        m.get_states(self.x)
+        m.indicators(self.z)
+        self.reset(t)
 
     def start(self, t0: float) -> None:
-        """After ``exitInitializationMode``: the initial event iteration."""
-        self.event_iteration(t0)
+        """After ``ExitInitializationMode`` (the model in Event Mode): the initial event
+        iteration, Continuous-Time Mode, the solver created."""
+        terminate, nxt = self.model.initial_event(t0)
+        self.t = t0
         if self.solver == "cvode":
-            from fmpy.sundials import CVodeSolver
+            self.cvode, self._cb = _cvode(self.model, t0, self.h_int or math.inf, self.rtol)
+        self._after_event(t0, terminate, nxt)
 
-            fmu = self.fmu
-            self.cvode = CVodeSolver(
-                nx=self.nx, nz=self.nz, get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
-                get_dx=fmu.getContinuousStateDerivatives if self.v3 else fmu.getDerivatives,
-                get_z=fmu.getEventIndicators, get_nominals=fmu.getNominalsOfContinuousStates,
-                set_time=fmu.setTime, input=_NoInput(), startTime=t0, maxStep=self.h_int,
-                relativeTolerance=self.rtol, maxNumSteps=100000)
+    def reset(self, t: float) -> None:
+        """Reinitialise the solver at ``t`` (after an event, or an input that changed)."""
+        if self.cvode is not None:
+            self.cvode.reset(t)
+            self.resets += 1
 
-    def _event(self, t: float) -> None:
-        self.fmu.enterEventMode()
-        self.event_iteration(t)
+    def at_event(self, t: float, set_inputs: Callable[[], None]) -> None:
+        """An event at ``t`` [s] whose Event Mode sets discrete inputs (``set_inputs()``)."""
+        terminate, nxt = self.model.event(t, set_inputs)
+        self._after_event(t, terminate, nxt)
 
     # ------------------------------------------------------------------ stepping
     def _fixed_step(self, t: float, h: float) -> None:
-        """One Euler or RK4 step of length h from (t, self.x); leaves the FMU at t + h."""
-        x, dx, s = self.x, self.dx, self._scratch
-        self.get_dx()
+        """One Euler or RK4 step of length h from (t, self.x); leaves the model at t + h."""
+        m, x, dx, s = self.model, self.x, self.dx, self.scratch
+        m.derivatives(dx)
         if self.solver == "euler":
             x += h * dx
         else:
             k1 = dx.copy()
             s[:] = x + h / 2 * k1
-            self.set_time(t + h / 2)
-            self.set_scratch()
-            self.get_dx()
+            m.set_time(t + h / 2)
+            m.set_states(s)
+            m.derivatives(dx)
             k2 = dx.copy()
             s[:] = x + h / 2 * k2
-            self.set_scratch()
-            self.get_dx()
+            m.set_states(s)
+            m.derivatives(dx)
             k3 = dx.copy()
             s[:] = x + h * k3
-            self.set_time(t + h)
-            self.set_scratch()
-            self.get_dx()
+            m.set_time(t + h)
+            m.set_states(s)
+            m.derivatives(dx)
             x += h / 6 * (k1 + 2 * k2 + 2 * k3 + dx)
-        self.set_time(t + h)
-        self.set_x()
+        m.set_time(t + h)
+        m.set_states(x)
 
-    def advance(self, t: float, h: float) -> None:
-        """Integrate from ``t`` to ``t + h`` [s] with the inputs held, handling events."""
+    def _cvode_step(self, t: float, t_next: float) -> tuple[float, bool]:
+        cb = self._cb
+        try:
+            root, _, t_reached = self.cvode.step(t, t_next)
+        except RuntimeError as e:
+            if cb.pending is not None:
+                err, cb.pending = cb.pending, None
+                raise err from None
+            raise FMUError(f"{self.model.name}: CVODE failed between t = {t:g} s and {t_next:g} s: {e}") from None
+        if cb.pending is not None:
+            err, cb.pending = cb.pending, None
+            raise err
+        m = self.model
+        m.set_time(t_reached)
+        m.get_states(self.x)
+        return t_reached, bool(root)
+
+    def advance(self, t: float, h: float, inputs_changed: bool = False) -> None:
+        """Integrate from ``t`` to ``t + h`` [s] with the inputs held, handling every event
+        on the way; ``inputs_changed``: a continuous input jumped at ``t`` (the solver is
+        reinitialised there).
+
+        Raises
+        ------
+        StopRequest
+            The model asked to terminate (its time is where it asked).
+        FMUError
+            An FMU call failed, CVODE failed, or more than :data:`MAX_ROUNDS` steps and
+            events were needed (chattering events?).
+        """
+        m = self.model
         t_end = t + h
         tiny = 1e-12 * max(1.0, abs(t_end))
+        if inputs_changed:
+            self.reset(t)
+        h_fix = self.h_int or h
         rounds = 0
-        if self.cvode is not None:
-            # the inputs may have jumped at t: CVODE's multistep history must not span it
-            self.cvode.reset(t)
         while t < t_end - tiny:
             rounds += 1
             if rounds > self.MAX_ROUNDS:
-                raise FMUError(f"more than {self.MAX_ROUNDS} integration steps or events between "
+                raise FMUError(f"{m.name}: more than {self.MAX_ROUNDS} integration steps or events between "
                                f"t = {t_end - h:g} s and {t_end:g} s (chattering events?)")
-            t_next = min(t_end, t + self.h_int) if self.cvode is None else t_end
+            t_next = t_end if self.cvode is not None else min(t_end, t + h_fix)
             if t_end - t_next < tiny:
                 t_next = t_end
             time_event = self.next_event is not None and self.next_event <= t_next + tiny
             if time_event:
                 t_next = max(self.next_event, t)
             if self.cvode is not None:
-                state_event, _, t_reached = self.cvode.step(t, t_next)
+                t_reached, state_event = self._cvode_step(t, t_next)
                 if state_event:
                     t_next, time_event = t_reached, False
-                self.set_time(t_next)
-                self.get_x()
             else:
                 if t_next > t:
                     self._fixed_step(t, t_next - t)
                 state_event = False
-                if self.nz:
-                    self.get_z(self.z_new)
+                if m.nz:
+                    m.indicators(self.z_new)
                     state_event = bool(np.any(np.sign(self.z_new) != np.sign(self.z)))
                     self.z[:] = self.z_new
             step_event = False
-            if self.needs_completed:
-                self.completed()
-                if self._term.value:
-                    raise FMUError(f"the FMU requested termination at t = {t_next:g} s")
-                step_event = bool(self._enter.value)
+            if m.needs_completed_step:
+                step_event, terminate = m.completed_step()
+                if terminate:
+                    raise StopRequest(m.name, t_next, "the FMU requested termination after an integrator step")
             if time_event or state_event or step_event:
-                self._event(t_next)
+                terminate, nxt = m.event(t_next)
+                self._after_event(t_next, terminate, nxt)
             t = t_next
+        self.t = t_end

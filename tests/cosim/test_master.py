@@ -73,7 +73,7 @@ def test_master_reproduces_the_plant_model(fmu_paths, name, integrator, substeps
                                rtol=0, atol=1e-10)
     # the probe saw the plant's state at each sample time, and did nothing else
     np.testing.assert_allclose(np.array(probe.inputs), ref, rtol=0, atol=1e-10)
-    assert plant.fmu is None                         # freed after the run
+    assert plant.instance is None                    # freed after the run
 
 
 def test_multirate_counts_and_zero_order_hold(fmu_paths):
@@ -224,7 +224,7 @@ def test_a_failing_component_stops_the_run_with_name_time_and_partial_results(fm
         Cosimulation([plant, bad], {"plant.F": "bad.y"}).run(2.0)
     assert err.value.component == "bad" and err.value.time == pytest.approx(0.5)
     assert len(err.value.results) == 50 and err.value.results.index[-1] == pytest.approx(0.49)
-    assert plant.fmu is None
+    assert plant.instance is None
 
 
 def test_an_fmu_error_stops_the_run_and_the_fmu_is_freed(fmu_paths):
@@ -234,7 +234,7 @@ def test_an_fmu_error_stops_the_run_and_the_fmu_is_freed(fmu_paths):
         Cosimulation([plant, huge], {"plant.i": "huge.out"}).run(1.0)
     assert err.value.component == "plant"
     assert len(err.value.results) == 1
-    assert plant.fmu is None
+    assert plant.instance is None
     # the same component runs again afterwards
     ok = Constant("ok", 0.01, 0.0)
     df = Cosimulation([plant, ok], {"plant.i": "ok.out"}).run(0.1)

@@ -1,0 +1,197 @@
+"""One FMU instance and the rules of its life (FMI 2.0 and 3.0): created, initialised, its
+failures remembered, ended as the standard allows.
+
+:class:`FMUInstance` loads the FMU's library (through fmpy, restoring the working directory
+it changes), instantiates it with a logger that keeps the last messages, and tracks the
+worst status any call returned. The standard's rules for the end are kept on every path
+(:meth:`FMUInstance.finish`): after a call returned *Error*, only ``FreeInstance`` (or
+``Reset``) may follow, never ``Terminate``; after *Fatal* no call at all (the instance is
+abandoned, its memory with it); otherwise ``Terminate`` (if initialised) and
+``FreeInstance``. A failure raises :class:`~fmu_models.errors.FMUError` naming the
+component, the call, the status and the FMU's last messages.
+
+Stop requests are not failures (:class:`~cosim.core.component.StopRequest`): an FMI 2.0
+``DoStep`` returning *Discard* is asked ``fmi2GetBooleanStatus(fmi2Terminated)`` and
+``fmi2GetRealStatus(fmi2LastSuccessfulTime)``; FMI 3.0 says it in ``DoStep``'s
+``terminateSimulation`` and ``lastSuccessfulTime``; Model Exchange in the event update and
+``CompletedIntegratorStep``.
+"""
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+from collections import deque
+
+from fmu_models.errors import FMUError
+
+from .exchange import raw_function
+
+__all__ = ["STATUS", "FMUInstance"]
+
+LOGGER = logging.getLogger("cosim.fmu")
+_LEVELS = {0: logging.INFO, 1: logging.WARNING, 2: logging.WARNING, 3: logging.ERROR, 4: logging.CRITICAL}
+#: FMI status codes by name.
+STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
+_ERROR, _FATAL = 3, 4
+
+
+class FMUInstance:
+    """An instantiated FMU (see the module documentation).
+
+    Parameters
+    ----------
+    owner : str
+        The component's name (the instance name and the messages').
+    md : fmpy ModelDescription
+    directory : str
+        Where the FMU is unpacked.
+    interface : {"cs", "me"}
+    logging_on : bool
+        Ask the FMU for debug messages and log them at INFO level (warnings and errors are
+        always logged, on the ``cosim.fmu`` logger).
+
+    Attributes
+    ----------
+    fmu : fmpy FMU2Slave, FMU2Model, FMU3Slave or FMU3Model
+    dll : ctypes.CDLL
+    handle : int
+        The instance pointer.
+    version : {2, 3}
+    worst : int
+        The worst status a call returned (0 ok ... 4 fatal).
+    initialized : bool
+        Initialisation mode was left.
+    messages : collections.deque of (int, str)
+        The last 200 log messages (status, text).
+    """
+
+    def __init__(self, owner: str, md, directory: str, interface: str, logging_on: bool = False):
+        from fmpy import fmi2, fmi3
+        from fmpy.fmi1 import calloc, free
+
+        self.owner, self.md, self.interface = owner, md, interface
+        self.version = 3 if str(md.fmiVersion).startswith("3") else 2
+        self.messages: deque = deque(maxlen=200)
+        self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
+        self._freed = False
+        ident = (md.coSimulation if interface == "cs" else md.modelExchange).modelIdentifier
+        args = dict(guid=md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
+        cwd = os.getcwd()
+        fmu = None
+        try:
+            if self.version == 2:
+                fmu = (fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args)
+
+                def logger(env, inst, status, category, message):
+                    self._log(status, message)
+
+                cb = fmi2.fmi2CallbackFunctions()
+                cb.logger = fmi2.fmi2CallbackLoggerTYPE(logger)
+                cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
+                cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
+                self._callbacks = cb
+                fmu.instantiate(callbacks=cb, loggingOn=self.logging_on)
+            else:
+                fmu = (fmi3.FMU3Slave if interface == "cs" else fmi3.FMU3Model)(**args)
+
+                def log3(env, status, category, message):
+                    self._log(status, message)
+
+                self._log3 = log3
+                fmu.instantiate(loggingOn=self.logging_on, logMessage=log3)
+        except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
+            if fmu is not None and getattr(fmu, "dll", None) is not None:
+                try:
+                    fmu.freeLibrary()
+                except Exception:
+                    LOGGER.debug("freeLibrary failed", exc_info=True)
+            raise FMUError(f"{owner}: cannot load or instantiate {ident}: {e}" + self._last(" (", ")")) from None
+        finally:
+            if os.getcwd() != cwd:              # fmpy changes directory to load the library
+                os.chdir(cwd)
+        if not fmu.component:
+            raise FMUError(f"{owner}: the FMU's Instantiate returned no instance" + self._last(" (", ")"))
+        self.fmu, self.dll, self.handle = fmu, fmu.dll, fmu.component
+        if self.logging_on:
+            try:
+                fmu.setDebugLogging(True, [])
+            except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
+                LOGGER.debug("%s: setDebugLogging refused", owner)
+
+    # ------------------------------------------------------------------ status
+    def _log(self, status, message) -> None:
+        text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
+        self.messages.append((int(status), text))
+        if status >= 1 or self.logging_on:
+            LOGGER.log(_LEVELS.get(int(status), logging.ERROR), "[%s] %s", self.owner, text)
+
+    def _last(self, before: str = "", after: str = "", n: int = 3) -> str:
+        log = "; ".join(m for s, m in list(self.messages)[-n:])
+        return f"{before}{log}{after}" if log else ""
+
+    def fail(self, what: str, status: int):
+        """Remember ``status`` and raise the FMUError of the call ``what``."""
+        status = int(status)
+        self.worst = max(self.worst, status)
+        label = STATUS.get(status, f"status {status}")
+        raise FMUError(f"{self.owner}: {what} returned {label}: " + (self._last() or "no message from the FMU"))
+
+    def call(self, what: str, fn, *args):
+        """``fn(*args)`` (an fmpy method), its failure an FMUError naming ``what``."""
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            return fn(*args)
+        except FMICallException as e:
+            self.fail(what, e.status)
+
+    @property
+    def usable(self) -> bool:
+        """No call returned Error or Fatal (other calls are allowed)."""
+        return self.worst < _ERROR
+
+    def raw(self, name: str):
+        """A fresh pointer to the FMI function ``name`` (no argtypes; see :func:`raw_function`)."""
+        return raw_function(self.dll, name)
+
+    # ------------------------------------------------------------------ stop requests
+    def discard_reason(self) -> float | None:
+        """After an FMI 2.0 ``DoStep`` returned Discard: the time the FMU asks to stop at
+        (``fmi2Terminated`` true: its ``fmi2LastSuccessfulTime``), or None (not a stop)."""
+        from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
+
+        try:
+            terminated = self.fmu.getBooleanStatus(fmi2Terminated)
+        except Exception:  # noqa: BLE001 - an FMU may not implement the status functions
+            return None
+        if not terminated:
+            return None
+        try:
+            return float(self.fmu.getRealStatus(fmi2LastSuccessfulTime))
+        except Exception:  # noqa: BLE001
+            return float("nan")
+
+    # ------------------------------------------------------------------ the end
+    def finish(self) -> None:
+        """End the instance as the standard allows (see the module documentation); safe twice."""
+        if self._freed:
+            return
+        self._freed = True
+        if self.worst >= _FATAL:
+            LOGGER.debug("%s: fatal: the instance is abandoned (no further FMI call)", self.owner)
+            return
+        if self.worst < _ERROR and self.initialized:
+            try:
+                self.fmu.terminate()
+            except Exception:  # noqa: BLE001 - a refusal changes nothing: free it anyway
+                LOGGER.debug("%s: terminate refused", self.owner)
+        try:
+            self.fmu.freeInstance()
+        except Exception:  # noqa: BLE001
+            LOGGER.debug("%s: freeInstance failed", self.owner)
+
+
+def c_bool_type(version: int):
+    """The ctypes type of an FMI Boolean out-argument (``fmi2Boolean`` is an int)."""
+    return ctypes.c_bool if version == 3 else ctypes.c_int
