@@ -333,6 +333,11 @@ class Component(ABC):
         return "sampled: outputs at t from the inputs at t"
 
     # ------------------------------------------------------------------ the protocol
+    def check_run(self, start_time: float, stop_time: float) -> None:  # noqa: B027 - optional
+        """Refuse, before anything starts, a run from ``start_time`` to ``stop_time`` [s]
+        this component cannot do (raise a :class:`~cosim.errors.CosimError` subclass that
+        says why). Default: every run is possible."""
+
     def reset(self, t0: float) -> None:
         """Prepare a run starting at ``t0`` [s] (instantiate, clear state)."""
         self.n_samples = 0

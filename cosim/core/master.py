@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -268,20 +267,29 @@ class Cosimulation:
         from fmu_models.checks import finite
 
         stop, start = finite(stop_time, "stop_time [s]"), finite(start_time, "start_time [s]")
-        span = Fraction(stop).limit_denominator(10**9) - Fraction(start).limit_denominator(10**9)
-        if span <= 0 or (span / self._base).denominator != 1:
-            raise ConfigurationError(f"stop_time - start_time = {float(span):g} s must be a positive "
-                                     f"multiple of the base step {self.step_size:g} s")
-        n = (span / self._base).numerator
+        n = self._multiple(stop - start, "stop_time - start_time",
+                           f"stop_time {stop!r} s - start_time {start!r} s = {stop - start!r} s")
         if n > MAX_STEPS:
             raise ResourceError(f"{n} base steps of {self.step_size:g} s (more than {MAX_STEPS})")
+        for c in self.components:
+            c.check_run(start, stop)
         if output_interval is None:
             return n, 1
-        m = Fraction(finite(output_interval, "output_interval [s]")).limit_denominator(10**9) / self._base
-        if m <= 0 or m.denominator != 1:
-            raise ConfigurationError(f"output_interval {output_interval} s must be a positive multiple of "
-                                     f"the base step {self.step_size:g} s")
-        return n, int(m)
+        interval = finite(output_interval, "output_interval [s]")
+        return n, self._multiple(interval, "output_interval", f"output_interval {interval!r} s")
+
+    def _multiple(self, span: float, what: str, shown: str) -> int:
+        """``span`` [s] as a whole number of base steps, up to the rounding of the floats
+        that gave it (a relative 1e-9 of the base step): Roberts' 1e-5 .. 1e8 s in steps
+        of 9999999.999999 s is 10 steps, though no float sum says so exactly."""
+        h = self.step_size
+        ratio = span / h
+        n = round(ratio) if np.isfinite(ratio) else 0
+        if n < 1 or abs(span - n * h) > 1e-9 * h + 4 * np.finfo(float).eps * abs(span):
+            near = f"; the nearest is {max(n, 1)} steps = {max(n, 1) * h!r} s" if np.isfinite(ratio) else ""
+            raise ConfigurationError(f"{what} must be a positive whole number of base steps of {h!r} s: "
+                                     f"{shown} is {ratio!r} steps{near}")
+        return int(n)
 
     def run(self, stop_time: float, start_time: float = 0.0, *, signals=None,
             output_interval: float | None = None, progress: bool | None = None) -> pd.DataFrame:

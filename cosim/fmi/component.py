@@ -44,6 +44,7 @@ from fmu_models.checks import finite
 from fmu_models.errors import (
     ConfigurationError,
     FMUError,
+    ResourceError,
     TypeMismatchError,
     UnknownNameError,
 )
@@ -55,11 +56,15 @@ from .instance import FMUInstance
 from .model_exchange import SOLVERS, FMUModel, MEIntegrator
 from .ports import array_shape, check_integer, element_ports, parse_start
 
-__all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "FMUComponent", "FMUError"]
+__all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError"]
 
 INTERFACES = ("auto", "cs", "me")
 FEEDTHROUGH_MODES = ("model", "none")
 LOGGER = _logging.getLogger("cosim.fmu")
+#: The most fixed internal steps (an FMU's ``fixedInternalStepSize`` in Co-Simulation, the
+#: Euler/RK4 ``solver_step`` in Model Exchange) a run may take: beyond it the run is refused
+#: before it starts instead of running for days inside one call nobody can interrupt.
+MAX_INTERNAL_STEPS = 10**9
 
 
 def _has_clocks(md) -> bool:
@@ -355,6 +360,26 @@ class FMUComponent(Component, kind="fmu"):
         self._sources = list(sources) if sources is not None else None
 
     # ------------------------------------------------------------------ lifecycle
+    def check_run(self, start_time: float, stop_time: float) -> None:
+        """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`
+        (e.g. Roberts in Co-Simulation: steps of 1e-3 s over 1e8 s)."""
+        if self.interface == "cs":
+            h, what = self.md.coSimulation.fixedInternalStepSize, "its fixedInternalStepSize"
+            hint = "; its Model Exchange interface (interface = 'me') integrates with CVODE" if \
+                self.md.modelExchange is not None else ""
+        elif self.solver != "cvode":
+            h, what, hint = self.solver_step or self.period, f"solver_step ({self.solver})", "; use solver = 'cvode'"
+        else:
+            return
+        try:
+            h = float(h) if h is not None else 0.0
+        except ValueError:
+            return                               # an unreadable attribute: nothing to go by
+        if h > 0 and (stop_time - start_time) / h > MAX_INTERNAL_STEPS:
+            raise ResourceError(f"{self.name}: {self.path.name} takes internal steps of {h:g} s ({what}): "
+                                f"{(stop_time - start_time) / h:.3g} of them from {start_time:g} s to "
+                                f"{stop_time:g} s, more than {MAX_INTERNAL_STEPS:.0e}{hint}")
+
     def _fail(self, what: str, status: int):
         self.instance.fail(what, status)
 

@@ -105,7 +105,8 @@ class Exchange:
     Attributes
     ----------
     direct : bool
-        True if every port is a scalar Float64/Real (one call, no conversion).
+        True if every port is a scalar Float64/Real of its own value reference (one call,
+        no conversion, no copy).
     """
 
     def __init__(self, dll, instance, version: int, ports: Sequence[ElementPort], direction: str,
@@ -127,7 +128,10 @@ class Exchange:
         for suffix, (ctype, type_name, members) in by_suffix.items():
             fn = raw_function(dll, f"fmi{version}{direction.capitalize()}{suffix}")
             self.groups.append((fn, f"{direction.capitalize()}{suffix}", _Group(ctype, type_name, members)))
-        self.direct = all(p.type in ("Real", "Float64") and p.size == 1 for p in ports)
+        # aliases (FMI 3 <Alias>, FMI 2 variables sharing a value reference) are one value
+        # moved once and copied to each port: not the in-place path
+        self.direct = (all(p.type in ("Real", "Float64") and p.size == 1 for p in ports)
+                       and all(g.identity for _, _, g in self.groups))
 
     def _args(self, g: _Group, buf):
         if self.version == 2:

@@ -186,7 +186,7 @@ def test_refusals_name_the_problem(fmu_paths, spring_damper_fmu):
         Cosimulation([src, Constant("src", 0.01, 1.0)], {})
     with pytest.raises(ConfigurationError, match="order must be one of"):
         Cosimulation([src], {}, order="random")
-    with pytest.raises(ConfigurationError, match="multiple of the base step"):
+    with pytest.raises(ConfigurationError, match=r"base steps of 0.01 s: .* is 1.5 steps; the nearest is 2"):
         Cosimulation([src], {}).run(0.015)
     with pytest.raises(KeyError, match="no variable 'mass'.*valid names"):
         FMUComponent("plant", fmu_paths["cartpole"], 0.01, parameters={"mass": 1.0})
@@ -239,3 +239,13 @@ def test_an_fmu_error_stops_the_run_and_the_fmu_is_freed(fmu_paths):
     ok = Constant("ok", 0.01, 0.0)
     df = Cosimulation([plant, ok], {"plant.i": "ok.out"}).run(0.1)
     assert len(df) == 11
+
+
+def test_span_is_rounded_not_refused():
+    """A span that is a whole number of steps up to float rounding (Roberts' 1e-5..1e8 s in
+    steps of 9999999.999999 s) runs; the recorded times end at the stop time."""
+    src = Constant("src", 9999999.999999, 1.0)
+    df = Cosimulation([src], {}).run(1e8, 1e-5)
+    assert len(df) == 11 and df.index[-1] == pytest.approx(1e8, rel=1e-15)
+    df = Cosimulation([Constant("c", 0.1, 1.0)], {}).run(0.3)     # 0.3 / 0.1 = 2.9999999999999996
+    assert len(df) == 4

@@ -261,7 +261,7 @@ def test_recording_interval_selection_and_streaming(fmu_paths, tmp_path):
     streamed = pd.read_parquet(path)
     pd.testing.assert_frame_equal(streamed, full, check_exact=True)
     assert not list(tmp_path.glob(".*tmp"))
-    with pytest.raises(ConfigurationError, match="output_interval 0.015 s must be a positive multiple"):
+    with pytest.raises(ConfigurationError, match="base steps of 0.01 s: output_interval 0.015 s is 1.5"):
         cs.run(1.0, output_interval=0.015)
     with pytest.raises(KeyError, match="'plnt.*' matches no signal"):
         cs.run(1.0, signals="plnt.*")
