@@ -60,6 +60,14 @@ def bouncing_me_fmu(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def call_rules_fmu(tmp_path_factory):
+    """A third-party FMI 2.0 CS FMU that logs every call, and each call the FMI standard
+    forbids, to the file named by ``CALL_RULES_LOG``; it fails, crashes or hangs on
+    request (tests/data/call_rules)."""
+    return build_test_fmu("call_rules", "CallRules", 2, tmp_path_factory.mktemp("callrules"))
+
+
+@pytest.fixture(scope="session")
 def fmu_builds(tmp_path_factory):
     """Both plant FMUs in FMI 2.0 and 3.0, built once per session: {(name, version): path}."""
     from fmu_models import build_fmu, model_names

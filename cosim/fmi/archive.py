@@ -104,6 +104,14 @@ class Extraction:
         The folder (exists until :meth:`close`).
     """
 
+    @classmethod
+    def existing(cls, directory: str) -> Extraction:
+        """An FMU another owner unpacked into ``directory``: used, never removed."""
+        self = cls.__new__(cls)
+        self.directory = directory
+        self._finalizer = weakref.finalize(self, lambda: None)
+        return self
+
     def __init__(self, path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES,
                  required: str = "modelDescription.xml", label: str = "FMU"):
         path = Path(path)

@@ -126,6 +126,9 @@ class FMUComponent(Component, kind="fmu"):
         The last 200 log messages of the FMU (status, text).
     integrator : MEIntegrator or None
         The Model Exchange integrator of the current run.
+    arguments : dict
+        The constructor's arguments but ``isolate`` (what the isolating child process
+        builds its own copy of the component from).
     """
 
     reentrant = True
@@ -138,6 +141,10 @@ class FMUComponent(Component, kind="fmu"):
                  feedthrough: str = "model", logging: bool = False, isolate: bool = False):
         from fmu_models.checks import positive
 
+        #: what a child process needs to build the same component (``isolate=True``)
+        self.arguments = dict(name=name, path=str(path), period=period, inputs=inputs, outputs=outputs,
+                              parameters=parameters, start=start, interface=interface, solver=solver,
+                              solver_step=solver_step, rtol=rtol, feedthrough=feedthrough, logging=logging)
         self.path = Path(path)
         md = read_description(self.path)
         self.md, self.version = md, 3 if str(md.fmiVersion).startswith("3") else 2
@@ -359,6 +366,12 @@ class FMUComponent(Component, kind="fmu"):
         self.connected_inputs = list(names)
         self._sources = list(sources) if sources is not None else None
 
+    @property
+    def input_sources(self) -> list[tuple[str, str]] | None:
+        """Each connected input's source signal name and FMI type (as :meth:`use_inputs`
+        was given them), or None."""
+        return list(self._sources) if self._sources is not None else None
+
     # ------------------------------------------------------------------ lifecycle
     def check_run(self, start_time: float, stop_time: float) -> None:
         """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`
@@ -380,6 +393,20 @@ class FMUComponent(Component, kind="fmu"):
                                 f"{(stop_time - start_time) / h:.3g} of them from {start_time:g} s to "
                                 f"{stop_time:g} s, more than {MAX_INTERNAL_STEPS:.0e}{hint}")
 
+    def use_unpacked(self, directory: str) -> None:
+        """Instantiate from the FMU already unpacked in ``directory`` (owned by the caller,
+        which removes it: the process of an isolated FMU uses its parent's folder, so that
+        nothing is left behind if it crashes)."""
+        self.close()
+        self._extraction = Extraction.existing(directory)
+
+    @property
+    def unpacked(self) -> str:
+        """The folder the FMU is unpacked in (unpacked on first use, kept between runs)."""
+        if self._extraction is None or self._extraction.closed:
+            self._extraction = Extraction(self.path)
+        return self._extraction.directory
+
     def _fail(self, what: str, status: int):
         self.instance.fail(what, status)
 
@@ -392,12 +419,9 @@ class FMUComponent(Component, kind="fmu"):
         if self.isolate:
             from .isolated import RemoteFMU
 
-            self._remote = RemoteFMU(self)
-            self._remote.reset(t0)
+            self._remote = RemoteFMU(self, t0)
             return
-        if self._extraction is None or self._extraction.closed:   # unpacked once, reused by every run
-            self._extraction = Extraction(self.path)
-        inst = FMUInstance(self.name, self.md, self._extraction.directory, self.interface, self.logging)
+        inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging)
         self.instance = inst
         self.messages = inst.messages
         fmu = inst.fmu
@@ -433,11 +457,10 @@ class FMUComponent(Component, kind="fmu"):
         items = list(value) if isinstance(value, list) else [value]
         kind = PORT_TYPES[v.type]
         if self.version == 2:
-            setter = {"boolean": fmu.setBoolean, "integer": fmu.setInteger, "real": fmu.setReal}[kind]
+            suffix = {"boolean": "Boolean", "integer": "Integer", "real": "Real"}[kind]
         else:
             suffix = "Int64" if v.type == "Enumeration" else v.type
-            setter = getattr(fmu, f"set{suffix}")
-        inst.call(f"Set {name}", setter, vr, items)
+        inst.call(f"Set{suffix}({name} = {value!r})", getattr(fmu, f"set{suffix}"), vr, items)
 
     def bind(self, values, inputs, outputs, integers=None):
         """Output and update closures over the raw FMI functions, exchanging values with

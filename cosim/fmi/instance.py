@@ -111,7 +111,7 @@ class FMUInstance:
             if os.getcwd() != cwd:              # fmpy changes directory to load the library
                 os.chdir(cwd)
         if not fmu.component:
-            raise FMUError(f"{owner}: the FMU's Instantiate returned no instance" + self._last(" (", ")"))
+            raise FMUError(f"{owner}: fmi{self.version}Instantiate returned no instance" + self._last(" (", ")"))
         self.fmu, self.dll, self.handle = fmu, fmu.dll, fmu.component
         if self.logging_on:
             try:
@@ -131,11 +131,13 @@ class FMUInstance:
         return f"{before}{log}{after}" if log else ""
 
     def fail(self, what: str, status: int):
-        """Remember ``status`` and raise the FMUError of the call ``what``."""
+        """Remember ``status`` and raise the FMUError of the call ``what`` (the FMI function's
+        name without its ``fmi2``/``fmi3`` prefix, e.g. ``"DoStep(t = 1 s, h = 0.1 s)"``)."""
         status = int(status)
         self.worst = max(self.worst, status)
         label = STATUS.get(status, f"status {status}")
-        raise FMUError(f"{self.owner}: {what} returned {label}: " + (self._last() or "no message from the FMU"))
+        raise FMUError(f"{self.owner}: fmi{self.version}{what} returned {label}: "
+                       + (self._last() or "no message from the FMU"))
 
     def call(self, what: str, fn, *args):
         """``fn(*args)`` (an fmpy method), its failure an FMUError naming ``what``."""

@@ -44,9 +44,9 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
     else TypeMismatchError (not an integer) or ConfigurationError (out of range) naming
     ``what``, the value and the range. Python ints (from TOML) are exact at any size; a
     float must be integral and below 2**53 (beyond, it is not exact)."""
-    if isinstance(value, bool):
-        v = int(value)
-    elif isinstance(value, (int, np.integer)):
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeMismatchError(f"{what}: {value!r} is a Boolean, not an integer (the variable is {type_name})")
+    if isinstance(value, (int, np.integer)):
         v = int(value)
     else:
         try:

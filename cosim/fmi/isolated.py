@@ -1,0 +1,278 @@
+"""An FMU in a process of its own (``FMUComponent(..., isolate=True)``, ``isolate = true``
+in a scenario): a crash of the FMU's code (a segfault, an abort, ``exit()``) ends the run
+with an :class:`~fmu_models.errors.FMUError` naming the FMU, the call, the time and the
+signal, the master keeps the rows recorded so far, and nothing is left behind.
+
+The parent (:class:`RemoteFMU`, used by the component in place of its own instance)
+unpacks the FMU and owns the folder; the child (``python -m cosim.fmi.isolated``) builds
+the same :class:`~cosim.fmi.component.FMUComponent` from the parent's arguments on that
+folder and answers requests over a pipe:
+
+* ``O``: set the feed-through inputs, get the outputs at ``t``;
+* ``U``: set all inputs, advance over ``[t, t + period]``; the reply carries the outputs
+  at ``t + period``, so an FMU without feed-through needs one round trip per step;
+* ``C``: end the instance by the FMI rules and exit.
+
+Each request is the op byte, ``t`` and the inputs (float64 and exact int64 values); each
+reply a status byte (``K`` ok, ``S`` a stop request, ``E`` an error, the last two with a
+pickled description) and the outputs. The child ignores Ctrl-C (the parent decides) and,
+on Linux, dies with its parent. Cost: see the README's performance section.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import struct
+import subprocess
+import sys
+
+import numpy as np
+
+from fmu_models import errors as _errors
+from fmu_models.errors import FMUError
+
+from ..core.component import StopRequest
+
+__all__ = ["RemoteFMU"]
+
+_HEAD = struct.Struct("<cd")        # op, t
+_REPLY = struct.Struct("<cI")       # status, length of a pickled payload
+#: Seconds a child may take to end its instance and exit before it is killed.
+CLOSE_TIMEOUT = 2.0
+
+
+def _read(fd: int, n: int) -> bytes:
+    """Exactly ``n`` bytes from ``fd`` (b"" if the other end closed first)."""
+    chunks, got = [], 0
+    while got < n:
+        b = os.read(fd, n - got)
+        if not b:
+            return b""
+        chunks.append(b)
+        got += len(b)
+    return b"".join(chunks)
+
+
+def _write(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+class RemoteFMU:
+    """The parent's side of an isolated FMU (see the module documentation).
+
+    Parameters
+    ----------
+    component : FMUComponent
+        The component (its arguments, connected inputs, sources and unpacked folder).
+    t0 : float
+        The start time [s]; the child instantiates and initialises the FMU at once.
+
+    Raises
+    ------
+    FMUError
+        The child could not start, or the FMU failed or crashed while initialising.
+    """
+
+    def __init__(self, component, t0: float):
+        self.name = component.name
+        self.fmu_name = component.path.name
+        self.feedthrough = bool(component.feedthrough)
+        self._stale = False                  # the outputs the last update returned are not current
+        self.n_in, self.n_out = len(component.connected_inputs), len(component.output_names)
+        v = component.version
+        self._step_calls = (f"setting the inputs or fmi{v}DoStep" if component.interface == "cs" else
+                            f"setting the inputs or integrating (fmi{v}GetDerivatives, events, ...)")
+        self._output_calls = f"setting the feed-through inputs or getting the outputs (fmi{v}Set*/Get*)"
+        setup = {"arguments": component.arguments, "directory": component.unpacked,
+                 "inputs": list(component.connected_inputs), "sources": component.input_sources, "t0": float(t0)}
+        self.proc = subprocess.Popen([sys.executable, "-m", "cosim.fmi.isolated"], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, bufsize=0, close_fds=True)
+        self._to, self._from = self.proc.stdin.fileno(), self.proc.stdout.fileno()
+        self._buf = bytearray(_HEAD.size + 16 * self.n_in)
+        self.outputs = np.zeros(self.n_out)
+        self.int_outputs = np.zeros(self.n_out, dtype=np.int64)
+        payload = pickle.dumps(setup)
+        self._call(f"instantiation or initialisation (fmi{v}Instantiate .. ExitInitializationMode)", t0,
+                   _HEAD.pack(b"R", t0) + struct.pack("<I", len(payload)) + payload)
+
+    # ------------------------------------------------------------------ the pipe
+    def _died(self, what: str, t: float) -> FMUError:
+        try:
+            code = self.proc.wait(timeout=CLOSE_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            code = self.proc.wait()
+        how = (f"signal {signal.Signals(-code).name}" if code < 0 and -code in signal.Signals._value2member_map_
+               else f"exit status {code}")
+        return FMUError(f"{self.name}: the process running {self.fmu_name} died ({how}) during {what} at "
+                        f"t = {t:g} s")
+
+    def _call(self, what: str, t: float, data: bytes) -> None:
+        try:
+            _write(self._to, data)
+            head = _read(self._from, _REPLY.size)
+        except (BrokenPipeError, ConnectionResetError):
+            head = b""
+        if not head:
+            raise self._died(what, t) from None
+        status, length = _REPLY.unpack(head)
+        body = _read(self._from, length + 16 * self.n_out)
+        if len(body) < length:
+            raise self._died(what, t)
+        if status == b"K":
+            out = np.frombuffer(body, dtype=np.float64, count=self.n_out)
+            self.outputs[:] = out
+            self.int_outputs[:] = np.frombuffer(body, dtype=np.int64, count=self.n_out, offset=8 * self.n_out)
+            return
+        info = pickle.loads(body[:length])
+        if status == b"S":
+            self._stale = True               # the outputs at the stop time are asked for afresh
+            raise StopRequest(*info)
+        kind, message = info
+        cls = getattr(_errors, kind, None)
+        if not (isinstance(cls, type) and issubclass(cls, _errors.PendulumCosimError)):
+            cls = FMUError
+        raise cls(message)
+
+    def _request(self, op: bytes, t: float, values, integers, index) -> bytes:
+        buf = self._buf
+        _HEAD.pack_into(buf, 0, op, t)
+        n = self.n_in
+        if n:
+            off = _HEAD.size
+            buf[off:off + 8 * n] = np.ascontiguousarray(values[index], dtype=np.float64).tobytes()
+            buf[off + 8 * n:] = np.ascontiguousarray(integers[index], dtype=np.int64).tobytes()
+        return bytes(buf)
+
+    # ------------------------------------------------------------------ the binding
+    def bind(self, values: np.ndarray, inputs, outputs, integers: np.ndarray | None = None):
+        """Output and update closures (see :class:`~cosim.core.component.FastBinding`),
+        each one round trip to the child (the output of an FMU without feed-through is the
+        one the last update returned)."""
+        if integers is None:
+            integers = np.zeros(len(values), dtype=np.int64)
+        out_idx = np.arange(len(values))[outputs] if isinstance(outputs, slice) else np.asarray(outputs, np.intp)
+        feedthrough = self.feedthrough
+
+        def output_fn(t: float) -> None:
+            if feedthrough or self._stale:
+                self._call(self._output_calls, t, self._request(b"O", t, values, integers, inputs))
+                self._stale = False
+            values[out_idx] = self.outputs
+            integers[out_idx] = self.int_outputs
+
+        def update_fn(t: float) -> None:
+            self._call(self._step_calls, t, self._request(b"U", t, values, integers, inputs))
+        return output_fn, update_fn
+
+    def close(self) -> None:
+        """End the child: ask it to end its instance by the FMI rules, then kill it if it
+        does not exit in :data:`CLOSE_TIMEOUT` s (e.g. stuck inside the FMU). Safe twice."""
+        proc = self.proc
+        if proc.poll() is None:
+            try:
+                _write(self._to, bytes(self._request(b"C", 0.0, np.zeros(self.n_in), np.zeros(self.n_in, np.int64),
+                                                     slice(None))))
+            except OSError:
+                pass
+            try:
+                proc.wait(timeout=CLOSE_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for f in (proc.stdin, proc.stdout):
+            try:
+                f.close()
+            except OSError:
+                pass
+
+
+# ---------------------------------------------------------------------- the child
+def _die_with_parent() -> None:
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+
+def _serve(fd_in: int, fd_out: int) -> None:
+    from .component import FMUComponent
+
+    head = _read(fd_in, _HEAD.size + 4)
+    if not head:
+        return
+    length = struct.unpack_from("<I", head, _HEAD.size)[0]
+    setup = pickle.loads(_read(fd_in, length))
+    n_out = 0
+
+    def reply(status: bytes, payload: bytes = b"", out: bytes = b"") -> None:
+        _write(fd_out, _REPLY.pack(status, len(payload)) + payload + (out or bytes(16 * n_out)))
+
+    def fail(e: BaseException) -> None:
+        if isinstance(e, StopRequest):
+            reply(b"S", pickle.dumps((e.component, e.time, e.reason)))
+        else:
+            reply(b"E", pickle.dumps((type(e).__name__, str(e))))
+
+    try:
+        comp = FMUComponent(**setup["arguments"])
+        comp.use_unpacked(setup["directory"])
+        comp.use_inputs(setup["inputs"], setup["sources"])
+        n_in, n_out = len(comp.connected_inputs), len(comp.output_names)
+        comp.reset(setup["t0"])
+        values = np.zeros(n_in + n_out)
+        ints = np.zeros(n_in + n_out, dtype=np.int64)
+        out_fn, upd_fn = comp.bind(values, slice(0, n_in), slice(n_in, n_in + n_out), ints)
+        out_fn(setup["t0"])
+    except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
+        fail(e)
+        return
+    reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
+    size = 16 * n_in
+    try:
+        while True:
+            head = _read(fd_in, _HEAD.size + size)
+            if not head:
+                break
+            op, t = _HEAD.unpack_from(head)
+            if op == b"C":
+                break
+            if n_in:
+                values[:n_in] = np.frombuffer(head, np.float64, n_in, _HEAD.size)
+                ints[:n_in] = np.frombuffer(head, np.int64, n_in, _HEAD.size + 8 * n_in)
+            try:
+                if op == b"O":
+                    out_fn(t)
+                else:
+                    upd_fn(t)
+                    if not comp.feedthrough:         # the outputs at t + period, sent back now
+                        out_fn(t + comp.period)
+            except BaseException as e:  # noqa: BLE001
+                fail(e)
+                continue
+            reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
+    finally:
+        comp.close()
+
+
+def main() -> None:
+    """The child process: serve one FMU on stdin/stdout until told to close."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with_parent()
+    fd_in, fd_out = sys.stdin.buffer.fileno(), os.dup(sys.stdout.buffer.fileno())
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # FMU prints go to stderr, not the pipe
+    try:
+        _serve(fd_in, fd_out)
+    except (OSError, EOFError, pickle.UnpicklingError, struct.error) as e:   # the parent went away
+        print(f"cosim.fmi.isolated: {type(e).__name__}: {e}", file=sys.stderr)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
