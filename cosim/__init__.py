@@ -42,13 +42,13 @@ from .components import (
     TiltFusion,
 )
 from .core import COMPONENTS, Component, Cosimulation, ExportedFMU, ExportsFMU, FastBinding, Port, StateEstimator
-from .fmi import FMUComponent
+from .fmi import FMUComponent, MESystem
 from .scenario import Scenario, ScenarioContext
 from .ssp import export_ssp, open_ssp
 
 __all__ = ["COMPONENTS", "PRBS", "Accelerometer", "BuildError", "Component", "ConfigurationError", "Constant",
-           "CosimError", "Cosimulation", "Encoder", "EstimatorComponent", "ExportedFMU", "ExportsFMU", "FMUComponent",
-           "FMUError", "FastBinding", "Gyroscope", "InputError", "Interrupted", "LQRController", "ModelComponent",
-           "NumericalError", "PendulumCosimError", "Port", "ProcessNoise", "ResourceError", "Scenario",
-           "ScenarioContext", "Sensor", "Sine", "StateEstimator", "Step", "Table", "TiltFusion", "TypeMismatchError",
-           "UnknownNameError", "export_ssp", "open_ssp"]
+           "CosimError", "Cosimulation", "Encoder", "EstimatorComponent", "ExportedFMU", "ExportsFMU",
+           "FMUComponent", "FMUError", "FastBinding", "Gyroscope", "InputError", "Interrupted", "LQRController",
+           "MESystem", "ModelComponent", "NumericalError", "PendulumCosimError", "Port", "ProcessNoise",
+           "ResourceError", "Scenario", "ScenarioContext", "Sensor", "Sine", "StateEstimator", "Step", "Table",
+           "TiltFusion", "TypeMismatchError", "UnknownNameError", "export_ssp", "open_ssp"]

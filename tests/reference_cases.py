@@ -197,10 +197,11 @@ def compare(case: Case, df: pd.DataFrame) -> dict:
     Returns ``error`` (the largest absolute difference), ``rows`` compared, ``reference``;
     for Co-Simulation ``missing`` (published rows we lack) and ``not_compared`` (published
     columns that are not ports: String, Binary); for Model Exchange ``peer_error`` (the
-    error of fmpy, or of scipy where fmpy fails, at the master's tolerance), ``peer`` and
-    ``ratio`` (ours over the peer's). A run the FMU stopped (Stair at 9 s) ends with the
-    value after the stopping event, which fmpy's Model Exchange loop does not record: that
-    row is compared with the published result instead."""
+    error of fmpy, or of scipy where fmpy fails, at the master's tolerance), ``peer``,
+    ``ratio`` (ours over the peer's) and ``scale`` (the largest reference value). A run the
+    FMU stopped (Stair at 9 s) ends with the value after the stopping event, which fmpy's
+    Model Exchange loop does not record: that row is compared with the published result
+    instead."""
     if case.interface == "cs":
         pub = _published(case.model)
         if pub is None:
@@ -233,7 +234,8 @@ def compare(case: Case, df: pd.DataFrame) -> dict:
     peer_err = float(np.max(np.abs(peers - ref2), initial=0.0))
     floor = 1e-12 * max(1.0, float(np.max(np.abs(ref), initial=0.0)))
     out = {"error": err, "peer_error": peer_err, "ratio": (err + floor) / (peer_err + floor), "rows": len(ours),
-           "reference": reference, "peer": peer, "columns": len(columns)}
+           "reference": reference, "peer": peer, "columns": len(columns),
+           "scale": float(np.max(np.abs(ref), initial=0.0))}
     if stop is not None:
         pub = _published(case.model)
         if pub is not None:

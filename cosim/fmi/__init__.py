@@ -1,9 +1,12 @@
 """FMU importing: an FMI 2.0 or 3.0 FMU as a co-simulation component (:mod:`.component`),
-its Model Exchange integration (:mod:`.model_exchange`), typed value exchange with its C
-functions (:mod:`.exchange`) and safe unpacking (:mod:`.archive`)."""
+connected Model Exchange FMUs as one system (:mod:`.system`), Model Exchange integration
+(:mod:`.model_exchange`), a crash-isolated FMU in a process of its own (:mod:`.isolated`),
+typed value exchange with its C functions (:mod:`.exchange`), ports (:mod:`.ports`), the
+FMI rules of an instance's life (:mod:`.instance`) and safe unpacking (:mod:`.archive`)."""
 from .archive import Extraction, read_description
 from .component import FEEDTHROUGH_MODES, INTERFACES, FMUComponent
 from .model_exchange import SOLVERS, MEIntegrator
+from .system import MESystem
 
-__all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "SOLVERS", "Extraction", "FMUComponent", "MEIntegrator",
+__all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "SOLVERS", "Extraction", "FMUComponent", "MEIntegrator", "MESystem",
            "read_description"]

@@ -421,6 +421,17 @@ class FMUComponent(Component, kind="fmu"):
 
             self._remote = RemoteFMU(self, t0)
             return
+        self.instantiate(t0)
+        if self.interface == "me":
+            self.integrator = MEIntegrator(FMUModel(self.instance), self.solver, self.solver_step, self.rtol)
+            self.integrator.start(t0)
+
+    def instantiate(self, t0: float) -> FMUInstance:
+        """A new instance of the FMU (closing any previous one), initialised at ``t0``
+        [s] with the structural parameters (in Configuration Mode), parameters and start
+        values; left after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the
+        integrator not started: what :class:`~cosim.fmi.system.MESystem` builds on)."""
+        self.close()
         inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging)
         self.instance = inst
         self.messages = inst.messages
@@ -444,12 +455,10 @@ class FMUComponent(Component, kind="fmu"):
                 inst.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
             inst.call("ExitInitializationMode", fmu.exitInitializationMode)
             inst.initialized = True
-            if self.interface == "me":
-                self.integrator = MEIntegrator(FMUModel(inst), self.solver, self.solver_step, self.rtol)
-                self.integrator.start(t0)
         except (TypeError, ValueError, OverflowError) as e:
             raise ConfigurationError(f"{self.name}: bad parameter or start value: {e}") from None
         self._private = None
+        return inst
 
     def _set_setting(self, name: str, value) -> None:
         v, inst = self.variables[name], self.instance

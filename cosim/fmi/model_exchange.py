@@ -54,12 +54,15 @@ class ContinuousModel:
         For messages.
     needs_completed_step : bool
         ``CompletedIntegratorStep`` must be called after every integrator step.
+    stop_reason : str
+        Why the model asked to terminate in its last event (for the stop notice).
     """
 
     nx = 0
     nz = 0
     name = ""
     needs_completed_step = False
+    stop_reason = "the FMU requested termination in its event update"
 
     def set_time(self, t: float) -> None:
         """Set the time [s]."""
@@ -328,7 +331,7 @@ class MEIntegrator:
     # ------------------------------------------------------------------ events
     def _after_event(self, t: float, terminate: bool, nxt: float | None) -> None:
         if terminate:
-            raise StopRequest(self.model.name, t, "the FMU requested termination in its event update")
+            raise StopRequest(self.model.name, t, self.model.stop_reason)
         self.next_event = nxt
         m = self.model
         m.get_states(self.x)

@@ -1,0 +1,149 @@
+"""Benchmark and report: what the master does with each Modelica Reference FMU (FMI 2/3,
+CS/ME, Python API and ``pendulum-cosim run``), the cost of crash isolation per doStep, and
+connected ME FMUs as one system against separate components.
+
+Prints the Markdown tables of the README's co-simulation and performance sections.
+
+Run: python bench/bench_reference_fmus.py [--skip-cli]
+(needs ../shared/reference-fmus or PENDULUM_COSIM_REFERENCE_FMUS)
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cosim import Constant, Cosimulation, FMUComponent, MESystem
+
+sys.path.append(str(Path(__file__).parents[1] / "tests"))     # after the packages: tests/cosim is no package
+
+import reference_cases as rc
+
+
+def _verdict(case, outcome, stopped: bool) -> str:
+    if isinstance(outcome, Exception):
+        return "refused: " + str(outcome).split(": ", 1)[-1].split(";")[0].split(":")[0]
+    r, note = outcome, " (stops at 9 s, as it asks)" if stopped else ""
+    if case.interface == "cs":
+        if r["reference"] == "none published":
+            return "runs (nothing published)" + note
+        return f"exact: {r['rows']} rows, error {r['error']:.0f}" + note
+    rel = r["error"] / r["scale"] if r["scale"] else 0.0
+    peer = "fmpy's" if r["peer"].startswith("fmpy") else "scipy's"
+    return f"relative error {rel:.0e}, {r['ratio']:.2f}x {peer}" + note
+
+
+def reference_table(cli: bool) -> None:
+    """One row per FMU and FMI version: what the Co-Simulation and the Model Exchange
+    interface give (API), and whether ``pendulum-cosim run`` gives the same."""
+    rows: dict = {}
+    bad = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, case in enumerate(rc.cases()):
+            try:
+                df = rc.run_api(case)
+                outcome, stopped = rc.compare(case, df), bool(df.attrs.get("stopped"))
+            except Exception as e:  # noqa: BLE001 - reported in the table
+                outcome, stopped, df = e, False, None
+            if cli:
+                cdf, proc = rc.run_cli(case, Path(tmp) / str(k))
+                same = (proc.returncode != 0 and "Traceback" not in proc.stderr) if df is None else \
+                    (cdf is not None and np.array_equal(cdf.to_numpy(float), df.to_numpy(float)))
+                if not same:
+                    bad.append(case.label)
+            rows.setdefault((case.model, case.version), {})[case.interface] = _verdict(case, outcome, stopped)
+    print("| Reference FMU | FMI | Co-Simulation (vs the published result) | Model Exchange, CVODE rtol 1e-6 "
+          "(vs CVODE at 1e-10; ratio to fmpy's error at 1e-6) |")
+    print("|---|---|---|---|")
+    for (model, version), r in rows.items():
+        print(f"| {model} | {version}.0 | {r.get('cs', '-')} | {r.get('me', '-')} |")
+    if cli:
+        n = len(rc.cases())
+        print(f"\nThe CLI (`pendulum-cosim run`, a minimal scenario file) gives the same rows or the same "
+              f"refusal in {n - len(bad)} of {n} cases" + (f"; differs: {bad}" if bad else ""))
+
+
+def _per_step(make, stop: float, repeats: int = 5) -> tuple[float, float]:
+    """(seconds per run of ``stop`` s, seconds of a run of one step): the minimum of repeats."""
+    full, one = [], []
+    for _ in range(repeats):
+        sim = make()
+        t0 = time.perf_counter()
+        sim.run(stop, progress=False)
+        full.append(time.perf_counter() - t0)
+        sim = make()
+        t0 = time.perf_counter()
+        sim.run(sim.step_size, progress=False)
+        one.append(time.perf_counter() - t0)
+    return min(full), min(one)
+
+
+def isolation_table() -> None:
+    print("| FMU (CS) | round trips per step | in-process per step | isolated per step | isolated start-up |")
+    print("|---|---|---|---|---|")
+    d = rc.reference_dir()
+    for model, inputs in (("Dahlquist", False), ("Feedthrough", True)):
+        path = d / "fmi2" / f"{model}.fmu"
+        n = 20000
+
+        def make(iso, path=path, inputs=inputs):
+            if inputs:
+                comp = FMUComponent("m", path, 0.01, inputs=["Float64_continuous_input"],
+                                    outputs=["Float64_continuous_output"], isolate=iso)
+                return Cosimulation([Constant("c", 0.01, 1.0), comp], {"m.Float64_continuous_input": "c.out"})
+            return Cosimulation([FMUComponent("m", path, 0.01, isolate=iso)], {})
+        plain_full, plain_one = _per_step(lambda: make(False), n * 0.01)
+        iso_full, iso_one = _per_step(lambda: make(True), n * 0.01)
+        per_plain = (plain_full - plain_one) / (n - 1)
+        per_iso = (iso_full - iso_one) / (n - 1)
+        print(f"| {model} | {2 if inputs else 1} | {per_plain * 1e6:.1f} us | {per_iso * 1e6:.0f} us | "
+              f"{iso_one:.2f} s |")
+
+
+def system_table() -> None:
+    """VanDerPol driving a first-order lag (the hand-written ME test FMU), against scipy."""
+    from conftest import build_test_fmu
+    from scipy.integrate import solve_ivp
+
+    d = rc.reference_dir()
+    with tempfile.TemporaryDirectory() as tmp:
+        lag = build_test_fmu("bouncing_me", "BouncingBallME", 2, Path(tmp))
+        exact = solve_ivp(lambda t, y: [y[1], (1 - y[0] ** 2) * y[1] - y[0], (y[0] - y[2]) / 0.5], (0, 2.0),
+                          [2.0, 0.0, 0.0], method="Radau", rtol=1e-11, atol=1e-13, t_eval=np.arange(0, 2.0001, 0.1))
+        print("| coupling | communication step | lag error vs scipy | wall |")
+        print("|---|---|---|---|")
+        for period in (0.1, 0.01):
+            for joint in (False, True):
+                vdp = FMUComponent("vdp", d / "fmi3" / "VanDerPol.fmu", period, interface="me", rtol=1e-8)
+                lg = FMUComponent("lag", lag, period, interface="me", rtol=1e-8)
+                parts = [MESystem("s", [vdp, lg], {"lag.u": "vdp.x0"}, period, rtol=1e-8)] if joint else [vdp, lg]
+                sim = Cosimulation(parts, {} if joint else {"lag.u": "vdp.x0"})
+                t0 = time.perf_counter()
+                df = sim.run(2.0, progress=False, output_interval=0.1)
+                wall = time.perf_counter() - t0
+                col = df["s.lag.x" if joint else "lag.x"].to_numpy()
+                err = np.abs(col - exact.y[2]).max()
+                label = "one MESystem (one CVODE)" if joint else "separate components (inputs held)"
+                print(f"| {label} | {period} s | {err:.1e} | {wall:.2f} s |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--skip-cli", action="store_true")
+    args = ap.parse_args()
+    if rc.reference_dir() is None:
+        sys.exit("the Reference FMUs are absent: put them in ../shared/reference-fmus or set "
+                 "PENDULUM_COSIM_REFERENCE_FMUS")
+    reference_table(not args.skip_cli)
+    print()
+    isolation_table()
+    print()
+    system_table()
+
+
+if __name__ == "__main__":
+    main()

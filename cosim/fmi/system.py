@@ -1,0 +1,484 @@
+"""Connected Model Exchange FMUs integrated as one system: one solver for the union of
+their continuous states, the connections between them evaluated inside every evaluation
+of the right-hand side.
+
+Connecting ME FMUs as separate components of the master holds each one's inputs constant
+over a communication step (a zero-order hold: an error of the order of the step wherever
+a signal changes within it). :class:`MESystem` removes the hold: at every right-hand-side
+evaluation CVODE asks for, the members get the time and their states, then, in the order
+of their direct feed-through (each member after those it depends on), their inputs from
+the other members' outputs, then their derivatives and event indicators. Events of any
+member (time, state, step events) stop the whole system: every member enters Event Mode,
+the event iteration runs over all of them with the connections propagated (discrete
+inputs are set here, as the standard requires) until no member needs another round and
+no connected value changed, then all enter Continuous-Time Mode.
+
+The system is one component of the master: its inputs are the members' unconnected
+inputs, its outputs all members' outputs, both named ``member.port`` (signals
+``system.member.port``), held over the communication step like any ME component's.
+A cycle of direct feed-through between members is an algebraic loop and is refused.
+
+Use it when ME FMUs exchange signals that change within a communication step (coupled
+dynamics, continuous controllers); keep separate components for FMUs at different
+periods, Co-Simulation FMUs, or Python components (see the README).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
+
+from ..core.component import Component, Port, ports_compatible
+from .component import FMUComponent
+from .exchange import Exchange, no_exchange
+from .model_exchange import SOLVERS, ContinuousModel, FMUModel, MEIntegrator
+
+__all__ = ["MESystem"]
+
+#: Most rounds of the joint event iteration (each a round of every member's own iteration).
+MAX_EVENT_ROUNDS = 1000
+
+
+def _split(ref: str, what: str) -> tuple[str, str]:
+    if not isinstance(ref, str) or "." not in ref:
+        raise ConfigurationError(f"{what} {ref!r} must be written 'member.port'")
+    return tuple(ref.split(".", 1))
+
+
+class _Coupled(ContinuousModel):
+    """The members as one :class:`~cosim.fmi.model_exchange.ContinuousModel` (see the
+    module documentation): states and indicators concatenated in member order, the
+    internal connections propagated before derivatives, indicators and outputs."""
+
+    def __init__(self, name: str, models: list[FMUModel], propagate, enter_ct):
+        self.name, self.models = name, models
+        self.nx, self.nz = sum(m.nx for m in models), sum(m.nz for m in models)
+        self.needs_completed_step = any(m.needs_completed_step for m in models)
+        xs, zs, i, j = [], [], 0, 0
+        for m in models:
+            xs.append(slice(i, i + m.nx))
+            zs.append(slice(j, j + m.nz))
+            i, j = i + m.nx, j + m.nz
+        self._x, self._z = xs, zs
+        self._propagate, self._enter_ct = propagate, enter_ct
+        self.dirty = True
+
+    def refresh(self) -> None:
+        """Propagate the continuous connections if time or states changed since."""
+        if self.dirty:
+            self._propagate(False)
+            self.dirty = False
+
+    def set_time(self, t):
+        for m in self.models:
+            m.set_time(t)
+        self.dirty = True
+
+    def get_states(self, x):
+        for m, s in zip(self.models, self._x):
+            m.get_states(x[s])
+
+    def set_states(self, x):
+        for m, s in zip(self.models, self._x):
+            m.set_states(x[s])
+        self.dirty = True
+
+    def derivatives(self, dx):
+        self.refresh()
+        for m, s in zip(self.models, self._x):
+            m.derivatives(dx[s])
+
+    def indicators(self, z):
+        self.refresh()
+        for m, s in zip(self.models, self._z):
+            m.indicators(z[s])
+
+    def nominals(self, out):
+        for m, s in zip(self.models, self._x):
+            m.nominals(out[s])
+
+    def completed_step(self):
+        enter = term = False
+        for m in self.models:
+            if m.needs_completed_step:
+                e, t = m.completed_step()
+                enter, term = enter or e, term or t
+        return enter, term
+
+    def event(self, t, set_inputs=None):
+        for m in self.models:
+            m.inst.call("EnterEventMode", m.inst.fmu.enterEventMode)
+        if set_inputs is not None:
+            set_inputs()
+        return self._iterate(t)
+
+    def initial_event(self, t):
+        return self._iterate(t)
+
+    def _iterate(self, t: float) -> tuple[bool, float | None]:
+        """The joint event iteration: every member's own, the connections propagated,
+        until no connected value changes. A member that asks to terminate is not asked
+        again; the others settle on its last values, then the system terminates."""
+        stopped = set()
+        for _ in range(MAX_EVENT_ROUNDS):
+            self._propagate(True)
+            nxt = []
+            for k, m in enumerate(self.models):
+                if k in stopped:
+                    continue
+                terminate, n = m.iterate(t)
+                if terminate:
+                    stopped.add(k)
+                elif n is not None:
+                    nxt.append(n)
+            if not self._propagate(True):          # no connected value changed: settled
+                self.dirty = True
+                if stopped:
+                    who = ", ".join(self.models[k].name for k in sorted(stopped))
+                    self.stop_reason = f"member {who} requested termination in its event update"
+                    return True, None
+                self._enter_ct()
+                return False, (min(nxt) if nxt else None)
+        raise FMUError(f"{self.name}: the joint event iteration at t = {t:g} s did not settle in "
+                       f"{MAX_EVENT_ROUNDS} rounds (the members' discrete values keep changing each other)")
+
+
+class MESystem(Component, kind="me_system"):
+    """Model Exchange FMUs connected to each other, integrated as one system (see the
+    module documentation).
+
+    Parameters
+    ----------
+    name : str
+    members : sequence of FMUComponent
+        The FMUs (each built with ``interface="me"`` or ``"auto"`` on an ME-only FMU; their
+        own periods are ignored). Their names are the members' names.
+    connections : mapping {"member.input": "member.output"}
+        The connections between members, evaluated inside every right-hand-side
+        evaluation (continuous inputs) and event iteration (all inputs).
+    period : float
+        The communication step [s] with the master (outputs sampled, external inputs
+        held).
+    solver : {"cvode", "euler", "rk4"}
+    solver_step : float, optional
+        Euler/RK4 step or CVODE's largest step [s] (see :class:`~cosim.fmi.FMUComponent`).
+    rtol : float
+        CVODE's relative tolerance (default 1e-6).
+
+    Attributes
+    ----------
+    members : list of FMUComponent
+    connections : dict {(member, input): (member, output)}
+    integrator : MEIntegrator or None
+        The integrator of the current run.
+    """
+
+    reentrant = True
+    holds_inputs = True
+
+    def __init__(self, name: str, members: Sequence[FMUComponent], connections: Mapping[str, str],
+                 period: float, solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6):
+        from fmu_models.checks import positive
+
+        self.members = list(members)
+        if not self.members:
+            raise ConfigurationError(f"{name}: an ME system needs at least one member")
+        for m in self.members:
+            if not isinstance(m, FMUComponent):
+                raise TypeMismatchError(f"{name}: member {m!r} is not an FMUComponent")
+            if m.interface != "me":
+                raise ConfigurationError(f"{name}: member {m.name!r} is a Co-Simulation FMU; an ME system "
+                                         "integrates Model Exchange FMUs (give it interface = 'me')")
+            if m.isolate:
+                raise ConfigurationError(f"{name}: member {m.name!r} cannot be isolated: the system calls its "
+                                         "functions inside every right-hand-side evaluation")
+        names = [m.name for m in self.members]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ConfigurationError(f"{name}: duplicate member names: {dup}")
+        if solver not in SOLVERS:
+            raise UnknownNameError(f"{name}: solver must be one of {SOLVERS}, got {solver!r}")
+        self.solver, self.rtol = solver, positive(rtol, f"{name}: rtol")
+        self.solver_step = None if solver_step is None else positive(solver_step, f"{name}: solver_step")
+        self.by_name = {m.name: m for m in self.members}
+        self.connections = self._parse(name, connections or {})
+        self.order = self._order(name)
+        ins = [Port(f"{m.name}.{p.name}", p.type, p.unit, p.description) for m in self.members
+               for p in m.input_ports if (m.name, p.name) not in self.connections]
+        outs = [Port(f"{m.name}.{p.name}", p.type, p.unit, p.description) for m in self.members
+                for p in m.output_ports]
+        super().__init__(name, period, ins, outs, feedthrough=self._feedthrough_map(), port_names_are_identifiers=False)
+        self.connected_inputs = list(self.input_names)
+        self._sources: list | None = None
+        self.integrator: MEIntegrator | None = None
+        self._model: _Coupled | None = None
+        self._private = None
+
+    @classmethod
+    def from_scenario(cls, name, table, context):
+        """``members``: a list of FMU tables (as ``type = "fmu"`` components, without
+        ``period``; ``interface`` is ``"me"``); ``connections``: ``{"member.input" =
+        "member.output"}``; the other keys as the constructor's."""
+        table = dict(table)
+        members = table.pop("members", None)
+        if not isinstance(members, list) or not members or not all(isinstance(m, dict) for m in members):
+            raise ConfigurationError(f"component {name!r}: members must be a list of FMU tables "
+                                     "([[component.members]] with name and path or model)")
+        built = []
+        for m in members:
+            m = dict(m)
+            if "name" not in m:
+                raise ConfigurationError(f"component {name!r}: every member needs a name")
+            for key, allowed in (("period", None), ("interface", "me")):
+                if key in m and m[key] != allowed:
+                    raise ConfigurationError(f"component {name!r}, member {m['name']!r}: {key} is the system's"
+                                             if key == "period" else
+                                             f"component {name!r}, member {m['name']!r}: interface must be 'me'")
+            m.pop("interface", None)
+            member_name = m.pop("name")
+            built.append(FMUComponent.from_scenario(member_name, {**m, "interface": "me",
+                                                                  "period": table.get("period", 1.0)}, context))
+        table["members"] = built
+        return context.construct(cls, name, table)
+
+    # ------------------------------------------------------------------ description
+    def _parse(self, name: str, connections: Mapping[str, str]) -> dict:
+        out = {}
+        for dst, src in connections.items():
+            (dm, di), (sm, so) = _split(dst, f"{name}: input"), _split(src, f"{name}: output")
+            for m, p, kind in ((dm, di, "input"), (sm, so, "output")):
+                if m not in self.by_name:
+                    raise UnknownNameError(f"{name}: no member {m!r}; members: {', '.join(self.by_name)}")
+                names = self.by_name[m].input_names if kind == "input" else self.by_name[m].output_names
+                if p not in names:
+                    raise UnknownNameError(f"{name}: member {m!r} has no {kind} {p!r}; its {kind}s: "
+                                           f"{', '.join(names) or '(none)'}")
+            st = self.by_name[sm].element_ports[so].type
+            dt = self.by_name[dm].element_ports[di].type
+            if not ports_compatible(st, dt):
+                raise TypeMismatchError(f"{name}: connection {src} -> {dst}: a {st} output cannot drive a {dt} "
+                                        "input")
+            if (dm, di) in out:
+                raise ConfigurationError(f"{name}: input {dst!r} is connected twice")
+            out[(dm, di)] = (sm, so)
+        return out
+
+    def _order(self, name: str) -> list[FMUComponent]:
+        """Members in an order where each one's feed-through inputs come from members
+        before it (Kahn's algorithm); a cycle is an algebraic loop."""
+        after = {m.name: set() for m in self.members}
+        for (dm, di), (sm, _so) in self.connections.items():
+            if any(di in deps for deps in self.by_name[dm].feedthrough.values()):
+                after[dm].add(sm)
+        order, done = [], set()
+        while len(order) < len(self.members):
+            ready = [m for m in self.members if m.name not in done and after[m.name] <= done]
+            if not ready:
+                loop = sorted(n for n in after if n not in done)
+                raise ConfigurationError(f"{name}: the members {loop} feed each other's outputs through at once "
+                                         "(an algebraic loop); break it with a member whose input does not reach "
+                                         "its output directly")
+            for m in ready:
+                order.append(m)
+                done.add(m.name)
+        return order
+
+    def _feedthrough_map(self) -> dict[str, set[str]]:
+        """Which external inputs each output depends on at once, through the members'
+        feed-through and the connections."""
+        memo: dict[tuple[str, str], set[str]] = {}
+
+        def deps(member: str, output: str) -> set[str]:
+            key = (member, output)
+            if key not in memo:
+                memo[key] = set()
+                found = set()
+                for i in self.by_name[member].feedthrough.get(output, ()):
+                    src = self.connections.get((member, i))
+                    found |= deps(*src) if src is not None else {f"{member}.{i}"}
+                memo[key] = found
+            return memo[key]
+        return {f"{m.name}.{o}": deps(m.name, o) for m in self.members for o in m.output_names}
+
+    def timing(self) -> str:
+        return ("Model Exchange system: outputs at t; connections between members inside every derivative "
+                "evaluation; external inputs held over the step")
+
+    def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
+        """Set, at each step, only these external inputs (``member.port``), in this order."""
+        unknown = [n for n in names if n not in self.input_names]
+        if unknown:
+            raise UnknownNameError(f"{self.name}: not input ports: {unknown}")
+        self.connected_inputs = list(names)
+        self._sources = list(sources) if sources is not None else None
+
+    def required_inputs(self) -> list[str]:
+        """None: unconnected inputs keep their start values."""
+        return []
+
+    def check_run(self, start_time: float, stop_time: float) -> None:
+        """Refuse a run of too many fixed solver steps (see FMUComponent.check_run)."""
+        for m in self.members:
+            m.check_run(start_time, stop_time)
+
+    # ------------------------------------------------------------------ lifecycle
+    def reset(self, t0: float) -> None:
+        """Instantiate and initialise every member at ``t0``, then the joint event
+        iteration and the solver."""
+        self.close()
+        super().reset(t0)
+        for m in self.members:
+            m.instantiate(t0)
+        self._model = self._coupled()
+        self.integrator = MEIntegrator(self._model, self.solver, self.solver_step, self.rtol)
+        self.integrator.start(t0)
+
+    def _coupled(self) -> _Coupled:
+        """The members' FMUModels and the propagation of the connections over a buffer of
+        the connected outputs."""
+        sources = sorted(set(self.connections.values()), key=lambda s: (s[0], s[1]))
+        slot = {s: k for k, s in enumerate(sources)}
+        buf = np.zeros(max(len(sources), 1))
+        ints = np.zeros(max(len(sources), 1), dtype=np.int64)
+        # per member in order: its inputs from members before it (current when set), its
+        # outputs, then its inputs from members after it (set once every output is
+        # current: none of them reaches an output at once, or the order would differ)
+        rank = {m.name: k for k, m in enumerate(self.order)}
+        early, late = [], []
+        for m in self.order:
+            inst = m.instance
+            mine = sorted(s for s in sources if s[0] == m.name)
+            get = (Exchange(inst.dll, inst.handle, m.version, [m.element_ports[p] for _, p in mine], "get",
+                            inst.fail, m.name).bind(buf, np.array([slot[s] for s in mine], np.intp), ints)
+                   if mine else no_exchange)
+            for before, steps in ((True, early), (False, late)):
+                setters = []
+                for discrete in (False, True):
+                    conns = [(di, src) for (dm, di), src in self.connections.items()
+                             if dm == m.name and m.element_ports[di].discrete == discrete
+                             and (rank[src[0]] < rank[m.name]) == before]
+                    if not conns:
+                        setters.append(None)
+                        continue
+                    ports = [m.element_ports[di] for di, _ in conns]
+                    names = [(f"{self.name}.{s[0]}.{s[1]}", self.by_name[s[0]].element_ports[s[1]].type)
+                             for _, s in conns]
+                    ex = Exchange(inst.dll, inst.handle, m.version, ports, "set", inst.fail, m.name, names)
+                    setters.append(ex.bind(buf, np.array([slot[s] for _, s in conns], np.intp), ints, changes=True))
+                steps.append((setters[0], setters[1], get if before else None))
+
+        def propagate(discrete: bool) -> bool:
+            changed = False
+            for phase in (early, late):
+                for set_cont, set_disc, get in phase:
+                    if set_cont is not None:
+                        changed |= bool(set_cont())
+                    if discrete and set_disc is not None:
+                        changed |= bool(set_disc())
+                    if get is not None:
+                        get()
+            return changed
+
+        def enter_ct() -> None:
+            for m in self.order:
+                m.instance.call("EnterContinuousTimeMode", m.instance.fmu.enterContinuousTimeMode)
+
+        return _Coupled(self.name, [FMUModel(m.instance) for m in self.order], propagate, enter_ct)
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """Output and update closures (see :class:`~cosim.core.component.FastBinding`):
+        external continuous inputs set in Continuous-Time Mode (the solver reinitialised
+        where one jumped), discrete ones in Event Mode."""
+        if self._model is None:
+            raise FMUError(f"{self.name}: reset() must be called before bind()")
+        if integers is None:
+            integers = np.zeros(len(values), dtype=np.int64)
+        idx = np.arange(len(values))[inputs] if isinstance(inputs, slice) else np.asarray(inputs, np.intp)
+        out_idx = np.arange(len(values))[outputs] if isinstance(outputs, slice) else np.asarray(outputs, np.intp)
+        sources = self._sources or [(f"{self.name}.{n}", "Float64") for n in self.connected_inputs]
+        ft_names = set().union(*self.feedthrough.values()) if self.feedthrough else set()
+        set_cont, set_disc, ft_cont, ft_disc, getters = [], [], [], [], []
+        out_pos = {n: k for k, n in enumerate(self.output_names)}
+        for m in self.members:
+            inst = m.instance
+            mine = [(k, n.split(".", 1)[1]) for k, n in enumerate(self.connected_inputs)
+                    if n.split(".", 1)[0] == m.name]
+            for discrete, plain, ft in ((False, set_cont, ft_cont), (True, set_disc, ft_disc)):
+                sel = [(k, p) for k, p in mine if m.element_ports[p].discrete == discrete]
+                for group, chosen in ((plain, sel), (ft, [(k, p) for k, p in sel if f"{m.name}.{p}" in ft_names])):
+                    if chosen:
+                        ex = Exchange(inst.dll, inst.handle, m.version, [m.element_ports[p] for _, p in chosen],
+                                      "set", inst.fail, m.name, [sources[k] for k, _ in chosen])
+                        group.append(ex.bind(values, idx[[k for k, _ in chosen]], integers, changes=True))
+            outs = m.output_names
+            if outs:
+                ex = Exchange(inst.dll, inst.handle, m.version, [m.element_ports[o] for o in outs], "get", inst.fail,
+                              m.name)
+                getters.append(ex.bind(values, out_idx[[out_pos[f"{m.name}.{o}"] for o in outs]], integers))
+        me, model, h = self.integrator, self._model, self.period
+        pending = [False]
+
+        def apply(setters) -> bool:
+            changed = False
+            for s in setters:
+                changed |= bool(s())
+            return changed
+
+        def differs(setters) -> bool:
+            return any(s.differs() for s in setters)
+
+        def output_fn(t: float) -> None:
+            if ft_cont and apply(ft_cont):
+                pending[0] = True
+                model.dirty = True
+            if ft_disc and differs(ft_disc):
+                me.at_event(t, lambda: apply(ft_disc))
+            model.refresh()
+            for g in getters:
+                g()
+
+        def update_fn(t: float) -> None:
+            if set_cont and apply(set_cont):
+                pending[0] = True
+                model.dirty = True
+            if set_disc and differs(set_disc):
+                me.at_event(t, lambda: apply(set_disc))
+            me.advance(t, h, pending[0])
+            pending[0] = False
+        return output_fn, update_fn
+
+    def _private_binding(self):
+        if self._private is None:
+            n_in, n_out = len(self.connected_inputs), len(self.output_names)
+            buf, ints = np.zeros(n_in + n_out), np.zeros(n_in + n_out, dtype=np.int64)
+            self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
+        return self._private
+
+    def output(self, t: float, u: np.ndarray) -> np.ndarray:
+        """Outputs at ``t`` with the connected external inputs ``u``."""
+        buf, ints, out_fn, _ = self._private_binding()
+        buf[: len(self.connected_inputs)] = u
+        ints[: len(self.connected_inputs)] = np.asarray(u, dtype=float).astype(np.int64)
+        out_fn(t)
+        return buf[len(self.connected_inputs):].copy()
+
+    def update(self, t: float, u: np.ndarray) -> None:
+        """Set the external inputs ``u`` and integrate the system over ``[t, t + period]``."""
+        buf, ints, _, upd_fn = self._private_binding()
+        buf[: len(self.connected_inputs)] = u
+        ints[: len(self.connected_inputs)] = np.asarray(u, dtype=float).astype(np.int64)
+        upd_fn(t)
+
+    def close(self) -> None:
+        """End every member's instance by the FMI rules (safe twice)."""
+        self._private, self._model, self.integrator = None, None, None
+        for m in self.members:
+            m.close()
+
+    def release(self) -> None:
+        """:meth:`close` and remove the members' unpacked files."""
+        self.close()
+        for m in self.members:
+            m.release()
