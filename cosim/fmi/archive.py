@@ -76,11 +76,34 @@ def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int =
         except (zipfile.BadZipFile, OSError, EOFError) as e:
             raise FMUError(f"{path.name} is damaged: {e}") from None
     try:
-        return read_model_description(str(path), validate=False)
+        md = read_model_description(str(path), validate=False)
     except Exception as e:  # noqa: BLE001 - lxml, attrs and fmpy raise a variety of types for bad XML
         first = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
                        f"{first}") from None
+    _complete_ranges(path, md)
+    return md
+
+
+def _complete_ranges(path: Path, md) -> None:
+    """fmpy leaves ``min``/``max`` of FMI 3.0 integer variables unread (None): read them
+    from the XML (entities not resolved, no network), so declared ranges can be checked."""
+    if not str(md.fmiVersion).startswith("3"):
+        return
+    missing = {v.name: v for v in md.modelVariables
+               if v.type.startswith(("Int", "UInt")) and v.min is None and v.max is None}
+    if not missing:
+        return
+    from lxml import etree
+
+    with _open_zip(path) as z:
+        root = etree.fromstring(z.read("modelDescription.xml"),
+                                etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False))
+    variables = root.find("ModelVariables")
+    for el in variables if variables is not None else ():
+        v = missing.get(el.get("name"))
+        if v is not None:
+            v.min, v.max = el.get("min"), el.get("max")
 
 
 class Extraction:

@@ -54,7 +54,7 @@ from .archive import Extraction, read_description
 from .exchange import Exchange
 from .instance import FMUInstance
 from .model_exchange import SOLVERS, FMUModel, MEIntegrator
-from .ports import array_shape, check_integer, element_ports, parse_start
+from .ports import array_shape, check_declared_range, check_integer, element_ports, parse_start
 
 __all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError"]
 
@@ -218,6 +218,7 @@ class FMUComponent(Component, kind="fmu"):
                 what = f"{name}: {kind} {key}"
                 if v.causality == "structuralParameter":
                     structural[key] = check_integer(val, v.type, self.version, what)
+                    check_declared_range([structural[key]], v, what)
                     settings[key] = structural[key]
                     continue
                 settings[key] = val
@@ -240,6 +241,8 @@ class FMUComponent(Component, kind="fmu"):
                 items = [bool(x) for x in items]
             else:
                 items = [check_integer(x, v.type, self.version, what) for x in items]
+            if PORT_TYPES[v.type] != "boolean":
+                check_declared_range(items, v, what)
             settings[key] = items if shape else items[0]
         return settings, structural
 

@@ -65,6 +65,25 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
     return v
 
 
+def check_declared_range(values: list, variable, what: str) -> None:
+    """Refuse values outside the variable's declared ``min``/``max`` (the standard makes
+    them an error), naming ``what``, the value and the range."""
+    real = variable.type in ("Real", "Float64", "Float32")
+    conv = float if real else int
+    try:
+        lo = conv(variable.min) if variable.min is not None else None
+        hi = conv(variable.max) if variable.max is not None else None
+    except (TypeError, ValueError):
+        return                                   # an unreadable bound: nothing to go by
+    if lo is None and hi is None:
+        return
+    for x in values:
+        if (lo is not None and x < lo) or (hi is not None and x > hi):
+            raise ConfigurationError(f"{what}: {x!r} is outside the range the FMU declares for "
+                                     f"{variable.name!r} [{'-inf' if lo is None else lo}, "
+                                     f"{'inf' if hi is None else hi}]")
+
+
 def parse_start(variable, count: int) -> list:
     """The start value(s) of ``variable`` as Python numbers, ``count`` of them (an array's
     start may hold one value for all elements); zeros if it has none."""

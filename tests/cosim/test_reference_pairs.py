@@ -127,3 +127,42 @@ period = 0.1
     assert proc.returncode == 0, proc.stderr
     df = pd.read_csv(tmp_path / "out" / "results.csv", index_col="time")
     assert df["b.UInt64_output"].dtype == np.uint64 and (df["b.UInt64_output"] == 2**64 - 1).all()
+
+
+def _oscillator(**extra):
+    """StateSpace resized by its structural parameters to a 2-state harmonic oscillator:
+    x' = [[0, 1], [-1, 0]] x, y = x, x(0) = [1, 0] (y1 = cos t, y2 = -sin t)."""
+    params = dict(m=2, n=2, r=2, A=[0.0, 1.0, -1.0, 0.0], B=[0.0] * 4, C=[1.0, 0.0, 0.0, 1.0], D=[0.0] * 4,
+                  x0=[1.0, 0.0], **extra)
+    return FMUComponent("ss", fmu("StateSpace"), 0.1, interface="me", parameters=params, start={"u": [0.0, 0.0]},
+                        rtol=1e-9)
+
+
+def test_structural_parameters_resize_the_ports_and_are_set_in_configuration_mode():
+    """The ports follow the structural parameters; the values go to the FMU in
+    Configuration Mode (its message proves it: outside it says "Structural variables can
+    only be set in Configuration Mode"). The Reference FMU v0.0.41 then refuses every
+    conforming call: its setUInt64 advances the value index before ASSERT_NVALUES(1)
+    (model.c), so one value is "Expected nValues >= 2 but was 1" -- an FMU bug, reported
+    as the FMU's error, not worked around by an illegal call."""
+    ss = _oscillator()
+    assert ss.output_names == ["y[1]", "y[2]"] and ss.input_names == ["u[1]", "u[2]"]
+    with pytest.raises(CosimError, match=r"ss: fmi3SetUInt64\(m = 2\) returned error: Expected nValues >= 2 "
+                                         r"but was 1"):
+        Cosimulation([ss], {}).run(1.0)
+
+
+@pytest.mark.parametrize("change, words", [({"A": [0.0, 1.0, -1.0]}, "A takes 9 value"),
+                                           ({"n": 6}, r"n: 6 is outside the range the FMU declares for .n. \[0, 5\]"),
+                                           ({"n": 2.5}, "n: 2.5 is not an integer"),
+                                           ({"n": -1}, r"n: -1 is outside the range of UInt64")])
+def test_structural_parameter_errors_are_named_before_the_run(change, words):
+    with pytest.raises(ConfigurationError, match=words):
+        FMUComponent("ss", fmu("StateSpace"), 0.1, parameters=change)
+
+
+def test_declared_min_max_are_enforced():
+    """BouncingBall declares 0.5 <= e <= 1: e = 1.5 is refused before anything runs."""
+    with pytest.raises(ConfigurationError, match=r"e: 1.5 is outside the range the FMU declares for 'e' \[0.5, 1.0\]"):
+        FMUComponent("b", fmu("BouncingBall"), 0.01, parameters={"e": 1.5})
+    FMUComponent("b", fmu("BouncingBall"), 0.01, parameters={"e": 0.9})
