@@ -19,7 +19,6 @@ import argparse
 import contextlib
 import logging
 import math
-import signal
 import sys
 import time
 import zipfile
@@ -35,7 +34,11 @@ EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 
 # ---------------------------------------------------------------------------- argument types
-def _number(kind, low=None, what="value", strict=False):
+#: The longest ``models --duration`` [s] (1e5 steps of 0.01 s: a report of ten rows).
+MAX_MODELS_DURATION = 1000.0
+
+
+def _number(kind, low=None, what="value", strict=False, high=None):
     def parse(text: str):
         try:
             v = kind(text)
@@ -46,6 +49,8 @@ def _number(kind, low=None, what="value", strict=False):
             raise argparse.ArgumentTypeError(f"{what} must be finite, got {text!r}")
         if low is not None and (v <= low if strict else v < low):
             raise argparse.ArgumentTypeError(f"{what} must be {'>' if strict else '>='} {low}, got {text!r}")
+        if high is not None and v > high:
+            raise argparse.ArgumentTypeError(f"{what} must be at most {high:g}, got {text!r}")
         return v
     return parse
 
@@ -93,63 +98,72 @@ def _resolve_scenario(name: str) -> Path:
 
 def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
                   stream: bool | None = None, progress: bool | None = None) -> int:
-    from .core.component import StateEstimator
-    from .results import OutputFolder, atomic_write, plot_estimates, save_results
+    """Load and check the scenario, then (only then) take ``out`` and run it."""
+    import tempfile
+
+    from .results import OutputFolder
     from .scenario import Scenario
 
     if dry_run:
-        import tempfile
-
         with tempfile.TemporaryDirectory() as tmp:
             sc = Scenario.load(path, fmu_dir=Path(tmp) / "fmus")
             print(f"scenario: {sc.title or path.name}")
             print(sc.cosim.describe())
         return 0
-    import shutil
-    import tempfile
-
-    with OutputFolder(out, overwrite) as out, tempfile.TemporaryDirectory() as fmus:
+    with tempfile.TemporaryDirectory() as fmus:
         t0 = time.perf_counter()
-        sc = Scenario.load(path, fmu_dir=fmus)
-        print(f"scenario: {sc.title or path.name}")
-        stream = bool(sc.recording.get("stream", False)) if stream is None else stream
-        rec = {k: v for k, v in sc.recording.items() if k != "stream"}
-        try:
-            if stream:
-                result = sc.cosim.run_to_parquet(out / "results.parquet", sc.stop_time, sc.start_time,
-                                                 progress=progress, **rec)
-                print(f"\n{sc.stop_time:g} s simulated in {time.perf_counter() - t0:.2f} s; "
-                      f"wrote {result} (streamed)")
-                return 0
-            df = sc.cosim.run(sc.stop_time, sc.start_time, progress=progress, **rec)
-        except (PendulumCosimError, KeyboardInterrupt) as e:
-            partial = getattr(e, "results", None) if not isinstance(e, Interrupted) else e.partial
-            if partial is not None and hasattr(partial, "to_csv") and len(partial):
-                save_results(partial, out, "results.partial")
-                print(f"partial results ({len(partial)} rows) written to {out}/results.partial.*", file=sys.stderr)
-            raise
-        wall = time.perf_counter() - t0
-        paths = save_results(df, out)
-        if any(Path(fmus).iterdir()):            # keep the FMUs the scenario built
-            for fmu in Path(fmus).rglob("*.fmu"):
-                dst = out / "fmus" / fmu.relative_to(fmus)
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(fmu, dst)
-        ests = [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)]
-        table = _rmse_table(df, ests)
-        if len(table):
-            print("\nRMSE against the plant's true states:")
-            print(table.to_string(float_format=lambda v: f"{v:.4f}"))
-            paths.append(atomic_write(out / "rmse.csv", table.to_csv))
-        if sc.plot:
-            png = out / "truth_vs_estimate.png"
-            measured = [m or None for m in sc.plot.get("measured", [])] or None
-            plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
-            paths.append(png)
-        print(f"\n{len(df)} rows x {len(df.columns)} signals, {sc.stop_time:g} s simulated in {wall:.2f} s "
-              "(including FMU build)")
-        for p in paths:
-            print(f"wrote {p}")
+        sc = Scenario.load(path, fmu_dir=fmus)         # read and checked before --out is touched
+        with OutputFolder(out, overwrite) as folder:
+            return _run_loaded(sc, path, folder, Path(fmus), t0, stream, progress)
+
+
+def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool | None,
+                progress: bool | None) -> int:
+    """Run a loaded scenario into the held folder ``out``: results, partial results on
+    failure, the FMUs it built, the RMSE table and the plot."""
+    import shutil
+
+    from .core.component import StateEstimator
+    from .results import atomic_write, plot_estimates, save_results
+
+    print(f"scenario: {sc.title or path.name}")
+    stream = bool(sc.recording.get("stream", False)) if stream is None else stream
+    rec = {k: v for k, v in sc.recording.items() if k != "stream"}
+    try:
+        if stream:
+            result = sc.cosim.run_to_parquet(out / "results.parquet", sc.stop_time, sc.start_time,
+                                             progress=progress, **rec)
+            print(f"\n{sc.stop_time:g} s simulated in {time.perf_counter() - t0:.2f} s; "
+                  f"wrote {result} (streamed)")
+            return 0
+        df = sc.cosim.run(sc.stop_time, sc.start_time, progress=progress, **rec)
+    except (PendulumCosimError, KeyboardInterrupt) as e:
+        partial = getattr(e, "results", None) if not isinstance(e, Interrupted) else e.partial
+        if partial is not None and hasattr(partial, "to_csv") and len(partial):
+            save_results(partial, out, "results.partial")
+            print(f"partial results ({len(partial)} rows) written to {out}/results.partial.*", file=sys.stderr)
+        raise
+    wall = time.perf_counter() - t0
+    paths = save_results(df, out)
+    for fmu in fmus.rglob("*.fmu"):                 # keep the FMUs the scenario built
+        dst = out / "fmus" / fmu.relative_to(fmus)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(fmu, dst)
+    ests = [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)]
+    table = _rmse_table(df, ests)
+    if len(table):
+        print("\nRMSE against the plant's true states:")
+        print(table.to_string(float_format=lambda v: f"{v:.4f}"))
+        paths.append(atomic_write(out / "rmse.csv", table.to_csv))
+    if sc.plot:
+        png = out / "truth_vs_estimate.png"
+        measured = [m or None for m in sc.plot.get("measured", [])] or None
+        plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
+        paths.append(png)
+    print(f"\n{len(df)} rows x {len(df.columns)} signals, {sc.stop_time:g} s simulated in {wall:.2f} s "
+          "(including FMU build)")
+    for p in paths:
+        print(f"wrote {p}")
     return 0
 
 
@@ -186,9 +200,12 @@ def _export(args) -> int:
                 for note in result.notes:
                     print(f"note: {note}")
                 return 0
+            from .fmi.archive import read_description
+
             for n in names:
                 exported = comps[n].export_fmu(out, args.fmi_version)
-                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {args.fmi_version}.0, "
+                version = str(read_description(exported.path).fmiVersion)[:1]
+                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {version}.0, "
                       f"period {comps[n].period:g} s)")
                 if exported.note:
                     print(f"note: {exported.note}")
@@ -278,7 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("scenarios", help="list the shipped scenario files")
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
-    models.add_argument("--duration", type=_positive_float, default=5.0, help="simulated time [s] (default 5)")
+    models.add_argument("--duration", type=_number(float, 0, "the duration", strict=True, high=MAX_MODELS_DURATION),
+                        default=5.0, help=f"simulated time [s] (default 5, at most {MAX_MODELS_DURATION:g}: "
+                                          "the report prints ten rows of it)")
     from .experiments import EXPERIMENTS
 
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
@@ -347,10 +366,6 @@ def _known_errors() -> tuple:
     return tuple(errors)
 
 
-def _sigterm(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
     when interrupted).
@@ -373,20 +388,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
         return EXIT_ERROR
     args = build_parser().parse_args(argv)
-    previous = signal.getsignal(signal.SIGTERM)
-    in_main = True
-    try:
-        signal.signal(signal.SIGTERM, _sigterm)
-    except ValueError:            # not the main thread: leave SIGTERM alone
-        in_main = False
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
         logging.getLogger("cosim.fmu").setLevel(logging.INFO)
+    from fmu_models.signals import terminate_as_interrupt
+
     try:
-        return _dispatch(args)
+        with terminate_as_interrupt():
+            return _dispatch(args)
     except KeyboardInterrupt:
         print("interrupted (Ctrl-C or SIGTERM)", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SystemError as e:
+        # Ctrl-C or SIGTERM inside a native extension's callback (CasADi's DM.__array__)
+        # comes back as a SystemError whose cause is the KeyboardInterrupt
+        if isinstance(e.__cause__ or e.__context__, KeyboardInterrupt) and not args.debug:
+            print("interrupted (Ctrl-C or SIGTERM)", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        raise
     except Interrupted as e:
         if args.debug:
             raise
@@ -398,9 +417,6 @@ def main(argv: list[str] | None = None) -> int:
         text = " ".join(str(e).split()) or type(e).__name__
         print(f"error: {text}", file=sys.stderr)
         return EXIT_ERROR
-    finally:
-        if in_main:
-            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

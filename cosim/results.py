@@ -3,15 +3,15 @@
 Every file is written under a temporary name in its folder and renamed when complete
 (:func:`atomic_write`), so a reader, a crash or Ctrl-C never leaves a file that looks
 finished but is not. :class:`OutputFolder` refuses a non-empty folder unless asked to
-overwrite it (then clears it first) and locks it, so that two runs cannot write into
-one folder at once.
+overwrite it, and then clears only a previous result of this project (recognised by its
+marker file, which lists what it wrote), never anything else; it locks the folder, so that
+two runs cannot write into one folder at once.
 """
 from __future__ import annotations
 
 import contextlib
 import fcntl
 import os
-import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -19,7 +19,7 @@ import pandas as pd
 
 from fmu_models.errors import ConfigurationError
 
-__all__ = ["OutputFolder", "atomic_write", "plot_estimates", "save_results"]
+__all__ = ["MARKER", "OutputFolder", "atomic_write", "plot_estimates", "save_results"]
 
 
 def atomic_write(path, write: Callable[[Path], object]) -> Path:
@@ -54,45 +54,107 @@ def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]
 
     Returns the paths written.
     """
+    from fmu_models.errors import TypeMismatchError
+
+    if not isinstance(df, pd.DataFrame):
+        raise TypeMismatchError(f"save_results takes a pandas DataFrame, got {type(df).__name__}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigurationError(f"cannot create the folder {out}: {e.strerror or e}") from None
     return [atomic_write(out / f"{name}.csv", df.to_csv),
             atomic_write(out / f"{name}.parquet", df.to_parquet)]
 
 
+#: The file that marks a folder as a result of this project and lists what it wrote there.
+MARKER = ".pendulum-cosim-output"
+
+
+def _files_below(folder: Path) -> list[str]:
+    """Every file, symlink and folder below ``folder`` (not following links), as relative
+    POSIX paths, the marker excluded."""
+    out = []
+    for root, dirs, files in os.walk(folder, followlinks=False):
+        rel = Path(root).relative_to(folder)
+        for name in dirs + files:
+            path = (rel / name).as_posix()
+            if path != MARKER:
+                out.append(path)
+    return sorted(out)
+
+
 class OutputFolder:
     """An output folder held for one run: created, checked, optionally cleared, locked.
+
+    A folder is only ever cleared if it is a previous result of this project: the
+    :data:`MARKER` file this class writes lists every file the run wrote, and ``overwrite``
+    removes those and nothing else; a folder with anything else in it (the user's files,
+    the scenario itself) is refused with what is in it. Folders created for a run (parents
+    included) are removed again if the run wrote nothing.
 
     Parameters
     ----------
     path : path
         The folder.
     overwrite : bool
-        Clear a non-empty folder first (default False: refuse it).
+        Replace a previous result of this project in the folder (default False: refuse
+        any non-empty folder).
 
-    Use as a context manager; the lock (``flock`` on the folder) is released at exit, and
-    a folder this object created is removed again if nothing was written into it.
+    Use as a context manager; the lock (``flock`` on the folder) is released at exit.
 
     Raises
     ------
     ConfigurationError
-        ``path`` is a file, the folder is not empty and ``overwrite`` is False, another
-        run holds the folder, or it cannot be created or written.
+        ``path`` is a file, the folder is not empty and ``overwrite`` is False, it holds
+        files this project did not write, another run holds the folder, or it cannot be
+        created or written.
     """
 
     def __init__(self, path, overwrite: bool = False):
         self.path, self.overwrite = Path(path), bool(overwrite)
         self._fd: int | None = None
+        self._created: list[Path] = []
+        self._owned = False                    # the checks passed: what is written now is ours
+
+    def _refuse(self, message: str):
+        self.__exit__(None, None, None)
+        raise ConfigurationError(message)
+
+    def _manifest(self) -> set[str] | None:
+        """What a previous run of this project wrote here, or None (no or unreadable marker)."""
+        import json
+
+        try:
+            with open(self.path / MARKER, encoding="utf-8") as f:
+                data = json.load(f)
+        except (OSError, ValueError):
+            return None
+        files = data.get("files") if isinstance(data, dict) and data.get("tool") == "pendulum-cosim" else None
+        return set(files) if isinstance(files, list) and all(isinstance(x, str) for x in files) else None
+
+    def _write_marker(self, files: list[str], state: str) -> None:
+        import json
+
+        atomic_write(self.path / MARKER, lambda tmp: tmp.write_text(json.dumps(
+            {"tool": "pendulum-cosim", "state": state, "files": files}, indent=1), encoding="utf-8"))
 
     def __enter__(self) -> Path:
         p = self.path
         if p.exists() and not p.is_dir():
             raise ConfigurationError(f"--out {p} is a file, not a folder")
-        self._created = not p.exists()
+        missing = []
+        q = p.absolute()
+        while not q.exists():
+            missing.append(q)
+            q = q.parent
         try:
-            p.mkdir(parents=True, exist_ok=True)
+            for d in reversed(missing):
+                d.mkdir()
+                self._created.append(d)
             self._fd = os.open(p, os.O_RDONLY)
         except OSError as e:
+            self._remove_created()
             raise ConfigurationError(f"cannot create the output folder {p}: {e.strerror or e}") from None
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -101,31 +163,60 @@ class OutputFolder:
             self._fd = None
             raise ConfigurationError(f"another pendulum-cosim run is writing to {p}; wait for it or "
                                      "choose another --out") from None
-        content = list(p.iterdir())
-        if content and not self.overwrite:
-            self.__exit__(None, None, None)
-            raise ConfigurationError(f"the output folder {p} is not empty ({len(content)} entries, e.g. "
-                                     f"{content[0].name}); use --overwrite to replace its contents, or "
-                                     "another --out")
-        for entry in content:
-            if entry.is_dir() and not entry.is_symlink():
-                shutil.rmtree(entry)
-            else:
-                entry.unlink()
+        content = _files_below(p)
+        if content:
+            if not self.overwrite:
+                self._refuse(f"the output folder {p} is not empty ({len(content)} entries, e.g. {content[0]}); "
+                             "use --overwrite to replace a previous result of pendulum-cosim, or another --out")
+            ours = self._manifest()
+            foreign = content if ours is None else [f for f in content if f not in ours]
+            if foreign:
+                shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+                self._refuse(f"the output folder {p} holds files pendulum-cosim did not write ({shown}); "
+                             "--overwrite only replaces a previous result of pendulum-cosim; move them or "
+                             "choose another --out (nothing was removed)")
+            for rel in sorted(content, key=lambda f: -f.count("/")):      # files, then their folders
+                entry = p / rel
+                with contextlib.suppress(FileNotFoundError):
+                    if entry.is_dir() and not entry.is_symlink():
+                        entry.rmdir()
+                    else:
+                        entry.unlink()
         if not os.access(p, os.W_OK):
-            self.__exit__(None, None, None)
-            raise ConfigurationError(f"the output folder {p} is not writable")
+            self._refuse(f"the output folder {p} is not writable")
+        try:
+            self._write_marker([], "running")
+        except OSError as e:
+            self._refuse(f"cannot write into the output folder {p}: {e.strerror or e}")
+        self._owned = True
         return p
 
+    def _remove_created(self) -> None:
+        for d in reversed(self._created):
+            with contextlib.suppress(OSError):
+                d.rmdir()                      # only succeeds if nothing was written
+        self._created = []
+
     def __exit__(self, *exc) -> None:
-        if self._fd is not None:
-            if self._created:
+        if self._fd is None:
+            return
+        try:
+            files = _files_below(self.path) if self._owned else []
+            if files:
+                self._write_marker(files, "complete" if exc[0] is None else "failed")
+            elif self._owned:
                 with contextlib.suppress(OSError):
-                    self.path.rmdir()          # only succeeds if nothing was written
+                    (self.path / MARKER).unlink()
+            if not files:
+                self._remove_created()
+        except OSError:
+            pass
+        finally:
             with contextlib.suppress(OSError):
                 fcntl.flock(self._fd, fcntl.LOCK_UN)
             os.close(self._fd)
             self._fd = None
+            self._owned = False
 
 
 def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[str],

@@ -53,7 +53,6 @@ scenario file. Unknown tables and keys are refused with the valid ones named.
 from __future__ import annotations
 
 import inspect
-import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -269,18 +268,10 @@ class Scenario:
         ConfigurationError
             Missing file, a folder, not TOML, or any problem of the scenario itself.
         """
+        from . import tomlfile
+
         path = Path(path)
-        if path.is_dir():
-            raise ConfigurationError(f"{path} is a folder, not a scenario file (.toml)")
-        try:
-            with open(path, "rb") as f:
-                spec = tomllib.load(f)
-        except FileNotFoundError:
-            raise ConfigurationError(f"no scenario file {path}") from None
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigurationError(f"{path}: not valid TOML: {e}") from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise ConfigurationError(f"cannot read {path}: {e}") from None
+        spec = tomlfile.read(path, "scenario file")
         return cls(spec, path.parent, fmu_dir)
 
     def run(self):

@@ -269,15 +269,50 @@ def _bindings(element: ET.Element, where: str) -> list[tuple[str, object]]:
     return out
 
 
+def _number(text, what: str) -> float:
+    """An attribute as a finite float, or ConfigurationError naming ``what``."""
+    import math
+
+    try:
+        v = float(text)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"{what} must be a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise ConfigurationError(f"{what} must be finite, got {text!r}")
+    return v
+
+
+#: The largest SystemStructure.ssd read (checked before parsing; an SSD of a few hundred
+#: components is well under 1 MiB).
+MAX_SSD_BYTES = 16 * 2**20
+
+
+def _parse_ssd(ssd_file: Path) -> ET.Element:
+    """Parse the SSD, refusing an oversized one before reading it, in 1 MiB pieces (Ctrl-C
+    is seen between them)."""
+    size = ssd_file.stat().st_size
+    if size > MAX_SSD_BYTES:
+        raise FMUError(f"{ssd_file.name}: {size / 2**20:.0f} MiB, more than {MAX_SSD_BYTES // 2**20} MiB for a "
+                       "system structure description; refused before parsing")
+    parser = ET.XMLParser()
+    try:
+        with open(ssd_file, "rb") as f:
+            while chunk := f.read(1 << 20):
+                parser.feed(chunk)
+        return parser.close()
+    except ET.ParseError as e:
+        raise FMUError(f"{ssd_file.name}: not valid XML: {e}") from None
+
+
 def _period(comp: ET.Element, md, name: str) -> float:
     for a in comp.findall("ssd:Annotations/ssc:Annotation", NS):
         if a.get("type") == ANNOTATION:
             t = a.find(f"{{{_PC_NS}}}Timing")
             if t is not None and t.get("period"):
-                return float(t.get("period"))
+                return _number(t.get("period"), f"component {name!r}: the period of its {ANNOTATION} annotation")
     step = getattr(md.defaultExperiment, "stepSize", None) if md.defaultExperiment else None
     if step:
-        return float(step)
+        return _number(step, f"component {name!r}: its FMU's DefaultExperiment stepSize")
     raise ConfigurationError(f"component {name!r}: no sample period (no {ANNOTATION} annotation and no "
                              "DefaultExperiment stepSize in its FMU)")
 
@@ -317,10 +352,7 @@ def open_ssp(path) -> Iterator[SSPSystem]:
         ssd_file = path if path.name.endswith(".ssd") else root / "SystemStructure.ssd"
         if not ssd_file.is_file():
             raise FMUError(f"{path} holds no SystemStructure.ssd")
-        try:
-            tree = ET.parse(ssd_file).getroot()
-        except ET.ParseError as e:
-            raise FMUError(f"{ssd_file}: not valid XML: {e}") from None
+        tree = _parse_ssd(ssd_file)
         where = ssd_file.name
         system = tree.find("ssd:System", NS)
         if tree.tag != _q("ssd:SystemStructureDescription") or system is None:
@@ -334,6 +366,10 @@ def open_ssp(path) -> Iterator[SSPSystem]:
         components = []
         for comp in system.findall("ssd:Elements/ssd:Component", NS):
             cname, source = comp.get("name"), comp.get("source")
+            if not cname or not source:
+                raise ConfigurationError(f"{where}: a Component without {'a name' if not cname else 'a source'} "
+                                         f"({'source ' + repr(source) if source else 'name ' + repr(cname)}); "
+                                         "every Component needs name and source (its FMU)")
             kind = comp.get("type", "application/x-fmu-sharedlibrary")
             if kind != "application/x-fmu-sharedlibrary":
                 raise ConfigurationError(f"component {cname!r}: type {kind!r} is not an FMU")
@@ -358,8 +394,10 @@ def open_ssp(path) -> Iterator[SSPSystem]:
             wiring.append((f"{c.get('startElement')}.{c.get('startConnector')}",
                            f"{c.get('endElement')}.{c.get('endConnector')}"))
         exp = tree.find("ssd:DefaultExperiment", NS)
-        start = float(exp.get("startTime")) if exp is not None and exp.get("startTime") else None
-        stop = float(exp.get("stopTime")) if exp is not None and exp.get("stopTime") else None
+        start = _number(exp.get("startTime"), f"{where}: DefaultExperiment startTime") \
+            if exp is not None and exp.get("startTime") else None
+        stop = _number(exp.get("stopTime"), f"{where}: DefaultExperiment stopTime") \
+            if exp is not None and exp.get("stopTime") else None
         yield SSPSystem(Cosimulation(components, wiring), start, stop, tree.get("name", "system"))
     finally:
         if extraction is not None:

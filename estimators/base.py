@@ -638,7 +638,8 @@ class KalmanBase:
             innovation=cat["innov"].reshape(-1, ny) if kept else None, S=mats("S", ny, ny) if kept else None,
             K=mats("K", nx, ny) if kept else None, nis=nis,
             accepted=acc, mask=used & acc[:, None], us=us, Q=Qd, R=Rd, log_likelihood=loglik,
-            state_names=list(s.state_names), output_names=list(s.output_names), filter_name=self.name)
+            state_names=list(s.state_names), output_names=list(s.output_names), filter_name=self.name,
+            model=s.identity)
 
     @property
     def _initial_for_run(self) -> dict:

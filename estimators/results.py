@@ -50,6 +50,8 @@ class FilterRun:
         The model's names (columns of :meth:`to_frame`).
     filter_name : str
         The filter that produced the run (its ``name``).
+    model : str
+        The :attr:`~estimators.DiscreteModel.identity` of the model it ran on.
     """
 
     x: np.ndarray
@@ -69,6 +71,7 @@ class FilterRun:
     state_names: list = field(default_factory=list)
     output_names: list = field(default_factory=list)
     filter_name: str = ""
+    model: str = ""
 
     def __len__(self) -> int:
         """Number of steps ``N``."""

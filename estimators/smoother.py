@@ -85,6 +85,10 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
             run.us.shape[1] != filt.system.nu:
         raise ConfigurationError(f"this run was made by {run.filter_name or 'another filter'} on states "
                                  f"{run.state_names}, not by {filt.name} on {filt.system.state_names}")
+    if run.model and run.model != filt.system.identity:
+        raise ConfigurationError(f"this run was made on another model than {filt.name}'s ({filt.system!r}): "
+                                 "its period, parameters or equations differ; smooth it with the filter "
+                                 "that made it")
     N, nx = len(run.x) - 1, filt.system.nx
 
     def flat(a):                                    # (K, nx, nx) symmetric -> (K, nx*nx) rows

@@ -55,6 +55,19 @@ class DiscreteModel:
         self._H = ca.Function("jac_h", [x], [ca.densify(H)])
         self._compiled: dict = {}
 
+    @property
+    def identity(self) -> str:
+        """A digest of the model's equations, period and names: two models with the same
+        identity step identically (what :func:`~estimators.rts_smooth` checks a run
+        against)."""
+        if not hasattr(self, "_identity"):
+            import hashlib
+
+            text = "\n".join([str(self.fx), str(self.hx), repr(self.dt), *self.state_names, *self.input_names,
+                              *self.output_names])
+            self._identity = hashlib.sha1(text.encode()).hexdigest()[:16]
+        return self._identity
+
     def compiled(self, kind: str, key: tuple, backend: str, build):
         """The compiled object ``kind`` (``"step"``, ``"fold"``, ``"update"``, ``"batch"``,
         ``"rts"``, ``"em"``) of the filter configuration ``key`` with ``backend`` on this model,

@@ -4,6 +4,16 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders a failed build created, deepest first, if they are empty."""
+    for d in folders:
+        try:
+            d.rmdir()
+        except OSError:
+            return
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -12,6 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     from . import build_fmus, model_names
     from .errors import PendulumCosimError
     from .export.pack import FMI_VERSIONS
+    from .signals import terminate_as_interrupt
 
     parser = argparse.ArgumentParser(prog="python -m fmu_models",
                                      description="Build the plant FMUs from the CasADi models.")
@@ -24,12 +35,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="build only this model (repeatable; default: all)")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
+    out = Path(args.out)
+    created = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
     try:
-        paths = build_fmus(args.out, args.fmi_version, tuple(args.model or model_names()))
+        with terminate_as_interrupt():
+            paths = build_fmus(args.out, args.fmi_version, tuple(args.model or model_names()))
     except KeyboardInterrupt:
+        _remove_empty(created)
         print("interrupted: no FMU was left half-written", file=sys.stderr)
         return 130
     except (PendulumCosimError, OSError) as e:
+        _remove_empty(created)
         print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
     for p in paths:

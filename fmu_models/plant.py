@@ -266,8 +266,12 @@ class PlantModel:
         ``u`` is either one input vector held throughout, an array of shape
         ``(n_steps, nu)``, or a callable ``u(t) -> (nu,)`` evaluated at each step start.
         """
+        from .memory import check_fits
+
         substeps = check_method(method, substeps)
         n_steps = checks.positive_int(n_steps, "n_steps", minimum=0)
+        check_fits(8.0 * n_steps * (2 * self.nx + self.nu), f"simulating {n_steps} steps of {self.name}",
+                   "simulate fewer steps at a time")
         fn = self.sym.step(method, substeps)
         x = checks.vector(x0, self.nx, "initial state x0")
         dt = _check_dt(dt)
@@ -280,10 +284,6 @@ class PlantModel:
             if us.shape != (n_steps, self.nu) or not np.all(np.isfinite(us)):
                 raise InputError(f"input sequence must be finite with shape ({n_steps}, {self.nu}), "
                                  f"got {ua.shape}")
-        from .memory import check_fits
-
-        check_fits(8.0 * n_steps * (2 * self.nx + self.nu), f"simulating {n_steps} steps of {self.name}",
-                   "simulate fewer steps at a time")
         out = np.empty((n_steps + 1, self.nx))
         out[0] = x
         # CasADi's mapaccum folds the step natively, in chunks of at most CHUNK steps

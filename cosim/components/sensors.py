@@ -65,6 +65,8 @@ class Sensor(Component, kind="sensor"):
         if isinstance(signals, str):
             signals = [signals]
         signals = list(signals)
+        if not signals:
+            raise ConfigurationError(f"{name}: a sensor needs at least one signal to measure (signals is empty)")
         super().__init__(name, period, inputs=signals, outputs=[f"y_{s}" for s in signals])
         n = len(signals)
         self.noise_std = _per_channel(noise_std, n, "noise_std", name, positive=True)

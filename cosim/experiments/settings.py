@@ -9,19 +9,23 @@ rerun with ``--settings out/.../settings.toml``.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 import typing
 from collections.abc import Iterable
-from pathlib import Path
 
 from fmu_models.errors import ConfigurationError, UnknownNameError
 
-__all__ = ["apply_overrides", "check_common", "from_mapping", "load_settings", "to_toml"]
+__all__ = ["RECORD_BYTES_PER_STEP", "apply_overrides", "check_common", "from_mapping", "load_settings", "to_toml"]
+
+
+#: Bytes an experiment keeps per realisation and step (truth, measurements, each filter's
+#: estimate and variances), the basis of the cap on ``runs x steps``.
+RECORD_BYTES_PER_STEP = 512
 
 
 def check_common(settings) -> None:
     """Checks every experiment's settings share: ``runs`` an integer >= 1, ``seed`` an
-    integer >= 0, ``duration`` and ``T`` positive with at least one step, and every other
+    integer >= 0, ``duration`` and ``T`` positive with at least one step, the records of
+    ``runs x steps`` within memory (:data:`RECORD_BYTES_PER_STEP` each), and every other
     number finite."""
     import math
 
@@ -31,8 +35,14 @@ def check_common(settings) -> None:
     positive_int(settings.seed, "seed", minimum=0)
     positive(settings.duration, "duration")
     positive(settings.T, "T")
-    if round(settings.duration / settings.T) < 1:
+    steps = round(settings.duration / settings.T)
+    if steps < 1:
         raise ConfigurationError("duration must be at least one period T")
+    from fmu_models.memory import check_fits
+
+    check_fits(RECORD_BYTES_PER_STEP * settings.runs * (steps + 1),
+               f"the records of {settings.runs} realisations x {steps} steps (duration {settings.duration:g} s / "
+               f"T {settings.T:g} s)", "fewer runs or a shorter duration")
     for f in dataclasses.fields(settings):
         v = getattr(settings, f.name)
         if isinstance(v, float) and not math.isfinite(v):
@@ -47,9 +57,13 @@ def _field_types(cls) -> dict:
 def _parse(text: str):
     """A value from its command-line text: TOML syntax (``1e-3``, ``[1, 2]``, ``"eqs"``,
     ``true``), else the bare text as a string."""
+    from .. import tomlfile
+
     try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
+        return tomlfile.loads(f"v = {text}", "--set value")["v"]
+    except ConfigurationError as e:
+        if "nested" in str(e) or "MiB" in str(e):
+            raise
         return text
 
 
@@ -104,16 +118,9 @@ def apply_overrides(settings, overrides: Iterable[str]):
 
 def load_settings(settings, path):
     """``settings`` with the values of the TOML file ``path`` (a flat table of fields)."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise ConfigurationError(f"no settings file {path}") from None
-    except IsADirectoryError:
-        raise ConfigurationError(f"{path} is a folder, not a settings file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigurationError(f"{path}: not valid TOML: {e}") from None
+    from .. import tomlfile
+
+    data = tomlfile.read(path, "settings file")
     data.pop("experiment", None)
     return from_mapping(settings, data)
 

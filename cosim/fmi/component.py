@@ -337,7 +337,8 @@ class FMUComponent(Component, kind="fmu"):
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """A copy of the FMU file as ``<folder>/<name>.fmu``, with this component's
-        parameters and start values (``fmi_version`` does not apply: the file is kept)."""
+        parameters and start values. The file is copied as it is: ``fmi_version`` other
+        than the FMU's own is said in the note, not converted."""
         from fmu_models.export.pack import atomic_copy
 
         folder = Path(folder)
@@ -345,7 +346,10 @@ class FMUComponent(Component, kind="fmu"):
         dst = folder / f"{self.name}.fmu"
         atomic_copy(self.path, dst)
         note = ""
-        if self.interface == "me":
+        if fmi_version != self.version:
+            note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
+                    f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
+        elif self.interface == "me":
             note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
                     "importer may use its Co-Simulation interface")
         return ExportedFMU(dst, dict(self.settings), note)

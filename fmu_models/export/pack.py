@@ -161,7 +161,12 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
         raise ConfigurationError(f"core must be one of {CORES}, got {core!r}")
     cc = find_compiler()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
+                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
+                                 ) from None
     generic = ["core_api.h", "core_common.h", "wrapper_modes.h", "wrapper_common.h", f"{core}_core.h",
                f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
     with tempfile.TemporaryDirectory(prefix=f"{identifier}_") as tmp:

@@ -290,7 +290,7 @@ def test_open_ssp_refuses_bad_archives_and_cleans_up(tmp_path, seed000_ssp):
 
 def test_cli_export_fmu_and_ssp(tmp_path, capsys):
     assert main(["export-fmu", "seed000_cartpole", "--out", str(tmp_path / "f"), "--fmi-version", "3"]) == 0
-    assert sorted(p.name for p in (tmp_path / "f").iterdir()) == ["ekf.fmu", "mfiae.fmu"]
+    assert sorted(p.name for p in (tmp_path / "f").iterdir()) == [".pendulum-cosim-output", "ekf.fmu", "mfiae.fmu"]
     assert main(["export-fmu", "seed000_cartpole", "--out", str(tmp_path / "g"), "--component", "sensor"]) == 0
     assert main(["export-ssp", "seed000_cartpole", "--out", str(tmp_path / "s")]) == 0
     assert (tmp_path / "s" / "seed000_cartpole.ssp").is_file()
