@@ -318,6 +318,52 @@ def _(cp, dm, tmp):
     Cosimulation([Constant("c", 0.01, 1.0)], {}).run(1e12)
 
 
+class _NanAt:
+    """A component whose output turns NaN at ``at`` [s]."""
+
+    @staticmethod
+    def make(at: float):
+        from cosim import Component
+
+        class NanAt(Component):
+            def output(self, t, u):
+                return np.array([np.nan if t >= at - 1e-12 else 1.0])
+        return NanAt("b", 0.01, [], ["y"])
+
+
+@attempt("cosim-nan-in-the-last-step", "signal b.y is nan at t = 1 s")
+def _(cp, dm, tmp):
+    from cosim import Cosimulation
+    Cosimulation([_NanAt.make(1.0)], {}).run(1.0, progress=False)
+
+
+@attempt("cosim-nan-in-the-last-block-unrecorded", "signal b.y is nan between")
+def _(cp, dm, tmp):
+    from cosim import Constant, Cosimulation
+    Cosimulation([_NanAt.make(0.97), Constant("c", 0.01, 1.0)], {}).run(1.0, signals=["c.*"], output_interval=0.5)
+
+
+@attempt("fmu-whose-library-does-not-load", "cannot load")
+def _(cp, dm, tmp):
+    import os
+    import zipfile
+
+    from cosim import Cosimulation, FMUComponent
+    from fmu_models import build_fmu
+
+    good = build_fmu("cartpole", tmp / "good")
+    bad = tmp / "bad.fmu"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(bad, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            dst.writestr(item, b"not a shared library" if item.filename.endswith(".so") else data)
+    cwd = os.getcwd()
+    try:
+        Cosimulation([FMUComponent("p", bad, 0.01)], {}).run(0.02)
+    finally:
+        assert os.getcwd() == cwd                # fmpy's chdir undone
+
+
 @attempt("constant-nan", "value")
 def _(cp, dm, tmp):
     from cosim import Constant

@@ -187,6 +187,7 @@ SCENARIO_TRIES = [
     ("component-name-with-dot", _component("", base='name = "a.b"\nperiod = 0.01\nvalue = 1.0'), "name"),
     ("duplicate-names", GOOD + '\n[[component]]\nname = "c"\ntype = "constant"\nperiod = 0.01\nvalue = 2.0\n',
      "duplicate"),
+    ("component-name-non-ascii", _component("", base='name = "ëkf"\nperiod = 0.01\nvalue = 1.0'), "ASCII"),
     ("period-text", _component("", base='name = "c"\nperiod = "fast"\nvalue = 1.0'), "period"),
     ("period-inf", _component("", base='name = "c"\nperiod = inf\nvalue = 1.0'), "period"),
     ("value-list", _component("", base='name = "c"\nperiod = 0.01\nvalue = [1, 2]'), "value"),
