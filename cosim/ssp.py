@@ -270,16 +270,10 @@ def _bindings(element: ET.Element, where: str) -> list[tuple[str, object]]:
 
 
 def _number(text, what: str) -> float:
-    """An attribute as a finite float, or ConfigurationError naming ``what``."""
-    import math
+    """An attribute as a finite float, or a ConfigurationError naming ``what``."""
+    from fmu_models.checks import finite
 
-    try:
-        v = float(text)
-    except (TypeError, ValueError):
-        raise ConfigurationError(f"{what} must be a number, got {text!r}") from None
-    if not math.isfinite(v):
-        raise ConfigurationError(f"{what} must be finite, got {text!r}")
-    return v
+    return finite(text, what)
 
 
 #: The largest SystemStructure.ssd read (checked before parsing; an SSD of a few hundred
