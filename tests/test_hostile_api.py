@@ -364,6 +364,15 @@ def _(cp, dm, tmp):
         assert os.getcwd() == cwd                # fmpy's chdir undone
 
 
+@attempt("me-system-connections-not-a-table", "connections must be a table")
+def _(cp, dm, tmp):
+    from cosim import FMUComponent, MESystem
+    from fmu_models import build_fmu
+
+    plant = FMUComponent("p", build_fmu("cartpole", tmp / "f"), 0.01, interface="me")
+    MESystem("s", [plant], [("p.x", "p.F")], 0.01)
+
+
 @attempt("constant-nan", "value")
 def _(cp, dm, tmp):
     from cosim import Constant

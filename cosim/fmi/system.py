@@ -245,6 +245,9 @@ class MESystem(Component, kind="me_system"):
 
     # ------------------------------------------------------------------ description
     def _parse(self, name: str, connections: Mapping[str, str]) -> dict:
+        if not isinstance(connections, Mapping):
+            raise TypeMismatchError(f"{name}: connections must be a table {{\"member.input\" = \"member.output\"}}, "
+                                    f"got {type(connections).__name__}")
         out = {}
         for dst, src in connections.items():
             (dm, di), (sm, so) = _split(dst, f"{name}: input"), _split(src, f"{name}: output")
