@@ -8,7 +8,10 @@ noise and sensors) as
   ``resources/<name>.fmu``) with a connector per port, the connections, one system-level
   ``ParameterBinding`` holding every parameter and start value as ``<component>.<variable>``,
   the start and stop time as ``DefaultExperiment``, and each component's sample period in
-  an annotation (``type="org.pendulum-cosim"``), since SSP 1.0 has no place for it;
+  an annotation (``type="org.pendulum-cosim"``), since SSP 1.0 has no place for it; and the
+  communication step (the greatest common divisor of the periods) in OMSimulator's
+  vendor annotation on the System (``type="org.openmodelica"``, ``oms:FixedStepMaster``),
+  which OMSimulator reads instead of its default 1 ms step;
 * ``resources/<name>.fmu``: the FMUs;
 * ``<name>.ssp``: the same two as one archive (what most tools open).
 
@@ -42,6 +45,7 @@ from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.description import xml_attrs
 
 from .core.component import PORT_TYPES, ExportedFMU, ExportsFMU
+from .core.schedule import base_step
 from .fmi.archive import Extraction, read_description
 
 __all__ = ["SSPExport", "SSPSystem", "export_ssp", "open_ssp"]
@@ -52,6 +56,9 @@ NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
 #: Annotation type of the project's additions to the SSD (the components' periods).
 ANNOTATION = "org.pendulum-cosim"
 _PC_NS = "https://github.com/pendulum-cosim/ssp"
+#: OMSimulator's vendor annotation (its schema oms.xsd) holding the master's step size.
+OMS_ANNOTATION = "org.openmodelica"
+_OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 _SSP_TYPES = {"real": "Real", "integer": "Integer", "boolean": "Boolean"}
 
 
@@ -86,7 +93,7 @@ def _value_xml(kind: str, value) -> str:
 
 
 def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descriptions: dict, connections: dict,
-              start_time: float, stop_time: float | None, description: str) -> str:
+              start_time: float, stop_time: float | None, description: str, step_size: float) -> str:
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
              f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{_PC_NS}" version="1.0"{xml_attrs(name=name)}'
@@ -127,6 +134,16 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
             lines.append(f"      <ssd:Connection{xml_attrs(startElement=sc, startConnector=sp, endElement=dc)}"
                          f"{xml_attrs(endConnector=dp)}/>")
         lines.append("    </ssd:Connections>")
+    lines += ["    <ssd:Annotations>",
+              f'      <ssc:Annotation type="{OMS_ANNOTATION}">',
+              f'        <oms:Annotations xmlns:oms="{_OMS_NS}">',
+              "          <oms:SimulationInformation>",
+              f"            <oms:FixedStepMaster{xml_attrs(description='oms-ma', stepSize=repr(float(step_size)))}"
+              f"{xml_attrs(relativeTolerance='1e-4')}/>",
+              "          </oms:SimulationInformation>",
+              "        </oms:Annotations>",
+              "      </ssc:Annotation>",
+              "    </ssd:Annotations>"]
     lines += ["  </ssd:System>",
               f"  <ssd:DefaultExperiment{xml_attrs(startTime=repr(float(start_time)))}"
               f"{xml_attrs(stopTime=None if stop_time is None else repr(float(stop_time)))}/>",
@@ -194,7 +211,8 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
                     raise ConfigurationError(f"cannot export as an SSP: the FMU of {comp!r} has no {kind} {port!r} "
                                              f"(connection {sc}.{sp} -> {dc}.{dp}); its {kind}s: "
                                              f"{', '.join(sorted(have))}")
-        text = _ssd_text(name, cosim.components, exported, descriptions, cosim.connections, start, stop, title)
+        step = float(base_step({c.name: c.period for c in cosim.components})[0])
+        text = _ssd_text(name, cosim.components, exported, descriptions, cosim.connections, start, stop, title, step)
         (tmp / "SystemStructure.ssd").write_text(text, encoding="utf-8")
         archive = tmp / f"{name}.ssp"
         with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
@@ -223,12 +241,15 @@ class SSPSystem:
     start_time, stop_time : float or None
         From the SSD's ``DefaultExperiment``.
     name : str
+    step_size : float or None
+        The communication step of OMSimulator's annotation (``oms:FixedStepMaster``), if any.
     """
 
     cosim: object
     start_time: float | None
     stop_time: float | None
     name: str
+    step_size: float | None = None
 
     def run(self, stop_time: float | None = None, **kw):
         """Run to ``stop_time`` (default the SSD's) from the SSD's start time; keywords go
@@ -311,11 +332,24 @@ def _period(comp: ET.Element, md, name: str) -> float:
                              "DefaultExperiment stepSize in its FMU)")
 
 
+def _oms_step(system: ET.Element, where: str) -> float | None:
+    for a in system.findall("ssd:Annotations/ssc:Annotation", NS):
+        if a.get("type") == OMS_ANNOTATION:
+            master = a.find(f".//{{{_OMS_NS}}}FixedStepMaster")
+            if master is not None and master.get("stepSize"):
+                return _number(master.get("stepSize"), f"{where}: the stepSize of its {OMS_ANNOTATION} annotation")
+    return None
+
+
 @contextlib.contextmanager
-def open_ssp(path) -> Iterator[SSPSystem]:
+def open_ssp(path, communication_step: float | None = None) -> Iterator[SSPSystem]:
     """Open the SSP at ``path`` (a ``.ssp`` archive, its unpacked folder, or its
     ``SystemStructure.ssd``) as an :class:`SSPSystem`; a context manager that removes what
     it unpacked.
+
+    ``communication_step`` [s], if given, steps every FMU with that one step instead of its
+    own period, as a tool with a single fixed-step master does (the project's FMUs keep
+    their own sample instants under any step).
 
     Each ``Component`` becomes an :class:`~cosim.fmi.component.FMUComponent` with its
     connectors as ports, the parameter bindings (inline values, system or component
@@ -330,9 +364,13 @@ def open_ssp(path) -> Iterator[SSPSystem]:
         What this reader does not support (nested systems, parameter files or mappings,
         transformations, connections to the system's own connectors), named.
     """
+    from fmu_models.checks import positive
+
     from .core.master import Cosimulation
     from .fmi.component import FMUComponent
 
+    if communication_step is not None:
+        communication_step = positive(communication_step, "open_ssp: communication_step [s]")
     path = Path(path)
     extraction = None
     if path.is_dir():
@@ -374,7 +412,7 @@ def open_ssp(path) -> Iterator[SSPSystem]:
             conns = comp.findall("ssd:Connectors/ssd:Connector", NS)
             values = {**{k: v for k, v in _bindings(comp, where)}, **params.get(cname, {})}
             components.append(FMUComponent(
-                cname, fmu, _period(comp, md, cname),
+                cname, fmu, communication_step or _period(comp, md, cname),
                 inputs=[c.get("name") for c in conns if c.get("kind") == "input"],
                 outputs=[c.get("name") for c in conns if c.get("kind") == "output"],
                 parameters=values))
@@ -392,7 +430,8 @@ def open_ssp(path) -> Iterator[SSPSystem]:
             if exp is not None and exp.get("startTime") else None
         stop = _number(exp.get("stopTime"), f"{where}: DefaultExperiment stopTime") \
             if exp is not None and exp.get("stopTime") else None
-        yield SSPSystem(Cosimulation(components, wiring), start, stop, tree.get("name", "system"))
+        yield SSPSystem(Cosimulation(components, wiring), start, stop, tree.get("name", "system"),
+                        _oms_step(system, where))
     finally:
         if extraction is not None:
             extraction.close()

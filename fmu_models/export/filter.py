@@ -25,8 +25,21 @@ Variables (names from the model):
   ``Q0_<state>``, ``R0_<measurement>`` (diagonals; MF-IAE: ``q0``, ``r0``), and the step
   parameters (IAE and MF-IAE: ``q_min, q_max, r_min, r_max``; MF-IAE ``gain_q``, ``gain_r``).
 
-Timing: as :class:`~cosim.components.estimation.EstimatorComponent`; see ``filter_core.h``.
-One ``doStep`` is one filter step and must last the filter's period.
+Timing: the filter updates at its own sample instants ``t0 + k period`` whatever the
+communication step (``canHandleVariableCommunicationStepSize="true"``), as
+:class:`~cosim.components.estimation.EstimatorComponent` does at its period:
+
+* the update at ``t_k`` predicts with the input ``u`` as set at the last communication point
+  at or before ``t_(k-1)`` and updates with the measurements and ``valid_*`` flags as set at
+  the last communication point at or before ``t_k``;
+* at a communication point on an instant (within ``1e-6`` periods, against accumulated
+  rounding of ``t += h``) the outputs already show that instant's update from the
+  measurements set there (direct feedthrough, as in Python); a ``doStep`` over ``[t, t+h]``
+  performs the updates of the instants strictly inside it with the inputs held as set;
+* between instants the outputs hold the latest estimate; a step shorter than a period only
+  advances time.
+
+See ``c/filter_core.h``.
 """
 from __future__ import annotations
 
@@ -226,7 +239,7 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
                         variables=v.variables,
                         outputs=[Unknown(k, y_idx, ["dependent"] * len(y_idx)) for k in out_idx],
                         initial_unknowns=[Unknown(k, p_idx) for k in out_idx],
-                        variable_step=False, default_step=s.dt, source_files=c_files)
+                        variable_step=True, default_step=s.dt, source_files=c_files)
         return fmi2(d) if fmi_version == 2 else fmi3(d)
 
     return pack_fmu(name, "filter", fmi_version, generate, xml, out_dir,

@@ -303,3 +303,53 @@ def test_cli_export_fmu_and_ssp(tmp_path, capsys):
     assert main(["export-ssp", "seed000_cartpole", "--out", str(tmp_path / "s")]) == 2   # not empty
     assert "--overwrite" in capsys.readouterr().err
     assert main(["export-ssp", "seed000_cartpole", "--out", str(tmp_path / "s"), "--overwrite"]) == 0
+
+
+def test_the_ssd_carries_the_step_size_where_omsimulator_reads_it(seed000_ssp):
+    _, ssp = seed000_ssp
+    text = ssp.ssd.read_text()
+    assert ('<ssc:Annotation type="org.openmodelica">' in text
+            and '<oms:FixedStepMaster description="oms-ma" stepSize="0.01"' in text)
+    with open_ssp(ssp.archive) as system:
+        assert system.step_size == 0.01
+
+
+@pytest.mark.parametrize("h", [0.0025, 0.005, 0.01])
+def test_a_fixed_step_master_with_a_step_dividing_the_period_reproduces_the_scenario(seed000_ssp, h):
+    """Issue 19: the exported SSP, unedited, in a fixed-step Gauss-Seidel master with
+    OMSimulator's time keeping (t += h, a last step of 6e-14 s at h = 0.01) equals the
+    project's run at every sample instant: plant and estimates to 1e-12."""
+    from fixed_step_master import run_fixed_step
+
+    scenario, ssp = seed000_ssp
+    ref = scenario.run()
+    got = run_fixed_step(ssp.archive, h, 5.0)
+    k = got["time"] / 0.01
+    on = np.abs(k - np.round(k)) < 1e-6
+    idx = np.round(k[on]).astype(int)
+    assert len(np.unique(idx)) == 501 and (h != 0.01 or len(got["time"]) == 502)   # 500 + the 6e-14 s step
+    first = np.unique(idx, return_index=True)[1]          # the first row of each instant
+    cols = [c for c in ref.columns if c in got]
+    assert {"plant.x", "plant.theta", "ekf.x", "ekf.theta", "mfiae.x", "sensor.y_x"} <= set(cols)
+    for c in cols:
+        np.testing.assert_allclose(got[c][on][first], ref[c].to_numpy(), rtol=0, atol=1e-12, err_msg=c)
+
+
+@pytest.mark.parametrize("h", [0.02, 0.03])
+def test_a_fixed_step_master_with_a_multiple_of_the_period_equals_the_master_at_that_step(seed000_ssp, h):
+    """A step of several periods: every FMU keeps its own instants inside the step with
+    its inputs held; the independent master equals the project's master driving the same
+    SSP with that one communication step."""
+    from fixed_step_master import run_fixed_step
+
+    _, ssp = seed000_ssp
+    stop = 4.98 if h == 0.03 else 5.0
+    got = run_fixed_step(ssp.archive, h, stop)
+    with open_ssp(ssp.archive, communication_step=h) as system:
+        ours = system.run(stop)
+    keep = np.r_[True, np.diff(got["time"]) > 1e-9]      # not the row after a last 1e-13 s step
+    assert keep.sum() == len(ours)
+    cols = [c for c in ours.columns if c in got]
+    assert {"plant.x", "ekf.x", "mfiae.theta"} <= set(cols)
+    for c in cols:
+        np.testing.assert_allclose(got[c][keep], ours[c].to_numpy(), rtol=0, atol=1e-12, err_msg=c)

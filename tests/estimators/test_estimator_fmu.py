@@ -104,8 +104,8 @@ def test_bad_parameters_steps_and_inputs_are_refused_with_a_message(cp, tmp_path
     inst = Instance(str(path))
     inst.init()
     with pytest.raises(Exception):
-        inst.do_step(0.0, 0.02)
-    assert any("differs from the filter's period 0.01 s" in m for _, m in inst.messages)
+        inst.do_step(0.0, 1e6)
+    assert any("holds 1e+08 filter updates of 0.01 s, more than the limit" in m for _, m in inst.messages)
     with pytest.raises(Exception):
         inst.set("F", np.inf)
     assert any("F: value inf is not finite" in m for _, m in inst.messages)
@@ -163,3 +163,75 @@ def test_export_refusals(cp, tmp_path):
         export_filter_fmu(EKF(cp, X0, 1.0, np.full((4, 4), 0.01) + np.eye(4) * 0.1, 0.1), tmp_path)
     with pytest.raises(TypeError, match="needs a filter"):
         export_filter_fmu("EKF", tmp_path)
+
+
+STEP_PATTERNS = {"T/4": [0.0025], "T/2": [0.005], "T": [0.01], "2T": [0.02], "3T": [0.03],
+                 "mixed": [0.015, 0.005, 0.0025, 0.0075, 0.02, 0.01, 0.03]}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("pattern", list(STEP_PATTERNS))
+def test_estimator_fmu_updates_at_its_own_instants_for_any_communication_step(cp, tmp_path, pattern, version):
+    """Issue 19: with any communication step the FMU performs the update of every instant
+    t_k = k T, predicting with the input set at the last communication point at or before
+    t_(k-1) and updating with the measurement set at the last one at or before t_k; at a
+    communication point on an instant the output already shows that instant's update."""
+    rng = np.random.default_rng(3)
+    fine = 0.0025                                  # every communication point lies on this grid
+    n_fine = 481
+    u_fine = rng.uniform(-1, 1, n_fine)
+    y_fine = cp.h(np.array(X0))[None, :] + rng.normal(0, 0.3, (n_fine, 2))
+    points, t, i = [0.0], 0.0, 0
+    while t < 1.15:
+        t = round(t + STEP_PATTERNS[pattern][i % len(STEP_PATTERNS[pattern])], 10)
+        points.append(t)
+        i += 1
+    path = export_filter_fmu(EKF(cp, X0, 1.0, 0.2, 0.1), tmp_path, fmi_version=version)
+    assert validate_fmu(str(path)) == []
+    inst = Instance(str(path)).init()
+    ref, est = EKF(cp, X0, 1.0, 0.2, 0.1), {0: np.array(X0, float)}
+
+    def set_before(t_k):                           # the last communication point at or before t_k
+        return round(max(p for p in points if p <= t_k + 1e-9) / fine)
+
+    try:
+        for n, t in enumerate(points[:-1]):
+            j = round(t / fine)
+            inst.set("y_x", y_fine[j, 0])
+            inst.set("y_theta", y_fine[j, 1])
+            got = inst.get(*cp.state_names)
+            k_latest = int(np.floor(t / 0.01 + 1e-6))
+            while max(est) < k_latest:
+                k = max(est) + 1
+                est[k] = ref.step([u_fine[set_before((k - 1) * 0.01)]], y_fine[set_before(k * 0.01)])
+            np.testing.assert_allclose(got, est[k_latest], rtol=0, atol=1e-12, err_msg=f"t = {t}")
+            inst.set("F", u_fine[j])
+            inst.do_step(t, points[n + 1] - t)
+    finally:
+        inst.free()
+    assert max(est) >= 110
+
+
+def test_estimator_fmu_reaches_an_instant_after_accumulated_rounding(cp, seed000_record, tmp_path):
+    """OMSimulator's loop: t += 0.01 (t = 4.999999999999938 after 500 steps), then a last step
+    of 6.2e-14 s to 5.0: every update is made once, none twice, none refused."""
+    us, ys = seed000_record
+    path = export_filter_fmu(EKF(cp, X0, 1.0, 0.2, 0.1), tmp_path, fmi_version=2)
+    ref = EKF(cp, X0, 1.0, 0.2, 0.1)
+    expected = [ref.x] + [ref.step([us[k - 1]], ys[k]) for k in range(1, 501)]
+    inst = Instance(str(path)).init()
+    t, k = 0.0, 0
+    try:
+        while t < 5.0 - 1e-15:
+            for n, v in zip(cp.output_names, ys[k]):
+                inst.set(n, v)
+            np.testing.assert_allclose(inst.get(*cp.state_names), expected[k], rtol=0, atol=1e-12)
+            inst.set("F", us[k])
+            h = min(0.01, 5.0 - t)
+            inst.do_step(t, h)
+            t += h
+            k = min(k + 1, 500) if h > 1e-9 else k
+        assert t == 5.0 and k == 500
+        np.testing.assert_allclose(inst.get(*cp.state_names), expected[500], rtol=0, atol=1e-12)
+    finally:
+        inst.free()

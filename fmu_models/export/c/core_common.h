@@ -18,6 +18,27 @@ enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_UNIT
 
 #define IN_GROUP(r, base, n) ((r) >= (base) && (r) < (base) + (n))
 
+/* Sample instants t0 + k period of a sampled core (plant grid, filter, signal). A time within
+ * SAMPLE_TOL periods of an instant counts as that instant, so that a master that adds up
+ * t += h (OMSimulator: 4.999999999999938 after 500 steps of 0.01) still reaches it. */
+#define SAMPLE_TOL 1e-6
+
+/* The index of the latest instant at or before t (an instant within the tolerance counts). */
+static inline long long latest_instant(double t, double t0, double period) {
+    return (long long)floor((t - t0) / period + SAMPLE_TOL);
+}
+
+/* 1 if t is (within the tolerance) the instant k. */
+static inline int at_instant(double t, double t0, double period, long long k) {
+    return fabs((t - t0) / period - (double)k) <= SAMPLE_TOL;
+}
+
+/* 1 if instant k lies before t + h by more than the tolerance (strictly inside a step that
+ * ends at t + h). */
+static inline int before_end(double t_end, double t0, double period, long long k) {
+    return (double)k < (t_end - t0) / period - SAMPLE_TOL;
+}
+
 /* NULL if v is in the domain, else why not ("must be > 0", ...). */
 static inline const char *domain_violation(int domain, double v) {
     if (!isfinite(v)) return "is not finite";

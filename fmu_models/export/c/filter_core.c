@@ -38,7 +38,8 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     flt_init(wk->arg, wk->res, wk->iw, wk->w, 0);
     if (stamp[0] != 0) FAIL("the initial covariances are not valid (non-finite after the parameters' mapping)");
     memset(d->diag, 0, sizeof d->diag);
-    d->started = 0;
+    d->t0 = d->time;
+    d->kc = 0;
     d->cand_ok = 0;
     return 0;
 }
@@ -77,7 +78,7 @@ int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, doub
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_OUT, NOUT)) {
-            if (d->started) {
+            if (at_instant(d->time, d->t0, PERIOD, d->kc + 1)) {
                 if (candidate(wk, d, err)) return 1;
                 state = d->cand_state;
                 diag = d->cand_diag;
@@ -130,22 +131,35 @@ int core_set_bool(CoreData *d, const unsigned vr[], size_t n, const int v[], int
     return 0;
 }
 
+/* Commits the candidate (the update of instant kc + 1). */
+static int commit(CoreWork *wk, CoreData *d, char *err) {
+    if (candidate(wk, d, err)) return 1;
+    memcpy(d->state, d->cand_state, sizeof d->state);
+    memcpy(d->diag, d->cand_diag, sizeof d->diag);
+    d->kc += 1;
+    d->cand_ok = 0;
+    return 0;
+}
+
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
+    double t_end = t + h, updates;
     if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
     if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
         FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
-    if (fabs(h - PERIOD) > 1e-9 * PERIOD)
-        FAIL("communication step %g s differs from the filter's period %g s: one doStep is one filter step",
-             h, PERIOD);
-    if (d->started) {
-        if (candidate(wk, d, err)) return 1;
-        memcpy(d->state, d->cand_state, sizeof d->state);
-        memcpy(d->diag, d->cand_diag, sizeof d->diag);
+    updates = h / PERIOD;
+    if (!(updates <= (double)MAX_UPDATES))
+        FAIL("communication step %g s holds %.3g filter updates of %g s, more than the limit of %ld",
+             h, updates, PERIOD, MAX_UPDATES);
+    if (at_instant(t, d->t0, PERIOD, d->kc + 1) && commit(wk, d, err)) return 1;
+    /* the input of the latest instant predicts the next update */
+    if (at_instant(t, d->t0, PERIOD, d->kc)) memcpy(d->u_prev, d->u, sizeof d->u);
+    while (before_end(t_end, d->t0, PERIOD, d->kc + 1)) {
+        d->time = d->t0 + (double)(d->kc + 1) * PERIOD;      /* for the messages */
+        if (commit(wk, d, err)) { d->time = t; return 1; }
+        memcpy(d->u_prev, d->u, sizeof d->u);
     }
-    memcpy(d->u_prev, d->u, sizeof d->u);
-    d->started = 1;
     d->cand_ok = 0;
-    d->time = t + h;
+    d->time = t_end;
     return 0;
 }
 

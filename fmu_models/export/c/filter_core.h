@@ -6,12 +6,21 @@
  * that must be ordered); and where each input and output of the filter's compiled step
  * (flt_step) and initialisation (flt_init) lives in the buffers below (INIT_*, STEP_*, OUT_*).
  *
- * Timing (as the Python EstimatorComponent): at the start time the outputs are the initial
- * estimate; after that, reading an output at t computes, once per set of inputs, the step
- * predict(u held from the previous communication point) + update(y at t) as a candidate,
- * and doStep(t, h) commits it and keeps u for the next prediction. The estimate therefore
- * depends directly on y (and the valid flags), never on u at the same instant. The
- * communication step must equal the filter's period.
+ * Timing: the filter runs at its own sample instants t_k = t0 + k PERIOD (t0: the start
+ * time), whatever communication step the master takes. The update at t_k is the step
+ * predict(u as set at the last communication point at or before t_(k-1)) + update(y and the
+ * valid flags as set at the last communication point at or before t_k):
+ *   - at a communication point that is (within SAMPLE_TOL periods) an instant t_k not yet
+ *     committed, the outputs are that update computed from the inputs as set now (once per
+ *     set of inputs), so the estimate at t_k uses the measurement at t_k, as the Python
+ *     EstimatorComponent does; doStep from that point commits it;
+ *   - doStep(t, h) then performs the update of every instant strictly inside (t, t + h) with
+ *     the inputs held as set; an instant at t + h is left to the communication point t + h
+ *     (where the master may set the measurement of that instant first);
+ *   - between instants the outputs hold the latest estimate; a step shorter than a period
+ *     only advances time.
+ * At the start time the outputs are the initial estimate. The estimate depends directly on
+ * y (and the valid flags), never on u at the same instant.
  */
 #ifndef FILTER_CORE_H
 #define FILTER_CORE_H
@@ -28,6 +37,9 @@
 #define CORE_NX 0
 #define CORE_NAME "filter"
 
+/* Most filter updates in one doStep: a longer communication step is refused. */
+#define MAX_UPDATES 10000000L
+
 typedef struct {
     double time;                 /* s */
     double p[NP];                /* parameters */
@@ -35,7 +47,8 @@ typedef struct {
     double y[NY];                /* measurements: set now */
     int valid[NY];               /* measurement valid flags */
     double u_prev[NU];           /* input of the previous communication point */
-    int started;                 /* a doStep happened: outputs are step results */
+    double t0;                   /* s, the start time: instants t0 + k PERIOD */
+    long long kc;                /* the latest instant whose update is committed */
     int cand_ok;                 /* cand_* hold the step for the current inputs */
     double state[NSTATE];        /* the filter state (x, P, ...), committed */
     double fixed[NFIXED];        /* the step's fixed inputs, from the parameters */

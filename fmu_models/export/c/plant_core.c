@@ -17,8 +17,8 @@ void core_defaults(CoreData *d) {
     d->step_size = DEFAULT_STEP_SIZE;
 }
 
-static void plant_f(CoreWork *wk, const CoreData *d, const double *x, double *xdot) {
-    wk->arg[0] = x; wk->arg[1] = d->u; wk->arg[2] = d->p;
+static void plant_f(CoreWork *wk, const CoreData *d, const double *x, const double *u, double *xdot) {
+    wk->arg[0] = x; wk->arg[1] = u; wk->arg[2] = d->p;
     wk->res[0] = xdot;
     mdl_f(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
@@ -46,6 +46,8 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     if (check_parameters(d->p, d->ip, err)) return 1;
     for (int i = 0; i < NX; i++)
         if (!isfinite(d->x[i])) FAIL("start value of %s is not finite", VAR_NAMES[VR_X + i]);
+    d->t0 = d->time;
+    d->kg = 0;
     return 0;
 }
 
@@ -55,7 +57,7 @@ int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, doub
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_DX, NX)) {
-            if (!have_xdot) { plant_f(wk, d, d->x, xdot); have_xdot = 1; }
+            if (!have_xdot) { plant_f(wk, d, d->x, d->u, xdot); have_xdot = 1; }
             v[i] = xdot[r - VR_DX];
         } else if (IN(r, VR_Y, NY)) {
             if (!have_y) { plant_h(wk, d, y); have_y = 1; }
@@ -102,7 +104,7 @@ CORE_INT_PARAMETERS(d->ip)
 CORE_NO_BOOLEANS
 
 int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {
-    plant_f(wk, d, d->x, dx);
+    plant_f(wk, d, d->x, d->u, dx);
     for (int i = 0; i < NX; i++)
         if (!isfinite(dx[i])) FAIL("der(%s) is not finite", VAR_NAMES[VR_X + i]);
     return 0;
@@ -149,51 +151,55 @@ int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size
     return 0;
 }
 
-/* One step of length T on x (in place). Same arithmetic as PlantModel.step. */
-static void one_step(CoreWork *wk, const CoreData *d, double T, double *x) {
+/* One step of length T on x (in place) with input u. Same arithmetic as PlantModel.step. */
+static void one_step(CoreWork *wk, const CoreData *d, double T, const double *u, double *x) {
     double k1[NX], k2[NX], k3[NX], k4[NX], z[NX];
-    plant_f(wk, d, x, k1);
+    plant_f(wk, d, x, u, k1);
     if (INTEGRATOR(d) == INTEGRATOR_EULER) {
         for (int i = 0; i < NX; i++) x[i] = x[i] + T * k1[i];
         return;
     }
     for (int i = 0; i < NX; i++) z[i] = x[i] + (T / 2) * k1[i];
-    plant_f(wk, d, z, k2);
+    plant_f(wk, d, z, u, k2);
     for (int i = 0; i < NX; i++) z[i] = x[i] + (T / 2) * k2[i];
-    plant_f(wk, d, z, k3);
+    plant_f(wk, d, z, u, k3);
     for (int i = 0; i < NX; i++) z[i] = x[i] + T * k3[i];
-    plant_f(wk, d, z, k4);
+    plant_f(wk, d, z, u, k4);
     for (int i = 0; i < NX; i++) x[i] = x[i] + (T / 6) * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
 }
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
-    double x[NX];
-    double T = d->step_size / (double)SUBSTEPS(d);
-    double ratio, n, rest = 0.0;
+    double x[NX], T = d->step_size, t_end = t + h, ratio;
+    long long last, k;
     if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
     if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
         FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
-    ratio = h / T;
+    ratio = h / T * (double)SUBSTEPS(d);
     if (!(ratio <= (double)MAX_INTERNAL_STEPS))
         FAIL("communication step %g s needs %.3g internal steps of %g s, more than the limit of %ld: "
-             "use shorter communication steps or a longer step_size", h, ratio, T, MAX_INTERNAL_STEPS);
-    n = floor(ratio + 0.5);
-    /* a communication step that is not a whole number of internal steps ends with a
-     * partial step of the remaining length */
-    if (fabs(ratio - n) > 1e-9 * fmax(1.0, ratio)) {
-        n = floor(ratio);
-        rest = h - n * T;
+             "use shorter communication steps or a longer step_size", h, ratio, T / (double)SUBSTEPS(d),
+             MAX_INTERNAL_STEPS);
+    /* the inputs as set at the grid instant drive its step (see plant_core.h) */
+    if (at_instant(t, d->t0, T, d->kg)) {
+        memcpy(d->u_g, d->u, sizeof(double) * NU);
+        memcpy(d->w_g, d->w, sizeof d->w_g);
     }
+    last = latest_instant(t_end, d->t0, T);
     memcpy(x, d->x, sizeof(x));
-    for (long k = 0; k < (long)n; k++) one_step(wk, d, T, x);
-    if (rest > 0) one_step(wk, d, rest, x);
-    for (int i = 0; i < NX; i++) {
-        x[i] += d->w[i];
-        if (!isfinite(x[i]))
-            FAIL("the state became non-finite (%s) in the step from t = %g s to %g s; state kept at t = %g s",
-                 VAR_NAMES[VR_X + i], t, t + h, t);
+    for (k = d->kg; k < last; k++) {
+        for (long s = 0; s < (long)SUBSTEPS(d); s++) one_step(wk, d, T / (double)SUBSTEPS(d), d->u_g, x);
+        for (int i = 0; i < NX; i++) {
+            x[i] += d->w_g[i];
+            if (!isfinite(x[i]))
+                FAIL("the state became non-finite (%s) in the step from t = %g s to %g s; state kept at t = %g s",
+                     VAR_NAMES[VR_X + i], d->t0 + (double)k * T, d->t0 + (double)(k + 1) * T, t);
+        }
+        /* later instants inside this communication step: the inputs as held */
+        memcpy(d->u_g, d->u, sizeof(double) * NU);
+        memcpy(d->w_g, d->w, sizeof d->w_g);
     }
     memcpy(d->x, x, sizeof(x));
-    d->time = t + h;
+    if (last > d->kg) d->kg = last;
+    d->time = t_end;
     return 0;
 }

@@ -27,6 +27,15 @@
 enum { INTEGRATOR_EULER = 1, INTEGRATOR_RK4 = 2 };
 #define INTEGRATOR(d) ((int)(d)->ip[IP_INTEGRATOR])
 #define SUBSTEPS(d) ((d)->ip[IP_SUBSTEPS])
+/* Co-Simulation timing: the state advances on the grid t0 + k step_size alone, whatever the
+ * communication step: doStep(t, h) performs the step of every grid instant in (t, t + h]
+ * (an instant within SAMPLE_TOL of t + h counts as reached), each step from instant k driven
+ * by u and w as set at the last communication point at or before instant k, made of
+ * `substeps` integrator steps of step_size / substeps, w added after it. Between grid
+ * instants the outputs hold the state of the latest instant; a communication step shorter
+ * than step_size only advances time. The run therefore equals the plant's discrete map at
+ * step_size for any communication step that divides step_size or is a multiple of it. */
+
 /* Most internal integration steps in one doStep: a larger communication step is refused
  * (an error instead of a call that never returns). */
 #define MAX_INTERNAL_STEPS 10000000L
@@ -39,7 +48,12 @@ typedef struct {
     long long ip[NIP];           /* integrator (INTEGRATOR_EULER or INTEGRATOR_RK4), substeps */
     double x[NX];                /* continuous states */
     double u[NU];                /* inputs */
-    double w[NX];                /* additive process noise, applied at the end of doStep */
+    double w[NX];                /* additive process noise, added after each step of step_size */
+    /* Co-Simulation: the plant is a sampled system on the grid t0 + k step_size */
+    double t0;                   /* s, the start time */
+    long long kg;                /* the grid instant the state x belongs to */
+    double u_g[NU > 0 ? NU : 1]; /* the input and the noise as set at the last communication */
+    double w_g[NX];              /* point at or before grid instant kg (they drive its step) */
 } CoreData;
 
 /* CasADi work memory for the generated functions. */

@@ -40,7 +40,7 @@ static double counter_normal(uint64_t seed, long long k, int c) {
 }
 
 /* round half to even, as numpy.rint */
-static long long sample_index(const CoreData *d) { return (long long)nearbyint(d->time / d->p[P_PERIOD]); }
+static long long sample_index(const CoreData *d) { return (long long)nearbyint(d->ts / d->p[P_PERIOD]); }
 #endif
 
 #if SIGNAL_KIND == KIND_PRBS
@@ -69,13 +69,15 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
 #if SIGNAL_KIND == KIND_PRBS
     prbs_fill(d);
 #endif
+    d->t0 = d->time;
+    d->ts = d->time;
     return 0;
 }
 
 /* Output channel j at the current time. */
 static double output(const CoreData *d, int j) {
     const double *p = d->p;
-    double t = d->time;
+    double t = d->ts;
     (void)j; (void)t;
 #if SIGNAL_KIND == KIND_CONSTANT
     return p[P_VALUE];
@@ -98,13 +100,19 @@ static double output(const CoreData *d, int j) {
 #endif
 }
 
+/* 1 if the time is (within the tolerance) a sample instant. */
+static int on_instant(const CoreData *d) {
+    double P = d->p[P_PERIOD];
+    return at_instant(d->time, d->t0, P, latest_instant(d->time, d->t0, P));
+}
+
 int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
     (void)wk;
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_OUT, NCH)) v[i] = output(d, (int)(r - VR_OUT));
         else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
-        else if (IN(r, VR_IN, NIN)) v[i] = d->in[r - VR_IN];
+        else if (IN(r, VR_IN, NIN)) v[i] = d->in_set[r - VR_IN];
         else if (r == VR_TIME) v[i] = d->time;
         else FAIL("no Real variable has value reference %u", r);
     }
@@ -117,7 +125,9 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
         if (IN(r, VR_P, NP)) {
             if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
         } else if (IN(r, VR_IN, NIN)) {
-            d->in[r - VR_IN] = v[i];          /* a sensor passes NaN and inf on */
+            /* a sensor passes NaN and inf on; between instants the held sample stays */
+            d->in_set[r - VR_IN] = v[i];
+            if (before_run || on_instant(d)) d->in[r - VR_IN] = v[i];
         } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
     }
     return 0;
@@ -128,11 +138,21 @@ CORE_INT_PARAMETERS(d->ip)
 CORE_NO_BOOLEANS
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
+    double P = d->p[P_PERIOD], t_end = t + h;
+    long long k_end;
     (void)wk;
     if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
     if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
         FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
-    d->time = t + h;
+    k_end = latest_instant(t_end, d->t0, P);
+    if (at_instant(t_end, d->t0, P, k_end)) {
+        d->ts = t_end;                           /* on an instant: the inputs set there count */
+        memcpy(d->in, d->in_set, sizeof d->in);
+    } else if (k_end > latest_instant(t, d->t0, P)) {
+        d->ts = d->t0 + (double)k_end * P;       /* an instant inside the step: inputs as held */
+        memcpy(d->in, d->in_set, sizeof d->in);
+    }
+    d->time = t_end;
     return 0;
 }
 

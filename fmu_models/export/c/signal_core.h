@@ -4,8 +4,14 @@
  * model_config.h (the schema of fmu_models.export.config, written by fmu_models.export.signal):
  * groups P (Real parameters, `period` first), IP (Integer parameters), IN (the sensor's
  * inputs), OUT (one output per channel), TIME; SIGNAL_KIND; and for the noise and the
- * sensor the first indices of the per-channel parameters in P: SIG_STD, SIG_BIAS, SIG_QUANT. Every output at time t is a function of t (and, for the sensor, of its
- * inputs at t) alone, so doStep only advances the time; any step size is accepted.
+ * sensor the first indices of the per-channel parameters in P: SIG_STD, SIG_BIAS, SIG_QUANT.
+ *
+ * Timing: a signal is sampled at its instants t0 + k period (t0: the start time) and held
+ * between them, as the master holds a component's outputs, whatever the communication step.
+ * At a communication point on an instant (within SAMPLE_TOL periods) the outputs are the
+ * function of that time and of the inputs as set now (a sensor's direct feedthrough); after
+ * a doStep that ends between instants they hold the value of the latest instant, computed
+ * from the inputs as held at it. Any step size is accepted.
  *
  * Noise (documented generator, equal to cosim.noise.counter_normal): channel c at sample
  * k = round(t / period) draws words i = 2 (k NCH + c) and i + 1 of SplitMix64 seeded with
@@ -41,7 +47,10 @@ typedef struct {
     double time;                      /* s */
     double p[NP];                     /* Real parameters */
     long long ip[NIP > 0 ? NIP : 1];  /* Integer parameters */
-    double in[NIN > 0 ? NIN : 1];     /* inputs (sensor) */
+    double in[NIN > 0 ? NIN : 1];     /* inputs (sensor) at the sample the outputs show */
+    double in_set[NIN > 0 ? NIN : 1]; /* inputs as set by the master */
+    double t0;                        /* s, the start time: instants t0 + k period */
+    double ts;                        /* s, the sample time the outputs show */
 #if SIGNAL_KIND == KIND_PRBS
     int nbits;
     unsigned char bits[PRBS_MAX_BITS];
