@@ -171,11 +171,16 @@ def _export(args) -> int:
     """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
     import tempfile
 
+    from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
+
     from .core.component import ExportsFMU, StateEstimator
     from .results import OutputFolder
     from .scenario import Scenario
     from .ssp import export_ssp
 
+    platforms = parse_platforms(args.platforms)
+    if platforms:
+        zig_command()                              # a missing extra is named before anything is written
     path = _resolve_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as fmus:
         sc = Scenario.load(path, fmu_dir=fmus)
@@ -194,7 +199,8 @@ def _export(args) -> int:
                                          "form")
         with OutputFolder(Path(args.out), args.overwrite) as out:
             if args.command == "export-ssp":
-                result = export_ssp(sc, out, fmi_version=args.fmi_version, name=args.name or path.stem)
+                result = export_ssp(sc, out, fmi_version=args.fmi_version, name=args.name or path.stem,
+                                    platforms=platforms)
                 print(f"wrote {result.archive} (and {result.ssd.name}, resources/ beside it): "
                       f"{len(result.fmus)} FMUs, FMI {args.fmi_version}.0")
                 for note in result.notes:
@@ -204,11 +210,12 @@ def _export(args) -> int:
 
             for n in names:
                 exported = comps[n].export_fmu(out, args.fmi_version)
+                notes = add_platforms(exported.path, platforms) if platforms else []
                 version = str(read_description(exported.path).fmiVersion)[:1]
                 print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {version}.0, "
                       f"period {comps[n].period:g} s)")
-                if exported.note:
-                    print(f"note: {exported.note}")
+                for note in ([exported.note] if exported.note else []) + notes:
+                    print(f"note: {note}")
     return 0
 
 
@@ -330,6 +337,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--out", required=True, help="output directory")
         p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
         p.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
+        p.add_argument("--platforms", metavar="LIST",
+                       help="also build binaries for these platforms (comma-separated: linux64,win64,darwin,"
+                            "aarch64-linux); needs pip install -e '.[cross]'")
     efmu.add_argument("--component", action="append", metavar="NAME",
                       help="component to export (repeatable; default: every estimator)")
     essp.add_argument("--name", help="system name and archive name (default: the scenario file's name)")

@@ -36,13 +36,14 @@ import contextlib
 import os
 import tempfile
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.description import xml_attrs
+from fmu_models.export.platforms import add_platforms
 
 from .core.component import PORT_TYPES, ExportedFMU, ExportsFMU
 from .core.schedule import base_step
@@ -152,7 +153,7 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
 
 
 def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
-               stop_time: float | None = None) -> SSPExport:
+               stop_time: float | None = None, platforms: Sequence[str] = ()) -> SSPExport:
     """Write a scenario (or a co-simulation) as an SSP into ``out_dir``.
 
     Parameters
@@ -170,6 +171,9 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         System name and archive name (default ``system``).
     stop_time : float, optional
         The ``DefaultExperiment`` stop time (default the scenario's).
+    platforms : sequence of str, optional
+        Platforms to cross-compile every FMU for besides this one
+        (:func:`fmu_models.export.platforms.add_platforms`; needs the ``cross`` extra).
 
     Raises
     ------
@@ -203,6 +207,13 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
                 refused.append(str(e))
         if refused:
             raise ConfigurationError("cannot export as an SSP: " + "; ".join(refused))
+        platform_notes = []
+        for n, e in exported.items():
+            if platforms:
+                try:
+                    platform_notes += add_platforms(e.path, platforms)
+                except FMUError as err:
+                    raise FMUError(f"component {n!r}: {err}") from None
         descriptions = {n: read_description(e.path) for n, e in exported.items()}
         for (dc, dp), (sc, sp) in cosim.connections.items():
             for comp, port, kind in ((sc, sp, "output"), (dc, dp, "input")):
@@ -226,7 +237,7 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         os.replace(archive, out_dir / f"{name}.ssp")
     return SSPExport(out_dir / "SystemStructure.ssd", out_dir / f"{name}.ssp",
                      {c.name: out_dir / "resources" / f"{c.name}.fmu" for c in cosim.components},
-                     [e.note for e in exported.values() if e.note])
+                     [e.note for e in exported.values() if e.note] + platform_notes)
 
 
 # ---------------------------------------------------------------------------- reading

@@ -1,4 +1,6 @@
-"""``python -m fmu_models build --out DIR [--fmi-version 2] [--model NAME]``: build the plant FMUs."""
+"""``python -m fmu_models build --out DIR [--fmi-version 2] [--model NAME] [--platforms LIST]``:
+build the plant FMUs (``--platforms linux64,win64,darwin,aarch64-linux`` adds cross-compiled
+binaries, see :mod:`fmu_models.export.platforms`)."""
 from __future__ import annotations
 
 import argparse
@@ -22,6 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     from . import build_fmus, model_names
     from .errors import PendulumCosimError
     from .export.pack import FMI_VERSIONS
+    from .export.platforms import PLATFORMS, add_platforms, parse_platforms
     from .signals import terminate_as_interrupt
 
     parser = argparse.ArgumentParser(prog="python -m fmu_models",
@@ -33,13 +36,23 @@ def main(argv: list[str] | None = None) -> int:
                    help="FMI version, 2 (default) or 3; both hold Model Exchange and Co-Simulation")
     b.add_argument("--model", action="append", choices=model_names(),
                    help="build only this model (repeatable; default: all)")
+    b.add_argument("--platforms", metavar="LIST",
+                   help=f"also build binaries for these platforms (comma-separated: {','.join(PLATFORMS)}); "
+                        "needs pip install -e '.[cross]'")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     out = Path(args.out)
     created = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
+    notes: list[str] = []
     try:
         with terminate_as_interrupt():
+            platforms = parse_platforms(args.platforms)
+            if platforms:
+                from .export.platforms import zig_command
+                zig_command()                      # a missing extra is named before anything is built
             paths = build_fmus(args.out, args.fmi_version, tuple(args.model or model_names()))
+            for p in paths:
+                notes += add_platforms(p, platforms) if platforms else []
     except KeyboardInterrupt:
         _remove_empty(created)
         print("interrupted: no FMU was left half-written", file=sys.stderr)
@@ -50,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     for p in paths:
         print(p)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
     print(f"built {len(paths)} FMU(s) in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
     return 0
 

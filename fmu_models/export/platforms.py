@@ -1,0 +1,390 @@
+"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources.
+
+:func:`add_platforms` compiles the ``sources/`` an FMU of this project ships (the files its
+``modelDescription.xml`` or ``buildDescription.xml`` lists) for each requested platform
+with zig's clang (the ``ziglang`` package, ``pip install -e '.[cross]'``), checks every
+binary (:func:`check_binary`) and adds them to the FMU, laid out as the standard asks:
+
+============== ============================== =====================================
+platform       FMI 2.0                        FMI 3.0
+============== ============================== =====================================
+linux64        ``binaries/linux64/*.so``      ``binaries/x86_64-linux/*.so``
+win64          ``binaries/win64/*.dll``       ``binaries/x86_64-windows/*.dll``
+darwin         ``binaries/darwin64/*.dylib``  ``binaries/x86_64-darwin/*.dylib`` and
+               (one universal Intel +         ``binaries/aarch64-darwin/*.dylib``
+               Apple-silicon file)
+aarch64-linux  (FMI 2.0 has no folder: left   ``binaries/aarch64-linux/*.so``
+               out with a note)
+============== ============================== =====================================
+
+The platform the FMU was built on keeps its native binary. Flags: ``-O2 -std=c99
+-fvisibility=hidden -ffp-contract=off`` (no fused multiply-add: the results equal the
+x86-64 build's), Linux targets against glibc 2.17, macOS 11.0 and later, Windows against
+the Universal C runtime; CasADi's ``CASADI_SYMBOL_EXPORT`` is emptied so that only the FMI
+functions are exported. zig's Apple-silicon code carries zig's ad-hoc signature: the
+universal file keeps each slice's bytes unchanged, so the signature holds.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import re
+import shutil
+import struct
+import sys
+import tempfile
+import zipfile
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+from ..cache import cached_file, writable_cache
+from ..compiler import run_compiler
+from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
+
+__all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_platforms", "zig_command"]
+
+#: The platforms ``--platforms`` accepts.
+PLATFORMS = ("linux64", "win64", "darwin", "aarch64-linux")
+_INSTALL = "pip install -e '.[cross]' (or: pip install 'ziglang>=0.11' lief)"
+_COMMON = ("-shared", "-O2", "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
+
+
+@dataclass(frozen=True)
+class _Target:
+    zig: str                      # zig's -target
+    flags: tuple[str, ...]        # besides _COMMON
+    suffix: str
+    fmi3: str                     # the FMI 3.0 binaries folder
+    fmi2: str | None              # the FMI 2.0 folder (None: the standard has none)
+    fmt: str                      # what check_binary expects: ELF, PE or MachO
+    arch: str                     # x86_64 or aarch64
+
+
+_LINUX = ("-fPIC", "-s", "-lm")
+_TARGETS = {
+    "linux64": (_Target("x86_64-linux-gnu.2.17", _LINUX, ".so", "x86_64-linux", "linux64", "ELF", "x86_64"),),
+    "win64": (_Target("x86_64-windows-gnu", ("-DCASADI_SYMBOL_EXPORT=", "-s"), ".dll", "x86_64-windows", "win64",
+                      "PE", "x86_64"),),
+    "darwin": (_Target("x86_64-macos.11.0", ("-fPIC", "-s"), ".dylib", "x86_64-darwin", "darwin64", "MachO",
+                       "x86_64"),
+               _Target("aarch64-macos.11.0", ("-fPIC", "-s"), ".dylib", "aarch64-darwin", "darwin64", "MachO",
+                       "aarch64")),
+    "aarch64-linux": (_Target("aarch64-linux-gnu.2.17", _LINUX, ".so", "aarch64-linux", None, "ELF", "aarch64"),),
+}
+#: Symbols Apple's linker defines in every dylib (not the FMU's own).
+_MACHO_LINKER = frozenset({"__dso_handle", "_mh_dylib_header"})
+#: Shared libraries a binary may import (the system's C library and runtime).
+_SYSTEM_LIBRARIES = {
+    "ELF": re.compile(r"^(libc\.so\.6|libm\.so\.6|ld-linux[-\w.]*\.so\.\d)$"),
+    "PE": re.compile(r"^(kernel32\.dll|api-ms-win-crt-[\w-]+\.dll|ucrtbase\.dll)$", re.IGNORECASE),
+    "MachO": re.compile(r"^/usr/lib/libSystem\.B\.dylib$"),
+}
+
+
+def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
+    """The platforms of ``--platforms`` (``"linux64,win64"`` or a sequence), checked;
+    ``()`` for none.
+
+    Raises
+    ------
+    ConfigurationError
+        An unknown or repeated name (the known ones are listed).
+    """
+    if text is None:
+        return ()
+    names = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
+    bad = [n for n in names if n not in PLATFORMS]
+    if bad or not names:
+        raise ConfigurationError(f"unknown platform(s) {', '.join(map(repr, bad)) or '(none given)'}: "
+                                 f"choose from {', '.join(PLATFORMS)} (comma-separated)")
+    if len(set(names)) != len(names):
+        raise ConfigurationError(f"platform listed twice in {','.join(names)}")
+    return tuple(names)
+
+
+def zig_command() -> list[str]:
+    """The cross-compiler command (``python -m ziglang cc``).
+
+    Raises
+    ------
+    CompilerNotFoundError
+        The ``ziglang`` package (or ``lief``, which checks the binaries) is not installed;
+        the message says what to install.
+    """
+    import importlib.util
+
+    missing = [m for m in ("ziglang", "lief") if importlib.util.find_spec(m) is None]
+    if missing:
+        raise CompilerNotFoundError(f"building for other platforms needs the package(s) {', '.join(missing)} "
+                                    f"(the cross-compiler and the binary checker): {_INSTALL}")
+    return [sys.executable, "-m", "ziglang", "cc"]
+
+
+# ---------------------------------------------------------------------------- checks
+@dataclass(frozen=True)
+class BinaryCheck:
+    """What :func:`check_binary` found in one binary.
+
+    Attributes
+    ----------
+    format : str
+        ``ELF``, ``PE`` or ``MachO``.
+    architectures : tuple of str
+        ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
+    exports : frozenset of str
+        The exported function names (Mach-O's leading underscore removed).
+    libraries : tuple of str
+        The shared libraries it imports.
+    problems : tuple of str
+        Empty when the binary is what an FMU of this FMI version needs.
+    """
+
+    format: str
+    architectures: tuple[str, ...]
+    exports: frozenset
+    libraries: tuple[str, ...]
+    problems: tuple[str, ...]
+
+
+def fmi_functions(fmi_version: int) -> frozenset:
+    """Every function of the FMI ``fmi_version`` C API, read from the standard's header
+    ``fmi<v>Functions.h`` (fmpy ships it)."""
+    import fmpy
+
+    header = Path(fmpy.__file__).parent / "c-code" / f"fmi{fmi_version}Functions.h"
+    names = re.findall(rf"FMI{fmi_version}_Export\s+\w+TYPE\s+(\w+);", header.read_text())
+    if not names:
+        raise FMUError(f"no FMI {fmi_version} functions found in {header}")
+    return frozenset(names)
+
+
+def _arch_name(value) -> str:
+    text = str(value).upper()
+    if "ARM64" in text or "AARCH64" in text:
+        return "aarch64"
+    if "X86_64" in text or "AMD64" in text:
+        return "x86_64"
+    return text.rsplit(".", 1)[-1].lower()
+
+
+def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence[str]) -> BinaryCheck:
+    """Check the FMU binary ``path``: its format ``fmt`` and ``architectures``, that it
+    exports every function of FMI ``fmi_version`` (fmpy loads them all) and nothing else,
+    and that it imports only the system's C library (and, on Windows, the C runtime).
+
+    Raises
+    ------
+    FMUError
+        The file cannot be read as a binary at all.
+    """
+    import lief
+
+    lief.logging.disable()
+    parsed = lief.MachO.parse(str(path)) if fmt == "MachO" else lief.parse(str(path))
+    if parsed is None:
+        raise FMUError(f"{path}: not a readable shared library")
+    binaries = list(parsed) if isinstance(parsed, lief.MachO.FatBinary) else [parsed]
+    problems, archs, exports, libraries = [], [], set(), []
+    for b in binaries:
+        kind = {lief.ELF.Binary: "ELF", lief.PE.Binary: "PE", lief.MachO.Binary: "MachO"}.get(type(b), "?")
+        if kind != fmt:
+            problems.append(f"{path.name}: a {kind} file, expected {fmt}")
+            continue
+        if kind == "ELF":
+            archs.append(_arch_name(b.header.machine_type))
+            names = {s.name for s in b.exported_symbols if s.is_function}
+            libs = list(b.libraries)
+        elif kind == "PE":
+            archs.append(_arch_name(b.header.machine))
+            names = {e.name for e in b.get_export().entries} if b.has_exports else set()
+            libs = [i.name for i in b.imports]
+        else:
+            archs.append(_arch_name(b.header.cpu_type))
+            names = {s.name[1:] if s.name.startswith("_") else s.name for s in b.exported_symbols} - _MACHO_LINKER
+            libs = [lib.name for lib in b.libraries if lib.command != lief.MachO.LoadCommand.TYPE.ID_DYLIB]
+            if archs[-1] == "aarch64" and not b.has_code_signature:
+                problems.append(f"{path.name} (aarch64): no code signature (macOS refuses to load it)")
+        exports |= names
+        libraries += [lib for lib in libs if lib not in libraries]
+    if sorted(archs) != sorted(architectures):
+        problems.append(f"{path.name}: architectures {', '.join(archs) or 'none'}, expected "
+                        f"{', '.join(architectures)}")
+    wanted = fmi_functions(fmi_version)
+    if wanted - exports:
+        problems.append(f"{path.name}: missing FMI functions {', '.join(sorted(wanted - exports)[:8])}"
+                        f"{' ...' if len(wanted - exports) > 8 else ''}")
+    if exports - wanted:
+        problems.append(f"{path.name}: exports {len(exports - wanted)} symbols besides the FMI functions "
+                        f"({', '.join(sorted(exports - wanted)[:8])})")
+    foreign = [lib for lib in libraries if not _SYSTEM_LIBRARIES[fmt].match(Path(lib).name if fmt != "MachO"
+                                                                                  else lib)]
+    if foreign:
+        problems.append(f"{path.name}: links libraries other than the system's: {', '.join(foreign)}")
+    return BinaryCheck(fmt, tuple(archs), frozenset(exports), tuple(libraries), tuple(problems))
+
+
+# ---------------------------------------------------------------------------- building
+def _universal(slices: Sequence[tuple[Path, str]], out: Path) -> None:
+    """Write a universal (fat) Mach-O file of the thin ``(file, arch)`` slices (fat header:
+    big-endian magic 0xcafebabe, then cputype, cpusubtype, offset, size, align of each,
+    slices 2^14-aligned)."""
+    cpu = {"x86_64": (0x01000007, 3), "aarch64": (0x0100000C, 0)}
+    align = 14
+    header = struct.pack(">II", 0xCAFEBABE, len(slices))
+    offset = 1 << align
+    entries, blobs = b"", []
+    for f, arch in slices:
+        data = f.read_bytes()
+        entries += struct.pack(">iiIII", *cpu[arch], offset, len(data), align)
+        blobs.append((offset, data))
+        offset = (offset + len(data) + (1 << align) - 1) // (1 << align) * (1 << align)
+    with open(out, "wb") as o:
+        o.write(header + entries)
+        for off, data in blobs:
+            o.seek(off)
+            o.write(data)
+
+
+def _source_files(z: zipfile.ZipFile, md: ET.Element, fmi_version: int, where: str) -> list[str]:
+    if fmi_version == 2:
+        names = [f.get("name") for f in md.iter("File") if f.get("name")]
+    else:
+        try:
+            build = ET.fromstring(z.read("sources/buildDescription.xml"))
+        except KeyError:
+            raise FMUError(f"{where}: no sources/buildDescription.xml (an FMI 3.0 FMU lists its C sources there)"
+                           ) from None
+        names = [f.get("name") for f in build.iter("SourceFile") if f.get("name")]
+    names = list(dict.fromkeys(names))
+    if not names:
+        raise FMUError(f"{where}: lists no C source files; it cannot be rebuilt for another platform")
+    for n in names:
+        if f"sources/{n}" not in z.namelist() or "/" in n or "\\" in n or n.startswith("."):
+            raise FMUError(f"{where}: source file {n!r} is not in its sources/ folder")
+    return names
+
+
+def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path) -> None:
+    """Cross-compile the library ``out`` through the compiled-code cache."""
+    import fmpy
+
+    headers = Path(fmpy.__file__).parent / "c-code"
+    flags = [*_COMMON, *target.flags]
+    if target.fmt == "MachO":
+        flags.append(f"-Wl,-install_name,@rpath/{identifier}.dylib")
+    zig = zig_command()
+
+    def build(dst: Path) -> None:
+        with tempfile.TemporaryDirectory(prefix="pendulum_cosim_zig_") as scratch:   # zig's .lib/.pdb
+            lib = Path(scratch) / f"{identifier}{target.suffix}"
+            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{headers}",
+                          *[str(src / f) for f in c_files], "-o", str(lib)],
+                         f"{identifier} for {target.zig}", cwd=scratch)
+            shutil.copyfile(lib, dst)
+
+    h = hashlib.sha256("|".join([*zig[1:], zig_version(), target.zig, *flags]).encode())
+    for f in sorted(src.iterdir()):
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    directory = writable_cache("cross-built FMU binaries are compiled without caching")
+    if directory is not None:
+        with contextlib.suppress(OSError):
+            shutil.copyfile(cached_file(directory / f"cross_{h.hexdigest()[:24]}{target.suffix}", build), out)
+            return
+    build(out)
+
+
+def zig_version() -> str:
+    """The installed ziglang package's version ("" if absent)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ziglang")
+    except PackageNotFoundError:
+        return ""
+
+
+def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
+    """Add binaries for ``platforms`` (names of :data:`PLATFORMS`) to the project's FMU
+    ``fmu``, cross-compiled from its ``sources/`` and checked with :func:`check_binary`; the
+    FMU file is replaced atomically. Returns notes on what was left out (an FMI 2.0 FMU has
+    no aarch64-linux folder).
+
+    Raises
+    ------
+    CompilerNotFoundError
+        The ``cross`` extra is not installed (the message says what to install).
+    FMUError
+        The FMU has no (complete) sources, or a built binary fails its check.
+    BuildError
+        The cross-compiler failed (its output in the message).
+    """
+    from .pack import atomic_copy
+
+    fmu = Path(fmu)
+    platforms = parse_platforms(platforms)
+    where = fmu.name
+    try:
+        z = zipfile.ZipFile(fmu)
+    except (OSError, zipfile.BadZipFile) as e:
+        raise FMUError(f"{fmu}: not a readable FMU ({e})") from None
+    notes: list[str] = []
+    with z, tempfile.TemporaryDirectory(prefix="pendulum_cosim_platforms_") as tmp:
+        tmp = Path(tmp)
+        try:
+            md = ET.fromstring(z.read("modelDescription.xml"))
+        except (KeyError, ET.ParseError) as e:
+            raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
+        fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
+        identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
+        if not identifiers:
+            raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
+        c_files = _source_files(z, md, fmi_version, where)
+        src = tmp / "sources"
+        src.mkdir()
+        for name in z.namelist():
+            if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
+                (src / name[len("sources/"):]).write_bytes(z.read(name))
+        present = set(z.namelist())
+        jobs = []                                   # (platform, identifier, targets), to build
+        for plat in platforms:
+            targets = _TARGETS[plat]
+            folders = {t.fmi2 if fmi_version == 2 else t.fmi3 for t in targets}
+            if None in folders:
+                notes.append(f"{where}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
+                             "(--fmi-version 3) for it")
+                continue
+            jobs += [(plat, ident, targets) for ident in identifiers
+                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in present for f in folders)]
+        builds = [(ident, t, tmp / f"{ident}-{t.zig}{t.suffix}") for _, ident, targets in jobs for t in targets]
+        if builds:
+            zig_command()                           # the missing extra named before anything starts
+            with ThreadPoolExecutor(max_workers=min(len(builds), os.cpu_count() or 1)) as pool:
+                for f in [pool.submit(_compile, t, src, c_files, ident, lib) for ident, t, lib in builds]:
+                    f.result()
+        added: dict[str, Path] = {}
+        for plat, ident, targets in jobs:
+            built = [(t, tmp / f"{ident}-{t.zig}{t.suffix}") for t in targets]
+            archs = None
+            if fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
+                lib = tmp / f"{ident}-universal{targets[0].suffix}"
+                _universal([(b, t.arch) for t, b in built], lib)
+                built, archs = [(targets[0], lib)], [t.arch for t in targets]
+            for t, lib in built:
+                check = check_binary(lib, fmi_version, t.fmt, archs or [t.arch])
+                if check.problems:
+                    raise FMUError(f"the {plat} binary of {where} fails its check: " + "; ".join(check.problems))
+                added[f"binaries/{t.fmi2 if fmi_version == 2 else t.fmi3}/{ident}{t.suffix}"] = lib
+        if added:
+            out = tmp / "with-platforms.fmu"
+            with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as o:
+                for info in z.infolist():
+                    if info.filename not in added:
+                        o.writestr(info, z.read(info.filename))
+                for name, lib in sorted(added.items()):
+                    o.write(lib, name)
+            atomic_copy(out, fmu)
+    return notes
