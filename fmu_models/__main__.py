@@ -4,7 +4,9 @@ binaries, see :mod:`fmu_models.export.platforms`)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -50,9 +52,18 @@ def main(argv: list[str] | None = None) -> int:
             if platforms:
                 from .export.platforms import zig_command
                 zig_command()                      # a missing extra is named before anything is built
-            paths = build_fmus(args.out, args.fmi_version, tuple(args.model or model_names()))
-            for p in paths:
-                notes += add_platforms(p, platforms) if platforms else []
+            models = tuple(args.model or model_names())
+            if not platforms:
+                paths = build_fmus(args.out, args.fmi_version, models)
+            else:                                  # complete FMUs only: built and extended aside, then moved
+                out.mkdir(parents=True, exist_ok=True)
+                with tempfile.TemporaryDirectory(dir=out, prefix=".build-") as tmp:
+                    staged = build_fmus(tmp, args.fmi_version, models)
+                    for p in staged:
+                        notes += add_platforms(p, platforms)
+                    paths = [out / p.name for p in staged]
+                    for p, dst in zip(staged, paths):
+                        os.replace(p, dst)
     except KeyboardInterrupt:
         _remove_empty(created)
         print("interrupted: no FMU was left half-written", file=sys.stderr)

@@ -39,7 +39,8 @@ def run_block(name: str, cwd: Path) -> str:
 
 def test_every_marked_block_is_known():
     assert set(blocks()) == {"estimators", "offline", "cosim", "writing-a-filter", "another-tool-export",
-                             "another-tool-loop", "another-tool-ssp", "another-tool-fmpy-ssp"}
+                             "another-tool-loop", "another-tool-ssp", "another-tool-fmpy-ssp",
+                             "another-tool-platforms"}
 
 
 @pytest.mark.parametrize("name", ["estimators", "cosim", "writing-a-filter"])
@@ -63,3 +64,21 @@ def test_the_estimator_in_another_tool(tmp_path):
     assert float(out.split("largest difference:")[1]) < 1e-12
     run_block("another-tool-ssp", tmp_path)
     run_block("another-tool-fmpy-ssp", tmp_path)
+
+
+def test_the_ssp_for_every_desktop_platform(tmp_path):
+    import importlib.util
+    import zipfile
+
+    if importlib.util.find_spec("ziglang") is None or importlib.util.find_spec("lief") is None:
+        pytest.skip("the cross extra (ziglang, lief) is not installed: pip install -e '.[cross]'")
+    run_block("another-tool-platforms", tmp_path)
+    archive = tmp_path / "loop_ssp_all" / "seed000_cartpole.ssp"
+    with zipfile.ZipFile(archive) as z:
+        fmus = [n for n in z.namelist() if n.endswith(".fmu")]
+        assert len(fmus) == 6
+        for n in fmus:
+            (tmp_path / "one.fmu").write_bytes(z.read(n))
+            with zipfile.ZipFile(tmp_path / "one.fmu") as f:
+                folders = {m.split("/")[1] for m in f.namelist() if m.startswith("binaries/")}
+            assert folders == {"linux64", "win64", "darwin64"}, n

@@ -97,6 +97,7 @@ def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
     if text is None:
         return ()
     names = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
+    names = [] if not any(names) else names
     bad = [n for n in names if n not in PLATFORMS]
     if bad or not names:
         raise ConfigurationError(f"unknown platform(s) {', '.join(map(repr, bad)) or '(none given)'}: "
