@@ -1,4 +1,4 @@
-"""Benchmark: FMU build time and the cost of one doStep through fmpy.
+"""Benchmark: FMU build time and the cost of one doStep (one internal Euler step) through fmpy.
 
 Run: python bench/bench_fmu.py
 """
@@ -25,9 +25,10 @@ def time_steps(path, version, n=20_000, with_input=True):
     if version == 2:
         fmu.setupExperiment(startTime=0)
     fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
     get = fmu.getReal if version == 2 else fmu.getFloat64
     set_ = fmu.setReal if version == 2 else fmu.setFloat64
+    set_([vr["step_size"]], [0.001])          # one internal step per 1 ms doStep (the plant's grid)
+    fmu.exitInitializationMode()
     outs, ins = [vr["y_x"], vr["y_theta"]], [vr["F"]]
     t, h = 0.0, 0.001
     t0 = time.perf_counter()

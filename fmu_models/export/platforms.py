@@ -86,8 +86,8 @@ _SYSTEM_LIBRARIES = {
 
 
 def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
-    """The platforms of ``--platforms`` (``"linux64,win64"`` or a sequence), checked;
-    ``()`` for none.
+    """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of
+    names), checked; ``()`` for None.
 
     Raises
     ------
