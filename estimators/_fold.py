@@ -9,7 +9,10 @@ numpy arrays:
 * input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]`` (stride 0: the same
   array every step), or, for an accumulated input, the row ``k - 1`` of the output that
   carries it (row ``k = 0`` reads the initial state);
-* output ``j`` of step ``k`` is written at ``res[j] + k * res_stride[j]``;
+* output ``j`` of step ``k`` is written at ``res[j] + k * res_stride[j]``, or, for a state
+  whose history nobody reads (a filter's extra state: an innovation window), at row
+  ``k % 2`` of a two-row array (``res_cycle``), so that a long window costs two rows, not
+  one per step;
 * an outer loop runs ``runs`` independent realisations, each with its own base pointers
   (``arg_run_stride``, ``res_run_stride``).
 
@@ -33,7 +36,8 @@ _DRIVER = r"""
 int %(name)s_fold(long runs, long n_steps,
                   const double *const *arg0, const long *arg_stride, const long *arg_run_stride,
                   double *const *res0, const long *res_stride, const long *res_run_stride,
-                  const long *acc_out, const double *const *init, const long *init_run_stride) {
+                  const long *acc_out, const double *const *init, const long *init_run_stride,
+                  const long *res_cycle) {
     casadi_int sz_arg, sz_res, sz_iw, sz_w;
     const casadi_real **arg;
     casadi_real **res, *w;
@@ -52,11 +56,12 @@ int %(name)s_fold(long runs, long n_steps,
                 if (acc_out[i] >= 0)
                     arg[i] = k == 0 ? init[i] + r * init_run_stride[i]
                                     : res0[acc_out[i]] + r * res_run_stride[acc_out[i]]
-                                      + (k - 1) * res_stride[acc_out[i]];
+                                      + (res_cycle[acc_out[i]] ? (k - 1) %% 2 : k - 1) * res_stride[acc_out[i]];
                 else
                     arg[i] = arg0[i] + r * arg_run_stride[i] + k * arg_stride[i];
             }
-            for (i = 0; i < n_out; i++) res[i] = res0[i] + r * res_run_stride[i] + k * res_stride[i];
+            for (i = 0; i < n_out; i++)
+                res[i] = res0[i] + r * res_run_stride[i] + (res_cycle[i] ? k %% 2 : k) * res_stride[i];
             if (%(name)s(arg, res, iw, w, 0)) { flag = 1 + (int)k; goto done; }
         }
     }
@@ -93,7 +98,7 @@ class NativeFold:
             self._fold = getattr(ctypes.CDLL(str(lib)), f"{name}_fold")
             self._fold.restype = ctypes.c_int
 
-    def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict) -> int:
+    def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()) -> int:
         """Fold ``n_steps`` steps for each of ``runs`` realisations.
 
         Parameters
@@ -107,12 +112,15 @@ class NativeFold:
         outs : dict of name -> ndarray
             Every output, shape ``(runs, n_steps, nnz)`` (views allowed, e.g. rows 1..N
             of a larger array); filled in place.
+        cycled : collection of str
+            State outputs (``<input>_new``) kept in two rows only, ``(runs, 2, nnz)``: step
+            ``k`` writes row ``k % 2`` (see :meth:`outputs`).
 
         Every array must be float64 with contiguous last axis. Returns 0, or ``1 + k`` if
         the step's evaluation failed at step ``k``.
         """
         if self.backend != "compiled":
-            return self._vm(runs, n_steps, args, init, outs)
+            return self._vm(runs, n_steps, args, init, outs, cycled)
         n_in, n_out = len(self.names_in), len(self.names_out)
         P = ctypes.POINTER(ctypes.c_double)
         L = ctypes.c_long
@@ -138,25 +146,31 @@ class NativeFold:
                 arg0[i] = ptr(a)
                 arg_stride[i] = a.strides[1] // 8 if a.ndim == 3 else 0
                 arg_run[i] = a.strides[0] // 8
-        res0, res_stride, res_run = (P * n_out)(), (L * n_out)(), (L * n_out)()
+        res0, res_stride, res_run, cyc = (P * n_out)(), (L * n_out)(), (L * n_out)(), (L * n_out)()
         for j, name in enumerate(self.names_out):
             o = outs[name]
             res0[j], res_stride[j], res_run[j] = ptr(o), o.strides[1] // 8, o.strides[0] // 8
+            cyc[j] = 1 if name in cycled else 0
         return self._fold(L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc,
-                          ini, ini_run)
+                          ini, ini_run, cyc)
 
-    def outputs(self, runs: int, n_steps: int, init: dict, drop=()) -> tuple[dict, dict]:
+    def outputs(self, runs: int, n_steps: int, init: dict, drop=(), cycle=()) -> tuple[dict, dict]:
         """Arrays for the outputs of a fold: ``(stored, views)``.
 
         ``stored[name]`` has shape ``(runs, n_steps, nnz)``, or ``(runs, n_steps + 1, nnz)``
         for an output carrying the state (``<input>_new``), whose row 0 holds the initial
         state ``init[<input>]`` (shape ``(runs, nnz)``). ``views`` are what the fold writes
         into (those arrays without the initial row). Outputs named in ``drop`` are not
-        stored: their view is one scratch row, overwritten each step.
+        stored: their view is one scratch row, overwritten each step. State outputs named in
+        ``cycle`` get two rows (``(runs, 2, nnz)``, stored and view alike; pass the same names
+        to the call): after the fold the last state is in row ``(n_steps - 1) % 2``.
         """
         stored, views = {}, {}
         for i, name in enumerate(self.names_out):
             nnz = self.step.nnz_out(i)
+            if name in cycle:
+                stored[name] = views[name] = np.empty((runs, 2, nnz))
+                continue
             if name in drop:
                 views[name] = np.lib.stride_tricks.as_strided(np.empty((1, 1, nnz)), (runs, n_steps, nnz),
                                                               (0, 0, 8))
@@ -168,7 +182,7 @@ class NativeFold:
             views[name] = stored[name][:, 1:] if lead else stored[name]
         return stored, views
 
-    def _vm(self, runs, n_steps, args, init, outs) -> int:
+    def _vm(self, runs, n_steps, args, init, outs, cycled=()) -> int:
         """The same fold through ``mapaccum`` in CasADi's virtual machine."""
         if n_steps not in self._mapped:
             self._mapped[n_steps] = self.step.mapaccum("fold", n_steps, list(range(self.n_state)),
@@ -188,7 +202,12 @@ class NativeFold:
             for name in self.names_out:
                 rr, cc = self.step.size_out(name)
                 val = np.asarray(res[name]).reshape(rr, n_steps, cc).transpose(1, 2, 0)   # (n, cc, rr)
-                outs[name][r] = val.reshape(n_steps, rr * cc)
+                val = val.reshape(n_steps, rr * cc)
+                if name in cycled:                  # the last two steps, in rows k % 2
+                    for k in range(max(0, n_steps - 2), n_steps):
+                        outs[name][r][k % 2] = val[k]
+                else:
+                    outs[name][r] = val
         return 0
 
 

@@ -573,10 +573,11 @@ class KalmanBase:
         state = {k: v[None] for k, v in self.state_arrays().items()}
         init = self._initial_for_run
         fold = self.native_fold()
-        outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else ())
+        cycled = [f"{k}_new" for k in self._extra_names]          # no one reads their history
+        outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else (), cycled)
         args = {"u": us[None], "y": ys[None], "mask": masks[None],
                 **{k: v[None] for k, v in self.parameter_arrays().items()}}
-        fold(1, N, args, state, views)
+        fold(1, N, args, state, views, cycled)
         status = outs["status"][0, :, 0]
         if status.any():
             k = int(np.flatnonzero(status)[0])
@@ -592,12 +593,13 @@ class KalmanBase:
         result = self._make_run(cat, us, ys, masks, init)
         result.log_likelihood += y0_ll
         for name in rt.pairs:                      # the filter now stands at the last step
-            rt.now(name)[:] = cat[f"{name}_new"][-1]
+            rt.now(name)[:] = cat[f"{name}_new"][(N - 1) % 2 if f"{name}_new" in cycled else -1]
         for name in rt.outputs:
             if name != "status":
                 rt.outputs[name][:] = cat[name][-1] if name in cat else views[name][0, -1]
         self.k += N
-        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()})
+        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()
+                        if name not in cycled})
         return result
 
     def _make_run(self, cat: dict, us, ys, masks, init: dict) -> FilterRun:

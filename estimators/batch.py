@@ -174,9 +174,10 @@ class BatchFilter:
         t = self.template
         fold = t.native_fold()
         state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
-        outs, views = fold.outputs(R, N, state)
+        cycled = [f"{k}_new" for k in t.extra_state()]             # no one reads their history
+        outs, views = fold.outputs(R, N, state, cycle=cycled)
         args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
-        fold(R, N, args, state, views)
+        fold(R, N, args, state, views, cycled)
         status = outs["status"][:, :, 0]
         bad = status != 0
         if bad.any() and self.on_failure == "raise":
@@ -197,6 +198,6 @@ class BatchFilter:
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
             failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names))
         for name in state:
-            self._rt.now(name)[:] = outs[f"{name}_new"][:, -1].ravel()
+            self._rt.now(name)[:] = outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1].ravel()
         self.k += N
         return out
