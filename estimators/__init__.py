@@ -23,12 +23,13 @@ from .mfiae import MFIAE
 from .protocol import Parameter, StepContext, StepResult, Update
 from .results import BatchRun, EMResult, FilterRun, Smoothed
 from .smoother import rts_smooth
+from .swml import SWML
 from .system import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ukf import UKF
 
-__all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "UKF", "BatchFilter", "BatchRun", "DiscreteModel", "EMResult",
-           "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed", "StepContext", "StepResult", "Update",
-           "augment_rate_bias", "discretize", "em_noise", "export_fmu", "linear_model", "rts_smooth"]
+__all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "SWML", "UKF", "BatchFilter", "BatchRun", "DiscreteModel",
+           "EMResult", "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed", "StepContext", "StepResult",
+           "Update", "augment_rate_bias", "discretize", "em_noise", "export_fmu", "linear_model", "rts_smooth"]
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):

@@ -27,6 +27,7 @@ import casadi as ca
 import numpy as np
 
 from ._compiled import compile_functions
+from .protocol import renamed
 
 __all__ = ["NativeFold"]
 
@@ -91,7 +92,7 @@ class NativeFold:
         self.names_out = [step.name_out(i) for i in range(step.n_out())]
         name = "foldstep"
         code = _DRIVER % {"name": name, "n_in": step.n_in(), "n_out": step.n_out()}
-        _, self.backend, lib = compile_functions([_renamed(step, name)], backend, extra_code=code,
+        _, self.backend, lib = compile_functions([renamed(step, name)], backend, extra_code=code,
                                                  return_library=True)
         self._mapped: dict = {}
         if self.backend == "compiled":
@@ -209,10 +210,3 @@ class NativeFold:
                 else:
                     outs[name][r] = val
         return 0
-
-
-def _renamed(fn: ca.Function, name: str) -> ca.Function:
-    """``fn`` under another name (the driver calls it by that name)."""
-    args = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
-    return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],
-                       [fn.name_out(i) for i in range(fn.n_out())])

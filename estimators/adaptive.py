@@ -25,7 +25,7 @@ from .ekf import EKF
 from .protocol import Parameter, StepContext, StepResult
 from .system import DiscreteModel
 
-__all__ = ["WindowedAdaptiveEKF", "bound_parameters", "bounds_around"]
+__all__ = ["AdaptationRecord", "WindowedAdaptiveEKF", "bound_parameters", "bounds_around"]
 
 #: Default bounds: this factor either side of the initial variances.
 BOUND_FACTOR = 1e4
@@ -54,7 +54,35 @@ def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
                       ("r_min", "r_max"), increasing=True)]
 
 
-class WindowedAdaptiveEKF(EKF):
+class AdaptationRecord:
+    """Records Q and R in a filter's noise history whenever its step declares (output
+    ``adapted``) that it adapted them, from Python and after a native run. A mixin before
+    the filter class; call :meth:`_init_adaptation_record` at the end of ``__init__``."""
+
+    def _init_adaptation_record(self) -> None:
+        self._adapted_flag = memoryview(self._out("adapted"))
+
+    def after_step(self) -> None:
+        """After a step that adapted: :meth:`on_adapted`."""
+        if self._adapted_flag[0]:
+            self.on_adapted()
+
+    def on_adapted(self) -> None:
+        """Runs after every step from Python that adapted Q and R: records them."""
+        self._record()
+
+    def after_run(self, outputs: dict) -> None:
+        """Records the Q and R of every step of a native run that adapted."""
+        nx, ny = self.system.nx, self.system.ny
+        adapted = np.flatnonzero(outputs["adapted"].ravel())
+        N = len(outputs["adapted"])
+        Q = outputs["Q_new"].reshape(-1, nx, nx).diagonal(axis1=1, axis2=2)
+        R = outputs["R_new"].reshape(-1, ny, ny).diagonal(axis1=1, axis2=2)
+        for i in adapted:
+            self.history.append(self.k - N + i + 1, np.concatenate([Q[i], R[i]]))
+
+
+class WindowedAdaptiveEKF(AdaptationRecord, EKF):
     """Base of :class:`~estimators.IAE` and :class:`~estimators.MFIAE` (Q and R are state).
 
     Parameters
@@ -77,7 +105,7 @@ class WindowedAdaptiveEKF(EKF):
                  nan_is_missing: bool = True, backend: str = "compiled"):
         self.window = positive_int(window, "window")
         super().__init__(system, x0, P0, Q, R, gate, nan_is_missing, backend)
-        self._adapted_flag = memoryview(self._out("adapted"))
+        self._init_adaptation_record()
 
     def config_key(self) -> tuple:
         """The window length."""
@@ -114,22 +142,3 @@ class WindowedAdaptiveEKF(EKF):
         n = int(min(self._now("count")[0], self.window))
         ring = matrix(self._now("ring"), ny, self.window)[:, self.window - n:]
         return ring @ ring.T / max(n, 1)
-
-    def after_step(self) -> None:
-        """After a step that adapted: :meth:`on_adapted`."""
-        if self._adapted_flag[0]:
-            self.on_adapted()
-
-    def on_adapted(self) -> None:
-        """Runs after every step from Python that adapted Q and R: records them."""
-        self._record()
-
-    def after_run(self, outputs: dict) -> None:
-        """Records the Q and R of every step of a native run that adapted."""
-        nx, ny = self.system.nx, self.system.ny
-        adapted = np.flatnonzero(outputs["adapted"].ravel())
-        N = len(outputs["adapted"])
-        Q = outputs["Q_new"].reshape(-1, nx, nx).diagonal(axis1=1, axis2=2)
-        R = outputs["R_new"].reshape(-1, ny, ny).diagonal(axis1=1, axis2=2)
-        for i in adapted:
-            self.history.append(self.k - N + i + 1, np.concatenate([Q[i], R[i]]))

@@ -147,7 +147,7 @@ class KalmanBase:
         self._params = params
 
         def build():
-            raw = build_step(self, extra, params)
+            raw = self.wrap_step(build_step(self, extra, params))
             (fn,), used = compile_functions([raw], backend)
             return fn, used, raw
 
@@ -191,6 +191,11 @@ class KalmanBase:
     def extra_state(self) -> dict:
         """Initial values of the filter's extra state arrays, by name (default none)."""
         return {}
+
+    def wrap_step(self, step: ca.Function) -> ca.Function:
+        """The Function every form of the filter runs, from the fused ``step`` built from the
+        hooks (default: ``step`` itself; see :mod:`estimators.protocol`)."""
+        return step
 
     def step_parameters(self) -> list[Parameter]:
         """The fixed inputs of the step beyond Q and R, with their values (default none); each

@@ -61,7 +61,8 @@ from fmu_models.variables import DOMAINS
 from .linalg import CSE, log_det, status_flag, symmetric, upper_entries, used_measurement
 from .system import DiscreteModel
 
-__all__ = ["DIAGNOSTICS", "STEP_INPUTS", "Parameter", "StepContext", "StepResult", "Update", "build_step"]
+__all__ = ["DIAGNOSTICS", "STEP_INPUTS", "Parameter", "StepContext", "StepResult", "Update", "build_step",
+           "renamed"]
 
 #: Outputs of every fused step after the new state, in order.
 DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
@@ -261,3 +262,12 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
             + [d(v) for v in ctx.outputs.values()] + [status])
     return ca.Function("step", list(inputs.values()), outs, list(inputs),
                        [f"{k}_new" for k in state] + list(DIAGNOSTICS) + list(ctx.outputs) + ["status"], CSE)
+
+
+def renamed(fn: ca.Function, name: str) -> ca.Function:
+    """``fn`` (an SX or MX Function) under another ``name``, inputs and outputs named as in
+    ``fn`` (generated C code calls it by that name)."""
+    sym = ca.SX if fn.is_a("SXFunction") else ca.MX
+    args = [sym.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
+    return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],
+                       [fn.name_out(i) for i in range(fn.n_out())])

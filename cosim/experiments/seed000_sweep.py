@@ -1,4 +1,4 @@
-"""Where adaptation pays: EKF, IAE and MF-IAE over a grid of wrong starting Q0 and R0.
+"""Where adaptation pays: EKF, IAE, MF-IAE and SWML over a grid of wrong starting Q0 and R0.
 
 Beyond the paper. Each cell of the grid starts the three filters at ``Q0 = fq q I`` and
 ``R0 = fr r I``, where ``(q, r)`` are the scenario's true variances and ``fq, fr`` run over
@@ -29,7 +29,7 @@ from .base import Experiment
 from .campaign import run_tasks
 from .common import new_figure
 
-ADAPTIVE = ("IAE", "MF-IAE", "EKF EM")
+ADAPTIVE = ("IAE", "MF-IAE", "EKF EM", "SWML")
 FILTERS = ("EKF", *ADAPTIVE)
 FACTORS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 

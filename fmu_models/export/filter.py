@@ -157,8 +157,9 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
     # the gate may be inf (no gate); everything else must be finite
     bad = 1 - finite_flag([e for e, n in zip(init_out, state_names + fixed_names) if n != "gate"])
     init = ca.Function("flt_init", [psym], init_out + [bad])
-    args = [ca.SX.sym(n, step.sparsity_in(i)) for i, n in enumerate(names_in)]
-    run_step = ca.Function("flt_step", args, step.call(args), names_in, names_out)
+    from estimators.protocol import renamed
+
+    run_step = renamed(step, "flt_step")
     src = {"u": (1, 0), "y": (2, 0), "mask": (3, 0)}
     step_src = [(0, st_off[n]) if n in st_off else src.get(n, (4, fx_off.get(n, 0))) for n in names_in]
     step_dst = [(0, st_off[n[:-4]]) if n.endswith("_new") else (2, 0) if n == "status" else (1, dg_off[n])

@@ -1,0 +1,405 @@
+"""Sliding-window maximum-likelihood adaptive EKF (SWML), started from autocovariance least squares.
+
+Beyond the source papers (issue 21). The EKF's noise is ``Q = q I``, ``R = r I`` (the form
+of seed 000 eqs 24-25), with ``theta = (ln q, ln r)``. Every step is an EKF step with the
+current Q, R; the filter keeps the input, measurement and valid channels of the last
+``window`` steps and its own state at every ``every``-th step. At update times (every
+``early_every`` steps up to step ``early_until``, then every ``every`` steps), over the
+window (the last ``window`` steps, or all steps so far), with the EKF re-run from the
+stored state at the window's start:
+
+1. the window's innovation log-likelihood ``l(theta) = -1/2 sum (ln det S_j + e_j^T S_j^-1
+   e_j)`` (the Gaussian likelihood of the innovations, Schweppe 1965);
+2. an autocovariance least-squares candidate (Odelson, Rajamani and Rawlings 2006, here
+   for time-varying gains and Jacobians): the innovation products ``e_{j+l} e_j^T``,
+   ``l = 0, 1, 2``, are fitted by least squares to their expectations, which are affine in
+   ``(q, r)`` through the linearised error recursion ``eps_{j+1} = F_{j+1} (I - K_j H_j)
+   eps_j + w_j - F_{j+1} K_j v_j`` (:meth:`SWML.als_step`); negative solutions are floored;
+3. the ALS point replaces the current one as the start if its likelihood is higher (and,
+   if it lowers r, higher by ``keep_r_nats``); around the start, one Newton step on ``l``
+   from a finite-difference gradient and Hessian in log space (step ``fd_step``; at most
+   a factor ``max_factor`` per variance; an uphill step of length ``fd_step`` where the
+   Hessian is not negative definite); of every point evaluated the one of highest
+   likelihood is kept;
+4. safeguards: r is never lowered unless the likelihood gains ``keep_r_nats``; neither
+   variance falls by more than a factor ``max_fall`` per update (rises are free); both
+   stay within ``q_bounds``/``r_bounds`` (default 1e-4 to 1e4 times the start);
+5. the filter continues from the end of the window re-run with the kept ``(q, r)`` (the
+   window is re-filtered, not only Q and R replaced).
+
+Everything is one compiled Function (:meth:`SWML.wrap_step`): the EKF step, then a
+conditional (CasADi's ``Function.conditional``: only the branch taken runs) whose
+update branches fold the EKF step over the window (``mapaccum``), so the update runs in
+``step``, ``run``, batched and in the FMU alike. The work of an update is not spread over
+the following steps: it is done at the update step (a burst; see the README's cost
+figures).
+"""
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from fmu_models import checks
+from fmu_models.errors import ConfigurationError
+
+from .adaptive import AdaptationRecord, bound_parameters, bounds_around
+from .ekf import EKF
+from .linalg import log_det, mask_measurement
+from .protocol import Parameter, StepContext, StepResult
+from .system import DiscreteModel
+
+__all__ = ["SWML"]
+
+
+def _scalar_variance(M, n: int, what: str) -> float:
+    """``v`` if ``M`` (a scalar, a vector or a matrix, checked as a covariance) is ``v I``."""
+    C = checks.covariance(M, n, what)
+    v = float(C[0, 0])
+    if np.abs(C - v * np.eye(n)).max() > 1e-12 * v:
+        raise ConfigurationError(f"SWML: {what} must be a multiple of the identity (it estimates {what} = v I), "
+                                 f"got diagonal {np.diag(C).tolist()}")
+    return v
+
+
+class SWML(AdaptationRecord, EKF, register="SWML"):
+    """EKF whose ``Q = q I`` and ``R = r I`` are re-estimated by maximum likelihood over a
+    sliding window of innovations, started from an ALS estimate (see the module
+    documentation for the method and its sources).
+
+    Parameters
+    ----------
+    system, x0, P0, gate, nan_is_missing, backend
+        As :class:`~estimators.base.KalmanBase`.
+    Q, R : float or array_like
+        The initial ``q I`` and ``r I`` (a scalar, or a multiple of the identity).
+    window : int
+        W, the steps in the window (default 100); a multiple of ``every``.
+    every : int
+        M, steps between updates after the start (default 25).
+    early_until, early_every : int
+        Up to step ``early_until`` (default 20) an update every ``early_every`` steps
+        (default 2) over all steps so far; ``early_until = 0``: none.
+    fd_step : float
+        Finite-difference step in ``ln q``, ``ln r`` (default 0.25).
+    max_factor : float
+        Largest change of a variance by the Newton step (default 10).
+    keep_r_nats : float
+        Likelihood gain [nats] a point must bring to lower r (default 2).
+    max_fall : float
+        Largest factor by which a variance may fall in one update (default 2).
+    q_bounds, r_bounds : (float, float), optional
+        Bounds of q and r (default 1e-4 and 1e4 times the initial values).
+
+    Attributes
+    ----------
+    Q, R : ndarray
+        The current estimates ``q I``, ``r I`` (and every attribute of
+        :class:`~estimators.base.KalmanBase`); :meth:`noise_history` lists every update.
+    """
+
+    name = "SWML"
+    adapts_noise = True
+
+    def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 100, every: int = 25,
+                 early_until: int = 20, early_every: int = 2, fd_step: float = 0.25, max_factor: float = 10.0,
+                 keep_r_nats: float = 2.0, max_fall: float = 2.0, q_bounds=None, r_bounds=None,
+                 gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
+        if not isinstance(system, DiscreteModel):
+            from fmu_models.errors import TypeMismatchError
+
+            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
+        q0, r0 = _scalar_variance(Q, system.nx, "Q"), _scalar_variance(R, system.ny, "R")
+        self.window = checks.positive_int(window, "window")
+        self.every = checks.positive_int(every, "every")
+        if self.window % self.every:
+            raise ConfigurationError(f"SWML: window = {self.window} must be a multiple of every = {self.every} "
+                                     "(the window starts at a stored state)")
+        self.early_until = int(checks.finite(early_until, "early_until"))
+        if self.early_until != early_until or not 0 <= self.early_until <= self.window:
+            raise ConfigurationError(f"SWML: early_until must be a whole number of steps in 0..window, "
+                                     f"got {early_until!r}")
+        self.early_every = checks.positive_int(early_every, "early_every")
+        self.fd_step = checks.positive(fd_step, "fd_step")
+        self.max_factor = checks.positive(max_factor, "max_factor")
+        self.keep_r_nats = checks.finite(keep_r_nats, "keep_r_nats")
+        if self.keep_r_nats < 0:
+            raise ConfigurationError(f"SWML: keep_r_nats must be >= 0, got {keep_r_nats}")
+        self.max_fall = checks.positive(max_fall, "max_fall")
+        if self.max_factor <= 1 or self.max_fall < 1:
+            raise ConfigurationError(f"SWML: max_factor must be > 1 and max_fall >= 1, got {max_factor}, {max_fall}")
+        self.q_bounds = bounds_around(np.array([q0]), q_bounds, "q_bounds")
+        self.r_bounds = bounds_around(np.array([r0]), r_bounds, "r_bounds")
+        self._start = (checks.vector(x0, system.nx, "x0", ConfigurationError),
+                       checks.covariance(P0, system.nx, "P0"))
+        super().__init__(system, x0, P0, q0, r0, gate, nan_is_missing, backend)
+        self._init_adaptation_record()
+
+    # ------------------------------------------------------------------ configuration
+    def config_key(self) -> tuple:
+        """Window, schedule and the update's constants (the bounds are step inputs)."""
+        return (self.window, self.every, self.early_until, self.early_every, self.fd_step, self.max_factor,
+                self.keep_r_nats, self.max_fall)
+
+    def step_parameters(self) -> list[Parameter]:
+        """The bounds of q and r (``q_bounds``, ``r_bounds``)."""
+        return bound_parameters(self.q_bounds, self.r_bounds)
+
+    def extra_state(self) -> dict:
+        """The window (``wu``, ``wy``, ``wv``: inputs, measurements, valid channels; ``wa``:
+        1 for a slot holding a step), the stored states at every ``every``-th step
+        (``snap_x``, ``snap_P``, oldest first), the initial state (``x_init``, ``P_init``)
+        and the step count."""
+        s, W, n_snap = self.system, self.window, self.window // self.every
+        x0, P0 = self._start
+        return {"wu": np.zeros(s.nu * W), "wy": np.zeros(s.ny * W), "wv": np.zeros(s.ny * W), "wa": np.zeros(W),
+                "snap_x": np.tile(x0, n_snap), "snap_P": np.tile(P0.ravel(order="F"), n_snap),
+                "x_init": x0.copy(), "P_init": P0.ravel(order="F").copy(), "count": np.zeros(1)}
+
+    def reset(self, x0=None, P0=None) -> None:
+        """As :meth:`KalmanBase.reset <estimators.base.KalmanBase.reset>`; the window empties
+        and starts from the new state."""
+        n = self.system.nx
+        self._start = (self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError),
+                       self.P if P0 is None else checks.covariance(P0, n, "P0"))
+        super().reset(*self._start)
+
+    def fmu_noise_parameters(self) -> list[Parameter]:
+        """``q0`` and ``r0``: the initial ``Q = q0 I``, ``R = r0 I``."""
+        return [Parameter("q0", self.Q[0, 0], "positive", "initial process noise variance (Q = q0 I)"),
+                Parameter("r0", self.R[0, 0], "positive", "initial measurement noise variance (R = r0 I)")]
+
+    def fmu_noise(self, p):
+        """``Q = q0 I``, ``R = r0 I``."""
+        s = self.system
+        return p["q0"] * ca.SX.eye(s.nx), p["r0"] * ca.SX.eye(s.ny)
+
+    def fmu_initial(self, p):
+        """The initial state, with the window's stored states at the FMU's ``x0``, ``P0``."""
+        out = super().fmu_initial(p)
+        n_snap = self.window // self.every
+        P = ca.reshape(ca.diag(p["P0"]), -1, 1)
+        out.update(snap_x=ca.repmat(p["x0"], n_snap, 1), snap_P=ca.repmat(P, n_snap, 1), x_init=p["x0"], P_init=P)
+        return out
+
+    # ------------------------------------------------------------------ the step
+    def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
+        """Push the step into the window; store the state at every ``every``-th step.
+        Declares the output ``adapted`` (set by the update, :meth:`wrap_step`)."""
+        s, W, M = self.system, self.window, self.every
+        n, n_snap = s.nx, W // M
+
+        def push(flat, rows, value):
+            ring = ca.reshape(flat, rows, -1)
+            return ca.horzcat(ring[:, 1:], value) if ring.shape[1] > 1 else value
+
+        st, count = ctx.state, ctx.state["count"]
+        due = ca.fmod(count, M) == 0                     # ctx.x is the state after step `count`
+        sx, sP = ca.reshape(st["snap_x"], n, n_snap), ca.reshape(st["snap_P"], n * n, n_snap)
+        ctx.output("adapted", ca.SX(0))
+        return {"wu": push(st["wu"], s.nu, ctx.u), "wy": push(st["wy"], s.ny, ctx.y),
+                "wv": push(st["wv"], s.ny, ctx.valid), "wa": push(st["wa"], 1, ca.SX(1)),
+                "snap_x": ca.if_else(due, push(sx, n, ctx.x), sx),
+                "snap_P": ca.if_else(due, push(sP, n * n, ca.reshape(ctx.P, -1, 1)), sP),
+                "count": count + 1}
+
+    def _window_step(self):
+        """One EKF step of a window re-run at ``theta``: ``(x, P, ll, u, y, valid, active,
+        lq, lr, gate) -> (x', P', ll')`` (an inactive slot changes nothing)."""
+        s = self.system
+        x, P, ll = ca.SX.sym("x", s.nx), ca.SX.sym("P", s.nx, s.nx), ca.SX.sym("ll")
+        u, y, v, a = ca.SX.sym("u", s.nu), ca.SX.sym("y", s.ny), ca.SX.sym("v", s.ny), ca.SX.sym("a")
+        lq, lr, gate = ca.SX.sym("lq"), ca.SX.sym("lr"), ca.SX.sym("gate")
+        ctx = StepContext(s, x, P, ca.exp(lq) * ca.SX.eye(s.nx), ca.exp(lr) * ca.SX.eye(s.ny), u, y, v, gate)
+        xp, Pp = self.predict_expr(ctx)
+        upd = self.update_expr(ctx, xp, Pp)
+        gain = -0.5 * (log_det(upd.S) + upd.nis) * upd.accepted
+        return ca.Function("swml_window_step", [x, P, ll, u, y, v, a, lq, lr, gate],
+                           [ca.if_else(a, upd.x, x), ca.if_else(a, upd.P, P), ll + a * gain])
+
+    def als_step(self):
+        """One step of the window re-run at the current ``theta`` that also accumulates the
+        ALS normal equations (a CasADi Function; its carried state ``c`` packs the affine
+        coefficients (in q, r, 1) of the posterior error covariance ``G``, of
+        ``N = Cov(eps - K e, e)`` and of ``L`` (the two-step cross term), the last two
+        innovations and the sums ``a11, a12, a22, b1, b2``).
+
+        The expectations (time-varying ALS): ``Pi_j = F_j G_{j-1} F_j^T + q I``;
+        ``E[e_j e_j^T] = H Pi_j H^T + r I``, ``E[e_j e_{j-1}^T] = H_j F_j N_{j-1}``,
+        ``E[e_j e_{j-2}^T] = H_j F_j L_{j-1}``; then ``G_j = (I-KH) Pi (I-KH)^T + r K K^T``,
+        ``N_j = (I-KH) Pi H^T - r K``, ``L_j = (I-KH) F_j N_{j-1}``. Products of complete,
+        accepted measurement vectors enter the least squares.
+        """
+        s = self.system
+        n, p = s.nx, s.ny
+        x, P, ll = ca.SX.sym("x", n), ca.SX.sym("P", n, n), ca.SX.sym("ll")
+        c = ca.SX.sym("c", 3 * n * n + 6 * n * p + 2 * p + 2 + 5)
+        u, y, v, a = ca.SX.sym("u", s.nu), ca.SX.sym("y", p), ca.SX.sym("v", p), ca.SX.sym("a")
+        lq, lr, gate = ca.SX.sym("lq"), ca.SX.sym("lr"), ca.SX.sym("gate")
+        q, r = ca.exp(lq), ca.exp(lr)
+        parts, o = [], 0
+        for shape in [(n, n)] * 3 + [(n, p)] * 6 + [(p, 1)] * 2 + [(1, 1)] * 2 + [(5, 1)]:
+            size = shape[0] * shape[1]
+            parts.append(ca.reshape(c[o:o + size], *shape))
+            o += size
+        G, Nc, L = parts[0:3], parts[3:6], parts[6:9]
+        e1, e2, f1, f2, sums = parts[9], parts[10], parts[11], parts[12], parts[13]
+        ctx = StepContext(s, x, P, q * ca.SX.eye(n), r * ca.SX.eye(p), u, y, v, gate)
+        _, F = self.transition(x, u)
+        xp, Pp = self.predict_expr(ctx)
+        upd = self.update_expr(ctx, xp, Pp)
+        _, H = self.measurement(xp)
+        _, _, Mv = mask_measurement(v, ca.SX.eye(p), ca.SX.zeros(p))
+        Hm, Ka = ca.mtimes(Mv, H), upd.accepted * upd.K
+        e = upd.innovation
+        Inx = ca.SX.eye(n)
+        Pi = [ca.mtimes([F, G[0], F.T]) + Inx, ca.mtimes([F, G[1], F.T]), ca.mtimes([F, G[2], F.T])]
+        E0 = [ca.mtimes([H, Pi[0], H.T]), ca.mtimes([H, Pi[1], H.T]) + ca.SX.eye(p), ca.mtimes([H, Pi[2], H.T])]
+        HF = ca.mtimes(H, F)
+        E1 = [ca.mtimes(HF, Nc[i]) for i in range(3)]
+        E2 = [ca.mtimes(HF, L[i]) for i in range(3)]
+        full = a * upd.accepted * ca.mmin(v)
+        acc = [sums[i] for i in range(5)]
+        for E, obs, w in ((E0, ca.mtimes(e, e.T), full), (E1, ca.mtimes(e, e1.T), full * f1),
+                          (E2, ca.mtimes(e, e2.T), full * f2)):
+            D = obs - E[2]
+            dot = lambda A, B: ca.sum1(ca.sum2(A * B))          # noqa: E731 - Frobenius product
+            for i, term in enumerate((dot(E[0], E[0]), dot(E[0], E[1]), dot(E[1], E[1]), dot(E[0], D),
+                                      dot(E[1], D))):
+                acc[i] = acc[i] + w * term
+        IKH = Inx - ca.mtimes(Ka, Hm)
+        G_new = [ca.mtimes([IKH, Pi[i], IKH.T]) for i in range(3)]
+        G_new[1] = G_new[1] + ca.mtimes(Ka, Ka.T)
+        N_new = [ca.mtimes([IKH, Pi[i], H.T]) for i in range(3)]
+        N_new[1] = N_new[1] - Ka
+        L_new = [ca.mtimes([IKH, F, Nc[i]]) for i in range(3)]
+        new = ca.vertcat(*[ca.reshape(m, -1, 1) for m in (*G_new, *N_new, *L_new)], e, e1, full, f1,
+                         ca.vertcat(*acc))
+        gain = -0.5 * (log_det(upd.S) + upd.nis) * upd.accepted
+        return ca.Function("swml_als_step", [x, P, ll, c, u, y, v, a, lq, lr, gate],
+                           [ca.if_else(a, upd.x, x), ca.if_else(a, upd.P, P), ll + a * gain,
+                            ca.if_else(a, new, c)])
+
+    def _branch(self, slots: int | None):
+        """The update over the last ``slots`` window slots from the initial state (the
+        early updates), or, with ``slots=None``, over the whole window from the oldest
+        stored state: an MX Function ``(x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate,
+        qb, rb) -> (x, P, Q, R, adapted)``."""
+        s, W = self.system, self.window
+        n, p = s.nx, s.ny
+        MX = ca.MX
+        x, P, Q, R = MX.sym("x", n), MX.sym("P", n, n), MX.sym("Q", n, n), MX.sym("R", p, p)
+        wu, wy, wv, wa = MX.sym("wu", s.nu * W), MX.sym("wy", p * W), MX.sym("wv", p * W), MX.sym("wa", W)
+        sx, sP, xi, Pi = MX.sym("sx", n), MX.sym("sP", n * n), MX.sym("xi", n), MX.sym("Pi", n * n)
+        gate, qb, rb = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2)
+        ins = [x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate, qb, rb]
+        if slots == 0:                                     # no update
+            return ca.Function("swml_none", ins, [x, P, Q, R, MX(0)])
+        N = W if slots is None else slots
+        cols = slice(W - N, W)
+        U, Y = ca.reshape(wu, s.nu, W)[:, cols], ca.reshape(wy, p, W)[:, cols]
+        V, A = ca.reshape(wv, p, W)[:, cols], ca.reshape(wa, 1, W)[:, cols]
+        x_s, P_s = (sx, ca.reshape(sP, n, n)) if slots is None else (xi, ca.reshape(Pi, n, n))
+        rep = lambda z: ca.repmat(z, 1, N)                   # noqa: E731
+        lfold = self._window_step().mapaccum("swml_ll", N, [0, 1, 2], [0, 1, 2])
+
+        def run(lq, lr):
+            xs, Ps, lls = lfold(x_s, P_s, 0, U, Y, V, A, rep(lq), rep(lr), rep(gate))
+            return lls[-1], xs[:, -1], Ps[:, -n:]
+
+        q0, r0 = Q[0, 0], R[0, 0]
+        lq0, lr0 = ca.log(q0), ca.log(r0)
+        als = self.als_step()
+        # G = P at the window start (its constant part), nothing else yet
+        c_init = ca.vertcat(MX.zeros(2 * n * n), ca.reshape(P_s, -1, 1), MX.zeros(als.size1_in(3) - 3 * n * n))
+        afold = als.mapaccum("swml_als", N, [0, 1, 2, 3], [0, 1, 2, 3])
+        xs0, Ps0, lls0, cs = afold(x_s, P_s, 0, c_init, U, Y, V, A, rep(lq0), rep(lr0), rep(gate))
+        l0, end0 = lls0[-1], (xs0[:, -1], Ps0[:, -n:])
+        sums = cs[-5:, -1]
+        a11, a12, a22, b1, b2 = (sums[i] for i in range(5))
+        det = a11 * a22 - a12 * a12
+        ok = det > 1e-300
+        qa = ca.if_else(ok, (a22 * b1 - a12 * b2) / ca.if_else(ok, det, 1), q0)
+        ra = ca.if_else(ok, (a11 * b2 - a12 * b1) / ca.if_else(ok, det, 1), r0)
+
+        lo_q, hi_q = ca.log(ca.fmax(qb[0], q0 / self.max_fall)), ca.log(qb[1])
+        lo_r, hi_r = ca.log(ca.fmax(rb[0], r0 / self.max_fall)), ca.log(rb[1])
+
+        def clamp(lq, lr):
+            return ca.fmin(ca.fmax(lq, lo_q), hi_q), ca.fmin(ca.fmax(lr, lo_r), hi_r)
+
+        tiny = 1e-300                                       # "negative parts floored" at the lower bounds
+        lqa, lra = clamp(ca.log(ca.fmax(qa, tiny)), ca.log(ca.fmax(ra, tiny)))
+        eva = run(lqa, lra)
+        la, endA = eva[0], eva[1:]
+
+        def finite(z):
+            return ca.logic_and(z == z, ca.fabs(z) < ca.inf)
+
+        keep = self.keep_r_nats
+        use_a = ca.logic_and(ca.logic_and(finite(la), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
+        lqs, lrs = ca.if_else(use_a, lqa, lq0), ca.if_else(use_a, lra, lr0)
+        ls = ca.if_else(use_a, la, l0)
+        h = self.fd_step
+        pts = [(lqs + h, lrs), (lqs - h, lrs), (lqs, lrs + h), (lqs, lrs - h), (lqs + h, lrs + h)]
+        evals = [run(*pt) for pt in pts]
+        lpq, lmq, lpr, lmr, lpp = (ev[0] for ev in evals)
+        g = ca.vertcat((lpq - lmq) / (2 * h), (lpr - lmr) / (2 * h))
+        H11, H22 = (lpq - 2 * ls + lmq) / h ** 2, (lpr - 2 * ls + lmr) / h ** 2
+        H12 = (lpp - lpq - lpr + ls) / h ** 2
+        detH = H11 * H22 - H12 * H12
+        negdef = ca.logic_and(H11 < 0, detH > 0)
+        newton = ca.vertcat(-(H22 * g[0] - H12 * g[1]), -(-H12 * g[0] + H11 * g[1])) / ca.if_else(negdef, detH, 1)
+        uphill = h * g / ca.fmax(ca.norm_2(g), 1e-300)
+        step = ca.if_else(negdef, newton, uphill)
+        cap = math.log(self.max_factor)
+        step = ca.fmin(ca.fmax(step, -cap), cap)
+        lqn, lrn = clamp(lqs + step[0], lrs + step[1])
+        evn = run(lqn, lrn)
+        cands = [((lqa, lra), la, endA), *[(pt, ev[0], ev[1:]) for pt, ev in zip(pts, evals)],
+                 ((lqn, lrn), evn[0], evn[1:])]
+        best_l, best_t, best_x, best_P = l0, (lq0, lr0), end0[0], end0[1]
+        for (lq, lr), lval, (xe, Pe) in cands:
+            inside = ca.logic_and(ca.logic_and(lq >= lo_q - 1e-12, lq <= hi_q + 1e-12),
+                                  ca.logic_and(lr >= lo_r - 1e-12, lr <= hi_r + 1e-12))
+            admissible = ca.logic_and(ca.logic_and(inside, finite(lval)), ca.logic_or(lr >= lr0, lval >= l0 + keep))
+            take = ca.logic_and(admissible, lval > best_l)
+            best_l = ca.if_else(take, lval, best_l)
+            best_t = (ca.if_else(take, lq, best_t[0]), ca.if_else(take, lr, best_t[1]))
+            best_x, best_P = ca.if_else(take, xe, best_x), ca.if_else(take, Pe, best_P)
+        ok_end = ca.logic_and(finite(ca.sum1(best_x)), finite(ca.sum1(ca.sum2(best_P))))
+        x_new, P_new = ca.if_else(ok_end, best_x, x), ca.if_else(ok_end, best_P, P)
+        Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), q0) * MX.eye(n)
+        R_new = ca.if_else(ok_end, ca.exp(best_t[1]), r0) * MX.eye(p)
+        name = "swml_window" if slots is None else "swml_early"
+        return ca.Function(name, ins, [x_new, P_new, Q_new, R_new, MX(1)])
+
+    def wrap_step(self, step: ca.Function) -> ca.Function:
+        """The EKF step (with the window bookkeeping of :meth:`adapt_expr`), then the update
+        at update times, as one MX Function with the step's inputs and outputs."""
+        s, W = self.system, self.window
+        n, n_snap = s.nx, W // self.every
+        ins = [ca.MX.sym(step.name_in(i), step.sparsity_in(i)) for i in range(step.n_in())]
+        names_out = [step.name_out(i) for i in range(step.n_out())]
+        out = dict(zip(names_out, step.call(ins)))
+        by = dict(zip([step.name_in(i) for i in range(step.n_in())], ins))
+        k = out["count_new"]
+        early = ca.logic_and(ca.logic_and(k <= self.early_until, ca.fmod(k, self.early_every) == 0), k > 0)
+        regular = ca.logic_and(k > self.early_until, ca.fmod(k, self.every) == 0)
+        index = ca.if_else(regular, 2, ca.if_else(early, 1, 0))
+        branches = [self._branch(0), self._branch(self.early_until or 0), self._branch(None)]
+        cond = ca.Function.conditional("swml_update", branches, branches[0])
+        sx = ca.reshape(out["snap_x_new"], n, n_snap)[:, 0]
+        sP = ca.reshape(out["snap_P_new"], n * n, n_snap)[:, 0]
+        res = cond(index, ca.reshape(out["x_new"], n, 1), ca.reshape(out["P_new"], n, n),
+                   ca.reshape(out["Q_new"], n, n), ca.reshape(out["R_new"], s.ny, s.ny), out["wu_new"],
+                   out["wy_new"], out["wv_new"], out["wa_new"], sx, sP, by["x_init"], by["P_init"], by["gate"],
+                   by["q_bounds"], by["r_bounds"])
+        for key, val in zip(("x_new", "P_new", "Q_new", "R_new", "adapted"), res):
+            out[key] = ca.densify(ca.reshape(val, out[key].shape))
+        bad = 1 - ca.logic_and(ca.sum1(ca.sum2(ca.fabs(out["x_new"]))) < ca.inf,
+                               ca.sum1(ca.sum2(ca.fabs(out["P_new"]))) < ca.inf)
+        out["status"] = ca.if_else(out["status"] != 0, out["status"], 2 * bad)
+        return ca.Function("step", ins, [out[nm] for nm in names_out], [step.name_in(i) for i in range(step.n_in())],
+                           names_out)
