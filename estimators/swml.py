@@ -21,7 +21,8 @@ stored state at the window's start:
    a factor ``max_factor`` per variance; an uphill step of length ``fd_step`` where the
    Hessian is not negative definite); of every point evaluated the one of highest
    likelihood is kept;
-4. safeguards: r is never lowered unless the likelihood gains ``keep_r_nats``; neither
+4. safeguards: r is never lowered unless the likelihood gains ``keep_r_nats`` over the
+   best point evaluated that keeps r (the current one among them); neither
    variance falls by more than a factor ``max_fall`` per update (rises are free); both
    stay within ``q_bounds``/``r_bounds`` (default 1e-4 to 1e4 times the start);
 5. the filter continues from the end of the window re-run with the kept ``(q, r)`` (the
@@ -360,14 +361,26 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         cands = [((lqa, lra), la, endA), *[(pt, ev[0], ev[1:]) for pt, ev in zip(pts, evals)],
                  ((lqn, lrn), evn[0], evn[1:])]
         best_l, best_t, best_x, best_P = l0, (lq0, lr0), end0[0], end0[1]
-        for (lq, lr), lval, (xe, Pe) in cands:
-            inside = ca.logic_and(ca.logic_and(lq >= lo_q - 1e-12, lq <= hi_q + 1e-12),
-                                  ca.logic_and(lr >= lo_r - 1e-12, lr <= hi_r + 1e-12))
-            admissible = ca.logic_and(ca.logic_and(inside, finite(lval)), ca.logic_or(lr >= lr0, lval >= l0 + keep))
-            take = ca.logic_and(admissible, lval > best_l)
-            best_l = ca.if_else(take, lval, best_l)
-            best_t = (ca.if_else(take, lq, best_t[0]), ca.if_else(take, lr, best_t[1]))
-            best_x, best_P = ca.if_else(take, xe, best_x), ca.if_else(take, Pe, best_P)
+
+        def inside(lq, lr):
+            return ca.logic_and(ca.logic_and(lq >= lo_q - 1e-12, lq <= hi_q + 1e-12),
+                                ca.logic_and(lr >= lo_r - 1e-12, lr <= hi_r + 1e-12))
+
+        # first the best point that keeps r; a point lowering r must beat it by keep_r_nats
+        for lowers in (False, True):
+            bar = best_l + keep if lowers else None
+            for (lq, lr), lval, (xe, Pe) in cands:
+                kind = lr < lr0 if lowers else lr >= lr0
+                ok = ca.logic_and(ca.logic_and(inside(lq, lr), finite(lval)), kind)
+                take = ca.logic_and(ok, lval > (ca.fmax(best_l, bar) if lowers else best_l))
+                best_l = ca.if_else(take, lval, best_l)
+                best_t = (ca.if_else(take, lq, best_t[0]), ca.if_else(take, lr, best_t[1]))
+                best_x, best_P = ca.if_else(take, xe, best_x), ca.if_else(take, Pe, best_P)
+        # the gain of lowering r at the chosen q: kept only if it is worth keep_r_nats there too
+        evk = run(best_t[0], ca.fmax(lr0, best_t[1]))
+        back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite(evk[0])), evk[0] > best_l - keep)
+        best_t = (best_t[0], ca.if_else(back, lr0, best_t[1]))
+        best_x, best_P = ca.if_else(back, evk[1], best_x), ca.if_else(back, evk[2], best_P)
         ok_end = ca.logic_and(finite(ca.sum1(best_x)), finite(ca.sum1(ca.sum2(best_P))))
         x_new, P_new = ca.if_else(ok_end, best_x, x), ca.if_else(ok_end, best_P, P)
         Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), q0) * MX.eye(n)
