@@ -78,7 +78,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     window : int
         W, the steps in the window (default 100); a multiple of ``every``.
     every : int
-        M, steps between updates after the start (default 25).
+        M, steps between updates after the start (default 50).
     early_until, early_every : int
         Up to step ``early_until`` (default 20) an update every ``early_every`` steps
         (default 2) over all steps so far; ``early_until = 0``: none.
@@ -103,7 +103,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     name = "SWML"
     adapts_noise = True
 
-    def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 100, every: int = 25,
+    def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 100, every: int = 50,
                  early_until: int = 20, early_every: int = 2, fd_step: float = 0.25, max_factor: float = 10.0,
                  keep_r_nats: float = 2.0, max_fall: float = 2.0, q_bounds=None, r_bounds=None,
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):

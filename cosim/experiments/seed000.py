@@ -105,7 +105,7 @@ class Settings:
     em_iterations: int = 100
     em_tol: float = 1e-6
     swml_window: int = 100
-    swml_every: int = 25
+    swml_every: int = 50
     seed: int = 2026
     divergence_threshold: float = 1e3
 

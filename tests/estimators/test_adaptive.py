@@ -118,16 +118,16 @@ def test_sweep_cells_equal_single_campaign_runs():
     campaign = replace(seed000.CONFIGS["paper"], runs=4, duration=0.6, scenarios=((0.2, 0.1), (0.3, 0.2)))
     sweep = seed000_sweep.SweepSettings(factors=(0.01, 10.0), campaign=campaign)
     table, _ = seed000_sweep.run(sweep, backend="serial", progress=False)
-    assert len(table) == 2 * 4 * 4                        # scenarios x cells x filters
+    assert len(table) == 2 * 4 * 5                        # scenarios x cells x filters
     single = seed000.run(replace(campaign, q0_factor=10.0, r0_factor=0.01), backend="serial", progress=False)[0]
-    for name in ("EKF", "IAE", "MF-IAE", "EKF EM"):
+    for name in ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML"):
         for sc in (1, 2):
             cell = table[(table.q_factor == 10.0) & (table.r_factor == 0.01) & (table["filter"] == name)
                          & (table.scenario == sc)]
             ref = single[(single["filter"] == name) & (single.scenario == sc)]["eta"].mean()
             assert cell["eta"].item() == pytest.approx(ref, rel=1e-12)
     g = seed000_sweep.goals(table, sweep)
-    assert set(g["filter"]) == {"IAE", "MF-IAE", "EKF EM"} and (g["cells"] == 4).all()
+    assert set(g["filter"]) == {"IAE", "MF-IAE", "EKF EM", "SWML"} and (g["cells"] == 4).all()
 
 
 def test_cli_paper_config_and_sweep_write_their_reports(tmp_path, capsys):
