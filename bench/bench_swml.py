@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import time
+from functools import partial
 
 import numpy as np
 
@@ -35,26 +36,34 @@ def best(fn, repeats=7):
     return min(times)
 
 
+def rerun(f, x0, us, ys) -> None:
+    """``f.run`` from the start again (same initial state and noise)."""
+    f.reset(x0, 1.0)
+    f.set_noise(1e-3, 10.0)
+    f.run(us, ys)
+
+
+def one_length(cp, x0, n: int) -> str:
+    """The table row for records of ``n`` steps."""
+    us, ys = record(cp, n)
+    ekf, swml = EKF(cp, x0, 1.0, 1e-3, 10.0), SWML(cp, x0, 1.0, 1e-3, 10.0)
+    ekf.run(us, ys), swml.run(us, ys)                         # compile and warm
+    te, ts = best(partial(rerun, ekf, x0, us, ys)), best(partial(rerun, swml, x0, us, ys))
+    Y = np.repeat(ys[None], 100, axis=0)
+    be, bs = (best(partial(BatchFilter(f, 100).run, us, Y), 3)
+              for f in (EKF(cp, x0, 1.0, 1e-3, 10.0), SWML(cp, x0, 1.0, 1e-3, 10.0)))
+    return (f"| {n} steps | {te / n * 1e6:.2f} | {ts / n * 1e6:.2f} | {ts / te:.1f}x | "
+            f"{be / n / 100 * 1e6:.2f} / {bs / n / 100 * 1e6:.2f} |")
+
+
 def main() -> None:
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = [0.5, 0.0, 1.8, 0.5]
-    print("| record | EKF run [us/step] | SWML run [us/step] | ratio | batched x100, per realisation-step: EKF / SWML |")
+    print("| record | EKF run [us/step] | SWML run [us/step] | ratio | "
+          "batched x100, per realisation-step: EKF / SWML |")
     print("|---|---|---|---|---|")
     for n in (500, 5000):
-        us, ys = record(cp, n)
-        ekf, swml = EKF(cp, x0, 1.0, 1e-3, 10.0), SWML(cp, x0, 1.0, 1e-3, 10.0)
-        ekf.run(us, ys), swml.run(us, ys)                     # compile and warm
-
-        def run(f):
-            f.reset(x0, 1.0)
-            f.set_noise(1e-3, 10.0)
-            f.run(us, ys)
-        te, ts = best(lambda: run(ekf)), best(lambda: run(swml))
-        Y = np.repeat(ys[None], 100, axis=0)
-        be, bs = (best(lambda f=f: BatchFilter(f, 100).run(us, Y), 3) for f in
-                  (EKF(cp, x0, 1.0, 1e-3, 10.0), SWML(cp, x0, 1.0, 1e-3, 10.0)))
-        print(f"| {n} steps | {te / n * 1e6:.2f} | {ts / n * 1e6:.2f} | {ts / te:.1f}x | "
-              f"{be / n / 100 * 1e6:.2f} / {bs / n / 100 * 1e6:.2f} |")
+        print(one_length(cp, x0, n))
     us, ys = record(cp, 200)
     g = SWML(cp, x0, 1.0, 1e-3, 10.0)
     times = []

@@ -520,7 +520,8 @@ def agreement(table: pd.DataFrame) -> list[str]:
                      f"(paper's MF-IAE / our bound: {_join(g['paper MF-IAE'] / g['EKF true Q,R'])}); "
                      f"IAE / bound = {_join(g['IAE / bound'])}; EKF / bound = {_join(g['EKF / bound'])}; "
                      f"EKF with EM-learned Q, R / bound = {_join(g['EKF EM / bound'])} "
-                     f"(learned q / true q = {_join(g['q_em'] / true_q)}).")
+                     f"(learned q / true q = {_join(g['q_em'] / true_q)}); SWML (online, beyond the paper) / "
+                     f"bound = {', '.join(f'{v:.3f}' for v in g['SWML / bound'])}.")
     return lines
 
 
