@@ -51,7 +51,11 @@ from .linalg import log_det, mask_measurement
 from .protocol import Parameter, StepContext, StepResult
 from .system import DiscreteModel
 
-__all__ = ["SWML"]
+__all__ = ["MAX_WINDOW", "SWML"]
+
+#: Longest window: its re-runs are compiled into the step (about 1.7 s of C compilation per
+#: 100 steps of window, once per configuration, then cached).
+MAX_WINDOW = 2000
 
 
 def _scalar_variance(M, n: int, what: str) -> float:
@@ -76,7 +80,8 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     Q, R : float or array_like
         The initial ``q I`` and ``r I`` (a scalar, or a multiple of the identity).
     window : int
-        W, the steps in the window (default 100); a multiple of ``every``.
+        W, the steps in the window (default 100); a multiple of ``every``, at most
+        :data:`MAX_WINDOW`.
     every : int
         M, steps between updates after the start (default 50).
     early_until, early_every : int
@@ -113,6 +118,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
         q0, r0 = _scalar_variance(Q, system.nx, "Q"), _scalar_variance(R, system.ny, "R")
         self.window = checks.positive_int(window, "window")
+        if self.window > MAX_WINDOW:
+            raise ConfigurationError(f"SWML: window = {self.window} is longer than {MAX_WINDOW} steps (its re-runs are "
+                                     "compiled into the step); use a shorter window")
         self.every = checks.positive_int(every, "every")
         if self.window % self.every:
             raise ConfigurationError(f"SWML: window = {self.window} must be a multiple of every = {self.every} "

@@ -227,7 +227,8 @@ def test_bad_settings_and_inputs_are_named(cp):
     for kw, msg in (({"window": 30, "every": 25}, "window = 30 must be a multiple of every = 25"),
                     ({"early_until": 200}, "early_until must be a whole number of steps in 0..window"),
                     ({"max_factor": 1.0}, "max_factor must be > 1"),
-                    ({"keep_r_nats": -1}, "keep_r_nats must be >= 0")):
+                    ({"keep_r_nats": -1}, "keep_r_nats must be >= 0"),
+                    ({"window": 10**6, "every": 10}, "window = 1000000 is longer than 2000 steps")):
         with pytest.raises(ConfigurationError, match=msg):
             SWML(cp, x0, 1.0, 0.1, 0.1, **kw)
     with pytest.raises(ConfigurationError, match="Q must be a multiple of the identity"):
