@@ -2,13 +2,7 @@
 import numpy as np
 import pytest
 
-from estimators import EKF, IAE, KF, MFIAE, UKF, BatchFilter, discretize
-from fmu_models import get_model
-
-
-@pytest.fixture(scope="module")
-def cp():
-    return discretize(get_model("cartpole"), 0.01)
+from estimators import EKF, IAE, KF, MFIAE, UKF, BatchFilter
 
 
 @pytest.mark.parametrize("cls,args", [(EKF, (0.2, 0.1)), (KF, (0.2, 0.1)), (UKF, (0.2, 0.1)),

@@ -20,11 +20,6 @@ X0 = [0.5, 0.0, 1.8, 0.5]
 
 
 @pytest.fixture(scope="module")
-def cp():
-    return discretize(get_model("cartpole"), 0.01)
-
-
-@pytest.fixture(scope="module")
 def seed000_record(cp):
     """500 steps of seed 000 scenario 1 (eqs reading), one realisation."""
     rng = np.random.default_rng(7)

@@ -142,11 +142,6 @@ def test_bias_augmented_ekf_removes_the_gyro_offset():
     assert err_full < 0.5 * err_plain
 
 
-@pytest.fixture(scope="module")
-def cp():
-    return discretize(get_model("cartpole"), 0.01)
-
-
 @pytest.mark.parametrize("cls", [EKF, KF, UKF, IAE])
 def test_bad_input_is_refused_and_state_kept(cp, cls):
     f = cls(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.01, 0.1)

@@ -4,15 +4,9 @@ the cart-pole."""
 import numpy as np
 import pytest
 
-from estimators import EKF, IAE, KF, MFIAE, UKF, discretize, em_noise, linear_model, rts_smooth
-from fmu_models import get_model
+from estimators import EKF, IAE, KF, MFIAE, UKF, em_noise, linear_model, rts_smooth
 
 X0 = np.array([0.5, 0.0, 1.8, 0.5])
-
-
-@pytest.fixture(scope="module")
-def cp():
-    return discretize(get_model("cartpole"), 0.01)
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 from fmu_helpers import Instance
 
-from estimators import SWML, BatchFilter, discretize, linear_model
-from fmu_models import get_model
+from estimators import SWML, BatchFilter, linear_model
 from fmu_models.errors import ConfigurationError, InputError
 
 A = np.array([[1.0, 0.1], [0.0, 0.9]])
@@ -165,11 +164,6 @@ def test_one_window_update_equals_a_numpy_reimplementation(lin):
 
 
 # ---------------------------------------------------------------------------- forms
-@pytest.fixture(scope="module")
-def cp():
-    return discretize(get_model("cartpole"), 0.01)
-
-
 @pytest.fixture(scope="module")
 def record(cp):
     rng = np.random.default_rng(11)
