@@ -71,9 +71,9 @@ from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, TypeMismatchError
 from fmu_models.registry import Registry
 
-__all__ = ["COMPONENTS", "PORT_TYPES", "Component", "ExportedFMU", "ExportsFMU", "FastBinding", "Port",
+__all__ = ["COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding", "Port",
            "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
-           "ports_compatible"]
+           "ports_compatible", "split_port"]
 
 #: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
 PORT_TYPES = {
@@ -202,6 +202,51 @@ class FastBinding(Protocol):
         outputs at ``t`` into ``values[outputs]`` (and the exact ones of integer and Boolean
         ports into ``integers[outputs]``); ``update_fn(t)`` consumes ``values[inputs]`` (a
         slice or an int index array of the connected inputs) and ``integers[inputs]``."""
+
+
+def split_port(ref, what: str, owner: str = "component") -> tuple[str, str]:
+    """``(owner, port)`` of a connection end written ``"<owner>.<port>"``; ``what`` names
+    it in the error (ConfigurationError) for anything else."""
+    if not isinstance(ref, str) or "." not in ref or ref.startswith(".") or ref.endswith("."):
+        raise ConfigurationError(f"{what} {ref!r} must be written '{owner}.port'")
+    first, port = ref.split(".", 1)
+    return first, port
+
+
+class BoundCalls:
+    """``output`` and ``update`` of a :class:`FastBinding` component through its own
+    :meth:`~FastBinding.bind` on a private buffer (the path of calls from outside the
+    master's loop). A mixin: the class sets ``self._private = None`` and drops it again
+    whenever its binding becomes stale (new instance, closed); it may override
+    :meth:`_set_private_inputs` for ports that need their exact integer value."""
+
+    _private = None
+
+    def _private_binding(self):
+        if self._private is None:
+            n_in, n_out = len(self.connected_inputs), len(self.output_names)
+            buf, ints = np.zeros(n_in + n_out), np.zeros(n_in + n_out, dtype=np.int64)
+            self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
+        return self._private
+
+    def _set_private_inputs(self, buf: np.ndarray, ints: np.ndarray, u) -> None:
+        n_in = len(self.connected_inputs)
+        buf[:n_in] = u
+        ints[:n_in] = np.asarray(u, dtype=float).astype(np.int64)
+
+    def output(self, t: float, u: np.ndarray) -> np.ndarray:
+        """Outputs at ``t`` [s] with the connected inputs ``u`` (one value per connected
+        input, in order); returns a new array, one value per output."""
+        buf, ints, out_fn, _ = self._private_binding()
+        self._set_private_inputs(buf, ints, u)
+        out_fn(t)
+        return buf[len(self.connected_inputs):].copy()
+
+    def update(self, t: float, u: np.ndarray) -> None:
+        """Set the connected inputs ``u`` and advance over ``[t, t + period]`` (``t`` in s)."""
+        buf, ints, _, upd_fn = self._private_binding()
+        self._set_private_inputs(buf, ints, u)
+        upd_fn(t)
 
 
 @runtime_checkable

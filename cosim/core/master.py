@@ -46,7 +46,7 @@ from fmu_models.errors import (
     UnknownNameError,
 )
 
-from .component import Component, FastBinding, StopRequest, bind_protocol, ports_compatible
+from .component import Component, FastBinding, StopRequest, bind_protocol, ports_compatible, split_port
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, base_step, evaluation_order
 
@@ -59,13 +59,6 @@ LOOP_SOLVERS = ("newton", "fixed-point")
 BLOCK = 64
 #: Largest number of base steps of one run.
 MAX_STEPS = 10**10
-
-
-def _split(ref: str, what: str) -> tuple[str, str]:
-    if not isinstance(ref, str) or "." not in ref or ref.startswith(".") or ref.endswith("."):
-        raise ConfigurationError(f"{what} {ref!r} must be written 'component.port'")
-    comp, port = ref.split(".", 1)
-    return comp, port
 
 
 class Cosimulation:
@@ -152,7 +145,7 @@ class Cosimulation:
 
     # ---------------------------------------------------------------- validation
     def _port(self, ref: str, direction: str):
-        comp, port = _split(ref, f"{direction} port")
+        comp, port = split_port(ref, f"{direction} port")
         if comp not in self.by_name:
             raise UnknownNameError(f"unknown component {comp!r} in {ref!r}; components: "
                                    f"{', '.join(self.by_name)}")

@@ -49,7 +49,7 @@ from fmu_models.errors import (
     UnknownNameError,
 )
 
-from ..core.component import PORT_TYPES, Component, ExportedFMU, Port, StopRequest
+from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest
 from .archive import Extraction, read_description
 from .exchange import Exchange
 from .instance import FMUInstance
@@ -71,7 +71,7 @@ def _has_clocks(md) -> bool:
     return any(v.type == "Clock" for v in md.modelVariables) or getattr(md, "scheduledExecution", None) is not None
 
 
-class FMUComponent(Component, kind="fmu"):
+class FMUComponent(BoundCalls, Component, kind="fmu"):
     """An FMU stepped by the master.
 
     Parameters
@@ -590,33 +590,12 @@ class FMUComponent(Component, kind="fmu"):
             pending[0] = False
         return output_fn, update_fn
 
-    def _private_binding(self):
-        if self._private is None:
-            n_in, n_out = len(self.connected_inputs), len(self.output_names)
-            buf = np.zeros(n_in + n_out)
-            ints = np.zeros(n_in + n_out, dtype=np.int64)
-            self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
-        return self._private
-
     def _set_private_inputs(self, buf, ints, u) -> None:
         n_in = len(self.connected_inputs)
         buf[:n_in] = u
         for i, n in enumerate(self.connected_inputs):
             if PORT_TYPES[self.element_ports[n].type] != "real":
                 ints[i] = int(u[i])
-
-    def output(self, t: float, u: np.ndarray) -> np.ndarray:
-        """Outputs at ``t`` with the connected inputs ``u`` (see the module documentation)."""
-        buf, ints, out_fn, _ = self._private_binding()
-        self._set_private_inputs(buf, ints, u)
-        out_fn(t)
-        return buf[len(self.connected_inputs):].copy()
-
-    def update(self, t: float, u: np.ndarray) -> None:
-        """Set the connected inputs ``u`` and advance over ``[t, t + period]``."""
-        buf, ints, _, upd_fn = self._private_binding()
-        self._set_private_inputs(buf, ints, u)
-        upd_fn(t)
 
     def close(self) -> None:
         """End and free the FMU instance as the FMI rules allow (see :mod:`cosim.fmi.instance`);

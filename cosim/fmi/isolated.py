@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import select
 import signal
 import struct
 import subprocess
@@ -42,10 +43,20 @@ _REPLY = struct.Struct("<cI")       # status, length of a pickled payload
 CLOSE_TIMEOUT = 2.0
 
 
-def _read(fd: int, n: int) -> bytes:
-    """Exactly ``n`` bytes from ``fd`` (b"" if the other end closed first)."""
+#: Seconds the parent waits on the child's pipe between checks for Ctrl-C (a signal that
+#: the kernel hands to another thread of the parent does not interrupt a blocking read).
+POLL = 0.25 if os.name == "posix" else None
+
+
+def _read(fd: int, n: int, poll: float | None = None) -> bytes:
+    """Exactly ``n`` bytes from ``fd`` (b"" if the other end closed first); with ``poll``
+    [s] the wait returns to the interpreter that often, so that a pending Ctrl-C is raised
+    even while the other end never answers (an FMU stuck in its code)."""
     chunks, got = [], 0
     while got < n:
+        if poll is not None:
+            while not select.select([fd], [], [], poll)[0]:
+                pass                       # pending signal handlers run between the waits
         b = os.read(fd, n - got)
         if not b:
             return b""
@@ -113,13 +124,13 @@ class RemoteFMU:
     def _call(self, what: str, t: float, data: bytes) -> None:
         try:
             _write(self._to, data)
-            head = _read(self._from, _REPLY.size)
+            head = _read(self._from, _REPLY.size, POLL)
         except (BrokenPipeError, ConnectionResetError):
             head = b""
         if not head:
             raise self._died(what, t) from None
         status, length = _REPLY.unpack(head)
-        body = _read(self._from, length + 16 * self.n_out)
+        body = _read(self._from, length + 16 * self.n_out, POLL)
         if len(body) < length:
             raise self._died(what, t)
         if status == b"K":

@@ -30,7 +30,7 @@ import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 
-from ..core.component import Component, Port, ports_compatible
+from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
 from .component import FMUComponent
 from .exchange import Exchange, no_exchange
 from .model_exchange import SOLVERS, ContinuousModel, FMUModel, MEIntegrator
@@ -39,12 +39,6 @@ __all__ = ["MESystem"]
 
 #: Most rounds of the joint event iteration (each a round of every member's own iteration).
 MAX_EVENT_ROUNDS = 1000
-
-
-def _split(ref: str, what: str) -> tuple[str, str]:
-    if not isinstance(ref, str) or "." not in ref:
-        raise ConfigurationError(f"{what} {ref!r} must be written 'member.port'")
-    return tuple(ref.split(".", 1))
 
 
 class _Coupled(ContinuousModel):
@@ -145,7 +139,7 @@ class _Coupled(ContinuousModel):
                        f"{MAX_EVENT_ROUNDS} rounds (the members' discrete values keep changing each other)")
 
 
-class MESystem(Component, kind="me_system"):
+class MESystem(BoundCalls, Component, kind="me_system"):
     """Model Exchange FMUs connected to each other, integrated as one system (see the
     module documentation).
 
@@ -250,7 +244,8 @@ class MESystem(Component, kind="me_system"):
                                     f"got {type(connections).__name__}")
         out = {}
         for dst, src in connections.items():
-            (dm, di), (sm, so) = _split(dst, f"{name}: input"), _split(src, f"{name}: output")
+            (dm, di), (sm, so) = (split_port(dst, f"{name}: input", "member"),
+                                  split_port(src, f"{name}: output", "member"))
             for m, p, kind in ((dm, di, "input"), (sm, so, "output")):
                 if m not in self.by_name:
                     raise UnknownNameError(f"{name}: no member {m!r}; members: {', '.join(self.by_name)}")
@@ -451,28 +446,6 @@ class MESystem(Component, kind="me_system"):
             me.advance(t, h, pending[0])
             pending[0] = False
         return output_fn, update_fn
-
-    def _private_binding(self):
-        if self._private is None:
-            n_in, n_out = len(self.connected_inputs), len(self.output_names)
-            buf, ints = np.zeros(n_in + n_out), np.zeros(n_in + n_out, dtype=np.int64)
-            self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
-        return self._private
-
-    def output(self, t: float, u: np.ndarray) -> np.ndarray:
-        """Outputs at ``t`` with the connected external inputs ``u``."""
-        buf, ints, out_fn, _ = self._private_binding()
-        buf[: len(self.connected_inputs)] = u
-        ints[: len(self.connected_inputs)] = np.asarray(u, dtype=float).astype(np.int64)
-        out_fn(t)
-        return buf[len(self.connected_inputs):].copy()
-
-    def update(self, t: float, u: np.ndarray) -> None:
-        """Set the external inputs ``u`` and integrate the system over ``[t, t + period]``."""
-        buf, ints, _, upd_fn = self._private_binding()
-        buf[: len(self.connected_inputs)] = u
-        ints[: len(self.connected_inputs)] = np.asarray(u, dtype=float).astype(np.int64)
-        upd_fn(t)
 
     def close(self) -> None:
         """End every member's instance by the FMI rules (safe twice)."""
