@@ -3,6 +3,7 @@
 folder is put on ``sys.path`` (for the helper modules beside this file), so a test folder
 named like a package can never shadow it."""
 import shutil
+import signal
 import subprocess
 import sys
 import zipfile
@@ -18,6 +19,13 @@ import fmu_models  # noqa: F401
 sys.path.append(str(Path(__file__).parent))
 
 DATA = Path(__file__).parent / "data"
+
+# The Ctrl-C tests send SIGINT to the command lines they start. A shell that runs the test
+# command in the background (``pytest &``, a CI runner without job control) starts it with
+# SIGINT ignored, which every child inherits, and then no Python process sees Ctrl-C:
+# restore the interactive default before any test starts a process.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def build_test_fmu(folder: str, identifier: str, version: int, out: Path) -> Path:

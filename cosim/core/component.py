@@ -205,8 +205,9 @@ class FastBinding(Protocol):
 
 
 def split_port(ref, what: str, owner: str = "component") -> tuple[str, str]:
-    """``(owner, port)`` of a connection end written ``"<owner>.<port>"``; ``what`` names
-    it in the error (ConfigurationError) for anything else."""
+    """``(owner, port)`` of the connection end ``ref``, written ``"<owner>.<port>"``;
+    ``what`` names it in the error (ConfigurationError) for anything else, ``owner`` is
+    the word for its first part in that message ("component", "member")."""
     if not isinstance(ref, str) or "." not in ref or ref.startswith(".") or ref.endswith("."):
         raise ConfigurationError(f"{what} {ref!r} must be written '{owner}.port'")
     first, port = ref.split(".", 1)
