@@ -15,6 +15,8 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -54,7 +56,8 @@ def _end_group(proc: subprocess.Popen) -> None:
             continue
 
 
-def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, timeout: float = 600.0) -> str:
+def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, timeout: float = 600.0,
+                 cancel: threading.Event | None = None) -> str:
     """Run the compiler command ``cmd`` (``what`` it builds, for messages); returns its
     output. Interrupted or failing, the compiler's process group is ended and its temporary
     files removed before the exception goes on.
@@ -75,6 +78,9 @@ def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, t
         Working directory (default: the current one).
     timeout
         Longest time [s] the compiler may take.
+    cancel
+        An event another thread sets to end the compiler (e.g. the main thread on Ctrl-C
+        while compilers run in worker threads); then BuildError ("cancelled").
     """
     with tempfile.TemporaryDirectory(prefix="pendulum_cosim_cc_") as tmp:
         env = {**os.environ, "TMPDIR": tmp, "TMP": tmp, "TEMP": tmp}
@@ -83,8 +89,19 @@ def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, t
                                     text=True, start_new_session=True)
         except OSError as e:
             raise BuildError(f"compiling {what}: cannot run the compiler {cmd[0]}: {e.strerror or e}") from None
+        deadline = time.monotonic() + timeout
         try:
-            out, _ = proc.communicate(timeout=timeout)
+            while True:
+                try:
+                    out, _ = proc.communicate(timeout=min(0.2, max(deadline - time.monotonic(), 0.0))
+                                              if cancel is not None else timeout)
+                    break
+                except subprocess.TimeoutExpired:
+                    if time.monotonic() >= deadline:
+                        raise
+                    if cancel is not None and cancel.is_set():
+                        _end_group(proc)
+                        raise BuildError(f"compiling {what}: cancelled") from None
         except subprocess.TimeoutExpired:
             _end_group(proc)
             raise BuildError(f"compiling {what}: the compiler did not finish in {timeout:g} s") from None

@@ -104,7 +104,9 @@ def test_a_missing_or_damaged_fmu_is_named(tmp_path, content, expect):
 def test_ctrl_c_during_a_cross_build_leaves_no_fmu_no_compiler_and_no_temporary_file(tmp_path):
     out, tmp, cache = tmp_path / "fmus", tmp_path / "tmp", tmp_path / "cache"
     tmp.mkdir()
-    env = {**os.environ, "PENDULUM_COSIM_CACHE": str(cache), "TMPDIR": str(tmp)}   # nothing cached: it compiles
+    # nothing cached, zig's cache cold too: the compilers would run for a minute or more
+    env = {**os.environ, "PENDULUM_COSIM_CACHE": str(cache), "TMPDIR": str(tmp),
+           "ZIG_GLOBAL_CACHE_DIR": str(tmp_path / "zig-cache")}
     proc = subprocess.Popen([sys.executable, "-m", "fmu_models", "build", "--out", str(out), "--platforms",
                              "win64,darwin,aarch64-linux", "--fmi-version", "3"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
@@ -112,8 +114,11 @@ def test_ctrl_c_during_a_cross_build_leaves_no_fmu_no_compiler_and_no_temporary_
     while time.monotonic() < deadline and not list(tmp.glob("pendulum_cosim_zig_*")):
         time.sleep(0.05)                                   # until zig runs
     assert list(tmp.glob("pendulum_cosim_zig_*")), "the cross build did not start"
+    time.sleep(1.0)                                        # the compilers are at work
+    t0 = time.monotonic()
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 10, "the running compilers were not ended at once"
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "interrupted" in err
     assert not out.exists() or not any(out.iterdir())      # no FMU without its platforms

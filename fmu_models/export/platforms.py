@@ -34,9 +34,10 @@ import shutil
 import struct
 import sys
 import tempfile
+import threading
 import zipfile
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -269,7 +270,8 @@ def _source_files(z: zipfile.ZipFile, md: ET.Element, fmi_version: int, where: s
     return names
 
 
-def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path) -> None:
+def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path,
+             cancel: threading.Event | None = None) -> None:
     """Cross-compile the library ``out`` through the compiled-code cache."""
     import fmpy
 
@@ -284,7 +286,7 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
             lib = Path(scratch) / f"{identifier}{target.suffix}"
             run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{headers}",
                           *[str(src / f) for f in c_files], "-o", str(lib)],
-                         f"{identifier} for {target.zig}", cwd=scratch)
+                         f"{identifier} for {target.zig}", cwd=scratch, cancel=cancel)
             shutil.copyfile(lib, dst)
 
     h = hashlib.sha256("|".join([*zig[1:], zig_version(), target.zig, *flags]).encode())
@@ -296,6 +298,25 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
             shutil.copyfile(cached_file(directory / f"cross_{h.hexdigest()[:24]}{target.suffix}", build), out)
             return
     build(out)
+
+
+def _compile_all(builds, src: Path, c_files: list[str]) -> None:
+    """Compile every ``(identifier, target, library)`` in worker threads; Ctrl-C (or any
+    error) in the main thread ends every running compiler before it goes on."""
+    cancel = threading.Event()
+    pool = ThreadPoolExecutor(max_workers=min(len(builds), os.cpu_count() or 1))
+    try:
+        futures = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for ident, t, lib in builds]
+        pending = set(futures)
+        while pending:                              # short waits: the main thread sees Ctrl-C
+            done, pending = wait(pending, timeout=0.2, return_when=FIRST_EXCEPTION)
+            for f in done:
+                f.result()
+    except BaseException:
+        cancel.set()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def zig_version() -> str:
@@ -363,9 +384,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
         builds = [(ident, t, tmp / f"{ident}-{t.zig}{t.suffix}") for _, ident, targets in jobs for t in targets]
         if builds:
             zig_command()                           # the missing extra named before anything starts
-            with ThreadPoolExecutor(max_workers=min(len(builds), os.cpu_count() or 1)) as pool:
-                for f in [pool.submit(_compile, t, src, c_files, ident, lib) for ident, t, lib in builds]:
-                    f.result()
+            _compile_all(builds, src, c_files)
         added: dict[str, Path] = {}
         for plat, ident, targets in jobs:
             built = [(t, tmp / f"{ident}-{t.zig}{t.suffix}") for t in targets]
