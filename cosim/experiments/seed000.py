@@ -9,8 +9,9 @@ figure. Scenarios ``(sigma_q^2, sigma_r^2)``: (0.2, 0.1), (0.2, 0.2), (0.3, 0.1)
 Two readings of the names (SPEC): ``"eqs"`` (eqs 24-25: ``q = sigma_q^2``, ``r =
 sigma_r^2``) and ``"prose"`` (section 5's text: ``q = sigma_r^2``, ``r = sigma_q^2``).
 
-Filters: EKF, IAE and MF-IAE from the same nominal (wrong) noise setting, and the EKF
-given the true Q and R (the bound an adaptive filter tries to reach). The paper gives no
+Filters: EKF, IAE and MF-IAE from the same nominal (wrong) noise setting, beside them
+the EKF with EM-learned Q and R and SWML (online, beyond the paper: :class:`estimators.SWML`),
+and the EKF given the true Q and R (the bound an adaptive filter tries to reach). The paper gives no
 filter settings: every one is in :class:`Settings`, and two configurations are named
 (:data:`CONFIGS`): ``"default"`` (filters from Q = R = 0.01 I, both readings) and
 ``"paper"`` (filters from Q0 = 1e-3 I, R0 = 10 I, eqs reading: the regime whose EKF row

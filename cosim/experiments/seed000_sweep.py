@@ -178,7 +178,7 @@ def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_
         to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"))
     atomic_write(out / "sweep.csv", lambda p: table.to_csv(p, index=False))
     atomic_write(out / "sweep.parquet", table.to_parquet)
-    lines = ["# Seed 000 robustness sweep: EKF, IAE and MF-IAE from wrong Q0 and R0", ""]
+    lines = ["# Seed 000 robustness sweep: EKF, IAE, MF-IAE, the EM-learned EKF and SWML from wrong Q0 and R0", ""]
     if partial:
         lines += ["**PARTIAL RESULTS: the sweep was interrupted; only finished cells are here.**", ""]
     if len(table):
@@ -247,11 +247,11 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
 
 
 class Sweep(Experiment, register="seed000-sweep"):
-    """The robustness map of EKF, IAE and MF-IAE over wrong starting Q0 and R0 (beyond the
+    """The robustness map of EKF, IAE, MF-IAE and SWML over wrong starting Q0 and R0 (beyond the
     paper; see the module documentation). ``--set`` names either a sweep setting
     (``factors``, the goal margins) or a setting of every cell's seed 000 campaign."""
 
-    description = "beyond the paper: EKF, IAE and MF-IAE over a 7 x 7 map of wrong Q0, R0"
+    description = "beyond the paper: EKF, IAE, MF-IAE and SWML over a 7 x 7 map of wrong Q0, R0"
     configs = seed000.CONFIGS
     default_config = "paper"
     paths = ("fast",)
