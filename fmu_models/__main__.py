@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -27,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     from .errors import PendulumCosimError
     from .export.pack import FMI_VERSIONS
     from .export.platforms import PLATFORMS, add_platforms, parse_platforms
-    from .signals import terminate_as_interrupt
+    from .signals import private_tempdir, terminate_as_interrupt
 
     parser = argparse.ArgumentParser(prog="python -m fmu_models",
                                      description="Build the plant FMUs from the CasADi models.")
@@ -57,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
                 paths = build_fmus(args.out, args.fmi_version, models)
             else:                                  # complete FMUs only: built and extended aside, then moved
                 out.mkdir(parents=True, exist_ok=True)
-                with tempfile.TemporaryDirectory(dir=out, prefix=".build-") as tmp:
+                with private_tempdir(".build-", dir=out) as tmp:
                     staged = build_fmus(tmp, args.fmi_version, models)
                     for p in staged:
                         notes += add_platforms(p, platforms)

@@ -14,13 +14,13 @@ import os
 import shutil
 import signal
 import subprocess
-import tempfile
 import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
 from .errors import BuildError, CompilerNotFoundError
+from .signals import private_tempdir
 
 __all__ = ["find_compiler", "run_compiler"]
 
@@ -82,7 +82,7 @@ def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, t
         An event another thread sets to end the compiler (e.g. the main thread on Ctrl-C
         while compilers run in worker threads); then BuildError ("cancelled").
     """
-    with tempfile.TemporaryDirectory(prefix="pendulum_cosim_cc_") as tmp:
+    with private_tempdir("pendulum_cosim_cc_") as tmp:
         env = {**os.environ, "TMPDIR": tmp, "TMP": tmp, "TEMP": tmp}
         try:
             proc = subprocess.Popen(list(cmd), cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

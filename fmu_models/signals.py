@@ -4,10 +4,13 @@ blocks as an interrupted one."""
 from __future__ import annotations
 
 import contextlib
+import shutil
 import signal
+import tempfile
+import threading
 from collections.abc import Iterator
 
-__all__ = ["terminate_as_interrupt"]
+__all__ = ["private_tempdir", "terminate_as_interrupt"]
 
 
 def _raise_interrupt(signum, frame):
@@ -27,3 +30,48 @@ def terminate_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+class _Deferred:
+    """Ctrl-C and SIGTERM noted instead of raised until :meth:`release` (main thread only:
+    elsewhere Python raises no signal exceptions)."""
+
+    def __init__(self):
+        self.noted, self.old = [], {}
+        if threading.current_thread() is threading.main_thread():
+            for s in (signal.SIGINT, signal.SIGTERM):
+                self.old[s] = signal.signal(s, lambda signum, frame: self.noted.append(signum))
+
+    def release(self) -> None:
+        """Restore the handlers; a signal noted meanwhile is raised now as the old handler
+        would have (KeyboardInterrupt for Ctrl-C, or for SIGTERM under
+        :func:`terminate_as_interrupt`)."""
+        old, self.old = self.old, {}
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        if self.noted:
+            signum = self.noted[0]
+            self.noted = []
+            handler = old.get(signum)
+            if callable(handler):
+                handler(signum, None)
+            elif handler != signal.SIG_IGN:
+                signal.raise_signal(signum)
+
+
+@contextlib.contextmanager
+def private_tempdir(prefix: str, dir=None) -> Iterator[str]:
+    """A new temporary folder (``prefix``, in ``dir`` or the default place) removed at the
+    end of the block, also when Ctrl-C or SIGTERM arrives while it is being created (with
+    ``tempfile.TemporaryDirectory`` an interrupt inside its creation leaves the folder
+    behind)."""
+    deferred = _Deferred()
+    path = None
+    try:
+        path = tempfile.mkdtemp(prefix=prefix, dir=dir)
+        deferred.release()
+        yield path
+    finally:
+        deferred.release()
+        if path is not None:
+            shutil.rmtree(path, ignore_errors=True)

@@ -383,8 +383,11 @@ def test_an_interrupted_build_leaves_nothing_behind(tmp_path, sig):
     proc = subprocess.Popen([sys.executable, "-m", "fmu_models", "build", "--out", str(out)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t0 = time.monotonic()
-    while not list(tmp.glob("*")) and proc.poll() is None and time.monotonic() - t0 < 60:
-        time.sleep(0.01)                                  # the build has started writing
+    # until the compiler runs (its private temporary folder exists); not merely the first
+    # file in TMPDIR, which is the probe tempfile writes and removes to test the folder, and
+    # a signal inside that probe can leave it behind (Python's tempfile, not ours)
+    while not list(tmp.glob("pendulum_cosim_cc_*")) and proc.poll() is None and time.monotonic() - t0 < 60:
+        time.sleep(0.01)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     assert "Traceback" not in err

@@ -21,7 +21,6 @@ import platform
 import secrets
 import shutil
 import sys
-import tempfile
 import uuid
 import zipfile
 from collections.abc import Callable
@@ -32,6 +31,7 @@ import fmpy
 from ..cache import cached_file, writable_cache
 from ..compiler import find_compiler, run_compiler
 from ..errors import ConfigurationError
+from ..signals import private_tempdir
 
 __all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "library_suffix", "pack_fmu",
            "platform_dir", "temp_beside"]
@@ -169,7 +169,7 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
                                  ) from None
     generic = ["core_api.h", "core_common.h", "wrapper_modes.h", "wrapper_common.h", f"{core}_core.h",
                f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
-    with tempfile.TemporaryDirectory(prefix=f"{identifier}_") as tmp:
+    with private_tempdir(f"{identifier}_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"
         src.mkdir()

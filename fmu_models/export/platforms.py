@@ -33,7 +33,6 @@ import re
 import shutil
 import struct
 import sys
-import tempfile
 import threading
 import zipfile
 from collections.abc import Sequence
@@ -45,6 +44,7 @@ from xml.etree import ElementTree as ET
 from ..cache import cached_file, writable_cache
 from ..compiler import run_compiler
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
+from ..signals import private_tempdir
 
 __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_platforms", "zig_command"]
 
@@ -282,7 +282,7 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
     zig = zig_command()
 
     def build(dst: Path) -> None:
-        with tempfile.TemporaryDirectory(prefix="pendulum_cosim_zig_") as scratch:   # zig's .lib/.pdb
+        with private_tempdir("pendulum_cosim_zig_") as scratch:   # zig's .lib/.pdb
             lib = Path(scratch) / f"{identifier}{target.suffix}"
             run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{headers}",
                           *[str(src / f) for f in c_files], "-o", str(lib)],
@@ -354,7 +354,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     except (OSError, zipfile.BadZipFile) as e:
         raise FMUError(f"{fmu}: not a readable FMU ({e})") from None
     notes: list[str] = []
-    with z, tempfile.TemporaryDirectory(prefix="pendulum_cosim_platforms_") as tmp:
+    with z, private_tempdir("pendulum_cosim_platforms_") as tmp:
         tmp = Path(tmp)
         try:
             md = ET.fromstring(z.read("modelDescription.xml"))
