@@ -22,7 +22,7 @@ import warnings
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["cache_dir", "cached_file", "file_digest", "writable_cache"]
+__all__ = ["build_cached", "cache_dir", "cached_file", "file_digest", "writable_cache"]
 
 
 def cache_dir() -> Path:
@@ -111,3 +111,23 @@ def cached_file(entry: Path, build: Callable[[Path], None], check: Callable[[Pat
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return entry
+
+
+def build_cached(name: str, key: str, sources: Path, build: Callable[[Path], None], out: Path,
+                 purpose: str) -> None:
+    """Write ``out`` (a compiled library) by ``build(path)`` through the cache entry
+    ``<name>_<hash><suffix of out>``, the hash taken over ``key`` (compiler, flags, target)
+    and every file of the folder ``sources`` (names and contents): built once, then copied.
+    Without a writable cache (``purpose`` says what falls back) or when the cache fails
+    (full disk, vanished folder), ``build(out)`` directly."""
+    h = hashlib.sha256(key.encode())
+    for f in sorted(Path(sources).iterdir()):
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    directory = writable_cache(purpose)
+    if directory is not None:
+        try:
+            shutil.copyfile(cached_file(directory / f"{name}_{h.hexdigest()[:24]}{Path(out).suffix}", build), out)
+            return
+        except OSError:             # a full or vanished cache: build without it
+            pass
+    build(out)

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import fmpy
 
-from ..cache import cached_file, writable_cache
+from ..cache import build_cached
 from ..compiler import find_compiler, run_compiler
 from ..errors import ConfigurationError
 from ..signals import private_tempdir
@@ -99,21 +99,11 @@ def _compile_library(cc: str, src: Path, c_files: list[str], lib: Path, identifi
         run_compiler([cc, *_CFLAGS, f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o",
                       str(out), "-lm"], identifier)
 
-    h = hashlib.sha256("|".join([cc, *_CFLAGS, platform_dir(3)]).encode())
+    key = "|".join([cc, *_CFLAGS, platform_dir(3)])
     with contextlib.suppress(OSError):
         st = os.stat(cc)
-        h.update(f"{st.st_size}|{st.st_mtime_ns}".encode())
-    for f in sorted(src.iterdir()):
-        h.update(f.name.encode() + b"\0" + f.read_bytes())
-    directory = writable_cache("FMUs are compiled without caching")
-    if directory is not None:
-        try:
-            entry = cached_file(directory / f"fmu_{h.hexdigest()[:24]}{library_suffix()}", build)
-            shutil.copyfile(entry, lib)
-            return
-        except OSError:             # a full or vanished cache: build without it
-            pass
-    build(lib)
+        key += f"{st.st_size}|{st.st_mtime_ns}"
+    build_cached("fmu", key, src, build, lib, "FMUs are compiled without caching")
 
 
 def _build_description(identifier: str, c_files: list[str]) -> str:

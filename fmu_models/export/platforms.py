@@ -26,8 +26,7 @@ universal file keeps each slice's bytes unchanged, so the signature holds.
 """
 from __future__ import annotations
 
-import contextlib
-import hashlib
+import functools
 import os
 import re
 import shutil
@@ -41,7 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..cache import cached_file, writable_cache
+from ..cache import build_cached
 from ..compiler import run_compiler
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
 from ..signals import private_tempdir
@@ -152,6 +151,7 @@ class BinaryCheck:
     problems: tuple[str, ...]
 
 
+@functools.cache
 def fmi_functions(fmi_version: int) -> frozenset:
     """Every function of the FMI ``fmi_version`` C API, read from the standard's header
     ``fmi<v>Functions.h`` (fmpy ships it)."""
@@ -289,15 +289,8 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
                          f"{identifier} for {target.zig}", cwd=scratch, cancel=cancel)
             shutil.copyfile(lib, dst)
 
-    h = hashlib.sha256("|".join([*zig[1:], zig_version(), target.zig, *flags]).encode())
-    for f in sorted(src.iterdir()):
-        h.update(f.name.encode() + b"\0" + f.read_bytes())
-    directory = writable_cache("cross-built FMU binaries are compiled without caching")
-    if directory is not None:
-        with contextlib.suppress(OSError):
-            shutil.copyfile(cached_file(directory / f"cross_{h.hexdigest()[:24]}{target.suffix}", build), out)
-            return
-    build(out)
+    build_cached("cross", "|".join([*zig[1:], zig_version(), target.zig, *flags]), src, build, out,
+                 "cross-built FMU binaries are compiled without caching")
 
 
 def _compile_all(builds, src: Path, c_files: list[str]) -> None:
