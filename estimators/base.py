@@ -192,6 +192,12 @@ class KalmanBase:
         """Initial values of the filter's extra state arrays, by name (default none)."""
         return {}
 
+    @property
+    def extra_state_names(self) -> list[str]:
+        """Names of the extra state arrays (:meth:`extra_state`): state nobody reads the
+        history of, so a native run keeps only its last value."""
+        return list(self._extra_names)
+
     def wrap_step(self, step: ca.Function) -> ca.Function:
         """The Function every form of the filter runs, from the fused ``step`` built from the
         hooks (default: ``step`` itself; see :mod:`estimators.protocol`)."""
@@ -578,7 +584,7 @@ class KalmanBase:
         state = {k: v[None] for k, v in self.state_arrays().items()}
         init = self._initial_for_run
         fold = self.native_fold()
-        cycled = [f"{k}_new" for k in self._extra_names]          # no one reads their history
+        cycled = [f"{k}_new" for k in self.extra_state_names]     # no one reads their history
         outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else (), cycled)
         args = {"u": us[None], "y": ys[None], "mask": masks[None],
                 **{k: v[None] for k, v in self.parameter_arrays().items()}}

@@ -174,7 +174,7 @@ class BatchFilter:
         t = self.template
         fold = t.native_fold()
         state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
-        cycled = [f"{k}_new" for k in t.extra_state()]             # no one reads their history
+        cycled = [f"{k}_new" for k in t.extra_state_names]         # no one reads their history
         outs, views = fold.outputs(R, N, state, cycle=cycled)
         args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
         fold(R, N, args, state, views, cycled)

@@ -47,7 +47,7 @@ from fmu_models.errors import ConfigurationError
 
 from .adaptive import AdaptationRecord, bound_parameters, bounds_around
 from .ekf import EKF
-from .linalg import log_det, mask_measurement
+from .linalg import BAD_RESULT, OK, finite_flag, log_det, mask_measurement
 from .protocol import Parameter, StepContext, StepResult
 from .system import DiscreteModel
 
@@ -343,11 +343,8 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         eva = run(lqa, lra)
         la, endA = eva[0], eva[1:]
 
-        def finite(z):
-            return ca.logic_and(z == z, ca.fabs(z) < ca.inf)
-
         keep = self.keep_r_nats
-        use_a = ca.logic_and(ca.logic_and(finite(la), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
+        use_a = ca.logic_and(ca.logic_and(finite_flag([la]), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
         lqs, lrs = ca.if_else(use_a, lqa, lq0), ca.if_else(use_a, lra, lr0)
         ls = ca.if_else(use_a, la, l0)
         h = self.fd_step
@@ -379,17 +376,17 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             bar = best_l + keep if lowers else None
             for (lq, lr), lval, (xe, Pe) in cands:
                 kind = lr < lr0 if lowers else lr >= lr0
-                ok = ca.logic_and(ca.logic_and(inside(lq, lr), finite(lval)), kind)
+                ok = ca.logic_and(ca.logic_and(inside(lq, lr), finite_flag([lval])), kind)
                 take = ca.logic_and(ok, lval > (ca.fmax(best_l, bar) if lowers else best_l))
                 best_l = ca.if_else(take, lval, best_l)
                 best_t = (ca.if_else(take, lq, best_t[0]), ca.if_else(take, lr, best_t[1]))
                 best_x, best_P = ca.if_else(take, xe, best_x), ca.if_else(take, Pe, best_P)
         # the gain of lowering r at the chosen q: kept only if it is worth keep_r_nats there too
         evk = run(best_t[0], ca.fmax(lr0, best_t[1]))
-        back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite(evk[0])), evk[0] > best_l - keep)
+        back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite_flag([evk[0]])), evk[0] > best_l - keep)
         best_t = (best_t[0], ca.if_else(back, lr0, best_t[1]))
         best_x, best_P = ca.if_else(back, evk[1], best_x), ca.if_else(back, evk[2], best_P)
-        ok_end = ca.logic_and(finite(ca.sum1(best_x)), finite(ca.sum1(ca.sum2(best_P))))
+        ok_end = finite_flag([best_x, best_P])
         x_new, P_new = ca.if_else(ok_end, best_x, x), ca.if_else(ok_end, best_P, P)
         Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), q0) * MX.eye(n)
         R_new = ca.if_else(ok_end, ca.exp(best_t[1]), r0) * MX.eye(p)
@@ -409,7 +406,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         early = ca.logic_and(ca.logic_and(k <= self.early_until, ca.fmod(k, self.early_every) == 0), k > 0)
         regular = ca.logic_and(k > self.early_until, ca.fmod(k, self.every) == 0)
         index = ca.if_else(regular, 2, ca.if_else(early, 1, 0))
-        branches = [self._branch(0), self._branch(self.early_until or 0), self._branch(None)]
+        branches = [self._branch(0), self._branch(self.early_until), self._branch(None)]
         cond = ca.Function.conditional("swml_update", branches, branches[0])
         sx = ca.reshape(out["snap_x_new"], n, n_snap)[:, 0]
         sP = ca.reshape(out["snap_P_new"], n * n, n_snap)[:, 0]
@@ -419,8 +416,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                    by["q_bounds"], by["r_bounds"])
         for key, val in zip(("x_new", "P_new", "Q_new", "R_new", "adapted"), res):
             out[key] = ca.densify(ca.reshape(val, out[key].shape))
-        bad = 1 - ca.logic_and(ca.sum1(ca.sum2(ca.fabs(out["x_new"]))) < ca.inf,
-                               ca.sum1(ca.sum2(ca.fabs(out["P_new"]))) < ca.inf)
-        out["status"] = ca.if_else(out["status"] != 0, out["status"], 2 * bad)
+        out["status"] = ca.if_else(out["status"] != 0, out["status"],
+                                   ca.if_else(finite_flag([out["x_new"], out["P_new"]]), OK, BAD_RESULT))
         return ca.Function("step", ins, [out[nm] for nm in names_out], [step.name_in(i) for i in range(step.n_in())],
                            names_out)
