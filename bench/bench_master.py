@@ -30,7 +30,7 @@ from fmpy.fmi2 import FMU2Slave
 
 from cosim.components.sources import Step
 from cosim.core.master import Cosimulation
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from fmu_models import build_fmu, get_model
 
 T_END, H, REPEATS = 5.0, 0.001, 7
@@ -112,7 +112,7 @@ def long_run(path, steps: int) -> str:
     """Peak RSS [MiB] of a fresh process streaming ``steps`` base steps to Parquet."""
     code = f"""
 import resource, tempfile, sys
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from cosim.core.master import Cosimulation
 from cosim.components.sources import Step
 plant = FMUComponent("plant", {str(path)!r}, {H}, parameters={{"step_size": {H}}})

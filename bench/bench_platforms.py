@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from estimators import EKF, discretize
+from estimators.filter_fmu import export_filter_fmu
 from fmu_models import build_fmu, get_model
-from fmu_models.export.filter import export_filter_fmu
 from fmu_models.export.platforms import add_platforms
 
 sys.path.append(str(Path(__file__).parents[1] / "tests"))     # the driver helpers (tests/cross_run.py),

@@ -97,7 +97,7 @@ def interruption(repeats: int) -> None:
 def temp_folders() -> None:
     from cosim.components.sources import Constant
     from cosim.core.master import Cosimulation
-    from cosim.fmi.component import FMUComponent
+    from cosim.fmi.fmu_component import FMUComponent
     from fmu_models import build_fmu
 
     with tempfile.TemporaryDirectory() as tmp:

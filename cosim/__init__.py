@@ -7,7 +7,7 @@ The names a user needs, in one place::
 Sub-packages: :mod:`cosim.core` (the component protocol, the master, its schedule and
 recording), :mod:`cosim.fmi` (FMUs as components), :mod:`cosim.components` (the component
 library), :mod:`cosim.experiments` (the papers' experiments); modules: :mod:`cosim.scenario`
-(scenario files), :mod:`cosim.ssp` (SSP export and import), :mod:`cosim.results` (output
+(scenario files), :mod:`cosim.ssp` (SSP export and import), :mod:`cosim.output` (output
 folders, files, plots), :mod:`cosim.cli` (the command line). Every error is one of
 :mod:`fmu_models.errors` (re-exported here).
 """

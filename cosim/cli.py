@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
-from fmu_models.registry import load_plugin
+from fmu_models.infra.registry import load_plugin
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
@@ -101,7 +101,7 @@ def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool 
     """Load and check the scenario, then (only then) take ``out`` and run it."""
     import tempfile
 
-    from .results import OutputFolder
+    from .output import OutputFolder
     from .scenario import Scenario
 
     if dry_run:
@@ -123,8 +123,10 @@ def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool |
     failure, the FMUs it built, the RMSE table and the plot."""
     import shutil
 
+    from fmu_models.infra.files import atomic_write
+
     from .core.component import StateEstimator
-    from .results import atomic_write, plot_estimates, save_results
+    from .output import plot_estimates, save_results
 
     print(f"scenario: {sc.title or path.name}")
     stream = bool(sc.recording.get("stream", False)) if stream is None else stream
@@ -174,7 +176,7 @@ def _export(args) -> int:
     from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
 
     from .core.component import ExportsFMU, StateEstimator
-    from .results import OutputFolder
+    from .output import OutputFolder
     from .scenario import Scenario
     from .ssp import export_ssp
 
@@ -249,10 +251,10 @@ def _model_report(m, duration: float) -> None:
 
 # ---------------------------------------------------------------------------- experiments
 def _experiment(args) -> int:
-    """Any registered experiment (:mod:`cosim.experiments.base`): its settings are validated
+    """Any registered experiment (:mod:`cosim.experiments.experiment`): its settings are validated
     before ``--out`` is touched; an interrupted run writes a partial report."""
     from .experiments import EXPERIMENTS
-    from .results import OutputFolder
+    from .output import OutputFolder
 
     exp = EXPERIMENTS.get(args.name)()
     exp.check_path(args.path)
@@ -401,7 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
         logging.getLogger("cosim.fmu").setLevel(logging.INFO)
-    from fmu_models.signals import terminate_as_interrupt
+    from fmu_models.infra.interrupts import terminate_as_interrupt
 
     try:
         with terminate_as_interrupt():

@@ -56,14 +56,14 @@ import inspect
 from collections.abc import Callable
 from pathlib import Path
 
-from fmu_models.checks import finite
 from fmu_models.errors import ConfigurationError, PendulumCosimError, TypeMismatchError, UnknownNameError
-from fmu_models.registry import load_plugin
+from fmu_models.infra.checks import finite
+from fmu_models.infra.registry import load_plugin
 
 from . import components as _library  # noqa: F401 - the library's components register themselves
 from .core.component import COMPONENTS, Component
 from .core.master import Cosimulation
-from .fmi import component as _fmu  # noqa: F401 - registers the fmu component type
+from .fmi import fmu_component as _fmu  # noqa: F401 - registers the fmu component type
 
 __all__ = ["RECORDING_KEYS", "SIMULATION_KEYS", "TABLES", "Scenario", "ScenarioContext", "component_types"]
 

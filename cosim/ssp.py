@@ -21,7 +21,7 @@ project's master; otherwise the export says so in its notes.
 
 :func:`open_ssp` reads such an SSP (a ``.ssp`` archive or its unpacked folder, flat
 systems of Co-Simulation FMUs) into a :class:`~cosim.core.master.Cosimulation` of
-:class:`~cosim.fmi.component.FMUComponent` objects, so the project's master runs what other
+:class:`~cosim.fmi.fmu_component.FMUComponent` objects, so the project's master runs what other
 tools run.
 
 Importers differ in how they order the FMUs within a step. fmpy's ``simulate_ssp``
@@ -303,7 +303,7 @@ def _bindings(element: ET.Element, where: str) -> list[tuple[str, object]]:
 
 def _number(text, what: str) -> float:
     """An attribute as a finite float, or a ConfigurationError naming ``what``."""
-    from fmu_models.checks import finite
+    from fmu_models.infra.checks import finite
 
     return finite(text, what)
 
@@ -362,7 +362,7 @@ def open_ssp(path, communication_step: float | None = None) -> Iterator[SSPSyste
     own period, as a tool with a single fixed-step master does (the project's FMUs keep
     their own sample instants under any step).
 
-    Each ``Component`` becomes an :class:`~cosim.fmi.component.FMUComponent` with its
+    Each ``Component`` becomes an :class:`~cosim.fmi.fmu_component.FMUComponent` with its
     connectors as ports, the parameter bindings (inline values, system or component
     level) as parameters and start values, and the period of the
     ``org.pendulum-cosim`` annotation (else the FMU's default step size).
@@ -375,10 +375,10 @@ def open_ssp(path, communication_step: float | None = None) -> Iterator[SSPSyste
         What this reader does not support (nested systems, parameter files or mappings,
         transformations, connections to the system's own connectors), named.
     """
-    from fmu_models.checks import positive
+    from fmu_models.infra.checks import positive
 
     from .core.master import Cosimulation
-    from .fmi.component import FMUComponent
+    from .fmi.fmu_component import FMUComponent
 
     if communication_step is not None:
         communication_step = positive(communication_step, "open_ssp: communication_step [s]")

@@ -14,6 +14,7 @@ itself by name (:data:`FILTERS`).
 """
 from .base import FILTERS, KalmanBase
 from .batch import BatchFilter
+from .discrete import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ekf import EKF
 from .em import em_noise
 from .fuzzy import MamdaniFuzzy
@@ -21,10 +22,9 @@ from .iae import IAE
 from .kf import KF
 from .mfiae import MFIAE
 from .protocol import Parameter, StepContext, StepResult, Update
-from .results import BatchRun, EMResult, FilterRun, Smoothed
+from .runs import BatchRun, EMResult, FilterRun, Smoothed
 from .smoother import rts_smooth
 from .swml import SWML
-from .system import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ukf import UKF
 
 __all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "SWML", "UKF", "BatchFilter", "BatchRun", "DiscreteModel",
@@ -34,8 +34,8 @@ __all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "SWML", "UKF", "BatchFilter",
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):
     """Export the filter ``filt`` as a Co-Simulation FMU; see
-    :func:`fmu_models.export.filter.export_filter_fmu` (parameters ``filt``, ``out_dir``,
+    :func:`estimators.filter_fmu.export_filter_fmu` (parameters ``filt``, ``out_dir``,
     ``fmi_version``, ``name``, ``file_name``)."""
-    from fmu_models.export.filter import export_filter_fmu
+    from .filter_fmu import export_filter_fmu
 
     return export_filter_fmu(filt, out_dir, fmi_version, name, file_name)

@@ -3,7 +3,7 @@
 A filter's fused step compiled by the C compiler runs about 10x faster than in CasADi's
 virtual machine. The library is keyed by a hash of the generated C code, the CasADi
 version, the compiler flags and the CPU, and kept in the project's compiled-code cache
-(:mod:`fmu_models.cache`: private builds, atomic rename, a SHA-256 sidecar, damaged
+(:mod:`fmu_models.infra.cache`: private builds, atomic rename, a SHA-256 sidecar, damaged
 entries rebuilt). A machine without a C compiler, a compiler that fails, or a cache that
 cannot be written falls back to CasADi's virtual machine with a warning (same numbers,
 slower).
@@ -17,9 +17,9 @@ from pathlib import Path
 
 import casadi as ca
 
-from fmu_models.cache import cache_dir, cached_file, writable_cache
-from fmu_models.compiler import find_compiler, run_compiler
 from fmu_models.errors import BuildError, CompilerNotFoundError, UnknownNameError
+from fmu_models.infra.cache import cache_dir, cached_file, writable_cache
+from fmu_models.infra.compiler import find_compiler, run_compiler
 
 __all__ = ["BACKENDS", "cache_dir", "compile_functions"]
 

@@ -17,13 +17,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from fmu_models.checks import float_array, positive_int
 from fmu_models.errors import ConfigurationError
+from fmu_models.infra.checks import float_array, positive_int
 
 from ._buffered import matrix
+from .discrete import DiscreteModel
 from .ekf import EKF
 from .protocol import Parameter, StepContext, StepResult
-from .system import DiscreteModel
 
 __all__ = ["AdaptationRecord", "WindowedAdaptiveEKF", "bound_parameters", "bounds_around"]
 

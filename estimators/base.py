@@ -10,7 +10,7 @@ compiled to native code (:mod:`estimators._compiled`) and
 * folded over a whole trajectory (:meth:`KalmanBase.run`: one native call, every step's
   estimate, covariance and diagnostics; :mod:`estimators._fold`);
 * mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`);
-* exported as an FMU (:func:`fmu_models.export.filter.export_filter_fmu`).
+* exported as an FMU (:func:`estimators.filter_fmu.export_filter_fmu`).
 
 Missing measurements: the step takes a 0/1 ``mask`` per measurement channel; a NaN
 measurement counts as missing too (unless ``nan_is_missing=False``). The update then uses
@@ -28,18 +28,18 @@ from collections.abc import Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models import checks
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
-from fmu_models.registry import Registry
+from fmu_models.infra import checks
+from fmu_models.infra.registry import Registry
 
 from ._buffered import matrix
 from ._compiled import compile_functions
+from .discrete import DiscreteModel
 from .history import NoiseHistory
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
 from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
-from .results import FilterRun
+from .runs import FilterRun
 from .runtime import BoundStep, VectorInput, explain_status, lean_step
-from .system import DiscreteModel
 
 __all__ = ["DIAGNOSTICS", "FILTERS", "KEEP", "FilterRun", "KalmanBase", "Parameter", "StepContext", "StepResult",
            "Update"]

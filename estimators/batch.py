@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmu_models import checks
 from fmu_models.errors import ConfigurationError, InputError, NumericalError, TypeMismatchError
-from fmu_models.memory import check_fits
+from fmu_models.infra import checks
+from fmu_models.infra.memory import check_fits
 
 from ._compiled import compile_functions
 from .base import KalmanBase
 from .linalg import BAD_INPUT
-from .results import BatchRun
+from .runs import BatchRun
 from .runtime import BoundStep
 
 __all__ = ["BatchFilter", "BatchRun"]

@@ -27,11 +27,11 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from fmu_models import checks
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+from fmu_models.infra import checks
 
 from .base import KalmanBase
-from .results import EMResult
+from .runs import EMResult
 from .smoother import rts_smooth
 
 __all__ = ["STRUCTURES", "EMResult", "em_noise"]

@@ -1,8 +1,8 @@
 """Linear Kalman filter on the model linearised about an operating point (seed 001's KF)."""
 from __future__ import annotations
 
+from .discrete import DiscreteModel
 from .ekf import EKF
-from .system import DiscreteModel
 
 __all__ = ["KF"]
 
@@ -33,8 +33,8 @@ class KF(EKF, register="KF"):
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
         import numpy as np
 
-        from fmu_models.checks import vector
         from fmu_models.errors import ConfigurationError
+        from fmu_models.infra.checks import vector
 
         if not isinstance(system, DiscreteModel):
             from fmu_models.errors import TypeMismatchError

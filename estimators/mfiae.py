@@ -4,13 +4,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from fmu_models import checks
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+from fmu_models.infra import checks
 
 from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
+from .discrete import DiscreteModel
 from .fuzzy import MamdaniFuzzy
 from .protocol import Parameter
-from .system import DiscreteModel
 
 __all__ = ["MFIAE", "Q_MAPPINGS"]
 

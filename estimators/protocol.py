@@ -58,8 +58,8 @@ import numpy as np
 from fmu_models.errors import ConfigurationError
 from fmu_models.variables import DOMAINS
 
+from .discrete import DiscreteModel
 from .linalg import CSE, log_det, status_flag, symmetric, upper_entries, used_measurement
-from .system import DiscreteModel
 
 __all__ = ["DIAGNOSTICS", "STEP_INPUTS", "Parameter", "StepContext", "StepResult", "Update", "build_step",
            "renamed"]

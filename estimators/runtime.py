@@ -20,8 +20,8 @@ from collections.abc import Callable, Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models.checks import float_array
 from fmu_models.errors import InputError, NumericalError
+from fmu_models.infra.checks import float_array
 
 from ._buffered import BufferedFunction
 from .linalg import BAD_INPUT, BAD_RESULT

@@ -29,7 +29,7 @@ from fmu_models.errors import ConfigurationError, NumericalError, TypeMismatchEr
 
 from .base import KalmanBase
 from .linalg import CSE, spd_solve, symmetric
-from .results import FilterRun, Smoothed
+from .runs import FilterRun, Smoothed
 
 __all__ = ["Smoothed", "rts_smooth", "smoother_step"]
 

@@ -42,14 +42,14 @@ import math
 import casadi as ca
 import numpy as np
 
-from fmu_models import checks
 from fmu_models.errors import ConfigurationError
+from fmu_models.infra import checks
 
 from .adaptive import AdaptationRecord, bound_parameters, bounds_around
+from .discrete import DiscreteModel
 from .ekf import EKF
 from .linalg import BAD_RESULT, OK, finite_flag, log_det, mask_measurement
 from .protocol import Parameter, StepContext, StepResult
-from .system import DiscreteModel
 
 __all__ = ["MAX_WINDOW", "SWML"]
 

@@ -3,13 +3,13 @@ from __future__ import annotations
 
 import casadi as ca
 
-from fmu_models.checks import finite
 from fmu_models.errors import ConfigurationError
+from fmu_models.infra.checks import finite
 
 from .base import KalmanBase
+from .discrete import DiscreteModel
 from .linalg import cholesky_lower, gated_gain, mask_measurement, symmetric
 from .protocol import StepContext, Update
-from .system import DiscreteModel
 
 __all__ = ["UKF"]
 

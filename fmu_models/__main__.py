@@ -26,7 +26,8 @@ def main(argv: list[str] | None = None) -> int:
     from .errors import PendulumCosimError
     from .export.pack import FMI_VERSIONS
     from .export.platforms import PLATFORMS, add_platforms, parse_platforms
-    from .signals import private_tempdir, terminate_as_interrupt
+    from .infra.files import private_tempdir
+    from .infra.interrupts import terminate_as_interrupt
 
     parser = argparse.ArgumentParser(prog="python -m fmu_models",
                                      description="Build the plant FMUs from the CasADi models.")

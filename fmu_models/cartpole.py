@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from . import register_model
+from .catalog import register_model
 from .plant import PlantModel
 from .variables import Variable
 

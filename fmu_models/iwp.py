@@ -26,7 +26,7 @@ import math
 
 import casadi as ca
 
-from . import register_model
+from .catalog import register_model
 from .plant import PlantModel
 from .variables import Variable
 

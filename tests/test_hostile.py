@@ -18,7 +18,7 @@ from cosim.cli import main
 from cosim.components.sources import Constant
 from cosim.core.master import Cosimulation
 from cosim.fmi.archive import Extraction
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from fmu_models.errors import ConfigurationError, FMUError
 
 ROOT = Path(__file__).parents[1]

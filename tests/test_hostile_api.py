@@ -430,7 +430,7 @@ def _(cp, dm, tmp):
 
 @attempt("save_results-not-a-frame", "")
 def _(cp, dm, tmp):
-    from cosim.results import save_results
+    from cosim.output import save_results
     save_results([1, 2, 3], tmp)
 
 
@@ -438,13 +438,13 @@ def _(cp, dm, tmp):
 def _(cp, dm, tmp):
     import pandas as pd
 
-    from cosim.results import plot_estimates
+    from cosim.output import plot_estimates
     plot_estimates(pd.DataFrame({"a": [1.0]}), ["a"], ["b"])
 
 
 @attempt("output-folder-is-a-file", "is a file")
 def _(cp, dm, tmp):
-    from cosim.results import OutputFolder
+    from cosim.output import OutputFolder
     (tmp / "file").write_text("x")
     with OutputFolder(tmp / "file"):
         pass

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from cosim.cli import main
-from cosim.results import MARKER
+from cosim.output import MARKER
 
 CLI = [sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())"]
 

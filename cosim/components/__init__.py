@@ -1,7 +1,8 @@
 """The component library: sources, sensors and noise, the wheel pendulum's sensor chain, the
 estimator and controller components, and a plant model stepped in Python. Each registers
 its ``kind`` for scenario files (:data:`cosim.core.component.COMPONENTS`)."""
-from .estimation import EstimatorComponent, LQRController, lqr_gain
+from .control import LQRController, lqr_gain
+from .estimation import EstimatorComponent
 from .imu import Accelerometer, Encoder, Gyroscope, TiltFusion
 from .noise import CounterNoise, PerInstantNoise, counter_normal, make_noise
 from .plant_model import ModelComponent

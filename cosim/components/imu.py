@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmu_models.checks import finite, positive_int
 from fmu_models.errors import ConfigurationError
+from fmu_models.infra.checks import finite, positive_int
 
 from ..core.component import Component
 from .noise import PerInstantNoise

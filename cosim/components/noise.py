@@ -10,7 +10,7 @@ Two generators, chosen per component with ``generator=``:
 ``"counter"``
     A counter-based generator whose value at sample ``k = round(t / period)`` is computed
     directly from ``(seed, k, channel)``: :func:`counter_normal`. The signal FMUs
-    (:mod:`fmu_models.export.signal`) use the same generator in C, so a scenario exported as an
+    (:mod:`fmu_models.export.signal_fmu`) use the same generator in C, so a scenario exported as an
     SSP draws the same noise as the project's master (within one rounding of the
     libraries' ``log`` and ``cos``), whatever the start time.
 
@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmu_models.checks import positive, positive_int
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra.checks import positive, positive_int
 
 __all__ = ["GENERATORS", "CounterNoise", "PerInstantNoise", "counter_normal", "make_noise"]
 

@@ -14,8 +14,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from fmu_models.checks import finite
 from fmu_models.errors import NumericalError, UnknownNameError
+from fmu_models.infra.checks import finite
 from fmu_models.plant import PlantModel, check_method
 
 from ..core.component import Component
@@ -39,7 +39,7 @@ class ModelComponent(Component, kind="plant_model"):
     outputs : sequence of str, optional
         Output ports; default: states and measured outputs. ``der(<state>)`` allowed.
     feedthrough : {"model", "none"}
-        As :class:`~cosim.fmi.component.FMUComponent`: ``der(<state>)`` at ``t`` uses the
+        As :class:`~cosim.fmi.fmu_component.FMUComponent`: ``der(<state>)`` at ``t`` uses the
         input at ``t`` ("model", default) or the input of the previous step ("none").
     """
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_models.checks import float_array, positive_int
 from fmu_models.errors import ConfigurationError
+from fmu_models.infra.checks import float_array, positive_int
 
 from ..core.component import Component, ExportedFMU
 from .noise import make_noise
@@ -103,9 +103,9 @@ class Sensor(Component, kind="sensor"):
             self._queue.append(self._measure(t, u))
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This sensor as a signal FMU (kind ``sensor``, :mod:`fmu_models.export.signal`) drawing
+        """This sensor as a signal FMU (kind ``sensor``, :mod:`fmu_models.export.signal_fmu`) drawing
         from the counter generator; refused with a delay."""
-        from fmu_models.export.signal import SignalSpec, build_signal_fmu, channel_params
+        from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
         if self.delay:
             raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
@@ -177,9 +177,9 @@ class ProcessNoise(Component, kind="process_noise"):
         return self.L @ self._noise.at(t)
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal`)
+        """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
         drawing from the counter generator; refused for a non-diagonal ``cov``."""
-        from fmu_models.export.signal import SignalSpec, build_signal_fmu, channel_params
+        from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
         if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fmu_models.checks import finite, positive, positive_int
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra.checks import finite, positive, positive_int
 
 from ..core.component import Component, ExportedFMU
 
@@ -25,12 +25,12 @@ class _Source(Component):
         raise NotImplementedError
 
     def _signal(self) -> tuple[str, list[tuple], list[tuple]]:
-        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`fmu_models.export.signal`)."""
+        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`fmu_models.export.signal_fmu`)."""
         raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This source as a signal FMU (:mod:`fmu_models.export.signal`) with output ``out``."""
-        from fmu_models.export.signal import SignalSpec, build_signal_fmu
+        """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``."""
+        from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
 
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,

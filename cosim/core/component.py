@@ -67,9 +67,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, TypeMismatchError
-from fmu_models.registry import Registry
+from fmu_models.infra.checks import positive
+from fmu_models.infra.registry import Registry
 
 __all__ = ["COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding", "Port",
            "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",

@@ -67,7 +67,7 @@ class Cosimulation:
     Parameters
     ----------
     components : sequence of Component
-        FMUs (:class:`~cosim.fmi.component.FMUComponent`), plant models
+        FMUs (:class:`~cosim.fmi.fmu_component.FMUComponent`), plant models
         (:class:`~cosim.components.plant_model.ModelComponent`) and Python components. With the
         default order the list order does not change results.
     connections : mapping or iterable of pairs
@@ -113,7 +113,7 @@ class Cosimulation:
     def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
                  order: str = "auto", loops: str = "refuse", loop_tolerance: float = 1e-10,
                  loop_max_iter: int = 50, loop_solver: str = "newton"):
-        from fmu_models.checks import positive, positive_int
+        from fmu_models.infra.checks import positive, positive_int
 
         for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
                                    ("loop_solver", loop_solver, LOOP_SOLVERS)):
@@ -260,7 +260,7 @@ class Cosimulation:
 
     # ---------------------------------------------------------------- running
     def _steps(self, stop_time: float, start_time: float, output_interval) -> tuple[int, int]:
-        from fmu_models.checks import finite
+        from fmu_models.infra.checks import finite
 
         stop, start = finite(stop_time, "stop_time [s]"), finite(start_time, "start_time [s]")
         n = self._multiple(stop - start, "stop_time - start_time",

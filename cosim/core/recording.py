@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError, ResourceError, UnknownNameError
-from fmu_models.memory import MEMORY_FRACTION, available_memory
+from fmu_models.infra.memory import MEMORY_FRACTION, available_memory
 
 __all__ = ["MemorySink", "ParquetSink", "partial_path", "select_signals"]
 

@@ -34,11 +34,10 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra.checks import positive
 
 from . import metrics
-from .base import Experiment
 from .campaign import realisation_seeds, run_tasks
 from .common import (
     batch_estimates,
@@ -48,6 +47,7 @@ from .common import (
     noise_components,
 )
 from .common import simulate_truth as common_truth
+from .experiment import Experiment
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
 READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 the measurement variance (R)",
@@ -119,7 +119,7 @@ class Settings:
         for name in ("q0_factor", "r0_factor"):
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
-        from fmu_models.checks import positive_int
+        from fmu_models.infra.checks import positive_int
 
         for name in ("swml_window", "swml_every"):
             positive_int(getattr(self, name), name)
@@ -335,7 +335,7 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
 
     from fmu_models import build_fmu
 
-    from ..fmi.component import FMUComponent
+    from ..fmi.fmu_component import FMUComponent
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -552,7 +552,8 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
     partial
         The campaign was interrupted.
     """
-    from ..results import atomic_write
+    from fmu_models.infra.files import atomic_write
+
     from .settings import to_toml
 
     out = Path(out_dir)
@@ -603,7 +604,7 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
 
 
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
-    from ..results import atomic_write
+    from fmu_models.infra.files import atomic_write
 
     for rd in sorted({k[0] for k in examples}):
         if (rd, 1) not in examples:

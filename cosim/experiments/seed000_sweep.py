@@ -21,13 +21,13 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from fmu_models.checks import positive
 from fmu_models.errors import ConfigurationError, Interrupted
+from fmu_models.infra.checks import positive
 
 from . import seed000
-from .base import Experiment
 from .campaign import run_tasks
 from .common import new_figure
+from .experiment import Experiment
 
 ADAPTIVE = ("IAE", "MF-IAE", "EKF EM", "SWML")
 FILTERS = ("EKF", *ADAPTIVE)
@@ -169,7 +169,8 @@ def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_
     partial
         The sweep was interrupted.
     """
-    from ..results import atomic_write
+    from fmu_models.infra.files import atomic_write
+
     from .settings import to_toml
 
     out = Path(out_dir)
@@ -219,7 +220,7 @@ def _grid(table: pd.DataFrame, name: str, metric: str) -> pd.DataFrame:
 
 
 def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
-    from ..results import atomic_write
+    from fmu_models.infra.files import atomic_write
 
     labels = [f"{f:g}" for f in settings.factors]
     for metric, title, log in (("eta_over_bound", "eta / true-Q,R bound", False),

@@ -28,9 +28,9 @@ import numpy as np
 import pandas as pd
 
 from . import metrics
-from .base import Experiment
 from .campaign import realisation_seeds, run_tasks
 from .common import batch_estimates, master_realisation, noise_components, simulate_truth
+from .experiment import Experiment
 
 CASES = {"hanging": (0.0, 0.0, np.pi, 0.0), "upright": (0.0, 0.0, 0.1, 0.0)}
 REPORT_TIMES = (1.0, 30.0, 60.0, 90.0, 100.0, 120.0)
@@ -151,7 +151,7 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
 
     from fmu_models import build_fmu, get_model
 
-    from ..fmi.component import FMUComponent
+    from ..fmi.fmu_component import FMUComponent
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -227,7 +227,8 @@ def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
     out_dir
         Output folder.
     """
-    from ..results import atomic_write
+    from fmu_models.infra.files import atomic_write
+
     from .common import new_figure
     from .settings import to_toml
 

@@ -26,8 +26,8 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 import pandas as pd
 
-from .base import Experiment
 from .campaign import realisation_seeds, run_tasks
+from .experiment import Experiment
 
 CASES = {"Q = R = 0.01": (0.01, 0.01), "Q = 0.01, R = 0.1": (0.01, 0.1)}
 STATES = ("alpha", "alpha_dot", "phi_dot")
@@ -78,10 +78,11 @@ def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
     from estimators import EKF, augment_rate_bias, discretize
     from fmu_models import get_model
 
-    from ..components.estimation import EstimatorComponent, LQRController
+    from ..components.control import LQRController
+    from ..components.estimation import EstimatorComponent
     from ..components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
     from ..components.plant_model import ModelComponent
-    from ..fmi.component import FMUComponent
+    from ..fmi.fmu_component import FMUComponent
 
     model = get_model("iwp")
     outs = list(STATES) + ["der(alpha_dot)"]
@@ -240,7 +241,8 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
     path
         The path that ran.
     """
-    from ..results import atomic_write
+    from fmu_models.infra.files import atomic_write
+
     from .common import new_figure
     from .settings import to_toml
 

@@ -29,7 +29,7 @@ def check_common(settings) -> None:
     number finite."""
     import math
 
-    from fmu_models.checks import positive, positive_int
+    from fmu_models.infra.checks import positive, positive_int
 
     positive_int(settings.runs, "runs")
     positive_int(settings.seed, "seed", minimum=0)
@@ -38,7 +38,7 @@ def check_common(settings) -> None:
     steps = round(settings.duration / settings.T)
     if steps < 1:
         raise ConfigurationError("duration must be at least one period T")
-    from fmu_models.memory import check_fits
+    from fmu_models.infra.memory import check_fits
 
     check_fits(RECORD_BYTES_PER_STEP * settings.runs * (steps + 1),
                f"the records of {settings.runs} realisations x {steps} steps (duration {settings.duration:g} s / "

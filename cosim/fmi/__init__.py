@@ -4,9 +4,9 @@ connected Model Exchange FMUs as one system (:mod:`.system`), Model Exchange int
 typed value exchange with its C functions (:mod:`.exchange`), ports (:mod:`.ports`), the
 FMI rules of an instance's life (:mod:`.instance`) and safe unpacking (:mod:`.archive`)."""
 from .archive import Extraction, read_description
-from .component import FEEDTHROUGH_MODES, INTERFACES, FMUComponent
+from .fmu_component import FEEDTHROUGH_MODES, INTERFACES, FMUComponent
+from .me_system import MESystem
 from .model_exchange import SOLVERS, MEIntegrator
-from .system import MESystem
 
 __all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "SOLVERS", "Extraction", "FMUComponent", "MEIntegrator", "MESystem",
            "read_description"]

@@ -4,8 +4,9 @@ with an :class:`~fmu_models.errors.FMUError` naming the FMU, the call, the time 
 signal, the master keeps the rows recorded so far, and nothing is left behind.
 
 The parent (:class:`RemoteFMU`, used by the component in place of its own instance)
-unpacks the FMU and owns the folder; the child (``python -m cosim.fmi.isolated``) builds
-the same :class:`~cosim.fmi.component.FMUComponent` from the parent's arguments on that
+unpacks the FMU and owns the folder; the child (``python -m cosim.fmi.isolated_child``,
+:mod:`cosim.fmi.isolated_child`) builds
+the same :class:`~cosim.fmi.fmu_component.FMUComponent` from the parent's arguments on that
 folder and answers requests over a pipe:
 
 * ``O``: set the feed-through inputs, get the outputs at ``t``;
@@ -35,10 +36,12 @@ from fmu_models.errors import FMUError
 
 from ..core.component import StopRequest
 
-__all__ = ["RemoteFMU"]
+__all__ = ["HEAD", "REPLY", "RemoteFMU", "read_exactly", "write_all"]
 
-_HEAD = struct.Struct("<cd")        # op, t
-_REPLY = struct.Struct("<cI")       # status, length of a pickled payload
+#: A request's head: the op byte and the time ``t`` [s].
+HEAD = struct.Struct("<cd")
+#: A reply's head: the status byte and the length of its pickled payload.
+REPLY = struct.Struct("<cI")
 #: Seconds a child may take to end its instance and exit before it is killed.
 CLOSE_TIMEOUT = 2.0
 
@@ -48,7 +51,7 @@ CLOSE_TIMEOUT = 2.0
 POLL = 0.25 if os.name == "posix" else None
 
 
-def _read(fd: int, n: int, poll: float | None = None) -> bytes:
+def read_exactly(fd: int, n: int, poll: float | None = None) -> bytes:
     """Exactly ``n`` bytes from ``fd`` (b"" if the other end closed first); with ``poll``
     [s] the wait returns to the interpreter that often, so that a pending Ctrl-C is raised
     even while the other end never answers (an FMU stuck in its code)."""
@@ -65,7 +68,8 @@ def _read(fd: int, n: int, poll: float | None = None) -> bytes:
     return b"".join(chunks)
 
 
-def _write(fd: int, data: bytes) -> None:
+def write_all(fd: int, data: bytes) -> None:
+    """Write all of ``data`` to ``fd`` (a pipe may take it in pieces)."""
     view = memoryview(data)
     while view:
         view = view[os.write(fd, view):]
@@ -99,15 +103,15 @@ class RemoteFMU:
         self._output_calls = f"setting the feed-through inputs or getting the outputs (fmi{v}Set*/Get*)"
         setup = {"arguments": component.arguments, "directory": component.unpacked,
                  "inputs": list(component.connected_inputs), "sources": component.input_sources, "t0": float(t0)}
-        self.proc = subprocess.Popen([sys.executable, "-m", "cosim.fmi.isolated"], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "cosim.fmi.isolated_child"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, bufsize=0, close_fds=True)
         self._to, self._from = self.proc.stdin.fileno(), self.proc.stdout.fileno()
-        self._buf = bytearray(_HEAD.size + 16 * self.n_in)
+        self._buf = bytearray(HEAD.size + 16 * self.n_in)
         self.outputs = np.zeros(self.n_out)
         self.int_outputs = np.zeros(self.n_out, dtype=np.int64)
         payload = pickle.dumps(setup)
         self._call(f"instantiation or initialisation (fmi{v}Instantiate .. ExitInitializationMode)", t0,
-                   _HEAD.pack(b"R", t0) + struct.pack("<I", len(payload)) + payload)
+                   HEAD.pack(b"R", t0) + struct.pack("<I", len(payload)) + payload)
 
     # ------------------------------------------------------------------ the pipe
     def _died(self, what: str, t: float) -> FMUError:
@@ -123,14 +127,14 @@ class RemoteFMU:
 
     def _call(self, what: str, t: float, data: bytes) -> None:
         try:
-            _write(self._to, data)
-            head = _read(self._from, _REPLY.size, POLL)
+            write_all(self._to, data)
+            head = read_exactly(self._from, REPLY.size, POLL)
         except (BrokenPipeError, ConnectionResetError):
             head = b""
         if not head:
             raise self._died(what, t) from None
-        status, length = _REPLY.unpack(head)
-        body = _read(self._from, length + 16 * self.n_out, POLL)
+        status, length = REPLY.unpack(head)
+        body = read_exactly(self._from, length + 16 * self.n_out, POLL)
         if len(body) < length:
             raise self._died(what, t)
         if status == b"K":
@@ -150,10 +154,10 @@ class RemoteFMU:
 
     def _request(self, op: bytes, t: float, values, integers, index) -> bytes:
         buf = self._buf
-        _HEAD.pack_into(buf, 0, op, t)
+        HEAD.pack_into(buf, 0, op, t)
         n = self.n_in
         if n:
-            off = _HEAD.size
+            off = HEAD.size
             buf[off:off + 8 * n] = np.ascontiguousarray(values[index], dtype=np.float64).tobytes()
             buf[off + 8 * n:] = np.ascontiguousarray(integers[index], dtype=np.int64).tobytes()
         return bytes(buf)
@@ -185,7 +189,7 @@ class RemoteFMU:
         proc = self.proc
         if proc.poll() is None:
             try:
-                _write(self._to, bytes(self._request(b"C", 0.0, np.zeros(self.n_in), np.zeros(self.n_in, np.int64),
+                write_all(self._to, bytes(self._request(b"C", 0.0, np.zeros(self.n_in), np.zeros(self.n_in, np.int64),
                                                      slice(None))))
             except OSError:
                 pass
@@ -199,91 +203,3 @@ class RemoteFMU:
                 f.close()
             except OSError:
                 pass
-
-
-# ---------------------------------------------------------------------- the child
-def _die_with_parent() -> None:
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        try:
-            ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
-
-
-def _serve(fd_in: int, fd_out: int) -> None:
-    from .component import FMUComponent
-
-    head = _read(fd_in, _HEAD.size + 4)
-    if not head:
-        return
-    length = struct.unpack_from("<I", head, _HEAD.size)[0]
-    setup = pickle.loads(_read(fd_in, length))
-    n_out = 0
-
-    def reply(status: bytes, payload: bytes = b"", out: bytes = b"") -> None:
-        _write(fd_out, _REPLY.pack(status, len(payload)) + payload + (out or bytes(16 * n_out)))
-
-    def fail(e: BaseException) -> None:
-        if isinstance(e, StopRequest):
-            reply(b"S", pickle.dumps((e.component, e.time, e.reason)))
-        else:
-            reply(b"E", pickle.dumps((type(e).__name__, str(e))))
-
-    try:
-        comp = FMUComponent(**setup["arguments"])
-        comp.use_unpacked(setup["directory"])
-        comp.use_inputs(setup["inputs"], setup["sources"])
-        n_in, n_out = len(comp.connected_inputs), len(comp.output_names)
-        comp.reset(setup["t0"])
-        values = np.zeros(n_in + n_out)
-        ints = np.zeros(n_in + n_out, dtype=np.int64)
-        out_fn, upd_fn = comp.bind(values, slice(0, n_in), slice(n_in, n_in + n_out), ints)
-        out_fn(setup["t0"])
-    except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
-        fail(e)
-        return
-    reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
-    size = 16 * n_in
-    try:
-        while True:
-            head = _read(fd_in, _HEAD.size + size)
-            if not head:
-                break
-            op, t = _HEAD.unpack_from(head)
-            if op == b"C":
-                break
-            if n_in:
-                values[:n_in] = np.frombuffer(head, np.float64, n_in, _HEAD.size)
-                ints[:n_in] = np.frombuffer(head, np.int64, n_in, _HEAD.size + 8 * n_in)
-            try:
-                if op == b"O":
-                    out_fn(t)
-                else:
-                    upd_fn(t)
-                    if not comp.feedthrough:         # the outputs at t + period, sent back now
-                        out_fn(t + comp.period)
-            except BaseException as e:  # noqa: BLE001
-                fail(e)
-                continue
-            reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
-    finally:
-        comp.close()
-
-
-def main() -> None:
-    """The child process: serve one FMU on stdin/stdout until told to close."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _die_with_parent()
-    fd_in, fd_out = sys.stdin.buffer.fileno(), os.dup(sys.stdout.buffer.fileno())
-    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # FMU prints go to stderr, not the pipe
-    try:
-        _serve(fd_in, fd_out)
-    except (OSError, EOFError, pickle.UnpicklingError, struct.error) as e:   # the parent went away
-        print(f"cosim.fmi.isolated: {type(e).__name__}: {e}", file=sys.stderr)
-        sys.exit(1)
-
-
-if __name__ == "__main__":
-    main()

@@ -2,7 +2,7 @@
 
 A :class:`ContinuousModel` is what the integrator needs: continuous states, derivatives,
 event indicators and the FMI event machinery. :class:`FMUModel` is one ME FMU;
-:class:`cosim.fmi.system.MESystem` is several connected ones integrated as one.
+:class:`cosim.fmi.me_system.MESystem` is several connected ones integrated as one.
 
 :class:`MEIntegrator` advances a model over ``[t, t + h]`` with one of three solvers:
 

@@ -1,7 +1,7 @@
 """``model_config.h``: the one schema by which every FMU the project writes configures its C
 core (plant, filter or signal; ``fmu_models/export/c``).
 
-The header is derived from the FMU's variable list (:class:`~fmu_models.export.variables.VariableList`,
+The header is derived from the FMU's variable list (:class:`~fmu_models.export.variable_list.VariableList`,
 the same list that writes the ``modelDescription.xml``) and holds, for every core:
 
 =================================  ================================================================
@@ -30,7 +30,7 @@ import casadi as ca
 
 from ..errors import ConfigurationError
 from ..variables import DOMAINS
-from .variables import VariableList
+from .variable_list import VariableList
 
 __all__ = ["c_array", "c_strings", "config_header", "work_sizes"]
 

@@ -1,7 +1,7 @@
 """``modelDescription.xml`` for FMI 2.0 and 3.0 from one description of an FMU, shared by
 the plant, estimator and signal FMUs.
 
-An FMU is described by its variables (:class:`~fmu_models.export.variables.FmuVariable`, in
+An FMU is described by its variables (:class:`~fmu_models.export.variable_list.FmuVariable`, in
 ModelVariables order with value reference = index - 1), its ModelStructure
 (:class:`Unknown` entries), its interfaces and capabilities (:class:`Description`).
 """

@@ -18,7 +18,6 @@ import contextlib
 import hashlib
 import os
 import platform
-import secrets
 import shutil
 import sys
 import uuid
@@ -28,13 +27,12 @@ from pathlib import Path
 
 import fmpy
 
-from ..cache import build_cached
-from ..compiler import find_compiler, run_compiler
 from ..errors import ConfigurationError
-from ..signals import private_tempdir
+from ..infra.cache import build_cached
+from ..infra.compiler import find_compiler, run_compiler
+from ..infra.files import atomic_copy, private_tempdir
 
-__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "atomic_copy", "find_compiler", "library_suffix", "pack_fmu",
-           "platform_dir", "temp_beside"]
+__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "find_compiler", "library_suffix", "pack_fmu", "platform_dir"]
 
 #: The generic C files shipped with the package (FMI wrappers and the model cores).
 C_DIR = Path(__file__).parent / "c"
@@ -60,40 +58,13 @@ def library_suffix() -> str:
     return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
-def temp_beside(dst: Path) -> tuple[int, str]:
-    """A new temporary file in ``dst``'s folder, opened for writing: ``(fd, path)``. Unlike
-    ``tempfile.mkstemp`` (always 0600) its permissions follow the umask, as the final file's
-    would, since it is renamed into place."""
-    for _ in range(100):
-        tmp = str(dst.parent / f".{dst.name}.{secrets.token_hex(6)}.tmp")
-        try:
-            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
-        except FileExistsError:
-            continue
-    raise FileExistsError(f"no free temporary name beside {dst}")
-
-
-def atomic_copy(src: Path, dst: Path) -> None:
-    """Copy ``src`` to ``dst`` through a temporary file in ``dst``'s folder and an atomic
-    rename, so that ``dst`` is at every instant either absent, the old file or the new one."""
-    fd, tmp = temp_beside(Path(dst))
-    try:
-        with os.fdopen(fd, "wb") as out, open(src, "rb") as inp:
-            shutil.copyfileobj(inp, out)
-        os.replace(tmp, dst)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
 #: Flags of the native build (the binary for this machine's platform).
 _CFLAGS = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L")
 
 
 def _compile_library(cc: str, src: Path, c_files: list[str], lib: Path, identifier: str) -> None:
     """Compile the FMU's library ``lib`` from the sources in ``src``, through the
-    compiled-code cache (:mod:`fmu_models.cache`): an FMU built before from the same sources,
+    compiled-code cache (:mod:`fmu_models.infra.cache`): an FMU built before from the same sources,
     compiler and flags is not compiled again."""
     def build(out: Path) -> None:
         run_compiler([cc, *_CFLAGS, f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o",

@@ -40,10 +40,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from ..cache import build_cached
-from ..compiler import run_compiler
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
-from ..signals import private_tempdir
+from ..infra.cache import build_cached
+from ..infra.compiler import run_compiler
+from ..infra.files import private_tempdir
 
 __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_platforms", "zig_command"]
 
@@ -337,7 +337,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     BuildError
         The cross-compiler failed (its output in the message).
     """
-    from .pack import atomic_copy
+    from ..infra.files import atomic_copy
 
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)

@@ -10,7 +10,7 @@ from cosim.components.sensors import Sensor
 from cosim.components.sources import Constant, Sine
 from cosim.core.component import Component
 from cosim.core.master import ConfigurationError, CosimError, Cosimulation
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from cosim.scenario import Scenario
 from estimators import EKF, discretize
 from fmu_models import get_model

@@ -9,13 +9,14 @@ import pandas as pd
 import pytest
 
 import cosim.core.component as protocol
-from cosim.components.estimation import EstimatorComponent, LQRController
+from cosim.components.control import LQRController
+from cosim.components.estimation import EstimatorComponent
 from cosim.components.plant_model import ModelComponent
 from cosim.components.sensors import ProcessNoise, Sensor
 from cosim.components.sources import Constant, Sine, Step
 from cosim.core.component import Component
 from cosim.core.master import Cosimulation
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from cosim.scenario import Scenario
 from estimators import EKF, discretize
 from fmu_models import get_model

@@ -14,12 +14,13 @@ from fmpy.validation import validate_fmu
 from fmu_helpers import Instance
 
 from cosim.cli import main
-from cosim.components.estimation import EstimatorComponent, LQRController
+from cosim.components.control import LQRController
+from cosim.components.estimation import EstimatorComponent
 from cosim.components.noise import CounterNoise, counter_normal
 from cosim.components.sensors import ProcessNoise, Sensor
 from cosim.components.sources import PRBS, Constant, Sine, Step
 from cosim.core.master import Cosimulation
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from cosim.ssp import export_ssp, open_ssp
 from estimators import EKF, discretize
 from fmu_models import get_model

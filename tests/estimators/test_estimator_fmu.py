@@ -11,10 +11,10 @@ from cosim.components.estimation import EstimatorComponent
 from cosim.components.sensors import ProcessNoise, Sensor
 from cosim.components.sources import PRBS
 from cosim.core.master import Cosimulation
-from cosim.fmi.component import FMUComponent
+from cosim.fmi.fmu_component import FMUComponent
 from estimators import EKF, IAE, KF, MFIAE, UKF, augment_rate_bias, discretize
+from estimators.filter_fmu import export_filter_fmu
 from fmu_models import get_model
-from fmu_models.export.filter import export_filter_fmu
 
 X0 = [0.5, 0.0, 1.8, 0.5]
 

@@ -183,7 +183,7 @@ def make(cp):
 
 
 def test_step_run_batch_and_fmu_agree(cp, record, tmp_path):
-    from fmu_models.export.filter import export_filter_fmu
+    from estimators.filter_fmu import export_filter_fmu
 
     us, ys = record
     stepped = make(cp)

@@ -56,7 +56,7 @@ def cross_fmus(tmp_path_factory):
     if importlib.util.find_spec("ziglang") is None or importlib.util.find_spec("lief") is None:
         pytest.skip("the cross extra (ziglang, lief) is not installed: pip install -e '.[cross]'")
     from estimators import EKF, discretize
-    from fmu_models.export.filter import export_filter_fmu
+    from estimators.filter_fmu import export_filter_fmu
 
     out = tmp_path_factory.mktemp("cross")
     fmus, notes = {}, {}

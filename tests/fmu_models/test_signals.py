@@ -1,4 +1,4 @@
-"""Interrupt-safe temporary folders (fmu_models.signals.private_tempdir): a Ctrl-C or
+"""Interrupt-safe temporary folders (fmu_models.infra.interrupts.private_tempdir): a Ctrl-C or
 SIGTERM that arrives while the folder is being created is raised once it exists, inside
 the block that removes it (tempfile.TemporaryDirectory leaves it behind then: 2 of 40
 interrupted builds did, measured with tests/test_hostile_cli.py's build)."""
@@ -8,7 +8,8 @@ import tempfile
 
 import pytest
 
-from fmu_models.signals import private_tempdir, terminate_as_interrupt
+from fmu_models.infra.files import private_tempdir
+from fmu_models.infra.interrupts import terminate_as_interrupt
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

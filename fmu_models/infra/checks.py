@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .errors import ConfigurationError, InputError, TypeMismatchError
+from ..errors import ConfigurationError, InputError, TypeMismatchError
 
 __all__ = ["covariance", "finite", "float_array", "positive", "positive_int", "vector"]
 

@@ -31,8 +31,8 @@ import numpy as np
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
-from .component import FMUComponent
 from .exchange import Exchange, no_exchange
+from .fmu_component import FMUComponent
 from .model_exchange import SOLVERS, ContinuousModel, FMUModel, MEIntegrator
 
 __all__ = ["MESystem"]
@@ -174,7 +174,7 @@ class MESystem(BoundCalls, Component, kind="me_system"):
 
     def __init__(self, name: str, members: Sequence[FMUComponent], connections: Mapping[str, str],
                  period: float, solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6):
-        from fmu_models.checks import positive
+        from fmu_models.infra.checks import positive
 
         self.members = list(members)
         if not self.members:

@@ -2,7 +2,7 @@
 (recordings, batches, campaigns, simulations) is derived from."""
 from __future__ import annotations
 
-from .errors import ResourceError
+from ..errors import ResourceError
 
 __all__ = ["MEMORY_FRACTION", "available_memory", "check_fits"]
 

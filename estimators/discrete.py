@@ -11,8 +11,8 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from fmu_models import checks
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra import checks
 from fmu_models.plant import PlantModel, check_method
 
 

@@ -2,7 +2,7 @@
 
 An experiment is a subclass of :class:`Experiment` registered by name with a class keyword
 (``class MyStudy(Experiment, register="my-study")``, in its own file; the command line then
-offers it, with the plugin mechanism of :mod:`fmu_models.registry` for code outside the
+offers it, with the plugin mechanism of :mod:`fmu_models.infra.registry` for code outside the
 project). It declares
 
 * ``configs``: named configurations (frozen dataclasses of settings), ``default_config``;
@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import ClassVar
 
 from fmu_models.errors import ConfigurationError
-from fmu_models.registry import Registry
+from fmu_models.infra.registry import Registry
 
 from .settings import apply_overrides, load_settings
 

@@ -5,7 +5,7 @@ Every kind of thing a user can add has one registry, filled where each thing is 
 * :data:`fmu_models.MODELS`: :func:`fmu_models.register_model` on a model's build function;
 * :data:`estimators.FILTERS`: ``class MyFilter(EKF, register="MyFilter")``;
 * :data:`cosim.COMPONENTS`: ``class MySensor(Component, kind="my_sensor")``;
-* :data:`fmu_models.export.SIGNAL_KINDS`: :func:`fmu_models.export.signal.register_signal_kind`;
+* :data:`fmu_models.export.SIGNAL_KINDS`: :func:`fmu_models.export.signal_fmu.register_signal_kind`;
 * :data:`cosim.experiments.EXPERIMENTS`: ``class MyStudy(Experiment, register="my-study")``.
 
 So adding a model, a filter, a component or an experiment is one file: its definition
@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Generic, TypeVar
 
-from .errors import ConfigurationError, UnknownNameError
+from ..errors import ConfigurationError, UnknownNameError
 
 __all__ = ["ENTRY_POINT_GROUP", "Registry", "load_plugin"]
 

@@ -12,32 +12,15 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError
+from fmu_models.infra.files import atomic_write
 
-__all__ = ["MARKER", "OutputFolder", "atomic_write", "plot_estimates", "save_results"]
-
-
-def atomic_write(path, write: Callable[[Path], object]) -> Path:
-    """Call ``write(tmp)`` to write a temporary file beside ``path``, then rename it to
-    ``path`` (atomic); the temporary file is removed if ``write`` fails. Returns ``path``."""
-    from fmu_models.export.pack import temp_beside
-
-    path = Path(path)
-    fd, tmp = temp_beside(path)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    return path
+__all__ = ["MARKER", "OutputFolder", "plot_estimates", "save_results"]
 
 
 def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]:

@@ -1,16 +1,15 @@
-"""SIGTERM handled as Ctrl-C by the command lines, so that a killed build or run cleans up
-(temporary folders, compiler processes, partial outputs) through the same ``finally``
-blocks as an interrupted one."""
+"""Signals: SIGTERM handled as Ctrl-C by the command lines, so that a killed build or run
+cleans up (temporary folders, compiler processes, partial outputs) through the same
+``finally`` blocks as an interrupted one; and Ctrl-C/SIGTERM deferred over a few
+statements that must not be cut in two (:class:`Deferred`)."""
 from __future__ import annotations
 
 import contextlib
-import shutil
 import signal
-import tempfile
 import threading
 from collections.abc import Iterator
 
-__all__ = ["private_tempdir", "terminate_as_interrupt"]
+__all__ = ["Deferred", "terminate_as_interrupt"]
 
 
 def _raise_interrupt(signum, frame):
@@ -32,7 +31,7 @@ def terminate_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-class _Deferred:
+class Deferred:
     """Ctrl-C and SIGTERM noted instead of raised until :meth:`release` (main thread only:
     elsewhere Python raises no signal exceptions)."""
 
@@ -57,21 +56,3 @@ class _Deferred:
                 handler(signum, None)
             elif handler != signal.SIG_IGN:
                 signal.raise_signal(signum)
-
-
-@contextlib.contextmanager
-def private_tempdir(prefix: str, dir=None) -> Iterator[str]:
-    """A new temporary folder (``prefix``, in ``dir`` or the default place) removed at the
-    end of the block, also when Ctrl-C or SIGTERM arrives while it is being created (with
-    ``tempfile.TemporaryDirectory`` an interrupt inside its creation leaves the folder
-    behind)."""
-    deferred = _Deferred()
-    path = None
-    try:
-        path = tempfile.mkdtemp(prefix=prefix, dir=dir)
-        deferred.release()
-        yield path
-    finally:
-        deferred.release()
-        if path is not None:
-            shutil.rmtree(path, ignore_errors=True)

@@ -19,8 +19,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import BuildError, CompilerNotFoundError
-from .signals import private_tempdir
+from ..errors import BuildError, CompilerNotFoundError
+from .files import private_tempdir
 
 __all__ = ["find_compiler", "run_compiler"]
 

@@ -40,7 +40,6 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_models.checks import finite
 from fmu_models.errors import (
     ConfigurationError,
     FMUError,
@@ -48,6 +47,7 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
+from fmu_models.infra.checks import finite
 
 from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest
 from .archive import Extraction, read_description
@@ -139,7 +139,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                  start: Mapping[str, object] | None = None, interface: str = "auto",
                  solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6,
                  feedthrough: str = "model", logging: bool = False, isolate: bool = False):
-        from fmu_models.checks import positive
+        from fmu_models.infra.checks import positive
 
         #: what a child process needs to build the same component (``isolate=True``)
         self.arguments = dict(name=name, path=str(path), period=period, inputs=inputs, outputs=outputs,
@@ -299,7 +299,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                                      "the fly) or path (an .fmu file)")
         if "model" in table:
             from fmu_models.export.pack import FMI_VERSIONS
-            from fmu_models.export.plant import build_fmu
+            from fmu_models.export.plant_fmu import build_fmu
 
             version = table.pop("fmi_version", 2)
             if isinstance(version, bool) or version not in FMI_VERSIONS:
@@ -339,7 +339,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         """A copy of the FMU file as ``<folder>/<name>.fmu``, with this component's
         parameters and start values. The file is copied as it is: ``fmi_version`` other
         than the FMU's own is said in the note, not converted."""
-        from fmu_models.export.pack import atomic_copy
+        from fmu_models.infra.files import atomic_copy
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -437,7 +437,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         """A new instance of the FMU (closing any previous one), initialised at ``t0``
         [s] with the structural parameters (in Configuration Mode), parameters and start
         values; left after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the
-        integrator not started: what :class:`~cosim.fmi.system.MESystem` builds on)."""
+        integrator not started: what :class:`~cosim.fmi.me_system.MESystem` builds on)."""
         self.close()
         inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging)
         self.instance = inst

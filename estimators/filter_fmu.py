@@ -47,11 +47,14 @@ from pathlib import Path
 
 import casadi as ca
 
-from ..errors import ConfigurationError, TypeMismatchError
-from .config import c_array, config_header, work_sizes
-from .description import Description, Unknown, fmi2, fmi3
-from .pack import pack_fmu
-from .variables import VariableList
+from fmu_models.errors import ConfigurationError, TypeMismatchError
+from fmu_models.export.config import c_array, config_header, work_sizes
+from fmu_models.export.description import Description, Unknown, fmi2, fmi3
+from fmu_models.export.pack import pack_fmu
+from fmu_models.export.variable_list import VariableList
+
+from .linalg import finite_flag
+from .protocol import renamed
 
 __all__ = ["export_filter_fmu", "filter_parameters"]
 
@@ -152,13 +155,9 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
             raise ConfigurationError(f"{filt.name}: fmu_initial gives {expr.numel()} values for {n!r}, the step "
                                      f"takes {step.nnz_in(n)}")
         init_out.append(ca.densify(ca.reshape(expr, step.size_in(n))))
-    from estimators.linalg import finite_flag
-
     # the gate may be inf (no gate); everything else must be finite
     bad = 1 - finite_flag([e for e, n in zip(init_out, state_names + fixed_names) if n != "gate"])
     init = ca.Function("flt_init", [psym], init_out + [bad])
-    from estimators.protocol import renamed
-
     run_step = renamed(step, "flt_step")
     src = {"u": (1, 0), "y": (2, 0), "mask": (3, 0)}
     step_src = [(0, st_off[n]) if n in st_off else src.get(n, (4, fx_off.get(n, 0))) for n in names_in]
@@ -213,7 +212,7 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         cg.add(run_step)
         cg.generate(str(folder) + "/")
         header = config_header(
-            v, name, guid, "fmu_models.export.filter", groups=("U", "Y", "OUT", "VALID", "TIME"), work=work,
+            v, name, guid, "estimators.filter_fmu", groups=("U", "Y", "OUT", "VALID", "TIME"), work=work,
             defines=[("NSTATE", max(nstate, 1)), ("NFIXED", max(nfixed, 1)), ("NDIAG", max(ndiag, 1)),
                      ("PERIOD", repr(s.dt)), ("N_LESS", len(less)),
                      ("INIT_NOUT", len(state_names) + len(fixed_names)), ("STEP_NIN", len(names_in)),

@@ -16,11 +16,12 @@ from pathlib import Path
 
 import casadi as ca
 
+from ..catalog import get_model, model_names
 from ..plant import PlantModel
 from .config import c_array, config_header, work_sizes
 from .description import Description, Unknown, fmi2, fmi3
 from .pack import pack_fmu
-from .variables import VariableList
+from .variable_list import VariableList
 
 __all__ = ["DEFAULT_STEP_SIZE", "build_fmu", "build_fmus", "derivative_unit", "plant_variables"]
 
@@ -93,7 +94,7 @@ def _write_sources(model: PlantModel, variables: VariableList, guid: str, folder
     for f in funcs:
         cg.add(f)
     cg.generate(str(folder) + "/")
-    header = config_header(variables, model.fmu_name, guid, "fmu_models.export.plant", work=work_sizes(funcs, 3, 2),
+    header = config_header(variables, model.fmu_name, guid, "fmu_models.export.plant_fmu", work=work_sizes(funcs, 3, 2),
                            defines=[("DEFAULT_STEP_SIZE", repr(DEFAULT_STEP_SIZE))],
                            tables=[c_array("double", "X_START", [repr(float(s.start)) for s in model.states])])
     (folder / "model_config.h").write_text(header)
@@ -159,8 +160,6 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     BuildError
         The compiler failed (its output is in the message).
     """
-    from .. import get_model
-
     if isinstance(model, str):
         model = get_model(model)
     variables = plant_variables(model)
@@ -188,6 +187,4 @@ def build_fmus(out_dir: str | Path = ".", fmi_version: int = 2, models: tuple[st
     models : tuple of str, optional
         Registry names of the models to build.
     """
-    from .. import get_model, model_names
-
     return [build_fmu(get_model(name), out_dir, fmi_version) for name in (models or model_names())]
