@@ -4,8 +4,9 @@ Run: python bench/bench_estimators.py
 Every filter runs the same data (seed 000 scenario-like truth); each figure is the
 fastest of 7 repeats of 5000 steps (this shared machine's speed varies by up to 50 %
 between runs; the fastest repeat is the least disturbed), each filter warmed up first.
-``step`` is timed with the inputs as Python lists (``[0.5]``, ``[0.52, 1.79]``) and as
-rows of numpy arrays. filterpy's EKF and UKF get the exact Jacobians/model from the same
+``step`` is timed with the inputs as Python lists (``[0.5]``, ``[0.52, 1.79]``), as
+rows of numpy arrays, and with the one-element ``u`` as a bare number (a float, and a
+numpy float64: ``U[k]`` of a 1-D ``U``). filterpy's EKF and UKF get the exact Jacobians/model from the same
 CasADi model (numpy calls), so the comparison is of the filter machinery.
 """
 from __future__ import annotations
@@ -46,11 +47,15 @@ def main():
     x0, P0, Q, R = np.array([0.5, 0, 1.8, 0.5]), np.eye(4), 1e-6 * np.eye(4), 2.5e-3 * np.eye(2)
     results = {}
     ul, yl = us.tolist(), ys.tolist()
+    u_float, u_np = us[:, 0].tolist(), us[:, 0]         # a float and a numpy float64 per step
     for name, make in [("KF", lambda: KF(sys_, x0, P0, Q, R)), ("EKF", lambda: EKF(sys_, x0, P0, Q, R)),
                        ("UKF", lambda: UKF(sys_, x0, P0, Q, R)),
                        ("IAE", lambda: IAE(sys_, x0, P0, Q, R)),
                        ("MF-IAE", lambda: MFIAE(sys_, x0, P0, 1e-6, 2.5e-3))]:
-        for label, u_in, y_in in (("lists", ul, yl), ("arrays", us, ys)):
+        inputs = [("lists", ul, yl), ("arrays", us, ys)]
+        if name == "EKF":
+            inputs += [("float u", u_float, yl), ("numpy scalar u", u_np, yl)]
+        for label, u_in, y_in in inputs:
             f = make()
 
             def run(f=f, u_in=u_in, y_in=y_in):
@@ -127,6 +132,8 @@ def main():
           f"with the model calls: {results['filterpy EKF (model via CasADi numpy calls)'] / ekf:.0f}x; "
           f"UKF over filterpy's UKF: {results['filterpy UKF'] / ukf:.0f}x; "
           f"UKF/EKF {ukf / ekf:.2f}, MF-IAE/EKF {results['MF-IAE (lists)'] / ekf:.2f}")
+    print(f"EKF step with a scalar u against lists: float {results['EKF (float u)'] / ekf:.2f}x, "
+          f"numpy float64 {results['EKF (numpy scalar u)'] / ekf:.2f}x")
 
 
 if __name__ == "__main__":

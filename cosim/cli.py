@@ -16,21 +16,29 @@ what finished as partial results, and exit with status 130.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import math
 import sys
 import time
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from fmu_models import get_model, model_names
 from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
+from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
+from fmu_models.infra.cli import run_command
+from fmu_models.infra.files import atomic_write
 from fmu_models.infra.registry import load_plugin
 
+from .core.component import ExportsFMU, StateEstimator
+from .experiments import EXPERIMENTS
+from .fmi.archive import read_description
+from .output import OutputFolder, plot_estimates, save_results
+from .scenario import Scenario
+from .ssp import export_ssp
+
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
-EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 
 # ---------------------------------------------------------------------------- argument types
@@ -101,8 +109,6 @@ def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool 
     """Load and check the scenario, then (only then) take ``out`` and run it."""
     import tempfile
 
-    from .output import OutputFolder
-    from .scenario import Scenario
 
     if dry_run:
         with tempfile.TemporaryDirectory() as tmp:
@@ -123,10 +129,7 @@ def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool |
     failure, the FMUs it built, the RMSE table and the plot."""
     import shutil
 
-    from fmu_models.infra.files import atomic_write
 
-    from .core.component import StateEstimator
-    from .output import plot_estimates, save_results
 
     print(f"scenario: {sc.title or path.name}")
     stream = bool(sc.recording.get("stream", False)) if stream is None else stream
@@ -173,12 +176,7 @@ def _export(args) -> int:
     """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
     import tempfile
 
-    from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
 
-    from .core.component import ExportsFMU, StateEstimator
-    from .output import OutputFolder
-    from .scenario import Scenario
-    from .ssp import export_ssp
 
     platforms = parse_platforms(args.platforms)
     if platforms:
@@ -208,7 +206,6 @@ def _export(args) -> int:
                 for note in result.notes:
                     print(f"note: {note}")
                 return 0
-            from .fmi.archive import read_description
 
             for n in names:
                 exported = comps[n].export_fmu(out, args.fmi_version)
@@ -224,7 +221,6 @@ def _export(args) -> int:
 def _models(args) -> int:
     """Simulate every registered model (Euler truth map and RK4) from its example state and
     input, and print trajectories and Jacobians."""
-    from fmu_models import get_model, model_names
 
     for name in model_names():
         with np.printoptions(precision=5, suppress=True, linewidth=110):
@@ -253,8 +249,6 @@ def _model_report(m, duration: float) -> None:
 def _experiment(args) -> int:
     """Any registered experiment (:mod:`cosim.experiments.experiment`): its settings are validated
     before ``--out`` is touched; an interrupted run writes a partial report."""
-    from .experiments import EXPERIMENTS
-    from .output import OutputFolder
 
     exp = EXPERIMENTS.get(args.name)()
     exp.check_path(args.path)
@@ -307,7 +301,6 @@ def build_parser() -> argparse.ArgumentParser:
     models.add_argument("--duration", type=_number(float, 0, "the duration", strict=True, high=MAX_MODELS_DURATION),
                         default=5.0, help=f"simulated time [s] (default 5, at most {MAX_MODELS_DURATION:g}: "
                                           "the report prints ten rows of it)")
-    from .experiments import EXPERIMENTS
 
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
                                             "campaign; writes tables, figures and summary.md")
@@ -369,15 +362,6 @@ def _dispatch(args) -> int:
                          args.dry_run, args.stream, False if args.no_progress else None)
 
 
-def _known_errors() -> tuple:
-    errors = [PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError]
-    with contextlib.suppress(ImportError):
-        from lxml.etree import XMLSyntaxError
-
-        errors.append(XMLSyntaxError)
-    return tuple(errors)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
     when interrupted).
@@ -391,44 +375,21 @@ def main(argv: list[str] | None = None) -> int:
     pre.add_argument("--plugin", action="append", default=[])
     pre.add_argument("--debug", action="store_true")
     known, _ = pre.parse_known_args(argv)
-    try:
-        for plugin in known.plugin:           # before the parser: their experiments become choices
-            load_plugin(plugin)
-    except PendulumCosimError as e:
-        if known.debug:
-            raise
-        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
-        return EXIT_ERROR
+    # before the parser: their experiments become choices
+    status = run_command(lambda: _load_plugins(known.plugin), debug=known.debug)
+    if status:
+        return status
     args = build_parser().parse_args(argv)
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
         logging.getLogger("cosim.fmu").setLevel(logging.INFO)
-    from fmu_models.infra.interrupts import terminate_as_interrupt
+    return run_command(lambda: _dispatch(args), debug=args.debug)
 
-    try:
-        with terminate_as_interrupt():
-            return _dispatch(args)
-    except KeyboardInterrupt:
-        print("interrupted (Ctrl-C or SIGTERM)", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except SystemError as e:
-        # Ctrl-C or SIGTERM inside a native extension's callback (CasADi's DM.__array__)
-        # comes back as a SystemError whose cause is the KeyboardInterrupt
-        if isinstance(e.__cause__ or e.__context__, KeyboardInterrupt) and not args.debug:
-            print("interrupted (Ctrl-C or SIGTERM)", file=sys.stderr)
-            return EXIT_INTERRUPTED
-        raise
-    except Interrupted as e:
-        if args.debug:
-            raise
-        print(f"interrupted: {e}", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except _known_errors() as e:
-        if args.debug:
-            raise
-        text = " ".join(str(e).split()) or type(e).__name__
-        print(f"error: {text}", file=sys.stderr)
-        return EXIT_ERROR
+
+def _load_plugins(plugins: list[str]) -> int:
+    for plugin in plugins:
+        load_plugin(plugin)
+    return 0
 
 
 if __name__ == "__main__":

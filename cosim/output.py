@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from fmu_models.errors import ConfigurationError
+from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.files import atomic_write
 
 __all__ = ["MARKER", "OutputFolder", "plot_estimates", "save_results"]
@@ -37,7 +37,6 @@ def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]
 
     Returns the paths written.
     """
-    from fmu_models.errors import TypeMismatchError
 
     if not isinstance(df, pd.DataFrame):
         raise TypeMismatchError(f"save_results takes a pandas DataFrame, got {type(df).__name__}")
@@ -223,7 +222,6 @@ def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[st
     """
     from matplotlib.figure import Figure
 
-    from fmu_models.errors import UnknownNameError
 
     if len(truth) != len(estimate):
         raise ConfigurationError("truth and estimate must list the same number of columns")

@@ -56,11 +56,13 @@ import inspect
 from collections.abc import Callable
 from pathlib import Path
 
+from fmu_models import get_model
 from fmu_models.errors import ConfigurationError, PendulumCosimError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import finite
 from fmu_models.infra.registry import load_plugin
 
 from . import components as _library  # noqa: F401 - the library's components register themselves
+from . import tomlfile
 from .core.component import COMPONENTS, Component
 from .core.master import Cosimulation
 from .fmi import fmu_component as _fmu  # noqa: F401 - registers the fmu component type
@@ -118,7 +120,6 @@ class ScenarioContext:
 
     def model(self, name, parameters=None):
         """The registered plant model ``name`` with ``parameters`` (a table) overridden."""
-        from fmu_models import get_model
 
         if parameters is None:
             parameters = {}
@@ -268,7 +269,6 @@ class Scenario:
         ConfigurationError
             Missing file, a folder, not TOML, or any problem of the scenario itself.
         """
-        from . import tomlfile
 
         path = Path(path)
         spec = tomlfile.read(path, "scenario file")

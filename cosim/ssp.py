@@ -44,10 +44,13 @@ from xml.etree import ElementTree as ET
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.description import xml_attrs
 from fmu_models.export.platforms import add_platforms
+from fmu_models.infra.checks import finite, positive
 
 from .core.component import PORT_TYPES, ExportedFMU, ExportsFMU
+from .core.master import Cosimulation
 from .core.schedule import base_step
 from .fmi.archive import Extraction, read_description
+from .fmi.fmu_component import FMUComponent
 
 __all__ = ["SSPExport", "SSPSystem", "export_ssp", "open_ssp"]
 
@@ -181,7 +184,6 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         Components without an FMU form (all named at once), or a connection to a port the
         exported FMU lacks.
     """
-    from .core.master import Cosimulation
 
     cosim = system if isinstance(system, Cosimulation) else system.cosim
     start = getattr(system, "start_time", 0.0)
@@ -303,7 +305,6 @@ def _bindings(element: ET.Element, where: str) -> list[tuple[str, object]]:
 
 def _number(text, what: str) -> float:
     """An attribute as a finite float, or a ConfigurationError naming ``what``."""
-    from fmu_models.infra.checks import finite
 
     return finite(text, what)
 
@@ -375,10 +376,7 @@ def open_ssp(path, communication_step: float | None = None) -> Iterator[SSPSyste
         What this reader does not support (nested systems, parameter files or mappings,
         transformations, connections to the system's own connectors), named.
     """
-    from fmu_models.infra.checks import positive
 
-    from .core.master import Cosimulation
-    from .fmi.fmu_component import FMUComponent
 
     if communication_step is not None:
         communication_step = positive(communication_step, "open_ssp: communication_step [s]")

@@ -17,6 +17,7 @@ from .batch import BatchFilter
 from .discrete import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ekf import EKF
 from .em import em_noise
+from .filter_fmu import export_filter_fmu
 from .fuzzy import MamdaniFuzzy
 from .iae import IAE
 from .kf import KF
@@ -36,6 +37,5 @@ def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=Non
     """Export the filter ``filt`` as a Co-Simulation FMU; see
     :func:`estimators.filter_fmu.export_filter_fmu` (parameters ``filt``, ``out_dir``,
     ``fmi_version``, ``name``, ``file_name``)."""
-    from .filter_fmu import export_filter_fmu
 
     return export_filter_fmu(filt, out_dir, fmi_version, name, file_name)

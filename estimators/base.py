@@ -28,12 +28,13 @@ from collections.abc import Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+from fmu_models.errors import ConfigurationError, InputError, TypeMismatchError, UnknownNameError
 from fmu_models.infra import checks
 from fmu_models.infra.registry import Registry
 
-from ._buffered import matrix
+from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
+from ._fold import NativeFold
 from .discrete import DiscreteModel
 from .history import NoiseHistory
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
@@ -300,7 +301,6 @@ class KalmanBase:
         ConfigurationError
             ``out`` has the wrong size or is not a contiguous float array.
         """
-        from ._buffered import BufferedFunction
 
         if covariance not in ("diagonal", "full"):
             raise UnknownNameError(f"{self.name}: covariance must be 'diagonal' or 'full', got {covariance!r}")
@@ -498,7 +498,6 @@ class KalmanBase:
         """The fused step folded over trajectories in native code
         (:class:`~estimators._fold.NativeFold`), compiled and cached on the model: what
         :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
-        from ._fold import NativeFold
 
         return self.system.compiled("fold", self.cache_key, self.backend,
                                     lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend))
@@ -506,7 +505,6 @@ class KalmanBase:
     def check_record(self, us, ys, masks=None):
         """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
         (N, ny), or :class:`InputError` / :class:`TypeMismatchError` naming the problem."""
-        from fmu_models.errors import InputError
 
         nu, ny = self.system.nu, self.system.ny
         us = checks.float_array(us, "us")

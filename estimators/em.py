@@ -30,6 +30,7 @@ import numpy as np
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra import checks
 
+from ._fold import NativeFold
 from .base import KalmanBase
 from .runs import EMResult
 from .smoother import rts_smooth
@@ -53,7 +54,6 @@ def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
 def _terms(filt: KalmanBase):
     """Compiled per-step M-step terms (cached on the model): transition ``(xs_k, xs_k1, Ps_k,
     Ps_k1, Plag, u) -> Q term`` and measurement ``(xs, Ps, y, mask) -> (R term, counts)``."""
-    from ._fold import NativeFold
 
     s = filt.system
 

@@ -5,6 +5,7 @@ import casadi as ca
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra import checks
 
 from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
 from .discrete import DiscreteModel
@@ -86,7 +87,6 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
             raise ConfigurationError(f"adapt must name Q, R or both, got {adapt!r}")
         if form not in FORMS:
             raise UnknownNameError(f"form must be one of {FORMS}, got {form!r}")
-        from fmu_models.infra import checks
 
         q0 = np.diag(checks.covariance(Q, system.nx, "Q"))
         r0 = np.diag(checks.covariance(R, system.ny, "R"))

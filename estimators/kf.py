@@ -1,6 +1,9 @@
 """Linear Kalman filter on the model linearised about an operating point (seed 001's KF)."""
 from __future__ import annotations
 
+from fmu_models.errors import ConfigurationError, TypeMismatchError
+from fmu_models.infra.checks import vector
+
 from .discrete import DiscreteModel
 from .ekf import EKF
 
@@ -33,11 +36,8 @@ class KF(EKF, register="KF"):
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
         import numpy as np
 
-        from fmu_models.errors import ConfigurationError
-        from fmu_models.infra.checks import vector
 
         if not isinstance(system, DiscreteModel):
-            from fmu_models.errors import TypeMismatchError
 
             raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
         x_op = np.zeros(system.nx) if x_op is None else vector(x_op, system.nx, "x_op", ConfigurationError)

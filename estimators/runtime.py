@@ -145,6 +145,20 @@ class VectorInput:
 
 
 _SLOW = (TypeError, ValueError, IndexError, KeyError)
+#: Types taken as the one entry of a one-element vector on the lean path (a numpy float64
+#: is a float; a 0-d array becomes a float through ``tolist()``).
+_SCALARS = frozenset({float, np.float64})
+
+
+def _unpack(name: str, entries: list[str]) -> list[str]:
+    """Lines of the lean step unpacking ``name`` into ``entries``; a one-element input also
+    takes a bare float (``ekf.step(U[k], Y[k])`` with a 1-D ``U``) at the cost of a list."""
+    if len(entries) == 1:
+        return [f"        if {name}.__class__ in SCALARS:",
+                f"            {entries[0]} = {name}",
+                "        else:",
+                f"            {entries[0]}, = {name}"]
+    return [f"        {', '.join(entries)}, = {name}"]
 
 
 def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: list, general: Callable,
@@ -191,8 +205,7 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
            "            u = u.tolist()",
            "        if y.__class__ is ndarray:",
            "            y = y.tolist()",
-           f"        {', '.join(us)}, = u",
-           f"        {', '.join(ys)}, = y",
+           *_unpack("u", us), *_unpack("y", ys),
            *[f"        ub[{i}] = {v}" for i, v in enumerate(us)],
            *[f"        yb[{j}] = {v}" for j, v in enumerate(ys)],
            "    except SLOW:",
@@ -207,7 +220,8 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
            "    count[0] += 1",
            *(["    after()"] if after is not None else []),
            "    return copies[c]()"]
-    scope = dict(general=general, ndarray=np.ndarray, ub=memoryview(fill_u.buffer), yb=memoryview(fill_y.buffer),
+    scope = dict(general=general, ndarray=np.ndarray, SCALARS=_SCALARS, ub=memoryview(fill_u.buffer),
+                 yb=memoryview(fill_y.buffer),
                  SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked, cell=rt.cell, triggers=rt.triggers,
                  status=memoryview(rt.status), explain=explain, count=count, after=after,
                  copies=tuple(x.copy for x in rt.pairs["x"]))

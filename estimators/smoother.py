@@ -27,6 +27,7 @@ import numpy as np
 
 from fmu_models.errors import ConfigurationError, NumericalError, TypeMismatchError
 
+from ._fold import NativeFold
 from .base import KalmanBase
 from .linalg import CSE, spd_solve, symmetric
 from .runs import FilterRun, Smoothed
@@ -56,7 +57,6 @@ def smoother_step(filt: KalmanBase) -> ca.Function:
 
 
 def _fold(filt: KalmanBase):
-    from ._fold import NativeFold
 
     return filt.system.compiled("rts", filt.cache_key, filt.backend,
                                 lambda: NativeFold(smoother_step(filt), 2, filt.backend))

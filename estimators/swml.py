@@ -42,7 +42,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError
+from fmu_models.errors import ConfigurationError, TypeMismatchError
 from fmu_models.infra import checks
 
 from .adaptive import AdaptationRecord, bound_parameters, bounds_around
@@ -113,7 +113,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                  keep_r_nats: float = 2.0, max_fall: float = 2.0, q_bounds=None, r_bounds=None,
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
         if not isinstance(system, DiscreteModel):
-            from fmu_models.errors import TypeMismatchError
 
             raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
         q0, r0 = _scalar_variance(Q, system.nx, "Q"), _scalar_variance(R, system.ny, "R")

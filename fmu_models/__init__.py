@@ -21,20 +21,5 @@ __all__ = ["METHODS", "MODELS", "PlantModel", "Variable", "build_fmu", "build_fm
            "load_plugin", "model_names", "register_model"]
 
 
-def build_fmu(model, out_dir=".", fmi_version: int = 2):
-    """Build a plant FMU; see :func:`fmu_models.export.plant_fmu.build_fmu` (parameters
-    ``model``, ``out_dir``, ``fmi_version``)."""
-    from .export.plant_fmu import build_fmu as build
-
-    return build(model, out_dir, fmi_version)
-
-
-def build_fmus(out_dir=".", fmi_version: int = 2, models=None):
-    """Build the plant FMUs; see :func:`fmu_models.export.plant_fmu.build_fmus` (parameters
-    ``out_dir``, ``fmi_version``, ``models``)."""
-    from .export.plant_fmu import build_fmus as build
-
-    return build(out_dir, fmi_version, models)
-
-
-from . import cartpole, iwp  # noqa: E402,F401 - the built-in models register themselves
+from . import cartpole, iwp  # noqa: F401 - the built-in models register themselves
+from .export.plant_fmu import build_fmu, build_fmus

@@ -9,6 +9,13 @@ import sys
 import time
 from pathlib import Path
 
+from .catalog import model_names
+from .export.pack import FMI_VERSIONS
+from .export.plant_fmu import build_fmus
+from .export.platforms import PLATFORMS, add_platforms, parse_platforms, zig_command
+from .infra.cli import run_command
+from .infra.files import private_tempdir
+
 
 def _remove_empty(folders: list[Path]) -> None:
     """Remove the folders a failed build created, deepest first, if they are empty."""
@@ -22,13 +29,6 @@ def _remove_empty(folders: list[Path]) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m fmu_models``; returns the exit status (0, 2 on an error,
     130 when interrupted)."""
-    from . import build_fmus, model_names
-    from .errors import PendulumCosimError
-    from .export.pack import FMI_VERSIONS
-    from .export.platforms import PLATFORMS, add_platforms, parse_platforms
-    from .infra.files import private_tempdir
-    from .infra.interrupts import terminate_as_interrupt
-
     parser = argparse.ArgumentParser(prog="python -m fmu_models",
                                      description="Build the plant FMUs from the CasADi models.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -45,39 +45,33 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     out = Path(args.out)
     created = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
-    notes: list[str] = []
-    try:
-        with terminate_as_interrupt():
-            platforms = parse_platforms(args.platforms)
-            if platforms:
-                from .export.platforms import zig_command
-                zig_command()                      # a missing extra is named before anything is built
-            models = tuple(args.model or model_names())
-            if not platforms:
-                paths = build_fmus(args.out, args.fmi_version, models)
-            else:                                  # complete FMUs only: built and extended aside, then moved
-                out.mkdir(parents=True, exist_ok=True)
-                with private_tempdir(".build-", dir=out) as tmp:
-                    staged = build_fmus(tmp, args.fmi_version, models)
-                    for p in staged:
-                        notes += add_platforms(p, platforms)
-                    paths = [out / p.name for p in staged]
-                    for p, dst in zip(staged, paths):
-                        os.replace(p, dst)
-    except KeyboardInterrupt:
-        _remove_empty(created)
-        print("interrupted: no FMU was left half-written", file=sys.stderr)
-        return 130
-    except (PendulumCosimError, OSError) as e:
-        _remove_empty(created)
-        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    for p in paths:
-        print(p)
-    for note in notes:
-        print(f"note: {note}", file=sys.stderr)
-    print(f"built {len(paths)} FMU(s) in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
-    return 0
+
+    def build() -> int:
+        notes: list[str] = []
+        platforms = parse_platforms(args.platforms)
+        if platforms:
+            zig_command()                          # a missing extra is named before anything is built
+        models = tuple(args.model or model_names())
+        if not platforms:
+            paths = build_fmus(args.out, args.fmi_version, models)
+        else:                                      # complete FMUs only: built and extended aside, then moved
+            out.mkdir(parents=True, exist_ok=True)
+            with private_tempdir(".build-", dir=out) as tmp:
+                staged = build_fmus(tmp, args.fmi_version, models)
+                for p in staged:
+                    notes += add_platforms(p, platforms)
+                paths = [out / p.name for p in staged]
+                for p, dst in zip(staged, paths):
+                    os.replace(p, dst)
+        for p in paths:
+            print(p)
+        for note in notes:
+            print(f"note: {note}", file=sys.stderr)
+        print(f"built {len(paths)} FMU(s) in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+        return 0
+
+    return run_command(build, cleanup=lambda: _remove_empty(created),
+                       interrupted="interrupted: no FMU was left half-written")
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ import scipy.linalg
 
 from .errors import ConfigurationError, InputError, UnknownNameError
 from .infra import checks
+from .infra.memory import check_fits
 from .variables import Variable
 
 #: Integration methods of the discrete maps.
@@ -266,7 +267,6 @@ class PlantModel:
         ``u`` is either one input vector held throughout, an array of shape
         ``(n_steps, nu)``, or a callable ``u(t) -> (nu,)`` evaluated at each step start.
         """
-        from .infra.memory import check_fits
 
         substeps = check_method(method, substeps)
         n_steps = checks.positive_int(n_steps, "n_steps", minimum=0)

@@ -6,7 +6,7 @@ import numpy as np
 import scipy.linalg
 
 from fmu_models.errors import ConfigurationError
-from fmu_models.infra.checks import float_array
+from fmu_models.infra.checks import float_array, vector
 from fmu_models.plant import PlantModel
 
 from ..core.component import Component
@@ -66,7 +66,6 @@ class LQRController(Component, kind="lqr"):
     def __init__(self, name: str, model: PlantModel, period: float, Q, R, x_op=None,
                  u_op=None, u_limits=None):
         super().__init__(name, period, inputs=model.state_names, outputs=model.input_names)
-        from fmu_models.infra.checks import vector
 
         self.x_op = np.zeros(model.nx) if x_op is None else vector(x_op, model.nx, f"{name}: x_op", ConfigurationError)
         self.u_op = np.zeros(model.nu) if u_op is None else vector(u_op, model.nu, f"{name}: u_op", ConfigurationError)

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from estimators.base import KalmanBase
+from estimators.filter_fmu import export_filter_fmu, filter_parameters
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
+from fmu_models.infra.checks import positive
 
 from ..core.component import Component, ExportedFMU
 
@@ -75,7 +77,6 @@ class EstimatorComponent(Component, kind="estimator"):
         ``covariance``; every other key is an argument of the filter's constructor, checked
         against its signature."""
         import estimators
-        from fmu_models.infra.checks import positive
 
         t = dict(table)
         for key in ("filter", "model", "period"):
@@ -147,7 +148,6 @@ class EstimatorComponent(Component, kind="estimator"):
         """The filter as an estimator FMU (:func:`estimators.filter_fmu.export_filter_fmu`),
         with the same timing as this component. Its outputs are the state estimate,
         ``P_<state>`` and ``nis`` as here (not the off-diagonal ``P_<i>_<j>``), and more."""
-        from estimators.filter_fmu import export_filter_fmu, filter_parameters
 
         filt = self.make_filter()
         path = export_filter_fmu(filt, folder, fmi_version, name=self._fmu_identifier(),

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from estimators import KF, linear_model
 from fmu_models.errors import ConfigurationError
 from fmu_models.infra.checks import finite, positive_int
 
@@ -203,7 +204,6 @@ class TiltFusion(Component, kind="tilt_fusion"):
         super().__init__(name, period, ["a_t", "a_r", "omega"], ["alpha", "alpha_dot", "bias"],
                          feedthrough={"alpha": ["a_t", "a_r"], "bias": ["a_t", "a_r"],
                                       "alpha_dot": ["a_t", "a_r", "omega"]})
-        from estimators import linear_model
 
         T = self.period
         self.system = linear_model([[1.0, -T], [0.0, 1.0]], [[T], [0.0]], [[1.0, 0.0]], T,
@@ -213,7 +213,6 @@ class TiltFusion(Component, kind="tilt_fusion"):
         self._make()                     # validates the covariances now
 
     def _make(self):
-        from estimators import KF
 
         self.filter = KF(self.system, [0.0, 0.0], [1.0, 0.1], [self.q_angle, self.q_bias],
                          [[self.r_tilt]])

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_models.errors import ConfigurationError
+from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 from fmu_models.infra.checks import float_array, positive_int
 
 from ..core.component import Component, ExportedFMU
@@ -105,7 +106,6 @@ class Sensor(Component, kind="sensor"):
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """This sensor as a signal FMU (kind ``sensor``, :mod:`fmu_models.export.signal_fmu`) drawing
         from the counter generator; refused with a delay."""
-        from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
         if self.delay:
             raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
@@ -179,7 +179,6 @@ class ProcessNoise(Component, kind="process_noise"):
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
         drawing from the counter generator; refused for a non-diagonal ``cov``."""
-        from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
         if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "

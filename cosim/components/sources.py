@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
 from fmu_models.infra.checks import finite, positive, positive_int
 
 from ..core.component import Component, ExportedFMU
@@ -30,7 +31,6 @@ class _Source(Component):
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
         """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``."""
-        from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
 
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,

@@ -45,10 +45,11 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
+from fmu_models.infra.checks import finite, positive, positive_int
 
-from .component import Component, FastBinding, StopRequest, bind_protocol, ports_compatible, split_port
+from .component import Component, FastBinding, StopRequest, bind_protocol, port_kind, ports_compatible, split_port
 from .recording import MemorySink, ParquetSink, select_signals
-from .schedule import Group, base_step, evaluation_order
+from .schedule import Group, Unit, base_step, evaluation_order
 
 __all__ = ["LOOPS", "LOOP_SOLVERS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
 
@@ -113,7 +114,6 @@ class Cosimulation:
     def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
                  order: str = "auto", loops: str = "refuse", loop_tolerance: float = 1e-10,
                  loop_max_iter: int = 50, loop_solver: str = "newton"):
-        from fmu_models.infra.checks import positive, positive_int
 
         for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
                                    ("loop_solver", loop_solver, LOOP_SOLVERS)):
@@ -138,7 +138,6 @@ class Cosimulation:
         if order == "auto":
             self.schedule = evaluation_order(self.components, self.connections, loops)
         else:
-            from .schedule import Unit
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
         self.timings: dict[str, float] = {}
@@ -260,7 +259,6 @@ class Cosimulation:
 
     # ---------------------------------------------------------------- running
     def _steps(self, stop_time: float, start_time: float, output_interval) -> tuple[int, int]:
-        from fmu_models.infra.checks import finite
 
         stop, start = finite(stop_time, "stop_time [s]"), finite(start_time, "start_time [s]")
         n = self._multiple(stop - start, "stop_time - start_time",
@@ -344,7 +342,6 @@ class Cosimulation:
 
     def _integer_columns(self, sel) -> dict[int, str]:
         """The recorded columns of integer signals (position in ``sel``: FMI type), kept exact."""
-        from .component import port_kind
 
         return {pos: self.signal_types[i] for pos, i in enumerate(sel) if port_kind(self.signal_types[i]) == "integer"}
 

@@ -6,7 +6,11 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from estimators import BatchFilter
+
+from ..components.estimation import EstimatorComponent
 from ..components.sensors import ProcessNoise, Sensor
+from ..core.master import Cosimulation
 
 
 def noise_components(model, T: float, q, measured: Sequence[str], r_std, seed_w: int, seed_v: int):
@@ -98,7 +102,6 @@ def batch_estimates(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray
     x0
         The initial estimate (unused: the template carries it; kept for the callers' symmetry).
     """
-    from estimators import BatchFilter
 
     R = X.shape[0]
     out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
@@ -168,8 +171,6 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
     duration
         Simulated time [s].
     """
-    from ..components.estimation import EstimatorComponent
-    from ..core.master import Cosimulation
 
     states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
     inp = [p for p in plant.input_names if not p.startswith("w_")]

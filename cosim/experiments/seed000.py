@@ -34,9 +34,14 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from fmu_models.errors import ConfigurationError, UnknownNameError
-from fmu_models.infra.checks import positive
+from estimators import EKF, IAE, MFIAE, SWML, discretize, em_noise
+from fmu_models import build_fmu, get_model
+from fmu_models.errors import ConfigurationError, Interrupted, UnknownNameError
+from fmu_models.infra.checks import positive, positive_int
+from fmu_models.infra.files import atomic_write
 
+from ..components.sources import PRBS
+from ..fmi.fmu_component import FMUComponent
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
 from .common import (
@@ -48,6 +53,7 @@ from .common import (
 )
 from .common import simulate_truth as common_truth
 from .experiment import Experiment
+from .settings import check_common, to_toml
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
 READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 the measurement variance (R)",
@@ -111,7 +117,6 @@ class Settings:
     divergence_threshold: float = 1e3
 
     def __post_init__(self):
-        from .settings import check_common
 
         check_common(self)
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
@@ -119,7 +124,6 @@ class Settings:
         for name in ("q0_factor", "r0_factor"):
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
-        from fmu_models.infra.checks import positive_int
 
         for name in ("swml_window", "swml_every"):
             positive_int(getattr(self, name), name)
@@ -160,8 +164,6 @@ def nominal_noise(s: Settings, q: float, r: float) -> tuple[float, float]:
 
 @lru_cache(maxsize=4)
 def _system(T: float):
-    from estimators import discretize
-    from fmu_models import get_model
 
     return discretize(get_model("cartpole"), T)
 
@@ -182,7 +184,6 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) ->
     r
         True measurement variance.
     """
-    from estimators import EKF, em_noise
 
     _X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
     q0, r0 = nominal_noise(s, q, r)
@@ -208,7 +209,6 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
     learned
         The EM-learned (q, r), for the EM EKF.
     """
-    from estimators import EKF, IAE, MFIAE, SWML
 
     x0 = np.array(s.x0)
     q0, r0 = nominal_noise(s, q, r)
@@ -226,7 +226,6 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
 def figure2_prbs(s: Settings):
     """The input source: Figure 2's PRBS (see the module documentation)."""
-    from ..components.sources import PRBS
 
     return PRBS("force", s.T, s.input_amplitude, s.input_bit_time, s.input_order, s.input_seed)
 
@@ -238,7 +237,6 @@ def _inputs(s: Settings) -> np.ndarray:
 
 
 def _noise(s: Settings, q: float, r: float, seed_w: int, seed_v: int):
-    from fmu_models import get_model
 
     return noise_components(get_model("cartpole"), s.T, q, ["x", "theta"], np.sqrt(r), seed_w, seed_v)
 
@@ -258,7 +256,6 @@ def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]
     seeds
         (process, measurement) seed pairs, one per realisation.
     """
-    from fmu_models import get_model
 
     u = _inputs(s)
     X, Y = common_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, ["x", "theta"], np.sqrt(r), seeds)
@@ -333,9 +330,7 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     """
     import tempfile
 
-    from fmu_models import build_fmu
 
-    from ..fmi.fmu_component import FMUComponent
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -406,7 +401,6 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     progress
         Show a progress bar.
     """
-    from fmu_models.errors import Interrupted
 
     if path not in ("fast", "master"):
         raise UnknownNameError(f"path must be 'fast' or 'master', got {path!r}")
@@ -552,9 +546,7 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
     partial
         The campaign was interrupted.
     """
-    from fmu_models.infra.files import atomic_write
 
-    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -604,7 +596,6 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
 
 
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
-    from fmu_models.infra.files import atomic_write
 
     for rd in sorted({k[0] for k in examples}):
         if (rd, 1) not in examples:

@@ -23,11 +23,13 @@ import pandas as pd
 
 from fmu_models.errors import ConfigurationError, Interrupted
 from fmu_models.infra.checks import positive
+from fmu_models.infra.files import atomic_write
 
 from . import seed000
 from .campaign import run_tasks
 from .common import new_figure
 from .experiment import Experiment
+from .settings import apply_overrides, to_toml
 
 ADAPTIVE = ("IAE", "MF-IAE", "EKF EM", "SWML")
 FILTERS = ("EKF", *ADAPTIVE)
@@ -169,9 +171,7 @@ def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_
     partial
         The sweep was interrupted.
     """
-    from fmu_models.infra.files import atomic_write
 
-    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -220,7 +220,6 @@ def _grid(table: pd.DataFrame, name: str, metric: str) -> pd.DataFrame:
 
 
 def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
-    from fmu_models.infra.files import atomic_write
 
     labels = [f"{f:g}" for f in settings.factors]
     for metric, title, log in (("eta_over_bound", "eta / true-Q,R bound", False),
@@ -261,7 +260,6 @@ class Sweep(Experiment, register="seed000-sweep"):
         """The campaign settings of ``config`` (default ``paper``) with the file, ``runs``,
         ``seed`` and the ``overrides`` that name campaign settings; the others set the
         sweep's own fields."""
-        from .settings import apply_overrides
 
         own = {f.name for f in fields(SweepSettings)} - {"campaign"}
         overrides = list(overrides or ())

@@ -27,10 +27,17 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 import pandas as pd
 
+from estimators import EKF, KF, discretize
+from fmu_models import build_fmu, get_model
+from fmu_models.infra.files import atomic_write
+
+from ..components.sources import Constant
+from ..fmi.fmu_component import FMUComponent
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
-from .common import batch_estimates, master_realisation, noise_components, simulate_truth
+from .common import batch_estimates, master_realisation, new_figure, noise_components, simulate_truth
 from .experiment import Experiment
+from .settings import check_common, to_toml
 
 CASES = {"hanging": (0.0, 0.0, np.pi, 0.0), "upright": (0.0, 0.0, 0.1, 0.0)}
 REPORT_TIMES = (1.0, 30.0, 60.0, 90.0, 100.0, 120.0)
@@ -61,7 +68,6 @@ class Settings:
     seed: int = 1
 
     def __post_init__(self):
-        from .settings import check_common
 
         check_common(self)
 
@@ -80,8 +86,6 @@ def make_filters(s: Settings, case: str) -> dict:
     case
         Which case (its initial state and KF linearisation point).
     """
-    from estimators import EKF, KF, discretize
-    from fmu_models import get_model
 
     system = discretize(get_model("cartpole"), s.T)
     x0 = np.array(CASES[case])
@@ -92,7 +96,6 @@ def make_filters(s: Settings, case: str) -> dict:
 
 
 def _source(s: Settings):
-    from ..components.sources import Constant
 
     return Constant("force", s.T, s.force)
 
@@ -124,7 +127,6 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
     runs
         Which realisations (default all).
     """
-    from fmu_models import get_model
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -149,9 +151,7 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
     """
     import tempfile
 
-    from fmu_models import build_fmu, get_model
 
-    from ..fmi.fmu_component import FMUComponent
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -227,10 +227,7 @@ def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
     out_dir
         Output folder.
     """
-    from fmu_models.infra.files import atomic_write
 
-    from .common import new_figure
-    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

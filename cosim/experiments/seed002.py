@@ -26,8 +26,20 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 import pandas as pd
 
+from estimators import EKF, augment_rate_bias, discretize
+from fmu_models import build_fmu, get_model
+from fmu_models.infra.files import atomic_write
+
+from ..components.control import LQRController
+from ..components.estimation import EstimatorComponent
+from ..components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
+from ..components.plant_model import ModelComponent
+from ..core.master import Cosimulation
+from ..fmi.fmu_component import FMUComponent
 from .campaign import realisation_seeds, run_tasks
+from .common import new_figure
 from .experiment import Experiment
+from .settings import check_common, to_toml
 
 CASES = {"Q = R = 0.01": (0.01, 0.01), "Q = 0.01, R = 0.1": (0.01, 0.1)}
 STATES = ("alpha", "alpha_dot", "phi_dot")
@@ -69,20 +81,12 @@ class Settings:
     seed: int = 3
 
     def __post_init__(self):
-        from .settings import check_common
 
         check_common(self)
 
 
 def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
-    from estimators import EKF, augment_rate_bias, discretize
-    from fmu_models import get_model
 
-    from ..components.control import LQRController
-    from ..components.estimation import EstimatorComponent
-    from ..components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
-    from ..components.plant_model import ModelComponent
-    from ..fmi.fmu_component import FMUComponent
 
     model = get_model("iwp")
     outs = list(STATES) + ["der(alpha_dot)"]
@@ -139,9 +143,7 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
     """
     import tempfile
 
-    from fmu_models import build_fmu
 
-    from ..core.master import Cosimulation
 
     s = settings
     out = []
@@ -241,10 +243,7 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
     path
         The path that ran.
     """
-    from fmu_models.infra.files import atomic_write
 
-    from .common import new_figure
-    from .settings import to_toml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -13,6 +13,10 @@ import typing
 from collections.abc import Iterable
 
 from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra.checks import positive, positive_int
+from fmu_models.infra.memory import check_fits
+
+from .. import tomlfile
 
 __all__ = ["RECORD_BYTES_PER_STEP", "apply_overrides", "check_common", "from_mapping", "load_settings", "to_toml"]
 
@@ -29,7 +33,6 @@ def check_common(settings) -> None:
     number finite."""
     import math
 
-    from fmu_models.infra.checks import positive, positive_int
 
     positive_int(settings.runs, "runs")
     positive_int(settings.seed, "seed", minimum=0)
@@ -38,7 +41,6 @@ def check_common(settings) -> None:
     steps = round(settings.duration / settings.T)
     if steps < 1:
         raise ConfigurationError("duration must be at least one period T")
-    from fmu_models.infra.memory import check_fits
 
     check_fits(RECORD_BYTES_PER_STEP * settings.runs * (steps + 1),
                f"the records of {settings.runs} realisations x {steps} steps (duration {settings.duration:g} s / "
@@ -57,7 +59,6 @@ def _field_types(cls) -> dict:
 def _parse(text: str):
     """A value from its command-line text: TOML syntax (``1e-3``, ``[1, 2]``, ``"eqs"``,
     ``true``), else the bare text as a string."""
-    from .. import tomlfile
 
     try:
         return tomlfile.loads(f"v = {text}", "--set value")["v"]
@@ -118,7 +119,6 @@ def apply_overrides(settings, overrides: Iterable[str]):
 
 def load_settings(settings, path):
     """``settings`` with the values of the TOML file ``path`` (a flat table of fields)."""
-    from .. import tomlfile
 
     data = tomlfile.read(path, "settings file")
     data.pop("experiment", None)

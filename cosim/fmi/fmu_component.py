@@ -47,12 +47,17 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
-from fmu_models.infra.checks import finite
+from fmu_models.export.pack import FMI_VERSIONS, library_suffix, platform_dir
+from fmu_models.export.plant_fmu import build_fmu
+from fmu_models.infra.checks import finite, positive
+from fmu_models.infra.files import atomic_copy
 
 from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest
 from .archive import Extraction, read_description
 from .exchange import Exchange
+from .exchange import no_exchange as _nothing
 from .instance import FMUInstance
+from .isolated import RemoteFMU
 from .model_exchange import SOLVERS, FMUModel, MEIntegrator
 from .ports import array_shape, check_declared_range, check_integer, element_ports, parse_start
 
@@ -139,7 +144,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                  start: Mapping[str, object] | None = None, interface: str = "auto",
                  solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6,
                  feedthrough: str = "model", logging: bool = False, isolate: bool = False):
-        from fmu_models.infra.checks import positive
 
         #: what a child process needs to build the same component (``isolate=True``)
         self.arguments = dict(name=name, path=str(path), period=period, inputs=inputs, outputs=outputs,
@@ -298,8 +302,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             raise ConfigurationError(f"component {name!r}: give either model (this project's plant, built on "
                                      "the fly) or path (an .fmu file)")
         if "model" in table:
-            from fmu_models.export.pack import FMI_VERSIONS
-            from fmu_models.export.plant_fmu import build_fmu
 
             version = table.pop("fmi_version", 2)
             if isinstance(version, bool) or version not in FMI_VERSIONS:
@@ -319,7 +321,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
     def _check_binary(self, name: str) -> None:
         import zipfile
 
-        from fmu_models.export.pack import library_suffix, platform_dir
 
         want = f"binaries/{platform_dir(self.version)}/{self.model_identifier}{library_suffix()}"
         with zipfile.ZipFile(self.path) as z:
@@ -339,7 +340,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         """A copy of the FMU file as ``<folder>/<name>.fmu``, with this component's
         parameters and start values. The file is copied as it is: ``fmi_version`` other
         than the FMU's own is said in the note, not converted."""
-        from fmu_models.infra.files import atomic_copy
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -424,7 +424,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self.close()
         super().reset(t0)
         if self.isolate:
-            from .isolated import RemoteFMU
 
             self._remote = RemoteFMU(self, t0)
             return
@@ -493,7 +492,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         ports = [self.element_ports[n] for n in self.connected_inputs]
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
-        from .exchange import no_exchange as _nothing
 
         def exchange(positions, direction, index, changes=False):
             if not positions:

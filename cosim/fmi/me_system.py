@@ -29,6 +29,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
+from fmu_models.infra.checks import positive
 
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
 from .exchange import Exchange, no_exchange
@@ -174,7 +175,6 @@ class MESystem(BoundCalls, Component, kind="me_system"):
 
     def __init__(self, name: str, members: Sequence[FMUComponent], connections: Mapping[str, str],
                  period: float, solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6):
-        from fmu_models.infra.checks import positive
 
         self.members = list(members)
         if not self.members:

@@ -43,7 +43,7 @@ from xml.etree import ElementTree as ET
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
 from ..infra.cache import build_cached
 from ..infra.compiler import run_compiler
-from ..infra.files import private_tempdir
+from ..infra.files import atomic_copy, private_tempdir
 
 __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_platforms", "zig_command"]
 
@@ -337,7 +337,6 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     BuildError
         The cross-compiler failed (its output in the message).
     """
-    from ..infra.files import atomic_copy
 
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)

@@ -15,7 +15,8 @@ finite = st.floats(-1e3, 1e3, allow_nan=False)
 entry = st.one_of(finite, st.integers(-5, 5), st.just(float("nan")), st.just(float("inf")), st.text(max_size=2),
                   st.none(), st.lists(finite, max_size=2), st.booleans())
 vector = st.one_of(st.lists(entry, min_size=0, max_size=3), st.tuples(finite, finite), st.text(max_size=3),
-                   finite, st.none(), st.lists(finite, min_size=1, max_size=3).map(np.array))
+                   finite, st.none(), st.lists(finite, min_size=1, max_size=3).map(np.array),
+                   finite.map(np.float64), finite.map(np.float32), finite.map(np.array))
 
 
 @pytest.fixture(scope="module")
@@ -55,3 +56,12 @@ def test_the_lean_step_is_the_instance_step_and_a_user_override_wins():
     assert "step" not in vars(g)
     g.step([0.5], [0.5, 1.8])
     assert g.calls == 1 and g.k == 1
+
+
+@pytest.mark.parametrize("u", [0.5, np.float64(0.5), np.array(0.5), np.array([0.5]), (0.5,), 1])
+def test_a_bare_number_for_the_one_input_is_the_one_element_vector(u):
+    """The cart-pole has one input: ``ekf.step(U[k], Y[k])`` with a 1-D ``U`` passes a numpy
+    float64; it means the vector ``[U[k]]``, on the lean path (no slow-path fallback)."""
+    f, g = EKF(CP, X0, 1.0, 0.2, 0.1), EKF(CP, X0, 1.0, 0.2, 0.1)
+    np.testing.assert_array_equal(f.step(u, [0.52, 1.79]), g.step([0.5 if u != 1 else 1.0], [0.52, 1.79]))
+    np.testing.assert_array_equal(f.P, g.P)

@@ -1,0 +1,95 @@
+"""The one error handler of the project's command lines (``pendulum-cosim`` and
+``python -m fmu_models``): what an error, Ctrl-C or SIGTERM becomes on the terminal and in
+the exit status.
+
+* every error of the project's family (:mod:`fmu_models.errors`) and the known library and
+  system errors (a bad zip, bad XML, an OS error, a file that is not UTF-8) print one line
+  ``error: ...`` and exit with :data:`EXIT_ERROR`;
+* Ctrl-C and SIGTERM (raised as KeyboardInterrupt inside the block, see
+  :func:`~fmu_models.infra.interrupts.terminate_as_interrupt`) print one line and exit with
+  :data:`EXIT_INTERRUPTED`, also when a native extension wrapped the KeyboardInterrupt in a
+  SystemError (CasADi's callbacks do);
+* ``debug=True`` lets the exception through with its traceback;
+* ``cleanup`` runs before the line is printed on every failure (folders a refused run made).
+"""
+from __future__ import annotations
+
+import sys
+import zipfile
+from collections.abc import Callable
+
+from ..errors import Interrupted, PendulumCosimError
+from .interrupts import terminate_as_interrupt
+
+__all__ = ["EXIT_ERROR", "EXIT_INTERRUPTED", "KNOWN_ERRORS", "one_line", "run_command"]
+
+EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
+
+
+def _known_errors() -> tuple[type[BaseException], ...]:
+    errors: list[type[BaseException]] = [PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError]
+    try:
+        from lxml.etree import XMLSyntaxError  # optional here: fmpy reads XML with it
+    except ImportError:
+        pass
+    else:
+        errors.append(XMLSyntaxError)
+    return tuple(errors)
+
+
+#: The exceptions printed as one line (the project's family, bad zip and XML, OS errors).
+KNOWN_ERRORS = _known_errors()
+
+
+def one_line(error: BaseException) -> str:
+    """The message of ``error`` on one line (its type name if it has none)."""
+    return " ".join(str(error).split()) or type(error).__name__
+
+
+def _interrupted(e: BaseException) -> bool:
+    return isinstance(e, KeyboardInterrupt) or (isinstance(e, SystemError) and isinstance(
+        e.__cause__ or e.__context__, KeyboardInterrupt))
+
+
+def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callable[[], None] | None = None,
+                interrupted: str = "interrupted (Ctrl-C or SIGTERM)") -> int:
+    """Run ``command()`` with SIGTERM as Ctrl-C and return its exit status, or the status
+    of its failure (see the module documentation).
+
+    Parameters
+    ----------
+    command
+        The work of the command line; returns its exit status (0 on success).
+    debug
+        Let errors through with their traceback instead of one line.
+    cleanup
+        Called on every failure before the message is printed.
+    interrupted
+        The line printed for Ctrl-C or SIGTERM.
+    """
+    try:
+        with terminate_as_interrupt():
+            return command()
+    except (KeyboardInterrupt, SystemError) as e:
+        if not _interrupted(e) or debug:
+            raise
+        _run(cleanup)
+        print(interrupted, file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Interrupted as e:
+        if debug:
+            raise
+        _run(cleanup)
+        print(f"interrupted: {one_line(e)}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except KNOWN_ERRORS as e:
+        if debug:
+            raise
+        _run(cleanup)
+        print(f"error: {one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+
+
+def _run(cleanup: Callable[[], None] | None) -> None:
+    if cleanup is not None:
+        cleanup()
