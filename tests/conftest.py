@@ -1,11 +1,27 @@
-"""Shared fixtures. The test folders mirror the packages (``tests/fmu_models``,
-``tests/estimators``, ``tests/cosim``); the project's packages are imported before this
-folder is put on ``sys.path`` (for the helper modules beside this file), so a test folder
-named like a package can never shadow it."""
+"""Shared fixtures, and the test session's own environment.
+
+The test folders mirror the packages (``tests/fmu_models``, ``tests/estimators``,
+``tests/cosim``); helpers live in ``tests/testkit``. The project's packages are imported
+before this folder is put on ``sys.path``, so a test folder named like a package can never
+shadow them.
+
+Hermetic: a session (all its xdist workers) has its own folder for every cache the code
+under test writes: the compiled-code cache (``PENDULUM_COSIM_CACHE``), ``XDG_CACHE_HOME``,
+``XDG_CONFIG_HOME``, matplotlib's (``MPLCONFIGDIR``), zig's (``ZIG_GLOBAL_CACHE_DIR``)
+and wine's prefix; nothing is read from or written to the user's home, so a run does not
+depend on what ran before. ``PENDULUM_COSIM_TEST_HOME=DIR`` keeps that folder in ``DIR``
+across sessions instead (a developer's warm caches; CI never sets it). Each test process
+is the subreaper of what it starts (:mod:`testkit.processes`), so the leftover checks look
+only at its own process tree.
+"""
+import inspect
+import os
+import re
 import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -18,7 +34,51 @@ import fmu_models  # noqa: F401
 
 sys.path.append(str(Path(__file__).parent))
 
+from testkit.processes import become_subreaper
+
 DATA = Path(__file__).parent / "data"
+#: The environment variables pointed into the session's folder, and their subfolders.
+HERMETIC = {"PENDULUM_COSIM_CACHE": "pendulum-cosim", "XDG_CACHE_HOME": "xdg-cache",
+            "XDG_CONFIG_HOME": "xdg-config", "MPLCONFIGDIR": "matplotlib", "ZIG_GLOBAL_CACHE_DIR": "zig",
+            "WINEPREFIX": "wine"}
+
+
+def pytest_configure(config):
+    """The controller (or a run without xdist) makes the session's folder and points the
+    caches into it; xdist workers inherit the environment."""
+    if hasattr(config, "workerinput"):
+        return
+    keep = os.environ.get("PENDULUM_COSIM_TEST_HOME")
+    home = Path(keep) if keep else Path(tempfile.mkdtemp(prefix="pendulum-cosim-tests-"))
+    config._pendulum_session_home = None if keep else home
+    for var, sub in HERMETIC.items():
+        (home / sub).mkdir(parents=True, exist_ok=True)
+        os.environ[var] = str(home / sub)
+
+
+def pytest_unconfigure(config):
+    home = getattr(config, "_pendulum_session_home", None)
+    if home is not None:
+        shutil.rmtree(home, ignore_errors=True)
+
+
+become_subreaper()
+
+#: A test runs a command line or another program in a process of its own if its code says so.
+_SPAWNS = re.compile(r"\bsubprocess\.|\bPopen\b|\bCLI\b|\brun_block\(|\bcross_run\.")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark ``subprocess`` every test whose own code starts a process (the command lines,
+    compilers, wine, qemu), so ``-m "not subprocess"`` selects the in-process tests."""
+    for item in items:
+        fn = getattr(item, "function", None)
+        try:
+            source = inspect.getsource(fn) if fn is not None else ""
+        except (OSError, TypeError):
+            source = ""
+        if _SPAWNS.search(source):
+            item.add_marker(pytest.mark.subprocess)
 
 # The Ctrl-C tests send SIGINT to the command lines they start. A shell that runs the test
 # command in the background (``pytest &``, a CI runner without job control) starts it with

@@ -5,9 +5,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_docstrings import public_objects
+from testkit.docstrings import public_objects
 
 ROOT = Path(__file__).parents[1]
+pytestmark = pytest.mark.docs
 
 
 @pytest.fixture(scope="module")

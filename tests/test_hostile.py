@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmu_helpers import Instance
+from testkit.fmu_helpers import Instance
+from testkit.processes import processes_mentioning
 
 from cosim.cli import main
 from cosim.components.sources import Constant
@@ -239,17 +240,6 @@ class _Stderr:
         return self.text
 
 
-def _processes_mentioning(text: str) -> list[int]:
-    pids = []
-    for d in Path("/proc").glob("[0-9]*"):
-        try:
-            if text in (d / "cmdline").read_bytes().decode(errors="replace"):
-                pids.append(int(d.name))
-        except OSError:
-            pass
-    return pids
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
 @pytest.mark.parametrize("sig, backend", [(signal.SIGINT, "processes"), (signal.SIGTERM, "processes"),
                                           (signal.SIGINT, "dask")])
@@ -272,7 +262,7 @@ def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp
     summary = out / "summary.md"
     assert summary.exists() and "PARTIAL" in summary.read_text().upper()
     time.sleep(0.5)
-    assert _processes_mentioning(str(out)) == []   # no worker left behind
+    assert processes_mentioning(str(out)) == []   # no worker left behind
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")

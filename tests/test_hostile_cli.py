@@ -18,6 +18,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from testkit.processes import processes_mentioning
 
 from cosim.cli import main
 from cosim.output import MARKER
@@ -394,9 +395,7 @@ def test_an_interrupted_build_leaves_nothing_behind(tmp_path, sig):
     assert proc.returncode in (0, 130), err
     time.sleep(0.2)
     assert list(tmp.iterdir()) == [], list(tmp.rglob("*"))
-    from test_hostile import _processes_mentioning
-
-    assert _processes_mentioning(str(tmp)) == []
+    assert processes_mentioning(str(tmp)) == []
     if proc.returncode == 130:
         assert not out.exists() or all(p.suffix == ".fmu" for p in out.iterdir())
         assert (tmp_path / "a").exists() == out.exists()

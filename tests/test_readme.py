@@ -66,6 +66,7 @@ def test_the_estimator_in_another_tool(tmp_path):
     run_block("another-tool-fmpy-ssp", tmp_path)
 
 
+@pytest.mark.cross
 def test_the_ssp_for_every_desktop_platform(tmp_path):
     import importlib.util
     import zipfile

@@ -10,7 +10,8 @@ import time
 
 import numpy as np
 import pytest
-import reference_cases as rc
+from testkit import reference_cases as rc
+from testkit.processes import processes_mentioning
 
 from cosim import Constant, Cosimulation, FMUComponent
 from fmu_models.errors import CosimError
@@ -20,9 +21,7 @@ linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="th
 
 
 def _children() -> list[int]:
-    from test_hostile import _processes_mentioning
-
-    return [p for p in _processes_mentioning("cosim.fmi.isolated") if p != os.getpid()]
+    return processes_mentioning("cosim.fmi.isolated")
 
 
 def _loop(fmu, isolate: bool, **parameters):

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
-import reference_cases as rc
 from scipy.integrate import solve_ivp
+from testkit import reference_cases as rc
 
 from cosim import Cosimulation, FMUComponent, MESystem, Sine
 from fmu_models.errors import ConfigurationError, UnknownNameError

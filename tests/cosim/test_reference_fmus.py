@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import reference_cases as rc
+from testkit import reference_cases as rc
 
 from fmu_models.errors import PendulumCosimError
 

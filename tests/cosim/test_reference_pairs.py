@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
-import reference_cases as rc
+from testkit import reference_cases as rc
 
 from cosim import Cosimulation, FMUComponent
 from fmu_models.errors import ConfigurationError, CosimError, PendulumCosimError

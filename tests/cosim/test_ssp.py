@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
-from fmu_helpers import Instance
+from testkit.fmu_helpers import Instance
 
 from cosim.cli import main
 from cosim.components.control import LQRController
@@ -320,7 +320,7 @@ def test_a_fixed_step_master_with_a_step_dividing_the_period_reproduces_the_scen
     """Issue 19: the exported SSP, unedited, in a fixed-step Gauss-Seidel master with
     OMSimulator's time keeping (t += h, a last step of 6e-14 s at h = 0.01) equals the
     project's run at every sample instant: plant and estimates to 1e-12."""
-    from fixed_step_master import run_fixed_step
+    from testkit.fixed_step_master import run_fixed_step
 
     scenario, ssp = seed000_ssp
     ref = scenario.run()
@@ -341,7 +341,7 @@ def test_a_fixed_step_master_with_a_multiple_of_the_period_equals_the_master_at_
     """A step of several periods: every FMU keeps its own instants inside the step with
     its inputs held; the independent master equals the project's master driving the same
     SSP with that one communication step."""
-    from fixed_step_master import run_fixed_step
+    from testkit.fixed_step_master import run_fixed_step
 
     _, ssp = seed000_ssp
     stop = 4.98 if h == 0.03 else 5.0

@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
-from fmu_helpers import Instance
+from testkit.fmu_helpers import Instance
 
 from cosim.components.estimation import EstimatorComponent
 from cosim.components.sensors import ProcessNoise, Sensor

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from fmu_helpers import Instance
+from testkit.fmu_helpers import Instance
 
 from estimators import SWML, BatchFilter, linear_model
 from fmu_models.errors import ConfigurationError, InputError

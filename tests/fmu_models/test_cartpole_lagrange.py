@@ -1,7 +1,7 @@
 """The cart-pole model against an independent Lagrange derivation and against seed 000 eq 22."""
 import numpy as np
 import pytest
-from oracles import cartpole_lagrange, complex_step_jacobian
+from testkit.oracles import cartpole_lagrange, complex_step_jacobian
 
 from fmu_models import get_model
 

@@ -1,7 +1,7 @@
 """Exactness of every Jacobian the models expose, at 200+ random points of a wide box."""
 import numpy as np
 import pytest
-from oracles import central_difference_jacobian, complex_step_jacobian, iwp_numpy
+from testkit.oracles import central_difference_jacobian, complex_step_jacobian, iwp_numpy
 
 from fmu_models import get_model
 

@@ -5,7 +5,7 @@ import pytest
 from fmpy import dump, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
-from fmu_helpers import Instance
+from testkit.fmu_helpers import Instance
 
 from fmu_models import get_model, model_names
 

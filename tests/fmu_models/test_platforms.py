@@ -14,13 +14,15 @@ import importlib.util
 import zipfile
 from pathlib import Path
 
-import cross_run
 import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
+from testkit import cross_run
 
 from fmu_models import build_fmu, get_model
+
+pytestmark = pytest.mark.cross
 from fmu_models.errors import CompilerNotFoundError, ConfigurationError, FMUError
 from fmu_models.export.platforms import add_platforms, check_binary, parse_platforms
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-ROOT = Path(__file__).parents[1]
+ROOT = Path(__file__).parents[2]
 RTOL = 1e-6          # the master's ME tolerance in these cases (and fmpy's, compared)
 
 

@@ -13,7 +13,7 @@ import fmpy
 import numpy as np
 from fmpy import read_model_description
 
-HARNESS = Path(__file__).parent / "data" / "cross_harness" / "harness.c"
+HARNESS = Path(__file__).parents[1] / "data" / "cross_harness" / "harness.c"
 HEADERS = Path(fmpy.__file__).parent / "c-code"
 WINE = shutil.which("wine64") or ("/usr/lib/wine/wine64" if Path("/usr/lib/wine/wine64").exists() else None)
 QEMU = shutil.which("qemu-aarch64")
