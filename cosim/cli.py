@@ -30,6 +30,7 @@ from fmu_models.export.platforms import add_platforms, parse_platforms, zig_comm
 from fmu_models.infra.cli import run_command
 from fmu_models.infra.files import atomic_write
 from fmu_models.infra.registry import load_plugin
+from fmu_models.infra.resources import shipped
 
 from .core.component import ExportsFMU, StateEstimator
 from .experiments import EXPERIMENTS
@@ -38,7 +39,10 @@ from .output import OutputFolder, plot_estimates, save_results
 from .scenario import Scenario
 from .ssp import export_ssp
 
-SCENARIO_DIR = Path(__file__).parent / "scenarios"
+
+def _scenario_dir() -> Path:
+    """The folder of the scenarios shipped with the package (a named error if it is missing)."""
+    return shipped("cosim", "scenarios")
 
 
 # ---------------------------------------------------------------------------- argument types
@@ -96,11 +100,11 @@ def _rmse_table(df, estimators_, truth_prefix="plant"):
 
 def _resolve_scenario(name: str) -> Path:
     path = Path(name)
-    if not path.exists() and (SCENARIO_DIR / f"{name}.toml").exists():
-        path = SCENARIO_DIR / f"{name}.toml"
+    if not path.exists() and (_scenario_dir() / f"{name}.toml").exists():
+        path = _scenario_dir() / f"{name}.toml"
     if not path.exists():
         raise ConfigurationError(f"no scenario file {name!r} (shipped: "
-                                 f"{', '.join(sorted(p.stem for p in SCENARIO_DIR.glob('*.toml')))})")
+                                 f"{', '.join(sorted(p.stem for p in _scenario_dir().glob('*.toml')))})")
     return path
 
 
@@ -349,13 +353,13 @@ def _dispatch(args) -> int:
     if args.command in ("export-fmu", "export-ssp"):
         return _export(args)
     if args.command == "scenarios":
-        for p in sorted(SCENARIO_DIR.glob("*.toml")):
+        for p in sorted(_scenario_dir().glob("*.toml")):
             first = p.read_text().splitlines()[0]
             print(f"{p.stem:24s} {first.split('=', 1)[1].strip().strip(chr(34)) if '=' in first else ''}")
             print(f"{'':24s} {p}")
         return 0
     if args.command == "demo":
-        return _run_scenario(SCENARIO_DIR / "seed000_cartpole.toml", Path(args.out), overwrite=True)
+        return _run_scenario(shipped("cosim", "scenarios", "seed000_cartpole.toml"), Path(args.out), overwrite=True)
     if not args.dry_run and not args.out:
         raise ConfigurationError("run needs --out DIR (or --dry-run)")
     return _run_scenario(_resolve_scenario(args.scenario), Path(args.out or "."), args.overwrite,

@@ -21,6 +21,7 @@ NumericalError            a result became non-finite (a filter diverged)
 FMUError                  an FMU file is unusable or an FMU call failed
 BuildError                generating or compiling C code failed
 CompilerNotFoundError     no C compiler is available
+InstallationError         a file the package ships is missing (a broken installation)
 RunError                  a run failed
 CosimError                a co-simulation failed; keeps the rows recorded so far
 Interrupted               a run was stopped by Ctrl-C or SIGTERM (partial results saved)
@@ -35,6 +36,7 @@ __all__ = [
     "CosimError",
     "FMUError",
     "InputError",
+    "InstallationError",
     "Interrupted",
     "NumericalError",
     "PendulumCosimError",
@@ -90,6 +92,11 @@ class BuildError(PendulumCosimError, RuntimeError):
 
 class CompilerNotFoundError(BuildError):
     """No C compiler could be found."""
+
+
+class InstallationError(PendulumCosimError, FileNotFoundError):
+    """A file the package ships (C sources, headers, scenarios) is missing: the
+    installation is incomplete; reinstalling the package mends it."""
 
 
 class RunError(PendulumCosimError, RuntimeError):

@@ -31,6 +31,7 @@ from ..errors import ConfigurationError
 from ..infra.cache import build_cached
 from ..infra.compiler import find_compiler, run_compiler
 from ..infra.files import atomic_copy, private_tempdir
+from ..infra.resources import shipped_files
 
 __all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "find_compiler", "library_suffix", "pack_fmu", "platform_dir"]
 
@@ -134,8 +135,8 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
         tmp = Path(tmp)
         src = tmp / "sources"
         src.mkdir()
-        for g in generic:
-            shutil.copy(C_DIR / g, src / g)
+        for g, path in zip(generic, shipped_files(__package__, "c", generic)):
+            shutil.copy(path, src / g)
         (src / "core.h").write_text(f'/* Generated: this FMU\'s model core. */\n#include "{core}_core.h"\n')
         write_generated(src, _PLACEHOLDER)
         h = hashlib.sha256(f"{identifier}|{core}|{fmi_version}|{fingerprint}".encode())

@@ -21,11 +21,10 @@ from fmpy.validation import validate_fmu
 from testkit import cross_run
 
 from fmu_models import build_fmu, get_model
-
-pytestmark = pytest.mark.cross
 from fmu_models.errors import CompilerNotFoundError, ConfigurationError, FMUError
 from fmu_models.export.platforms import add_platforms, check_binary, parse_platforms
 
+pytestmark = pytest.mark.cross
 WINE, QEMU, ARM_ROOT = cross_run.WINE, cross_run.QEMU, cross_run.ARM_ROOT
 ALL = ["linux64", "win64", "darwin", "aarch64-linux"]
 
