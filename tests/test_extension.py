@@ -185,7 +185,7 @@ def test_a_user_scenario_runs_from_the_command_line(tmp_path):
 def test_the_user_filter_exports_as_an_fmu_with_its_parameter(tmp_path):
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
-    from fmu_helpers import Instance
+    from testkit.fmu_helpers import Instance
 
     from estimators import discretize
     from fmu_models import get_model
