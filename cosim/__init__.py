@@ -24,6 +24,7 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
+from fmu_models.infra.version import VERSION as __version__
 
 from .components import (
     PRBS,
@@ -46,9 +47,45 @@ from .fmi import FMUComponent, MESystem
 from .scenario import Scenario, ScenarioContext
 from .ssp import export_ssp, open_ssp
 
-__all__ = ["COMPONENTS", "PRBS", "Accelerometer", "BuildError", "Component", "ConfigurationError", "Constant",
-           "CosimError", "Cosimulation", "Encoder", "EstimatorComponent", "ExportedFMU", "ExportsFMU",
-           "FMUComponent", "FMUError", "FastBinding", "Gyroscope", "InputError", "Interrupted", "LQRController",
-           "MESystem", "ModelComponent", "NumericalError", "PendulumCosimError", "Port", "ProcessNoise",
-           "ResourceError", "Scenario", "ScenarioContext", "Sensor", "Sine", "StateEstimator", "Step", "Table",
-           "TiltFusion", "TypeMismatchError", "UnknownNameError", "export_ssp", "open_ssp"]
+__all__ = [
+    "COMPONENTS",
+    "PRBS",
+    "Accelerometer",
+    "BuildError",
+    "Component",
+    "ConfigurationError",
+    "Constant",
+    "CosimError",
+    "Cosimulation",
+    "Encoder",
+    "EstimatorComponent",
+    "ExportedFMU",
+    "ExportsFMU",
+    "FMUComponent",
+    "FMUError",
+    "FastBinding",
+    "Gyroscope",
+    "InputError",
+    "Interrupted",
+    "LQRController",
+    "MESystem",
+    "ModelComponent",
+    "NumericalError",
+    "PendulumCosimError",
+    "Port",
+    "ProcessNoise",
+    "ResourceError",
+    "Scenario",
+    "ScenarioContext",
+    "Sensor",
+    "Sine",
+    "StateEstimator",
+    "Step",
+    "Table",
+    "TiltFusion",
+    "TypeMismatchError",
+    "UnknownNameError",
+    "__version__",
+    "export_ssp",
+    "open_ssp",
+]

@@ -31,6 +31,7 @@ from fmu_models.infra.cli import run_command
 from fmu_models.infra.files import atomic_write
 from fmu_models.infra.registry import load_plugin
 from fmu_models.infra.resources import shipped
+from fmu_models.infra.version import VERSION
 
 from .core.component import ExportsFMU, StateEstimator
 from .experiments import EXPERIMENTS
@@ -283,6 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "Plants run as FMUs built from CasADi models; estimators and other components "
                     "run in Python, each at its own sample period.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
+    parser.add_argument("--version", action="version", version=f"pendulum-cosim {VERSION}")
     parser.add_argument("--plugin", action="append", metavar="MODULE_OR_FILE",
                         help="import a module or .py file first (repeatable): the models, filters, components "
                              "and experiments it defines register themselves")

@@ -45,6 +45,7 @@ from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.description import xml_attrs
 from fmu_models.export.platforms import add_platforms
 from fmu_models.infra.checks import finite, positive
+from fmu_models.infra.version import VERSION
 
 from .core.component import PORT_TYPES, ExportedFMU, ExportsFMU
 from .core.master import Cosimulation
@@ -101,7 +102,7 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
              f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{_PC_NS}" version="1.0"{xml_attrs(name=name)}'
-             f'{xml_attrs(generationTool="pendulum-cosim")}>',
+             f'{xml_attrs(generationTool=f"pendulum-cosim {VERSION}")}>',
              f"  <ssd:System{xml_attrs(name=name, description=description or None)}>"]
     params = []
     for c in components:

@@ -12,6 +12,8 @@ itself by name (:data:`FILTERS`).
 >>> sys_ = discretize(get_model("cartpole"), dt=0.01)
 >>> ekf = EKF(sys_, x0=[0.5, 0, 1.8, 0.5], P0=1.0, Q=0.2, R=0.1)
 """
+from fmu_models.infra.version import VERSION as __version__
+
 from .base import FILTERS, KalmanBase
 from .batch import BatchFilter
 from .discrete import DiscreteModel, augment_rate_bias, discretize, linear_model
@@ -28,9 +30,34 @@ from .smoother import rts_smooth
 from .swml import SWML
 from .ukf import UKF
 
-__all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "SWML", "UKF", "BatchFilter", "BatchRun", "DiscreteModel",
-           "EMResult", "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed", "StepContext", "StepResult",
-           "Update", "augment_rate_bias", "discretize", "em_noise", "export_fmu", "linear_model", "rts_smooth"]
+__all__ = [
+    "EKF",
+    "FILTERS",
+    "IAE",
+    "KF",
+    "MFIAE",
+    "SWML",
+    "UKF",
+    "BatchFilter",
+    "BatchRun",
+    "DiscreteModel",
+    "EMResult",
+    "FilterRun",
+    "KalmanBase",
+    "MamdaniFuzzy",
+    "Parameter",
+    "Smoothed",
+    "StepContext",
+    "StepResult",
+    "Update",
+    "__version__",
+    "augment_rate_bias",
+    "discretize",
+    "em_noise",
+    "export_fmu",
+    "linear_model",
+    "rts_smooth",
+]
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):

@@ -14,11 +14,24 @@ from __future__ import annotations
 from . import errors
 from .catalog import MODELS, get_model, model_names, register_model
 from .infra.registry import load_plugin
+from .infra.version import VERSION as __version__
 from .plant import METHODS, PlantModel
 from .variables import Variable
 
-__all__ = ["METHODS", "MODELS", "PlantModel", "Variable", "build_fmu", "build_fmus", "errors", "get_model",
-           "load_plugin", "model_names", "register_model"]
+__all__ = [
+           "METHODS",
+           "MODELS",
+           "PlantModel",
+           "Variable",
+           "__version__",
+           "build_fmu",
+           "build_fmus",
+           "errors",
+           "get_model",
+           "load_plugin",
+           "model_names",
+           "register_model",
+]
 
 
 from . import cartpole, iwp  # noqa: F401 - the built-in models register themselves

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import quoteattr
 
+from ..infra.version import VERSION
+
 __all__ = ["SYMBOLS", "Description", "Unknown", "base_units", "fmi2", "fmi3", "xml_attrs"]
 
 #: SI base-unit exponents of the unit symbols a unit string is made of (FMI <BaseUnit>);
@@ -43,7 +45,7 @@ def base_units(unit: str) -> dict | None:
     return {k: v for k, v in total.items() if v}
 
 
-_GENERATION = dict(generationTool="pendulum-cosim (CasADi code generation)",
+_GENERATION = dict(generationTool=f"pendulum-cosim {VERSION} (CasADi code generation)",
                    generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"))
 _LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description="errors"/>'
                    '<Category name="logAll" description="everything"/></LogCategories>')
