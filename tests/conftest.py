@@ -64,6 +64,16 @@ def pytest_unconfigure(config):
 
 become_subreaper()
 
+
+@pytest.fixture(autouse=True)
+def _private_temp_folder(tmp_path_factory, monkeypatch):
+    """Every test has its own temporary folder (``tempfile.gettempdir()`` and ``TMPDIR`` for
+    what it starts): its checks that nothing is left behind see only its own files, however
+    many tests run at once."""
+    folder = tmp_path_factory.mktemp("tmp")
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    monkeypatch.setenv("TMPDIR", str(folder))
+
 #: A test runs a command line or another program in a process of its own if its code says so.
 _SPAWNS = re.compile(r"\bsubprocess\.|\bPopen\b|\bCLI\b|\brun_block\(|\bcross_run\.")
 
