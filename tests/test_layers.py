@@ -7,6 +7,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from cosim.core.schedule import _sccs
+
 ROOT = Path(__file__).parents[1]
 LAYERS = ("fmu_models", "estimators", "cosim")
 
@@ -57,38 +59,9 @@ def import_graph() -> dict[str, dict[str, int]]:
 
 
 def cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
-    """The strongly connected components of more than one module (Tarjan)."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on: set[str] = set()
-    found: list[list[str]] = []
-
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on.add(v)
-        for w in graph[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            comp = []
-            while True:
-                w = stack.pop()
-                on.discard(w)
-                comp.append(w)
-                if w == v:
-                    break
-            if len(comp) > 1:
-                found.append(sorted(comp))
-
-    for v in graph:
-        if v not in index:
-            visit(v)
-    return found
+    """The strongly connected components of more than one module (the scheduler's Tarjan,
+    which finds the algebraic loops of a co-simulation)."""
+    return [sorted(c) for c in _sccs(list(graph), graph) if len(c) > 1]
 
 
 def test_no_import_cycle_between_modules():
