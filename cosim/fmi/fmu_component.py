@@ -50,7 +50,7 @@ from fmu_models.errors import (
 from fmu_models.export.pack import FMI_VERSIONS, library_suffix, platform_dir
 from fmu_models.export.plant_fmu import build_fmu
 from fmu_models.infra.checks import finite, positive
-from fmu_models.infra.files import atomic_copy
+from fmu_models.infra.files import atomic_copy, private_tempdir
 
 from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest
 from .archive import Extraction, read_description
@@ -185,6 +185,9 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self.variables = {v.name: v for v in md.modelVariables}
         ident = (md.coSimulation if interface == "cs" else md.modelExchange).modelIdentifier
         self.model_identifier = ident
+        #: The project's plant model this FMU was built from (a scenario's ``model = ...``),
+        #: or None for an FMU file: an FMU export in another FMI version rebuilds from it.
+        self.plant_model = None
         self._check_binary(name)
         self.settings, self.structural = self._settings(name, parameters or {}, start or {})
         self.element_ports = element_ports(md, self.structural)
@@ -309,6 +312,9 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                                          f"got {version!r}")
             model = context.model(table.pop("model"), table.pop("model_parameters", None))
             path = build_fmu(model, context.fmu_dir / f"fmi{version}", fmi_version=version)
+            comp = context.construct(cls, name, table, path=path)
+            comp.plant_model = model
+            return comp
         else:
             for key in ("fmi_version", "model_parameters"):
                 if key in table:
@@ -337,15 +343,23 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                 f"{self.interface.upper()}, period={self.period})")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """A copy of the FMU file as ``<folder>/<name>.fmu``, with this component's
-        parameters and start values. The file is copied as it is: ``fmi_version`` other
-        than the FMU's own is said in the note, not converted."""
-
+        """The FMU as ``<folder>/<name>.fmu``, with this component's parameters and start
+        values. A plant built from the project's model is written in ``fmi_version`` (built
+        again from its model if the run used the other version); an FMU file is copied as it
+        is, and an ``fmi_version`` other than its own is said in the note, not converted."""
+        if fmi_version not in FMI_VERSIONS:
+            raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         dst = folder / f"{self.name}.fmu"
-        atomic_copy(self.path, dst)
         note = ""
+        if fmi_version != self.version and self.plant_model is not None:
+            with private_tempdir(f"pendulum_cosim_export_{self.name}_") as tmp:
+                atomic_copy(build_fmu(self.plant_model, tmp, fmi_version=fmi_version), dst)
+            note = (f"{self.name}: built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run "
+                    f"used the FMI {self.version}.0 FMU of the same model)")
+            return ExportedFMU(dst, dict(self.settings), note)
+        atomic_copy(self.path, dst)
         if fmi_version != self.version:
             note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
                     f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")

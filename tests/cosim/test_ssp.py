@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 from testkit.fmu_helpers import Instance
 
@@ -354,3 +355,22 @@ def test_a_fixed_step_master_with_a_multiple_of_the_period_equals_the_master_at_
     assert {"plant.x", "ekf.x", "mfiae.theta"} <= set(cols)
     for c in cols:
         np.testing.assert_allclose(got[c][keep], ours[c].to_numpy(), rtol=0, atol=1e-12, err_msg=c)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_plant_built_from_its_model_is_exported_in_the_version_asked_for(tmp_path, capsys, version):
+    """``export-fmu --fmi-version 3`` of the scenario's plant (built from the model as FMI
+    2.0 for the run) writes an FMI 3.0 FMU of the same model, and says so; the SSP of a
+    scenario holds FMUs of the version asked for, plant included."""
+    out = tmp_path / f"v{version}"
+    assert main(["export-fmu", "seed000_cartpole", "--out", str(out), "--component", "plant",
+                 "--fmi-version", str(version)]) == 0
+    printed = capsys.readouterr().out
+    assert read_model_description(str(out / "plant.fmu")).fmiVersion == f"{version}.0"
+    assert f"FMI {version}.0" in printed
+    assert ("built as FMI 3.0 from its model 'cartpole'" in printed) == (version == 3)
+    assert main(["export-ssp", "seed000_cartpole", "--out", str(tmp_path / f"s{version}"), "--fmi-version",
+                 str(version)]) == 0
+    versions = {p.name: read_model_description(str(p)).fmiVersion
+                for p in (tmp_path / f"s{version}" / "resources").glob("*.fmu")}
+    assert set(versions.values()) == {f"{version}.0"}, versions
