@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import os
 import warnings
 from pathlib import Path
 
@@ -93,6 +94,9 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     ------
     UnknownNameError
         An unknown backend.
+    BuildError
+        The compiler named by ``$CC`` failed (a compiler found on the PATH that fails falls
+        back to the virtual machine with a warning naming it; the user's own is not replaced).
     """
     if backend not in BACKENDS:
         raise UnknownNameError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -121,7 +125,11 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
                       stacklevel=2)
         return vm
     except BuildError as e:          # a broken compiler ($CC=/bin/false, a missing libm, ...)
-        warnings.warn(f"{_VM}: {' '.join(str(e).split())[:400]}", stacklevel=2)
+        if os.environ.get("CC"):     # the user's own choice is not replaced behind their back
+            raise BuildError(f"the C compiler named by $CC ({os.environ['CC']}) failed to compile the filter "
+                             f"functions: {' '.join(str(e).split())}; fix CC or unset it, or choose "
+                             "backend='vm' (CasADi's virtual machine: same numbers, slower)") from None
+        warnings.warn(f"{_VM}: the C compiler {cc} failed: {' '.join(str(e).split())}", stacklevel=2)
         return vm
     out = [ca.external(n, str(lib)) for n in names]
     return (out, "compiled", lib) if return_library else (out, "compiled")

@@ -12,7 +12,7 @@ import dataclasses
 import typing
 from collections.abc import Iterable
 
-from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.errors import ConfigurationError, PendulumCosimError, UnknownNameError
 from fmu_models.infra.checks import positive, positive_int
 from fmu_models.infra.memory import check_fits
 
@@ -103,7 +103,16 @@ def from_mapping(settings, values: dict):
     if unknown:
         raise UnknownNameError(f"unknown setting(s) {', '.join(unknown)}; valid: {', '.join(types)}")
     new = {k: _convert(k, v, types[k], getattr(settings, k)) for k, v in values.items()}
-    return dataclasses.replace(settings, **new)
+    try:
+        return dataclasses.replace(settings, **new)
+    except PendulumCosimError:
+        raise
+    except (TypeError, ValueError, IndexError, KeyError, AttributeError) as e:
+        # a value of the right outer type but the wrong shape inside (scenarios = [1]),
+        # caught by the experiment's own checks as a built-in error
+        given = "; ".join(f"{k} = {_toml_value(v)} (default {_toml_value(getattr(settings, k))})"
+                          for k, v in new.items())
+        raise ConfigurationError(f"setting(s) {given}: not of the form the experiment needs ({e})") from None
 
 
 def apply_overrides(settings, overrides: Iterable[str]):
@@ -113,7 +122,10 @@ def apply_overrides(settings, overrides: Iterable[str]):
         if "=" not in item:
             raise ConfigurationError(f"--set needs name=value, got {item!r}")
         name, text = item.split("=", 1)
-        values[name.strip()] = _parse(text.strip())
+        try:
+            values[name.strip()] = _parse(text.strip())
+        except ConfigurationError as e:          # too deep or too long: say which setting
+            raise ConfigurationError(f"--set {name.strip()}=...: {e}") from None
     return from_mapping(settings, values)
 
 

@@ -10,11 +10,14 @@ the exit status.
   :data:`EXIT_INTERRUPTED`, also when a native extension wrapped the KeyboardInterrupt in a
   SystemError (CasADi's callbacks do);
 * ``debug=True`` lets the exception through with its traceback;
-* ``cleanup`` runs before the line is printed on every failure (folders a refused run made).
+* ``cleanup`` runs before the line is printed on every failure (folders a refused run made);
+* warnings are printed as one line ``warning: ...`` each (once per message), not as
+  Python's source-quoting form.
 """
 from __future__ import annotations
 
 import sys
+import warnings
 import zipfile
 from collections.abc import Callable
 
@@ -68,7 +71,9 @@ def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callab
         The line printed for Ctrl-C or SIGTERM.
     """
     try:
-        with terminate_as_interrupt():
+        with terminate_as_interrupt(), warnings.catch_warnings():
+            warnings.simplefilter("default")
+            warnings.showwarning = _show_warning
             return command()
     except (KeyboardInterrupt, SystemError) as e:
         if not _interrupted(e) or debug:
@@ -88,6 +93,10 @@ def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callab
         _run(cleanup)
         print(f"error: {one_line(e)}", file=sys.stderr)
         return EXIT_ERROR
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"warning: {one_line(message)}", file=sys.stderr if file is None else file)
 
 
 def _run(cleanup: Callable[[], None] | None) -> None:
