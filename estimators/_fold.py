@@ -26,6 +26,8 @@ import ctypes
 import casadi as ca
 import numpy as np
 
+from fmu_models.infra.memory import check_fits
+
 from ._compiled import compile_functions
 from .protocol import renamed
 
@@ -166,6 +168,12 @@ class NativeFold:
         ``cycle`` get two rows (``(runs, 2, nnz)``, stored and view alike; pass the same names
         to the call): after the fold the last state is in row ``(n_steps - 1) % 2``.
         """
+        rows = {name: (2 if name in cycle else 0 if name in drop else n_steps + name.endswith("_new"))
+                for name in self.names_out}
+        total = 8 * runs * sum(rows[n] * self.step.nnz_out(i) for i, n in enumerate(self.names_out))
+        check_fits(total, f"the outputs of {runs} x {n_steps} steps of {self.step.name()} "
+                   f"({8 * sum(self.step.nnz_out(i) for i in range(self.step.n_out()))} bytes a step)",
+                   "run shorter records (in pieces), fewer realisations, or keep='estimates'")
         stored, views = {}, {}
         for i, name in enumerate(self.names_out):
             nnz = self.step.nnz_out(i)

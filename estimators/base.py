@@ -30,6 +30,7 @@ import numpy as np
 
 from fmu_models.errors import ConfigurationError, InputError, TypeMismatchError, UnknownNameError
 from fmu_models.infra import checks
+from fmu_models.infra.memory import check_fits
 from fmu_models.infra.registry import Registry
 
 from ._buffered import BufferedFunction, matrix
@@ -530,6 +531,19 @@ class KalmanBase:
                 raise InputError(f"{self.name}: masks must have shape ({N}, {ny}), got {m.shape}")
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
 
+    def _check_run_fits(self, ys, keep: str) -> None:
+        """Refuse (ResourceError, with the sizes) a run whose record and outputs would not
+        fit in memory, before anything of it is allocated."""
+        try:
+            n = len(ys)
+        except TypeError:
+            return                   # not a sequence: check_record names the problem
+        s, fn = self.system, self._raw_step
+        out = sum(fn.nnz_out(i) for i in range(fn.n_out()) if keep == "all" or fn.name_out(i) not in DROPPABLE)
+        per_step = 8 * (2 * (s.nu + 2 * s.ny) + 2 * out)   # the record and its mask as arrays; outputs, results
+        check_fits(n * per_step, f"{self.name}: run over N = {n} steps ({per_step} bytes a step)",
+                   "filter the record in pieces (each run continues where the last ended), or keep='estimates'")
+
     def run(self, us, ys, masks=None, y0=None, keep: str = "all") -> FilterRun:
         """Filter whole sequences in one native call: ``step(us[k], ys[k], masks[k])`` for
         ``k = 0..N-1``.
@@ -563,10 +577,14 @@ class KalmanBase:
         ------
         InputError, NumericalError
             As :meth:`step`, naming the step; the filter's state is then unchanged.
+        ResourceError
+            The record and the run's outputs would not fit in memory (said before any of
+            it is allocated).
         """
-        us, ys, masks = self.check_record(us, ys, masks)
         if keep not in KEEP:
             raise UnknownNameError(f"{self.name}: keep must be one of {KEEP}, got {keep!r}")
+        self._check_run_fits(ys, keep)
+        us, ys, masks = self.check_record(us, ys, masks)
         y0_ll = 0.0
         if y0 is not None:
             self.update(y0)
