@@ -146,6 +146,14 @@ def call_rules_fmu(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def chaos_fmu(tmp_path_factory):
+    """A third-party FMI 2.0 CS FMU whose calls misbehave at random by seed (Warning,
+    Discard, Error, Fatal, NaN or inf outputs, a sleep, a crash), logging every call and each
+    one the standard forbids to ``CHAOS_LOG`` (tests/data/chaos)."""
+    return build_test_fmu("chaos", "Chaos", 2, tmp_path_factory.mktemp("chaos"))
+
+
+@pytest.fixture(scope="session")
 def fmu_builds(tmp_path_factory):
     """Both plant FMUs in FMI 2.0 and 3.0, built once per session: {(name, version): path}."""
     from fmu_models import build_fmu, model_names

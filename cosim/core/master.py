@@ -62,6 +62,14 @@ BLOCK = 64
 MAX_STEPS = 10**10
 
 
+def _rows_finite(buf: np.ndarray, jb: int, j: int) -> bool:
+    """Whether the rows recorded since a block began (``jb`` up to ``j``, wrapped around the
+    buffer's end if the buffer was flushed meanwhile) are all finite."""
+    if j >= jb:
+        return bool(np.isfinite(buf[jb:j]).all())
+    return bool(np.isfinite(buf[jb:]).all() and np.isfinite(buf[:j]).all())
+
+
 class Cosimulation:
     """Couples components and runs them.
 
@@ -451,7 +459,7 @@ class Cosimulation:
         self.timings = {}
         self.stopped = None
         owner: dict = {}
-        k0, k, j, phase, f = 0, 0, 0, "reset", None
+        k0, k, j, jb, phase, f = 0, 0, 0, 0, "reset", None
         bar = None
 
         def record(row: int) -> int:
@@ -484,6 +492,7 @@ class Cosimulation:
             stop = None
             for k0 in range(0, n + 1, BLOCK):
                 k1 = min(k0 + BLOCK, n + 1)
+                jb = j                                  # the block's first row in the buffer
                 for k in range(k0, k1):
                     t = t0 + k * hf
                     outs, upds = schedule[k % L]
@@ -505,8 +514,8 @@ class Cosimulation:
                         j = self._finish_stop(request, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
                                               values, jacobi, source, owner)
                         break
-                if not np.isfinite(values).all():
-                    j = self._raise_nonfinite(values, sink, sel_idx, j, k0, k, m, t0)
+                if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
+                    j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
                 bar.update(k1 - k0)
                 if stop is not None:
                     break
@@ -531,10 +540,10 @@ class Cosimulation:
                 e.results = sink.abort()
             raise
         except Exception as e:
-            if phase != "reset" and not np.isfinite(values).all():
+            if phase != "reset" and not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
                 # a non-finite signal is the root cause of what failed after it
                 try:
-                    self._raise_nonfinite(values, sink, sel_idx, j, k0, k, m, t0)
+                    self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
                 except CosimError as root:
                     raise root from e
             sink.flush(j)
@@ -589,25 +598,35 @@ class Cosimulation:
                                            request.component, ts, f" ({request.reason})" if request.reason else "")
         return record(j)
 
-    def _raise_nonfinite(self, values, sink, sel_idx, j: int, k0: int, k: int, m: int, t0: float) -> int:
-        """Raise CosimError for the first NaN/inf signal found after base steps ``k0..k``.
+    def _raise_nonfinite(self, values, sink, sel_idx, j: int, jb: int, k0: int, k: int, m: int, t0: float) -> int:
+        """Raise CosimError for the first NaN/inf signal of base steps ``k0..k``: in a row
+        recorded since the block began (buffer rows ``jb..j``, the row at each base step
+        ``k % m == 0``), else among the current values.
 
-        Recording every base step in memory, the error names the exact time and the results
-        end just before it; otherwise it names the window ``t_k0..t_k`` (the rows recorded
-        up to ``t_k`` are kept).
+        A recorded non-finite value is named with its exact time, and the results end just
+        before its row (rows a streamed run already wrote stay written); a signal that is not
+        recorded is named with the window ``t_k0..t_k``.
         """
         h = self.step_size
+        buf = sink.buffer
+        segments = [(jb, j)] if j >= jb else [(jb, len(buf)), (0, j)]
+        kr = -(-k0 // m) * m                            # the base step of row jb
+        for lo, hi in segments:
+            bad = ~np.isfinite(buf[lo:hi])
+            if bad.any():
+                row, col = (int(v[0]) for v in np.nonzero(bad))
+                t_bad = t0 + (kr + row * m) * h
+                sig = sink.columns[col]
+                value = buf[lo + row, col]
+                j = lo + row if hi == j else 0           # the rows before it are kept
+                sink.flush(j)
+                raise CosimError(f"signal {sig} is {value} at t = {t_bad:g} s (component {sig.split('.')[0]!r})",
+                                 sig.split(".")[0], t_bad, sink.abort())
+            kr += (hi - lo) * m
         col = int(np.flatnonzero(~np.isfinite(values))[0])
         sig = self.signal_names[col]
-        where = np.flatnonzero(sel_idx == col)
-        t_bad, when = t0 + k * h, f"between t = {t0 + k0 * h:g} s and t = {t0 + k * h:g} s"
-        if isinstance(sink, MemorySink) and m == 1 and len(where):
-            rows = sink.buffer[j - (k - k0 + 1): j, where[0]]
-            first = int(np.flatnonzero(~np.isfinite(rows))[0])
-            j = j - (k - k0 + 1) + first
-            t_bad = t0 + (k0 + first) * h
-            when = f"at t = {t_bad:g} s"
+        t_bad = t0 + k * h
         sink.flush(j)
-        raise CosimError(f"signal {sig} is {values[col]} {when} (component {sig.split('.')[0]!r})",
-                         sig.split(".")[0], t_bad, sink.abort())
+        raise CosimError(f"signal {sig} is {values[col]} between t = {t0 + k0 * h:g} s and t = {t_bad:g} s "
+                         f"(component {sig.split('.')[0]!r})", sig.split(".")[0], t_bad, sink.abort())
 

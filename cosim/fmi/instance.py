@@ -34,6 +34,26 @@ _LEVELS = {0: logging.INFO, 1: logging.WARNING, 2: logging.WARNING, 3: logging.E
 #: FMI status codes by name.
 STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 _ERROR, _FATAL = 3, 4
+#: FMI 2.0 loggers by instance key (the componentEnvironment each instance is given): one C
+#: proxy formats an FMU's printf-style message with its arguments (fmpy's addLoggerProxy,
+#: which holds a single callback), and this table sends it to the instance that logged it.
+_FMI2_LOGS: dict[int, object] = {}
+_FMI2_CALLBACK: list = []                  # the one ctypes callback behind the proxy, kept alive
+_FMI2_KEYS = iter(range(1, 2**62))
+
+
+def _fmi2_logger():
+    """The ctypes logger every FMI 2.0 instance shares (created once)."""
+    if not _FMI2_CALLBACK:
+        from fmpy import fmi2
+
+        def dispatch(env, inst, status, category, message):
+            log = _FMI2_LOGS.get(env or 0)
+            if log is not None:
+                log(status, message)
+
+        _FMI2_CALLBACK.append(fmi2.fmi2CallbackLoggerTYPE(dispatch))
+    return _FMI2_CALLBACK[0]
 
 
 class FMUInstance:
@@ -83,13 +103,16 @@ class FMUInstance:
             if self.version == 2:
                 fmu = (fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args)
 
-                def logger(env, inst, status, category, message):
-                    self._log(status, message)
+                from fmpy.logging import addLoggerProxy
 
+                self._log_key = next(_FMI2_KEYS)
+                _FMI2_LOGS[self._log_key] = self._log
                 cb = fmi2.fmi2CallbackFunctions()
-                cb.logger = fmi2.fmi2CallbackLoggerTYPE(logger)
+                cb.logger = _fmi2_logger()
                 cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
                 cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
+                cb.componentEnvironment = self._log_key
+                addLoggerProxy(ctypes.byref(cb))     # printf-style messages formatted with their arguments
                 self._callbacks = cb
                 fmu.instantiate(callbacks=cb, loggingOn=self.logging_on)
             else:
@@ -101,6 +124,7 @@ class FMUInstance:
                 self._log3 = log3
                 fmu.instantiate(loggingOn=self.logging_on, logMessage=log3)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
+            _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
             if fmu is not None and getattr(fmu, "dll", None) is not None:
                 try:
                     fmu.freeLibrary()
@@ -180,6 +204,12 @@ class FMUInstance:
         if self._freed:
             return
         self._freed = True
+        try:
+            self._end()
+        finally:
+            _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
+
+    def _end(self) -> None:
         if self.worst >= _FATAL:
             LOGGER.debug("%s: fatal: the instance is abandoned (no further FMI call)", self.owner)
             return
