@@ -31,7 +31,7 @@ from fmu_models.infra.memory import check_fits
 from ._compiled import compile_functions
 from .protocol import renamed
 
-__all__ = ["NativeFold"]
+__all__ = ["FOLD_NAME", "NativeFold", "compile_with_fold"]
 
 _DRIVER = r"""
 #include <stdlib.h>
@@ -75,6 +75,19 @@ done:
 """
 
 
+#: The name of a fused step compiled with its fold driver (:func:`compile_with_fold`).
+FOLD_NAME = "foldstep"
+
+
+def compile_with_fold(step: ca.Function, backend: str = "compiled") -> tuple:
+    """``step`` compiled together with its fold driver into one library: ``(the step as
+    an external Function, backend used, library path or None)``. One compilation serves
+    both a filter's single steps and its folds (:class:`NativeFold` with ``library=``)."""
+    code = _DRIVER % {"name": FOLD_NAME, "n_in": step.n_in(), "n_out": step.n_out()}
+    (fn,), used, lib = compile_functions([renamed(step, FOLD_NAME)], backend, extra_code=code, return_library=True)
+    return (fn if used == "compiled" else step), used, lib
+
+
 class NativeFold:
     """A step Function folded over trajectories (see the module documentation).
 
@@ -88,17 +101,17 @@ class NativeFold:
     backend : {"compiled", "vm"}
     """
 
-    def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled"):
+    def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled", library=None):
         self.step, self.n_state = step, n_state
         self.names_in = [step.name_in(i) for i in range(step.n_in())]
         self.names_out = [step.name_out(i) for i in range(step.n_out())]
-        name = "foldstep"
-        code = _DRIVER % {"name": name, "n_in": step.n_in(), "n_out": step.n_out()}
-        _, self.backend, lib = compile_functions([renamed(step, name)], backend, extra_code=code,
-                                                 return_library=True)
         self._mapped: dict = {}
+        if library is None:
+            _, self.backend, library = compile_with_fold(step, backend)
+        else:
+            self.backend = backend
         if self.backend == "compiled":
-            self._fold = getattr(ctypes.CDLL(str(lib)), f"{name}_fold")
+            self._fold = getattr(ctypes.CDLL(str(library)), f"{FOLD_NAME}_fold")
             self._fold.restype = ctypes.c_int
 
     def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()) -> int:
@@ -124,6 +137,13 @@ class NativeFold:
         """
         if self.backend != "compiled":
             return self._vm(runs, n_steps, args, init, outs, cycled)
+        return self.bind(runs, n_steps, args, init, outs, cycled)()
+
+    def bind(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()):
+        """The fold of :meth:`__call__` with its arguments prebuilt once: a callable without
+        arguments that runs it (returns as :meth:`__call__`); the arrays stay bound (they
+        are kept alive by the callable, and changed in place between calls). Compiled
+        backend only."""
         n_in, n_out = len(self.names_in), len(self.names_out)
         P = ctypes.POINTER(ctypes.c_double)
         L = ctypes.c_long
@@ -154,8 +174,14 @@ class NativeFold:
             o = outs[name]
             res0[j], res_stride[j], res_run[j] = ptr(o), o.strides[1] // 8, o.strides[0] // 8
             cyc[j] = 1 if name in cycled else 0
-        return self._fold(L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc,
-                          ini, ini_run, cyc)
+        call = (L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc, ini, ini_run, cyc)
+        fold = self._fold
+
+        def run() -> int:
+            return fold(*call)
+        run.keep = keep
+        return run
+
 
     def outputs(self, runs: int, n_steps: int, init: dict, drop=(), cycle=()) -> tuple[dict, dict]:
         """Arrays for the outputs of a fold: ``(stored, views)``.

@@ -35,7 +35,7 @@ from fmu_models.infra.registry import Registry
 
 from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
-from ._fold import NativeFold
+from ._fold import NativeFold, compile_with_fold
 from .discrete import DiscreteModel
 from .history import NoiseHistory
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
@@ -150,10 +150,11 @@ class KalmanBase:
 
         def build():
             raw = self.wrap_step(build_step(self, extra, params))
-            (fn,), used = compile_functions([raw], backend)
-            return fn, used, raw
+            fn, used, lib = compile_with_fold(raw, backend)     # one library: the step and its fold
+            return fn, used, raw, lib
 
-        step, self.backend, self._raw_step = system.compiled("step", self.cache_key, backend, build)
+        step, self.backend, self._raw_step, self._step_library = system.compiled("step", self.cache_key, backend,
+                                                                                 build)
         self._rt = BoundStep(step, state, self._fixed)
         ins = self._rt.inputs
         self._u, self._y, self._mask = ins["u"], ins["y"], ins["mask"]
@@ -501,7 +502,8 @@ class KalmanBase:
         :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
 
         return self.system.compiled("fold", self.cache_key, self.backend,
-                                    lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend))
+                                    lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend,
+                                                       library=self._step_library))
 
     def check_record(self, us, ys, masks=None):
         """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),

@@ -26,6 +26,64 @@ __all__ = ["BatchFilter", "BatchRun"]
 ON_FAILURE = ("raise", "mark")
 
 
+class FoldedStep:
+    """One step of ``runs`` realisations through a filter's native fold (the step's own
+    compiled library, whatever the number of runs), with the interface of
+    :class:`~estimators.runtime.BoundStep`: the state in two copies (``pairs``; the step
+    reads the current one and writes the other, :meth:`commit` swaps them), ``inputs``
+    and ``outputs`` as flat run-major arrays.
+
+    Parameters
+    ----------
+    fold : NativeFold
+        The filter's fold (compiled backend).
+    runs : int
+        Number of realisations.
+    state : mapping of str to ndarray
+        Initial state arrays, flat run-major (copied).
+    shared : mapping of str to ndarray
+        Fixed inputs bound as they are (flat run-major; changed in place by the owner).
+    """
+
+    def __init__(self, fold, runs: int, state, shared):
+        step = fold.step
+        self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in fold.names_in
+                      if k in state}
+        self.inputs = {k: (shared[k] if k in shared else np.zeros(runs * step.nnz_in(k))) for k in fold.names_in
+                       if k not in self.pairs}
+        self.outputs = {n: np.zeros(runs * step.nnz_out(n)) for n in fold.names_out if not n.endswith("_new")}
+        self.status = self.outputs["status"]
+        self.cell = [0]
+        args = {k: v.reshape(runs, -1) for k, v in self.inputs.items()}
+
+        def bound(c: int):
+            init = {k: pair[c].reshape(runs, -1) for k, pair in self.pairs.items()}
+            outs = {n: (self.pairs[n[:-4]][1 - c] if n.endswith("_new") else self.outputs[n]).reshape(runs, 1, -1)
+                    for n in fold.names_out}
+            return fold.bind(runs, 1, args, init, outs)
+        self._calls = (bound(0), bound(1))
+
+    @property
+    def cur(self) -> int:
+        """Which copy of the state is current (0 or 1)."""
+        return self.cell[0]
+
+    def now(self, name: str) -> np.ndarray:
+        """The current copy of state array ``name`` (a view)."""
+        return self.pairs[name][self.cell[0]]
+
+    def trigger(self) -> float:
+        """Step every realisation from the current state into the other copy; returns the
+        first status (the per-run statuses are in ``outputs["status"]``)."""
+        if self._calls[self.cell[0]]():
+            raise NumericalError("batched step: the compiled step failed to evaluate")
+        return self.status[0]
+
+    def commit(self) -> None:
+        """Make the state the last :meth:`trigger` wrote the current one."""
+        self.cell[0] ^= 1
+
+
 class BatchFilter:
     """``n_runs`` copies of ``template`` stepped together.
 
@@ -68,8 +126,6 @@ class BatchFilter:
                        + sum(step_fn.nnz_out(i) for i in range(step_fn.n_out())) + step_fn.nnz_out("x_new"))
         check_fits(self.n * per_run, f"n_runs = {self.n} realisations of {template.name} ({per_run} bytes each)",
                    "use fewer realisations per batch")
-        (step,), _ = s.compiled("batch", (*template.cache_key, self.n), template.backend,
-                                lambda: compile_functions([step_fn.map(self.n, "serial")], template.backend))
         state = {k: np.tile(v, self.n) for k, v in template.state_arrays().items()}
         if x0 is not None:
             x0 = checks.float_array(x0, "x0")
@@ -77,7 +133,12 @@ class BatchFilter:
                 raise ConfigurationError(f"x0 must be finite with shape ({self.n}, {self.nx}), got {x0.shape}")
             state["x"] = x0.ravel()
         self._params = {k: np.tile(v, self.n) for k, v in template.parameter_arrays().items()}
-        self._rt = BoundStep(step, state, self._params)
+        if template.backend == "compiled":      # the filter's own fold, one step for all runs: no code per n_runs
+            self._rt = FoldedStep(template.native_fold(), self.n, state, self._params)
+        else:
+            (step,), _ = s.compiled("batch", (*template.cache_key, self.n), template.backend,
+                                    lambda: compile_functions([step_fn.map(self.n, "serial")], template.backend))
+            self._rt = BoundStep(step, state, self._params)
         self._pairs = self._rt.pairs
         self._inputs = self._rt.inputs
         self._out = self._rt.outputs
