@@ -1,7 +1,7 @@
 """A co-simulation as an SSP (System Structure and Parameterization 1.0), and back.
 
 :func:`export_ssp` writes a scenario whose every component is an FMU or can be written as
-one (:meth:`cosim.core.component.Component.export_fmu`: FMUs, estimators, sources, process
+one (:meth:`cosim.core.component.ExportsFMU.export_fmu`: FMUs, estimators, sources, process
 noise and sensors) as
 
 * ``SystemStructure.ssd``: one ``Component`` per component (``source`` =

@@ -53,7 +53,7 @@ from .protocol import Parameter, StepContext, StepResult
 
 __all__ = ["MAX_WINDOW", "SWML"]
 
-#: Longest window: its re-runs are compiled into the step (about 1.7 s of C compilation per
+#: Longest window, whose re-runs are compiled into the step (about 1.7 s of C compilation per
 #: 100 steps of window, once per configuration, then cached).
 MAX_WINDOW = 2000
 

@@ -30,6 +30,7 @@ from fmu_models.infra.checks import positive, positive_int
 
 __all__ = ["GENERATORS", "CounterNoise", "PerInstantNoise", "counter_normal", "make_noise"]
 
+#: The noise generators by name (numpy's PCG64, and the counter-based one the signal FMUs use).
 GENERATORS = ("pcg64", "counter")
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)

@@ -60,6 +60,7 @@ READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 
             "prose": "section 5 prose: sigma_r^2 is the process variance, sigma_q^2 the measurement variance"}
 #: Table 3 of seed 000 (eta, eq 44).
 PAPER_ETA = {"EKF": (4.4782, 5.2441, 4.4426, 4.9982), "MF-IAE": (2.2153, 2.2109, 2.6581, 2.6800)}
+#: The filters of the campaign, in the order of its tables.
 FILTERS = ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R")
 #: Run index of the training realisation EM learns from (never one of the test runs).
 TRAINING_RUN = 2**31 - 1

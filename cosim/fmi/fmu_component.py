@@ -28,7 +28,7 @@ with an error naming the FMU, the call and the signal, not the process.
 
 FMU log messages go to the Python logger ``cosim.fmu`` (warnings and errors always;
 everything with ``logging=True``), and the last ones are kept in
-:attr:`FMUComponent.messages` and quoted in errors.
+``FMUComponent.messages`` and quoted in errors.
 """
 from __future__ import annotations
 

@@ -38,9 +38,9 @@ from ..core.component import StopRequest
 
 __all__ = ["HEAD", "REPLY", "RemoteFMU", "read_exactly", "write_all"]
 
-#: A request's head: the op byte and the time ``t`` [s].
+#: A request's head, the op byte and the time ``t`` [s].
 HEAD = struct.Struct("<cd")
-#: A reply's head: the status byte and the length of its pickled payload.
+#: A reply's head, the status byte and the length of its pickled payload.
 REPLY = struct.Struct("<cI")
 #: Seconds a child may take to end its instance and exit before it is killed.
 CLOSE_TIMEOUT = 2.0
