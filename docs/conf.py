@@ -18,7 +18,7 @@ sys.path.insert(0, str(ROOT))          # the checkout's packages, also when not 
 
 project = "pendulum-cosim"
 author = "pendulum-cosim authors"
-copyright = "pendulum-cosim authors"   # noqa: A001 - Sphinx's name for it
+copyright = "pendulum-cosim authors"
 try:
     from importlib.metadata import version as _version
 

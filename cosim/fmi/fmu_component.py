@@ -118,7 +118,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
     isolate : bool
         Run the FMU in a process of its own, so that a crash of its code ends the run with
         a named error instead of the process (default False; costs a round trip between
-        the processes per call, see the README's performance section).
+        the processes per call, see the performance page of the documentation).
 
     Attributes
     ----------
