@@ -197,7 +197,7 @@ def _driver(spec: Path) -> None:
             Path(b["flags"]["writes"]).parent.mkdir(parents=True, exist_ok=True)
             Path(b["flags"]["writes"]).write_text(b["code"])
         elif b["language"] == "python":
-            exec(compile(b["code"], f"<{b['page']}:{b['line']} {b['name']}>", "exec"), namespace)  # noqa: S102
+            exec(compile(b["code"], f"<{b['page']}:{b['line']} {b['name']}>", "exec"), namespace)
         else:
             proc = subprocess.run(["bash", "-euo", "pipefail", "-c", b["code"]], check=False)
             if proc.returncode != 0:
