@@ -356,7 +356,7 @@ def _oms_step(system: ET.Element, where: str) -> float | None:
 @contextlib.contextmanager
 def open_ssp(path, communication_step: float | None = None) -> Iterator[SSPSystem]:
     """Open the SSP at ``path`` (a ``.ssp`` archive, its unpacked folder, or its
-    ``SystemStructure.ssd``) as an :class:`SSPSystem`; a context manager that removes what
+    ``SystemStructure.ssd``) as an :class:`.SSPSystem`; a context manager that removes what
     it unpacked.
 
     ``communication_step`` [s], if given, steps every FMU with that one step instead of its

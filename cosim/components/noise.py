@@ -87,7 +87,7 @@ class PerInstantNoise:
 
 class CounterNoise:
     """``n`` standard normal numbers at sample ``round(t / period)`` of the counter
-    generator (:func:`counter_normal`) with ``seed``."""
+    generator (:func:`.counter_normal`) with ``seed``."""
 
     def __init__(self, seed: int, n: int, period: float):
         self.seed, self.n, self.period = seed, n, period
@@ -101,7 +101,7 @@ class CounterNoise:
 
 
 def make_noise(generator: str, seed: int, n: int, period: float, owner: str):
-    """A noise stream of ``generator`` (see :data:`GENERATORS`), ``seed``, ``n`` channels
+    """A noise stream of ``generator`` (see :data:`.GENERATORS`), ``seed``, ``n`` channels
     drawn at ``period`` [s]; errors name ``owner`` (the component)."""
     if generator not in GENERATORS:
         raise UnknownNameError(f"{owner}: generator must be one of {GENERATORS}, got {generator!r}")

@@ -194,7 +194,7 @@ COMPONENTS: Registry = Registry("component type")
 
 @runtime_checkable
 class FastBinding(Protocol):
-    """A component with a fast path for the master's inner loop (see :meth:`bind`)."""
+    """A component with a fast path for the master's inner loop (see :meth:`~.FastBinding.bind`)."""
 
     def bind(self, values: np.ndarray, inputs, outputs: slice, integers: np.ndarray | None = None
              ) -> tuple[Callable[[float], None], Callable[[float], None]]:

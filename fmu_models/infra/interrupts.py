@@ -32,7 +32,7 @@ def terminate_as_interrupt() -> Iterator[None]:
 
 
 class Deferred:
-    """Ctrl-C and SIGTERM noted instead of raised until :meth:`release` (main thread only:
+    """Ctrl-C and SIGTERM noted instead of raised until :meth:`~.Deferred.release` (main thread only:
     elsewhere Python raises no signal exceptions)."""
 
     def __init__(self):
