@@ -72,6 +72,15 @@ def test_the_built_pages_show_their_figures(built):
             assert (built / page).parent.joinpath(src).resolve().exists(), (page, src)
 
 
+def test_no_page_shows_raw_markup(built):
+    """No role or directive is left unparsed (MyST parses a directive's rST output as
+    Markdown unless it is wrapped in eval-rst, and says nothing)."""
+    raw = re.compile(r":(?:py:)?(?:obj|class|func|meth|mod|data|attr|exc):`|\{py:|\{eval-rst\}|\.\. autosummary::")
+    shown = [str(p.relative_to(built)) for p in built.rglob("*.html")
+             if "_modules" not in p.parts and raw.search(p.read_text())]
+    assert not shown, shown
+
+
 # ---------------------------------------------------------------------- without building
 _LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
 
