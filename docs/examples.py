@@ -197,7 +197,8 @@ def _driver(spec: Path) -> None:
             Path(b["flags"]["writes"]).parent.mkdir(parents=True, exist_ok=True)
             Path(b["flags"]["writes"]).write_text(b["code"])
         elif b["language"] == "python":
-            exec(compile(b["code"], f"<{b['page']}:{b['line']} {b['name']}>", "exec"), namespace)
+            # padded so that a traceback's line numbers are the page's
+            exec(compile("\n" * b["line"] + b["code"], b["page"], "exec"), namespace)
         else:
             proc = subprocess.run(["bash", "-euo", "pipefail", "-c", b["code"]], check=False)
             if proc.returncode != 0:

@@ -201,3 +201,71 @@ def test_the_readme_figure_is_the_example_s():
     assert "docs/_static/readme_estimate.png" in readme
     image = ROOT / "docs" / "_static" / "readme_estimate.png"
     assert image.stat().st_size > 10_000 and image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------------ the runner itself, abused
+def _page(tmp_path: Path, text: str) -> Path:
+    page = tmp_path / "page.md"
+    page.write_text(text)
+    return page
+
+
+def test_an_unmarked_code_block_is_found(tmp_path, monkeypatch):
+    page = _page(tmp_path, "# t\n\n```python\nprint(1)\n```\n\n```text\nlisting\n```\n\n```{toctree}\nx\n```\n")
+    monkeypatch.setattr(examples, "ROOT", tmp_path)
+    monkeypatch.setattr(examples, "pages", lambda: [page])
+    assert examples.unmarked_code() == ["page.md:3 (python)"]
+
+
+def test_code_shown_through_a_directive_is_found(tmp_path, monkeypatch):
+    page = _page(tmp_path, "```{code-block} python\nprint(1)\n```\n")
+    monkeypatch.setattr(examples, "ROOT", tmp_path)
+    monkeypatch.setattr(examples, "pages", lambda: [page])
+    assert examples.unmarked_code() == ["page.md:1 ({code-block})"]
+
+
+def test_blocks_that_cannot_run_as_marked_are_named(tmp_path, monkeypatch):
+    page = _page(tmp_path, "<!-- test: a -->\n```python\nx = 1\n```\n<!-- test: a fast -->\n```bash\ntrue\n```\n"
+                           "<!-- test: cfg -->\n```toml\nx = 1\n```\n<!-- test: b needs=wine -->\n```bash\ntrue\n```\n")
+    monkeypatch.setattr(examples, "ROOT", tmp_path)
+    monkeypatch.setattr(examples, "pages", lambda: [page])
+    found = "\n".join(examples.problems())
+    assert "the name is also used" in found and "unknown flags ['fast']" in found
+    assert "a toml block needs writes=PATH" in found and "unknown need 'wine'" in found
+
+
+def test_an_unclosed_block_is_an_error(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("text\n\n```python\nprint(1)\n")
+    with pytest.raises(ValueError, match="page.md:3: unclosed code block"):
+        _blocks_of(page, tmp_path)
+
+
+def _blocks_of(page: Path, root: Path):
+    saved = examples.ROOT
+    examples.ROOT = root
+    try:
+        return examples.blocks(page)
+    finally:
+        examples.ROOT = saved
+
+
+def test_a_failing_example_names_its_page_line_and_block(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("<!-- test: fine -->\n```python\nx = 41\n```\n\n<!-- test: broken -->\n```python\n"
+                    "x += 1\nraise RuntimeError(f'x is {x}')\n```\n\n<!-- test: never -->\n```bash\ntouch ran\n```\n")
+    todo = examples.runnable(_blocks_of(page, tmp_path))[0]
+    with pytest.raises(AssertionError) as err:
+        run_block(todo, tmp_path / "run")
+    message = str(err.value)
+    assert "broken" in message and 'page.md", line 9' in message      # the page's own line numbers
+    assert "x is 42" in message                                        # one namespace: x from "fine"
+    assert not (tmp_path / "run" / "ran").exists()                                 # nothing after the failure
+
+
+def test_a_failing_shell_block_stops_the_page(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("<!-- test: sh -->\n```bash\nfalse | cat\necho after\n```\n")
+    todo = examples.runnable(_blocks_of(page, tmp_path))[0]
+    with pytest.raises(AssertionError, match="the shell block exited with 1"):
+        run_block(todo, tmp_path / "run")

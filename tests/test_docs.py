@@ -135,3 +135,45 @@ def test_user_facing_text_names_no_issue_or_outside_file():
     helps.append(proc.stdout)
     found += [f"help text {i}" for i, h in enumerate(helps) if FORBIDDEN.search(h)]
     assert not found, found
+
+
+def _mini_build(tmp_path: Path, page: str) -> subprocess.CompletedProcess:
+    """Build one page with the documentation's configuration (its resolver, nitpicky, -W)."""
+    src = tmp_path / "src"
+    (src / "_static").mkdir(parents=True)
+    conf = (ROOT / "docs" / "conf.py").read_text()
+    conf = conf.replace("ROOT = Path(__file__).resolve().parents[1]", f"ROOT = Path({str(ROOT)!r})")
+    (src / "conf.py").write_text(conf)
+    (src / "index.md").write_text(page)
+    return subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-n", "-q", "-b", "html", str(src),
+                           str(tmp_path / "out")], capture_output=True, text=True, timeout=600)
+
+
+_DOCUMENTED = """# page
+
+```{eval-rst}
+.. py:function:: fmu_models.catalog.model_names()
+
+   The one documented object of this page.
+```
+"""
+
+
+def test_a_reference_resolves_as_python_resolves_the_name(tmp_path):
+    """The package's name (fmu_models.model_names) and the defining module's name reach the
+    one documented object."""
+    proc = _mini_build(tmp_path, _DOCUMENTED + "{py:func}`fmu_models.model_names`, "
+                                               "{py:func}`fmu_models.catalog.model_names`\n")
+    assert proc.returncode == 0, proc.stderr
+    html = (tmp_path / "out" / "index.html").read_text()
+    assert html.count('href="#fmu_models.catalog.model_names" title="fmu_models.catalog.model_names"') == 2
+
+
+def test_a_reference_to_nothing_documented_fails_the_build(tmp_path):
+    """A name that does not exist, one that exists but is not documented, and another
+    project's name are all warnings, so the build fails naming each."""
+    proc = _mini_build(tmp_path, _DOCUMENTED + "{py:class}`estimators.NoSuchFilter`, {py:class}`estimators.UKF`, "
+                                               "{py:func}`numpy.linalg.solve`\n")
+    assert proc.returncode != 0
+    for name in ("estimators.NoSuchFilter", "estimators.UKF", "numpy.linalg.solve"):
+        assert f"reference target not found: {name}" in proc.stderr, proc.stderr
