@@ -22,6 +22,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from fmu_models.infra.files import atomic_copy
+
 HERE = Path(__file__).resolve().parent
 _spec = importlib.util.spec_from_file_location("doc_examples", HERE / "examples.py")
 examples = importlib.util.module_from_spec(_spec)
@@ -52,8 +54,7 @@ def make(slow: bool = False) -> list[Path]:
         folder = Path(tempfile.mkdtemp(prefix="doc-figure-"))
         try:
             examples.run(run, folder)
-            target = HERE / "_static" / figure
-            shutil.copyfile(folder / produced, target)
+            target = atomic_copy(folder / produced, HERE / "_static" / figure)   # whole or not at all
             written.append(target)
             print(f"wrote {target.relative_to(examples.ROOT)}")
         finally:
