@@ -1,7 +1,7 @@
 """A co-simulation as an SSP (System Structure and Parameterization 1.0), and back.
 
 :func:`export_ssp` writes a scenario whose every component is an FMU or can be written as
-one (:meth:`cosim.core.component.Component.export_fmu`: FMUs, estimators, sources, process
+one (:meth:`cosim.core.component.ExportsFMU.export_fmu`: FMUs, estimators, sources, process
 noise and sensors) as
 
 * ``SystemStructure.ssd``: one ``Component`` per component (``source`` =
@@ -357,7 +357,7 @@ def _oms_step(system: ET.Element, where: str) -> float | None:
 @contextlib.contextmanager
 def open_ssp(path, communication_step: float | None = None) -> Iterator[SSPSystem]:
     """Open the SSP at ``path`` (a ``.ssp`` archive, its unpacked folder, or its
-    ``SystemStructure.ssd``) as an :class:`SSPSystem`; a context manager that removes what
+    ``SystemStructure.ssd``) as an :class:`.SSPSystem`; a context manager that removes what
     it unpacked.
 
     ``communication_step`` [s], if given, steps every FMU with that one step instead of its

@@ -27,7 +27,7 @@ from .protocol import Parameter, StepContext, StepResult
 
 __all__ = ["AdaptationRecord", "WindowedAdaptiveEKF", "bound_parameters", "bounds_around"]
 
-#: Default bounds: this factor either side of the initial variances.
+#: Default bounds, this factor either side of the initial variances.
 BOUND_FACTOR = 1e4
 
 
@@ -57,7 +57,7 @@ def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
 class AdaptationRecord:
     """Records Q and R in a filter's noise history whenever its step declares (output
     ``adapted``) that it adapted them, from Python and after a native run. A mixin before
-    the filter class; call :meth:`_init_adaptation_record` at the end of ``__init__``."""
+    the filter class; call ``_init_adaptation_record`` at the end of ``__init__``."""
 
     def _init_adaptation_record(self) -> None:
         self._adapted_flag = memoryview(self._out("adapted"))

@@ -3,12 +3,12 @@
 A filter (:class:`KalmanBase` subclass) implements the hooks of :mod:`estimators.protocol`;
 from them one CasADi Function is built per model and configuration, the fused ``step``,
 mapping the state and ``(u, y, mask)`` to the next state and the step's diagnostics. It is
-compiled to native code (:mod:`estimators._compiled`) and
+compiled to native code (``estimators._compiled``) and
 
 * bound to the filter's numpy arrays (:class:`~estimators.runtime.BoundStep`): :meth:`KalmanBase.step`
   is one native call plus the copies of ``u`` and ``y``;
 * folded over a whole trajectory (:meth:`KalmanBase.run`: one native call, every step's
-  estimate, covariance and diagnostics; :mod:`estimators._fold`);
+  estimate, covariance and diagnostics; ``estimators._fold``);
 * mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`);
 * exported as an FMU (:func:`estimators.filter_fmu.export_filter_fmu`).
 
@@ -46,9 +46,9 @@ from .runtime import BoundStep, VectorInput, explain_status, lean_step
 __all__ = ["DIAGNOSTICS", "FILTERS", "KEEP", "FilterRun", "KalmanBase", "Parameter", "StepContext", "StepResult",
            "Update"]
 
-#: The filters usable by name (scenario files, the command line): ``class F(KalmanBase, register="F")``.
+#: The filters usable by name in scenario files and the command line (``class F(KalmanBase, register="F")``).
 FILTERS: Registry = Registry("filter")
-#: Outputs that are symmetric matrices (exactly: their lower triangle mirrors the upper).
+#: Outputs that are symmetric matrices (exactly, their lower triangle mirrors the upper).
 SYMMETRIC = ("P_new", "P_prior", "S", "Q_new", "R_new")
 #: What run(keep="estimates") does not store.
 DROPPABLE = ("x_prior", "P_prior", "innov", "S", "K")
@@ -498,7 +498,7 @@ class KalmanBase:
     # ================================================================ whole trajectories
     def native_fold(self):
         """The fused step folded over trajectories in native code
-        (:class:`~estimators._fold.NativeFold`), compiled and cached on the model: what
+        (``estimators._fold.NativeFold``), compiled and cached on the model: what
         :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
 
         return self.system.compiled("fold", self.cache_key, self.backend,

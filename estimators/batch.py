@@ -3,7 +3,7 @@ native call for whole trajectories of all.
 
 :meth:`BatchFilter.step` maps the filter's fused step over ``n_runs`` realisations
 (``casadi.Function.map``, compiled); :meth:`BatchFilter.run` folds it over whole
-trajectories of every realisation in native code (:mod:`estimators._fold`). A Monte
+trajectories of every realisation in native code (``estimators._fold``). A Monte
 Carlo campaign pays the Python overhead once per step, or once per campaign, not once per
 realisation.
 """
@@ -97,7 +97,7 @@ class BatchFilter:
         Per-realisation initial estimates (default: the template's x for all).
     on_failure : {"raise", "mark"}
         What a realisation whose input or result is not finite does: raise (default),
-        or keep its previous state (in :meth:`step`), mark it in :attr:`failed` and go on
+        or keep its previous state (in :meth:`step`), mark it in ``failed`` and go on
         with the others (Monte Carlo campaigns count such runs as diverged).
 
     Attributes

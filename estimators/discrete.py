@@ -57,7 +57,7 @@ class DiscreteModel:
 
     @property
     def identity(self) -> str:
-        """A digest of the model's equations, period and names: two models with the same
+        """A digest of the model's equations, period and names; two models with the same
         identity step identically (what :func:`~estimators.rts_smooth` checks a run
         against)."""
         if not hasattr(self, "_identity"):

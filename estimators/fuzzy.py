@@ -26,7 +26,7 @@ import numpy as np
 
 INPUT_SETS = ("NP", "ZE", "GA")
 OUTPUT_SETS = ("DI", "MA", "AU")
-#: Table 2 of seed 000: RULES[C_T set][C_I set] -> output set.
+#: Table 2 of seed 000, ``RULES[C_T set][C_I set] -> output set``.
 RULES = {"NP": {"NP": "MA", "ZE": "DI", "GA": "DI"},
          "ZE": {"NP": "AU", "ZE": "MA", "GA": "DI"},
          "GA": {"NP": "AU", "ZE": "AU", "GA": "MA"}}

@@ -14,11 +14,11 @@ __all__ = ["CSE", "cholesky_lower", "finite_flag", "gated_gain", "joseph_update"
            "mask_measurement", "not_nan", "spd_solve", "status_flag", "symmetric", "upper_entries",
            "used_measurement"]
 
-#: Options of the compiled Functions: common subexpressions merged once more after the
+#: Options of the compiled Functions, common subexpressions merged once more after the
 #: Jacobians (AD re-creates e.g. cos(theta) beside the model's own; 6 transcendental calls
 #: become 2 in the cart-pole EKF step).
 CSE = {"cse": True}
-#: Status codes of a fused step: all finite, a bad input, a non-finite result.
+#: Status codes of a fused step (all finite, a bad input, a non-finite result).
 OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
 
 

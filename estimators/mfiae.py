@@ -58,7 +58,7 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         Initial measurement noise variance sigma_r^2 (R = r0 I), or one per channel.
     window : int
         N of eq 37 (default 10: the paper does not give it; seed 000's Table 3 is matched
-        within 10 % for windows 6 to 15, see the README).
+        within 10 % for windows 6 to 15, see the experiments page of the documentation).
     fuzzy : MamdaniFuzzy, optional
         The fuzzy system (default ``MamdaniFuzzy()``).
     gain_q, gain_r : float

@@ -3,7 +3,7 @@
 :func:`rts_smooth` takes a filter and the :class:`~estimators.base.FilterRun` its
 :meth:`~estimators.base.KalmanBase.run` returned, and runs the backward pass from the last
 step to the first (Rauch, Tung and Striebel, 1965), one compiled step per time step,
-folded in native code (:mod:`estimators._fold`), with the filter's own predictions
+folded in native code (``estimators._fold``), with the filter's own predictions
 ``x^-_{k+1}``, ``P^-_{k+1}`` (so time-varying or adapted Q is used as the filter used it):
 
 * KF and EKF-family filters (the extended RTS smoother on the exact CasADi Jacobian

@@ -1,6 +1,6 @@
 """Sliding-window maximum-likelihood adaptive EKF (SWML), started from autocovariance least squares.
 
-Beyond the source papers (issue 21). The EKF's noise is ``Q = q I``, ``R = r I`` (the form
+Beyond the source papers. The EKF's noise is ``Q = q I``, ``R = r I`` (the form
 of seed 000 eqs 24-25), with ``theta = (ln q, ln r)``. Every step is an EKF step with the
 current Q, R; the filter keeps the input, measurement and valid channels of the last
 ``window`` steps and its own state at every ``every``-th step. At update times (every
@@ -32,8 +32,8 @@ Everything is one compiled Function (:meth:`SWML.wrap_step`): the EKF step, then
 conditional (CasADi's ``Function.conditional``: only the branch taken runs) whose
 update branches fold the EKF step over the window (``mapaccum``), so the update runs in
 ``step``, ``run``, batched and in the FMU alike. The work of an update is not spread over
-the following steps: it is done at the update step (a burst; see the README's cost
-figures).
+the following steps: it is done at the update step (a burst; see the cost figures of the
+documentation's performance page).
 """
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ from .protocol import Parameter, StepContext, StepResult
 
 __all__ = ["MAX_WINDOW", "SWML"]
 
-#: Longest window: its re-runs are compiled into the step (about 1.7 s of C compilation per
+#: Longest window, whose re-runs are compiled into the step (about 1.7 s of C compilation per
 #: 100 steps of window, once per configuration, then cached).
 MAX_WINDOW = 2000
 

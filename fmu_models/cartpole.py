@@ -1,10 +1,10 @@
-"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1 with SPEC section 1 errata).
+"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1 with the errata of the papers below).
 
-State ``x = [x, x_dot, theta, theta_dot]`` (SPEC x1..x4): cart position [m], cart
+State ``x = [x, x_dot, theta, theta_dot]`` (the paper's x1..x4): cart position [m], cart
 velocity [m/s], pole angle from UPRIGHT [rad] (positive leaning towards +x), pole rate
 [rad/s]. Input ``F``: force on the cart [N]. Measurement ``y = [x, theta]`` (eqs 13, 23).
 
-Errata applied (SPEC section 1; each checked against Lagrange's equations in
+Errata applied (each checked against Lagrange's equations in
 ``tests/test_cartpole_lagrange.py``):
 
 * Table 1 prints ``M3 = M1 M2 - mc^2 l^2 cos^2 x3``; the mass must be ``mp``.
@@ -71,7 +71,7 @@ def dynamics(x, u, p):
 
 
 def measurement(x, p):
-    """Eq 23: cart position and pole angle (y_k = [x1_k, x3_k]; SPEC fixes eqs 18-19's index).
+    """Eq 23: cart position and pole angle (``y_k = [x1_k, x3_k]``; eqs 18-19 print ``x_{k-1}``, an index slip).
 
     Parameters
     ----------
@@ -87,6 +87,6 @@ def measurement(x, p):
 def build() -> PlantModel:
     """The model with its default parameters (registered as ``"cartpole"``)."""
     return PlantModel("cartpole", "CartPole",
-                      "Cart-inverted pendulum (seed 000 eqs 8-11, SPEC section 1)",
+                      "Cart-inverted pendulum (seed 000 eqs 8-11, Table 1 corrected)",
                       STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement,
                       example_input=lambda t: [-0.5 if t < 2.0 else 0.5])       # seed 000 Figure 2

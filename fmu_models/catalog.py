@@ -10,7 +10,7 @@ from .plant import PlantModel
 
 __all__ = ["MODELS", "get_model", "model_names", "register_model"]
 
-#: The plant models by name: each a function returning the model with its default parameters.
+#: The plant models by name, each a function returning the model with its default parameters.
 MODELS: Registry[Callable[[], PlantModel]] = Registry("model")
 _BASE: dict[str, PlantModel] = {}
 

@@ -1,4 +1,4 @@
-"""Inertia-wheel pendulum of seed 002 (eqs 1-2; SPEC section 3).
+"""Inertia-wheel pendulum of seed 002 (eqs 1-2).
 
 State ``x = [alpha, alpha_dot, phi_dot]``: pendulum angle from the upright vertical
 [rad], its rate [rad/s] and the wheel speed relative to the body [rad/s]. Input ``i``:
@@ -9,15 +9,15 @@ Equations (seed 002 eqs 1-2)::
     phi''   = (k i - b_phi phi') / I_k
     alpha'' = (s I_k phi'' + m_c g l_p sin(alpha) - b_alpha alpha') / (I_r + I_k)
 
-Coupling sign ``s`` (SPEC section 3): seed 002 prints ``s = +1``. With the denominator
+Coupling sign ``s``: seed 002 prints ``s = +1``. With the denominator
 ``I_r + I_k``, ``phi`` is the wheel angle relative to the body and the reaction torque
 on the body opposes the torque that spins the wheel, so the physical sign is ``s = -1``,
 the default here. Simplification kept from the paper: for a relative wheel angle the
 exact wheel equation is ``I_k (alpha'' + phi'') = k i - b_phi phi'``; eq 1 neglects the
 body's acceleration ``alpha''`` in it.
 
-Default parameters: the 1-D Cubli (Gajamohan et al., IROS 2012), mapped by SPEC
-section 3: ``I_k = Iw``, ``I_r = Ib + mw lw^2``, ``m_c = mb + mw``,
+Default parameters: the 1-D Cubli (Gajamohan et al., IROS 2012; seed 002 gives no
+numbers), mapped as ``I_k = Iw``, ``I_r = Ib + mw lw^2``, ``m_c = mb + mw``,
 ``l_p = (mb lb + mw lw)/(mb + mw)``, ``b_alpha = Cb``, ``b_phi = Cw``, ``k = Km``.
 """
 from __future__ import annotations
@@ -54,13 +54,13 @@ PARAMETERS = (
     Variable("Cw", "N.m.s/rad", "wheel bearing viscous friction, b_phi", 0.05e-3, "nonnegative"),
     Variable("Km", "N.m/A", "motor torque constant, k", 25.1e-3, "positive"),
     Variable("g", "m/s2", "gravitational acceleration", 9.81, "positive"),
-    Variable("s", "1", "coupling sign of the wheel reaction torque (SPEC: -1; paper prints +1)",
+    Variable("s", "1", "coupling sign of the wheel reaction torque (physical: -1; the paper prints +1)",
              -1.0, "sign"),
 )
 
 
 def dynamics(x, u, p):
-    """Seed 002 eqs 1-2 with the Cubli parameter map of SPEC section 3.
+    """Seed 002 eqs 1-2 with the Cubli parameters mapped as in the module docstring.
 
     Parameters
     ----------
@@ -99,6 +99,6 @@ def measurement(x, p):
 def build() -> PlantModel:
     """The model with its default parameters (registered as ``"iwp"``)."""
     return PlantModel("iwp", "InertiaWheelPendulum",
-                      "Inertia-wheel pendulum (seed 002 eqs 1-2, SPEC section 3)",
+                      "Inertia-wheel pendulum (seed 002 eqs 1-2, coupling sign -1)",
                       STATES, INPUTS, OUTPUTS, PARAMETERS, dynamics, measurement,
                       example_x0=[0.05, 0.0, 0.0], example_input=lambda t: [0.05 * math.sin(2 * math.pi * t)])

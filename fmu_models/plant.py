@@ -154,6 +154,7 @@ class PlantModel:
     state_names = property(lambda self: [v.name for v in self.states])
     input_names = property(lambda self: [v.name for v in self.inputs])
     output_names = property(lambda self: [v.name for v in self.outputs])
+    #: The parameters' names, in the order of :attr:`p`.
     param_names = property(lambda self: [v.name for v in self.parameters])
     nx = property(lambda self: len(self.states))
     nu = property(lambda self: len(self.inputs))

@@ -30,6 +30,7 @@ from fmu_models.infra.checks import positive, positive_int
 
 __all__ = ["GENERATORS", "CounterNoise", "PerInstantNoise", "counter_normal", "make_noise"]
 
+#: The noise generators by name (numpy's PCG64, and the counter-based one the signal FMUs use).
 GENERATORS = ("pcg64", "counter")
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
@@ -86,7 +87,7 @@ class PerInstantNoise:
 
 class CounterNoise:
     """``n`` standard normal numbers at sample ``round(t / period)`` of the counter
-    generator (:func:`counter_normal`) with ``seed``."""
+    generator (:func:`.counter_normal`) with ``seed``."""
 
     def __init__(self, seed: int, n: int, period: float):
         self.seed, self.n, self.period = seed, n, period
@@ -100,7 +101,7 @@ class CounterNoise:
 
 
 def make_noise(generator: str, seed: int, n: int, period: float, owner: str):
-    """A noise stream of ``generator`` (see :data:`GENERATORS`), ``seed``, ``n`` channels
+    """A noise stream of ``generator`` (see :data:`.GENERATORS`), ``seed``, ``n`` channels
     drawn at ``period`` [s]; errors name ``owner`` (the component)."""
     if generator not in GENERATORS:
         raise UnknownNameError(f"{owner}: generator must be one of {GENERATORS}, got {generator!r}")

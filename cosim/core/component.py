@@ -3,7 +3,7 @@
 Every component, FMU or Python, is a :class:`Component`. The master depends on this
 class only. A component has a ``name``, a sample ``period`` [s], typed input and output
 ports (:class:`Port`), and declares which outputs depend *directly* on which inputs
-(:attr:`Component.feedthrough`). At each of its sample instants ``t`` (every ``period``
+(its ``feedthrough`` attribute). At each of its sample instants ``t`` (every ``period``
 seconds from the start time) the master calls, for all components due at ``t``:
 
 1. :meth:`Component.output` ``(t, u) -> y`` in an order that respects the direct
@@ -47,7 +47,7 @@ test ``isinstance(component, Protocol)``, never the class):
 
 ``holds_inputs = True`` declares that the inputs :meth:`~Component.update` consumes are
 held over ``[t, t + period]`` (a plant integrating them) rather than used at the next
-instant. The master counts every component's instants itself (:attr:`Component.n_samples`).
+instant. The master counts every component's instants itself (``Component.n_samples``).
 
 Signals: the master keeps every signal as a float and every integer or Boolean signal
 also as an exact int64 (a UInt64 as its bit pattern), so 64-bit integers travel exactly
@@ -75,7 +75,7 @@ __all__ = ["COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU",
            "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
            "ports_compatible", "split_port"]
 
-#: FMI type names a port may have, by kind: real, integer (incl. enumerations), boolean.
+#: FMI type names a port may have, by kind (real, integer incl. enumerations, boolean).
 PORT_TYPES = {
     "Float64": "real", "Float32": "real", "Real": "real",
     "Int8": "integer", "UInt8": "integer", "Int16": "integer", "UInt16": "integer",
@@ -123,7 +123,7 @@ class Port:
 
 @dataclass(frozen=True)
 class ExportedFMU:
-    """A component written as an FMU by :meth:`Component.export_fmu`.
+    """A component written as an FMU by :meth:`ExportsFMU.export_fmu`.
 
     Attributes
     ----------
@@ -194,7 +194,7 @@ COMPONENTS: Registry = Registry("component type")
 
 @runtime_checkable
 class FastBinding(Protocol):
-    """A component with a fast path for the master's inner loop (see :meth:`bind`)."""
+    """A component with a fast path for the master's inner loop (see :meth:`~.FastBinding.bind`)."""
 
     def bind(self, values: np.ndarray, inputs, outputs: slice, integers: np.ndarray | None = None
              ) -> tuple[Callable[[float], None], Callable[[float], None]]:
@@ -219,7 +219,7 @@ class BoundCalls:
     :meth:`~FastBinding.bind` on a private buffer (the path of calls from outside the
     master's loop). A mixin: the class sets ``self._private = None`` and drops it again
     whenever its binding becomes stale (new instance, closed); it may override
-    :meth:`_set_private_inputs` for ports that need their exact integer value."""
+    ``_set_private_inputs`` for ports that need their exact integer value."""
 
     _private = None
 
@@ -375,13 +375,13 @@ class Component(ABC):
                 f"inputs={self.input_names}, outputs={self.output_names})")
 
     def timing(self) -> str:
-        """One line on what an output at ``t`` means (for :meth:`Cosimulation.describe`)."""
+        """One line on what an output at ``t`` means (for :meth:`~cosim.core.master.Cosimulation.describe`)."""
         return "sampled: outputs at t from the inputs at t"
 
     # ------------------------------------------------------------------ the protocol
     def check_run(self, start_time: float, stop_time: float) -> None:  # noqa: B027 - optional
         """Refuse, before anything starts, a run from ``start_time`` to ``stop_time`` [s]
-        this component cannot do (raise a :class:`~cosim.errors.CosimError` subclass that
+        this component cannot do (raise a :class:`~fmu_models.errors.CosimError` subclass that
         says why). Default: every run is possible."""
 
     def reset(self, t0: float) -> None:

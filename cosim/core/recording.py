@@ -63,8 +63,8 @@ def _integer_layout(columns: Sequence[str], int_columns) -> tuple[np.ndarray, li
 class MemorySink:
     """Rows kept in memory: a preallocated array, a DataFrame at the end.
 
-    The writer fills :attr:`buffer` (and :attr:`ibuffer`, the exact integer columns at
-    :attr:`int_positions`) row by row and calls :meth:`flush` with the number of rows
+    The writer fills ``buffer`` (and ``ibuffer``, the exact integer columns at
+    ``int_positions``) row by row and calls :meth:`flush` with the number of rows
     written whenever the buffer is full and at the end (the protocol of both sinks).
 
     Parameters
@@ -100,7 +100,7 @@ class MemorySink:
         self.last_time = None
 
     def flush(self, rows: int) -> None:
-        """``rows`` more rows of :attr:`buffer` are complete (the buffer holds the whole run,
+        """``rows`` more rows of ``buffer`` are complete (the buffer holds the whole run,
         so it fills only once)."""
         self.n += rows
 
@@ -178,7 +178,7 @@ class ParquetSink:
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
 
     def flush(self, rows: int) -> None:
-        """Write the first ``rows`` rows of :attr:`buffer` as one row group."""
+        """Write the first ``rows`` rows of ``buffer`` as one row group."""
         if not rows:
             return
         pa = self._pa

@@ -36,6 +36,7 @@ __all__ = ["EXPERIMENTS", "PATHS", "Experiment"]
 
 #: The experiments by name (``pendulum-cosim experiment NAME``).
 EXPERIMENTS: Registry = Registry("experiment")
+#: The ways a realisation can be run (the vectorised fast path, or the co-simulation master with the plant FMU).
 PATHS = ("fast", "master")
 
 
@@ -69,7 +70,7 @@ class Experiment:
 
     def settings(self, config: str | None = None, settings_file=None, overrides=(), runs: int | None = None,
                  seed: int | None = None):
-        """The settings of configuration ``config`` (default :attr:`default_config`) with the
+        """The settings of configuration ``config`` (default ``default_config``) with the
         values of the TOML ``settings_file``, then ``runs``, ``seed`` and every ``name=value``
         of ``overrides`` applied, in that order.
 

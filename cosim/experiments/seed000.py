@@ -1,12 +1,12 @@
 """Seed 000 section 5: EKF, IAE and MF-IAE on the cart-pole under four noise scenarios.
 
-Truth (SPEC section 1): the Euler map, ``T = 0.01 s``, ``x0 = [0.5, 0, 1.8, 0.5]``, 500
+Truth (seed 000 eqs 12-17): the Euler map, ``T = 0.01 s``, ``x0 = [0.5, 0, 1.8, 0.5]``, 500
 steps; process noise ``w ~ N(0, q I)`` added each step, measurement ``y = [x, theta] +
 v``, ``v ~ N(0, r I)``. Input: seed 000 Figure 2's PRBS of +/-0.5 N, -0.5 N until 2 s then
 +0.5 N: here the maximal-length LFSR sequence of order 7 (taps 7, 6) started from state
 28, one bit per second (:func:`figure2_prbs`), whose first five bits ``0 0 1 1 1`` are the
 figure. Scenarios ``(sigma_q^2, sigma_r^2)``: (0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2).
-Two readings of the names (SPEC): ``"eqs"`` (eqs 24-25: ``q = sigma_q^2``, ``r =
+Two readings of the names (section 5's prose swaps them): ``"eqs"`` (eqs 24-25: ``q = sigma_q^2``, ``r =
 sigma_r^2``) and ``"prose"`` (section 5's text: ``q = sigma_r^2``, ``r = sigma_q^2``).
 
 Filters: EKF, IAE and MF-IAE from the same nominal (wrong) noise setting, beside them
@@ -60,6 +60,7 @@ READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 
             "prose": "section 5 prose: sigma_r^2 is the process variance, sigma_q^2 the measurement variance"}
 #: Table 3 of seed 000 (eta, eq 44).
 PAPER_ETA = {"EKF": (4.4782, 5.2441, 4.4426, 4.9982), "MF-IAE": (2.2153, 2.2109, 2.6581, 2.6800)}
+#: The filters of the campaign, in the order of its tables.
 FILTERS = ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R")
 #: Run index of the training realisation EM learns from (never one of the test runs).
 TRAINING_RUN = 2**31 - 1

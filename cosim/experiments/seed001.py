@@ -1,7 +1,7 @@
 """Seed 001: Kalman filter on the linearised cart-pole against the EKF, cart driven by a
 constant force, 120 s.
 
-Seed 001's setting is garbled in the extraction (SPEC section 1): it claims that the KF
+Seed 001's setting is garbled in its text: it claims that the KF
 on the linearised model tracks the cart until about 100 s and then diverges while the
 EKF holds, with position errors at 1, 30, 60, 90 and 100 s. Our reading, every choice in
 :class:`Settings`:

@@ -1,6 +1,6 @@
 """Seed 002: the inertia-wheel pendulum's EKF fed by the sensor chain, balanced by LQR.
 
-The chain (issue: sensor chain; :mod:`cosim.components.imu`): accelerometer and gyroscope on the
+The sensor chain (:mod:`cosim.components.imu`): accelerometer and gyroscope on the
 pendulum, fused by a Kalman filter into the tilt; the gyroscope's rate goes on with its
 offset; an incremental encoder gives the wheel speed. The EKF (state augmented with the
 gyro offset, :func:`estimators.augment_rate_bias`) takes ``[fused tilt, gyro rate,

@@ -107,7 +107,7 @@ def _complete_ranges(path: Path, md) -> None:
 
 
 class Extraction:
-    """An FMU (or SSP) unpacked into a private temporary folder, removed by :meth:`close`.
+    """An FMU (or SSP) unpacked into a private temporary folder, removed by :meth:`~.Extraction.close`.
 
     Parameters
     ----------

@@ -28,7 +28,7 @@ with an error naming the FMU, the call and the signal, not the process.
 
 FMU log messages go to the Python logger ``cosim.fmu`` (warnings and errors always;
 everything with ``logging=True``), and the last ones are kept in
-:attr:`FMUComponent.messages` and quoted in errors.
+``FMUComponent.messages`` and quoted in errors.
 """
 from __future__ import annotations
 
@@ -118,7 +118,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
     isolate : bool
         Run the FMU in a process of its own, so that a crash of its code ends the run with
         a named error instead of the process (default False; costs a round trip between
-        the processes per call, see the README's performance section).
+        the processes per call, see the performance page of the documentation).
 
     Attributes
     ----------

@@ -17,7 +17,7 @@ folder and answers requests over a pipe:
 Each request is the op byte, ``t`` and the inputs (float64 and exact int64 values); each
 reply a status byte (``K`` ok, ``S`` a stop request, ``E`` an error, the last two with a
 pickled description) and the outputs. The child ignores Ctrl-C (the parent decides) and,
-on Linux, dies with its parent. Cost: see the README's performance section.
+on Linux, dies with its parent. Cost: see the performance page of the documentation.
 """
 from __future__ import annotations
 
@@ -38,9 +38,9 @@ from ..core.component import StopRequest
 
 __all__ = ["HEAD", "REPLY", "RemoteFMU", "read_exactly", "write_all"]
 
-#: A request's head: the op byte and the time ``t`` [s].
+#: A request's head, the op byte and the time ``t`` [s].
 HEAD = struct.Struct("<cd")
-#: A reply's head: the status byte and the length of its pickled payload.
+#: A reply's head, the status byte and the length of its pickled payload.
 REPLY = struct.Struct("<cI")
 #: Seconds a child may take to end its instance and exit before it is killed.
 CLOSE_TIMEOUT = 2.0

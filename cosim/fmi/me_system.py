@@ -20,7 +20,7 @@ A cycle of direct feed-through between members is an algebraic loop and is refus
 
 Use it when ME FMUs exchange signals that change within a communication step (coupled
 dynamics, continuous controllers); keep separate components for FMUs at different
-periods, Co-Simulation FMUs, or Python components (see the README).
+periods, Co-Simulation FMUs, or Python components (see the third-party FMUs page of the documentation).
 """
 from __future__ import annotations
 

@@ -298,7 +298,7 @@ def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
 
 
 class MEIntegrator:
-    """Advance a :class:`ContinuousModel` between communication points (see the module
+    """Advance a :class:`.ContinuousModel` between communication points (see the module
     documentation).
 
     Parameters

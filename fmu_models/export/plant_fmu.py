@@ -25,7 +25,7 @@ from .variable_list import VariableList
 
 __all__ = ["DEFAULT_STEP_SIZE", "build_fmu", "build_fmus", "derivative_unit", "plant_variables"]
 
-#: Default internal step [s]: seed 000's sampling period T.
+#: Default internal step [s], seed 000's sampling period T.
 DEFAULT_STEP_SIZE = 0.01
 _ITEMS = (("euler", 1, "forward Euler (seed 000 eqs 14-17)"), ("rk4", 2, "classical Runge-Kutta 4"))
 

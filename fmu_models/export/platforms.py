@@ -323,8 +323,8 @@ def zig_version() -> str:
 
 
 def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
-    """Add binaries for ``platforms`` (names of :data:`PLATFORMS`) to the project's FMU
-    ``fmu``, cross-compiled from its ``sources/`` and checked with :func:`check_binary`; the
+    """Add binaries for ``platforms`` (names of :data:`.PLATFORMS`) to the project's FMU
+    ``fmu``, cross-compiled from its ``sources/`` and checked with :func:`.check_binary`; the
     FMU file is replaced atomically. Returns notes on what was left out (an FMI 2.0 FMU has
     no aarch64-linux folder).
 

@@ -78,7 +78,7 @@ KINDS = tuple(SIGNAL_KINDS.names())
 
 def register_signal_kind(name: str, c_output: str, inputs: bool = False) -> SignalKind:
     """Register a signal FMU kind ``name`` whose output channel ``j`` is the C expression
-    ``c_output`` (see :class:`SignalKind`); ``inputs``: one input per channel. Returns it.
+    ``c_output`` (see :class:`.SignalKind`); ``inputs``: one input per channel. Returns it.
 
     >>> register_signal_kind("ramp", "p[P_SLOPE] * t")        # doctest: +SKIP
     """

@@ -68,7 +68,7 @@ class VariableList:
     """Variables added in value-reference order (``vr`` = position), grouped.
 
     Use :meth:`add` with the :class:`FmuVariable` fields except ``vr``; then
-    :attr:`variables` is the list, :meth:`group` the variables of a group and
+    ``variables`` is the list, :meth:`group` the variables of a group and
     :meth:`first` the value reference of a group's first variable.
     """
 

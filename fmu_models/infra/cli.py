@@ -26,6 +26,7 @@ from .interrupts import terminate_as_interrupt
 
 __all__ = ["EXIT_ERROR", "EXIT_INTERRUPTED", "KNOWN_ERRORS", "one_line", "run_command"]
 
+#: Exit statuses of a refused command (2) and of an interrupted one (130, as a shell reports SIGINT).
 EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 

@@ -1,7 +1,7 @@
 """Signals: SIGTERM handled as Ctrl-C by the command lines, so that a killed build or run
 cleans up (temporary folders, compiler processes, partial outputs) through the same
 ``finally`` blocks as an interrupted one; and Ctrl-C/SIGTERM deferred over a few
-statements that must not be cut in two (:class:`Deferred`)."""
+statements that must not be cut in two (:class:`~fmu_models.infra.interrupts.Deferred`)."""
 from __future__ import annotations
 
 import contextlib
@@ -32,7 +32,7 @@ def terminate_as_interrupt() -> Iterator[None]:
 
 
 class Deferred:
-    """Ctrl-C and SIGTERM noted instead of raised until :meth:`release` (main thread only:
+    """Ctrl-C and SIGTERM noted instead of raised until :meth:`~.Deferred.release` (main thread only:
     elsewhere Python raises no signal exceptions)."""
 
     def __init__(self):
