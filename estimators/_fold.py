@@ -99,6 +99,9 @@ class NativeFold:
     n_state : int
         Number of state inputs.
     backend : {"compiled", "vm"}
+    library : path, optional
+        The shared library ``step`` was already compiled into with its driver
+        (:func:`compile_with_fold`); default: compile it now.
     """
 
     def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled", library=None):
