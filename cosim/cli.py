@@ -74,26 +74,38 @@ _positive_float = _number(float, 0, "the duration", strict=True)
 
 
 # ---------------------------------------------------------------------------- run / demo
-def _rmse_table(df, estimators_, truth_prefix="plant"):
-    """RMSE of every estimator's states against the plant's, and of the raw measurements."""
+def _truth_of(df, est: str, estimators_) -> str | None:
+    """The component whose outputs are the true values of estimator ``est``'s states: the
+    one (not an estimator) that outputs every state ``est`` estimates, ``plant`` first if
+    several do; None if none does."""
+    states = [c.split(".", 1)[1] for c in df.columns if c.startswith(est + ".")]
+    states = [n for n in states if not n.startswith("P_") and n != "nis"]
+    comps = sorted({c.split(".", 1)[0] for c in df.columns} - set(estimators_))
+    found = [c for c in comps if states and all(f"{c}.{n}" in df.columns for n in states)]
+    return "plant" if "plant" in found else (found[0] if found else None)
+
+
+def _rmse_table(df, estimators_):
+    """RMSE of every estimator's states against the component that outputs their true
+    values (:func:`_truth_of`), and of the raw measurements (``<sensor>.y_<state>``)."""
     import pandas as pd
 
-    rows = {}
+    rows, truths = {}, set()
     for est in estimators_:
-        cols = [c for c in df.columns if c.startswith(est + ".") and not c.split(".")[1].startswith("P_")
-                and c.split(".")[1] != "nis"]
-        row = {}
-        for c in cols:
-            tc = f"{truth_prefix}.{c.split('.')[1]}"
-            if tc in df.columns:
-                row[c.split(".")[1]] = float(np.sqrt(np.mean((df[c] - df[tc]) ** 2)))
-        rows[est] = row
+        truth = _truth_of(df, est, estimators_)
+        if truth is None:
+            continue
+        truths.add(truth)
+        rows[est] = {c.split(".", 1)[1]: float(np.sqrt(np.mean((df[c] - df[f"{truth}.{c.split('.', 1)[1]}"]) ** 2)))
+                     for c in df.columns if c.startswith(est + ".") and f"{truth}.{c.split('.', 1)[1]}" in df.columns
+                     and not c.split(".", 1)[1].startswith("P_") and c.split(".", 1)[1] != "nis"}
     meas = {}
-    for c in df.columns:
-        if ".y_" in c and not c.startswith(truth_prefix + "."):
-            tc = f"{truth_prefix}.{c.split('.y_')[1]}"
-            if tc in df.columns:
-                meas[c.split(".y_")[1]] = float(np.sqrt(np.mean((df[c] - df[tc]) ** 2)))
+    for truth in sorted(truths):
+        for c in df.columns:
+            if ".y_" in c and not c.startswith(truth + "."):
+                tc = f"{truth}.{c.split('.y_')[1]}"
+                if tc in df.columns:
+                    meas[c.split(".y_")[1]] = float(np.sqrt(np.mean((df[c] - df[tc]) ** 2)))
     if meas:
         rows["raw measurement"] = meas
     return pd.DataFrame(rows).T
