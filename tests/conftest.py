@@ -88,8 +88,10 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def build_test_fmu(folder: str, identifier: str, version: int, out: Path) -> Path:
-    """Compile a hand-written test FMU of ``tests/data/<folder>`` and zip it into ``out``."""
+def build_test_fmu(folder: str, identifier: str, version: int, out: Path,
+                   description: str = "modelDescription.xml") -> Path:
+    """Compile a hand-written test FMU of ``tests/data/<folder>`` and zip it into ``out``
+    (``description``: the folder's model description to ship, as ``modelDescription.xml``)."""
     src = DATA / folder
     plat = ("linux64" if version == 2 else "x86_64-linux") if sys.platform.startswith("linux") else None
     if plat is None:
@@ -102,7 +104,7 @@ def build_test_fmu(folder: str, identifier: str, version: int, out: Path) -> Pat
                     "-o", str(binaries / f"{identifier}.so"), "-lm"], check=True)
     fmu = out / f"{identifier}.fmu"
     with zipfile.ZipFile(fmu, "w") as z:
-        z.write(src / "modelDescription.xml", "modelDescription.xml")
+        z.write(src / description, "modelDescription.xml")
         z.write(binaries / f"{identifier}.so", f"binaries/{plat}/{identifier}.so")
     return fmu
 
@@ -133,6 +135,13 @@ def call_rules_fmu(tmp_path_factory):
     forbids, to the file named by ``CALL_RULES_LOG``; it fails, crashes or hangs on
     request (tests/data/call_rules)."""
     return build_test_fmu("call_rules", "CallRules", 2, tmp_path_factory.mktemp("callrules"))
+
+
+@pytest.fixture(scope="session")
+def clock_lab_fmu(tmp_path_factory):
+    """A third-party FMI 3.0 FMU (ME, CS with Event Mode, SE) with clocks of every kind that
+    checks the clock call rules it receives (tests/data/clock_lab)."""
+    return build_test_fmu("clock_lab", "ClockLab", 3, tmp_path_factory.mktemp("clocklab"))
 
 
 @pytest.fixture(scope="session")
