@@ -145,6 +145,20 @@ def clock_lab_fmu(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def clock_loop_fmus(tmp_path_factory):
+    """Three third-party FMI 3.0 FMUs of a clocked control loop (tests/data/clock_loop): a
+    Model Exchange plant, a Model Exchange supervisor whose state event ticks an output clock,
+    a Co-Simulation controller with a sample clock and a triggered mode clock:
+    {"plant" | "supervisor" | "controller": path}."""
+    out = tmp_path_factory.mktemp("clockloop")
+    paths = {}
+    for role in ("plant", "supervisor", "controller"):
+        (out / role).mkdir()
+        paths[role] = build_test_fmu("clock_loop", "ClockLoop", 3, out / role, f"{role}.xml")
+    return paths
+
+
+@pytest.fixture(scope="session")
 def fmu_builds(tmp_path_factory):
     """Both plant FMUs in FMI 2.0 and 3.0, built once per session: {(name, version): path}."""
     from fmu_models import build_fmu, model_names

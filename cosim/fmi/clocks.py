@@ -546,6 +546,7 @@ class ClockedRun:
         self.done_n = -1                             # the instant whose outputs were computed
         self.window_end = self.t0
         self.inbox = board.inbox(self.name)
+        self._outbox: list = []                      # output clock activations to send
         self._error: BaseException | None = None
 
     # ------------------------------------------------------------------ set-up
@@ -839,12 +840,23 @@ class ClockedRun:
                 published = published or []
                 published.append(self.publishers[i])
         if published:
-            if fresh:
-                self.get_u()
+            self._outbox.append((t, snap, published))
+            if fresh:                                 # CS: outputs without clocks are left limits
+                self._publish(self.interface == "me")
+
+    def _publish(self, read: bool) -> None:
+        """Send the output clocks' activations read so far to their sinks, each with this
+        component's outputs (the unclocked ones read again first if ``read``)."""
+        if not self._outbox:
+            return
+        if read:
+            self.get_u()
+        for t, snap, published in self._outbox:
             out = dict(snap) if snap else {}
             out[self.name] = (self.own.copy(), self.own_i.copy())
             for pub in published:
                 pub(t, out)
+        self._outbox.clear()
 
     def _finish(self, t: float) -> bool:
         """The rest of an Event Mode at ``t`` (ME, CS): the event iteration, the intervals,
@@ -948,6 +960,7 @@ class ClockedRun:
                     self._overlay(snap)
                 self._activate(t, ks + got, "output", snap)
                 self.set_u_ft()
+                self._publish(False)
             self._write()
 
         def event(t: float) -> None:
@@ -987,6 +1000,7 @@ class ClockedRun:
                     if reached >= end - self.tol:
                         self.pending_event = True
                         return
+                    self.get_u()
                     enter(reached)
                     self._intra(reached)
                     event(reached)
@@ -997,6 +1011,7 @@ class ClockedRun:
                     continue
                 if target >= end - self.tol:
                     return
+                self.get_u()
                 enter(target)
                 self._intra(target)
                 event(target)
@@ -1046,10 +1061,11 @@ class ClockedRun:
             self._fill(self.in_ft)
             ks = self._due_periodic(n) + self._due_at(t)
             got, snap = self._received_at(t)
-            if ks or got or self.in_event:
+            if ks or got or self.in_event or self.pending_event:
                 if not self.in_event:
                     self._check(self._enter_event(self.c), f"EnterEventMode(t = {t:g} s)")
                     self.in_event = True
+                self.pending_event = False
                 if got:
                     self.vin_base[:] = self.vin
                     self.iin_base[:] = self.iin
@@ -1061,6 +1077,7 @@ class ClockedRun:
                 if self.set_disc_ft.differs():
                     me.at_event(t, self.set_disc_ft)
             self.get_u()
+            self._publish(False)
             self._write()
 
         def rest():
@@ -1097,7 +1114,12 @@ class ClockedRun:
         return p if f is None else (f if p is None else min(p, f))
 
     def _me_event(self, t: float, set_inputs) -> tuple[bool, float | None]:
-        """An Event Mode of the ME FMU at ``t`` (entered here unless already in it)."""
+        """An Event Mode of the ME FMU at ``t`` (entered here unless already in it). An event
+        the integrator finds at the end of the step (within rounding) waits for that instant,
+        whose Event Mode handles it with the instant's activations."""
+        if not self.in_event and set_inputs is None and abs(t - self.window_end) <= self.tol:
+            self.pending_event = True
+            return False, None
         if not self.in_event:
             self._check(self._enter_event(self.c), f"EnterEventMode(t = {t:g} s)")
             self.in_event = True
