@@ -106,7 +106,7 @@ def test_clocked_variables_only_at_their_ticks(clock_lab_fmu, interface):
     instant); fixedValue = yConst of the same instant + 1 where both clocks tick (the
     partitions' dependency); trigSum adds the input at each trigger: at an instant its value
     there, between instants its value at the last instant (zero-order hold)."""
-    sim, df = run_lab(clock_lab_fmu, interface)
+    _, df = run_lab(clock_lab_fmu, interface)
     u = df["u.out"].to_numpy()
     np.testing.assert_allclose(df["m.yConst"], 2 * u + df["m.constCount"], rtol=0, atol=1e-12)
     both = [round(x / P) for x in expected(interface)["cFixed"]]
@@ -121,7 +121,7 @@ def test_clocked_variables_only_at_their_ticks(clock_lab_fmu, interface):
 def test_countdown_between_instants(clock_lab_fmu, interface, calls):
     """A countdown interval of 0.05 s puts its activations between the 0.1 s instants: CS
     steps to them (a variable step), ME makes them time events, SE activates there."""
-    sim, df = run_lab(clock_lab_fmu, interface, start={"pCountdown": 0.05})
+    sim, _ = run_lab(clock_lab_fmu, interface, start={"pCountdown": 0.05})
     np.testing.assert_allclose(ticks_of(sim)["cCountdown"], expected(interface, countdown=0.05)["cCountdown"],
                                rtol=0, atol=1e-9)
     assert not [line for line in calls() if "ILLEGAL" in line]
@@ -166,7 +166,7 @@ def test_cs_event_mode_sequence(clock_lab_fmu, calls):
     early = next(i for i, x in enumerate(lines) if "eventHandlingNeeded at 0.34999" in x or
                  "eventHandlingNeeded at 0.35" in x)
     assert "early=1" in lines[early]
-    assert lines[early + 1].startswith("EnterEventMode t=0.35") or lines[early + 1].startswith("EnterEventMode t=0.34999")
+    assert lines[early + 1].startswith(("EnterEventMode t=0.35", "EnterEventMode t=0.34999"))
     after = lines[early + 1:early + 8]
     assert any(x.startswith("GetClock cAlarm=1") for x in after)
     trig = next(i for i, x in enumerate(lines) if x.startswith("SetClock cTrigger"))

@@ -106,6 +106,7 @@ def reference_loop(paths):
     state = {"level": 0.0, "alarms": 0, "count": 0, "lastLevel": 0.0, "modes": 0, "u": 0.0, "ref": 0.0}
     alarm_times, mode_times, rows = [], [], []
     pending_alarm = None                                         # a state event at an instant
+    events = []                                                  # the alarms of one step: (time, level)
 
     def alarm_in_event_mode(te):
         """The supervisor in Event Mode at te: its output clock and the variables it clocks."""
@@ -158,7 +159,7 @@ def reference_loop(paths):
             sup.fmu.enterContinuousTimeMode()
             sup.read()
             pending_alarm = None
-        events = []
+        events.clear()
 
         def sup_event(te):
             sup.fmu.enterEventMode()
