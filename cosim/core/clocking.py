@@ -487,10 +487,16 @@ class ClockTicks(Component, kind="clock_ticks"):
         self._label = board.label(self.name, "tick")
 
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse activation times before the start."""
+        """Refuse activation times before the start, and more activations than a run may
+        log (:data:`MAX_TICKS`)."""
         if self.times is not None and self.times and self.times[0] < start_time:
             raise ConfigurationError(f"{self.name}: activation time {self.times[0]:g} s is before the start time "
                                      f"{start_time:g} s")
+        if self.interval is not None:
+            n = (stop_time - start_time - self.shift) / self.interval + 1
+            if n > MAX_TICKS:
+                raise ResourceError(f"{self.name}: an activation every {self.interval:g} s from {start_time:g} s to "
+                                    f"{stop_time:g} s makes {n:.3g} of them, more than {MAX_TICKS} (a run logs each)")
 
     def reset(self, t0: float) -> None:
         """Start at ``t0`` [s]: no activation yet."""

@@ -547,6 +547,7 @@ class ClockedRun:
         self.window_end = self.t0
         self.inbox = board.inbox(self.name)
         self._outbox: list = []                      # output clock activations to send
+        self.in_callback = False                     # in the clockUpdate callback (Clock Update Mode)
         self._error: BaseException | None = None
 
     # ------------------------------------------------------------------ set-up
@@ -1163,10 +1164,12 @@ class ClockedRun:
                 self._se_cb_clocks = []
                 st = act(self.c, ctypes.c_uint32(vr), _D(t))
                 err, self._error = self._error, None
+                if err is not None:                 # what went wrong in the callback comes first
+                    if st > 1:
+                        self.inst.worst = max(self.inst.worst, 3 if st == 2 else st)
+                    raise err
                 if st > 1:
                     self._fail(f"ActivateModelPartition({k.name}, t = {t:g} s)", st)
-                if err is not None:
-                    raise err
                 self.board.log(t, self.labels[vr])
                 self.get_k[vr]()
                 self.get_u()
@@ -1222,6 +1225,7 @@ class ClockedRun:
         ``fmi3GetClock``, every countdown clock's interval; an error is kept and raised
         after the activation returns (a callback cannot raise)."""
         try:
+            self.in_callback = True
             n = len(self.out_clocks)
             if n:
                 self._check(self._get_clock(self.c, self._out_vr, self._n_out, self._out_val), "GetClock")
@@ -1243,6 +1247,8 @@ class ClockedRun:
         except BaseException as e:  # noqa: BLE001 - kept, raised after the FMU returns
             if self._error is None:
                 self._error = e
+        finally:
+            self.in_callback = False
 
     def _se_outputs(self, t: float, snap: dict | None) -> None:
         published = None

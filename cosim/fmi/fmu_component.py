@@ -435,10 +435,17 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self._board = board
 
     def _clock_update(self, env) -> None:
-        """The Scheduled Execution ``clockUpdate`` callback, passed on to the run."""
-        run = self._run
-        if run is not None:
-            run.clock_update(env)
+        """The Scheduled Execution ``clockUpdate`` callback, passed on to the run (an
+        exception, Ctrl-C too, is kept by the run and raised when the FMU returns: a ctypes
+        callback cannot raise)."""
+        try:
+            run = self._run
+            if run is not None:
+                run.clock_update(env)
+        except BaseException as e:  # noqa: BLE001 - kept for the run
+            run = self._run
+            if run is not None and run._error is None:
+                run._error = e
 
     # ------------------------------------------------------------------ lifecycle
     def check_run(self, start_time: float, stop_time: float) -> None:

@@ -18,7 +18,9 @@
  *   8 cOut       triggered output (see cConst), outValue = yConst
  *   9 cAlarm     triggered output at the state event x = pThreshold (x' = uRate, reset to
  *                0 at the event): an event indicator in ME, an early return in CS
- * A time event at pTimeEvent (if >= 0) counts in timeEvents (ME and CS).
+ * A time event at pTimeEvent (if >= 0) counts in timeEvents (ME and CS). pFailAt (if >= 0):
+ * the first fmi3UpdateDiscreteStates (SE: fmi3ActivateModelPartition) at or after that time
+ * returns fmi3Error ("requested failure"), to test what an importer does after an error.
  *
  * Rules checked (a violation each): SetClock only in Event Mode, only on input clocks,
  * only to activate, each time-based clock exactly at its time (not early, not late, not
@@ -48,7 +50,7 @@ enum { Q_NOT_YET_KNOWN = 0, Q_UNCHANGED = 1, Q_CHANGED = 2 };
 enum { VR_TIME = 0, VR_UCONST = 20, VR_YCONST, VR_CONSTCOUNT, VR_FIXEDCOUNT, VR_FIXEDPCOUNT, VR_TUNABLECOUNT,
        VR_CHANGINGCOUNT, VR_COUNTDOWNCOUNT, VR_TRIGVALUE, VR_TRIGSUM, VR_TRIGCOUNT, VR_OUTVALUE, VR_ALARMCOUNT, VR_X,
        VR_URATE, VR_LASTTIME, VR_FIXEDSEEN, VR_VIOLATIONS, VR_FIXEDVALUE, VR_TIMEEVENTS, VR_PFIXEDINTERVAL,
-       VR_PFIXEDSHIFT, VR_PCOUNTDOWN, VR_PTHRESHOLD, VR_PTIMEEVENT = 45, VR_DERX = 46 };
+       VR_PFIXEDSHIFT, VR_PCOUNTDOWN, VR_PTHRESHOLD, VR_PTIMEEVENT = 45, VR_DERX = 46, VR_Z = 47, VR_PFAILAT = 48 };
 
 typedef struct {
     Base b;
@@ -63,7 +65,7 @@ typedef struct {
     int se_last_priority;
     /* variables */
     double uConst, trigValue, uRate, x, lastTime, fixedSeen, yConstLast, trigSumPrev, fixedValueLast, outValueLast;
-    double pFixedInterval, pFixedShift, pCountdown, pThreshold, pTimeEvent;
+    double pFixedInterval, pFixedShift, pCountdown, pThreshold, pTimeEvent, pFailAt;
     int32_t constCount, fixedCount, fixedPCount, tunableCount, changingCount, countdownCount, trigCount, alarmCount;
     int32_t timeEvents;
 } Lab;
@@ -106,6 +108,7 @@ static void *create(fmi3String name, fmi3String token, int kind, fmi3InstanceEnv
     m->pCountdown = 0.0;
     m->pThreshold = 0.35;
     m->pTimeEvent = -1.0;
+    m->pFailAt = -1.0;
     for (int k = 0; k < N_CLOCKS; k++) m->next_due[k] = NAN, m->last_activation[k] = -INFINITY;
     m->interval[C_CONST] = 0.1;
     m->interval[C_FIXED] = 0.2, m->shift[C_FIXED] = 0.1;
@@ -482,7 +485,8 @@ fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
         case VR_PTHRESHOLD: v[i] = m->pThreshold; break;
         case VR_PTIMEEVENT: v[i] = m->pTimeEvent; break;
         case VR_DERX: v[i] = m->uRate; break;
-        case 47: v[i] = m->pThreshold - m->x; break;
+        case VR_Z: v[i] = m->pThreshold - m->x; break;
+        case VR_PFAILAT: v[i] = m->pFailAt; break;
         default: return violation(&m->b, "fmi3GetFloat64 of value reference %u, not a Float64", vr[i]);
         }
     }
@@ -494,7 +498,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
     if (!m || !usable(&m->b, "fmi3SetFloat64")) return fmi3Error;
     if (nv != n) return violation(&m->b, "fmi3SetFloat64 with nValues %zu for %zu scalars", nv, n);
     for (size_t i = 0; i < n; i++) {
-        bool param = vr[i] >= VR_PFIXEDINTERVAL && vr[i] <= VR_PTIMEEVENT;
+        bool param = (vr[i] >= VR_PFIXEDINTERVAL && vr[i] <= VR_PTIMEEVENT) || vr[i] == VR_PFAILAT;
         if (param && m->b.state != S_INSTANTIATED && m->b.state != S_INIT)
             return violation(&m->b, "fmi3SetFloat64 of the fixed parameter %u in %s", vr[i], STATE_NAME[m->b.state]);
         if (!clocked_access(m, vr[i], true, "fmi3SetFloat64")) return fmi3Error;
@@ -510,6 +514,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
         case VR_PCOUNTDOWN: m->pCountdown = v[i]; break;
         case VR_PTHRESHOLD: m->pThreshold = v[i]; break;
         case VR_PTIMEEVENT: m->pTimeEvent = v[i]; break;
+        case VR_PFAILAT: m->pFailAt = v[i]; break;
         default: return violation(&m->b, "fmi3SetFloat64 of value reference %u, not a settable Float64", vr[i]);
         }
         call_log(&m->b, "SetFloat64 %u=%.17g t=%.17g", vr[i], v[i], m->b.time);
@@ -549,6 +554,16 @@ fmi3Status fmi3SetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t
     return violation(&m->b, "fmi3SetInt32: this FMU has no Int32 input or parameter");
 }
 
+/* pFailAt reached: an error, as an FMU that fails */
+static bool requested_failure(Lab *m) {
+    if (m->pFailAt < 0 || m->b.time < m->pFailAt - TOL) return false;
+    m->pFailAt = -1.0;
+    call_log(&m->b, "requested failure at t=%.17g", m->b.time);
+    if (m->b.logger) m->b.logger(m->b.env, fmi3Error, "logStatusError", "requested failure (pFailAt)");
+    m->b.state = S_ERROR;
+    return true;
+}
+
 /* ---------------------------------------------------------------- Event Mode (ME, CS) */
 static void state_event(Lab *m) {
     if (m->alarm_pending || (m->b.kind == KIND_ME && m->x >= m->pThreshold - 1e-12)) {
@@ -584,6 +599,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance inst, fmi3Boolean *need, fmi3Bo
     bool x_reset;
     if (!m || !in_states(&m->b, "fmi3UpdateDiscreteStates", M(S_EVENT))) return fmi3Error;
     call_log(&m->b, "UpdateDiscreteStates t=%.17g", m->b.time);
+    if (requested_failure(m)) return fmi3Error;
     for (int k = C_OUT; k <= C_ALARM; k++)
         if (m->out_pending[k]) return violation(&m->b, "output clock %s ticked but was not read with fmi3GetClock before fmi3UpdateDiscreteStates", CLOCK[k]);
     x_reset = m->active[C_ALARM];
@@ -754,6 +770,7 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance inst, fmi3ValueReference vr, 
     if (check_missed(m, t, "fmi3ActivateModelPartition") != fmi3OK) return fmi3Error;
     if (check_due(m, k) != fmi3OK) return fmi3Error;
     m->set_since_activation = false;
+    if (requested_failure(m)) return fmi3Error;
     partition(m, k);
     announce = m->qualifier[C_COUNTDOWN] == Q_CHANGED && k == C_CONST && m->constCount % 4 == 0;
     tick = m->out_pending[C_OUT];
