@@ -408,9 +408,18 @@ class ClockBoard:
             self._labels.append(key)
         return self._label_of[key]
 
+    def log_functions(self) -> tuple:
+        """``(log_time, log_label)``: the two appends of :meth:`log` without its limit check,
+        for a component's hot path (it checks :meth:`count` once per instant)."""
+        return self._times.append, self._ids.append
+
+    def count(self) -> int:
+        """Activations logged so far."""
+        return len(self._ids)
+
     def log(self, time: float, label: int) -> None:
         """Log one activation of the clock numbered ``label`` at ``time`` [s]."""
-        if len(self._ids) >= MAX_TICKS:
+        if len(self._ids) > MAX_TICKS:
             raise ResourceError(f"more than {MAX_TICKS} clock activations in one run: the log would not fit; "
                                 "shorten the run")
         self._times.append(time)

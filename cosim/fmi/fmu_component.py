@@ -57,7 +57,8 @@ from fmu_models.infra.files import atomic_copy
 from ..core.clocking import ClockBoard
 from ..core.component import CLOCK, PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest, port_kind
 from .archive import Extraction, read_description
-from .clocks import ClockedRun, initialise, read_clocks
+from .clock_run import ClockedRun, initialise
+from .clocks import read_clocks
 from .exchange import Exchange
 from .exchange import no_exchange as _nothing
 from .instance import FMUInstance

@@ -20,7 +20,7 @@ import pytest
 
 from cosim import Constant, Cosimulation, FMUComponent, MESystem, Sine
 from cosim.core.clocking import MAX_TICKS, ClockTicks
-from cosim.fmi.clocks import ClockedRun
+from cosim.fmi.clock_run import ClockedRun
 from cosim.ssp import export_ssp
 from fmu_models.errors import (
     ConfigurationError,
