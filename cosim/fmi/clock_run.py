@@ -123,7 +123,8 @@ class _Plan:
     """The calls of one set of input clocks activated together (ME, CS: one ``fmi3SetClock``;
     SE: the partitions in priority order)."""
 
-    __slots__ = ("args", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_rest", "vrs")
+    __slots__ = ("args", "fill", "fire", "get", "get_d", "intervals", "labels", "names", "set_all", "set_all_d",
+                 "set_ft", "set_ft_d", "set_rest", "set_rest_d", "tick", "vrs")
 
 
 def _calls(fns) -> tuple:
@@ -168,6 +169,7 @@ class ClockedRun:
         self.log_t, self.log_id = board.log_functions()
         self._build_ports(comp)
         self._build_calls()
+        self._fillers()
         self._patterns()
         self.in_event = comp.interface != "se"       # ME and CS: in Event Mode after initialisation
         self.started = False
@@ -180,7 +182,6 @@ class ClockedRun:
         self.inbox = board.inbox(self.name)
         self._outbox: list = []                      # output clock activations to send
         self.in_callback = False                     # in the clockUpdate callback (Clock Update Mode)
-        self.fast_plan: _Plan | None = None          # the short path's activation of this instant
         self.dirty = False                           # the own buffers hold outputs newer than the signals
         self._error: BaseException | None = None
 
@@ -252,10 +253,11 @@ class ClockedRun:
                         own_i[j] = v - (big << 1) if kind == "u" and v >= big else v
         return get
 
-    def _setter(self, positions: list[int], changes: bool = False):
+    def _setter(self, positions: list[int], changes: bool = False, direct: bool = False):
         """A call setting the input ports at ``positions`` from the component's input buffer
         (scalar Float64 ports directly; others through an :class:`Exchange`, which checks
-        integer ranges)."""
+        integer ranges). ``direct``: scalar Float64 ports read from the master's signals
+        (the short path, which fills no buffer); any other such setter has ``needs_fill``."""
         if not positions:
             return no_exchange
         comp = self.comp
@@ -266,17 +268,22 @@ class ClockedRun:
             n = _SIZE(len(ports))
             buf = (_D * len(ports))()
             args = (self.c, (_U32 * len(ports))(*[p.variable.valueReference for p in ports]), n, buf, n)
-            fn, fail, vin = self._fn("fmi3SetFloat64"), self._fail, self.vin
-            pairs = tuple(enumerate(positions))
+            fn, fail = self._fn("fmi3SetFloat64"), self._fail
+            src = self.values if direct else self.vin
+            pairs = tuple((i, int(self.idx_in[j]) if direct else j) for i, j in enumerate(positions))
 
             def set_reals() -> bool:
                 for i, j in pairs:
-                    buf[i] = vin[j]
+                    buf[i] = src[j]
                 st = fn(*args)
                 if st > 1:
                     fail("SetFloat64", st)
                 return False
             return set_reals
+        if direct:
+            f = self._setter(positions, changes)
+            f.needs_fill = True
+            return f
         srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type) for n in names]
         starts = comp._input_starts()
         ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "set", self._fail, self.name,
@@ -303,6 +310,10 @@ class ClockedRun:
         self.set_ft = {vr: self._setter([i for i in pos if i in ft]) for vr, pos in by_clock.items()}
         self.set_rest = {vr: self._setter([i for i in pos if i not in ft]) for vr, pos in by_clock.items()}
         self.set_all = {vr: self._setter(pos) for vr, pos in by_clock.items()}
+        self.set_ft_d = {vr: self._setter([i for i in pos if i in ft], direct=True) for vr, pos in by_clock.items()}
+        self.set_rest_d = {vr: self._setter([i for i in pos if i not in ft], direct=True)
+                           for vr, pos in by_clock.items()}
+        self.set_all_d = {vr: self._setter(pos, direct=True) for vr, pos in by_clock.items()}
         if self.interface == "me":
             cont = [i for i in unclocked if not ports[names[i]].discrete]
             disc = [i for i in unclocked if ports[names[i]].discrete]
@@ -312,6 +323,9 @@ class ClockedRun:
             self.set_disc_ft = self._setter([i for i in disc if i in ft], changes=True)
         self.set_u_all = self._setter(unclocked)
         self.set_u_ft = self._setter([i for i in unclocked if i in ft])
+        self.set_u_all_d = self._setter(unclocked, direct=True)
+        self.set_u_ft_d = self._setter([i for i in unclocked if i in ft], direct=True)
+        self.set_u_rest = self._setter([i for i in unclocked if i not in ft])
         outs = comp.output_names
         get_by_clock: dict[int, list[int]] = {}
         unclocked_out = []
@@ -380,6 +394,12 @@ class ClockedRun:
             plan.get_d = _calls(self.get_kd.get(v) for v in key)
             plan.intervals = [by_vr[v] for v in key if by_vr[v].variability == "changing" or
                               (by_vr[v].variability == "tunable" and not by_vr[v].has_decimal)]
+            plan.set_ft_d = _calls(self.set_ft_d.get(v) for v in key)
+            plan.set_rest_d = _calls(self.set_rest_d.get(v) for v in key)
+            plan.set_all_d = _calls(self.set_all_d.get(v) for v in key)
+            plan.fill = any(getattr(f, "needs_fill", False)
+                            for f in (*plan.set_ft_d, *plan.set_rest_d, *plan.set_all_d))
+            plan.tick = plan.fire = None                 # the short path's calls, made by the interface
         return plan
 
     def _patterns(self) -> None:
@@ -503,14 +523,38 @@ class ClockedRun:
         return best
 
     # ------------------------------------------------------------------ inputs
+    def _fillers(self) -> None:
+        """``fill_all()`` (every connected input from the signals: what an update consumes)
+        and ``fill_ft()`` (those the outputs depend on: at an instant), or None without any."""
+        values, integers, vin, iin = self.values, self.integers, self.vin, self.iin
+        n = self.n_in
+        if n:
+            idx, v_n, i_n = self.idx_in, vin[:n], iin[:n]
+            take_v, take_i = values.take, integers.take
+
+            def fill_all() -> None:
+                take_v(idx, out=v_n)
+                take_i(idx, out=i_n)
+            self.fill_all = fill_all
+        else:
+            self.fill_all = None
+        pairs = tuple((int(j), int(self.idx_in[j])) for j in self.in_ft)
+        if not pairs:
+            self.fill_ft = None
+            return
+
+        def fill_ft() -> None:
+            for j, slot in pairs:
+                vin[j] = values[slot]
+                iin[j] = integers[slot]
+        self.fill_ft = fill_ft
+
     def _fill(self, positions=None) -> None:
-        if positions is None:
-            if self.n_in:
-                np.take(self.values, self.idx_in, out=self.vin[:self.n_in])
-                np.take(self.integers, self.idx_in, out=self.iin[:self.n_in])
-        elif len(positions):
-            self.vin[positions] = self.values[self.idx_in[positions]]
-            self.iin[positions] = self.integers[self.idx_in[positions]]
+        """The inputs into the input buffer: all of them, or (``positions`` given) those the
+        outputs depend on."""
+        f = self.fill_all if positions is None else self.fill_ft
+        if f is not None:
+            f()
 
     def _keep_base(self) -> None:
         self.vin_base[:] = self.vin
@@ -699,9 +743,11 @@ class ClockedRun:
     def _again(self) -> None:
         """The outputs computed again at the same instant (a split evaluation or a loop)."""
         if self.in_event:
+            self._fill(self.in_ft)
             vrs = set(self.active)
-            if self.fast_plan is not None:
-                vrs.update(self.fast_plan.vrs)
+            plan = self.periodic_at(self.done_n)
+            if plan is not None:
+                vrs.update(plan.vrs)
             self.set_u_ft()
             for vr in vrs:
                 self.set_ft[vr]()
@@ -732,7 +778,9 @@ class ClockedRun:
         get_ud = self.get_ud
         set_u_ft = None if self.set_u_ft is no_exchange else self.set_u_ft
         set_u_all = None if self.set_u_all is no_exchange else self.set_u_all
-        in_ft, n_in = self.in_ft, self.n_in
+        set_u_ft_d = None if self.set_u_ft_d is no_exchange else self.set_u_ft_d
+        set_u_all_d = None if self.set_u_all_d is no_exchange else self.set_u_all_d
+        u_fill = any(getattr(f, "needs_fill", False) for f in (set_u_ft_d, set_u_all_d))
         has_out, countdown = bool(self.out_clocks), bool(self.countdown)
         ct, ch = _D(0.0), _D(P)
         ids = self.board._ids
@@ -744,49 +792,107 @@ class ClockedRun:
                     fail(f"EnterEventMode(t = {t:g} s)", st)
                 self.in_event = True
 
+        quiet = [False]          # nothing pending, nothing held: the short path may run (set by each update)
+        fast = [None]            # (event iteration, plan) of the short path's activation at this instant
+        fill_ft, fill_all = self.fill_ft, self.fill_all
+
+        def make(plan):
+            """The short path of ``plan``: its activation at an instant (for the outputs) and
+            its event iteration (in the update)."""
+            args, vrs, labels = plan.args, plan.vrs, plan.labels
+            set_ft, get_d, set_rest = plan.set_ft_d, plan.get_d, plan.set_rest_d
+            one = labels[0] if len(labels) == 1 else None
+            simple = not plan.intervals
+            fill = plan.fill or u_fill
+
+            def tick(t: float) -> None:
+                if fill and fill_ft is not None:
+                    fill_ft()
+                st = enter_ev(c)
+                if st > 1:
+                    fail(f"EnterEventMode(t = {t:g} s)", st)
+                self.in_event = True
+                if set_u_ft_d is not None:
+                    set_u_ft_d()
+                st = set_clock(*args)
+                if st > 1:
+                    fail(f"SetClock({plan.names}, t = {t:g} s)", st)
+                if one is not None:
+                    log_t(t)
+                    log_id(one)
+                else:
+                    for lab in labels:
+                        log_t(t)
+                        log_id(lab)
+                for f in set_ft:
+                    f()
+                for g in get_d:
+                    g()
+                if has_out:
+                    self._read_output_clocks(t, None, False)
+                    if outbox:
+                        self._publish(True)
+                if simple:
+                    fast[0] = entry
+                else:
+                    self.active.update(vrs)
+                    self.ticked.update(vrs)
+
+            def tock(t: float) -> None:
+                if fill and fill_all is not None:
+                    fill_all()
+                for f in set_rest:
+                    f()
+                if set_u_all_d is not None:
+                    set_u_all_d()
+                st = uds(*uds_args)
+                if st > 1:
+                    fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
+                if term.value:
+                    raise StopRequest(name, t, "the FMU requested termination in its event update")
+                if need.value:                          # more super-dense instants: the general way
+                    self._read_output_clocks(t, None, True)
+                    event(t)
+                    return
+                self.fmu_next = next_t.value if next_def.value else None
+                if self.ticked:
+                    self.ticked.clear()
+                st = enter_step(c)
+                if st > 1:
+                    fail(f"EnterStepMode(t = {t:g} s)", st)
+                self.in_event = False
+
+            entry = (tock, plan)
+            plan.tick = tick
+            return tick
+
         def output_fn(t: float) -> None:
             n = round((t - t0) * inv)
             if n == self.done_n:
                 self._again()
                 return
             self.done_n = n
+            if quiet[0] and not inbox:                  # the short path: periodic clocks only
+                if get_ud is not None:                  # in Step Mode, before any set
+                    get_ud()
+                plans = self.plans
+                plan = plans[n % self.plan_len] if plans is not None and n >= self.first else self._plan_at(n)
+                if plan is not None:
+                    (plan.tick or make(plan))(t)
+                return
             if self.dirty:
                 self._sync()
-            if len(in_ft):
-                self._fill(in_ft)
-            if get_ud is not None:                      # in Step Mode, before any set
+            if fill_ft is not None:
+                fill_ft()
+            if get_ud is not None:
                 get_ud()
             plans = self.plans
             plan = plans[n % self.plan_len] if plans is not None and n >= self.first else self._plan_at(n)
             if inbox or next_at or self.pending_event or self.in_event or (
                     self.fmu_next is not None and abs(self.fmu_next - t) <= tol):
                 slow_output(t, plan)
-            elif plan is not None:                      # the short path: periodic clocks only
-                st = enter_ev(c)
-                if st > 1:
-                    fail(f"EnterEventMode(t = {t:g} s)", st)
-                self.in_event = True
-                if set_u_ft is not None:
-                    set_u_ft()
-                st = set_clock(*plan.args)
-                if st > 1:
-                    fail(f"SetClock({plan.names}, t = {t:g} s)", st)
-                for lab in plan.labels:
-                    log_t(t)
-                    log_id(lab)
-                for s in plan.set_ft:
-                    s()
-                if plan.intervals:
-                    self.active.update(plan.vrs)
-                    self.ticked.update(plan.vrs)
-                else:
-                    self.fast_plan = plan
-                for g in plan.get_d:
-                    g()
-                if has_out:
-                    self._read_output_clocks(t, None, False)
-                    if outbox:
-                        self._publish(True)
+            elif plan is not None:
+                (plan.tick or make(plan))(t)
 
         def slow_output(t, plan):
             ks = list(plan.vrs) if plan is not None else []
@@ -814,57 +920,53 @@ class ClockedRun:
             self.in_event = False
 
         def update_fn(t: float) -> None:
-            if n_in:
-                self._fill()
-            if self.in_event:
-                plan, self.fast_plan = self.fast_plan, None
-                if plan is not None and not (countdown or inbox or next_at):
-                    for s in plan.set_rest:             # the short path of the event iteration
-                        s()
-                    if set_u_all is not None:
-                        set_u_all()
-                    st = uds(*uds_args)
-                    if st > 1:
-                        fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
-                    if term.value:
-                        raise StopRequest(name, t, "the FMU requested termination in its event update")
-                    if need.value:
-                        self._read_output_clocks(t, None, True)
-                        event(t)
-                    else:
-                        self.fmu_next = next_t.value if next_def.value else None
-                        if self.ticked:
-                            self.ticked.clear()
-                        st = enter_step(c)
-                        if st > 1:
-                            fail(f"EnterStepMode(t = {t:g} s)", st)
-                        self.in_event = False
-                else:
-                    if plan is not None:
-                        self.active.update(plan.vrs)
-                        self.ticked.update(plan.vrs)
-                    for vr in self.active:
-                        s = self.set_rest[vr]
-                        if s is not no_exchange:
-                            s()
-                    if set_u_all is not None:
-                        set_u_all()
-                    event(t)
-                if len(ids) > MAX_TICKS:
-                    self._check_log()
-            elif set_u_all is not None:
-                set_u_all()
+            entry = fast[0]
+            filled = False
+            if entry is not None and not (countdown or inbox or next_at):
+                fast[0] = None
+                entry[0](t)                             # the short path of the event iteration
+            elif entry is None and not self.in_event:   # no tick at this instant: Step Mode
+                if set_u_all_d is not None:
+                    if u_fill and fill_all is not None:
+                        fill_all()
+                        filled = True
+                    set_u_all_d()
+            else:
+                if fill_all is not None:
+                    fill_all()
+                filled = True
+                fast[0] = None
+                general_event(t, entry[1] if entry is not None else None)
             if not inbox and not next_at and self.fmu_next is None:
                 ct.value = t
                 st = do_step(c, ct, ch, True, *refs)
                 if st > 1:
                     fail(f"DoStep(t = {t:g} s, h = {P:g} s)", st)
                 if ehn_f.value or term_f.value or early_f.value:
+                    if not filled and fill_all is not None:
+                        fill_all()
                     self._keep_base()
                     advance(t, step_done(t, t + P))
-                return
-            self._keep_base()
-            advance(t, t)
+            else:
+                if not filled and fill_all is not None:
+                    fill_all()
+                self._keep_base()
+                advance(t, t)
+            quiet[0] = not (next_at or self.fmu_next is not None or self.pending_event or self.dirty or self.in_event)
+            if len(ids) > MAX_TICKS:
+                self._check_log()
+
+        def general_event(t, plan):
+            if plan is not None:
+                self.active.update(plan.vrs)
+                self.ticked.update(plan.vrs)
+            for vr in self.active:
+                f = self.set_rest[vr]
+                if f is not no_exchange:
+                    f()
+            if set_u_all is not None:
+                set_u_all()
+            event(t)
 
         def step_done(t, target):
             """After fmi3DoStep towards ``target``: the time to step on from, or None (the
@@ -1043,8 +1145,11 @@ class ClockedRun:
         self._se_queue: list[int] = []
         log_t, log_id, fail, labels = self.log_t, self.log_id, self._fail, self.labels
         set_u_all = None if self.set_u_all is no_exchange else self.set_u_all
+        set_u_ft_d = None if self.set_u_ft_d is no_exchange else self.set_u_ft_d
+        set_u_rest = None if self.set_u_rest is no_exchange else self.set_u_rest     # consumed at the update
         set_all = {vr: f for vr, f in self.set_all.items() if f is not no_exchange}
-        inbox, next_at, in_ft, ids = self.inbox, self.next_at, self.in_ft, self.board._ids
+        inbox, next_at, ids = self.inbox, self.next_at, self.board._ids
+        fill_ft, fill_all = self.fill_ft, self.fill_all
         cv, at = _U32(0), _D(0.0)
 
         def activate(t: float, vr: int, k: FMIClock, direct: bool) -> None:
@@ -1100,6 +1205,56 @@ class ClockedRun:
                     self._se_outputs(t, snap, direct)
             self._se_now = None
 
+        def make(plan):
+            """The short path of ``plan``: one partition (not changing, not tunable without
+            intervalDecimal) activated at an instant; others go through :func:`run_at`."""
+            vr = plan.vrs[0]
+            k = by_vr[vr]
+            if len(plan.vrs) > 1 or plan.intervals:
+                def fire_all(t: float) -> None:
+                    self._fill(self.in_ft)
+                    run_at(t, list(plan.vrs), None, True)
+                plan.fire = fire_all
+                return fire_all
+            s_all = self.set_all_d[vr]
+            s_all = None if s_all is no_exchange else s_all
+            cvp, lab, g_k, g_u = _U32(vr), plan.labels[0], self.get_kd[vr], self.get_ud
+            cb, queue = self._se_cb_clocks, self._se_queue
+            fill = fill_ft is not None and (plan.fill or getattr(set_u_ft_d, "needs_fill", False))
+
+            def fire(t: float) -> None:
+                self._se_now = t
+                if fill:
+                    fill_ft()
+                if set_u_ft_d is not None:
+                    set_u_ft_d()
+                if set_u_rest is not None:
+                    set_u_rest()
+                if s_all is not None:
+                    s_all()
+                at.value = t
+                st = act(c, cvp, at)
+                if self._error is not None:             # what went wrong in the callback comes first
+                    err, self._error = self._error, None
+                    if st > 1:
+                        self.inst.worst = max(self.inst.worst, 3 if st == 2 else st)
+                    raise err
+                if st > 1:
+                    fail(f"ActivateModelPartition({k.name}, t = {t:g} s)", st)
+                log_t(t)
+                log_id(lab)
+                if g_k is not None:
+                    g_k()
+                if g_u is not None:
+                    g_u()
+                if cb:
+                    self._se_outputs(t, None, True)
+                self._se_now = None
+                if queue:                               # a countdown due at once: after it, in order
+                    run_at(t, list(queue), None, True)
+            plan.fire = fire
+            return fire
+
         def output_fn(t: float) -> None:
             n = round((t - t0) * inv)
             if n == self.done_n:
@@ -1107,27 +1262,13 @@ class ClockedRun:
             self.done_n = n
             if self.dirty:
                 self._sync()
-            if len(in_ft):
-                self._fill(in_ft)
             plans = self.plans
             plan = plans[n % self.plan_len] if plans is not None and n >= self.first else self._plan_at(n)
             if not inbox and not next_at:               # the short path: periodic partitions only
-                if plan is None:
-                    return
-                if len(plan.vrs) == 1:
-                    vr = plan.vrs[0]
-                    self._se_now = t
-                    if set_u_all is not None:
-                        set_u_all()
-                    activate(t, vr, by_vr[vr], True)
-                    if self._se_cb_clocks:
-                        self._se_outputs(t, None, True)
-                    self._se_now = None
-                    if self._se_queue:                  # a countdown due at once: after it, in order
-                        run_at(t, list(self._se_queue), None, True)
-                else:
-                    run_at(t, list(plan.vrs), None, True)
+                if plan is not None:
+                    (plan.fire or make(plan))(t)
                 return
+            self._fill(self.in_ft)
             ks = (list(plan.vrs) if plan is not None else []) + self._due_at(t)
             got, snap = self._received_at(t)
             if got:
@@ -1137,12 +1278,14 @@ class ClockedRun:
                 run_at(t, ks + got, snap, True)
 
         def update_fn(t: float) -> None:
-            if self.n_in:
-                self._fill()
             if len(ids) > MAX_TICKS:
                 self._check_log()
             if not inbox and not next_at:
+                if set_u_rest is not None:              # the inputs consumed at t, for the next activation
+                    fill_all()
                 return
+            if fill_all is not None:
+                fill_all()
             self._keep_base()
             got, snap = self._received_at(t)        # arrived after this instant's outputs
             if got:

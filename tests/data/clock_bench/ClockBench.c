@@ -1,7 +1,8 @@
 /* ClockBench: a minimal hand-written FMI 3.0 FMU with one clock, for the benchmark of the
  * master's cost per tick (bench/bench_clocks.py); independent of pendulum-cosim's code.
  * Co-Simulation with Event Mode and Scheduled Execution: the constant clock "tick"
- * (every 1 ms) clocks the input u and the output y = u + n (n: the ticks so far). The few
+ * (every 1 ms) clocks the input u and the output y = u + n (n: the ticks so far; not
+ * declared in the model description, so that only Float64 values are exchanged). The few
  * checks it makes are cheap: clocks set only in Event Mode, clocked variables exchanged only
  * while "tick" is active (Scheduled Execution: after its partition ran), fmi3DoStep only in
  * Step Mode and never over a tick; a violation is an fmi3Error with a message. */
