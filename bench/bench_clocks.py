@@ -142,7 +142,7 @@ def raw_loop(path: Path, kind: str, count: int, n: int) -> float:
     for k in range(n + 1):
         t = k * H
         y = 0.0
-        for i, (c, fn, one, vt, on, vu, ubuf, vy, ybuf, uds_args, step_args) in enumerate(calls):
+        for i, (c, fn, one, vt, on, vu, ubuf, vy, ybuf, _, _) in enumerate(calls):
             if kind == "cs":
                 if k:
                     fn["EnterEventMode"](c)

@@ -41,12 +41,24 @@ from .components import (
     Table,
     TiltFusion,
 )
-from .core import COMPONENTS, Component, Cosimulation, ExportedFMU, ExportsFMU, FastBinding, Port, StateEstimator
+from .core import (
+    CLOCK,
+    COMPONENTS,
+    ClockTicks,
+    Component,
+    Cosimulation,
+    ExportedFMU,
+    ExportsFMU,
+    FastBinding,
+    Port,
+    StateEstimator,
+)
 from .fmi import FMUComponent, MESystem
 from .scenario import Scenario, ScenarioContext
 from .ssp import export_ssp, open_ssp
 
-__all__ = ["COMPONENTS", "PRBS", "Accelerometer", "BuildError", "Component", "ConfigurationError", "Constant",
+__all__ = ["CLOCK", "COMPONENTS", "PRBS", "Accelerometer", "BuildError", "ClockTicks", "Component",
+           "ConfigurationError", "Constant",
            "CosimError", "Cosimulation", "Encoder", "EstimatorComponent", "ExportedFMU", "ExportsFMU",
            "FMUComponent", "FMUError", "FastBinding", "Gyroscope", "InputError", "Interrupted", "LQRController",
            "MESystem", "ModelComponent", "NumericalError", "PendulumCosimError", "Port", "ProcessNoise",

@@ -247,3 +247,44 @@ def test_bad_interval_at_run_time_is_named(clock_lab_fmu):
     assert err.value.time == pytest.approx(0.3)
     assert len(err.value.results) == 4
     assert (sim.clock_ticks.clock == "m.cConst").sum() == 4
+
+
+@pytest.mark.parametrize("interface", INTERFACES)
+def test_feedthrough_none_delays_clocked_inputs(clock_lab_fmu, interface, calls):
+    """feedthrough='none': a tick's outputs are read before its inputs change (ME, CS: the
+    clocked inputs set in the update, before the state changes; SE: the inputs consumed at
+    the previous instant), so yConst(t) = 2 u(t - period) + constCount(t)."""
+    m = lab(clock_lab_fmu, interface, feedthrough="none")
+    assert not any(m.feedthrough.values())
+    sim = Cosimulation([m, ClockTicks("src", P, times=[5.0]), Sine("u", P, 1.0, 0.7, offset=0.5)],
+                       {"m.cTrigger": "src.tick", "m.uConst": "u.out"})
+    df = sim.run(STOP)
+    u = df["u.out"].to_numpy()
+    before = np.concatenate([[0.0], u[:-1]])                  # uConst's start value before the first instant
+    np.testing.assert_allclose(df["m.yConst"], 2 * before + df["m.constCount"], rtol=0, atol=1e-12)
+    assert not [line for line in calls() if "ILLEGAL" in line]
+
+
+@pytest.mark.parametrize("interface", INTERFACES)
+def test_clocks_count_from_the_start_time(clock_lab_fmu, interface):
+    """Shifts are relative to the start: from 0.5 s cConst ticks at 0.5, 0.6, ..., cFixed
+    (shift 0.1 s, interval 0.2 s) at 0.6, 0.8, 1.0."""
+    m = lab(clock_lab_fmu, interface)
+    sim = Cosimulation([m, ClockTicks("src", P, times=[5.0])], {"m.cTrigger": "src.tick"})
+    sim.run(1.0, 0.5)
+    got = ticks_of(sim)
+    np.testing.assert_allclose(got["cConst"], [0.5, 0.6, 0.7, 0.8, 0.9, 1.0], atol=1e-9)
+    np.testing.assert_allclose(got["cFixed"], [0.6, 0.8, 1.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("interface", INTERFACES)
+def test_sink_stepped_more_often_than_its_source(clock_lab_fmu, interface, calls):
+    """A source stepped every 0.2 s ticks at 0.25 s and 0.7 s (between its instants): the
+    sink, stepped every 0.1 s, gets each activation in the step that holds it."""
+    m = lab(clock_lab_fmu, interface)
+    src = ClockTicks("src", 0.2, times=[0.25, 0.7])
+    sim = Cosimulation([m, src], {"m.cTrigger": "src.tick"})
+    df = sim.run(1.0)
+    np.testing.assert_allclose(ticks_of(sim)["cTrigger"], [0.25, 0.7], atol=1e-9)
+    assert df["m.trigCount"].iloc[-1] == 2
+    assert not [line for line in calls() if "ILLEGAL" in line]
