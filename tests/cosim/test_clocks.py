@@ -288,3 +288,16 @@ def test_sink_stepped_more_often_than_its_source(clock_lab_fmu, interface, calls
     np.testing.assert_allclose(ticks_of(sim)["cTrigger"], [0.25, 0.7], atol=1e-9)
     assert df["m.trigCount"].iloc[-1] == 2
     assert not [line for line in calls() if "ILLEGAL" in line]
+
+
+@pytest.mark.parametrize("interface", ["cs", "me"])
+@pytest.mark.parametrize("when", [0.37, 0.4])
+def test_fmu_time_event(clock_lab_fmu, interface, when, calls):
+    """The FMU's own time event (its nextEventTime): CS steps to it and handles it in Event
+    Mode (the FMU refuses a step over it), ME makes it a time event; at an instant it is
+    handled in that instant's Event Mode."""
+    sim, df = run_lab(clock_lab_fmu, interface, start={"pTimeEvent": when})
+    assert df["m.timeEvents"].iloc[-1] == 1
+    assert not [line for line in calls() if "ILLEGAL" in line]
+    events = [float(x.split("t=")[1]) for x in calls() if " EnterEventMode t=" in x]
+    assert any(abs(e - when) < 1e-9 for e in events)
