@@ -296,7 +296,7 @@ def test_fmu_time_event(clock_lab_fmu, interface, when, calls):
     """The FMU's own time event (its nextEventTime): CS steps to it and handles it in Event
     Mode (the FMU refuses a step over it), ME makes it a time event; at an instant it is
     handled in that instant's Event Mode."""
-    sim, df = run_lab(clock_lab_fmu, interface, start={"pTimeEvent": when})
+    _, df = run_lab(clock_lab_fmu, interface, start={"pTimeEvent": when})
     assert df["m.timeEvents"].iloc[-1] == 1
     assert not [line for line in calls() if "ILLEGAL" in line]
     events = [float(x.split("t=")[1]) for x in calls() if " EnterEventMode t=" in x]
