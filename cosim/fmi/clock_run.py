@@ -47,6 +47,7 @@ patterns of the periodic clocks are computed once per run.
 from __future__ import annotations
 
 import ctypes
+import itertools
 import math
 from collections.abc import Mapping
 from fractions import Fraction
@@ -214,10 +215,28 @@ class ClockedRun:
             ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "get", fail, self.name)
             return ex.bind(own, np.asarray(positions, np.intp) + base, own_i)
         groups: dict = {}
-        for j, p in zip([j + base for j in positions], ports):
+        calls = []
+        items = sorted(zip([j + base for j in positions], ports), key=lambda x: x[0])
+        if direct:                               # Float64 at consecutive signals: read in place
+            runs, rest = [], []
+            for j, p in items:
+                if p.type == "Float64" and runs and runs[-1][-1][0] == j - 1 and \
+                        all(q.variable.valueReference != p.variable.valueReference for _, q in runs[-1]):
+                    runs[-1].append((j, p))
+                elif p.type == "Float64":
+                    runs.append([(j, p)])
+                else:
+                    rest.append((j, p))
+            for run in runs:
+                n = _SIZE(len(run))
+                ptr = ctypes.cast(own.ctypes.data + 8 * run[0][0], ctypes.POINTER(_D))
+                calls.append((self._fn("fmi3GetFloat64"), (c, (_U32 * len(run))(*[p.variable.valueReference
+                                                                                   for _, p in run]), n, ptr, n),
+                              None, "f", (), "GetFloat64"))
+            items = rest
+        for j, p in items:
             ctype, suffix, kind = _SCALAR[p.type]
             groups.setdefault(suffix, (ctype, kind, []))[2].append((j, p.variable.valueReference))
-        calls = []
         for suffix, (ctype, kind, items) in groups.items():
             vrs = list(dict.fromkeys(vr for _, vr in items))
             n = _SIZE(len(vrs))
@@ -225,6 +244,14 @@ class ClockedRun:
             where = {vr: i for i, vr in enumerate(vrs)}
             calls.append((self._fn(f"fmi3Get{suffix}"), (c, (_U32 * len(vrs))(*vrs), n, buf, n), buf, kind,
                           tuple((j, where[vr]) for j, vr in items), f"Get{suffix}"))
+        if len(calls) == 1 and calls[0][2] is None:
+            fn, args, _, _, _, label = calls[0]
+
+            def get_in_place() -> None:
+                st = fn(*args)
+                if st > 1:
+                    fail(label, st)
+            return get_in_place
         if len(calls) == 1 and calls[0][3] == "f" and len(calls[0][4]) == 1:
             fn, args, buf, _, ((j, _),), label = calls[0]
 
@@ -266,11 +293,22 @@ class ClockedRun:
         if not changes and all(p.size == 1 and p.type == "Float64" for p in ports) and \
                 len({p.variable.valueReference for p in ports}) == len(ports):
             n = _SIZE(len(ports))
-            buf = (_D * len(ports))()
-            args = (self.c, (_U32 * len(ports))(*[p.variable.valueReference for p in ports]), n, buf, n)
+            vrs = (_U32 * len(ports))(*[p.variable.valueReference for p in ports])
             fn, fail = self._fn("fmi3SetFloat64"), self._fail
+            slots = [int(self.idx_in[j]) for j in positions]
+            if direct and all(b == a + 1 for a, b in itertools.pairwise(slots)):
+                args = (self.c, vrs, n, ctypes.cast(self.values.ctypes.data + 8 * slots[0], ctypes.POINTER(_D)), n)
+
+                def set_in_place() -> bool:      # the FMU reads the master's signals
+                    st = fn(*args)
+                    if st > 1:
+                        fail("SetFloat64", st)
+                    return False
+                return set_in_place
+            buf = (_D * len(ports))()
+            args = (self.c, vrs, n, buf, n)
             src = self.values if direct else self.vin
-            pairs = tuple((i, int(self.idx_in[j]) if direct else j) for i, j in enumerate(positions))
+            pairs = tuple((i, slots[i] if direct else j) for i, j in enumerate(positions))
 
             def set_reals() -> bool:
                 for i, j in pairs:
@@ -358,18 +396,21 @@ class ClockedRun:
         self._n_out = _SIZE(n_out)
         self._get_clock = self._fn("fmi3GetClock")
         self._set_clock = self._fn("fmi3SetClock")
-        flags = [_B(False) for _ in range(5)]
-        self._uds_flags = flags
+        ub = self._uds_bytes = (ctypes.c_uint8 * 8)()        # the five flags side by side
+        self._uds_flags = [_B.from_buffer(ub, i) for i in range(5)]
+        self._uds_any = ctypes.c_uint64.from_buffer(ub)       # any of them set
         self._uds_next = _D(0.0)
-        self._uds_args = (c, *[ctypes.byref(f) for f in flags], ctypes.byref(self._uds_next))
+        self._uds_args = (c, *[ctypes.byref(ub, i) for i in range(5)], ctypes.byref(self._uds_next))
         self._uds = self._fn("fmi3UpdateDiscreteStates") if self.interface != "se" else None
         self._enter_event = self._fn("fmi3EnterEventMode") if self.interface != "se" else None
         if self.interface == "cs":
             self._enter_step = self._fn("fmi3EnterStepMode")
             self._do_step = self._fn("fmi3DoStep")
-            self._ds_flags = [_B(False) for _ in range(3)]
+            db = self._ds_bytes = (ctypes.c_uint8 * 4)()      # eventHandlingNeeded, terminate, earlyReturn
+            self._ds_flags = [_B.from_buffer(db, i) for i in range(3)]
+            self._ds_any = ctypes.c_uint32.from_buffer(db)
             self._ds_last = _D(0.0)
-            self._ds_refs = (*[ctypes.byref(f) for f in self._ds_flags], ctypes.byref(self._ds_last))
+            self._ds_refs = (*[ctypes.byref(db, i) for i in range(3)], ctypes.byref(self._ds_last))
         if self.interface == "se":
             self._activate_fn = self._fn("fmi3ActivateModelPartition")
         self.countdown = [k for k in self.model.clocks if k.variability == "countdown" and k.causality == "input"]
@@ -769,6 +810,7 @@ class ClockedRun:
         set_clock, uds, uds_args = self._set_clock, self._uds, self._uds_args
         fl = self._uds_flags
         need, term, next_def, next_t = fl[0], fl[1], fl[4], self._uds_next
+        uds_any, ds_any = self._uds_any, self._ds_any
         flags, last, refs = self._ds_flags, self._ds_last, self._ds_refs
         ehn_f, term_f, early_f = flags
         can_vary = bool(getattr(self.comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
@@ -802,7 +844,7 @@ class ClockedRun:
             args, vrs, labels = plan.args, plan.vrs, plan.labels
             set_ft, get_d, set_rest = plan.set_ft_d, plan.get_d, plan.set_rest_d
             one = labels[0] if len(labels) == 1 else None
-            simple = not plan.intervals
+            simple = not plan.intervals and not countdown
             fill = plan.fill or u_fill
 
             def tick(t: float) -> None:
@@ -839,6 +881,7 @@ class ClockedRun:
                     self.ticked.update(vrs)
 
             def tock(t: float) -> None:
+                """The whole update of the short path: the event iteration, Step Mode, the step."""
                 if fill and fill_all is not None:
                     fill_all()
                 for f in set_rest:
@@ -848,19 +891,35 @@ class ClockedRun:
                 st = uds(*uds_args)
                 if st > 1:
                     fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
-                if term.value:
-                    raise StopRequest(name, t, "the FMU requested termination in its event update")
-                if need.value:                          # more super-dense instants: the general way
-                    self._read_output_clocks(t, None, True)
-                    event(t)
+                if uds_any.value:                       # a flag: the general way
+                    if term.value:
+                        raise StopRequest(name, t, "the FMU requested termination in its event update")
+                    if need.value:
+                        self._read_output_clocks(t, None, True)
+                        event(t)
+                    else:
+                        self.fmu_next = next_t.value if next_def.value else None
+                        step_mode(t)
+                    step_general(t, False)
                     return
-                self.fmu_next = next_t.value if next_def.value else None
-                if self.ticked:
+                if has_out and self.ticked:
                     self.ticked.clear()
                 st = enter_step(c)
                 if st > 1:
                     fail(f"EnterStepMode(t = {t:g} s)", st)
                 self.in_event = False
+                ct.value = t
+                st = do_step(c, ct, ch, True, *refs)
+                if st > 1:
+                    fail(f"DoStep(t = {t:g} s, h = {P:g} s)", st)
+                if ds_any.value:                        # an event, an early return, a stop
+                    if fill_all is not None:
+                        fill_all()
+                    self._keep_base()
+                    advance(t, step_done(t, t + P))
+                    quiet[0] = now_quiet()
+                else:
+                    quiet[0] = True
 
             entry = (tock, plan)
             plan.tick = tick
@@ -911,21 +970,28 @@ class ClockedRun:
                 self._activate(t, ks + got, "output", snap)
                 self._publish(True)
 
-        def event(t: float) -> None:
-            if self._finish(t):
-                raise StopRequest(name, t, "the FMU requested termination in its event update")
+        def step_mode(t: float) -> None:
             st = enter_step(c)
             if st > 1:
                 fail(f"EnterStepMode(t = {t:g} s)", st)
             self.in_event = False
 
+        def event(t: float) -> None:
+            if self._finish(t):
+                raise StopRequest(name, t, "the FMU requested termination in its event update")
+            step_mode(t)
+
+        def now_quiet() -> bool:
+            return not (next_at or self.fmu_next is not None or self.pending_event or self.dirty or self.in_event)
+
         def update_fn(t: float) -> None:
             entry = fast[0]
+            if entry is not None and not inbox and not next_at and self.fmu_next is None:
+                fast[0] = None                          # the short path
+                entry[0](t)
+                return
             filled = False
-            if entry is not None and not (countdown or inbox or next_at):
-                fast[0] = None
-                entry[0](t)                             # the short path of the event iteration
-            elif entry is None and not self.in_event:   # no tick at this instant: Step Mode
+            if entry is None and not self.in_event:     # no tick at this instant: Step Mode
                 if set_u_all_d is not None:
                     if u_fill and fill_all is not None:
                         fill_all()
@@ -937,12 +1003,19 @@ class ClockedRun:
                 filled = True
                 fast[0] = None
                 general_event(t, entry[1] if entry is not None else None)
+            step_general(t, filled)
+            if len(ids) > MAX_TICKS:
+                self._check_log()
+
+        def step_general(t: float, filled: bool) -> None:
+            """The step from ``t`` (Step Mode), whatever may stop it; then whether the next
+            instant may take the short path."""
             if not inbox and not next_at and self.fmu_next is None:
                 ct.value = t
                 st = do_step(c, ct, ch, True, *refs)
                 if st > 1:
                     fail(f"DoStep(t = {t:g} s, h = {P:g} s)", st)
-                if ehn_f.value or term_f.value or early_f.value:
+                if ds_any.value:
                     if not filled and fill_all is not None:
                         fill_all()
                     self._keep_base()
@@ -952,9 +1025,7 @@ class ClockedRun:
                     fill_all()
                 self._keep_base()
                 advance(t, t)
-            quiet[0] = not (next_at or self.fmu_next is not None or self.pending_event or self.dirty or self.in_event)
-            if len(ids) > MAX_TICKS:
-                self._check_log()
+            quiet[0] = now_quiet()
 
         def general_event(t, plan):
             if plan is not None:
