@@ -367,14 +367,21 @@ times = [0.25, 0.5]
 """
 
 
-def test_scenario_dry_run_and_two_runs_at_once(clock_lab_fmu, tmp_path):
-    """From a scenario file: --dry-run lists the clocks; two runs at once into two folders
-    both finish, with the same results and activations, and leave no unpacked FMU behind."""
+def test_scenario_dry_run_lists_the_clocks(clock_lab_fmu, tmp_path):
+    """From a scenario file, --dry-run lists every clock's timing and connections."""
     (tmp_path / "s.toml").write_text(SCENARIO.format(path=clock_lab_fmu, interface="se"))
     dry = subprocess.run([*CLI, "run", "s.toml", "--dry-run"], cwd=tmp_path, capture_output=True, text=True)
     assert dry.returncode == 0, dry.stderr
     assert "m.cFixed: fixed, every 0.4 s from 0.1 s; interval set by the component (clock_intervals)" in dry.stdout
     assert "src.tick: output clock, activated at 0.25, 0.5 s; drives m.cTrigger" in dry.stdout
+    assert "src.tick -> m.cTrigger: clock connection" in dry.stdout
+
+
+@pytest.mark.slow
+def test_two_runs_at_once(clock_lab_fmu, tmp_path):
+    """Two runs of a clocked scenario at once into two folders both finish, with the same
+    results and activations, and leave no unpacked FMU behind."""
+    (tmp_path / "s.toml").write_text(SCENARIO.format(path=clock_lab_fmu, interface="se"))
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     env = {**os.environ, "TMPDIR": str(tmp)}
