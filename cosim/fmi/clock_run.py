@@ -359,6 +359,11 @@ class ClockedRun:
             self.set_disc = self._setter(disc, changes=True)
             self.set_cont_ft = self._setter([i for i in cont if i in ft], changes=True)
             self.set_disc_ft = self._setter([i for i in disc if i in ft], changes=True)
+        self.set_ud = no_exchange
+        if self.interface == "cs":       # discrete inputs without clock: changed in Event Mode only
+            disc = [i for i in unclocked if ports[names[i]].discrete]
+            self.set_ud = self._setter(disc, changes=True)
+            unclocked = [i for i in unclocked if i not in disc]
         self.set_u_all = self._setter(unclocked)
         self.set_u_ft = self._setter([i for i in unclocked if i in ft])
         self.set_u_all_d = self._setter(unclocked, direct=True)
@@ -822,7 +827,8 @@ class ClockedRun:
         set_u_all = None if self.set_u_all is no_exchange else self.set_u_all
         set_u_ft_d = None if self.set_u_ft_d is no_exchange else self.set_u_ft_d
         set_u_all_d = None if self.set_u_all_d is no_exchange else self.set_u_all_d
-        u_fill = any(getattr(f, "needs_fill", False) for f in (set_u_ft_d, set_u_all_d))
+        set_ud = None if self.set_ud is no_exchange else self.set_ud
+        u_fill = set_ud is not None or any(getattr(f, "needs_fill", False) for f in (set_u_ft_d, set_u_all_d))
         has_out, countdown = bool(self.out_clocks), bool(self.countdown)
         ct, ch = _D(0.0), _D(P)
         ids = self.board._ids
@@ -888,6 +894,8 @@ class ClockedRun:
                     f()
                 if set_u_all_d is not None:
                     set_u_all_d()
+                if set_ud is not None:
+                    set_ud()
                 st = uds(*uds_args)
                 if st > 1:
                     fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
@@ -992,11 +1000,15 @@ class ClockedRun:
                 return
             filled = False
             if entry is None and not self.in_event:     # no tick at this instant: Step Mode
+                if u_fill and fill_all is not None:
+                    fill_all()
+                    filled = True
                 if set_u_all_d is not None:
-                    if u_fill and fill_all is not None:
-                        fill_all()
-                        filled = True
                     set_u_all_d()
+                if set_ud is not None and set_ud.differs():
+                    enter(t)                            # a discrete input changes: Event Mode
+                    set_ud()
+                    event(t)
             else:
                 if fill_all is not None:
                     fill_all()
@@ -1037,6 +1049,8 @@ class ClockedRun:
                     f()
             if set_u_all is not None:
                 set_u_all()
+            if set_ud is not None:
+                set_ud()
             event(t)
 
         def step_done(t, target):

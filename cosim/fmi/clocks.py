@@ -333,8 +333,9 @@ class FMIClocks:
     def feedthrough(self, declared: Mapping[str, Sequence[str]], outs: list[Port], ins: list[Port], ports,
                     interface: str) -> dict:
         """The direct dependencies the master may assume (see the module documentation):
-        a clocked output on the inputs its ``ModelStructure`` lists and on its clocks'
-        triggered input ports; in Scheduled Execution also on every input of its
+        a clocked output on the inputs its ``ModelStructure`` lists (in Co-Simulation not on
+        discrete inputs without a clock: those change in Event Mode in the update) and on its
+        clocks' triggered input ports; in Scheduled Execution also on every input of its
         partitions; outputs without clocks as declared in Model Exchange, on no input in
         Co-Simulation and Scheduled Execution. ``declared``: the dependencies read from the
         ``ModelStructure`` (output port -> input ports)."""
@@ -364,6 +365,9 @@ class FMIClocks:
                 result[p.name] = sorted(declared.get(p.name, ())) if interface == "me" else []
                 continue
             deps = set(declared.get(p.name, ()))
+            if interface == "cs":                   # discrete inputs without clock: set in the update
+                deps = {d for d in deps if d not in ports or ports[d].type == CLOCK or not ports[d].discrete
+                        or self.clocks_of(ports[d].variable.name)}
             for vr in clocks:
                 k = self.by_vr[vr]
                 if k.is_port and k.causality == "input" and k.name in in_names:

@@ -16,7 +16,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from cosim import Cosimulation, FMUComponent, Sine
+from cosim import Component, Cosimulation, FMUComponent, Port, Sine
 from cosim.core.clocking import ClockTicks
 from fmu_models.errors import CosimError
 
@@ -301,3 +301,42 @@ def test_fmu_time_event(clock_lab_fmu, interface, when, calls):
     assert not [line for line in calls() if "ILLEGAL" in line]
     events = [float(x.split("t=")[1]) for x in calls() if " EnterEventMode t=" in x]
     assert any(abs(e - when) < 1e-9 for e in events)
+
+
+class _Counter(Component):
+    """An Int32 output that counts the instants (a discrete signal changing at every one)."""
+
+    def __init__(self, name, period):
+        super().__init__(name, period, outputs=[Port("k", "Int32")], feedthrough=False)
+        self.k = 0
+
+    def reset(self, t0):
+        super().reset(t0)
+        self.k = 0
+
+    def output(self, t, u):
+        return np.array([float(self.k)])
+
+    def update(self, t, u):
+        self.k += 1
+
+
+@pytest.mark.parametrize("interface", INTERFACES)
+def test_discrete_input_without_clock(clock_lab_fmu, interface, calls):
+    """A discrete input without clock changing at instants where no clock ticks (period
+    0.05 s, the clocks every 0.1 s): ME and CS enter Event Mode to set it (the FMU refuses it
+    in Step or Continuous-Time Mode); the FMU sees every value (CS, SE: one instant late, as
+    the outputs without clocks there depend on no input directly)."""
+    m = FMUComponent("m", clock_lab_fmu, 0.05, interface=interface)
+    sim = Cosimulation([m, ClockTicks("src", 0.05, times=[5.0]), _Counter("n", 0.05)],
+                       {"m.cTrigger": "src.tick", "m.uMode": "n.k"})
+    df = sim.run(0.5)
+    assert not [line for line in calls() if "ILLEGAL" in line]
+    seen = df["m.modeSeen"].to_numpy()
+    k = df["n.k"].to_numpy()
+    if interface == "cs":                        # set in the update: seen one instant later (no feedthrough)
+        np.testing.assert_array_equal(seen[1:], k[:-1])
+    elif interface == "me":                      # set in Event Mode before the outputs: seen at once
+        np.testing.assert_array_equal(seen, k)
+    else:        # consumed at the update before each activation (no feedthrough), read after it (every 0.1 s)
+        np.testing.assert_array_equal(seen[2::2], k[1:-1:2])

@@ -18,7 +18,8 @@
  *   8 cOut       triggered output (see cConst), outValue = yConst
  *   9 cAlarm     triggered output at the state event x = pThreshold (x' = uRate, reset to
  *                0 at the event): an event indicator in ME, an early return in CS
- * A time event at pTimeEvent (if >= 0) counts in timeEvents (ME and CS). pFailAt (if >= 0):
+ * A time event at pTimeEvent (if >= 0) counts in timeEvents (ME and CS). uMode (Int32,
+ * discrete, no clock) is copied to modeSeen; ME and CS take it only in Event Mode. pFailAt (if >= 0):
  * the first fmi3UpdateDiscreteStates (SE: fmi3ActivateModelPartition) at or after that time
  * returns fmi3Error ("requested failure"), to test what an importer does after an error.
  *
@@ -50,7 +51,8 @@ enum { Q_NOT_YET_KNOWN = 0, Q_UNCHANGED = 1, Q_CHANGED = 2 };
 enum { VR_TIME = 0, VR_UCONST = 20, VR_YCONST, VR_CONSTCOUNT, VR_FIXEDCOUNT, VR_FIXEDPCOUNT, VR_TUNABLECOUNT,
        VR_CHANGINGCOUNT, VR_COUNTDOWNCOUNT, VR_TRIGVALUE, VR_TRIGSUM, VR_TRIGCOUNT, VR_OUTVALUE, VR_ALARMCOUNT, VR_X,
        VR_URATE, VR_LASTTIME, VR_FIXEDSEEN, VR_VIOLATIONS, VR_FIXEDVALUE, VR_TIMEEVENTS, VR_PFIXEDINTERVAL,
-       VR_PFIXEDSHIFT, VR_PCOUNTDOWN, VR_PTHRESHOLD, VR_PTIMEEVENT = 45, VR_DERX = 46, VR_Z = 47, VR_PFAILAT = 48 };
+       VR_PFIXEDSHIFT, VR_PCOUNTDOWN, VR_PTHRESHOLD, VR_PTIMEEVENT = 45, VR_DERX = 46, VR_Z = 47, VR_PFAILAT = 48,
+       VR_UMODE = 49, VR_MODESEEN = 50 };
 
 typedef struct {
     Base b;
@@ -67,7 +69,7 @@ typedef struct {
     double uConst, trigValue, uRate, x, lastTime, fixedSeen, yConstLast, trigSumPrev, fixedValueLast, outValueLast;
     double pFixedInterval, pFixedShift, pCountdown, pThreshold, pTimeEvent, pFailAt;
     int32_t constCount, fixedCount, fixedPCount, tunableCount, changingCount, countdownCount, trigCount, alarmCount;
-    int32_t timeEvents;
+    int32_t timeEvents, uMode;
 } Lab;
 
 static int clock_of_vr(fmi3ValueReference vr) { return (vr >= 1 && vr <= N_CLOCKS) ? (int)vr - 1 : -1; }
@@ -541,6 +543,7 @@ fmi3Status fmi3GetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t
         case VR_ALARMCOUNT: v[i] = m->alarmCount; break;
         case VR_VIOLATIONS: v[i] = m->b.violations; break;
         case VR_TIMEEVENTS: v[i] = m->timeEvents; break;
+        case VR_UMODE: case VR_MODESEEN: v[i] = m->uMode; break;
         default: return violation(&m->b, "fmi3GetInt32 of value reference %u, not an Int32", vr[i]);
         }
     }
@@ -548,10 +551,18 @@ fmi3Status fmi3GetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t
 }
 
 fmi3Status fmi3SetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Int32 v[], size_t nv) {
-    (void)vr; (void)n; (void)v; (void)nv;
     Lab *m = (Lab *)inst;
     if (!m || !usable(&m->b, "fmi3SetInt32")) return fmi3Error;
-    return violation(&m->b, "fmi3SetInt32: this FMU has no Int32 input or parameter");
+    if (nv != n) return violation(&m->b, "fmi3SetInt32 with nValues %zu for %zu scalars", nv, n);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != VR_UMODE) return violation(&m->b, "fmi3SetInt32 of value reference %u, not an Int32 input", vr[i]);
+        if (m->b.state != S_INSTANTIATED && m->b.state != S_INIT && m->b.state != S_EVENT && m->b.state != S_ACTIVATION)
+            return violation(&m->b, "fmi3SetInt32 of the discrete input uMode in %s (a discrete input changes in Event Mode)",
+                             STATE_NAME[m->b.state]);
+        m->uMode = v[i];
+        call_log(&m->b, "SetInt32 uMode=%d t=%.17g", (int)v[i], m->b.time);
+    }
+    return fmi3OK;
 }
 
 /* pFailAt reached: an error, as an FMU that fails */
