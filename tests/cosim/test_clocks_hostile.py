@@ -407,3 +407,18 @@ def test_cli_refusal_has_no_traceback(clock_lab_fmu, tmp_path):
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and "A period of 0.05 s" in proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_clock_port_of_a_component_without_clocks(clock_lab_fmu):
+    """A Python component that declares a Clock port but no clocks cannot take part."""
+    from cosim import CLOCK, Component, Port
+
+    class Fake(Component):
+        def __init__(self):
+            super().__init__("fake", P, outputs=[Port("tick", CLOCK)], feedthrough=False)
+
+        def output(self, t, u):
+            return np.array([0.0])
+
+    with pytest.raises(ConfigurationError, match=r"component 'fake' has the clock port 'tick' but declares no clocks"):
+        Cosimulation([lab(clock_lab_fmu), Fake()], {"m.cTrigger": "fake.tick"})
