@@ -365,7 +365,7 @@ class ClockBoard:
         self._inbox: dict = {}
         self._labels: list[str] = []
         self._label_of: dict = {}
-        self._times, self._ids = array("d"), array("l")
+        self._times, self._ids = array("d"), array("q")
 
     def inbox(self, component: str) -> list:
         """The list the activations for ``component``'s triggered clocks are appended to, as
