@@ -337,6 +337,14 @@ class ClockPlan:
         return (f"clock connection: {dst.split('.')[0]}'s partition runs at each activation of {src}, at the same "
                 "time (latency 0; between base instants if the activation falls there)")
 
+    def clocked_text(self, dst: str, clocks: Sequence[str], direct: bool) -> str:
+        """What a connection into an input of component ``dst`` clocked by ``clocks`` does,
+        in words (``direct``: an output depends on the input directly)."""
+        names = ", ".join(f"{dst}.{k}" for k in clocks)
+        when = "at t after the source's output at t" if direct else "before the state changes at t"
+        return (f"clocked by {names}: set only at its activations ({when}; between base instants the value of the "
+                "component whose clock caused the activation at that time, else the value at the last instant)")
+
     # ------------------------------------------------------------------ the run
     def board(self, values: np.ndarray, integers: np.ndarray, slots: Mapping) -> ClockBoard:
         """A fresh :class:`ClockBoard` for one run over the master's signal arrays."""

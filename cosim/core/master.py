@@ -264,6 +264,10 @@ class Cosimulation:
                     next(p.type for p in dst.input_ports if p.name == dp)) == "clock":
                 lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {self.clock_plan.connection_text(f'{sn}.{sp}', f'{dn}.{dp}')}")
                 continue
+            clocks = self.clock_plan is not None and getattr(dst, "port_clocks", None) and dst.port_clocks(dp)
+            if clocks:
+                lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {self.clock_plan.clocked_text(dn, clocks, ft)}")
+                continue
             if self.order == "jacobi":
                 when = "read at t from the values before t: one base step old when both are due"
             elif ft:

@@ -431,6 +431,14 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             return ()
         return self.clock_model.infos(self.interface, self.clock_overrides, self.input_names + self.output_names)
 
+    def port_clocks(self, port: str) -> list[str]:
+        """The clocks of the data port ``port`` (it is exchanged only at their activations);
+        empty for a port without clock."""
+        if self.clock_model is None or port not in self.element_ports or port in self.clock_model.by_name:
+            return []
+        by_vr = self.clock_model.by_vr
+        return [by_vr[vr].name for vr in self.clock_model.clocks_of(self.element_ports[port].variable.name)]
+
     def attach_clocks(self, board: ClockBoard) -> None:
         """Take the run's clock board (before :meth:`bind`)."""
         self._board = board

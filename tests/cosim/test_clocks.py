@@ -234,6 +234,9 @@ def test_describe_lists_the_clocks(clock_lab_fmu):
                  "src.tick: output clock, activated at 0.5 s; drives m.cTrigger",
                  "src.tick -> m.cTrigger: clock connection"):
         assert want in text, want
+    sim = Cosimulation([m, ClockTicks("src", P, times=[0.5]), Sine("u", P, 1.0, 1.0)],
+                       {"m.cTrigger": "src.tick", "m.uConst": "u.out"})
+    assert "u.out -> m.uConst: clocked by m.cConst: set only at its activations" in sim.describe()
 
 
 def test_bad_interval_at_run_time_is_named(clock_lab_fmu):
