@@ -22,6 +22,12 @@ estimate) follows from the components' feedthrough declarations in any list orde
 :meth:`Cosimulation.describe` prints the evaluation order and the latency of every
 connection.
 
+Clocks (FMI 3.0 clocked FMUs, :class:`~cosim.core.clocking.ClockTicks` sources) tick at
+these instants, or between two of them where an activation falls there; clock connections
+go in ``connections`` like any other, and the clocks are checked before the run (see
+:mod:`cosim.core.clocking`); :attr:`Cosimulation.clock_ticks` logs the activations of the
+last run. Without clocks, nothing of this costs anything in the loop.
+
 Algebraic loops (a cycle of direct dependencies at one instant) are refused before the
 run with the loop's ports named, or, with ``loops="iterate"``, solved at each instant by
 Newton's method on the loop's signals (finite-difference Jacobian; exact in one step for
@@ -111,6 +117,11 @@ class Cosimulation:
         The evaluation order (see :mod:`cosim.core.schedule`).
     timings : dict
         Wall times [s] of the last run: ``setup``, ``loop``, ``teardown``.
+    clock_plan : ClockPlan or None
+        The clocks and clock connections, checked (None without clocks).
+    clock_ticks : DataFrame or None
+        Every clock activation of the last run (columns ``time`` [s], ``clock``:
+        ``component.clock``), or None without clocks.
 
     Raises
     ------
@@ -118,7 +129,7 @@ class Cosimulation:
         Duplicate names, an unknown component or port (the message lists the valid ones),
         an input connected twice, an unconnected required input, incompatible port types,
         periods that are not multiples of the base step or not commensurate, an algebraic
-        loop.
+        loop, a clock the run cannot honour (see :mod:`cosim.core.clocking`).
     """
 
     def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
