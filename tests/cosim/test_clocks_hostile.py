@@ -422,3 +422,15 @@ def test_clock_port_of_a_component_without_clocks(clock_lab_fmu):
 
     with pytest.raises(ConfigurationError, match=r"component 'fake' has the clock port 'tick' but declares no clocks"):
         Cosimulation([lab(clock_lab_fmu), Fake()], {"m.cTrigger": "fake.tick"})
+
+
+@pytest.mark.parametrize("interface", ["cs", "se"])
+def test_huge_interval(clock_lab_fmu, interface, calls):
+    """An interval of 1e300 s (a multiple of the period): the clock ticks once, at its shift,
+    and the pattern of the periodic clocks is computed per instant instead of ahead."""
+    sim = sourced(lab(clock_lab_fmu, interface, clock_intervals={"cFixed": 1e300}))
+    assert "m.cFixed: fixed, every 1e+300 s from 0.1 s" in sim.describe()
+    sim.run(1.0)
+    ticks = sim.clock_ticks
+    np.testing.assert_allclose(ticks.time[ticks.clock == "m.cFixed"], [0.1])
+    assert not any("ILLEGAL" in x for x in calls())
