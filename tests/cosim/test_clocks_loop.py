@@ -239,3 +239,49 @@ def _no_log_leak(monkeypatch):
     monkeypatch.delenv("CLOCK_FMU_LOG", raising=False)
     yield
     os.environ.pop("CLOCK_FMU_LOG", None)
+
+
+def test_the_scenario_file_gives_the_reference_loop(clock_loop_fmus, tmp_path):
+    """The same loop written as a scenario file: the results and activations of the
+    hand-written reference loop."""
+    from cosim import Scenario
+
+    (tmp_path / "loop.toml").write_text(f"""
+[simulation]
+stop_time = {STOP}
+
+[[component]]
+name = "controller"
+type = "fmu"
+path = "{clock_loop_fmus['controller']}"
+period = {H}
+
+[[component]]
+name = "supervisor"
+type = "fmu"
+path = "{clock_loop_fmus['supervisor']}"
+period = {H}
+solver = "euler"
+solver_step = {H_INT}
+
+[[component]]
+name = "plant"
+type = "fmu"
+path = "{clock_loop_fmus['plant']}"
+period = {H}
+solver = "euler"
+solver_step = {H_INT}
+
+[connections]
+"plant.u" = "controller.u"
+"controller.y" = "plant.p"
+"supervisor.p" = "plant.p"
+"controller.mode" = "supervisor.alarm"
+"controller.level" = "supervisor.level"
+""")
+    sc = Scenario.load(tmp_path / "loop.toml")
+    df = sc.run()
+    ref, alarms, modes, _ = reference_loop(clock_loop_fmus)
+    np.testing.assert_allclose(df[COLUMNS].to_numpy(float), ref, rtol=0, atol=1e-12)
+    ticks = sc.cosim.clock_ticks
+    np.testing.assert_allclose(ticks.time[ticks.clock == "controller.mode"].to_numpy(), modes, rtol=0, atol=1e-12)
