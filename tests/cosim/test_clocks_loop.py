@@ -281,7 +281,7 @@ solver_step = {H_INT}
 """)
     sc = Scenario.load(tmp_path / "loop.toml")
     df = sc.run()
-    ref, alarms, modes, _ = reference_loop(clock_loop_fmus)
+    ref, _, modes, _ = reference_loop(clock_loop_fmus)
     np.testing.assert_allclose(df[COLUMNS].to_numpy(float), ref, rtol=0, atol=1e-12)
     ticks = sc.cosim.clock_ticks
     np.testing.assert_allclose(ticks.time[ticks.clock == "controller.mode"].to_numpy(), modes, rtol=0, atol=1e-12)
