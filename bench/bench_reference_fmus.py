@@ -21,7 +21,7 @@ from cosim import Constant, Cosimulation, FMUComponent, MESystem
 
 sys.path.append(str(Path(__file__).parents[1] / "tests"))     # after the packages: tests/cosim is no package
 
-import reference_cases as rc
+from testkit import reference_cases as rc
 
 
 def _verdict(case, outcome, stopped: bool) -> str:

@@ -42,16 +42,29 @@ from .components import (
     Table,
     TiltFusion,
 )
-from .core import COMPONENTS, Component, Cosimulation, ExportedFMU, ExportsFMU, FastBinding, Port, StateEstimator
+from .core import (
+    CLOCK,
+    COMPONENTS,
+    ClockTicks,
+    Component,
+    Cosimulation,
+    ExportedFMU,
+    ExportsFMU,
+    FastBinding,
+    Port,
+    StateEstimator,
+)
 from .fmi import FMUComponent, MESystem
 from .scenario import Scenario, ScenarioContext
 from .ssp import export_ssp, open_ssp
 
 __all__ = [
+    "CLOCK",
     "COMPONENTS",
     "PRBS",
     "Accelerometer",
     "BuildError",
+    "ClockTicks",
     "Component",
     "ConfigurationError",
     "Constant",

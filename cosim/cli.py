@@ -157,6 +157,8 @@ def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool |
                                              progress=progress, **rec)
             print(f"\n{sc.stop_time:g} s simulated in {time.perf_counter() - t0:.2f} s; "
                   f"wrote {result} (streamed)")
+            if sc.cosim.clock_ticks is not None:
+                print(f"wrote {_write_ticks(sc, out, 'clock_ticks.csv')}")
             return 0
         df = sc.cosim.run(sc.stop_time, sc.start_time, progress=progress, **rec)
     except (PendulumCosimError, KeyboardInterrupt) as e:
@@ -164,9 +166,13 @@ def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool |
         if partial is not None and hasattr(partial, "to_csv") and len(partial):
             save_results(partial, out, "results.partial")
             print(f"partial results ({len(partial)} rows) written to {out}/results.partial.*", file=sys.stderr)
+        if sc.cosim.clock_ticks is not None:
+            _write_ticks(sc, out, "clock_ticks.partial.csv")
         raise
     wall = time.perf_counter() - t0
     paths = save_results(df, out)
+    if sc.cosim.clock_ticks is not None:
+        paths.append(_write_ticks(sc, out, "clock_ticks.csv"))
     for fmu in fmus.rglob("*.fmu"):                 # keep the FMUs the scenario built
         dst = out / "fmus" / fmu.relative_to(fmus)
         dst.parent.mkdir(parents=True, exist_ok=True)
@@ -187,6 +193,11 @@ def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool |
     for p in paths:
         print(f"wrote {p}")
     return 0
+
+
+def _write_ticks(sc, out: Path, name: str) -> Path:
+    """Every clock activation of the last run (columns time, clock) as ``out/name``."""
+    return atomic_write(out / name, lambda p: sc.cosim.clock_ticks.to_csv(p, index=False))
 
 
 def _export(args) -> int:

@@ -38,6 +38,26 @@ Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
     [connections]                   # input = output
     "ekf.y_x" = "sensor.y_x"
 
+A clocked FMI 3.0 FMU is a ``type = "fmu"`` component like any other (``clock_intervals``
+sets the intervals the importer may set); its triggered input clocks take their activations
+from an output clock, another FMU's or a ``clock_ticks`` source's, through the same
+``[connections]`` table (see :mod:`cosim.core.clocking`)::
+
+    [[component]]
+    name = "ctrl"
+    type = "fmu"
+    path = "controller.fmu"         # a periodic clock "sample", a triggered clock "mode"
+    period = 0.01
+
+    [[component]]
+    name = "ticks"
+    type = "clock_ticks"
+    period = 0.01
+    times = [0.5, 1.25]             # or interval = ..., shift = ...
+
+    [connections]
+    "ctrl.mode" = "ticks.tick"
+
     [plot]                          # optional: truth/estimate figure
     truth = ["plant.x"]
     estimate = ["ekf.x"]

@@ -98,8 +98,10 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def build_test_fmu(folder: str, identifier: str, version: int, out: Path) -> Path:
-    """Compile a hand-written test FMU of ``tests/data/<folder>`` and zip it into ``out``."""
+def build_test_fmu(folder: str, identifier: str, version: int, out: Path,
+                   description: str = "modelDescription.xml") -> Path:
+    """Compile a hand-written test FMU of ``tests/data/<folder>`` and zip it into ``out``
+    (``description``: the folder's model description to ship, as ``modelDescription.xml``)."""
     src = DATA / folder
     plat = ("linux64" if version == 2 else "x86_64-linux") if sys.platform.startswith("linux") else None
     if plat is None:
@@ -112,7 +114,7 @@ def build_test_fmu(folder: str, identifier: str, version: int, out: Path) -> Pat
                     "-o", str(binaries / f"{identifier}.so"), "-lm"], check=True)
     fmu = out / f"{identifier}.fmu"
     with zipfile.ZipFile(fmu, "w") as z:
-        z.write(src / "modelDescription.xml", "modelDescription.xml")
+        z.write(src / description, "modelDescription.xml")
         z.write(binaries / f"{identifier}.so", f"binaries/{plat}/{identifier}.so")
     return fmu
 
@@ -151,6 +153,27 @@ def chaos_fmu(tmp_path_factory):
     Discard, Error, Fatal, NaN or inf outputs, a sleep, a crash), logging every call and each
     one the standard forbids to ``CHAOS_LOG`` (tests/data/chaos)."""
     return build_test_fmu("chaos", "Chaos", 2, tmp_path_factory.mktemp("chaos"))
+
+
+@pytest.fixture(scope="session")
+def clock_lab_fmu(tmp_path_factory):
+    """A third-party FMI 3.0 FMU (ME, CS with Event Mode, SE) with clocks of every kind that
+    checks the clock call rules it receives (tests/data/clock_lab)."""
+    return build_test_fmu("clock_lab", "ClockLab", 3, tmp_path_factory.mktemp("clocklab"))
+
+
+@pytest.fixture(scope="session")
+def clock_loop_fmus(tmp_path_factory):
+    """Three third-party FMI 3.0 FMUs of a clocked control loop (tests/data/clock_loop): a
+    Model Exchange plant, a Model Exchange supervisor whose state event ticks an output clock,
+    a Co-Simulation controller with a sample clock and a triggered mode clock:
+    {"plant" | "supervisor" | "controller": path}."""
+    out = tmp_path_factory.mktemp("clockloop")
+    paths = {}
+    for role in ("plant", "supervisor", "controller"):
+        (out / role).mkdir()
+        paths[role] = build_test_fmu("clock_loop", "ClockLoop", 3, out / role, f"{role}.xml")
+    return paths
 
 
 @pytest.fixture(scope="session")

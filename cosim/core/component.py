@@ -71,8 +71,8 @@ from fmu_models.errors import ConfigurationError, TypeMismatchError
 from fmu_models.infra.checks import positive
 from fmu_models.infra.registry import Registry
 
-__all__ = ["COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding", "Port",
-           "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
+__all__ = ["CLOCK", "COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding",
+           "Port", "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
            "ports_compatible", "split_port"]
 
 #: FMI type names a port may have, by kind (real, integer incl. enumerations, boolean).
@@ -85,9 +85,16 @@ PORT_TYPES = {
 }
 
 
+#: The type of a clock port, an FMI 3.0 Clock. A clock connection carries its activations and
+#: its signal counts them (see :mod:`cosim.core.clocking`).
+CLOCK = "Clock"
+
+
 def port_kind(type_name: str) -> str:
     """``"real"``, ``"integer"`` or ``"boolean"`` for the FMI type name ``type_name`` (see
-    :data:`PORT_TYPES`)."""
+    :data:`PORT_TYPES`), ``"clock"`` for :data:`CLOCK`."""
+    if type_name == CLOCK:
+        return "clock"
     try:
         return PORT_TYPES[type_name]
     except KeyError:
@@ -99,10 +106,11 @@ def ports_compatible(src_type: str, dst_type: str) -> bool:
     """True if an output of type ``src_type`` may drive an input of type ``dst_type``.
 
     Same kind always; integer and boolean outputs may also drive real inputs (exact).
-    A real output never drives an integer or boolean input (that would round silently).
+    A real output never drives an integer or boolean input (that would round silently). A
+    clock drives only a clock, and only a clock drives a clock.
     """
     s, d = port_kind(src_type), port_kind(dst_type)
-    return s == d or d == "real"
+    return s == d or (d == "real" and s != "clock")
 
 
 @dataclass(frozen=True)

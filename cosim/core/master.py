@@ -22,6 +22,12 @@ estimate) follows from the components' feedthrough declarations in any list orde
 :meth:`Cosimulation.describe` prints the evaluation order and the latency of every
 connection.
 
+Clocks (FMI 3.0 clocked FMUs, :class:`~cosim.core.clocking.ClockTicks` sources) tick at
+these instants, or between two of them where an activation falls there; clock connections
+go in ``connections`` like any other, and the clocks are checked before the run (see
+:mod:`cosim.core.clocking`); :attr:`Cosimulation.clock_ticks` logs the activations of the
+last run. Without clocks, nothing of this costs anything in the loop.
+
 Algebraic loops (a cycle of direct dependencies at one instant) are refused before the
 run with the loop's ports named, or, with ``loops="iterate"``, solved at each instant by
 Newton's method on the loop's signals (finite-difference Jacobian; exact in one step for
@@ -47,7 +53,17 @@ from fmu_models.errors import (
 )
 from fmu_models.infra.checks import finite, positive, positive_int
 
-from .component import Component, FastBinding, StopRequest, bind_protocol, port_kind, ports_compatible, split_port
+from .clocking import ClockPlan
+from .component import (
+    CLOCK,
+    Component,
+    FastBinding,
+    StopRequest,
+    bind_protocol,
+    port_kind,
+    ports_compatible,
+    split_port,
+)
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, Unit, base_step, evaluation_order
 
@@ -109,6 +125,11 @@ class Cosimulation:
         The evaluation order (see :mod:`cosim.core.schedule`).
     timings : dict
         Wall times [s] of the last run: ``setup``, ``loop``, ``teardown``.
+    clock_plan : ClockPlan or None
+        The clocks and clock connections, checked (None without clocks).
+    clock_ticks : DataFrame or None
+        Every clock activation of the last run (columns ``time`` [s], ``clock``:
+        ``component.clock``), or None without clocks.
 
     Raises
     ------
@@ -116,7 +137,7 @@ class Cosimulation:
         Duplicate names, an unknown component or port (the message lists the valid ones),
         an input connected twice, an unconnected required input, incompatible port types,
         periods that are not multiples of the base step or not commensurate, an algebraic
-        loop.
+        loop, a clock the run cannot honour (see :mod:`cosim.core.clocking`).
     """
 
     def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
@@ -148,6 +169,11 @@ class Cosimulation:
         else:
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
+        #: The clocks and clock connections, checked here before any run (None without any).
+        self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
+        self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
+        #: the activations of the last run's clocks (time, clock), or None
+        self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
 
     # ---------------------------------------------------------------- validation
@@ -184,6 +210,9 @@ class Cosimulation:
                                          f"(from {'.'.join(out[d])} and {src})")
             st = next(p for p in self.by_name[s[0]].output_ports if p.name == s[1]).type
             dt = next(p for p in self.by_name[d[0]].input_ports if p.name == d[1]).type
+            if not ports_compatible(st, dt) and CLOCK in (st, dt):
+                raise TypeMismatchError(f"connection {src} -> {dst}: a {st} output cannot drive a {dt} input: a clock "
+                                        "connects only to a clock (an output clock to a triggered input clock)")
             if not ports_compatible(st, dt):
                 raise TypeMismatchError(f"connection {src} -> {dst}: a {st} output cannot drive a {dt} "
                                         "input (values would be rounded); convert it in a component")
@@ -205,6 +234,7 @@ class Cosimulation:
             for p in c.output_names:
                 slots[(c.name, p)] = n
                 n += 1
+        self._slots = slots
         self.signal_names = [f"{c}.{p}" for (c, p) in slots]
         self.signal_types = [p.type for c in self.components for p in c.output_ports]
         self._n_signals = n
@@ -237,6 +267,8 @@ class Cosimulation:
         for i, g in enumerate(self.schedule, 1):
             label = " + ".join(str(u) for u in g.units)
             lines.append(f"  {i}. {label}" + ("   [algebraic loop, solved by iteration]" if g.loop else ""))
+        if self.clock_plan is not None:
+            lines += ["", *self.clock_plan.describe_lines()]
         position = {}
         for i, g in enumerate(self.schedule):
             for u in g.units:
@@ -247,6 +279,14 @@ class Cosimulation:
             ft = any(dp in deps for deps in dst.feedthrough.values())
             hold = ("" if src.period <= dst.period and self._ratio[dn] % self._ratio[sn] == 0
                     else f"; {sn} updates every {src.period:g} s, held in between (zero-order hold)")
+            if self.clock_plan is not None and port_kind(
+                    next(p.type for p in dst.input_ports if p.name == dp)) == "clock":
+                lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {self.clock_plan.connection_text(f'{sn}.{sp}', f'{dn}.{dp}')}")
+                continue
+            clocks = self.clock_plan is not None and getattr(dst, "port_clocks", None) and dst.port_clocks(dp)
+            if clocks:
+                lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {self.clock_plan.clocked_text(dn, clocks, ft)}")
+                continue
             if self.order == "jacobi":
                 when = "read at t from the values before t: one base step old when both are due"
             elif ft:
@@ -351,7 +391,8 @@ class Cosimulation:
     def _integer_columns(self, sel) -> dict[int, str]:
         """The recorded columns of integer signals (position in ``sel``: FMI type), kept exact."""
 
-        return {pos: self.signal_types[i] for pos, i in enumerate(sel) if port_kind(self.signal_types[i]) == "integer"}
+        return {pos: ("Int64" if self.signal_types[i] == CLOCK else self.signal_types[i]) for pos, i in enumerate(sel)
+                if port_kind(self.signal_types[i]) in ("integer", "clock")}
 
     def _bind_all(self, values, source, integers):
         bound = {}
@@ -383,7 +424,7 @@ class Cosimulation:
                         outs.append(self._loop_solver(units, bound, values))
                     else:
                         outs.extend(bound[u.comp.name][0] for u in units)
-                upds = [bound[c.name][1] for c in self.components if c.name in due]
+                upds = [bound[c.name][1] for c in self._update_order if c.name in due]
                 patterns[due] = len(entries)
                 entries.append((tuple(outs), tuple(upds)))
             index[j] = patterns[due]
@@ -461,6 +502,8 @@ class Cosimulation:
         owner: dict = {}
         k0, k, j, jb, phase, f = 0, 0, 0, 0, "reset", None
         bar = None
+        board = None
+        self.clock_ticks = None
 
         def record(row: int) -> int:
             if all_sel:
@@ -480,6 +523,11 @@ class Cosimulation:
                 f = c
                 c.reset(t0)
             phase = "bind"
+            if self.clock_plan is not None:
+                board = self.clock_plan.board(values, integers, self._slots)
+                for c in self.clock_plan.members:
+                    f = c
+                    c.attach_clocks(board)
             bound = self._bind_all(values, source, integers)
             for name, (o, u) in bound.items():
                 owner[o], owner[u] = name, name
@@ -555,6 +603,8 @@ class Cosimulation:
         finally:
             if bar is not None:
                 bar.close()
+            if board is not None:
+                self.clock_ticks = board.ticks()
             reached = k if phase in ("output", "update") else -1
             for c in self.components:              # the instants each component computed
                 c.n_samples = reached // self._ratio[c.name] + 1 if reached >= 0 else 0

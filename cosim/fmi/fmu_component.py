@@ -22,7 +22,9 @@ Parameters and start values of arrays are lists.
 The FMI rules of an instance's life are kept on every path (:mod:`cosim.fmi.instance`):
 after a call returned Error only FreeInstance follows; after Fatal nothing. An FMU that
 asks to terminate ends the run normally (:class:`~cosim.core.component.StopRequest`).
-Scheduled Execution (clocks) is refused with its reason. With ``isolate=True`` the FMU
+An FMI 3.0 FMU with clocks (Model Exchange, Co-Simulation with Event Mode, Scheduled
+Execution) runs as the standard's call sequences for clocks say (:mod:`cosim.fmi.clocks`;
+the master's side in :mod:`cosim.core.clocking`). With ``isolate=True`` the FMU
 runs in a process of its own (:mod:`cosim.fmi.isolated`): a crash of its code ends the run
 with an error naming the FMU, the call and the signal, not the process.
 
@@ -52,8 +54,11 @@ from fmu_models.export.plant_fmu import build_fmu
 from fmu_models.infra.checks import finite, positive
 from fmu_models.infra.files import atomic_copy, private_tempdir
 
-from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest
+from ..core.clocking import ClockBoard
+from ..core.component import CLOCK, PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest, port_kind
 from .archive import Extraction, read_description
+from .clock_run import ClockedRun, initialise
+from .clocks import read_clocks
 from .exchange import Exchange
 from .exchange import no_exchange as _nothing
 from .instance import FMUInstance
@@ -63,17 +68,13 @@ from .ports import array_shape, check_declared_range, check_integer, element_por
 
 __all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError"]
 
-INTERFACES = ("auto", "cs", "me")
+INTERFACES = ("auto", "cs", "me", "se")
 FEEDTHROUGH_MODES = ("model", "none")
 LOGGER = _logging.getLogger("cosim.fmu")
 #: The most fixed internal steps (an FMU's ``fixedInternalStepSize`` in Co-Simulation, the
 #: Euler/RK4 ``solver_step`` in Model Exchange) a run may take: beyond it the run is refused
 #: before it starts instead of running for days inside one call nobody can interrupt.
 MAX_INTERNAL_STEPS = 10**9
-
-
-def _has_clocks(md) -> bool:
-    return any(v.type == "Clock" for v in md.modelVariables) or getattr(md, "scheduledExecution", None) is not None
 
 
 class FMUComponent(BoundCalls, Component, kind="fmu"):
@@ -99,8 +100,9 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         parameters are set in Configuration Mode (FMI 3.0) and decide the arrays' sizes.
     start : mapping, optional
         Start values by name (e.g. initial states), set before initialisation.
-    interface : {"auto", "cs", "me"}
-        Co-Simulation or Model Exchange; ``"auto"`` takes Co-Simulation if the FMU has it.
+    interface : {"auto", "cs", "me", "se"}
+        Co-Simulation, Model Exchange or Scheduled Execution; ``"auto"`` takes
+        Co-Simulation if the FMU has it, else Model Exchange, else Scheduled Execution.
     solver : {"cvode", "euler", "rk4"}
         Model Exchange solver (see :mod:`cosim.fmi.model_exchange`; default CVODE).
     solver_step : float, optional
@@ -119,6 +121,10 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         Run the FMU in a process of its own, so that a crash of its code ends the run with
         a named error instead of the process (default False; costs a round trip between
         the processes per call, see the performance page of the documentation).
+    clock_intervals : mapping, optional
+        Intervals [s] of fixed or tunable input clocks that declare ``intervalDecimal``
+        (the importer sets those), by clock name; default: the declared ones. Each must be
+        a multiple of ``period``.
 
     Attributes
     ----------
@@ -126,7 +132,9 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
     version : int
         2 or 3.
     interface : str
-        ``"cs"`` or ``"me"``, as resolved.
+        ``"cs"``, ``"me"`` or ``"se"``, as resolved.
+    clock_model : FMIClocks or None
+        The FMU's clocks (:mod:`cosim.fmi.clocks`), None if it declares none.
     messages : collections.deque of (int, str)
         The last 200 log messages of the FMU (status, text).
     integrator : MEIntegrator or None
@@ -143,34 +151,43 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                  outputs: Sequence[str] | None = None, parameters: Mapping[str, object] | None = None,
                  start: Mapping[str, object] | None = None, interface: str = "auto",
                  solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6,
-                 feedthrough: str = "model", logging: bool = False, isolate: bool = False):
+                 feedthrough: str = "model", logging: bool = False, isolate: bool = False,
+                 clock_intervals: Mapping[str, float] | None = None):
 
         #: what a child process needs to build the same component (``isolate=True``)
         self.arguments = dict(name=name, path=str(path), period=period, inputs=inputs, outputs=outputs,
                               parameters=parameters, start=start, interface=interface, solver=solver,
-                              solver_step=solver_step, rtol=rtol, feedthrough=feedthrough, logging=logging)
+                              solver_step=solver_step, rtol=rtol, feedthrough=feedthrough, logging=logging,
+                              clock_intervals=clock_intervals)
         self.path = Path(path)
         md = read_description(self.path)
         self.md, self.version = md, 3 if str(md.fmiVersion).startswith("3") else 2
         if interface not in INTERFACES:
             raise UnknownNameError(f"{name}: interface must be one of {INTERFACES}, got {interface!r}")
-        has = {"cs": md.coSimulation is not None, "me": md.modelExchange is not None}
-        if _has_clocks(md) and not any(has.values()):
-            raise FMUError(f"{name}: {self.path.name} is a Scheduled Execution FMU (clocks): the master steps "
-                           "periodic components and does not schedule clocked partitions; not supported")
+        has = {"cs": md.coSimulation is not None, "me": md.modelExchange is not None,
+               "se": getattr(md, "scheduledExecution", None) is not None}
+        words = {"cs": "Co-Simulation", "me": "Model Exchange", "se": "Scheduled Execution"}
         if interface == "auto":
-            interface = "cs" if has["cs"] else "me" if has["me"] else ""
+            interface = "cs" if has["cs"] else "me" if has["me"] else "se" if has["se"] else ""
             if not interface:
-                raise FMUError(f"{name}: {self.path.name} has neither a Co-Simulation nor a Model "
-                               "Exchange interface")
+                raise FMUError(f"{name}: {self.path.name} has no Co-Simulation, Model Exchange or Scheduled "
+                               "Execution interface")
         elif not has[interface]:
-            have = [k for k, v in has.items() if v]
-            raise ConfigurationError(f"{name}: {self.path.name} has no "
-                                     f"{'Co-Simulation' if interface == 'cs' else 'Model Exchange'} "
-                                     f"interface; it has: {', '.join(have) or 'none'}")
-        if _has_clocks(md):
-            raise FMUError(f"{name}: {self.path.name} declares clocks: clocked (Scheduled Execution) variables "
-                           "are not supported by the master")
+            have = [words[k] for k, v in has.items() if v]
+            raise ConfigurationError(f"{name}: {self.path.name} has no {words[interface]} interface; it has: "
+                                     f"{', '.join(have) or 'none'}")
+        self.clock_model = read_clocks(md, self.path, name)
+        if self.clock_model is not None:
+            self.clock_model.check_interface(interface)
+            if isolate is True:
+                raise ConfigurationError(f"{name}: an FMU with clocks cannot be isolated (isolate = true): its "
+                                         "Event Mode and callbacks run in the master's process")
+        elif interface == "se":
+            raise FMUError(f"{name}: {self.path.name} is a Scheduled Execution FMU without clocks: it has no model "
+                           "partition to activate")
+        if clock_intervals is not None and self.clock_model is None:
+            raise ConfigurationError(f"{name}: clock_intervals given, but {self.path.name} has no clocks")
+        self.clock_overrides = self.clock_model.check_overrides(clock_intervals or {}) if self.clock_model else {}
         self.interface = interface
         if solver not in SOLVERS:
             raise UnknownNameError(f"{name}: solver must be one of {SOLVERS}, got {solver!r}")
@@ -183,7 +200,8 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
         self.isolate = isolate
         self.variables = {v.name: v for v in md.modelVariables}
-        ident = (md.coSimulation if interface == "cs" else md.modelExchange).modelIdentifier
+        ident = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}[
+            interface].modelIdentifier
         self.model_identifier = ident
         #: The project's plant model this FMU was built from (a scenario's ``model = ...``),
         #: or None for an FMU file: an FMU export in another FMI version rebuilds from it.
@@ -194,7 +212,14 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         ins = self._ports(name, inputs, ("input",), "input")
         outs = self._ports(name, outputs, ("output", "local"), "output", default=("output",))
         ft = self._model_feedthrough(outs, ins) if feedthrough == "model" else False
+        if self.clock_model is not None and ft is not False:
+            ft = self.clock_model.feedthrough(ft, outs, ins, self.element_ports, interface)
         super().__init__(name, period, ins, outs, feedthrough=ft, port_names_are_identifiers=False)
+        if interface == "se":
+            self.reentrant = False              # a partition is activated once per time
+        self._board: ClockBoard | None = None
+        self._run: ClockedRun | None = None
+        self._clock_schedule = None
         self.instance: FMUInstance | None = None
         self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
@@ -258,6 +283,8 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         available = {p.name: p for p in self.element_ports.values() if p.variable.causality in causalities}
         if chosen is None:
             chosen = [n for n, p in available.items() if p.variable.causality in default and p.type in PORT_TYPES]
+            if self.clock_model is not None:
+                chosen += self.clock_model.default_ports(what)
         elif isinstance(chosen, str) or not all(isinstance(c, str) for c in chosen):
             raise TypeMismatchError(f"{name}: {what}s must be a list of variable names, got {chosen!r}")
         ports, seen = [], set()
@@ -268,6 +295,11 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                                        f"{', '.join(available)}")
             for n in names:
                 e = available[n]
+                if e.type == CLOCK and self.clock_model is not None:
+                    if n not in seen:
+                        seen.add(n)
+                        ports.append(self.clock_model.port(n, what, name))
+                    continue
                 if e.type not in PORT_TYPES:
                     raise TypeMismatchError(f"{name}: {what} {n!r} is of type {e.type}; ports can be "
                                             f"{', '.join(sorted(set(PORT_TYPES)))}")
@@ -349,6 +381,9 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         is, and an ``fmi_version`` other than its own is said in the note, not converted."""
         if fmi_version not in FMI_VERSIONS:
             raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
+        if self.clock_model is not None:
+            raise ConfigurationError(f"{self.name}: an FMU with clocks has no SSP form here (the SSP 1.0 files "
+                                     "written have no clock connections)")
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         dst = folder / f"{self.name}.fmu"
@@ -369,6 +404,14 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         return ExportedFMU(dst, dict(self.settings), note)
 
     def timing(self) -> str:
+        if self.clock_model is not None:
+            kind = {"cs": "Co-Simulation with Event Mode", "se": "Scheduled Execution",
+                    "me": f"Model Exchange, {self.solver} solver"}[self.interface]
+            n_in = sum(k.causality == "input" for k in self.clock_model.clocks)
+            n_out = len(self.clock_model.clocks) - n_in
+            held = "" if self.interface == "se" else f"; inputs held over [t, t + {self.period:g}]"
+            return (f"FMI 3.0 {kind}, {n_in} input and {n_out} output/local clock(s): clocked outputs at their "
+                    f"clocks' activations, held in between{held}")
         kind = ("Co-Simulation doStep" if self.interface == "cs"
                 else f"Model Exchange, {self.solver} solver (step {self.solver_step:g} s)")
         lim = " (left limits: feedthrough='none')" if self.feedthrough_mode == "none" else ""
@@ -393,10 +436,46 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         was given them), or None."""
         return list(self._sources) if self._sources is not None else None
 
+    # ------------------------------------------------------------------ clocks
+    @property
+    def clock_infos(self) -> tuple:
+        """The FMU's clocks as the master's plan sees them (empty without clocks; see
+        :mod:`cosim.core.clocking`)."""
+        if self.clock_model is None:
+            return ()
+        return self.clock_model.infos(self.interface, self.clock_overrides, self.input_names + self.output_names)
+
+    def port_clocks(self, port: str) -> list[str]:
+        """The clocks of the data port ``port`` (it is exchanged only at their activations);
+        empty for a port without clock."""
+        if self.clock_model is None or port not in self.element_ports or port in self.clock_model.by_name:
+            return []
+        by_vr = self.clock_model.by_vr
+        return [by_vr[vr].name for vr in self.clock_model.clocks_of(self.element_ports[port].variable.name)]
+
+    def attach_clocks(self, board: ClockBoard) -> None:
+        """Take the run's clock board (before :meth:`bind`)."""
+        self._board = board
+
+    def _clock_update(self, env) -> None:
+        """The Scheduled Execution ``clockUpdate`` callback, passed on to the run (an
+        exception, Ctrl-C too, is kept by the run and raised when the FMU returns: a ctypes
+        callback cannot raise)."""
+        try:
+            run = self._run
+            if run is not None:
+                run.clock_update(env)
+        except BaseException as e:  # noqa: BLE001 - kept for the run
+            run = self._run
+            if run is not None and run._error is None:
+                run._error = e
+
     # ------------------------------------------------------------------ lifecycle
     def check_run(self, start_time: float, stop_time: float) -> None:
         """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`
         (e.g. Roberts in Co-Simulation: steps of 1e-3 s over 1e8 s)."""
+        if self.interface == "se":
+            return
         if self.interface == "cs":
             h, what = self.md.coSimulation.fixedInternalStepSize, "its fixedInternalStepSize"
             hint = "; its Model Exchange interface (interface = 'me') integrates with CVODE" if \
@@ -444,7 +523,8 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self.instantiate(t0)
         if self.interface == "me":
             self.integrator = MEIntegrator(FMUModel(self.instance), self.solver, self.solver_step, self.rtol)
-            self.integrator.start(t0)
+            if self.clock_model is None:        # a clocked FMU's first Event Mode ends in its first update
+                self.integrator.start(t0)
 
     def instantiate(self, t0: float) -> FMUInstance:
         """A new instance of the FMU (closing any previous one), initialised at ``t0``
@@ -452,7 +532,10 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         values; left after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the
         integrator not started: what :class:`~cosim.fmi.me_system.MESystem` builds on)."""
         self.close()
-        inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging)
+        options = {}
+        if self.clock_model is not None:
+            options = dict(event_mode=True, early_return=True, clock_update=self._clock_update)
+        inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging, **options)
         self.instance = inst
         self.messages = inst.messages
         fmu = inst.fmu
@@ -473,6 +556,8 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                 inst.call("EnterInitializationMode", fmu.enterInitializationMode)
             else:
                 inst.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
+            if self.clock_model is not None:
+                self._clock_schedule = initialise(self, inst, t0)
             inst.call("ExitInitializationMode", fmu.exitInitializationMode)
             inst.initialized = True
         except (TypeError, ValueError, OverflowError) as e:
@@ -499,6 +584,16 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             return self._remote.bind(values, inputs, outputs, integers)
         if self.instance is None:
             raise FMUError(f"{self.name}: reset() must be called before bind()")
+        if self.clock_model is not None:
+            if integers is None:
+                integers = np.zeros(len(values), dtype=np.int64)
+            board = self._board if self._board is not None else ClockBoard(None, values, integers, {})
+            run = self._run = ClockedRun(self, board, values, inputs, outputs, integers)
+            if self.interface == "cs":
+                return run.cs_functions()
+            if self.interface == "me":
+                return run.me_functions(self.integrator)
+            return run.se_functions()
         inst = self.instance
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
@@ -606,7 +701,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         n_in = len(self.connected_inputs)
         buf[:n_in] = u
         for i, n in enumerate(self.connected_inputs):
-            if PORT_TYPES[self.element_ports[n].type] != "real":
+            if port_kind(self.element_ports[n].type) != "real":
                 ints[i] = int(u[i])
 
     def close(self) -> None:
@@ -616,7 +711,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         if remote is not None:
             remote.close()
         inst, self.instance = self.instance, None
-        self._private, self.integrator = None, None
+        self._private, self.integrator, self._run = None, None, None
         if inst is not None:
             inst.finish()
 

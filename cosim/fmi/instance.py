@@ -66,14 +66,21 @@ class FMUInstance:
     md : fmpy ModelDescription
     directory : str
         Where the FMU is unpacked.
-    interface : {"cs", "me"}
+    interface : {"cs", "me", "se"}
     logging_on : bool
         Ask the FMU for debug messages and log them at INFO level (warnings and errors are
         always logged, on the ``cosim.fmu`` logger).
+    event_mode : bool
+        FMI 3.0 Co-Simulation: instantiate with ``eventModeUsed`` (what clocks need).
+    early_return : bool
+        FMI 3.0 Co-Simulation: instantiate with ``earlyReturnAllowed``.
+    clock_update : callable, optional
+        Scheduled Execution: the ``clockUpdate`` callback, called with the instance
+        environment (it must not raise: a ctypes callback cannot).
 
     Attributes
     ----------
-    fmu : fmpy FMU2Slave, FMU2Model, FMU3Slave or FMU3Model
+    fmu : fmpy FMU2Slave, FMU2Model, FMU3Slave, FMU3Model or FMU3ScheduledExecution
     dll : ctypes.CDLL
     handle : int
         The instance pointer.
@@ -86,7 +93,8 @@ class FMUInstance:
         The last 200 log messages (status, text).
     """
 
-    def __init__(self, owner: str, md, directory: str, interface: str, logging_on: bool = False):
+    def __init__(self, owner: str, md, directory: str, interface: str, logging_on: bool = False, *,
+                 event_mode: bool = False, early_return: bool = False, clock_update=None):
         from fmpy import fmi2, fmi3
         from fmpy.fmi1 import calloc, free
 
@@ -95,7 +103,8 @@ class FMUInstance:
         self.messages: deque = deque(maxlen=200)
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
         self._freed = False
-        ident = (md.coSimulation if interface == "cs" else md.modelExchange).modelIdentifier
+        ident = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}[
+            interface].modelIdentifier
         args = dict(guid=md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
         cwd = os.getcwd()
         fmu = None
@@ -116,13 +125,20 @@ class FMUInstance:
                 self._callbacks = cb
                 fmu.instantiate(callbacks=cb, loggingOn=self.logging_on)
             else:
-                fmu = (fmi3.FMU3Slave if interface == "cs" else fmi3.FMU3Model)(**args)
-
                 def log3(env, status, category, message):
                     self._log(status, message)
 
                 self._log3 = log3
-                fmu.instantiate(loggingOn=self.logging_on, logMessage=log3)
+                if interface == "se":
+                    fmu = fmi3.FMU3ScheduledExecution(**args)
+                    self._instantiate_se(fmu, directory, clock_update)
+                elif interface == "cs":
+                    fmu = fmi3.FMU3Slave(**args)
+                    fmu.instantiate(loggingOn=self.logging_on, logMessage=log3, eventModeUsed=bool(event_mode),
+                                    earlyReturnAllowed=bool(early_return))
+                else:
+                    fmu = fmi3.FMU3Model(**args)
+                    fmu.instantiate(loggingOn=self.logging_on, logMessage=log3)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
             if fmu is not None and getattr(fmu, "dll", None) is not None:
@@ -142,6 +158,25 @@ class FMUInstance:
                 fmu.setDebugLogging(True, [])
             except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
                 LOGGER.debug("%s: setDebugLogging refused", owner)
+
+    def _instantiate_se(self, fmu, directory: str, clock_update) -> None:
+        """``fmi3InstantiateScheduledExecution`` with this instance's logger and the
+        ``clockUpdate`` callback (fmpy's own instantiate passes one that does nothing); the
+        preemption locks do nothing (partitions run one after the other here)."""
+        from fmpy import fmi3
+
+        def noop(*args):
+            return None
+
+        fmu.logMessage = fmi3.fmi3LogMessageCallback(self._log3)
+        fmu.clockUpdate = fmi3.fmi3ClockUpdateCallback(clock_update or noop)
+        fmu.lockPreemption = fmi3.fmi3LockPreemptionCallback(noop)
+        fmu.unlockPreemption = fmi3.fmi3UnlockPreemptionCallback(noop)
+        resources = os.path.join(directory, "resources") + os.path.sep
+        fmu.component = fmu.fmi3InstantiateScheduledExecution(
+            fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"), fmi3.fmi3False,
+            fmi3.fmi3Boolean(self.logging_on), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
+            fmu.lockPreemption, fmu.unlockPreemption)
 
     # ------------------------------------------------------------------ status
     def _log(self, status, message) -> None:

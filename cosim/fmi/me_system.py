@@ -188,6 +188,9 @@ class MESystem(BoundCalls, Component, kind="me_system"):
             if m.isolate:
                 raise ConfigurationError(f"{name}: member {m.name!r} cannot be isolated: the system calls its "
                                          "functions inside every right-hand-side evaluation")
+            if m.clock_model is not None:
+                raise ConfigurationError(f"{name}: member {m.name!r} has clocks; an ME system does not drive "
+                                         "clocks: give it to the master as a component of its own")
         names = [m.name for m in self.members]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:

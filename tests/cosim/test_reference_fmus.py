@@ -3,7 +3,9 @@ Co-Simulation and Model Exchange), through the Python API and ``pendulum-cosim r
 
 Every case either gives the reference result (Co-Simulation: the published one, exactly;
 Model Exchange: fmpy's CVODE at rtol 1e-10 within twice the error fmpy itself makes at
-the master's tolerance) or is refused with a message naming what is unsupported. The
+the master's tolerance; Scheduled Execution, the Clocks FMU: every activation and tick
+counter of the table in its model description) or is refused with a message naming what
+is unsupported. The
 cases and comparisons are in ``tests/reference_cases.py`` (shared with the benchmark that
 writes the README's table).
 """
@@ -36,6 +38,10 @@ def _string_like(case: rc.Case, name: str) -> bool:
 def check_result(case: rc.Case, df) -> dict:
     r = rc.compare(case, df)
     assert r["rows"] > 0, r
+    if case.interface == "se":
+        assert r["wrong_ticks"] == {}, r
+        assert r["error"] == 0.0, r
+        return r
     if case.interface == "cs":
         assert r["error"] == 0.0, r
         assert r["missing"] == 0, r
@@ -47,9 +53,13 @@ def check_result(case: rc.Case, df) -> dict:
 
 
 def test_every_model_is_a_case():
-    """Both versions' folders are read (9 models: 6 in both versions, 3 FMI 3 only)."""
-    assert len(CASES) == 2 * (6 * 2 + 3)
+    """Both versions' folders are read (9 models: 6 in both versions, 3 FMI 3 only), each
+    with each of its interfaces (Clocks has only Scheduled Execution); one refusal is left,
+    Roberts in Co-Simulation (its fixed internal step over 1e8 s)."""
+    assert len(CASES) == 2 * (6 * 2 + 2) + 1
     assert {c.model for c in CASES} >= {"BouncingBall", "Clocks", "Feedthrough", "Roberts", "StateSpace", "Stair"}
+    assert [c.label for c in CASES if c.model == "Clocks"] == ["Clocks-fmi3-se"]
+    assert [c.label for c in CASES if c.refused] == ["Roberts-fmi3-cs"]
 
 
 @pytest.mark.parametrize("case", CASES, ids=IDS)
@@ -66,6 +76,8 @@ def test_api(case: rc.Case):
     else:
         assert df.attrs["stopped"] is None
         assert df.index[-1] == pytest.approx(case.stop, rel=1e-12)
+    if case.model == "Clocks":             # the table ends at 9 s; at 10 s inClock1 ticks once more
+        assert df["inClock1Ticks"].iloc[-1] == 11 and df["totalInClockTicks"].iloc[-1] == 16
 
 
 @pytest.mark.parametrize("case", CASES, ids=IDS)
@@ -82,6 +94,11 @@ def test_cli(case: rc.Case, tmp_path):
     assert list(df.columns) == list(api.columns)
     np.testing.assert_array_equal(df.index.to_numpy(), api.index.to_numpy())
     np.testing.assert_array_equal(df.to_numpy(float), api.to_numpy(float))    # the CSV is exact
+    if case.interface == "se":             # the activations the command line wrote: the API's
+        check_result(case, df)
+        np.testing.assert_array_equal(df.attrs["clock_ticks"]["time"].to_numpy(),
+                                      api.attrs["clock_ticks"]["time"].to_numpy())
+        assert list(df.attrs["clock_ticks"]["clock"]) == list(api.attrs["clock_ticks"]["clock"])
     if case.model == "Stair":
         assert "asked to stop the run at t = 9 s" in proc.stderr
 

@@ -4,11 +4,15 @@ the README's table).
 
 Located as ``../shared/reference-fmus`` from the project root or by the environment
 variable ``PENDULUM_COSIM_REFERENCE_FMUS``. Every case runs one Reference FMU (FMI 2.0 or
-3.0, Co-Simulation or Model Exchange) over its default experiment through the master,
-from Python or from the command line with a minimal scenario file, and compares it:
-Co-Simulation with the result the Reference-FMUs project publishes, Model Exchange with
-fmpy's CVODE at relative tolerance 1e-10 (the reference) and with fmpy's CVODE at the
-master's own tolerance (the error ours may have: at most twice fmpy's).
+3.0, Co-Simulation, Model Exchange or Scheduled Execution, whichever interfaces it has) over
+its default experiment through the master, from Python or from the command line with a
+minimal scenario file, and compares it: Co-Simulation with the result the Reference-FMUs
+project publishes, Model Exchange with fmpy's CVODE at relative tolerance 1e-10 (the
+reference) and with fmpy's CVODE at the master's own tolerance (the error ours may have: at
+most twice fmpy's), Scheduled Execution (``Clocks``) with the tick table in a comment of
+its modelDescription.xml: the importer ticks its triggered input clocks at the table's
+times (a ``clock_ticks`` source), and every clock's activations and tick counters must be
+the table's.
 """
 from __future__ import annotations
 
@@ -52,28 +56,95 @@ class Case:
         return f"{self.model}-fmi{self.version}-{self.interface}"
 
 
+def tick_table(case: Case) -> dict[str, list[float]]:
+    """The expected activations of a clocked Reference FMU, from the tick table in a comment
+    of its modelDescription.xml: clock -> the times marked ``+`` (``?``: computed by the
+    rule the table's row states, see :func:`expected_ticks`)."""
+    import re
+    import zipfile
+
+    with zipfile.ZipFile(fmu_path(case)) as z:
+        text = z.read("modelDescription.xml").decode()
+    comment = re.search(r"<!--(.*?)-->", text, re.S).group(1)
+    lines = [ln for ln in comment.splitlines() if ln.strip()]
+    head = next(ln for ln in lines if ln.startswith("time"))
+    cols = [(m.start(), float(m.group())) for m in re.finditer(r"\d+(\.\d+)?", head)]
+    table = {}
+    for ln in lines:
+        name = ln.split()[0]
+        if name == "time":
+            continue
+        table[name] = [t for pos, t in cols if pos < len(ln) and ln[pos] in "+?"]
+        table[name + ":marks"] = "".join(ln[pos] if pos < len(ln) else " " for pos, _ in cols)
+    return table
+
+
+def expected_ticks(case: Case) -> dict[str, list[float]]:
+    """Every clock's expected activation times: the table's ``+`` marks, and the output
+    clock's ``?`` row by its stated rule (active in a partition that makes the total of
+    input ticks a multiple of 5), partitions at one time in priority order."""
+    import zipfile
+
+    from lxml import etree
+
+    table = tick_table(case)
+    with zipfile.ZipFile(fmu_path(case)) as z:
+        root = etree.fromstring(z.read("modelDescription.xml"))
+    inputs = sorted((el for el in root.find("ModelVariables") if el.tag == "Clock" and el.get("causality") == "input"),
+                    key=lambda el: int(el.get("priority")))
+    names = [el.get("name") for el in inputs]
+    out = {n: table[n] for n in names}
+    total, outs = 0, []
+    for t in sorted({x for n in names for x in table[n]}):
+        for n in names:                      # the partitions at one time in priority order
+            if t in table[n]:
+                total += 1
+                if total % 5 == 0:
+                    outs.append(t)
+    out["outClock"] = outs
+    return out
+
+
 #: Period and span of each model's default experiment (Roberts: 10 steps over 1e-5..1e8 s,
 #: a period that divides the span exactly; StateSpace and Feedthrough: the published grid).
 EXPERIMENTS = {"BouncingBall": (0.01, 0.0, 3.0), "Dahlquist": (0.1, 0.0, 10.0), "Feedthrough": (0.1, 0.0, 2.0),
                "Resource": (0.1, 0.0, 1.0), "Stair": (0.2, 0.0, 10.0), "VanDerPol": (0.01, 0.0, 20.0),
                "StateSpace": (0.1, 0.0, 10.0), "Roberts": (9999999.999999, 1e-5, 1e8), "Clocks": (1.0, 0.0, 10.0)}
 #: The refusals: (model, interface) -> the words the message must contain.
-REFUSED = {("Clocks", "cs"): "Scheduled Execution", ("Clocks", "me"): "Scheduled Execution",
-           ("Roberts", "cs"): "fixedInternalStepSize"}
+REFUSED = {("Roberts", "cs"): "fixedInternalStepSize"}
+
+
+def _interfaces(path: Path) -> list[str]:
+    from fmpy import read_model_description
+
+    md = read_model_description(str(path))
+    return [k for k, x in (("cs", md.coSimulation), ("me", md.modelExchange),
+                           ("se", getattr(md, "scheduledExecution", None))) if x is not None]
 
 
 def cases() -> list[Case]:
-    """Every case: each Reference FMU of both versions, both interfaces."""
+    """Every case: each Reference FMU of both versions, each of its interfaces."""
     d = reference_dir()
     out = []
     for version in (2, 3):
         names = sorted(p.stem for p in (d / f"fmi{version}").glob("*.fmu")) if d else []
         for model in names:
             period, start, stop = EXPERIMENTS.get(model, (0.1, 0.0, 1.0))
-            for interface in ("cs", "me"):
+            for interface in _interfaces(d / f"fmi{version}" / f"{model}.fmu"):
                 refused = REFUSED.get((model, interface), "")
                 out.append(Case(model, version, interface, period, start, stop, refused=refused))
     return out
+
+
+def _triggered_sources(case: Case) -> dict[str, list[float]]:
+    """Scheduled Execution: each triggered input clock's activation times from the table
+    (the importer is their source)."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmu_path(case)))
+    table = tick_table(case)
+    return {v.name: table[v.name] for v in md.modelVariables
+            if v.type == "Clock" and v.causality == "input" and v.intervalVariability == "triggered"}
 
 
 def fmu_path(case: Case) -> Path:
@@ -83,7 +154,18 @@ def fmu_path(case: Case) -> Path:
 def run_api(case: Case) -> pd.DataFrame:
     """The case through the master from Python; columns named by the FMU's variables."""
     from cosim import Cosimulation, FMUComponent
+    from cosim.core.clocking import ClockTicks
 
+    if case.interface == "se":
+        comp = FMUComponent("m", fmu_path(case), case.period, interface="se", parameters=case.parameters or None)
+        sources = _triggered_sources(case)
+        ticks = [ClockTicks(f"src_{name}", case.period, times=times) for name, times in sources.items()]
+        sim = Cosimulation([comp, *ticks], {f"m.{name}": f"src_{name}.tick" for name in sources})
+        df = sim.run(case.stop, case.start)
+        df = df[[c for c in df.columns if c.startswith("m.")]].rename(columns=lambda c: c[2:])
+        df.attrs["clock_ticks"] = sim.clock_ticks
+        df.attrs["stopped"] = None
+        return df
     comp = FMUComponent("m", fmu_path(case), case.period, interface=case.interface, rtol=RTOL,
                         parameters=case.parameters or None)
     df = Cosimulation([comp], {}).run(case.stop, case.start)
@@ -96,17 +178,28 @@ def run_api(case: Case) -> pd.DataFrame:
 def run_cli(case: Case, folder: Path) -> tuple[pd.DataFrame | None, subprocess.CompletedProcess]:
     """The case through ``pendulum-cosim run`` with a minimal scenario file."""
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "s.toml").write_text(
-        f'[simulation]\nstart_time = {case.start!r}\nstop_time = {case.stop!r}\n\n[[component]]\nname = "m"\n'
-        f'type = "fmu"\npath = "{fmu_path(case)}"\nperiod = {case.period!r}\ninterface = "{case.interface}"\n'
-        f"rtol = {RTOL!r}\n")
+    text = (f'[simulation]\nstart_time = {case.start!r}\nstop_time = {case.stop!r}\n\n[[component]]\nname = "m"\n'
+            f'type = "fmu"\npath = "{fmu_path(case)}"\nperiod = {case.period!r}\ninterface = "{case.interface}"\n')
+    if case.interface == "se":
+        sources = _triggered_sources(case)
+        for name, times in sources.items():
+            text += (f'\n[[component]]\nname = "src_{name}"\ntype = "clock_ticks"\nperiod = {case.period!r}\n'
+                     f"times = {times!r}\n")
+        text += "\n[connections]\n" + "".join(f'"m.{name}" = "src_{name}.tick"\n' for name in sources)
+    else:
+        text += f"rtol = {RTOL!r}\n"
+    (folder / "s.toml").write_text(text)
     proc = subprocess.run([sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())",
                            "run", "s.toml", "--out", "out", "--no-progress"], cwd=folder, capture_output=True,
                           text=True, timeout=600)
     csv = folder / "out" / "results.csv"
     if proc.returncode != 0 or not csv.exists():
         return None, proc
-    return pd.read_csv(csv, index_col="time").rename(columns=lambda c: c[2:]), proc
+    df = pd.read_csv(csv, index_col="time")
+    if case.interface == "se":
+        df = df[[c for c in df.columns if c.startswith("m.")]]
+        df.attrs["clock_ticks"] = pd.read_csv(folder / "out" / "clock_ticks.csv")
+    return df.rename(columns=lambda c: c[2:]), proc
 
 
 def _published(model: str) -> pd.DataFrame | None:
@@ -202,6 +295,8 @@ def compare(case: Case, df: pd.DataFrame) -> dict:
     FMU stopped (Stair at 9 s) ends with the value after the stopping event, which fmpy's
     Model Exchange loop does not record: that row is compared with the published result
     instead."""
+    if case.interface == "se":
+        return _compare_ticks(case, df)
     if case.interface == "cs":
         pub = _published(case.model)
         if pub is None:
@@ -245,3 +340,30 @@ def compare(case: Case, df: pd.DataFrame) -> dict:
             out["error"] = max(err, float(np.max(np.abs(a - b), initial=0.0)))
             out["rows"] += len(a)
     return out
+
+
+def _compare_ticks(case: Case, df: pd.DataFrame) -> dict:
+    """Scheduled Execution: every clock's activations (the master's log) against
+    :func:`expected_ticks`, and the FMU's tick counters at each of the table's times
+    (``<clock>Ticks`` = the activations so far, ``totalInClockTicks`` their sum)."""
+    want = expected_ticks(case)
+    log = df.attrs["clock_ticks"]
+    horizon = max(t for ts in tick_table(case).values() if isinstance(ts, list) for t in ts)
+    got = {name: [t for t, c in zip(log["time"], log["clock"]) if c == f"m.{name}" and t <= horizon + 1e-9]
+           for name in want}
+    wrong = {name: (got[name], want[name]) for name in want if got[name] != want[name]}
+    times = sorted({t for ts in want.values() for t in ts})
+    err = 0.0
+    for t in times:
+        row = df.loc[t]
+        total = 0
+        for name in want:
+            if name == "outClock":
+                continue
+            n = sum(1 for x in want[name] if x <= t)
+            total += n
+            err = max(err, abs(row[f"{name}Ticks"] - n))
+        outs = sum(x <= t for x in want["outClock"])
+        err = max(err, abs(row["totalInClockTicks"] - total), abs(row["outClock"] - outs))
+    return {"error": float(err), "rows": len(times), "missing": 0, "not_compared": [], "wrong_ticks": wrong,
+            "ticks": got, "reference": "the tick table of its model description"}
