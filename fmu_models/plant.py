@@ -11,7 +11,6 @@ from functools import cache
 
 import casadi as ca
 import numpy as np
-import scipy.linalg
 
 from .errors import ConfigurationError, InputError, UnknownNameError
 from .infra import checks
@@ -258,6 +257,8 @@ class PlantModel:
         n, m = self.nx, self.nu
         M = np.zeros((n + m, n + m))
         M[:n, :n], M[:n, n:] = A, B
+        import scipy.linalg  # here: 0.2 s of import time most runs never need
+
         E = scipy.linalg.expm(M * dt)
         return E[:n, :n], E[:n, n:]
 

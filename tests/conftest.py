@@ -80,8 +80,14 @@ _SPAWNS = re.compile(r"\bsubprocess\.|\bPopen\b|\bCLI\b|\brun_block\(|\bcross_ru
 
 def pytest_collection_modifyitems(config, items):
     """Mark ``subprocess`` every test whose own code starts a process (the command lines,
-    compilers, wine, qemu), so ``-m "not subprocess"`` selects the in-process tests."""
+    compilers, wine, qemu), so ``-m "not subprocess"`` selects the in-process tests; group
+    the tests of a module-scoped fixture on one worker."""
     for item in items:
+        # the tests sharing a module-scoped fixture (a docs build, a wheel build) run on one
+        # xdist worker, so the fixture is made once (--dist loadgroup)
+        defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+        if any(d[-1].scope == "module" for d in defs.values() if d):
+            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
         fn = getattr(item, "function", None)
         try:
             source = inspect.getsource(fn) if fn is not None else ""

@@ -3,7 +3,6 @@ point (seed 002's balancing controller)."""
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from fmu_models.errors import ConfigurationError
 from fmu_models.infra.checks import float_array, vector
@@ -29,6 +28,8 @@ def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
         raise ConfigurationError(f"LQR weights must be Q ({model.nx}, {model.nx}) and R ({model.nu}, {model.nu}); "
                                  f"got {Q.shape} and {R.shape}")
     try:
+        import scipy.linalg  # here: 0.2 s of import time most runs never need
+
         P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
     except (ValueError, np.linalg.LinAlgError) as e:
         raise ConfigurationError(f"no LQR solution for these weights: {e}") from None
