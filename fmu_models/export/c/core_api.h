@@ -22,6 +22,10 @@
 enum { INT_NONE = 0, INT_32 = 32, INT_64 = 64 };
 
 void core_defaults(CoreData *d);
+/* 0 if d is a consistent state of this core (times finite, parameters in their domains,
+ * indices in range, ...), else 1 with the reason: checked before an FMU state from outside
+ * (deserialised bytes) is used. */
+int core_check(const CoreData *d, char *err);
 /* leaving initialization mode: check every value, compute the initial state */
 int core_exit_init(CoreWork *wk, CoreData *d, char *err);
 double core_time(const CoreData *d);
