@@ -215,6 +215,21 @@ def build_fmu_for(label: str, version: int, folder: str | Path) -> Path:
     return build_signal_fmu(spec, folder, version, f"Fuzz{label.capitalize()}")
 
 
+#: The regression cases of cases.c (the exact call sequences of the classes found).
+CASES = ("nonfinite_time", "vr_overflow", "logging_off", "event_mode_used", "after_error", "forbidden_states",
+         "fmu_states")
+
+
+def run_case(t: Target, name: str, timeout: float = 10.0) -> Result:
+    """Run regression case ``name`` of cases.c on ``t`` (outcome ``"ok"`` or why not)."""
+    cmd = [*command(t, 0, 0, 1, timeout=timeout)[:8], f"timeout={timeout}", f"case={name}"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env={**os.environ, **SAN_ENV})
+    err = r.stderr
+    outcome = ("sanitizer" if any(m in err for m in SANITIZER_MARKS) else "hang" if "HANG " in err
+               else "ok" if r.returncode == 0 and f"CASE {name} ok" in r.stdout else "violation")
+    return Result(outcome, {}, err[-8000:], r.returncode, cmd)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line: build an FMU for fuzzing and run (or replay) sequences of a seed."""
     p = argparse.ArgumentParser(description="Fuzz one FMU of the project (replay a failing sequence).")

@@ -32,7 +32,8 @@ double core_time(const CoreData *d);
 void core_set_time(CoreData *d, double t);
 
 int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err);
-/* before_run: 1 in the instantiated and initialization modes (parameters may change) */
+/* before_run: 1 in the instantiated and initialization modes (parameters may change), 2 in
+ * Model Exchange's Continuous-Time Mode (continuous states may be set), else 0 */
 int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err);
 /* width: INT_32 or INT_64 in FMI 3.0 (checked against the variable), INT_NONE in FMI 2.0 */
 int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err);

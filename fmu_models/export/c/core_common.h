@@ -65,7 +65,7 @@ static inline int check_step(double t, double h, double time, char *err) {
         return 1;
     }
     if (!(h > 0) || !isfinite(h)) {
-        snprintf(err, ERRLEN, "communication step size %g must be finite and > 0", h);
+        snprintf(err, ERRLEN, "communication step size %g must be > 0 and finite", h);
         return 1;
     }
     if (!isfinite(t + h)) {

@@ -99,14 +99,15 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
         } else if (IN(r, VR_U, NU)) {
             if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
             d->u[r - VR_U] = v[i];
         } else if (IN(r, VR_Y, NY)) {
             d->y[r - VR_Y] = v[i];               /* NaN: a missing measurement (if the filter says so) */
             d->cand_ok = 0;
-        } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
+        } else if (r < N_VARS) FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
+        else FAIL("no Real variable has value reference %u", r);
     }
     return 0;
 }

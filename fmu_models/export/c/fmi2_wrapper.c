@@ -4,9 +4,10 @@
  * Every function checks the instance's state against the FMI 2.0 state machines (sections
  * 3.2.3 and 4.2.4 of the standard) for its interface type; any other call, any NULL argument
  * the standard does not allow and any bad value is answered with fmi2Error and a message
- * through the logger callback (which may be NULL), after which only fmi2FreeInstance,
- * fmi2Reset, fmi2SetFMUstate, fmi2FreeFMUstate, fmi2SetDebugLogging and the fmi2Get*Status
- * functions are accepted. Errors are always logged; loggingOn switches the debug messages. */
+ * through the logger callback (which may be NULL). After an Error the instance is in the
+ * tables' error state: fmi2FreeInstance, fmi2Reset, fmi2SetDebugLogging, the FMU-state
+ * functions (fmi2SetFMUstate restores a saved state) and, for debugging, the getters are
+ * accepted, nothing else. Errors are always logged; loggingOn switches the debug messages. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -55,16 +56,17 @@ static void mem_free(Instance *c, void *p) { c->cb.freeMemory(p); }
 #define STATUS_OK fmi2OK
 #define STATUS_ERROR fmi2Error
 #define IS_CS(c) ((c)->type == fmi2CoSimulation)
-#define ERROR_CALLS "fmi2FreeInstance, fmi2Reset, fmi2SetFMUstate, fmi2FreeFMUstate, fmi2SetDebugLogging"
+#define ERROR_CALLS "fmi2FreeInstance, fmi2Reset, fmi2SetDebugLogging, the FMU-state functions and (values for debugging only) the getters"
 #include "wrapper_common.h"
 
 #define ALLOW(fn, cs, me) ALLOW_IN(comp, fn, cs, me)
 
-/* The states of the FMI 2.0 tables (Co-Simulation | Model Exchange). */
+/* The states of the FMI 2.0 tables (Co-Simulation | Model Exchange); in the error state the
+ * getters are allowed with values "usable for debugging only". */
 #define CS_RUN B(M_STEP)
 #define ME_RUN (B(M_EVENT) | B(M_CONT))
-#define GET_CS (B(M_INIT) | CS_RUN | B(M_TERMINATED))
-#define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED))
+#define GET_CS (B(M_INIT) | CS_RUN | B(M_TERMINATED) | B(M_ERROR))
+#define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED) | B(M_ERROR))
 #define SET_CS (B(M_INSTANTIATED) | B(M_INIT) | CS_RUN)
 #define SET_REAL_ME (B(M_INSTANTIATED) | B(M_INIT) | ME_RUN)
 #define SET_DISCRETE_ME (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT))   /* not in Continuous-Time Mode */
@@ -176,7 +178,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
     ALLOW("fmi2SetReal", SET_CS, SET_REAL_ME);
     VALUES("fmi2SetReal", vr, n, v);
-    return core(c, "fmi2SetReal", core_set_real(&c->d, vr, n, v, BEFORE_RUN(c), c->err));
+    return core(c, "fmi2SetReal", core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err));
 }
 
 fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
@@ -237,7 +239,7 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
 
 /* ------------------------------------------------------------------ FMU state */
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *s) {
-    ALLOW("fmi2GetFMUstate", LIVE, LIVE);
+    ALLOW("fmi2GetFMUstate", ANY, ANY);
     return get_fmu_state(c, "fmi2GetFMUstate", s);
 }
 
@@ -252,17 +254,17 @@ fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *s) {
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate s, size_t *size) {
-    ALLOW("fmi2SerializedFMUstateSize", LIVE, LIVE);
+    ALLOW("fmi2SerializedFMUstateSize", ANY, ANY);
     return fmu_state_size(c, "fmi2SerializedFMUstateSize", s, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate s, fmi2Byte out[], size_t size) {
-    ALLOW("fmi2SerializeFMUstate", LIVE, LIVE);
+    ALLOW("fmi2SerializeFMUstate", ANY, ANY);
     return serialize_fmu_state(c, "fmi2SerializeFMUstate", s, out, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte in[], size_t size, fmi2FMUstate *s) {
-    ALLOW("fmi2DeSerializeFMUstate", LIVE, LIVE);
+    ALLOW("fmi2DeSerializeFMUstate", ANY, ANY);
     return deserialize_fmu_state(c, "fmi2DeSerializeFMUstate", in, size, s);
 }
 
@@ -316,8 +318,8 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetPrio
     return fmi2OK;
 }
 
-/* Continuous-Time Mode only: in Event Mode the standard allows it for a model without
- * continuous states alone. */
+/* Continuous-Time Mode only: in Event Mode the standard allows it for a pure discrete-time
+ * model alone. */
 fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real t) {
     ALLOW("fmi2SetTime", 0, B(M_CONT));
     if (!isfinite(t)) return fail(c, "fmi2SetTime", "time %g is not finite", t);
@@ -332,7 +334,7 @@ fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real dx[], size_t nx) {
-    ALLOW("fmi2GetDerivatives", 0, ME_RUN | B(M_TERMINATED));
+    ALLOW("fmi2GetDerivatives", 0, GET_ME);
     NSTATES("fmi2GetDerivatives", dx, nx);
     return core(c, "fmi2GetDerivatives", core_derivatives(&c->wk, &c->d, dx, c->err));
 }
@@ -351,7 +353,7 @@ fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) 
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real nom[], size_t nx) {
-    ALLOW("fmi2GetNominalsOfContinuousStates", 0, B(M_INSTANTIATED) | ME_RUN | B(M_TERMINATED));
+    ALLOW("fmi2GetNominalsOfContinuousStates", 0, B(M_INSTANTIATED) | GET_ME);
     NSTATES("fmi2GetNominalsOfContinuousStates", nom, nx);
     for (size_t i = 0; i < nx; i++) nom[i] = 1.0;
     return fmi2OK;
@@ -367,7 +369,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t n,
                                         const fmi2Integer order[], fmi2Real v[]) {
-    ALLOW("fmi2GetRealOutputDerivatives", CS_RUN | B(M_TERMINATED), 0);
+    ALLOW("fmi2GetRealOutputDerivatives", CS_RUN | B(M_TERMINATED) | B(M_ERROR), 0);
     (void)vr; (void)order; (void)v;
     return n ? fail(c, "fmi2GetRealOutputDerivatives", "output derivatives are not provided (maxOutputDerivativeOrder = 0)") : fmi2OK;
 }
@@ -385,7 +387,7 @@ fmi2Status fmi2CancelStep(fmi2Component comp) {
 }
 
 #define NO_STATUS(fn, T) fmi2Status fn(fmi2Component comp, const fmi2StatusKind s, T *v) { \
-    ALLOW(#fn, CS_RUN | B(M_TERMINATED) | B(M_ERROR), 0); (void)s; (void)v; \
+    ALLOW(#fn, CS_RUN | B(M_TERMINATED), 0); (void)s; (void)v; \
     return fail(c, #fn, "no status to report: doStep never returns fmi2Pending or fmi2Discard"); }
 NO_STATUS(fmi2GetStatus, fmi2Status)
 NO_STATUS(fmi2GetRealStatus, fmi2Real)

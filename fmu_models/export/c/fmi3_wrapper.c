@@ -5,9 +5,10 @@
  * Every function checks the instance's state against the FMI 3.0 state machine (the allowed
  * function calls of each state, sections 2.3, 3.2 and 4.2 of the standard) for its interface
  * type; any other call, any NULL argument the standard does not allow, any bad value and any
- * function this FMU does not support is answered with fmi3Error, after which only
- * fmi3FreeInstance, fmi3Reset, fmi3SetFMUState, fmi3FreeFMUState and fmi3SetDebugLogging are
- * accepted. The log callback is called only for the enabled categories: none when the
+ * function this FMU does not support is answered with fmi3Error. After an Error the simulation
+ * cannot go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions
+ * (fmi3SetFMUState restores a saved state) and, for debugging, the getters are accepted,
+ * nothing else. The log callback is called only for the enabled categories: none when the
  * instance was created with loggingOn = false (errors included), as the standard says. The
  * Co-Simulation interface has no Event Mode (hasEventMode = false): eventModeUsed = true is
  * refused. */
@@ -57,16 +58,18 @@ static void mem_free(Instance *c, void *p) { (void)c; free(p); }
 #define STATUS_OK fmi3OK
 #define STATUS_ERROR fmi3Error
 #define IS_CS(c) ((c)->kind == CS)
-#define ERROR_CALLS "fmi3FreeInstance, fmi3Reset, fmi3SetFMUState, fmi3FreeFMUState, fmi3SetDebugLogging"
+#define ERROR_CALLS "fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions and (values for debugging only) the getters"
 #include "wrapper_common.h"
 
 #define ALLOW(fn, cs, me) ALLOW_IN(inst, fn, cs, me)
 
-/* The states of the FMI 3.0 state machine (Co-Simulation | Model Exchange). */
+/* The states of the FMI 3.0 state machine (Co-Simulation | Model Exchange); after an Error
+ * the getters answer with values for debugging only (as FMI 2.0's tables and the Terminated
+ * state's note say). */
 #define CS_RUN B(M_STEP)
 #define ME_RUN (B(M_EVENT) | B(M_CONT))
-#define GET_CS (B(M_INIT) | CS_RUN | B(M_TERMINATED))
-#define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED))
+#define GET_CS (B(M_INIT) | CS_RUN | B(M_TERMINATED) | B(M_ERROR))
+#define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED) | B(M_ERROR))
 #define SET_CS (B(M_INSTANTIATED) | B(M_INIT) | CS_RUN)
 #define SET_FLOAT_ME (B(M_INSTANTIATED) | B(M_INIT) | ME_RUN)
 #define SET_DISCRETE_ME (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT))   /* not in Continuous-Time Mode */
@@ -177,7 +180,9 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance inst) {
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance inst) {
-    ALLOW("fmi3EnterEventMode", 0, B(M_CONT));
+    ALLOW("fmi3EnterEventMode", CS_RUN, B(M_CONT));
+    if (IS_CS(c))
+        return fail(c, "fmi3EnterEventMode", "this Co-Simulation instance has no Event Mode (hasEventMode = false)");
     c->mode = M_EVENT;
     return fmi3OK;
 }
@@ -210,7 +215,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
 fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
     ALLOW("fmi3SetFloat64", SET_CS, SET_FLOAT_ME);
     VALUES("fmi3SetFloat64", vr, n, v, nv);
-    return core(c, "fmi3SetFloat64", core_set_real(&c->d, vr, n, v, BEFORE_RUN(c), c->err));
+    return core(c, "fmi3SetFloat64", core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err));
 }
 
 /* Integer-valued variables: the core says which width each has (Enumerations use Int64). */
@@ -282,12 +287,12 @@ fmi3Status fmi3SetBinary(fmi3Instance inst, const fmi3ValueReference vr[], size_
 }
 /* Clocks: Event Mode only, which a Co-Simulation instance of this FMU never enters. */
 fmi3Status fmi3GetClock(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Clock v[]) {
-    ALLOW("fmi3GetClock", 0, B(M_EVENT));
+    ALLOW("fmi3GetClock", B(M_EVENT), B(M_EVENT));
     ARRAY("fmi3GetClock", vr, n); ARRAY("fmi3GetClock", v, n);
     return n ? fail(c, "fmi3GetClock", "no Clock variable has value reference %u", vr[0]) : fmi3OK;
 }
 fmi3Status fmi3SetClock(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Clock v[]) {
-    ALLOW("fmi3SetClock", 0, B(M_EVENT));
+    ALLOW("fmi3SetClock", B(M_EVENT), B(M_EVENT));
     ARRAY("fmi3SetClock", vr, n); ARRAY("fmi3SetClock", v, n);
     return n ? fail(c, "fmi3SetClock", "no Clock variable has value reference %u", vr[0]) : fmi3OK;
 }
@@ -304,7 +309,7 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance inst, fmi3ValueReference dep
 
 /* ------------------------------------------------------------------ FMU state */
 fmi3Status fmi3GetFMUState(fmi3Instance inst, fmi3FMUState *s) {
-    ALLOW("fmi3GetFMUState", LIVE, LIVE);
+    ALLOW("fmi3GetFMUState", ANY, ANY);
     return get_fmu_state(c, "fmi3GetFMUState", s);
 }
 
@@ -319,17 +324,17 @@ fmi3Status fmi3FreeFMUState(fmi3Instance inst, fmi3FMUState *s) {
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance inst, fmi3FMUState s, size_t *size) {
-    ALLOW("fmi3SerializedFMUStateSize", LIVE, LIVE);
+    ALLOW("fmi3SerializedFMUStateSize", ANY, ANY);
     return fmu_state_size(c, "fmi3SerializedFMUStateSize", s, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance inst, fmi3FMUState s, fmi3Byte out[], size_t size) {
-    ALLOW("fmi3SerializeFMUState", LIVE, LIVE);
+    ALLOW("fmi3SerializeFMUState", ANY, ANY);
     return serialize_fmu_state(c, "fmi3SerializeFMUState", s, out, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance inst, const fmi3Byte in[], size_t size, fmi3FMUState *s) {
-    ALLOW("fmi3DeserializeFMUState", LIVE, LIVE);
+    ALLOW("fmi3DeserializeFMUState", ANY, ANY);
     return deserialize_fmu_state(c, "fmi3DeserializeFMUState", in, size, s);
 }
 
@@ -394,7 +399,7 @@ fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance inst) {
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance inst, fmi3Boolean *need, fmi3Boolean *term, fmi3Boolean *nom,
                                     fmi3Boolean *vals, fmi3Boolean *nextDef, fmi3Float64 *next) {
     const char *fn = "fmi3UpdateDiscreteStates";
-    ALLOW(fn, 0, B(M_EVENT));
+    ALLOW(fn, B(M_EVENT), B(M_EVENT));
     NOT_NULL(fn, need); NOT_NULL(fn, term); NOT_NULL(fn, nom); NOT_NULL(fn, vals); NOT_NULL(fn, nextDef);
     NOT_NULL(fn, next);
     *need = fmi3False; *term = fmi3False; *nom = fmi3False; *vals = fmi3False; *nextDef = fmi3False; *next = 0;
@@ -483,7 +488,7 @@ fmi3Status fmi3EnterStepMode(fmi3Instance inst) {
 
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance inst, const fmi3ValueReference vr[], size_t n,
                                     const fmi3Int32 orders[], fmi3Float64 v[], size_t nv) {
-    ALLOW("fmi3GetOutputDerivatives", CS_RUN | B(M_TERMINATED), 0); (void)vr; (void)orders; (void)v; (void)nv;
+    ALLOW("fmi3GetOutputDerivatives", CS_RUN | B(M_TERMINATED) | B(M_ERROR), 0); (void)vr; (void)orders; (void)v; (void)nv;
     return n ? fail(c, "fmi3GetOutputDerivatives", "output derivatives are not provided (maxOutputDerivativeOrder = 0)") : fmi3OK;
 }
 

@@ -81,13 +81,13 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
             FAIL("no settable Real variable has value reference %u", r);
         if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
         } else if (r == VR_STEP) {
-            if (!before_run) FAIL("step_size is fixed: set it before leaving initialization mode");
+            if (before_run != 1) FAIL("step_size is fixed: set it before leaving initialization mode");
             if (!(v[i] > 0)) FAIL("step_size = %g must be > 0", v[i]);
             d->step_size = v[i];
         } else if (IN(r, VR_X, NX)) {
-            if (!before_run)
+            if (!before_run)      /* 2: Continuous-Time Mode, where a state may be set (FMI 2.0.1) */
                 FAIL("start value of state %s can only be set before leaving initialization mode "
                      "(use the FMU state or SetContinuousStates)", VAR_NAMES[r]);
             d->x[r - VR_X] = v[i];

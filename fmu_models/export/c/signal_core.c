@@ -146,14 +146,15 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
         } else if (IN(r, VR_IN, NIN)) {
             /* a sensor passes NaN and inf on; between instants the held sample stays */
             int on = 1;
-            if (!before_run && on_instant(d, &on, err)) return 1;
+            if (before_run != 1 && on_instant(d, &on, err)) return 1;
             d->in_set[r - VR_IN] = v[i];
-            if (before_run || on) d->in[r - VR_IN] = v[i];
-        } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
+            if (before_run == 1 || on) d->in[r - VR_IN] = v[i];
+        } else if (r < N_VARS) FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
+        else FAIL("no Real variable has value reference %u", r);
     }
     return 0;
 }

@@ -150,8 +150,9 @@ static SavedState *own_state(Instance *c, const char *fn, const void *s) {
 
 /* 0 if s can be restored into c (message in c->err otherwise). */
 static int check_state(const Instance *c, const SavedState *s, char *err) {
-    unsigned allowed = IS_CS(c) ? (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_TERMINATED))
-                                : (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED));
+    /* a state saved after an Error restores the error state */
+    unsigned allowed = IS_CS(c) ? (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_TERMINATED) | B(M_ERROR))
+                                : (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED) | B(M_ERROR));
     if (s->magic != STATE_MAGIC || s->size != sizeof(SavedState)) {
         snprintf(err, ERRLEN, "not an FMU state of this FMU");
         return 1;
@@ -232,7 +233,7 @@ static STATUS deserialize_fmu_state(Instance *c, const char *fn, const void *in,
     NOT_NULL(fn, in);
     NOT_NULL(fn, s);
     if (size != sizeof(SavedState))
-        return fail(c, fn, "%zu bytes given, a serialised state of this FMU has %zu", size, sizeof(SavedState));
+        return fail(c, fn, "%zu bytes given, expected %zu (a serialised state of this FMU)", size, sizeof(SavedState));
     memcpy(&tmp, in, sizeof tmp);
     if (tmp.magic != STATE_MAGIC || tmp.size != sizeof(SavedState) || tmp.hash != state_hash(&tmp))
         return fail(c, fn, "the bytes are not a serialised state of this FMU (or were changed)");

@@ -21,6 +21,9 @@ static const char *mode_name(Mode m) {
 #define LIVE (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED))
 #define ANY (LIVE | B(M_ERROR))
 #define BEFORE_RUN(c) ((B((c)->mode) & (B(M_INSTANTIATED) | B(M_INIT))) != 0)
+/* core_set_real's `before_run`: 1 before the run, 2 in Continuous-Time Mode (where the
+ * continuous states may be set too), 0 else. */
+#define SET_WHEN(c) (BEFORE_RUN(c) ? 1 : (c)->mode == M_CONT ? 2 : 0)
 
 /* Log categories of the modelDescription (<LogCategories>): bits of an instance's `cats`. */
 #define CAT_ERROR 1u

@@ -4,6 +4,7 @@
  *
  *   fuzz lib=PATH fmi=2|3 cs=0|1 me=0|1 dd=0|1 token=TOKEN vars=FILE seed=S first=I count=N
  *        [calls=60] [timeout=10] [trace=0]
+ *   fuzz lib=... fmi=... cs=... me=... dd=... token=... vars=... case=NAME   (cases.c)
  *
  * Runs sequences first .. first + count - 1, sequence i from its own generator seeded with
  * (seed, i), so that any one replays alone (first=i count=1 trace=1). Each sequence drives up
@@ -45,10 +46,11 @@
 extern void __sanitizer_set_death_callback(void (*)(void)) __attribute__((weak));
 
 /* ------------------------------------------------------------------ the state tables
- * FMI 2.0: sections 3.2.3 (Model Exchange) and 4.2.4 (Co-Simulation), the states these FMUs
- * reach (no asynchronous doStep: no stepInProgress, stepFailed, stepCanceled; slaveInitialized
- * is Step Mode here). After an Error (column X) only fmi2FreeInstance, fmi2Reset,
- * fmi2SetFMUstate, fmi2FreeFMUstate and fmi2SetDebugLogging. */
+ * FMI 2.0: the tables of sections 3.2.3 (Model Exchange) and 4.2.4 (Co-Simulation), for the
+ * states these FMUs reach (no asynchronous doStep: no stepInProgress, stepFailed or
+ * stepCanceled; stepComplete is S). Column X is the tables' "error" state: the getters
+ * (note 7: values for debugging only), the FMU-state functions, fmi2Reset, fmi2FreeInstance
+ * and fmi2SetDebugLogging. */
 static const Row FMI2_TABLE[] = {
     {"fmi2SetDebugLogging", "INSTX", "INECTX"},
     {"fmi2SetupExperiment", "I", "I"},
@@ -56,33 +58,33 @@ static const Row FMI2_TABLE[] = {
     {"fmi2ExitInitializationMode", "N", "N"},
     {"fmi2Terminate", "S", "EC"},
     {"fmi2Reset", "INSTX", "INECTX"},
-    {"fmi2GetReal", "NST", "NECT"},
-    {"fmi2GetInteger", "NST", "NECT"},
-    {"fmi2GetBoolean", "NST", "NECT"},
-    {"fmi2GetString", "NST", "NECT"},
+    {"fmi2GetReal", "NSTX", "NECTX"},
+    {"fmi2GetInteger", "NSTX", "NECTX"},
+    {"fmi2GetBoolean", "NSTX", "NECTX"},
+    {"fmi2GetString", "NSTX", "NECTX"},
     {"fmi2SetReal", "INS", "INEC"},
     {"fmi2SetInteger", "INS", "INE"},
     {"fmi2SetBoolean", "INS", "INE"},
     {"fmi2SetString", "INS", "INE"},
-    {"fmi2GetFMUstate", "INST", "INECT"},
+    {"fmi2GetFMUstate", "INSTX", "INECTX"},
     {"fmi2SetFMUstate", "INSTX", "INECTX"},
     {"fmi2FreeFMUstate", "INSTX", "INECTX"},
-    {"fmi2SerializedFMUstateSize", "INST", "INECT"},
-    {"fmi2SerializeFMUstate", "INST", "INECT"},
-    {"fmi2DeSerializeFMUstate", "INST", "INECT"},
-    {"fmi2GetDirectionalDerivative", "NST", "NECT"},
+    {"fmi2SerializedFMUstateSize", "INSTX", "INECTX"},
+    {"fmi2SerializeFMUstate", "INSTX", "INECTX"},
+    {"fmi2DeSerializeFMUstate", "INSTX", "INECTX"},
+    {"fmi2GetDirectionalDerivative", "NSTX", "NECTX"},
     {"fmi2EnterEventMode", "-", "EC"},
     {"fmi2NewDiscreteStates", "-", "E"},
     {"fmi2EnterContinuousTimeMode", "-", "E"},
     {"fmi2CompletedIntegratorStep", "-", "C"},
-    {"fmi2SetTime", "-", "C"},     /* Event Mode: only a model without continuous states */
+    {"fmi2SetTime", "-", "C"},     /* Event Mode (note 8): a pure discrete-time FMU only */
     {"fmi2SetContinuousStates", "-", "C"},
-    {"fmi2GetDerivatives", "-", "ECT"},
-    {"fmi2GetEventIndicators", "-", "NECT"},
-    {"fmi2GetContinuousStates", "-", "NECT"},
-    {"fmi2GetNominalsOfContinuousStates", "-", "IECT"},
+    {"fmi2GetDerivatives", "-", "NECTX"},
+    {"fmi2GetEventIndicators", "-", "NECTX"},
+    {"fmi2GetContinuousStates", "-", "NECTX"},
+    {"fmi2GetNominalsOfContinuousStates", "-", "INECTX"},
     {"fmi2SetRealInputDerivatives", "INS", "-"},
-    {"fmi2GetRealOutputDerivatives", "ST", "-"},
+    {"fmi2GetRealOutputDerivatives", "STX", "-"},
     {"fmi2DoStep", "S", "-"},
     {"fmi2CancelStep", "", "-"},   /* stepInProgress only: never reached */
     {"fmi2GetStatus", "", "-"},    /* the status functions: only after Pending or Discard */
@@ -94,8 +96,9 @@ static const Row FMI2_TABLE[] = {
 
 /* FMI 3.0: the allowed function calls of each state (sections 2.3.1 to 2.3.9, 3.2.1, 4.2.1),
  * for an FMU without Event Mode in Co-Simulation, clocks, structural parameters, intermediate
- * update and evaluateDiscreteStates (all Error: the empty rows). After an Error only
- * fmi3FreeInstance, fmi3Reset, fmi3SetFMUState, fmi3FreeFMUState, fmi3SetDebugLogging. */
+ * update and evaluateDiscreteStates (all Error: the empty rows). After an Error (X) the
+ * simulation must not go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state
+ * functions (a saved state may be restored) and the getters (values for debugging only). */
 static const Row FMI3_TABLE[] = {
     {"fmi3SetDebugLogging", "INSTX", "INECTX"},
     {"fmi3EnterInitializationMode", "I", "I"},
@@ -103,14 +106,14 @@ static const Row FMI3_TABLE[] = {
     {"fmi3EnterEventMode", "", "C"},          /* CS: only with eventModeUsed */
     {"fmi3Terminate", "S", "EC"},
     {"fmi3Reset", "INSTX", "INECTX"},
-    {"fmi3GetFloat64", "NST", "NECT"},
-    {"fmi3GetInt32", "NST", "NECT"},
-    {"fmi3GetInt64", "NST", "NECT"},
-    {"fmi3GetBoolean", "NST", "NECT"},
-    {"fmi3GetString", "NST", "NECT"},
-    {"fmi3GetFloat32", "NST", "NECT"},
-    {"fmi3GetUInt8", "NST", "NECT"},
-    {"fmi3GetBinary", "NST", "NECT"},
+    {"fmi3GetFloat64", "NSTX", "NECTX"},
+    {"fmi3GetInt32", "NSTX", "NECTX"},
+    {"fmi3GetInt64", "NSTX", "NECTX"},
+    {"fmi3GetBoolean", "NSTX", "NECTX"},
+    {"fmi3GetString", "NSTX", "NECTX"},
+    {"fmi3GetFloat32", "NSTX", "NECTX"},
+    {"fmi3GetUInt8", "NSTX", "NECTX"},
+    {"fmi3GetBinary", "NSTX", "NECTX"},
     {"fmi3SetFloat64", "INS", "INEC"},
     {"fmi3SetFloat32", "INS", "INEC"},
     {"fmi3SetInt32", "INS", "INE"},
@@ -121,14 +124,14 @@ static const Row FMI3_TABLE[] = {
     {"fmi3SetBinary", "INS", "INE"},
     {"fmi3GetClock", "", "E"},
     {"fmi3SetClock", "", "E"},
-    {"fmi3GetFMUState", "INST", "INECT"},
+    {"fmi3GetFMUState", "INSTX", "INECTX"},
     {"fmi3SetFMUState", "INSTX", "INECTX"},
     {"fmi3FreeFMUState", "INSTX", "INECTX"},
-    {"fmi3SerializedFMUStateSize", "INST", "INECT"},
-    {"fmi3SerializeFMUState", "INST", "INECT"},
-    {"fmi3DeserializeFMUState", "INST", "INECT"},
-    {"fmi3GetDirectionalDerivative", "NST", "NECT"},
-    {"fmi3GetAdjointDerivative", "NST", "NECT"},
+    {"fmi3SerializedFMUStateSize", "INSTX", "INECTX"},
+    {"fmi3SerializeFMUState", "INSTX", "INECTX"},
+    {"fmi3DeserializeFMUState", "INSTX", "INECTX"},
+    {"fmi3GetDirectionalDerivative", "NSTX", "NECTX"},
+    {"fmi3GetAdjointDerivative", "NSTX", "NECTX"},
     {"fmi3EnterConfigurationMode", "", ""},   /* no structural parameters */
     {"fmi3ExitConfigurationMode", "", ""},
     {"fmi3GetIntervalDecimal", "", ""},       /* no clocks */
@@ -141,14 +144,14 @@ static const Row FMI3_TABLE[] = {
     {"fmi3CompletedIntegratorStep", "-", "C"},
     {"fmi3SetTime", "-", "C"},
     {"fmi3SetContinuousStates", "-", "C"},
-    {"fmi3GetContinuousStateDerivatives", "-", "NECT"},
-    {"fmi3GetEventIndicators", "-", "NECT"},
-    {"fmi3GetContinuousStates", "-", "NECT"},
-    {"fmi3GetNominalsOfContinuousStates", "-", "NECT"},
+    {"fmi3GetContinuousStateDerivatives", "-", "NECTX"},
+    {"fmi3GetEventIndicators", "-", "NECTX"},
+    {"fmi3GetContinuousStates", "-", "NECTX"},
+    {"fmi3GetNominalsOfContinuousStates", "-", "NECTX"},
     {"fmi3GetNumberOfEventIndicators", "-", "IE"},
     {"fmi3GetNumberOfContinuousStates", "-", "IE"},
     {"fmi3EnterStepMode", "", "-"},           /* from Event Mode: never in CS here */
-    {"fmi3GetOutputDerivatives", "ST", "-"},
+    {"fmi3GetOutputDerivatives", "STX", "-"},
     {"fmi3DoStep", "S", "-"},
     {NULL, NULL, NULL}};
 
@@ -406,7 +409,7 @@ static int set_rule(const Var *v, int st) {
         return EXP_ERR;
     case S_CONT:
         if (in && v->var == 'n' && v->type == 'R') return EXP_OK;
-        if (v->flag == 'S') return EXP_ANY;     /* a continuous state: 3.0.2 allows it, 2.0 does not */
+        if (v->flag == 'S') return V == 2 ? EXP_OK : EXP_ANY;   /* a state: FMI 2.0.1 note 5 allows it */
         return EXP_ERR;
     default: return EXP_ERR;
     }
@@ -1344,8 +1347,10 @@ static void run_sequence(uint64_t seed, long long i) {
     n_seq++;
 }
 
+#include "cases.c"
+
 int main(int argc, char **argv) {
-    const char *lib = NULL, *vars = NULL;
+    const char *lib = NULL, *vars = NULL, *case_name = NULL;
     long long first = 0, count = 1;
     for (int i = 1; i < argc; i++) {
         char *eq = strchr(argv[i], '=');
@@ -1365,6 +1370,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(k, "calls")) MAXCALLS = atoi(v);
         else if (!strcmp(k, "timeout")) TIMEOUT = atof(v);
         else if (!strcmp(k, "trace")) TRACE = atoi(v);
+        else if (!strcmp(k, "case")) case_name = v;
         else { fprintf(stderr, "fuzz: unknown argument %s\n", k); return 2; }
     }
     if (!lib || !TOKEN || !vars || (V != 2 && V != 3) || MAXCALLS < 1 || !(TIMEOUT > 0)) {
@@ -1384,6 +1390,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "fuzz: version %s\n", F3(fmi3GetVersion)());
         return 1;
     }
+    if (case_name) return run_case(case_name);
     for (long long i = first; i < first + count; i++) run_sequence(SEED, i);
     summary("ok");
     return 0;
