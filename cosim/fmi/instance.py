@@ -99,7 +99,10 @@ class FMUInstance:
                     self._log(status, message)
 
                 self._log3 = log3
-                fmu.instantiate(loggingOn=self.logging_on, logMessage=log3)
+                # an FMI 3.0 FMU calls the log callback only with loggingOn, errors included:
+                # always on, so that a failing call names its reason (_log keeps the debug
+                # messages off the log unless logging_on)
+                fmu.instantiate(loggingOn=True, logMessage=log3)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             if fmu is not None and getattr(fmu, "dll", None) is not None:
                 try:

@@ -68,10 +68,22 @@ class Result:
     command: list = field(default_factory=list)
 
 
-def _compile(cmd: list[str], what: str) -> None:
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+def _compile(cmd: list[str], out: Path, what: str) -> None:
+    """Run the compiler command ``cmd`` writing ``out`` (atomically: another process never
+    sees a half-written file)."""
+    part = out.with_name(f"{out.name}.{os.getpid()}.part")
+    r = subprocess.run([*cmd, "-o", str(part)], capture_output=True, text=True, timeout=900)
     if r.returncode != 0:
+        part.unlink(missing_ok=True)
         raise RuntimeError(f"building {what} failed:\n{' '.join(cmd)}\n{r.stdout}{r.stderr}")
+    os.replace(part, out)
+
+
+def _write_if_changed(path: Path, data: bytes) -> None:
+    if not path.exists() or path.read_bytes() != data:
+        part = path.with_name(f"{path.name}.{os.getpid()}.part")
+        part.write_bytes(data)
+        os.replace(part, path)
 
 
 def _source_files(md, sources: Path) -> list[str]:
@@ -100,32 +112,38 @@ def build_driver(folder: Path) -> Path:
     exe = Path(folder) / "fuzz"
     if not exe.exists():
         Path(folder).mkdir(parents=True, exist_ok=True)
-        _compile(["gcc", *SAN_FLAGS, "-std=c99", f"-I{HEADERS}", f"-I{FUZZ_DIR}", str(DRIVER), "-o", str(exe),
-                  "-ldl", "-lm"], "the fuzz driver")
+        _compile(["gcc", *SAN_FLAGS, "-std=c99", f"-I{HEADERS}", f"-I{FUZZ_DIR}", str(DRIVER), "-ldl", "-lm"],
+                 exe, "the fuzz driver")
     return exe
 
 
-def build_target(fmu: str | Path, folder: str | Path) -> Target:
+def build_target(fmu: str | Path, folder: str | Path, mutate: dict | None = None) -> Target:
     """Extract ``fmu``, build its ``sources/`` (the files its build description names) into a
-    sanitized shared library in ``folder``, and the driver beside it."""
+    sanitized shared library in ``folder``, and the driver beside it. ``mutate``: {source file:
+    (text, replacement)} changes made first (to check that the fuzzer finds a broken FMU)."""
     fmu, folder = Path(fmu), Path(folder)
     md = read_model_description(str(fmu))
     version = 3 if md.fmiVersion.startswith("3") else 2
-    work = folder / f"{fmu.stem}-fmi{version}"
+    work = folder / f"{fmu.stem}-fmi{version}{'-mutant' if mutate else ''}"
     sources = work / "sources"
     work.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(fmu) as z:
         for name in z.namelist():
             if name.startswith("sources/") and not name.endswith("/"):
                 sources.mkdir(exist_ok=True)
-                (sources / Path(name).name).write_bytes(z.read(name))
+                _write_if_changed(sources / Path(name).name, z.read(name))
+    for name, (text, replacement) in (mutate or {}).items():
+        src = (sources / name).read_text()
+        if text not in src:
+            raise ValueError(f"{name} has no {text!r} to change")
+        _write_if_changed(sources / name, src.replace(text, replacement).encode())
     lib = work / "fmu_asan.so"
     if not lib.exists():
         files = [str(sources / f) for f in _source_files(md, sources)]
         _compile(["gcc", "-shared", "-fPIC", *SAN_FLAGS, "-std=c99", "-D_POSIX_C_SOURCE=200809L", f"-I{sources}",
-                  f"-I{HEADERS}", *files, "-o", str(lib), "-lm"], f"{fmu.name} with sanitizers")
+                  f"-I{HEADERS}", *files, "-lm"], lib, f"{fmu.name} with sanitizers")
     vars_file = work / "variables.txt"
-    vars_file.write_text(variable_table(md))
+    _write_if_changed(vars_file, variable_table(md).encode())
     cs = md.coSimulation is not None
     iface = md.coSimulation or md.modelExchange
     return Target(fmu, version, lib, build_driver(folder), vars_file,
