@@ -924,13 +924,24 @@ static void op_serialize(Rng *r, Inst *in, int bad) {
     }
 }
 
+/* SavedState (wrapper_common.h): magic, size, mode, cosim (4 bytes each), then the FNV-1a
+ * 64-bit checksum of the whole block (taken with the checksum zero), then CoreData. */
+#define CRAFT_HASH_AT 16
+#define CRAFT_OFFSET 24
+static void craft_hash(unsigned char *b, size_t size) {
+    uint64_t h = 0xcbf29ce484222325ull;
+    memset(b + CRAFT_HASH_AT, 0, 8);
+    for (size_t i = 0; i < size; i++) h = (h ^ b[i]) * 0x100000001b3ull;
+    memcpy(b + CRAFT_HASH_AT, &h, 8);
+}
+
 static void op_deserialize(Rng *r, Inst *in, int bad) {
     const char *fn = V == 2 ? "fmi2DeSerializeFMUstate" : "fmi3DeserializeFMUState";
     Blob *b = NBLOBS ? &BLOBS[pick(r, NBLOBS)] : NULL;
     unsigned char *bytes, junk[64];
     size_t size;
     void *s = NULL, **sp = &s;
-    int exp, st, k = bad ? pick(r, 5) : -1, legal = 1;
+    int exp, st, k = bad ? pick(r, 7) : -1, legal = 1;
     char args[100];
     if (!b) { memset(junk, 0xA5, sizeof junk); bytes = junk; size = sizeof junk; exp = EXP_ERR; }
     else {
@@ -943,8 +954,21 @@ static void op_deserialize(Rng *r, Inst *in, int bad) {
     else if (k == 1) { size = size ? size - 1 : 0; exp = EXP_ERR; }
     else if (k == 2) { sp = NULL; exp = EXP_ERR; }
     else if (k == 3) { s = some_state(r, in, &legal); if (!legal && s) exp = EXP_ERR; }
-    snprintf(args, sizeof args, "%zu bytes%s%s%s", size, k == 0 ? " changed" : "", sp ? "" : " FMUstate pointer NULL",
-             k == 3 ? " into a held state" : "");
+    else if (k >= 5 && b && size > CRAFT_OFFSET + 8) {
+        /* a crafted state: values of the core's data changed, the checksum made to match (the
+         * layout of wrapper_common.h's SavedState): the FMU must check every value it uses */
+        int m = 1 + pick(r, 4);
+        for (int q = 0; q < m; q++) {
+            size_t at = CRAFT_OFFSET + 8 * (size_t)pick(r, (int)((size - CRAFT_OFFSET) / 8));
+            double hv = HOSTILE_REALS[pick(r, (int)(sizeof HOSTILE_REALS / sizeof HOSTILE_REALS[0]))];
+            if (chance(r, 0.5)) memcpy(bytes + at, &hv, 8);
+            else { uint64_t w = rnd(r); memcpy(bytes + at, &w, 8); }
+        }
+        craft_hash(bytes, size);
+        exp = EXP_ANY;
+    }
+    snprintf(args, sizeof args, "%zu bytes%s%s%s%s", size, k == 0 ? " changed" : "", sp ? "" : " FMUstate pointer NULL",
+             k == 3 ? " into a held state" : "", k >= 5 ? " crafted" : "");
     exp = STATE_EXP(in, fn, exp);
     begin(fn, in);
     st = V == 2 ? (int)F2(fmi2DeSerializeFMUstate)(H(in), (const fmi2Byte *)(k == 4 ? NULL : bytes), size, (fmi2FMUstate *)sp)
@@ -957,7 +981,7 @@ static void op_deserialize(Rng *r, Inst *in, int bad) {
         int keep = in->st;
         double t = in->time;
         int d = in->dirty;
-        in->st = b ? b->st : keep; in->time = b ? b->time : t; in->dirty = b ? b->dirty : 1;
+        in->st = b ? b->st : keep; in->time = b ? b->time : t; in->dirty = b ? b->dirty || k >= 5 : 1;
         state_add(s, in);
         in->st = keep; in->time = t; in->dirty = d;
     }
