@@ -95,11 +95,13 @@ def test_a_failing_sequence_replays_alone(fuzz_targets, capsys):
 
 @pytest.mark.slow
 def test_the_fuzzer_catches_an_unchecked_time(fuzz_targets, tmp_path):
-    """A mutant without the finiteness check on the communication point: NaN reaches the
-    instant conversion (a sanitizer report) or an endless update loop (a hang)."""
+    """A mutant estimator whose doStep checks neither the time nor the instant range (the code
+    before the fix): doStep(t = inf) runs its update loop until the time limit (a hang), NaN
+    is answered OK (a violation)."""
     t = fuzz_targets("ekf", 2)
-    mutant = fuzz_run.build_target(t.fmu, tmp_path, mutate={
-        "core_common.h": ("if (!isfinite(t)) {", "if (0) {")})
+    mutant = fuzz_run.build_target(t.fmu, tmp_path, mutate={"filter_core.c": [
+        ("if (check_step(t, h, d->time, err)) return 1;", "(void)check_step;"),
+        ("if (instant_of(t_end, d->t0, PERIOD, &k_end, err)) return 1;", "k_end = d->kc;")]})
     res = fuzz_run.run_case(mutant, "nonfinite_time", timeout=3)
     assert res.outcome in ("sanitizer", "hang", "violation"), res.report
 

@@ -120,7 +120,8 @@ def build_driver(folder: Path) -> Path:
 def build_target(fmu: str | Path, folder: str | Path, mutate: dict | None = None) -> Target:
     """Extract ``fmu``, build its ``sources/`` (the files its build description names) into a
     sanitized shared library in ``folder``, and the driver beside it. ``mutate``: {source file:
-    (text, replacement)} changes made first (to check that the fuzzer finds a broken FMU)."""
+    (text, replacement) or a list of them} changes made first (to check that the fuzzer finds
+    a broken FMU)."""
     fmu, folder = Path(fmu), Path(folder)
     md = read_model_description(str(fmu))
     version = 3 if md.fmiVersion.startswith("3") else 2
@@ -132,11 +133,13 @@ def build_target(fmu: str | Path, folder: str | Path, mutate: dict | None = None
             if name.startswith("sources/") and not name.endswith("/"):
                 sources.mkdir(exist_ok=True)
                 _write_if_changed(sources / Path(name).name, z.read(name))
-    for name, (text, replacement) in (mutate or {}).items():
+    for name, changes in (mutate or {}).items():
         src = (sources / name).read_text()
-        if text not in src:
-            raise ValueError(f"{name} has no {text!r} to change")
-        _write_if_changed(sources / name, src.replace(text, replacement).encode())
+        for text, replacement in [changes] if isinstance(changes[0], str) else changes:
+            if text not in src:
+                raise ValueError(f"{name} has no {text!r} to change")
+            src = src.replace(text, replacement)
+        _write_if_changed(sources / name, src.encode())
     lib = work / "fmu_asan.so"
     if not lib.exists():
         files = [str(sources / f) for f in _source_files(md, sources)]
