@@ -50,7 +50,9 @@ def _fuzz_target(t, seed: int, budget_s: float | None, sequences: int | None, ch
             continue
         tot[r.outcome] += 1
         seq = _failing_sequence(r.report)
-        tot["replays"].append(f"{r.outcome}: {fuzz_run.replay_command(t, seed, seq if seq is not None else first)}")
+        head = next((ln for ln in r.report.splitlines() if ln.strip()), "")
+        tot["replays"].append(f"{r.outcome} ({head[:300]}): "
+                              f"{fuzz_run.replay_command(t, seed, seq if seq is not None else first)}")
         # go on after the failing sequence (its chunk's later sequences included)
         first = (seq + 1) if seq is not None else first + n
     tot["seconds"] = time.perf_counter() - t0
@@ -60,7 +62,7 @@ def _fuzz_target(t, seed: int, budget_s: float | None, sequences: int | None, ch
 def _failing_sequence(report: str) -> int | None:
     import re
 
-    m = re.search(r"seq=(\d+)", report)
+    m = re.search(r"^(?:VIOLATION|HANG|DIED) seed=\d+ seq=(\d+)", report, re.M)
     return int(m.group(1)) if m else None
 
 

@@ -192,8 +192,10 @@ def run(t: Target, seed: int, first: int = 0, count: int = 100, calls: int = 60,
         outcome = "crash"
     else:
         outcome = "ok"
-    report = err if trace else err[-12000:]
-    m = re.search(r"seq=(\d+)", err)
+    heads = [ln for ln in err.splitlines() if ln.startswith(("VIOLATION ", "HANG ", "DIED "))
+             or any(m in ln for m in SANITIZER_MARKS)][:6]
+    report = err if trace or len(err) <= 12000 else "\n".join(heads) + "\n[...]\n" + err[-12000:]
+    m = re.search(r"^(?:VIOLATION|HANG|DIED) seed=\d+ seq=(\d+)", err, re.M)
     if outcome != "ok" and m:
         report += f"\nreplay: {replay_command(t, seed, int(m.group(1)))}"
     return Result(outcome, counts, report, r.returncode, cmd)
