@@ -4,6 +4,7 @@ short run per FMU kind and FMI version, the exact call sequences of every class 
 fuzzing found (cases.c), mutants the fuzzer must catch, and the long runs (``slow``)."""
 import fcntl
 import shutil
+import tempfile
 
 import pytest
 from fmpy.validation import validate_fmu
@@ -21,14 +22,21 @@ def fuzz_targets(tmp_path_factory):
     """Build on demand, once per session (the test processes share the builds, one building
     while the others wait): target(label, version) -> fuzz_run.Target."""
     root = tmp_path_factory.getbasetemp().parent / "fuzz-shared"
-    root.mkdir(exist_ok=True)
+    tmp = root / "tmp"
+    tmp.mkdir(parents=True, exist_ok=True)
     cache = {}
 
     def target(label, version):
         if (label, version) not in cache:
             with open(root / f"{label}-{version}.lock", "w") as lock:
                 fcntl.flock(lock, fcntl.LOCK_EX)
-                fmu = fuzz_run.build_fmu_for(label, version, root / "fmus")
+                # the builds' temporary folders in a folder of this fixture, not in the shared
+                # temporary folder that other tests watch for leftovers while this one builds
+                old, tempfile.tempdir = tempfile.tempdir, str(tmp)
+                try:
+                    fmu = fuzz_run.build_fmu_for(label, version, root / "fmus")
+                finally:
+                    tempfile.tempdir = old
                 cache[label, version] = fuzz_run.build_target(fmu, root / "build")
         return cache[label, version]
 

@@ -240,7 +240,7 @@ def build_fmu_for(label: str, version: int, folder: str | Path) -> Path:
 
 #: The regression cases of cases.c (the exact call sequences of the classes found).
 CASES = ("nonfinite_time", "vr_overflow", "logging_off", "event_mode_used", "after_error", "forbidden_states",
-         "fmu_states")
+         "fmu_states", "atomic_set")
 
 
 def run_case(t: Target, name: str, timeout: float = 10.0) -> Result:

@@ -18,6 +18,7 @@
 
 typedef struct {
     CoreData d;
+    CoreData undo;               /* the data before a changing call (wrapper_common.h) */
     CoreWork wk;
     fmi2Type type;
     Mode mode;
@@ -148,7 +149,8 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     ALLOW("fmi2ExitInitializationMode", B(M_INIT), B(M_INIT));
-    if (core_exit_init(&c->wk, &c->d, c->err)) return core(c, "fmi2ExitInitializationMode", 1);
+    BEGIN_CHANGE(c);
+    if (core_exit_init(&c->wk, &c->d, c->err)) return undo(c, "fmi2ExitInitializationMode");
     c->mode = IS_CS(c) ? M_STEP : M_EVENT;
     return fmi2OK;
 }
@@ -178,7 +180,9 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
     ALLOW("fmi2SetReal", SET_CS, SET_REAL_ME);
     VALUES("fmi2SetReal", vr, n, v);
-    return core(c, "fmi2SetReal", core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err));
+    BEGIN_CHANGE(c);
+    if (core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err)) return undo(c, "fmi2SetReal");
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
@@ -195,9 +199,10 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
 fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) {
     ALLOW("fmi2SetInteger", SET_CS, SET_DISCRETE_ME);
     VALUES("fmi2SetInteger", vr, n, v);
+    BEGIN_CHANGE(c);
     for (size_t i = 0; i < n; i++) {
         long long tmp = v[i];
-        if (core_set_int(&c->d, &vr[i], 1, &tmp, INT_NONE, BEFORE_RUN(c), c->err)) return core(c, "fmi2SetInteger", 1);
+        if (core_set_int(&c->d, &vr[i], 1, &tmp, INT_NONE, BEFORE_RUN(c), c->err)) return undo(c, "fmi2SetInteger");
     }
     return fmi2OK;
 }
@@ -216,9 +221,10 @@ fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], siz
 fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) {
     ALLOW("fmi2SetBoolean", SET_CS, SET_DISCRETE_ME);
     VALUES("fmi2SetBoolean", vr, n, v);
+    BEGIN_CHANGE(c);
     for (size_t i = 0; i < n; i++) {
         int tmp = v[i] ? 1 : 0;
-        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return core(c, "fmi2SetBoolean", 1);
+        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return undo(c, "fmi2SetBoolean");
     }
     return fmi2OK;
 }
@@ -377,7 +383,9 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     ALLOW("fmi2DoStep", CS_RUN, 0);
     (void)noSetPrior;
-    return core(c, "fmi2DoStep", core_do_step(&c->wk, &c->d, t, h, c->err));
+    BEGIN_CHANGE(c);
+    if (core_do_step(&c->wk, &c->d, t, h, c->err)) return undo(c, "fmi2DoStep");
+    return fmi2OK;
 }
 
 /* doStep never returns fmi2Pending: there is no step in progress to cancel or ask about. */

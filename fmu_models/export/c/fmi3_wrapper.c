@@ -25,6 +25,7 @@ typedef enum { ME, CS } Kind;
 
 typedef struct {
     CoreData d;
+    CoreData undo;               /* the data before a changing call (wrapper_common.h) */
     CoreWork wk;
     Kind kind;
     Mode mode;
@@ -174,7 +175,8 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance inst, fmi3Boolean tolDef, fm
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance inst) {
     ALLOW("fmi3ExitInitializationMode", B(M_INIT), B(M_INIT));
-    if (core_exit_init(&c->wk, &c->d, c->err)) return core(c, "fmi3ExitInitializationMode", 1);
+    BEGIN_CHANGE(c);
+    if (core_exit_init(&c->wk, &c->d, c->err)) return undo(c, "fmi3ExitInitializationMode");
     c->mode = c->kind == CS ? M_STEP : M_EVENT;   /* Co-Simulation without Event Mode: Step Mode */
     return fmi3OK;
 }
@@ -215,7 +217,9 @@ fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
 fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
     ALLOW("fmi3SetFloat64", SET_CS, SET_FLOAT_ME);
     VALUES("fmi3SetFloat64", vr, n, v, nv);
-    return core(c, "fmi3SetFloat64", core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err));
+    BEGIN_CHANGE(c);
+    if (core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err)) return undo(c, "fmi3SetFloat64");
+    return fmi3OK;
 }
 
 /* Integer-valued variables: the core says which width each has (Enumerations use Int64). */
@@ -226,10 +230,10 @@ fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
         v[i] = (T)tmp; } \
     return fmi3OK; }
 #define INT_SET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
-    long long tmp; ALLOW(#fn, SET_CS, SET_DISCRETE_ME); VALUES(#fn, vr, n, v, nv); \
+    long long tmp; ALLOW(#fn, SET_CS, SET_DISCRETE_ME); VALUES(#fn, vr, n, v, nv); BEGIN_CHANGE(c); \
     for (size_t i = 0; i < n; i++) { \
         tmp = (long long)v[i]; \
-        if (core_set_int(&c->d, &vr[i], 1, &tmp, width, BEFORE_RUN(c), c->err)) return core(c, #fn, 1); } \
+        if (core_set_int(&c->d, &vr[i], 1, &tmp, width, BEFORE_RUN(c), c->err)) return undo(c, #fn); } \
     return fmi3OK; }
 INT_GET(fmi3GetInt64, fmi3Int64, INT_64)
 INT_SET(fmi3SetInt64, fmi3Int64, INT_64)
@@ -250,9 +254,10 @@ fmi3Status fmi3GetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size
 fmi3Status fmi3SetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Boolean v[], size_t nv) {
     ALLOW("fmi3SetBoolean", SET_CS, SET_DISCRETE_ME);
     VALUES("fmi3SetBoolean", vr, n, v, nv);
+    BEGIN_CHANGE(c);
     for (size_t i = 0; i < n; i++) {
         int tmp = v[i] ? 1 : 0;
-        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return core(c, "fmi3SetBoolean", 1);
+        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return undo(c, "fmi3SetBoolean");
     }
     return fmi3OK;
 }
@@ -498,7 +503,12 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
     ALLOW(fn, CS_RUN, 0); (void)noSetPrior;
     NOT_NULL(fn, eventNeeded); NOT_NULL(fn, term); NOT_NULL(fn, early); NOT_NULL(fn, last);
     *eventNeeded = fmi3False; *term = fmi3False; *early = fmi3False;
-    if (core_do_step(&c->wk, &c->d, t, h, c->err)) { *last = core_time(&c->d); return core(c, fn, 1); }
+    BEGIN_CHANGE(c);
+    if (core_do_step(&c->wk, &c->d, t, h, c->err)) {
+        STATUS st = undo(c, fn);
+        *last = core_time(&c->d);
+        return st;
+    }
     *last = core_time(&c->d);
     return fmi3OK;
 }

@@ -2,8 +2,8 @@
  * wrappers share.
  *
  * Include wrapper_modes.h first, then this after defining: the status type STATUS with values
- * STATUS_OK, STATUS_ERROR; the instance type Instance (fields `mode`, `d` (CoreData), `cats`
- * (enabled log categories), `char err[ERRLEN]` and the FMU-state registry `states`,
+ * STATUS_OK, STATUS_ERROR; the instance type Instance (fields `mode`, `d` and `undo` (CoreData),
+ * `cats` (enabled log categories), `char err[ERRLEN]` and the FMU-state registry `states`,
  * `nstates`, `cap_states`); IS_CS(c), true for a Co-Simulation instance; ERROR_CALLS, the
  * functions allowed after an error (for the message); and
  *   static void logmsg(Instance *c, STATUS st, const char *cat, const char *fn, const char *text);
@@ -41,6 +41,16 @@ static STATUS core(Instance *c, const char *fn, int rc) {
     logmsg(c, STATUS_ERROR, "logStatusError", fn, c->err);
     c->mode = M_ERROR;
     return STATUS_ERROR;
+}
+
+/* A call that changes the core's data takes effect whole or not at all: BEGIN_CHANGE keeps
+ * the data, undo() puts them back and refuses the call (a setter refused at its third value
+ * leaves the first two unset; a doStep refused in its tenth update leaves the first nine
+ * undone). */
+#define BEGIN_CHANGE(c) memcpy(&(c)->undo, &(c)->d, sizeof (c)->d)
+static STATUS undo(Instance *c, const char *fn) {
+    memcpy(&c->d, &c->undo, sizeof c->d);
+    return core(c, fn, 1);
 }
 
 static const char *kind_name(int cs) { return cs ? "Co-Simulation" : "Model Exchange"; }

@@ -402,10 +402,55 @@ static void case_fmu_states(void) {
     }
 }
 
+/* Found by the soak run: a setter refused at a later value had applied the earlier ones (a
+ * hostile value among them then made the derivatives read for debugging non-finite). A
+ * refused call now changes nothing: the values read after the Error are those before it. */
+static void case_atomic_set(void) {
+    const Var *in = first_var('R', 'i'), *iv = first_var('I', 'p');
+    unsigned vr[2];
+    double before[1], after[1], v[2];
+    void *h = c_new(1, 1, 0, 0.0);
+    if (!in) in = first_var('R', 'p');                 /* a source: a parameter, settable here */
+    if (!in) { case_fail("no settable Real variable"); c_free(h); return; }
+    if (V == 2) F2(fmi2EnterInitializationMode)(h); else F3(fmi3EnterInitializationMode)(h, fmi3False, 0, 0, fmi3False, 0);
+    vr[0] = in->vr; vr[1] = 0xFFFFFFF0u;
+    c_begin(V == 2 ? "fmi2GetReal" : "fmi3GetFloat64");
+    c_expect(V == 2 ? (int)F2(fmi2GetReal)(h, vr, 1, before) : (int)F3(fmi3GetFloat64)(h, vr, 1, before, 1), 0, 1, NULL);
+    v[0] = before[0] + 0.25; v[1] = 1.0;
+    c_begin(V == 2 ? "fmi2SetReal" : "fmi3SetFloat64");
+    c_expect(V == 2 ? (int)F2(fmi2SetReal)(h, vr, 2, v) : (int)F3(fmi3SetFloat64)(h, vr, 2, v, 2), 3, 1, "value reference");
+    c_begin(V == 2 ? "fmi2GetReal" : "fmi3GetFloat64");     /* allowed after the Error: for debugging */
+    c_expect(V == 2 ? (int)F2(fmi2GetReal)(h, vr, 1, after) : (int)F3(fmi3GetFloat64)(h, vr, 1, after, 1), 0, 1, NULL);
+    if (after[0] != before[0]) case_fail("the refused setter changed %u from %g to %g", vr[0], before[0], after[0]);
+    c_free(h);
+    if (iv) {   /* the same with an Integer parameter */
+        int i0[2] = {0, 0}, i1[2] = {0, 0};
+        h = c_new(1, 1, 0, 0.0);
+        vr[0] = iv->vr; vr[1] = 0xFFFFFFF0u;
+        if (V == 2) {
+            F2(fmi2EnterInitializationMode)(h);
+            F2(fmi2GetInteger)(h, vr, 1, i0);
+            i1[0] = i0[0] < 0x7FFFFFFF ? i0[0] + 1 : i0[0] - 1;
+            c_begin("fmi2SetInteger");
+            c_expect((int)F2(fmi2SetInteger)(h, vr, 2, i1), 3, 1, "value reference");
+            F2(fmi2GetInteger)(h, vr, 1, i1);
+        } else {
+            F3(fmi3EnterInitializationMode)(h, fmi3False, 0, 0, fmi3False, 0);
+            F3(fmi3GetInt32)(h, vr, 1, i0, 1);
+            i1[0] = i0[0] < 0x7FFFFFFF ? i0[0] + 1 : i0[0] - 1;
+            c_begin("fmi3SetInt32");
+            c_expect((int)F3(fmi3SetInt32)(h, vr, 2, i1, 2), 3, 1, "value reference");
+            F3(fmi3GetInt32)(h, vr, 1, i1, 1);
+        }
+        if (i1[0] != i0[0]) case_fail("the refused setter changed %u from %d to %d", vr[0], i0[0], i1[0]);
+        c_free(h);
+    }
+}
+
 static const struct { const char *name; void (*run)(void); } CASES[] = {
     {"nonfinite_time", case_nonfinite_time}, {"vr_overflow", case_vr_overflow}, {"logging_off", case_logging_off},
     {"event_mode_used", case_event_mode_used}, {"after_error", case_after_error},
-    {"forbidden_states", case_forbidden_states}, {"fmu_states", case_fmu_states}};
+    {"forbidden_states", case_forbidden_states}, {"fmu_states", case_fmu_states}, {"atomic_set", case_atomic_set}};
 
 static int run_case(const char *name) {
     for (size_t i = 0; i < sizeof CASES / sizeof CASES[0]; i++)

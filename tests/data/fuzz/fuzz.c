@@ -158,7 +158,7 @@ static const Row FMI3_TABLE[] = {
 /* ------------------------------------------------------------------ configuration */
 #define MAXVARS 256
 #define MAXINST 8
-#define MAXSTATES 64
+#define MAXSTATES 4096
 #define MAXBLOBS 16
 #define MAXTRACE 400
 
@@ -435,7 +435,11 @@ static void state_add(void *h, const Inst *in) {
         for (int i = 0; i < NSTATES_HELD; i++)      /* a freed record at the same address is gone */
             if (STATES[i].h == h && STATES[i].owner == in->id) STATES[i].alive = 0;
         if (NSTATES_HELD == MAXSTATES) state_forget_dead();
-        if (NSTATES_HELD == MAXSTATES) return;       /* all alive: the FMU frees them at FreeInstance */
+        if (NSTATES_HELD == MAXSTATES) {              /* all alive: not held (the FMU frees it at FreeInstance) */
+            for (int i = 0; i < NSTATES_HELD; i++)    /* and no freed record may claim its address */
+                if (STATES[i].h == h) STATES[i].h = NULL;
+            return;
+        }
         r = &STATES[NSTATES_HELD++];
     }
     r->h = h; r->owner = in->id; r->alive = 1; r->st = in->st; r->time = in->time; r->dirty = in->dirty;
@@ -443,7 +447,8 @@ static void state_add(void *h, const Inst *in) {
 
 /* A state handle to pass: one of this instance's (alive, or freed), another instance's, or NULL. */
 static void *some_state(Rng *r, const Inst *in, int *legal) {
-    int own[MAXSTATES], n = 0;
+    static int own[MAXSTATES];
+    int n = 0;
     for (int i = 0; i < NSTATES_HELD; i++)
         if (STATES[i].alive && STATES[i].owner == in->id) own[n++] = i;
     if (n && chance(r, 0.8)) { *legal = 1; return STATES[own[pick(r, n)]].h; }
