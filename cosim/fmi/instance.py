@@ -129,16 +129,19 @@ class FMUInstance:
                     self._log(status, message)
 
                 self._log3 = log3
+                # an FMI 3.0 FMU calls the log callback only with loggingOn, errors included:
+                # always on, so that a failing call names its reason (_log keeps the debug
+                # messages off the log unless logging_on)
                 if interface == "se":
                     fmu = fmi3.FMU3ScheduledExecution(**args)
                     self._instantiate_se(fmu, directory, clock_update)
                 elif interface == "cs":
                     fmu = fmi3.FMU3Slave(**args)
-                    fmu.instantiate(loggingOn=self.logging_on, logMessage=log3, eventModeUsed=bool(event_mode),
+                    fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
                                     earlyReturnAllowed=bool(early_return))
                 else:
                     fmu = fmi3.FMU3Model(**args)
-                    fmu.instantiate(loggingOn=self.logging_on, logMessage=log3)
+                    fmu.instantiate(loggingOn=True, logMessage=log3)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
             if fmu is not None and getattr(fmu, "dll", None) is not None:
@@ -175,7 +178,7 @@ class FMUInstance:
         resources = os.path.join(directory, "resources") + os.path.sep
         fmu.component = fmu.fmi3InstantiateScheduledExecution(
             fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"), fmi3.fmi3False,
-            fmi3.fmi3Boolean(self.logging_on), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
+            fmi3.fmi3Boolean(True), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
             fmu.lockPreemption, fmu.unlockPreemption)
 
     # ------------------------------------------------------------------ status

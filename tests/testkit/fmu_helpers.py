@@ -38,7 +38,7 @@ class Instance:
             def log3(env, status, category, message):
                 self.messages.append((status, message.decode()))
 
-            self.fmu.instantiate(logMessage=log3)
+            self.fmu.instantiate(loggingOn=True, logMessage=log3)   # FMI 3.0: no message at all without it
         for name, value in (start or {}).items():
             self.set(name, value)
 

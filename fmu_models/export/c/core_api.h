@@ -22,13 +22,18 @@
 enum { INT_NONE = 0, INT_32 = 32, INT_64 = 64 };
 
 void core_defaults(CoreData *d);
+/* 0 if d is a consistent state of this core (times finite, parameters in their domains,
+ * indices in range, ...), else 1 with the reason: checked before an FMU state from outside
+ * (deserialised bytes) is used. */
+int core_check(const CoreData *d, char *err);
 /* leaving initialization mode: check every value, compute the initial state */
 int core_exit_init(CoreWork *wk, CoreData *d, char *err);
 double core_time(const CoreData *d);
 void core_set_time(CoreData *d, double t);
 
 int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err);
-/* before_run: 1 in the instantiated and initialization modes (parameters may change) */
+/* before_run: 1 in the instantiated and initialization modes (parameters may change), 2 in
+ * Model Exchange's Continuous-Time Mode (continuous states may be set), else 0 */
 int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err);
 /* width: INT_32 or INT_64 in FMI 3.0 (checked against the variable), INT_NONE in FMI 2.0 */
 int core_get_int(const CoreData *d, const unsigned vr[], size_t n, long long v[], int width, char *err);

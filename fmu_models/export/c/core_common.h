@@ -16,16 +16,34 @@
 /* the order of fmu_models.variables.DOMAINS */
 enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_UNIT = 3, DOMAIN_SIGN = 4 };
 
-#define IN_GROUP(r, base, n) ((r) >= (base) && (r) < (base) + (n))
+/* 1 if the value reference r (unsigned) lies in [base, base + n): compared as unsigned
+ * long long, so no value reference (up to 2^32 - 1) can overflow the arithmetic. */
+#define IN_GROUP(r, base, n) \
+    ((unsigned long long)(r) >= (unsigned long long)(base) && \
+     (unsigned long long)(r) < (unsigned long long)(base) + (unsigned long long)(n))
 
 /* Sample instants t0 + k period of a sampled core (plant grid, filter, signal). A time within
  * SAMPLE_TOL periods of an instant counts as that instant, so that a master that adds up
  * t += h (OMSimulator: 4.999999999999938 after 500 steps of 0.01) still reaches it. */
 #define SAMPLE_TOL 1e-6
 
-/* The index of the latest instant at or before t (an instant within the tolerance counts). */
-static inline long long latest_instant(double t, double t0, double period) {
-    return (long long)floor((t - t0) / period + SAMPLE_TOL);
+/* Most sample periods between the start time and any time the core works at: instant
+ * indices stay exact in a double and far inside a long long. */
+#define MAX_INSTANTS 4503599627370496.0 /* 2^52 */
+
+/* The index *k of the latest instant at or before t (an instant within the tolerance counts);
+ * 1 with the message in err if t is not finite or lies more than MAX_INSTANTS periods from t0
+ * (no conversion of an out-of-range double to an integer). */
+static inline int instant_of(double t, double t0, double period, long long *k, char *err) {
+    double q = (t - t0) / period;
+    if (!isfinite(t) || !isfinite(q) || fabs(q) > MAX_INSTANTS) {
+        snprintf(err, ERRLEN,
+                 "time %g s lies %g sample periods of %g s from the start time %g s: at most 2^52 are supported",
+                 t, q, period, t0);
+        return 1;
+    }
+    *k = (long long)floor(q + SAMPLE_TOL);
+    return 0;
 }
 
 /* 1 if t is (within the tolerance) the instant k. */
@@ -37,6 +55,38 @@ static inline int at_instant(double t, double t0, double period, long long k) {
  * ends at t + h). */
 static inline int before_end(double t_end, double t0, double period, long long k) {
     return (double)k < (t_end - t0) / period - SAMPLE_TOL;
+}
+
+/* The checks every core's doStep(t, h) starts with: t and h finite, h > 0, t + h finite, t
+ * the FMU's time (within 1e-9 relative); else 1 with the message in err. */
+static inline int check_step(double t, double h, double time, char *err) {
+    if (!isfinite(t)) {
+        snprintf(err, ERRLEN, "currentCommunicationPoint %g is not finite", t);
+        return 1;
+    }
+    if (!(h > 0) || !isfinite(h)) {
+        snprintf(err, ERRLEN, "communication step size %g must be > 0 and finite", h);
+        return 1;
+    }
+    if (!isfinite(t + h)) {
+        snprintf(err, ERRLEN, "currentCommunicationPoint + communicationStepSize = %g + %g is not finite", t, h);
+        return 1;
+    }
+    if (fabs(t - time) > 1e-9 * fmax(1.0, fabs(t))) {
+        snprintf(err, ERRLEN, "currentCommunicationPoint %.17g differs from the FMU time %.17g", t, time);
+        return 1;
+    }
+    return 0;
+}
+
+/* 1 (message in err) unless every v[0..n-1] is finite; `what` names the array. */
+static inline int check_finite(const double v[], int n, const char *what, char *err) {
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) {
+            snprintf(err, ERRLEN, "the FMU state is invalid: %s[%d] = %g is not finite", what, i, v[i]);
+            return 1;
+        }
+    return 0;
 }
 
 /* NULL if v is in the domain, else why not ("must be > 0", ...). */
@@ -89,12 +139,13 @@ static inline int check_parameters(const double p[], const long long ip[], char 
 /* The index k of the Integer parameter with value reference vr (-1 with the message in err if
  * there is none of this width: INT_32 or INT_64 in FMI 3.0, INT_NONE in FMI 2.0). */
 static inline int int_parameter(unsigned vr, int width, char *err) {
-    int k = (int)vr - VR_IP;
-    if (!IN_GROUP(vr, VR_IP, NIP) || (width != INT_NONE && IP_WIDTH[k] != width)) {
+    unsigned k;
+    if (!IN_GROUP(vr, VR_IP, NIP) || (width != INT_NONE && IP_WIDTH[vr - (unsigned)VR_IP] != width)) {
         snprintf(err, ERRLEN, "no Int%d variable has value reference %u", width ? width : 32, vr);
         return -1;
     }
-    return k;
+    k = vr - (unsigned)VR_IP;      /* < NIP: no signed arithmetic on the value reference */
+    return (int)k;
 }
 
 static inline int get_int_parameters(const long long ip[], const unsigned vr[], size_t n, long long v[], int width,

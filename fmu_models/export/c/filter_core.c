@@ -99,14 +99,15 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
         } else if (IN(r, VR_U, NU)) {
             if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
             d->u[r - VR_U] = v[i];
         } else if (IN(r, VR_Y, NY)) {
             d->y[r - VR_Y] = v[i];               /* NaN: a missing measurement (if the filter says so) */
             d->cand_ok = 0;
-        } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
+        } else if (r < N_VARS) FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
+        else FAIL("no Real variable has value reference %u", r);
     }
     return 0;
 }
@@ -143,23 +144,41 @@ static int commit(CoreWork *wk, CoreData *d, char *err) {
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     double t_end = t + h, updates;
-    if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
-    if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
-        FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
+    long long k_end, n;
+    if (check_step(t, h, d->time, err)) return 1;
     updates = h / PERIOD;
     if (!(updates <= (double)MAX_UPDATES))
         FAIL("communication step %g s holds %.3g filter updates of %g s, more than the limit of %ld",
              h, updates, PERIOD, MAX_UPDATES);
+    /* every instant index below is in range (no conversion or loop past the step asked for) */
+    if (instant_of(t_end, d->t0, PERIOD, &k_end, err)) return 1;
+    if ((double)k_end - (double)d->kc > (double)MAX_UPDATES + 2)
+        FAIL("the FMU state has committed instant %lld, %.3g updates before t + h = %g s: more than the limit of %ld",
+             d->kc, (double)k_end - (double)d->kc, t_end, MAX_UPDATES);
     if (at_instant(t, d->t0, PERIOD, d->kc + 1) && commit(wk, d, err)) return 1;
     /* the input of the latest instant predicts the next update */
     if (at_instant(t, d->t0, PERIOD, d->kc)) memcpy(d->u_prev, d->u, sizeof d->u);
-    while (before_end(t_end, d->t0, PERIOD, d->kc + 1)) {
+    for (n = 0; before_end(t_end, d->t0, PERIOD, d->kc + 1); n++) {
+        if (n > MAX_UPDATES + 2) { d->time = t; FAIL("more than %ld filter updates in one step", MAX_UPDATES); }
         d->time = d->t0 + (double)(d->kc + 1) * PERIOD;      /* for the messages */
         if (commit(wk, d, err)) { d->time = t; return 1; }
         memcpy(d->u_prev, d->u, sizeof d->u);
     }
     d->cand_ok = 0;
     d->time = t_end;
+    return 0;
+}
+
+int core_check(const CoreData *d, char *err) {
+    if (!isfinite(d->time) || !isfinite(d->t0)) FAIL("the FMU state is invalid: its time is not finite");
+    if (check_parameters(d->p, NULL, err)) return 1;
+    if (!(d->kc >= 0 && (double)d->kc <= MAX_INSTANTS)) FAIL("the FMU state is invalid: committed instant %lld", d->kc);
+    if (d->cand_ok != 0 && d->cand_ok != 1) FAIL("the FMU state is invalid: candidate flag %d", d->cand_ok);
+    for (int j = 0; j < NY; j++)
+        if (d->valid[j] != 0 && d->valid[j] != 1) FAIL("the FMU state is invalid: valid flag %d", d->valid[j]);
+    if (check_finite(d->u, NU, "u", err) || check_finite(d->u_prev, NU, "u_prev", err)
+        || check_finite(d->state, NSTATE, "state", err))
+        return 1;
     return 0;
 }
 

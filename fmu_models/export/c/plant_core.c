@@ -81,13 +81,13 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
             FAIL("no settable Real variable has value reference %u", r);
         if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
         } else if (r == VR_STEP) {
-            if (!before_run) FAIL("step_size is fixed: set it before leaving initialization mode");
+            if (before_run != 1) FAIL("step_size is fixed: set it before leaving initialization mode");
             if (!(v[i] > 0)) FAIL("step_size = %g must be > 0", v[i]);
             d->step_size = v[i];
         } else if (IN(r, VR_X, NX)) {
-            if (!before_run)
+            if (!before_run)      /* 2: Continuous-Time Mode, where a state may be set (FMI 2.0.1) */
                 FAIL("start value of state %s can only be set before leaving initialization mode "
                      "(use the FMU state or SetContinuousStates)", VAR_NAMES[r]);
             d->x[r - VR_X] = v[i];
@@ -169,25 +169,29 @@ static void one_step(CoreWork *wk, const CoreData *d, double T, const double *u,
 }
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
-    double x[NX], T = d->step_size, t_end = t + h, ratio;
-    long long last, k;
-    if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
-    if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
-        FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
+    double x[NX], T = d->step_size, t_end = t + h, ratio, steps;
+    long long last, k, first;
+    if (check_step(t, h, d->time, err)) return 1;
     ratio = h / T * (double)SUBSTEPS(d);
     if (!(ratio <= (double)MAX_INTERNAL_STEPS))
         FAIL("communication step %g s needs %.3g internal steps of %g s, more than the limit of %ld: "
              "use shorter communication steps or a longer step_size", h, ratio, T / (double)SUBSTEPS(d),
              MAX_INTERNAL_STEPS);
+    if (instant_of(t_end, d->t0, T, &last, err)) return 1;
+    /* the grid steps to make: bounded by the step asked for (kg is the instant of x) */
+    steps = ((double)last - (double)d->kg) * (double)SUBSTEPS(d);
+    if (steps > (double)MAX_INTERNAL_STEPS + (double)SUBSTEPS(d))
+        FAIL("the FMU state is at grid instant %lld, %.3g internal steps before t + h = %g s: more than the limit of %ld",
+             d->kg, steps, t_end, MAX_INTERNAL_STEPS);
     /* the inputs as set at the grid instant drive its step (see plant_core.h) */
     if (at_instant(t, d->t0, T, d->kg)) {
         memcpy(d->u_g, d->u, sizeof(double) * NU);
         memcpy(d->w_g, d->w, sizeof d->w_g);
     }
-    last = latest_instant(t_end, d->t0, T);
     memcpy(x, d->x, sizeof(x));
-    for (k = d->kg; k < last; k++) {
-        for (long s = 0; s < (long)SUBSTEPS(d); s++) one_step(wk, d, T / (double)SUBSTEPS(d), d->u_g, x);
+    first = d->kg;
+    for (k = first; k < last; k++) {
+        for (long long s = 0; s < SUBSTEPS(d); s++) one_step(wk, d, T / (double)SUBSTEPS(d), d->u_g, x);
         for (int i = 0; i < NX; i++) {
             x[i] += d->w_g[i];
             if (!isfinite(x[i]))
@@ -201,5 +205,16 @@ int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     memcpy(d->x, x, sizeof(x));
     if (last > d->kg) d->kg = last;
     d->time = t_end;
+    return 0;
+}
+
+int core_check(const CoreData *d, char *err) {
+    if (!isfinite(d->time) || !isfinite(d->t0)) FAIL("the FMU state is invalid: its time is not finite");
+    if (check_parameters(d->p, d->ip, err)) return 1;
+    if (!(d->step_size > 0) || !isfinite(d->step_size)) FAIL("the FMU state is invalid: step_size %g", d->step_size);
+    if (!(d->kg >= 0 && (double)d->kg <= MAX_INSTANTS)) FAIL("the FMU state is invalid: grid instant %lld", d->kg);
+    if (check_finite(d->x, NX, "x", err) || check_finite(d->u, NU, "u", err) || check_finite(d->w, NX, "w", err)
+        || check_finite(d->u_g, NU, "u_g", err) || check_finite(d->w_g, NX, "w_g", err))
+        return 1;
     return 0;
 }

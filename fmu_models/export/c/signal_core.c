@@ -39,8 +39,6 @@ static double counter_normal(uint64_t seed, long long k, int c) {
     return sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
 }
 
-/* round half to even, as numpy.rint */
-static long long sample_index(const CoreData *d) { return (long long)nearbyint(d->ts / d->p[P_PERIOD]); }
 #endif
 
 #if SIGNAL_KIND == KIND_PRBS
@@ -49,17 +47,25 @@ static const int TAPS[17][4] = {{0}, {0}, {2, 1}, {3, 2}, {4, 3}, {5, 3}, {6, 5}
                                 {9, 5}, {10, 7}, {11, 9}, {12, 11, 10, 4}, {13, 12, 11, 8}, {14, 13, 12, 2},
                                 {15, 14}, {16, 15, 13, 4}};
 
-static void prbs_fill(CoreData *d) {
-    int order = (int)d->ip[IP_ORDER];
-    unsigned state = (unsigned)(d->ip[IP_SEED] % (1LL << order));
+/* The LFSR of `order` seeded with `seed`: its first n bits into bits[] (bits may be NULL:
+ * only the last one is returned). */
+static int prbs_run(int order, long long seed, unsigned char *bits, int n) {
+    unsigned state = (unsigned)(seed % (1LL << order)), out = 0;
     if (!state) state = 1;
-    d->nbits = (1 << order) - 1;
-    for (int i = 0; i < d->nbits; i++) {
+    for (int i = 0; i < n; i++) {
         unsigned bit = 0;
         for (int t = 0; t < 4 && TAPS[order][t]; t++) bit ^= (state >> (TAPS[order][t] - 1)) & 1u;
-        d->bits[i] = (unsigned char)(state & 1u);
+        out = state & 1u;
+        if (bits) bits[i] = (unsigned char)out;
         state = (state >> 1) | (bit << (order - 1));
     }
+    return (int)out;
+}
+
+static void prbs_fill(CoreData *d) {
+    int order = (int)d->ip[IP_ORDER];
+    d->nbits = (1 << order) - 1;
+    prbs_run(order, d->ip[IP_SEED], d->bits, d->nbits);
 }
 #endif
 
@@ -74,43 +80,60 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     return 0;
 }
 
-/* Output channel j at the current time. */
-static double output(const CoreData *d, int j) {
+/* Output channel j at the current time into *v; 1 with the message in err if it cannot be
+ * computed (a PRBS before initialization, or a sample index out of range). */
+static int output(const CoreData *d, int j, double *v, char *err) {
     const double *p = d->p;
     double t = d->ts;
-    (void)j; (void)t;
+    (void)j; (void)t; (void)err;
 #if SIGNAL_KIND == KIND_CONSTANT
-    return p[P_VALUE];
+    *v = p[P_VALUE];
 #elif SIGNAL_KIND == KIND_STEP
-    return t >= p[P_T_STEP] - 1e-12 ? p[P_AFTER] : p[P_BEFORE];
+    *v = t >= p[P_T_STEP] - 1e-12 ? p[P_AFTER] : p[P_BEFORE];
 #elif SIGNAL_KIND == KIND_SINE
-    return p[P_OFFSET] + p[P_AMPLITUDE] * sin(2 * 3.141592653589793 * p[P_FREQUENCY] * t + p[P_PHASE]);
+    *v = p[P_OFFSET] + p[P_AMPLITUDE] * sin(2 * 3.141592653589793 * p[P_FREQUENCY] * t + p[P_PHASE]);
 #elif SIGNAL_KIND == KIND_PRBS
-    long long i = (long long)floor(t / p[P_BIT_TIME] + 1e-9) % d->nbits;
-    if (i < 0) i += d->nbits;
-    return p[P_OFFSET] + (d->bits[i] ? p[P_AMPLITUDE] : -p[P_AMPLITUDE]);
-#elif SIGNAL_KIND == KIND_NOISE
-    return p[SIG_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
-#elif SIGNAL_KIND == KIND_SENSOR /* y = q(s + bias + std z) */
-    double y = d->in[j] + p[SIG_BIAS + j] + p[SIG_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], sample_index(d), j);
-    double q = p[SIG_QUANT + j];
-    return q > 0 ? nearbyint(y / q) * q : y;
-#else /* KIND_CUSTOM: the registered C expression (signal_custom.h) */
-    return custom_output(d, j, p, t);
+    double q = floor(t / p[P_BIT_TIME] + 1e-9), r;
+    int order = (int)d->ip[IP_ORDER], nbits = (1 << order) - 1, bit;
+    if (!isfinite(q)) FAIL("t / bit_time = %g / %g is not finite", t, p[P_BIT_TIME]);
+    r = fmod(q, (double)nbits);                     /* exact, whatever the size of q */
+    if (r < 0) r += (double)nbits;
+    /* before initialization the bits are not stored yet: run the register up to the bit */
+    bit = d->nbits == nbits ? d->bits[(int)r] : prbs_run(order, d->ip[IP_SEED], NULL, (int)r + 1);
+    *v = p[P_OFFSET] + (bit ? p[P_AMPLITUDE] : -p[P_AMPLITUDE]);
+#elif SIGNAL_KIND == KIND_NOISE || SIGNAL_KIND == KIND_SENSOR
+    long long k;
+    double q = nearbyint(d->ts / d->p[P_PERIOD]);
+    if (!(fabs(q) <= MAX_INSTANTS)) FAIL("sample index t / period = %g / %g is out of range", d->ts, d->p[P_PERIOD]);
+    k = (long long)q;
+#if SIGNAL_KIND == KIND_NOISE
+    *v = p[SIG_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], k, j);
+#else /* y = q(s + bias + std z) */
+    double y = d->in[j] + p[SIG_BIAS + j] + p[SIG_STD + j] * counter_normal((uint64_t)d->ip[IP_SEED], k, j);
+    double qu = p[SIG_QUANT + j];
+    *v = qu > 0 ? nearbyint(y / qu) * qu : y;
 #endif
+#else /* KIND_CUSTOM: the registered C expression (signal_custom.h) */
+    *v = custom_output(d, j, p, t);
+#endif
+    return 0;
 }
 
-/* 1 if the time is (within the tolerance) a sample instant. */
-static int on_instant(const CoreData *d) {
+/* 1 in *on if the time is (within the tolerance) a sample instant; 1 (message in err) if the
+ * time lies out of the supported range. */
+static int on_instant(const CoreData *d, int *on, char *err) {
     double P = d->p[P_PERIOD];
-    return at_instant(d->time, d->t0, P, latest_instant(d->time, d->t0, P));
+    long long k;
+    if (instant_of(d->time, d->t0, P, &k, err)) return 1;
+    *on = at_instant(d->time, d->t0, P, k);
+    return 0;
 }
 
 int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
     (void)wk;
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
-        if (IN(r, VR_OUT, NCH)) v[i] = output(d, (int)(r - VR_OUT));
+        if (IN(r, VR_OUT, NCH)) { if (output(d, (int)(r - VR_OUT), &v[i], err)) return 1; }
         else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
         else if (IN(r, VR_IN, NIN)) v[i] = d->in_set[r - VR_IN];
         else if (r == VR_TIME) v[i] = d->time;
@@ -123,12 +146,15 @@ int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], 
     for (size_t i = 0; i < n; i++) {
         unsigned r = vr[i];
         if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run, err)) return 1;
+            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
         } else if (IN(r, VR_IN, NIN)) {
             /* a sensor passes NaN and inf on; between instants the held sample stays */
+            int on = 1;
+            if (before_run != 1 && on_instant(d, &on, err)) return 1;
             d->in_set[r - VR_IN] = v[i];
-            if (before_run || on_instant(d)) d->in[r - VR_IN] = v[i];
-        } else FAIL("%s is calculated and cannot be set", r < N_VARS ? VAR_NAMES[r] : "this variable");
+            if (before_run == 1 || on) d->in[r - VR_IN] = v[i];
+        } else if (r < N_VARS) FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
+        else FAIL("no Real variable has value reference %u", r);
     }
     return 0;
 }
@@ -139,20 +165,34 @@ CORE_NO_BOOLEANS
 
 int core_do_step(CoreWork *wk, CoreData *d, double t, double h, char *err) {
     double P = d->p[P_PERIOD], t_end = t + h;
-    long long k_end;
+    long long k_end, k_now;
     (void)wk;
-    if (!(h > 0) || !isfinite(h)) FAIL("communication step size %g must be > 0", h);
-    if (fabs(t - d->time) > 1e-9 * fmax(1.0, fabs(t)))
-        FAIL("currentCommunicationPoint %.17g differs from the FMU time %.17g", t, d->time);
-    k_end = latest_instant(t_end, d->t0, P);
+    if (check_step(t, h, d->time, err)) return 1;
+    if (instant_of(t_end, d->t0, P, &k_end, err) || instant_of(t, d->t0, P, &k_now, err)) return 1;
     if (at_instant(t_end, d->t0, P, k_end)) {
         d->ts = t_end;                           /* on an instant: the inputs set there count */
         memcpy(d->in, d->in_set, sizeof d->in);
-    } else if (k_end > latest_instant(t, d->t0, P)) {
+    } else if (k_end > k_now) {
         d->ts = d->t0 + (double)k_end * P;       /* an instant inside the step: inputs as held */
         memcpy(d->in, d->in_set, sizeof d->in);
     }
     d->time = t_end;
+    return 0;
+}
+
+int core_check(const CoreData *d, char *err) {
+    if (!isfinite(d->time) || !isfinite(d->t0) || !isfinite(d->ts))
+        FAIL("the FMU state is invalid: its time is not finite");
+    if (check_parameters(d->p, d->ip, err)) return 1;
+#if SIGNAL_KIND == KIND_PRBS
+    if (d->nbits != 0) {
+        int order = (int)d->ip[IP_ORDER];
+        if (order < 2 || order > 16 || d->nbits != (1 << order) - 1)
+            FAIL("the FMU state is invalid: %d PRBS bits for order %d", d->nbits, order);
+    }
+    for (int i = 0; i < PRBS_MAX_BITS; i++)
+        if (d->bits[i] > 1) FAIL("the FMU state is invalid: PRBS bit %d", i);
+#endif
     return 0;
 }
 

@@ -1,19 +1,32 @@
-/* pendulum-cosim: modes of an FMU instance (FMI 2.0 and 3.0 wrappers). */
+/* pendulum-cosim: the states of an FMU instance (FMI 2.0 and 3.0 wrappers) and masks of the
+ * states in which a function may be called.
+ *
+ * The states are those of the standards' state machines that these FMUs can reach: no
+ * asynchronous doStep (FMI 2.0 stepInProgress, stepCanceled), no discarded step, no
+ * configuration or clock modes, no Co-Simulation event mode (hasEventMode = false). Every call
+ * that returns Error leaves the instance in M_ERROR, where only what the standard allows
+ * after an error is accepted (the wrapper's ERROR_CALLS). */
 #ifndef WRAPPER_MODES_H
 #define WRAPPER_MODES_H
 
-/* Modes of an instance, and masks of the modes in which a call is allowed. */
 typedef enum { M_INSTANTIATED, M_INIT, M_STEP, M_EVENT, M_CONT, M_TERMINATED, M_ERROR } Mode;
 
 static const char *mode_name(Mode m) {
-    static const char *n[] = {"instantiated", "initialization mode", "step mode", "event mode",
-                              "continuous-time mode", "terminated", "error"};
-    return n[m];
+    static const char *n[] = {"Instantiated", "Initialization Mode", "Step Mode", "Event Mode",
+                              "Continuous-Time Mode", "Terminated", "the error state"};
+    return (unsigned)m <= (unsigned)M_ERROR ? n[m] : "an unknown state";
 }
 
 #define B(m) (1u << (m))
-#define ANY_LIVE (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED))
-#define RUNNING (B(M_STEP) | B(M_EVENT) | B(M_CONT))
-#define BEFORE_RUN(c) (((1u << (c)->mode) & (B(M_INSTANTIATED) | B(M_INIT))) != 0)
+#define LIVE (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED))
+#define ANY (LIVE | B(M_ERROR))
+#define BEFORE_RUN(c) ((B((c)->mode) & (B(M_INSTANTIATED) | B(M_INIT))) != 0)
+/* core_set_real's `before_run`: 1 before the run, 2 in Continuous-Time Mode (where the
+ * continuous states may be set too), 0 else. */
+#define SET_WHEN(c) (BEFORE_RUN(c) ? 1 : (c)->mode == M_CONT ? 2 : 0)
+
+/* Log categories of the modelDescription (<LogCategories>): bits of an instance's `cats`. */
+#define CAT_ERROR 1u
+#define CAT_ALL_BITS CAT_ERROR
 
 #endif

@@ -1,0 +1,140 @@
+"""Soak benchmark: the project's FMUs under the call-sequence fuzzer for a given time, or for a
+given number of sequences. Measured, not asserted.
+
+Run: python bench/bench_soak.py --fuzz-seconds 600 [--jobs 2] [--seed 1]
+     python bench/bench_soak.py --fuzz-sequences 100000      (per FMU kind and FMI version)
+
+Part "fuzz": every FMU kind (plant: cartpole and iwp; estimator: EKF and MF-IAE; signal: PRBS
+and sensor), FMI 2.0 and 3.0, rebuilt from its own ``sources/`` with AddressSanitizer and
+UndefinedBehaviorSanitizer (tests/testkit/fuzz_run.py), driven by tests/data/fuzz/fuzz.c in
+chunks of seeded sequences. Reported per kind and version: sequences, calls, illegal calls and
+how many were answered Error, legal calls and how many OK, sanitizer reports, crashes, hangs,
+state-machine violations, and the replay command of every failing sequence.
+
+The parts are listed in PARTS (name -> function(args) -> report lines); each runs when asked
+for with --parts (default: all), so another part (a master under a misbehaving FMU) is one
+more function and one more entry.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+sys.path.append(str(Path(__file__).parents[1] / "tests"))   # the fuzzer's helpers (tests/testkit)
+from testkit import fuzz_run  # after the path
+
+COUNTS = ("sequences", "calls", "illegal", "illegal_error", "legal", "legal_ok")
+FAILURES = ("sanitizer", "crash", "hang", "violation")
+
+
+def _fuzz_target(t, seed: int, budget_s: float | None, sequences: int | None, chunk: int) -> dict:
+    """Run chunks on one target until the time budget or the sequence count is spent."""
+    tot = dict.fromkeys(COUNTS + FAILURES, 0)
+    tot["replays"] = []
+    first, t0 = 0, time.perf_counter()
+    while True:
+        if sequences is not None and first >= sequences:
+            break
+        if budget_s is not None and time.perf_counter() - t0 >= budget_s:
+            break
+        n = chunk if sequences is None else min(chunk, sequences - first)
+        r = fuzz_run.run(t, seed, first, n)
+        for k in COUNTS:
+            tot[k] += int(r.counts.get(k, 0) or 0)
+        if r.outcome == "ok":
+            first += n
+            continue
+        tot[r.outcome] += 1
+        seq = _failing_sequence(r.report)
+        head = next((ln for ln in r.report.splitlines() if ln.strip()), "")
+        tot["replays"].append(f"{r.outcome} ({head[:300]}): "
+                              f"{fuzz_run.replay_command(t, seed, seq if seq is not None else first)}")
+        # go on after the failing sequence (its chunk's later sequences included)
+        first = (seq + 1) if seq is not None else first + n
+    tot["seconds"] = time.perf_counter() - t0
+    return tot
+
+
+def _failing_sequence(report: str) -> int | None:
+    import re
+
+    m = re.search(r"^(?:VIOLATION|HANG|DIED) seed=\d+ seq=(\d+)", report, re.M)
+    return int(m.group(1)) if m else None
+
+
+def fuzz_part(args) -> list[str]:
+    """The fuzzer over every FMU kind and FMI version; the report lines."""
+    versions = [int(v) for v in args.versions.split(",")]
+    labels = [(kind, label) for kind, ls in fuzz_run.FMU_KINDS.items() for label in ls
+              if kind in args.kinds.split(",")]
+    with tempfile.TemporaryDirectory(prefix="pendulum_soak_") as tmp:
+        targets = []
+        for kind, label in labels:
+            for v in versions:
+                fmu = fuzz_run.build_fmu_for(label, v, Path(tmp) / "fmus")
+                targets.append((kind, label, v, fuzz_run.build_target(fmu, Path(tmp) / "build")))
+        per_kind = {}
+        for kind, label, _, _ in targets:
+            per_kind[kind] = per_kind.get(kind, set()) | {label}
+        budget = None if args.fuzz_seconds is None else args.fuzz_seconds * args.jobs / len(targets)
+        seqs = {(k, lb, v): None if args.fuzz_sequences is None else -(-args.fuzz_sequences // len(per_kind[k]))
+                for k, lb, v, _ in targets}
+        with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+            futures = {(k, lb, v): pool.submit(_fuzz_target, t, args.seed, budget, seqs[k, lb, v], args.chunk)
+                       for k, lb, v, t in targets}
+            results = {key: f.result() for key, f in futures.items()}
+    lines = ["| FMU kind | FMI | FMUs | sequences | calls | illegal calls answered Error | "
+             "legal calls answered OK | sanitizer reports | crashes | hangs | violations | seq/s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    replays = []
+    for kind in dict.fromkeys(k for k, _, _, _ in targets):
+        for v in versions:
+            rows = [r for (k, _, vv), r in results.items() if k == kind and vv == v]
+            s = {c: sum(r[c] for r in rows) for c in COUNTS + FAILURES}
+            secs = max(r["seconds"] for r in rows)
+            lines.append(f"| {kind} | {v}.0 | {', '.join(sorted(per_kind[kind]))} | {s['sequences']} | {s['calls']} | "
+                         f"{s['illegal_error']} / {s['illegal']} | {s['legal_ok']} / {s['legal']} | "
+                         f"{s['sanitizer']} | {s['crash']} | {s['hang']} | {s['violation']} | "
+                         f"{s['sequences'] / secs:.0f} |")
+            replays += [x for r in rows for x in r["replays"]]
+    lines.append("")
+    lines += [f"failing sequence: {x}" for x in replays] or ["no failing sequence"]
+    return lines
+
+
+#: The parts of the soak benchmark, by name.
+PARTS = {"fuzz": fuzz_part}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Command line (see the module documentation)."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--fuzz-seconds", type=float, default=None, help="time for the fuzz part [s] (default 60)")
+    p.add_argument("--fuzz-sequences", type=int, default=None,
+                   help="sequences per FMU kind and FMI version instead of a time")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--jobs", type=int, default=1, help="driver processes at once")
+    p.add_argument("--chunk", type=int, default=2000, help="sequences per driver process")
+    p.add_argument("--kinds", default="plant,estimator,signal")
+    p.add_argument("--versions", default="2,3")
+    p.add_argument("--parts", default=",".join(PARTS))
+    args = p.parse_args(argv)
+    if args.fuzz_seconds is None and args.fuzz_sequences is None:
+        args.fuzz_seconds = 60.0
+    for name in args.parts.split(","):
+        if name not in PARTS:
+            p.error(f"unknown part {name!r} (parts: {', '.join(PARTS)})")
+    print("command: python bench/bench_soak.py " + " ".join(sys.argv[1:] if argv is None else argv))
+    for name in args.parts.split(","):
+        t0 = time.perf_counter()
+        print(f"\n## {name}\n")
+        print("\n".join(PARTS[name](args)))
+        print(f"\n({name}: {time.perf_counter() - t0:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
