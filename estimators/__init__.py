@@ -14,6 +14,7 @@ itself by name (:data:`FILTERS`).
 """
 from .base import FILTERS, KalmanBase
 from .batch import BatchFilter
+from .consistency import BandTest, WhitenessTest, chi2_band, nees_test, nis_test, whiteness_test
 from .discrete import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ekf import EKF
 from .em import em_noise
@@ -22,6 +23,7 @@ from .fuzzy import MamdaniFuzzy
 from .iae import IAE
 from .kf import KF
 from .mfiae import MFIAE
+from .pcrb import PCRB, posterior_crb, rmse_ratio
 from .protocol import Parameter, StepContext, StepResult, Update
 from .runs import BatchRun, EMResult, FilterRun, Smoothed
 from .smoother import rts_smooth
@@ -31,6 +33,8 @@ from .ukf import UKF
 __all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "SWML", "UKF", "BatchFilter", "BatchRun", "DiscreteModel",
            "EMResult", "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed", "StepContext", "StepResult",
            "Update", "augment_rate_bias", "discretize", "em_noise", "export_fmu", "linear_model", "rts_smooth"]
+__all__ += ["PCRB", "BandTest", "WhitenessTest", "chi2_band", "nees_test", "nis_test", "posterior_crb", "rmse_ratio",
+            "whiteness_test"]
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):
