@@ -112,8 +112,8 @@ class BandTest:
 
 def _values(values, what: str) -> np.ndarray:
     v = checks.float_array(values, what)
-    if v.ndim == 1:
-        v = v[:, None]
+    if v.ndim == 1:                     # one run
+        v = v[None, :]
     if v.ndim != 2:
         raise InputError(f"{what} must have shape (runs, steps), got {v.shape}")
     if v.shape[0] < 1 or v.shape[1] < 1:
@@ -162,9 +162,9 @@ def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:
 
     Parameters
     ----------
-    nees : array_like, shape (runs, steps)
-        Normalised estimation errors squared ``e^T P^-1 e`` of each run and step; a
-        diverged run may be ``inf`` (it fails the test), NaN is refused.
+    nees : array_like, shape (runs, steps) or (steps,)
+        Normalised estimation errors squared ``e^T P^-1 e`` of each run and step (a 1-D
+        array is one run); a diverged run may be ``inf`` (it fails the test), NaN is refused.
     nx : int
         State dimension (the degrees of freedom).
     confidence : float
@@ -184,8 +184,8 @@ def nis_test(nis, dof, confidence: float = 0.95) -> BandTest:
 
     Parameters
     ----------
-    nis : array_like, shape (runs, steps)
-        Normalised innovations squared ``nu^T S^-1 nu``.
+    nis : array_like, shape (runs, steps) or (steps,)
+        Normalised innovations squared ``nu^T S^-1 nu`` (a 1-D array is one run).
     dof : int or array_like, shape (runs, steps)
         Measured channels of each value: ``n_y``, or per run and step the number of valid
         channels (0 where the measurement was missing: no information, no degree of freedom).
