@@ -143,10 +143,13 @@ def _band_test(statistic: str, values, dof, confidence: float) -> BandTest:
             raise InputError("degrees of freedom dof must be finite, >= 0 and not all 0")
     total = d.sum(axis=0)                                   # chi-square dof of the sum over runs
     has = total > 0
+    # the quantiles once per distinct number of degrees of freedom (one without missing data)
+    levels, where = np.unique(np.where(has, total, 1), return_inverse=True)
+    q_lo, q_hi = (chi2.ppf(p, levels) / N for p in (a / 2, 1 - a / 2))
     with np.errstate(invalid="ignore"):
         per_step = np.where(has, v.mean(axis=0), np.nan)
-        lower = np.where(has, chi2.ppf(a / 2, np.where(has, total, 1)) / N, np.nan)
-        upper = np.where(has, chi2.ppf(1 - a / 2, np.where(has, total, 1)) / N, np.nan)
+        lower = np.where(has, q_lo[where.ravel()], np.nan)
+        upper = np.where(has, q_hi[where.ravel()], np.nan)
     inside = (per_step >= lower) & (per_step <= upper)
     mean_dof = float(total[has].mean() / N)
     average = float(per_step[has].mean())
@@ -298,11 +301,16 @@ def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.9
     per_step = np.full((ny, len(lags), K), np.nan)
     share = np.empty((ny, len(lags)))
     counts = []
+    all_valid = bool(ok.all())
     for i, lag in enumerate(lags):
-        pairs = ok[:, :-lag] & ok[:, lag:]                  # (N, K - lag, ny)
-        a, b = e[:, :-lag] * pairs, e[:, lag:] * pairs
-        num, da, db = (a * b).sum(axis=0), (a * a).sum(axis=0), (b * b).sum(axis=0)   # (K - lag, ny)
-        n_k = pairs.sum(axis=0)                              # valid pairs at each step
+        if all_valid:
+            a, b = e[:, :-lag], e[:, lag:]
+            n_k = np.full((K - lag, ny), N)
+        else:
+            pairs = ok[:, :-lag] & ok[:, lag:]              # (N, K - lag, ny)
+            a, b = e[:, :-lag] * pairs, e[:, lag:] * pairs
+            n_k = pairs.sum(axis=0)                          # valid pairs at each step
+        num, da, db = (np.einsum("rkj,rkj->kj", x, y) for x, y in ((a, b), (a, a), (b, b)))   # (K - lag, ny)
         with np.errstate(invalid="ignore", divide="ignore"):
             rk = np.where(n_k > 0, num / np.sqrt(da * db), np.nan)
             acf[:, i] = num.sum(axis=0) / np.sqrt(da.sum(axis=0) * db.sum(axis=0))
