@@ -48,6 +48,8 @@ from fmu_models.errors import InputError, NumericalError, TypeMismatchError
 from fmu_models.infra import checks
 from fmu_models.infra.memory import check_fits
 
+from ._buffered import BufferedFunction
+from ._compiled import compile_functions
 from .discrete import DiscreteModel
 
 __all__ = ["PCRB", "posterior_crb", "rmse_ratio"]
@@ -172,20 +174,36 @@ def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: 
     return W
 
 
-def _jacobians(system: DiscreteModel, n: int):
-    """Batched exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) over ``n`` points."""
+class _Jacobians:
+    """The exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) of ``system`` at ``n``
+    points per call: one mapped CasADi Function, compiled to native code (cached on disk;
+    CasADi's VM without a C compiler), bound to numpy arrays."""
 
-    def build():
-        F = ca.Function("pcrb_F", [system.x, system.u], [ca.densify(ca.jacobian(system.fx, system.x))])
-        H = ca.Function("pcrb_H", [system.x], [ca.densify(ca.jacobian(system.hx, system.x))])
-        return F.map(n), H.map(n)
+    def __init__(self, system: DiscreteModel, n: int, backend: str = "compiled"):
+        x, u = system.x, system.u
+        xn = ca.SX.sym("x_next", system.nx)
+        fn = ca.Function("pcrb_jacobians", [x, u, xn],
+                         [ca.densify(ca.jacobian(system.fx, x)),
+                          ca.densify(ca.substitute(ca.jacobian(system.hx, x), x, xn))])
+        (mapped,), self.backend = compile_functions([fn.map(n, "serial")], backend)
+        self.n, self.nx, self.nu, self.ny = n, system.nx, system.nu, system.ny
+        self.fn = BufferedFunction(mapped)
 
-    return system.compiled("pcrb", (n,), "vm", build)
+    def __call__(self, xs: np.ndarray, us: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``F`` at (``xs``, ``us``) and ``H`` at ``xn``: points (n, nx), (n, nu), (n, nx) ->
+        (n, nx, nx), (n, ny, nx)."""
+        n, nx, ny = self.n, self.nx, self.ny
+        for i, a in enumerate((xs, us, xn)):
+            self.fn.args[i][:] = a.ravel()          # point-major = CasADi's column-major (dim, n)
+        self.fn.trigger()
+        F = self.fn.res[0].reshape(n, nx, nx).transpose(0, 2, 1)
+        H = self.fn.res[1].reshape(n, nx, ny).transpose(0, 2, 1)
+        return F.copy(), H.copy()
 
 
-def _unmap(a, n: int, rows: int, cols: int) -> np.ndarray:
-    """A mapped CasADi result (rows, n * cols) as (n, rows, cols)."""
-    return np.asarray(a).reshape(rows, n, cols).transpose(1, 0, 2)
+def _jacobians(system: DiscreteModel, n: int) -> _Jacobians:
+    """The :class:`_Jacobians` of ``system`` at ``n`` points, built once per model and size."""
+    return system.compiled("pcrb", (n,), "compiled", lambda: _Jacobians(system, n))
 
 
 def _root(M: np.ndarray) -> np.ndarray:
@@ -200,7 +218,8 @@ def _joseph(P: np.ndarray, Z: np.ndarray) -> np.ndarray:
     with the measurement matrix ``Z`` and unit noise, in Joseph form (symmetric and positive
     semi-definite by construction; the gain by a Cholesky solve of ``I + Z P Z^T``)."""
     S = np.eye(len(Z)) + Z @ P @ Z.T
-    K = scipy.linalg.cho_solve(scipy.linalg.cho_factor(0.5 * (S + S.T), lower=True), Z @ P).T
+    L = np.linalg.cholesky(0.5 * (S + S.T))
+    K = np.linalg.solve(L.T, np.linalg.solve(L, Z @ P)).T       # P Z^T S^-1 by the Cholesky factor
     A = np.eye(len(P)) - K @ Z
     out = A @ P @ A.T + K @ K.T
     return 0.5 * (out + out.T)
@@ -280,22 +299,19 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     bound[0] = np.zeros((nx, nx)) if P0 is None else P0
     for k0 in range(0, N, chunk):
         n = min(chunk, N - k0)
-        Fmap, Hmap = _jacobians(s, runs * n)
-        xs = X[:, k0:k0 + n].reshape(runs * n, nx).T
-        F = _unmap(Fmap(xs, us[:, k0:k0 + n].reshape(runs * n, nu).T), runs * n, nx, nx).reshape(runs, n, nx, nx)
-        H = _unmap(Hmap(X[:, k0 + 1:k0 + n + 1].reshape(runs * n, nx).T), runs * n, ny, nx).reshape(runs, n, ny, nx)
+        F, H = _jacobians(s, runs * n)(X[:, k0:k0 + n], us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
+        F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
         if not (np.isfinite(F).all() and np.isfinite(H).all()):
             r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])
             raise NumericalError(f"PCRB: a Jacobian of the model is not finite along realisation {r} at step {k0 + k}")
         Fbar = F.mean(axis=0)                                                    # (n, nx, nx)
         # D = Lq^-1 (F - F_bar): V = E[D^T D], the spread of the Jacobians over the realisations
         D = scipy.linalg.solve_triangular(Lq, (F - Fbar).transpose(2, 0, 1, 3).reshape(nx, -1), lower=True)
-        D = D.reshape(nx, runs, n, nx)
-        Zv = _root(np.einsum("jrki,jrkl->kil", D, D) / runs) if runs > 1 else None
-        if W is None:
-            Iy = np.einsum("rkji,jl,rklm->kim", H, Rinv, H) / runs
-        else:
-            Iy = np.einsum("rkji,rkjl,rklm->kim", H, W[:, k0:k0 + n], H) / runs
+        Dk = D.reshape(nx, runs, n, nx).transpose(2, 0, 1, 3).reshape(n, nx * runs, nx)    # (k, (j, r), i)
+        Zv = _root(np.swapaxes(Dk, 1, 2) @ Dk / runs) if runs > 1 else None
+        WH = (Rinv @ H) if W is None else W[:, k0:k0 + n] @ H                              # (r, k, ny, nx)
+        Hk, WHk = (a.transpose(1, 0, 2, 3).reshape(n, runs * ny, nx) for a in (H, WH))
+        Iy = np.swapaxes(Hk, 1, 2) @ WHk / runs
         Zy = _root(Iy)
         with np.errstate(over="ignore", invalid="ignore"):          # a non-finite bound is refused below
             for j in range(n):

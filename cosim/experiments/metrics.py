@@ -221,3 +221,30 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
     row.update(no_whiteness() if whiteness is None else whiteness)
     return {"pcrb_ratio_max_late": float(np.max(ratio)), "anees_late": row["anees"], "anis_late": row["anis"],
             "consistent_late": verdict(row)}
+
+
+def consistency_markdown(table, keys: list[str]) -> list[str]:
+    """Markdown lines of the consistency tests, one row per row of ``table`` (the rows of
+    :func:`consistency`, with the columns ``keys`` first and ``filter``).
+
+    Parameters
+    ----------
+    table
+        A DataFrame with the columns of :func:`consistency` and ``keys``.
+    keys
+        The identifying columns shown first (e.g. reading and scenario).
+    """
+    def yes(v):
+        return "n/a" if v is None or (isinstance(v, float) and np.isnan(v)) else ("yes" if v else "no")
+
+    out = ["| " + " | ".join(keys) + " | filter | runs | avg NEES [band] | steps inside | NEES | avg NIS [band] | "
+           "steps inside | NIS | max abs autocorr. (lag 1) [band] | white | consistent |",
+           "|" + "---|" * (len(keys) + 12)]
+    for _, r in table.iterrows():
+        tested = not (r["white_ok"] is None or (isinstance(r["white_ok"], float) and np.isnan(r["white_ok"])))
+        white = f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]" if tested else "not tested"
+        out.append("| " + " | ".join(str(r[k]) for k in keys) + f" | {r['filter']} | {r['runs']} | {r['anees']:.3g} "
+                   f"[{r['anees_lo']:.2f}, {r['anees_hi']:.2f}] | {r['anees_inside']:.0%} | {yes(r['nees_ok'])} | "
+                   f"{r['anis']:.3g} [{r['anis_lo']:.2f}, {r['anis_hi']:.2f}] | {r['anis_inside']:.0%} | "
+                   f"{yes(r['nis_ok'])} | {white} | {yes(r['white_ok'])} | **{yes(r['consistent'])}** |")
+    return out

@@ -100,7 +100,8 @@ class Settings:
     the filters' prior), the ``confidence`` of the chi-square bands and the whiteness test
     at lags 1..``whiteness_lags``; ``transient_steps``: the diagnostic columns ``*_late``
     leave out the first this many steps (an adaptive filter's start-up; not part of the
-    verdicts).
+    verdicts; not computed for a record of at most ``transient_steps + whiteness_lags``
+    steps).
     """
 
     runs: int = 100
@@ -149,9 +150,12 @@ class Settings:
             raise ConfigurationError(f"whiteness_lags = {self.whiteness_lags} must be shorter than the "
                                      f"{self.steps} steps")
         positive_int(self.transient_steps, "transient_steps", minimum=0)
-        if self.transient_steps + self.whiteness_lags >= self.steps:
-            raise ConfigurationError(f"transient_steps = {self.transient_steps} must leave more than whiteness_lags = "
-                                     f"{self.whiteness_lags} of the {self.steps} steps")
+
+    @property
+    def has_late(self) -> bool:
+        """Whether the record is long enough for the diagnostic after ``transient_steps``
+        (more than ``whiteness_lags`` steps left)."""
+        return self.transient_steps + self.whiteness_lags < self.steps
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
             positive(getattr(self, name), name)
         for name in ("q0_factor", "r0_factor"):
@@ -383,7 +387,8 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
         res = batch_run(make, X, Y, u[:, None])
         errors[name], nees[name], nis[name], failed[name] = res.x - X, res.nees, res.nis, res.failed
         white[name] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
-        late[name] = metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
+        late[name] = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
+                      if s.has_late else None)
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
     out = _summarise(errors, nees, nis, failed, s, example)
     out["learned"] = learned
@@ -568,7 +573,7 @@ def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult
                      else np.full(4, np.nan))
             late = (metrics.after_transient(nees, nis, mse, bound[1:], 2, s.transient_steps,
                                             parts[0][1]["whiteness_late"][name] if n == 1 else None, s.confidence)
-                    if bound is not None and complete else {})
+                    if bound is not None and complete and s.has_late else {})
             cons_rows.append({**ident, "filter": name, "eta": float(np.concatenate(
                 [res["per_run"][name]["eta"] for _, res in parts]).mean()),
                 "diverged": int(sum(res["per_run"][name]["diverged"].sum() for _, res in parts)),
@@ -710,7 +715,8 @@ def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[s
     """
     c = consistency[consistency["filter"] != "PCRB"]
     if "consistent_late" not in c or c["consistent_late"].isna().all():
-        return []
+        return [f"(The diagnostic after the first {settings.transient_steps} steps is not computed: the record has "
+                f"{settings.steps} steps.)", ""] if not settings.has_late else []
     lines = [f"Diagnostic, not the rule: the same over the steps after the first {settings.transient_steps} "
              f"({settings.transient_steps * settings.T:g} s), where an adaptive filter's start-up no longer "
              "counts:", ""]
@@ -732,22 +738,7 @@ def consistency_lines(consistency: pd.DataFrame) -> list[str]:
     consistency
         The ``consistency`` table of :class:`CampaignResult`.
     """
-    c = consistency[consistency["filter"] != "PCRB"]
-    out = ["| reading | scenario | filter | runs | avg NEES [band] | steps inside | NEES | avg NIS [band] | "
-           "steps inside | NIS | max abs autocorr. (lag 1) [band] | white | consistent |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-
-    def yes(v):
-        return "n/a" if v is None or (isinstance(v, float) and np.isnan(v)) else ("yes" if v else "no")
-
-    for _, r in c.iterrows():
-        white = ("not tested" if r["white_ok"] is None or (isinstance(r["white_ok"], float) and np.isnan(r["white_ok"]))
-                 else f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]")
-        out.append(f"| {r['reading']} | {r['scenario']} | {r['filter']} | {r['runs']} | {r['anees']:.3g} "
-                   f"[{r['anees_lo']:.2f}, {r['anees_hi']:.2f}] | {r['anees_inside']:.0%} | {yes(r['nees_ok'])} | "
-                   f"{r['anis']:.3g} [{r['anis_lo']:.2f}, {r['anis_hi']:.2f}] | {r['anis_inside']:.0%} | "
-                   f"{yes(r['nis_ok'])} | {white} | {yes(r['white_ok'])} | **{yes(r['consistent'])}** |")
-    return out
+    return metrics.consistency_markdown(consistency[consistency["filter"] != "PCRB"], ["reading", "scenario"])
 
 
 def write_report(result: CampaignResult, settings: Settings, out_dir, path: str = "fast",

@@ -94,8 +94,10 @@ def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: s
             test.update(res["whiteness"][name])
             test["consistent"] = metrics.verdict(test)
             ratio = metrics.pcrb_ratio(pr["rmse"], bound[1:])
-            late = metrics.after_transient(st["nees"], st["nis"], st["mse"], bound[1:], 2, s.transient_steps,
-                                           res["whiteness_late"][name], s.confidence)
+            late = (metrics.after_transient(st["nees"], st["nis"], st["mse"], bound[1:], 2, s.transient_steps,
+                                            res["whiteness_late"][name], s.confidence) if s.has_late else
+                    {"pcrb_ratio_max_late": np.nan, "anees_late": np.nan, "anis_late": np.nan,
+                     "consistent_late": np.nan})
             rows.append({"scenario": scenario_index + 1, "q_factor": fq, "r_factor": fr, "filter": name,
                          "eta": float(np.mean(pr["eta"])), "eta_true_ekf": float(np.mean(true_eta)),
                          "eta_over_true_ekf": float(np.mean(pr["eta"]) / np.mean(true_eta)),
@@ -190,11 +192,12 @@ def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
                      "consistent cell-scenarios": f"{int(t['consistent'].sum())} of {len(t)}",
                      "worst eta/true-Q,R EKF": float(c["eta_over_true_ekf"].max()),
                      "worst eta/EKF": float(c["eta_over_ekf"].max()),
-                     "after the transient: every state within PCRB margin": int(
+                     **({"after the transient: every state within PCRB margin": int(
                          (c["pcrb_ratio_worst_late"] <= 1 + settings.pcrb_margin).sum()),
-                     "after the transient: worst RMSE/PCRB": float(c["pcrb_ratio_worst_late"].max()),
-                     "after the transient: consistent cells": int(
-                         (c["consistent_scenarios_late"] == c["scenarios"]).sum())})
+                         "after the transient: worst RMSE/PCRB": float(c["pcrb_ratio_worst_late"].max()),
+                         "after the transient: consistent cells": int(
+                             (c["consistent_scenarios_late"] == c["scenarios"]).sum())}
+                        if t["pcrb_ratio_max_late"].notna().all() else {})})
     return pd.DataFrame(rows)
 
 

@@ -162,12 +162,37 @@ def test_seed001_fast_equals_master_and_kf_diverges_only_far_from_its_linearisat
     for case in seed001.CASES:
         fast = seed001.fast_task(case, s)
         master = seed001.master_task(case, s)
+        np.testing.assert_allclose(fast["bound"], master["bound"], rtol=1e-12)
         for n in seed001.FILTERS:
             np.testing.assert_allclose(fast[n]["rmse"], master[n]["rmse"], rtol=1e-10, atol=1e-13)
+            np.testing.assert_allclose(fast[n]["pcrb_ratio"], master[n]["pcrb_ratio"], rtol=1e-8)
+            for key in ("anees", "anis", "anees_inside"):
+                assert fast[n]["tests"][key] == pytest.approx(master[n]["tests"][key], rel=1e-6), key
+            assert master[n]["tests"]["white_ok"] is None and fast[n]["tests"]["white_ok"] is not None
     up = seed001.fast_task("upright", s)
     assert np.isfinite(up["KF"]["t_div"]).all() and not np.isfinite(up["EKF"]["t_div"]).any()
     hang = seed001.fast_task("hanging", s)
     assert not np.isfinite(hang["KF"]["t_div"]).any()
+
+
+def test_seed001_report_has_the_pcrb_and_the_verdicts(tmp_path):
+    from cosim.experiments import seed001
+
+    s = seed001.Settings(runs=3, duration=2.0)
+    result = seed001.run(s, backend="serial", progress=False)
+    cons = result.consistency
+    assert list(cons["filter"]) == ["KF", "EKF", "PCRB"] * 2
+    hanging = cons[(cons.case == "hanging") & (cons["filter"] == "EKF")].iloc[0]
+    assert 0.5 < hanging["pcrb_ratio_x"] < 2.0 and hanging["consistent"] in (True, False)
+    upright_kf = cons[(cons.case == "upright") & (cons["filter"] == "KF")].iloc[0]
+    assert upright_kf["pcrb_ratio_max"] > 10 and not upright_kf["consistent"]       # it diverges
+    md = seed001.write_report(result, s, tmp_path)
+    text = md.read_text()
+    assert "posterior Cramér-Rao bound" in text and "Rule: consistent at 95%" in text and "Regime:" in text
+    for name in ("consistency.csv", "errors.png", "nees.png", "rmse_pcrb.png", "settings.toml"):
+        assert (tmp_path / name).exists(), name
+    with pytest.raises(UnknownNameError, match="pcrb_prior"):
+        seed001.Settings(pcrb_prior="x")
 
 
 def test_dask_backend_gives_the_same_numbers():
