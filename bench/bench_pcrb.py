@@ -11,7 +11,7 @@
    replaced by no-ops (the baseline: what the sweep cost before them), on this machine's
    cores. Goal: the sweep with the PCRB under 3 minutes on 2 cores.
 
-Run: python bench/bench_pcrb.py [--skip-sweep]
+Run: python bench/bench_pcrb.py [--skip-sweep] [--out DIR] (DIR: the report of the measured sweep)
 """
 from __future__ import annotations
 
@@ -86,11 +86,14 @@ def _no_bands(nees, nis, nx, ny, confidence=0.95):
             {"anees": z, "anis": z, "nees_lo": z, "nees_hi": z, "nis_lo": z, "nis_hi": z})
 
 
-def sweep_costs() -> None:
+def sweep_costs(out: str | None) -> None:
     settings = seed000_sweep.SweepSettings()
-    seed000_sweep.run(replace(settings, factors=(1.0,), campaign=replace(settings.campaign, runs=2, duration=0.1)),
+    seed000_sweep.run(replace(settings, factors=(1.0,), campaign=replace(settings.campaign, runs=2, duration=0.2)),
                       progress=False)                                       # warm the compiled filters
-    wall = seed000_sweep.run(settings, progress=False).wall
+    result = seed000_sweep.run(settings, progress=False)
+    wall = result.wall
+    if out:
+        seed000_sweep.write_report(*result, settings, out)
     print(f"{os.cpu_count()} cores; sweep 7 x 7 cells x 4 scenarios x {settings.campaign.runs} realisations, "
           f"with the PCRB and the consistency tests: {wall:6.1f} s")
     saved = seed000.scenario_bound, metrics.whiteness_row, metrics.band_row
@@ -105,10 +108,12 @@ def sweep_costs() -> None:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--skip-sweep", action="store_true")
+    ap.add_argument("--out", help="write the report of the measured sweep here")
     args = ap.parse_args()
     bound_costs()
     if not args.skip_sweep:
-        sweep_costs()
+        print(f"load average before the sweeps: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
+        sweep_costs(args.out)
 
 
 if __name__ == "__main__":

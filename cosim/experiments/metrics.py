@@ -173,6 +173,27 @@ def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence:
     return row, per_step
 
 
+def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
+    """The Monte Carlo standard error of :func:`pcrb_ratio`, shape (nx,): the realisations
+    are independent, so the mean-square error over them has the standard error
+    ``std_r(m_r) / sqrt(N)`` (``m_r`` a realisation's mean-square error over the steps), and
+    the ratio, its square root over the bound's, half that relative error (the bound's own
+    Monte Carlo error, from the Jacobians' spread only, is far smaller).
+
+    Parameters
+    ----------
+    rmse_runs
+        Each realisation's RMSE per state over steps 1..K, shape (runs, nx).
+    bound_mse
+        The bound on the MSE at steps 1..K, shape (K, nx).
+    """
+    m = np.square(rmse_runs)
+    N = len(m)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        rel = m.std(axis=0, ddof=1) / np.sqrt(N) / m.mean(axis=0) if N > 1 else np.full(m.shape[1], np.nan)
+        return 0.5 * rel * pcrb_ratio(rmse_runs, bound_mse)
+
+
 def pcrb_ratio(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
     """Each state's RMSE as a multiple of the posterior Cramér-Rao bound, shape (nx,):
     ``sqrt(mean_r rmse_r^2 / mean_k PCRB_k)``, i.e. the RMSE over realisations and steps

@@ -104,7 +104,10 @@ def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: s
                          "eta_over_ekf": float(np.mean(pr["eta"]) / np.mean(ekf)),
                          "worse_than_ekf": float(np.mean(pr["eta"] > ekf)) if name in ADAPTIVE else 0.0,
                          **{f"pcrb_ratio_{x}": float(ratio[a]) for a, x in enumerate(STATES)},
-                         "pcrb_ratio_max": float(np.max(ratio)), "diverged": int(pr["diverged"].sum()), **test,
+                         "pcrb_ratio_max": float(np.max(ratio)),
+                         **{f"pcrb_ratio_se_{x}": float(v) for x, v in
+                            zip(STATES, metrics.pcrb_ratio_se(pr["rmse"], bound[1:]))},
+                         "diverged": int(pr["diverged"].sum()), **test,
                          **late})
     return rows
 

@@ -200,3 +200,38 @@ def test_dask_backend_gives_the_same_numbers():
     a = seed000.run(SMALL, readings=("eqs",), backend="dask", n_jobs=2, progress=False)[0]
     b = seed000.run(SMALL, readings=("eqs",), backend="serial", progress=False)[0]
     np.testing.assert_array_equal(_etas(a), _etas(b))
+
+
+def test_partial_campaign_keeps_what_finished(tmp_path):
+    """An interrupted campaign (some tasks None): the finished scenarios keep their rows; on
+    the master path (several chunks, the PCRB in its own task) a scenario whose PCRB task
+    did not finish has no ratio (NaN, not a wrong one) and no whiteness; the report says
+    PARTIAL."""
+    s = replace(SMALL, readings=("eqs",))
+    keys = [("eqs", 0), ("eqs", 1)]
+    done = seed000.fast_task(0, "eqs", s)
+    res = seed000._assemble(s, keys, [np.arange(3)], [done, None], 1.0)
+    assert set(res.consistency["scenario"]) == {1} and set(res.per_run["scenario"]) == {1}
+    assert res.consistency["runs"].eq(3).all()
+    master = {**done, "whiteness": {n: metrics.no_whiteness() for n in done["whiteness"]}}   # what a master task
+    master.pop("bound")                                                                     # returns
+    res = seed000._assemble(s, keys, [np.arange(3)], [master, None, None, None], 1.0)
+    row = res.consistency[res.consistency["filter"] == "SWML"].iloc[0]
+    assert np.isnan(row["pcrb_ratio_x"]) and row["white_ok"] is None
+    assert row["anees"] == pytest.approx(done["steps"]["SWML"]["nees"].mean(), rel=1e-12)
+    assert "PCRB" not in set(res.consistency["filter"]) and not len(res.bound)
+    md = seed000.write_report(res, s, tmp_path, "master", partial=True).read_text()
+    assert "PARTIAL RESULTS" in md and "whiteness is not tested there" in md
+
+
+@pytest.mark.parametrize(("setting", "message"), [("confidence=2", "confidence must lie strictly between 0 and 1"),
+                                                  ("pcrb_prior=guess", "pcrb_prior must be one of"),
+                                                  ("whiteness_lags=0", "whiteness_lags must be an integer >= 1"),
+                                                  ("transient_steps=-1", "transient_steps must be an integer >= 0")])
+def test_bad_limit_settings_are_refused_on_the_command_line(tmp_path, capsys, setting, message):
+    from cosim.cli import main
+
+    for experiment in ("seed000", "seed000-sweep"):
+        assert main(["experiment", experiment, "--set", setting, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err and not (tmp_path / "o").exists()
