@@ -8,13 +8,13 @@ independent runs, at each step ``k``:
 * the NEES ``e_k^T P_k^-1 e_k`` of a consistent filter is chi-square with ``n_x`` degrees of
   freedom, so ``N`` times the average over the runs is chi-square with ``N n_x``: at
   confidence ``1 - alpha`` the average lies in ``[chi2(alpha/2, N n_x) / N,
-  chi2(1 - alpha/2, N n_x) / N]`` (eq 5.4.2-6; for ``N = 100``, ``n_x = 4``: about
+  chi2(1 - alpha/2, N n_x) / N]`` (for ``N = 100``, ``n_x = 4``: about
   [3.46, 4.57]);
 * the same for the NIS ``nu_k^T S_k^-1 nu_k`` with the number of measured channels;
 * the innovations are white: the normalised autocorrelation over the runs
   ``rho(k, k+l) = sum_r nu_r(k) nu_r(k+l) / sqrt(sum_r nu_r(k)^2 sum_r nu_r(k+l)^2)`` (per
   channel, each innovation divided by its predicted standard deviation) is approximately
-  normal with variance ``1/N`` at every lag ``l >= 1`` (eq 5.4.2-9): inside
+  normal with variance ``1/N`` at every lag ``l >= 1``: inside
   ``+-z_{1-alpha/2} / sqrt(N)``.
 
 Each test gives the statistic at every step beside its band, the share of steps inside,
@@ -48,7 +48,7 @@ def _confidence(confidence) -> float:
 def chi2_band(runs, dof, confidence: float = 0.95) -> tuple[float, float]:
     """Two-sided band of the average over ``runs`` independent chi-square(``dof``) values
     at ``confidence``: ``(chi2.ppf(alpha/2, runs dof) / runs, chi2.ppf(1 - alpha/2, runs dof) / runs)``
-    with ``alpha = 1 - confidence`` (Bar-Shalom et al. 2001, eq 5.4.2-6).
+    with ``alpha = 1 - confidence`` (Bar-Shalom et al. 2001, section 5.4).
 
     Parameters
     ----------
@@ -161,7 +161,7 @@ def _band_test(statistic: str, values, dof, confidence: float) -> BandTest:
 
 
 def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:
-    """The NEES test over Monte Carlo runs (Bar-Shalom et al. 2001, section 5.4.2, eq 5.4.2-6).
+    """The NEES test over Monte Carlo runs (Bar-Shalom et al. 2001, section 5.4).
 
     Parameters
     ----------
@@ -183,7 +183,7 @@ def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:
 
 
 def nis_test(nis, dof, confidence: float = 0.95) -> BandTest:
-    """The NIS test over Monte Carlo runs (Bar-Shalom et al. 2001, section 5.4.2).
+    """The NIS test over Monte Carlo runs (Bar-Shalom et al. 2001, section 5.4).
 
     Parameters
     ----------
@@ -245,7 +245,7 @@ class WhitenessTest:
 
 
 def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.95, valid=None) -> WhitenessTest:
-    """The whiteness test of the innovations (Bar-Shalom et al. 2001, section 5.4.2, eq 5.4.2-9).
+    """The whiteness test of the innovations (Bar-Shalom et al. 2001, section 5.4).
 
     Each channel's innovation is divided by its predicted standard deviation
     ``sqrt(S_jj)``; missing channels (``valid`` False) take no part in the sums.

@@ -3,7 +3,8 @@
 For ``x_{k+1} = f(x_k, u_k) + w_k``, ``y_k = h(x_k) + v_k`` with ``w_k ~ N(0, Q)``,
 ``v_k ~ N(0, R)`` and a Gaussian prior ``x_0 ~ N(m_0, P_0)``, the Fisher information
 ``J_k`` of the state at step ``k`` follows the recursion of Tichavský, Muravchik and Nehorai
-(IEEE Trans. Signal Processing 46(5), 1998, eqs 21 and 34-37):
+(IEEE Trans. Signal Processing 46(5), 1998: the Fisher information recursion and its form for
+additive Gaussian noise):
 
     J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
     D11 = E[F^T Q^-1 F],  D12 = D21^T = -E[F^T] Q^-1,  D22 = Q^-1 + E[H^T R^-1 H],
@@ -174,36 +175,49 @@ def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: 
     return W
 
 
-class _Jacobians:
-    """The exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) of ``system`` at ``n``
-    points per call: one mapped CasADi Function, compiled to native code (cached on disk;
-    CasADi's VM without a C compiler), bound to numpy arrays."""
+#: Points per call of the compiled Jacobians (one compiled library per model, whatever the
+#: number of realisations and steps).
+JACOBIAN_BLOCK = 1024
 
-    def __init__(self, system: DiscreteModel, n: int, backend: str = "compiled"):
+
+class _Jacobians:
+    """The exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) of ``system``: one
+    CasADi Function mapped over :data:`JACOBIAN_BLOCK` points, compiled to native code
+    (cached on disk; CasADi's VM without a C compiler), bound to numpy arrays."""
+
+    def __init__(self, system: DiscreteModel, backend: str = "compiled"):
         x, u = system.x, system.u
         xn = ca.SX.sym("x_next", system.nx)
         fn = ca.Function("pcrb_jacobians", [x, u, xn],
                          [ca.densify(ca.jacobian(system.fx, x)),
                           ca.densify(ca.substitute(ca.jacobian(system.hx, x), x, xn))])
-        (mapped,), self.backend = compile_functions([fn.map(n, "serial")], backend)
-        self.n, self.nx, self.nu, self.ny = n, system.nx, system.nu, system.ny
+        (mapped,), self.backend = compile_functions([fn.map(JACOBIAN_BLOCK, "serial")], backend)
+        self.nx, self.nu, self.ny = system.nx, system.nu, system.ny
         self.fn = BufferedFunction(mapped)
 
     def __call__(self, xs: np.ndarray, us: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``F`` at (``xs``, ``us``) and ``H`` at ``xn``: points (n, nx), (n, nu), (n, nx) ->
-        (n, nx, nx), (n, ny, nx)."""
-        n, nx, ny = self.n, self.nx, self.ny
-        for i, a in enumerate((xs, us, xn)):
-            self.fn.args[i][:] = a.ravel()          # point-major = CasADi's column-major (dim, n)
-        self.fn.trigger()
-        F = self.fn.res[0].reshape(n, nx, nx).transpose(0, 2, 1)
-        H = self.fn.res[1].reshape(n, nx, ny).transpose(0, 2, 1)
-        return F.copy(), H.copy()
+        """``F`` at (``xs``, ``us``) and ``H`` at ``xn``: ``m`` points (..., nx), (..., nu),
+        (..., nx) -> (m, nx, nx), (m, ny, nx)."""
+        nx, ny, b = self.nx, self.ny, JACOBIAN_BLOCK
+        pts = [np.ascontiguousarray(a).reshape(-1, a.shape[-1]) for a in (xs, us, xn)]
+        m = len(pts[0])
+        F, H = np.empty((m, nx, nx)), np.empty((m, ny, nx))
+        args, res = self.fn.args, self.fn.res
+        for i0 in range(0, m, b):
+            i1 = min(i0 + b, m)
+            for a, p in zip(args, pts):
+                blk = a.reshape(b, -1)              # point-major = CasADi's column-major (dim, b)
+                blk[:i1 - i0] = p[i0:i1]
+                blk[i1 - i0:] = p[i1 - 1]           # pad the last block with a valid point
+            self.fn.trigger()
+            F[i0:i1] = res[0].reshape(b, nx, nx)[:i1 - i0].transpose(0, 2, 1)
+            H[i0:i1] = res[1].reshape(b, nx, ny)[:i1 - i0].transpose(0, 2, 1)
+        return F, H
 
 
-def _jacobians(system: DiscreteModel, n: int) -> _Jacobians:
-    """The :class:`_Jacobians` of ``system`` at ``n`` points, built once per model and size."""
-    return system.compiled("pcrb", (n,), "compiled", lambda: _Jacobians(system, n))
+def _jacobians(system: DiscreteModel) -> _Jacobians:
+    """The :class:`_Jacobians` of ``system``, built once per model."""
+    return system.compiled("pcrb", (JACOBIAN_BLOCK,), "compiled", lambda: _Jacobians(system))
 
 
 def _root(M: np.ndarray) -> np.ndarray:
@@ -226,8 +240,9 @@ def _joseph(P: np.ndarray, Z: np.ndarray) -> np.ndarray:
 
 
 def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=None) -> PCRB:
-    """The posterior Cramér-Rao bound along true trajectories (Tichavský et al. 1998, eqs
-    21 and 34-37; see the module documentation for the form computed and for missing data).
+    """The posterior Cramér-Rao bound along true trajectories (Tichavský, Muravchik and
+    Nehorai 1998, the recursion for additive Gaussian noise; see the module documentation
+    for the form computed and for missing data).
 
     Parameters
     ----------
@@ -287,7 +302,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
         P0 = checks.covariance(P0, nx, "PCRB: P0 (None for a known initial state)")
     valid = _valid_channels(masks, ys, runs, N, ny)
     chunk = min(N, PCRB_CHUNK)
-    check_fits(8.0 * (runs * chunk * (3 * nx * nx + ny * nx) + (N + 1) * 4 * nx * nx
+    check_fits(8.0 * (runs * chunk * (4 * nx * nx + 3 * ny * nx) + (N + 1) * 4 * nx * nx
                       + (0 if valid is None else runs * N * ny * ny)),
                f"the PCRB over {runs} realisations x {N} steps", "fewer realisations")
     W = _measurement_weights(R, valid, runs, N)
@@ -299,7 +314,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     bound[0] = np.zeros((nx, nx)) if P0 is None else P0
     for k0 in range(0, N, chunk):
         n = min(chunk, N - k0)
-        F, H = _jacobians(s, runs * n)(X[:, k0:k0 + n], us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
+        F, H = _jacobians(s)(X[:, k0:k0 + n], us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
         F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
         if not (np.isfinite(F).all() and np.isfinite(H).all()):
             r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])

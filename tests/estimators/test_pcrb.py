@@ -88,9 +88,9 @@ def test_missing_channels_carry_no_information(lin):
 
 @pytest.fixture(scope="module")
 def cartpole_truth(cp):
-    """12 realisations of 60 steps of the seed 000 truth (q = 0.2, r = 0.1, PRBS-like input)."""
+    """10 realisations of 50 steps of the seed 000 truth (q = 0.2, r = 0.1, PRBS-like input)."""
     rng = np.random.default_rng(3)
-    runs, n = 12, 60
+    runs, n = 10, 50
     us = np.where((np.arange(n) // 20) % 2, 0.5, -0.5)[:, None]
     X = np.empty((runs, n + 1, 4))
     X[:, 0] = [0.5, 0.0, 1.8, 0.5]
@@ -108,8 +108,13 @@ def test_equals_an_independent_numpy_implementation_on_the_cartpole(cp, cartpole
     p = tuple(get_model("cartpole").p)
     T = cp.dt
 
-    def jac_f(x, u):
-        return np.eye(4) + T * complex_step_jacobian(lambda z: f(z, u, p), x)
+    seen = {}
+
+    def jac_f(x, u):                      # both oracle runs below visit the same points
+        key = (x.tobytes(), u.tobytes())
+        if key not in seen:
+            seen[key] = np.eye(4) + T * complex_step_jacobian(lambda z: f(z, u, p), x)
+        return seen[key]
 
     def jac_h(x):
         return np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
