@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import sys
 import time
 from dataclasses import replace
@@ -86,23 +87,33 @@ def _no_bands(nees, nis, nx, ny, confidence=0.95):
             {"anees": z, "anis": z, "nees_lo": z, "nees_hi": z, "nis_lo": z, "nis_hi": z})
 
 
+def cpu_seconds() -> float:
+    """CPU time of this process and of its finished children (the sweep's workers) [s]."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def sweep_costs(out: str | None) -> None:
     settings = seed000_sweep.SweepSettings()
     seed000_sweep.run(replace(settings, factors=(1.0,), campaign=replace(settings.campaign, runs=2, duration=0.2)),
                       progress=False)                                       # warm the compiled filters
+    c0 = cpu_seconds()
     result = seed000_sweep.run(settings, progress=False)
-    wall = result.wall
+    wall, cpu = result.wall, cpu_seconds() - c0
     if out:
         seed000_sweep.write_report(*result, settings, out)
     print(f"{os.cpu_count()} cores; sweep 7 x 7 cells x 4 scenarios x {settings.campaign.runs} realisations, "
-          f"with the PCRB and the consistency tests: {wall:6.1f} s")
+          f"with the PCRB and the consistency tests: {wall:6.1f} s wall, {cpu:6.1f} s CPU "
+          f"(load average after: {os.getloadavg()[0]:.1f})")
     saved = seed000.scenario_bound, metrics.whiteness_row, metrics.band_row
     seed000.scenario_bound, metrics.whiteness_row, metrics.band_row = _no_bound, _no_whiteness, _no_bands
+    c0 = cpu_seconds()
     try:                         # fork: the workers inherit the no-ops
         base = seed000_sweep.run(settings, progress=False).wall
     finally:
         seed000.scenario_bound, metrics.whiteness_row, metrics.band_row = saved
-    print(f"  baseline: the same sweep with the PCRB and the tests replaced by no-ops: {base:6.1f} s")
+    print(f"  baseline: the same sweep with the PCRB and the tests replaced by no-ops: {base:6.1f} s wall, "
+          f"{cpu_seconds() - c0:6.1f} s CPU (load average after: {os.getloadavg()[0]:.1f})")
 
 
 def main():

@@ -260,7 +260,7 @@ def consistency_markdown(table, keys: list[str]) -> list[str]:
 
     out = ["| " + " | ".join(keys) + " | filter | runs | avg NEES [band] | steps inside | NEES | avg NIS [band] | "
            "steps inside | NIS | max abs autocorr. (lag 1) [band] | white | consistent |",
-           "|" + "---|" * (len(keys) + 12)]
+           "|" + "---|" * (len(keys) + 11)]
     for _, r in table.iterrows():
         tested = not (r["white_ok"] is None or (isinstance(r["white_ok"], float) and np.isnan(r["white_ok"])))
         white = f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]" if tested else "not tested"

@@ -77,6 +77,9 @@ def test_report_is_written(tmp_path):
     assert "Where we agree with the paper" in text and (tmp_path / "settings.toml").exists()
     assert "posterior Cramér-Rao bound" in text and "Rule: consistent at 95%" in text
     assert "3 realisations x 2 scenarios" in text and "Regime: configuration custom" in text
+    table = [ln for ln in text.splitlines() if ln.startswith("| reading | scenario | filter | runs")]
+    body = text.splitlines()[text.splitlines().index(table[0]):][:2 + 2 * 2 * len(seed000.FILTERS)]
+    assert len({ln.count("|") for ln in body}) == 1                 # a well-formed markdown table
     for name in ("per_run.csv", "per_run.parquet", "eps_k.csv", "table3.csv", "consistency.csv", "pcrb.csv",
                  "figure3_eqs.png", "figure4_prose.png", "figure_nees_eqs.png", "figure_nis_prose.png",
                  "figure_rmse_pcrb_eqs.png"):
