@@ -150,12 +150,6 @@ class Settings:
             raise ConfigurationError(f"whiteness_lags = {self.whiteness_lags} must be shorter than the "
                                      f"{self.steps} steps")
         positive_int(self.transient_steps, "transient_steps", minimum=0)
-
-    @property
-    def has_late(self) -> bool:
-        """Whether the record is long enough for the diagnostic after ``transient_steps``
-        (more than ``whiteness_lags`` steps left)."""
-        return self.transient_steps + self.whiteness_lags < self.steps
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
             positive(getattr(self, name), name)
         for name in ("q0_factor", "r0_factor"):
@@ -178,6 +172,12 @@ class Settings:
     @property
     def steps(self) -> int:
         return round(self.duration / self.T)
+
+    @property
+    def has_late(self) -> bool:
+        """Whether the record is long enough for the diagnostic after ``transient_steps``
+        (more than ``whiteness_lags`` steps left)."""
+        return self.transient_steps + self.whiteness_lags < self.steps
 
 
 #: Named configurations (``--config``).

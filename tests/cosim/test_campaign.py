@@ -138,8 +138,16 @@ def test_settings_of_the_limit_and_the_bands_are_checked():
             seed000.Settings(confidence=bad)
     with pytest.raises(ConfigurationError, match="whiteness_lags"):
         seed000.Settings(whiteness_lags=0)
+    # the campaign's own checks still run after these
+    with pytest.raises(ConfigurationError, match="q0"):
+        seed000.Settings(q0=-1.0)
+    with pytest.raises(ConfigurationError, match="x0 must have 4 entries"):
+        seed000.Settings(x0=(0.0, 1.0))
+    assert not seed000.Settings(duration=0.5).has_late and seed000.Settings().has_late
     with pytest.raises(ConfigurationError, match="shorter than the 50 steps"):
         seed000.Settings(duration=0.5, whiteness_lags=50)
+    with pytest.raises(ConfigurationError, match="transient_steps"):
+        seed000.Settings(transient_steps=-1)
 
 
 def test_run_tasks_refuses_unknown_backend():
