@@ -6,7 +6,10 @@
    (explicit inverses, one Jacobian call per realisation and step: the numpy oracle of
    the tests);
 2. the consistency tests of one filter (NEES and NIS bands, whiteness at lags 1..5);
-3. the whole seed 000 sweep (7 x 7 cells x 4 scenarios x 100 realisations) as the
+3. one task of the sweep (7 cells of one scenario) in this process, CPU time, alternated
+   twice with the same task with the PCRB and the tests replaced by no-ops (less sensitive
+   to other load on the machine than wall times);
+4. the whole seed 000 sweep (7 x 7 cells x 4 scenarios x 100 realisations) as the
    command line runs it, and the same sweep with the PCRB and the consistency tests
    replaced by no-ops (the baseline: what the sweep cost before them), on this machine's
    cores. Goal: the sweep with the PCRB under 3 minutes on 2 cores.
@@ -93,6 +96,27 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
+def task_costs() -> None:
+    settings = seed000_sweep.SweepSettings()
+    cells = [(1.0, f) for f in settings.factors]
+    seed000_sweep.cell_task(0, cells[:1], settings.campaign)                 # warm
+    saved = seed000.scenario_bound, metrics.whiteness_row, metrics.band_row
+    cpu = {"with": [], "without": []}
+    for _ in range(2):
+        for mode in cpu:
+            if mode == "without":
+                seed000.scenario_bound, metrics.whiteness_row, metrics.band_row = _no_bound, _no_whiteness, _no_bands
+            try:
+                t0 = time.process_time()
+                seed000_sweep.cell_task(0, cells, settings.campaign)
+                cpu[mode].append(time.process_time() - t0)
+            finally:
+                seed000.scenario_bound, metrics.whiteness_row, metrics.band_row = saved
+    print(f"one sweep task (7 cells x {settings.campaign.runs} realisations), CPU: with the PCRB and the tests "
+          f"{min(cpu['with']):.2f} s; baseline with no-ops {min(cpu['without']):.2f} s "
+          f"(+{min(cpu['with']) / min(cpu['without']) - 1:.0%})")
+
+
 def sweep_costs(out: str | None) -> None:
     settings = seed000_sweep.SweepSettings()
     seed000_sweep.run(replace(settings, factors=(1.0,), campaign=replace(settings.campaign, runs=2, duration=0.2)),
@@ -122,6 +146,7 @@ def main():
     ap.add_argument("--out", help="write the report of the measured sweep here")
     args = ap.parse_args()
     bound_costs()
+    task_costs()
     if not args.skip_sweep:
         print(f"load average before the sweeps: {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
         sweep_costs(args.out)
