@@ -21,7 +21,7 @@ def main():
     print(f"{os.cpu_count()} cores; 4 scenarios x {s.runs} realisations x {len(seed000.FILTERS)} filters "
           f"({', '.join(seed000.FILTERS)}) x {s.steps} steps")
     for path in ("fast",) + (() if args.skip_master else ("master",)):
-        _, _, _, wall = seed000.run(s, path=path, readings=("eqs",), progress=False)
+        wall = seed000.run(s, path=path, readings=("eqs",), progress=False).wall
         print(f"{path:6s} path: {wall:6.2f} s")
 
 

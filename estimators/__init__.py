@@ -16,6 +16,7 @@ from fmu_models.infra.version import VERSION as __version__
 
 from .base import FILTERS, KalmanBase
 from .batch import BatchFilter
+from .consistency import BandTest, WhitenessTest, chi2_band, nees_test, nis_test, whiteness_test
 from .discrete import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ekf import EKF
 from .em import em_noise
@@ -24,6 +25,7 @@ from .fuzzy import MamdaniFuzzy
 from .iae import IAE
 from .kf import KF
 from .mfiae import MFIAE
+from .pcrb import PCRB, posterior_crb, rmse_ratio
 from .protocol import Parameter, StepContext, StepResult, Update
 from .runs import BatchRun, EMResult, FilterRun, Smoothed
 from .smoother import rts_smooth
@@ -58,6 +60,8 @@ __all__ = [
     "linear_model",
     "rts_smooth",
 ]
+__all__ += ["PCRB", "BandTest", "WhitenessTest", "chi2_band", "nees_test", "nis_test", "posterior_crb", "rmse_ratio",
+            "whiteness_test"]
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):

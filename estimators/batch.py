@@ -257,7 +257,8 @@ class BatchFilter:
             x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
             nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
-            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names))
+            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
+            innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny))
         for name in state:
             self._rt.now(name)[:] = outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1].ravel()
         self.k += N

@@ -109,6 +109,10 @@ class BatchRun:
         step on are not meaningful).
     state_names, output_names : list of str
         The model's names.
+    innovation : ndarray, shape (R, N, ny), or None
+        Innovations (0 in missing channels), for whiteness tests.
+    S : ndarray, shape (R, N, ny, ny), or None
+        Their predicted covariances (1 on the diagonal of missing channels).
     """
 
     x: np.ndarray
@@ -120,6 +124,8 @@ class BatchRun:
     failed: np.ndarray
     state_names: list = field(default_factory=list)
     output_names: list = field(default_factory=list)
+    innovation: np.ndarray | None = None
+    S: np.ndarray | None = None
 
 
 @dataclass

@@ -3,6 +3,7 @@ the master, vectorised truth, batched filters, and one realisation through the m
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -84,10 +85,47 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
     return X, X[:, :, idx] + V
 
 
+class BatchOutcome(NamedTuple):
+    """One filter over every realisation (what :func:`batch_run` returns): estimates ``x``
+    (runs, N+1, nx) with the initial one at k = 0, ``nees`` and ``nis`` (runs, N), the
+    ``failed`` realisations (runs,), the ``innovation`` (runs, N, ny) and its covariance
+    ``S`` (runs, N, ny, ny)."""
+
+    x: np.ndarray
+    nees: np.ndarray
+    nis: np.ndarray
+    failed: np.ndarray
+    innovation: np.ndarray
+    S: np.ndarray
+
+
+def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> BatchOutcome:
+    """Run one filter over all realisations in one native call; NEES from the full
+    covariance. ``us`` (N+1, nu): ``us[k]`` is held over step k -> k+1.
+
+    Parameters
+    ----------
+    make
+        Returns a new filter (the template of every realisation).
+    X
+        Truth, shape (runs, N+1, nx).
+    Y
+        Measurements, shape (runs, N+1, ny); row 0 is not used.
+    us
+        Inputs, shape (N+1, nu).
+    """
+    R = X.shape[0]
+    out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
+    e = out.x[:, 1:] - X[:, 1:]
+    with np.errstate(invalid="ignore", over="ignore"):
+        nees = np.einsum("rki,rki->rk", e, np.linalg.solve(out.P[:, 1:], e[..., None])[..., 0])
+    return BatchOutcome(out.x, nees, out.nis, out.failed.copy(), out.innovation, out.S)
+
+
 def batch_estimates(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray, x0):
     """Run one filter over all realisations in one native call: estimates (runs, N+1, nx)
     (the initial estimate at k = 0), NEES (from the full covariance) and NIS (runs, N), and
-    the realisations that failed. ``us`` (N+1, nu): ``us[k]`` is held over step k -> k+1.
+    the realisations that failed (:func:`batch_run` without the innovations).
 
     Parameters
     ----------
@@ -102,13 +140,8 @@ def batch_estimates(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray
     x0
         The initial estimate (unused: the template carries it; kept for the callers' symmetry).
     """
-
-    R = X.shape[0]
-    out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
-    e = out.x[:, 1:] - X[:, 1:]
-    with np.errstate(invalid="ignore", over="ignore"):
-        nees = np.einsum("rki,rki->rk", e, np.linalg.solve(out.P[:, 1:], e[..., None])[..., 0])
-    return out.x, nees, out.nis, out.failed.copy()
+    out = batch_run(make, X, Y, us)
+    return out.x, out.nees, out.nis, out.failed
 
 
 def nees_from_outputs(err: np.ndarray, P: np.ndarray) -> np.ndarray:

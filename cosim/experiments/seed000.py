@@ -11,7 +11,12 @@ sigma_r^2``) and ``"prose"`` (section 5's text: ``q = sigma_r^2``, ``r = sigma_q
 
 Filters: EKF, IAE and MF-IAE from the same nominal (wrong) noise setting, beside them
 the EKF with EM-learned Q and R and SWML (online, beyond the paper: :class:`estimators.SWML`),
-and the EKF given the true Q and R (the bound an adaptive filter tries to reach). The paper gives no
+and the EKF given the true Q and R (what an adaptive filter tries to reach; itself a filter,
+not a bound). Below them all, the posterior Cramér-Rao bound (PCRB,
+:func:`estimators.posterior_crb`) over the same realisations: no estimator has a smaller
+mean-square error, and every filter's RMSE per state is reported as a multiple of it.
+Consistency: the chi-square bands of the NEES and the NIS and the whiteness of the
+innovations (:func:`~cosim.experiments.metrics.consistency_rule`). The paper gives no
 filter settings: every one is in :class:`Settings`, and two configurations are named
 (:data:`CONFIGS`): ``"default"`` (filters from Q = R = 0.01 I, both readings) and
 ``"paper"`` (filters from Q0 = 1e-3 I, R0 = 10 I, eqs reading: the regime whose EKF row
@@ -21,7 +26,9 @@ Two paths give the same numbers: ``fast`` (truth and all filters over all realis
 native calls) and ``master`` (each realisation through the co-simulation master with the
 plant FMU, process-noise and sensor components and the four filters as components). Both
 draw realisation ``r`` of scenario ``s`` from ``realisation_seeds(seed, s, r)`` and compute
-NEES from the full covariance.
+NEES from the full covariance. The master path's estimator components do not publish
+their innovations, so its whiteness test is not run (the fast path gives the same
+numbers); its PCRB is computed on the fast path's truth of the same seeds.
 """
 from __future__ import annotations
 
@@ -34,10 +41,10 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from estimators import EKF, IAE, MFIAE, SWML, discretize, em_noise
+from estimators import EKF, IAE, MFIAE, SWML, discretize, em_noise, posterior_crb
 from fmu_models import build_fmu, get_model
 from fmu_models.errors import ConfigurationError, Interrupted, UnknownNameError
-from fmu_models.infra.checks import positive, positive_int
+from fmu_models.infra.checks import finite, positive, positive_int
 from fmu_models.infra.files import atomic_write
 
 from ..components.sources import PRBS
@@ -45,7 +52,7 @@ from ..fmi.fmu_component import FMUComponent
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
 from .common import (
-    batch_estimates,
+    batch_run,
     master_realisation,
     nees_from_outputs,
     new_figure,
@@ -62,9 +69,14 @@ READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 
 PAPER_ETA = {"EKF": (4.4782, 5.2441, 4.4426, 4.9982), "MF-IAE": (2.2153, 2.2109, 2.6581, 2.6800)}
 #: The filters of the campaign, in the order of its tables.
 FILTERS = ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R")
+#: The name of the EKF given the true Q and R, what an adaptive filter tries to reach (not a bound).
+TRUE_EKF = "EKF true Q,R"
 #: Run index of the training realisation EM learns from (never one of the test runs).
 TRAINING_RUN = 2**31 - 1
 STATES = ("x", "x_dot", "theta", "theta_dot")
+#: The prior of the PCRB (``pcrb_prior``).
+PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at x0 in every realisation)",
+               "P0": "x_0 ~ N(x0, P0 I), the filters' own prior (J_0 = (P0 I)^-1)"}
 
 
 @dataclass(frozen=True)
@@ -84,7 +96,13 @@ class Settings:
     training realisation of the scenario, ``em_iterations`` at most, relative tolerance
     ``em_tol``. "SWML" (:class:`estimators.SWML`, beyond the paper): window ``swml_window``,
     an update every ``swml_every`` steps, started from the nominal values. ``seed`` of all
-    random streams; ``divergence_threshold`` [state units].
+    random streams; ``divergence_threshold`` [state units]. The limit and consistency:
+    ``pcrb_prior`` (:data:`PCRB_PRIORS`: ``"known"``, the truth's own start, or ``"P0"``,
+    the filters' prior), the ``confidence`` of the chi-square bands and the whiteness test
+    at lags 1..``whiteness_lags``; ``transient_steps``: the diagnostic columns ``*_late``
+    leave out the first this many steps (an adaptive filter's start-up; not part of the
+    verdicts; not computed for a record of at most ``transient_steps + whiteness_lags``
+    steps).
     """
 
     runs: int = 100
@@ -116,10 +134,23 @@ class Settings:
     swml_every: int = 50
     seed: int = 2026
     divergence_threshold: float = 1e3
+    pcrb_prior: str = "known"
+    confidence: float = 0.95
+    whiteness_lags: int = 5
+    transient_steps: int = 100
 
     def __post_init__(self):
 
         check_common(self)
+        if self.pcrb_prior not in PCRB_PRIORS:
+            raise UnknownNameError(f"pcrb_prior must be one of {list(PCRB_PRIORS)}, got {self.pcrb_prior!r}")
+        if not 0.0 < finite(self.confidence, "confidence") < 1.0:
+            raise ConfigurationError(f"confidence must lie strictly between 0 and 1, got {self.confidence!r}")
+        positive_int(self.whiteness_lags, "whiteness_lags")
+        if self.whiteness_lags >= self.steps:
+            raise ConfigurationError(f"whiteness_lags = {self.whiteness_lags} must be shorter than the "
+                                     f"{self.steps} steps")
+        positive_int(self.transient_steps, "transient_steps", minimum=0)
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
             positive(getattr(self, name), name)
         for name in ("q0_factor", "r0_factor"):
@@ -142,6 +173,12 @@ class Settings:
     @property
     def steps(self) -> int:
         return round(self.duration / self.T)
+
+    @property
+    def has_late(self) -> bool:
+        """Whether the record is long enough for the diagnostic after ``transient_steps``
+        (more than ``whiteness_lags`` steps left)."""
+        return self.transient_steps + self.whiteness_lags < self.steps
 
 
 #: Named configurations (``--config``).
@@ -263,9 +300,51 @@ def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]
     return X, Y, u
 
 
+def scenario_bound(s: Settings, X: np.ndarray, u: np.ndarray, q: float, r: float) -> np.ndarray:
+    """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
+    realisations ``X`` (runs, N+1, 4) with inputs ``u`` (N+1,), under ``s.pcrb_prior``.
+
+    Parameters
+    ----------
+    s
+        The campaign's settings.
+    X
+        The true trajectories.
+    u
+        The input sequence.
+    q
+        True process variance.
+    r
+        True measurement variance.
+    """
+    P0 = None if s.pcrb_prior == "known" else s.P0
+    return posterior_crb(_system(s.T), X, u[:-1, None], q, r, P0).mse
+
+
+def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndarray:
+    """:func:`scenario_bound` over all realisations of one scenario and reading (the master
+    path's PCRB: the fast path's truth of the same seeds).
+
+    Parameters
+    ----------
+    scenario_index
+        Which scenario (0-based).
+    reading
+        Which reading of the noise names.
+    settings
+        The campaign's settings.
+    """
+    s = settings
+    q, r = true_noise(s.scenarios[scenario_index], reading)
+    X, _, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in range(s.runs)])
+    return scenario_bound(s, X, u, q, r)
+
+
 def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, example: dict) -> dict:
-    """Per-filter metrics of one task (errors over k = 1..N)."""
-    out = {"eps_k": {}, "per_run": {}, "example": example}
+    """Per-filter metrics of one task (errors over k = 1..N): eps_k, the per-realisation
+    numbers, and the per-step NEES, NIS and mean-square errors the consistency tests and
+    the figures need."""
+    out = {"eps_k": {}, "per_run": {}, "steps": {}, "example": example}
     for name, err in errors.items():
         e = err[:, 1:]
         div = metrics.diverged(e, s.divergence_threshold) | failed[name]
@@ -274,12 +353,13 @@ def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, e
             out["per_run"][name] = {"eta": metrics.eta_per_run(e), "diverged": div,
                                     "rmse": np.sqrt(np.mean(e**2, axis=1)),
                                     "anees": nees[name].mean(axis=1), "anis": nis[name].mean(axis=1)}
+            out["steps"][name] = {"nees": nees[name], "nis": nis[name], "mse": np.mean(e**2, axis=0)}
     return out
 
 
-def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) -> dict:
+def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None) -> dict:
     """All realisations of one scenario and reading, every filter over all of them in
-    native calls.
+    native calls, with the PCRB over the same realisations and the innovations' whiteness.
 
     Parameters
     ----------
@@ -291,6 +371,9 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) 
         The campaign's settings.
     runs
         Which realisations (default all).
+    bound
+        The PCRB of these realisations (:func:`scenario_bound`), if the caller has it
+        (default: computed here).
     """
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
@@ -299,13 +382,19 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None) 
     X, Y, u = simulate_truth(s, q, r, seeds)
     system = _system(s.T)
     learned = learn_noise(system, s, scenario_index, q, r)
-    errors, nees, nis, failed = {}, {}, {}, {}
+    errors, nees, nis, failed, white, late = {}, {}, {}, {}, {}, {}
+    L = s.transient_steps
     for name, make in make_filters(system, s, q, r, learned).items():
-        est, nees[name], nis[name], failed[name] = batch_estimates(make, X, Y, u[:, None], s.x0)
-        errors[name] = est - X
+        res = batch_run(make, X, Y, u[:, None])
+        errors[name], nees[name], nis[name], failed[name] = res.x - X, res.nees, res.nis, res.failed
+        white[name] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
+        late[name] = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
+                      if s.has_late else None)
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
     out = _summarise(errors, nees, nis, failed, s, example)
     out["learned"] = learned
+    out["whiteness"], out["whiteness_late"] = white, late
+    out["bound"] = scenario_bound(s, X, u, q, r) if bound is None else bound
     return out
 
 
@@ -358,19 +447,28 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     example = {"truth": X[0], **{f"est {n}": E[n][0] for n in makers}}
     out = _summarise(errors, NEES, NIS, failed, s, example)
     out["learned"] = learned
+    out["whiteness"] = {n: metrics.no_whiteness() for n in makers}
+    out["whiteness_late"] = {n: None for n in makers}
     return out
 
 
 # ---------------------------------------------------------------------------- campaign
 class CampaignResult(NamedTuple):
     """What :func:`run` returns: ``per_run`` (one row per reading, scenario, filter and
-    realisation), ``eps`` (eps_k of eq 43 by reading, scenario, filter and time), the
-    ``examples`` of Figure 3 by (reading, scenario), and the ``wall`` time [s]."""
+    realisation), ``eps`` (per reading, scenario, filter and step k: eps_k of eq 43, the
+    average NEES and NIS over the realisations with their per-step bands, and each state's
+    mean-square error), the ``examples`` of Figure 3 by (reading, scenario), the ``wall``
+    time [s], ``consistency`` (one row per reading, scenario and filter, and one for the
+    PCRB: RMSE per state and as a multiple of the PCRB, the band and whiteness tests and the
+    verdicts of :func:`~cosim.experiments.metrics.consistency_rule`) and ``bound`` (the
+    PCRB on each state's mean-square error per reading, scenario and step)."""
 
     per_run: pd.DataFrame
     eps: pd.DataFrame
     examples: dict
     wall: float
+    consistency: pd.DataFrame
+    bound: pd.DataFrame
 
 
 #: Realisations per task on the master path.
@@ -378,13 +476,11 @@ MASTER_CHUNK = 10
 
 
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,
-        backend: str = "processes", n_jobs=None, progress: bool = True):
-    """Run the campaign; returns ``(per_run, eps, examples, wall_time)``.
+        backend: str = "processes", n_jobs=None, progress: bool = True) -> CampaignResult:
+    """Run the campaign; returns a :class:`CampaignResult`.
 
-    ``per_run``: tidy DataFrame, one row per (reading, scenario, filter, realisation);
-    ``eps``: DataFrame of eps_k (eq 43) by (reading, scenario, filter) and time.
     ``readings`` defaults to the settings' readings. Interrupted (Ctrl-C, SIGTERM), it
-    raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` holds the same tuple
+    raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` holds the same result
     for the tasks that finished.
 
     Parameters
@@ -424,6 +520,8 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings,
                        **({"runs": list(c), **extra[(rd, i)]} if path == "master" else {})))
              for rd, i in keys for c in chunks]
+    if path == "master":         # the PCRB of each scenario over all its realisations
+        tasks += [(bound_task, dict(scenario_index=i, reading=rd, settings=settings)) for rd, i in keys]
     try:
         results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=f"seed000 ({path})")
     except Interrupted as e:
@@ -433,23 +531,31 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     return _assemble(settings, keys, chunks, results, time.perf_counter() - t0)
 
 
-def _assemble(settings: Settings, keys, chunks, results, wall):
-    """The campaign's tables from the task results (None for tasks that did not finish)."""
-    rows, eps_rows, examples = [], [], {}
+def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult:
+    """The campaign's tables from the task results (None for tasks that did not finish):
+    ``len(keys) * len(chunks)`` filter tasks, then (master path) one PCRB task per key."""
+    rows, eps_frames, cons_rows, bound_frames, examples = [], [], [], [], {}
     n = len(chunks)
+    s = settings
+    K = s.steps
     for j, (rd, i) in enumerate(keys):
         parts = [(c, res) for c, res in zip(chunks, results[j * n:(j + 1) * n]) if res is not None]
         if not parts:
             continue
-        q, r = true_noise(settings.scenarios[i], rd)
-        q0, r0 = nominal_noise(settings, q, r)
+        q, r = true_noise(s.scenarios[i], rd)
+        q0, r0 = nominal_noise(s, q, r)
         q_em, r_em = parts[0][1]["learned"]
+        bound = parts[0][1].get("bound")
+        if bound is None and len(results) > len(keys) * n:
+            bound = results[len(keys) * n + j]
+        complete = sum(len(c) for c, _ in parts) == s.runs
+        ident = {"reading": rd, "scenario": i + 1}
         for name in FILTERS:
             for c, res in parts:
                 pr = res["per_run"][name]
                 for m, run_id in enumerate(c):
-                    rows.append({"reading": rd, "scenario": i + 1, "sigma_q2": settings.scenarios[i][0],
-                                 "sigma_r2": settings.scenarios[i][1], "q_true": q, "r_true": r,
+                    rows.append({**ident, "sigma_q2": s.scenarios[i][0],
+                                 "sigma_r2": s.scenarios[i][1], "q_true": q, "r_true": r,
                                  "q0": q0, "r0": r0, "q_em": q_em, "r_em": r_em,
                                  "filter": name, "run": int(run_id), "eta": pr["eta"][m],
                                  "diverged": bool(pr["diverged"][m]), "anees": pr["anees"][m],
@@ -457,18 +563,49 @@ def _assemble(settings: Settings, keys, chunks, results, wall):
                                  **{f"rmse_{x}": pr["rmse"][m, a] for a, x in enumerate(STATES)}})
             w = np.array([len(c) for c, _ in parts], float)
             eps = sum(res["eps_k"][name] * wi for (_, res), wi in zip(parts, w)) / w.sum()
-            for k, e in enumerate(eps, start=1):
-                eps_rows.append({"reading": rd, "scenario": i + 1, "filter": name, "k": k,
-                                 "time": k * settings.T, "eps": e})
+            mse = sum(res["steps"][name]["mse"] * wi for (_, res), wi in zip(parts, w)) / w.sum()
+            nees = np.concatenate([res["steps"][name]["nees"] for _, res in parts])
+            nis = np.concatenate([res["steps"][name]["nis"] for _, res in parts])
+            row, per_step = metrics.band_row(nees, nis, 4, 2, s.confidence)
+            row.update(parts[0][1]["whiteness"][name] if n == 1 else metrics.no_whiteness())
+            row["consistent"] = metrics.verdict(row)
+            rmse_runs = np.concatenate([res["per_run"][name]["rmse"] for _, res in parts])
+            ratio, se = ((metrics.pcrb_ratio(rmse_runs, bound[1:]), metrics.pcrb_ratio_se(rmse_runs, bound[1:]))
+                         if bound is not None and complete else (np.full(4, np.nan), np.full(4, np.nan)))
+            late = (metrics.after_transient(nees, nis, mse, bound[1:], 2, s.transient_steps,
+                                            parts[0][1]["whiteness_late"][name] if n == 1 else None, s.confidence)
+                    if bound is not None and complete and s.has_late else {})
+            cons_rows.append({**ident, "filter": name, "eta": float(np.concatenate(
+                [res["per_run"][name]["eta"] for _, res in parts]).mean()),
+                "diverged": int(sum(res["per_run"][name]["diverged"].sum() for _, res in parts)),
+                **{f"rmse_{x}": float(np.sqrt(np.mean(rmse_runs[:, a] ** 2))) for a, x in enumerate(STATES)},
+                **{f"pcrb_ratio_{x}": float(ratio[a]) for a, x in enumerate(STATES)},
+                "pcrb_ratio_max": float(np.max(ratio)),
+                **{f"pcrb_ratio_se_{x}": float(se[a]) for a, x in enumerate(STATES)}, **row, **late})
+            eps_frames.append(pd.DataFrame({**ident, "filter": name, "k": np.arange(1, K + 1),
+                                            "time": np.arange(1, K + 1) * s.T, "eps": eps, **per_step,
+                                            **{f"mse_{x}": mse[:, a] for a, x in enumerate(STATES)}}))
+        if bound is not None:
+            cons_rows.append({**ident, "filter": "PCRB", "runs": s.runs,
+                              **{f"rmse_{x}": float(np.sqrt(bound[1:, a].mean())) for a, x in enumerate(STATES)},
+                              **{f"pcrb_ratio_{x}": 1.0 for x in STATES}, "pcrb_ratio_max": 1.0})
+            bound_frames.append(pd.DataFrame({**ident, "k": np.arange(K + 1), "time": np.arange(K + 1) * s.T,
+                                              **{f"mse_{x}": bound[:, a] for a, x in enumerate(STATES)}}))
         examples[(rd, i + 1)] = parts[0][1]["example"]
-    return CampaignResult(pd.DataFrame(rows), pd.DataFrame(eps_rows), examples, wall)
+
+    def frame(parts):
+        return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+    return CampaignResult(pd.DataFrame(rows), frame(eps_frames), examples, wall, pd.DataFrame(cons_rows),
+                          frame(bound_frames))
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
     """eta (eq 44) per reading, scenario and filter, with the paper's Table 3 beside it.
 
     eta is the mean over all realisations; ``diverged`` counts the runs flagged, and
-    ``(no div.)`` excludes them; ``<filter> / bound`` is eta over the true-Q,R EKF's.
+    ``(no div.)`` excludes them; ``<filter> / EKF true Q,R`` is eta over that of the EKF
+    given the true Q and R (a filter, not a bound: see :func:`pcrb_table` for the limit).
 
     Parameters
     ----------
@@ -490,7 +627,7 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
                 row[f"{name} (no div.)"] = ok["eta"].mean() if len(ok) else np.nan
         row["q_em"], row["r_em"] = g["q_em"].iloc[0], g["r_em"].iloc[0]
         for name in FILTERS[:-1]:
-            row[f"{name} / bound"] = row[name] / row["EKF true Q,R"]
+            row[f"{name} / {TRUE_EKF}"] = row[name] / row[TRUE_EKF]
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -500,7 +637,13 @@ def _join(values) -> str:
 
 
 def agreement(table: pd.DataFrame) -> list[str]:
-    """Plain sentences on where the table agrees with the paper's Table 3 and where not."""
+    """Plain sentences on where the table agrees with the paper's Table 3 and where not.
+
+    Parameters
+    ----------
+    table
+        The table of :func:`summary_table`.
+    """
     lines = []
     for rd, g in table.groupby("reading", sort=False):
         for label, ours, paper in (("EKF", "EKF", "paper EKF"), ("MF-IAE", "MF-IAE", "paper MF-IAE")):
@@ -510,32 +653,105 @@ def agreement(table: pd.DataFrame) -> list[str]:
             verdict = ("agrees with the paper within 10 % in every scenario" if within.all() else
                        f"agrees within 10 % in {int(within.sum())} of {len(g)} scenarios")
             lines.append(f"- {rd} reading, {label}: ours / paper = {cells}; {verdict}.")
-        bound = g["MF-IAE / bound"]
+        vs = f" / {TRUE_EKF}"
         true_q = g["sigma_q2" if rd == "eqs" else "sigma_r2"]
-        lines.append(f"- {rd} reading: MF-IAE / true-Q,R bound = {_join(bound)} "
-                     f"(paper's MF-IAE / our bound: {_join(g['paper MF-IAE'] / g['EKF true Q,R'])}); "
-                     f"IAE / bound = {_join(g['IAE / bound'])}; EKF / bound = {_join(g['EKF / bound'])}; "
-                     f"EKF with EM-learned Q, R / bound = {_join(g['EKF EM / bound'])} "
-                     f"(learned q / true q = {_join(g['q_em'] / true_q)}); SWML (online, beyond the paper) / "
-                     f"bound = {', '.join(f'{v:.3f}' for v in g['SWML / bound'])}.")
+        lines.append(f"- {rd} reading, eta over the EKF given the true Q and R: MF-IAE {_join(g['MF-IAE' + vs])} "
+                     f"(the paper's MF-IAE: {_join(g['paper MF-IAE'] / g[TRUE_EKF])}); IAE {_join(g['IAE' + vs])}; "
+                     f"EKF {_join(g['EKF' + vs])}; EKF with EM-learned Q, R {_join(g['EKF EM' + vs])} "
+                     f"(learned q / true q = {_join(g['q_em'] / true_q)}); SWML (online, beyond the paper) "
+                     f"{', '.join(f'{v:.3f}' for v in g['SWML' + vs])}.")
     return lines
 
 
-def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path: str,
+def pcrb_table(consistency: pd.DataFrame) -> pd.DataFrame:
+    """Each filter's RMSE per state as a multiple of the PCRB: one row per reading and
+    filter, one column per scenario and state (``s<scenario> <state>``), and the worst.
+
+    Parameters
+    ----------
+    consistency
+        The ``consistency`` table of :class:`CampaignResult`.
+    """
+    c = consistency[consistency["filter"] != "PCRB"]
+    rows = []
+    for (rd, name), g in c.groupby(["reading", "filter"], sort=False):
+        row = {"reading": rd, "filter": name}
+        for _, r in g.sort_values("scenario").iterrows():
+            row.update({f"s{r['scenario']} {x}": r[f"pcrb_ratio_{x}"] for x in STATES})
+        row["worst"] = float(g["pcrb_ratio_max"].max())
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def limit_sentences(consistency: pd.DataFrame) -> list[str]:
+    """Plain sentences: how far the EKF given the true noise, SWML and MF-IAE are from the
+    PCRB, per reading (range over scenarios, per state).
+
+    Parameters
+    ----------
+    consistency
+        The ``consistency`` table of :class:`CampaignResult`.
+    """
+    lines = []
+    for rd, g in consistency.groupby("reading", sort=False):
+        for name in (TRUE_EKF, "SWML", "MF-IAE", "EKF"):
+            f = g[g["filter"] == name]
+            if not len(f) or f["pcrb_ratio_max"].isna().all():
+                continue
+            per_state = "; ".join(f"{x} {f[f'pcrb_ratio_{x}'].min():.3f}-{f[f'pcrb_ratio_{x}'].max():.3f}"
+                                  for x in STATES)
+            lines.append(f"- {rd} reading, {name}: RMSE / sqrt(PCRB) over the {len(f)} scenarios: {per_state}.")
+    return lines
+
+
+def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[str]:
+    """The diagnostic beside the verdicts: each filter's worst RMSE / PCRB, average NEES and
+    verdict over the steps after the first ``settings.transient_steps`` (not the rule).
+
+    Parameters
+    ----------
+    consistency
+        The ``consistency`` table of :class:`CampaignResult`.
+    settings
+        The campaign's settings.
+    """
+    c = consistency[consistency["filter"] != "PCRB"]
+    if "consistent_late" not in c or c["consistent_late"].isna().all():
+        return [f"(The diagnostic after the first {settings.transient_steps} steps is not computed: the record has "
+                f"{settings.steps} steps.)", ""] if not settings.has_late else []
+    lines = [f"Diagnostic, not the rule: the same over the steps after the first {settings.transient_steps} "
+             f"({settings.transient_steps * settings.T:g} s), where an adaptive filter's start-up no longer "
+             "counts:", ""]
+    for (rd, name), g in c.groupby(["reading", "filter"], sort=False):
+        lines.append(f"- {rd} reading, {name}: worst state's RMSE / PCRB {g['pcrb_ratio_max_late'].min():.3f}-"
+                     f"{g['pcrb_ratio_max_late'].max():.3f} (all steps: {g['pcrb_ratio_max'].min():.3f}-"
+                     f"{g['pcrb_ratio_max'].max():.3f}); average NEES {g['anees_late'].min():.3g}-"
+                     f"{g['anees_late'].max():.3g} (all steps: {g['anees'].min():.3g}-{g['anees'].max():.3g}); "
+                     f"consistent in {int(g['consistent_late'].astype(bool).sum())} of {len(g)} scenarios (all steps: "
+                     f"{int(g['consistent'].astype(bool).sum())}).")
+    return lines + [""]
+
+
+def consistency_lines(consistency: pd.DataFrame) -> list[str]:
+    """A markdown table of the consistency tests, one row per reading, scenario and filter.
+
+    Parameters
+    ----------
+    consistency
+        The ``consistency`` table of :class:`CampaignResult`.
+    """
+    return metrics.consistency_markdown(consistency[consistency["filter"] != "PCRB"], ["reading", "scenario"])
+
+
+def write_report(result: CampaignResult, settings: Settings, out_dir, path: str = "fast",
                  config: str = "custom", partial: bool = False) -> Path:
     """Tables (CSV, Parquet), figures (PNG), ``settings.toml`` and a markdown summary into
     ``out_dir``; with ``partial`` the summary says the campaign was interrupted.
 
     Parameters
     ----------
-    per_run
-        The per-realisation table.
-    eps
-        eps_k by reading, scenario, filter and time.
-    examples
-        Example trajectories for Figure 3.
-    wall
-        Wall time [s].
+    result
+        What :func:`run` returned.
     settings
         The settings used.
     out_dir
@@ -547,27 +763,29 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
     partial
         The campaign was interrupted.
     """
-
-
+    per_run, eps, examples, wall, cons, bound = result
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed000")))
     atomic_write(out / "per_run.csv", lambda p: per_run.to_csv(p, index=False))
     atomic_write(out / "per_run.parquet", per_run.to_parquet)
     atomic_write(out / "eps_k.csv", lambda p: eps.to_csv(p, index=False))
+    atomic_write(out / "consistency.csv", lambda p: cons.to_csv(p, index=False))
+    atomic_write(out / "pcrb.csv", lambda p: bound.to_csv(p, index=False))
     table = summary_table(per_run) if len(per_run) else pd.DataFrame()
     atomic_write(out / "table3.csv", lambda p: table.to_csv(p, index=False))
-    agg = (per_run.groupby(["reading", "filter"])[["anees", "anis"] + [f"rmse_{x}" for x in STATES]].mean()
-           if len(per_run) else pd.DataFrame())
-    atomic_write(out / "consistency_rmse.csv", agg.to_csv)
     _figures(eps, examples, settings, out)
+    _limit_figures(eps, bound, settings, out)
 
     lines = [f"# Seed 000 campaign ({path} path, configuration: {config})", ""]
     if partial:
         lines += ["**PARTIAL RESULTS: the campaign was interrupted; only the tasks that finished "
                   "are in these tables.**", ""]
-    lines += [f"{settings.runs} realisations x {len(settings.scenarios)} scenarios x {len(FILTERS)} filters "
-              f"x {settings.steps} steps per reading; wall time {wall:.2f} s.", "",
+    regime = (f"filters from Q0 = {settings.q0:g} I, R0 = {settings.r0:g} I" if settings.q0_factor is None
+              else f"filters from Q0 = {settings.q0_factor:g} q I, R0 = {settings.r0_factor:g} r I")
+    lines += [f"Regime: configuration {config} ({regime}, P0 = {settings.P0:g} I, readings "
+              f"{', '.join(settings.readings)}); {settings.runs} realisations x {len(settings.scenarios)} scenarios "
+              f"x {len(FILTERS)} filters x {settings.steps} steps per reading; wall time {wall:.2f} s.", "",
               "Input: the PRBS of seed 000 Figure 2: maximal-length LFSR of order "
               f"{settings.input_order} started from state {settings.input_seed}, {settings.input_bit_time:g} s "
               f"per bit, +/-{settings.input_amplitude:g} N (its first bits 0 0 1 1 1: -0.5 N until 2 s, "
@@ -582,18 +800,103 @@ def write_report(per_run, eps, examples, wall, settings: Settings, out_dir, path
         lines += ["", "## Where we agree with the paper, and where not", "", *agreement(table), ""]
         div = {c: int(table[c].sum()) for c in table.columns if c.endswith("diverged")}
         lines += ["Diverged realisations (error not finite or above "
-                  f"{settings.divergence_threshold:g}): " + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), "",
-                  "## Consistency and per-state RMSE (mean over scenarios and realisations)", "",
-                  agg.to_markdown(floatfmt=".4f"), ""]
+                  f"{settings.divergence_threshold:g}): " + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), ""]
+    if len(cons):
+        lines += _limit_section(cons, settings)
+        lines += ["## Consistency: chi-square bands of NEES and NIS, whiteness of the innovations", "",
+                  "Rule: " + metrics.consistency_rule(settings.confidence, settings.whiteness_lags) + ".", "",
+                  *consistency_lines(cons), "", *transient_sentences(cons, settings)]
+        if path == "master":
+            lines += ["On the master path the estimator components do not publish their innovations, so "
+                      "whiteness is not tested there (the fast path gives the same numbers).", ""]
     lines += ["## Settings (the paper gives none of the filter settings)", "",
               "Rerun with `pendulum-cosim experiment seed000 --settings settings.toml` (this folder's file), "
               "or change one with `--set name=value`.", "", "| setting | value |", "|---|---|"]
     lines += [f"| {k} | {v} |" for k, v in asdict(settings).items()]
     lines += ["", "Readings of the noise names:", ""] + [f"- **{k}**: {v}" for k, v in READINGS.items()]
-    lines += ["", "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
+    lines += ["", "Files: per_run.csv|parquet (every realisation), eps_k.csv (per step: eps_k, average NEES and NIS "
+              "with their bands, mean-square errors), consistency.csv (per scenario and filter: RMSE, RMSE / PCRB, "
+              "the tests), pcrb.csv (the bound per step), table3.csv.", "",
+              "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
     md = out / "summary.md"
     atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
     return md
+
+
+def _limit_section(cons: pd.DataFrame, settings: Settings) -> list[str]:
+    """The report's section on the PCRB: the bound per state and every filter's RMSE over it."""
+    pc = cons[cons["filter"] == "PCRB"]
+    lines = ["## How far from the best possible: RMSE per state over the posterior Cramér-Rao bound", "",
+             "The PCRB (Tichavský, Muravchik and Nehorai 1998) is the lowest mean-square error any estimator can "
+             f"have on these realisations ({settings.runs} of them, Jacobians exact, expectations over the same "
+             f"truth the filters ran on; prior: {PCRB_PRIORS[settings.pcrb_prior]}). Each entry is a filter's "
+             "RMSE over the realisations and the steps 1..K divided by the root of the bound's mean over the same "
+             "steps (1.000 is the best possible; the EKF given the true Q and R is a filter, not the limit).", ""]
+    if len(pc):
+        lines += ["Root of the bound (mean over the steps): " + "; ".join(
+            f"{r['reading']} scenario {r['scenario']}: " + ", ".join(f"{x} {r[f'rmse_{x}']:.4g}" for x in STATES)
+            for _, r in pc.iterrows()), ""]
+    tab = pcrb_table(cons)
+    if len(tab):
+        lines += [tab.to_markdown(index=False, floatfmt=".3f"), "", _scatter_sentence(cons, settings.runs), "",
+                  *limit_sentences(cons), ""]
+    return lines
+
+
+def _scatter_sentence(cons: pd.DataFrame, runs: int) -> str:
+    """How precise the ratios are: the largest Monte Carlo standard error of a filter that
+    did not diverge (RMSE / PCRB below 2)."""
+    near = cons[(cons["filter"] != "PCRB") & (cons["pcrb_ratio_max"] < 2)]
+    se = near[[c for c in near.columns if c.startswith("pcrb_ratio_se_")]].to_numpy(float)
+    if not np.isfinite(se).any():
+        return ""
+    return (f"Each ratio is itself a Monte Carlo estimate over the {runs} realisations: its standard error (from "
+            f"the spread of the realisations' mean-square errors; consistency.csv, pcrb_ratio_se_*) is at most "
+            f"{np.nanmax(se):.3f} for the filters within 2x of the bound, so a ratio within about two standard "
+            "errors of 1 is at the limit, and one slightly below 1 is scatter, not an estimator beating the bound.")
+
+
+def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, out: Path) -> None:
+    """NEES and NIS over time with their bands, and RMSE against the PCRB (scenario 1)."""
+    if not len(eps):
+        return
+    for rd in sorted(set(eps["reading"])):
+        e1 = eps[(eps.reading == rd) & (eps.scenario == eps.scenario.min())]
+        sc = int(e1["scenario"].iloc[0])
+        for stat, label, ny in (("anees", "average NEES", 4), ("anis", "average NIS", 2)):
+            fig, axes = new_figure(1, 1, figsize=(8, 4))
+            ax = axes[0, 0]
+            first = e1[e1["filter"] == FILTERS[0]]
+            lo, hi = ("nees_lo", "nees_hi") if stat == "anees" else ("nis_lo", "nis_hi")
+            ax.fill_between(first["time"], first[lo], first[hi], color="0.85",
+                            label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
+            for name in FILTERS:
+                f = e1[e1["filter"] == name]
+                ax.plot(f["time"], f[stat], lw=0.9, label=name)
+            ax.axhline(ny, color="k", lw=0.6, ls=":")
+            ax.set_yscale("log")
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel(f"{label} over {settings.runs} runs")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7, ncol=2)
+            ax.set_title(f"Seed 000: {label} with its chi-square band, scenario {sc} ({rd} reading)")
+            atomic_write(out / f"figure_{stat[1:]}_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+        b = bound[(bound.reading == rd) & (bound.scenario == sc)] if len(bound) else bound
+        fig, axes = new_figure(4, 1, figsize=(8, 9), sharex=True)
+        for a, x in enumerate(STATES):
+            ax = axes[a, 0]
+            for name in ("EKF", "MF-IAE", "SWML", TRUE_EKF):
+                f = e1[e1["filter"] == name]
+                ax.plot(f["time"], np.sqrt(f[f"mse_{x}"]), lw=0.9, label=name)
+            if len(b):
+                ax.plot(b["time"].iloc[1:], np.sqrt(b[f"mse_{x}"].iloc[1:]), "k-", lw=1.4, label="sqrt(PCRB)")
+            ax.set_yscale("log")
+            ax.set_ylabel(f"RMSE {x}")
+            ax.grid(alpha=0.3)
+        axes[0, 0].legend(fontsize=7, ncol=3)
+        axes[-1, 0].set_xlabel("time [s]")
+        fig.suptitle(f"Seed 000: RMSE over {settings.runs} runs against the PCRB, scenario {sc} ({rd} reading)")
+        atomic_write(out / f"figure_rmse_pcrb_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
 
 
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
@@ -642,13 +945,18 @@ class Seed000(Experiment, register="seed000"):
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
         """:func:`write_report`."""
-        return write_report(*result, settings, out_dir, path, config, partial=partial)
+        return write_report(result, settings, out_dir, path, config, partial=partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
-        """Table 3 beside ours, and the agreement in words."""
+        """Table 3 beside ours, the agreement in words, and the distance to the PCRB."""
         table = summary_table(result.per_run)
         cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *FILTERS]
+        cons = result.consistency
+        verdicts = [f"- {r['reading']} scenario {r['scenario']}, {r['filter']}: "
+                    f"{'consistent' if r['consistent'] else 'not consistent'} (avg NEES {r['anees']:.3g})"
+                    for _, r in cons[cons["filter"] != "PCRB"].iterrows()]
         return "\n".join([f"Seed 000, Table 3 (eta, eq 44): configuration {config}, {settings.runs} realisations, "
                           f"{path} path, {result.wall:.2f} s",
                           table[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"), "",
-                          *agreement(table)])
+                          *agreement(table), "", "RMSE per state / sqrt(PCRB):", *limit_sentences(cons), "",
+                          f"Consistency at {settings.confidence:.0%} (see summary.md for the rule):", *verdicts])

@@ -14,8 +14,13 @@ EKF holds, with position errors at 1, 30, 60, 90 and 100 s. Our reading, every c
 
 Both filters measure ``[x, theta]`` with noise of standard deviation 0.01, process noise
 variance 1e-8 per step, T = 0.01 s (the Euler truth map), 20 realisations. Reported:
-mean absolute position error at 1, 30, 60, 90, 100 and 120 s, per-state RMSE, and the
-first time the KF's error (RMS over the states) exceeds ``divergence_error`` for good.
+mean absolute position error at 1, 30, 60, 90, 100 and 120 s, per-state RMSE, the
+first time the KF's error (RMS over the states) exceeds ``divergence_error`` for good,
+each filter's RMSE per state as a multiple of the posterior Cramér-Rao bound over the same
+realisations (:func:`estimators.posterior_crb`: the limit of any estimator), and the
+consistency verdicts of :func:`~cosim.experiments.metrics.consistency_rule` (on the
+master path without the whiteness test: the estimator components do not publish their
+innovations).
 """
 from __future__ import annotations
 
@@ -27,15 +32,17 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 import pandas as pd
 
-from estimators import EKF, KF, discretize
+from estimators import EKF, KF, discretize, posterior_crb
 from fmu_models import build_fmu, get_model
+from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra.checks import finite, positive_int
 from fmu_models.infra.files import atomic_write
 
 from ..components.sources import Constant
 from ..fmi.fmu_component import FMUComponent
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
-from .common import batch_estimates, master_realisation, new_figure, noise_components, simulate_truth
+from .common import batch_run, master_realisation, nees_from_outputs, new_figure, noise_components, simulate_truth
 from .experiment import Experiment
 from .settings import check_common, to_toml
 
@@ -44,6 +51,10 @@ REPORT_TIMES = (1.0, 30.0, 60.0, 90.0, 100.0, 120.0)
 PAPER = pd.DataFrame({"time": [1, 30, 60, 90, 100], "KF error": [0.012, 0.0047, 0.045, 0.004, 0.047],
                       "EKF error": [0.006, 0.002, 0.005, 0.011, 0.009]})
 FILTERS = ("KF", "EKF")
+STATES = ("x", "x_dot", "theta", "theta_dot")
+#: The prior of the PCRB (``pcrb_prior``).
+PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at the case's state)",
+               "P0": "x_0 ~ N(x0, P0 I), the filters' own prior"}
 
 
 @dataclass(frozen=True)
@@ -54,7 +65,9 @@ class Settings:
     [N]; process noise variance ``q`` per step and measurement standard deviation
     ``r_std``; filters start at the true state with ``P0`` (times I) and use the true
     noise; ``divergence_error``: RMS-over-states error above which the KF counts as
-    diverged (from the first time it stays above); ``seed``.
+    diverged (from the first time it stays above); ``seed``. The limit and consistency:
+    ``pcrb_prior`` (:data:`PCRB_PRIORS`), the ``confidence`` of the chi-square bands and
+    the whiteness test at lags 1..``whiteness_lags``.
     """
 
     runs: int = 20
@@ -66,10 +79,21 @@ class Settings:
     P0: float = 1e-4
     divergence_error: float = 0.5
     seed: int = 1
+    pcrb_prior: str = "known"
+    confidence: float = 0.95
+    whiteness_lags: int = 5
 
     def __post_init__(self):
 
         check_common(self)
+        if self.pcrb_prior not in PCRB_PRIORS:
+            raise UnknownNameError(f"pcrb_prior must be one of {list(PCRB_PRIORS)}, got {self.pcrb_prior!r}")
+        if not 0.0 < finite(self.confidence, "confidence") < 1.0:
+            raise ConfigurationError(f"confidence must lie strictly between 0 and 1, got {self.confidence!r}")
+        positive_int(self.whiteness_lags, "whiteness_lags")
+        if self.whiteness_lags >= self.steps:
+            raise ConfigurationError(f"whiteness_lags = {self.whiteness_lags} must be shorter than the "
+                                     f"{self.steps} steps")
 
     @property
     def steps(self) -> int:
@@ -100,7 +124,10 @@ def _source(s: Settings):
     return Constant("force", s.T, s.force)
 
 
-def _summary(errors: dict, s: Settings) -> dict:
+def _summary(errors: dict, s: Settings, nees: dict, nis: dict, white: dict, bound: np.ndarray | None) -> dict:
+    """Per filter: the errors at the report times, the RMSE, the divergence time, the RMS
+    error over the states, the RMSE per state over the PCRB (``bound``: its mean-square
+    error per step, k = 0..N) and the consistency tests (``white``: the whiteness rows)."""
     out = {}
     t = np.arange(s.steps + 1) * s.T
     for name, err in errors.items():
@@ -110,13 +137,49 @@ def _summary(errors: dict, s: Settings) -> dict:
         stays = np.flip(np.logical_and.accumulate(np.flip(above, axis=1), axis=1), axis=1)
         t_div = np.where(stays.any(axis=1), t[np.argmax(stays, axis=1)], np.nan)
         idx = [round(tr / s.T) for tr in REPORT_TIMES if tr <= s.duration]
-        out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": np.sqrt(np.mean(err[:, 1:] ** 2, axis=1)),
-                     "t_div": t_div, "rms_mean": rms.mean(axis=0)}
+        rmse = np.sqrt(np.mean(err[:, 1:] ** 2, axis=1))
+        row, per_step = metrics.band_row(nees[name], nis[name], 4, 2, s.confidence)
+        row.update(white[name])
+        row["consistent"] = metrics.verdict(row)
+        with np.errstate(over="ignore", invalid="ignore"):
+            mse = np.mean(err[:, 1:] ** 2, axis=0)
+        out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": rmse, "t_div": t_div, "rms_mean": rms.mean(axis=0),
+                     "pcrb_ratio": metrics.pcrb_ratio(rmse, bound[1:]),
+                     "pcrb_ratio_se": metrics.pcrb_ratio_se(rmse, bound[1:]), "tests": row, "anees": per_step["anees"],
+                     "nees_band": (per_step["nees_lo"], per_step["nees_hi"]), "rmse_k": np.sqrt(mse)}
+    out["bound"] = bound
     return out
 
 
+def case_bound(s: Settings, case: str, X: np.ndarray, us: np.ndarray) -> np.ndarray:
+    """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
+    realisations ``X`` of ``case`` with inputs ``us`` (N+1, 1), under ``s.pcrb_prior``.
+
+    Parameters
+    ----------
+    s
+        The settings.
+    case
+        Which case.
+    X
+        The true trajectories (runs, N+1, 4).
+    us
+        The inputs.
+    """
+    P0 = None if s.pcrb_prior == "known" else s.P0
+    return posterior_crb(discretize(get_model("cartpole"), s.T), X, us[:-1], s.q, s.r_std**2, P0).mse
+
+
+def _truth(case: str, s: Settings, runs):
+    seeds = [tuple(realisation_seeds(s.seed, list(CASES).index(case), r)) for r in runs]
+    us = np.full((s.steps + 1, 1), s.force)
+    X, Y = simulate_truth(get_model("cartpole"), CASES[case], us, s.T, s.q, ["x", "theta"], s.r_std, seeds)
+    return X, Y, us
+
+
 def fast_task(case: str, settings: Settings, runs=None) -> dict:
-    """All realisations of one case, both filters batched.
+    """All realisations of one case, both filters batched, with the PCRB and the
+    consistency tests.
 
     Parameters
     ----------
@@ -130,15 +193,18 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
 
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
-    seeds = [tuple(realisation_seeds(s.seed, list(CASES).index(case), r)) for r in runs]
-    us = np.full((s.steps + 1, 1), s.force)
-    X, Y = simulate_truth(get_model("cartpole"), CASES[case], us, s.T, s.q, ["x", "theta"], s.r_std, seeds)
-    errors = {n: batch_estimates(m, X, Y, us, CASES[case])[0] - X for n, m in make_filters(s, case).items()}
-    return _summary(errors, s)
+    X, Y, us = _truth(case, s, runs)
+    errors, nees, nis, white = {}, {}, {}, {}
+    for n, m in make_filters(s, case).items():
+        res = batch_run(m, X, Y, us)
+        errors[n], nees[n], nis[n] = res.x - X, res.nees, res.nis
+        white[n] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
+    return _summary(errors, s, nees, nis, white, case_bound(s, case, X, us))
 
 
 def master_task(case: str, settings: Settings, runs=None) -> dict:
-    """The same realisations through the co-simulation master with the plant FMU.
+    """The same realisations through the co-simulation master with the plant FMU (the
+    PCRB on the fast path's truth of the same seeds; no whiteness test).
 
     Parameters
     ----------
@@ -158,21 +224,27 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
     model = get_model("cartpole")
     makers = make_filters(s, case)
     errors = {n: np.empty((len(runs), s.steps + 1, 4)) for n in makers}
+    nees = {n: np.empty((len(runs), s.steps)) for n in makers}
+    nis = {n: np.empty((len(runs), s.steps)) for n in makers}
     with tempfile.TemporaryDirectory() as tmp:
         plant = FMUComponent("plant", build_fmu(model, tmp), s.T,
                              start=dict(zip(model.state_names, CASES[case])))
         for i, r in enumerate(runs):
             noise, sensor = noise_components(model, s.T, s.q, ["x", "theta"], s.r_std,
                                              *realisation_seeds(s.seed, list(CASES).index(case), r))
-            X, est, _, _ = master_realisation(plant, _source(s), noise, sensor, makers, s.T, s.duration)
+            X, est, cov, nis_r = master_realisation(plant, _source(s), noise, sensor, makers, s.T, s.duration)
             for n in makers:
                 errors[n][i] = est[n] - X
-    return _summary(errors, s)
+                with np.errstate(over="ignore", invalid="ignore"):
+                    nees[n][i] = nees_from_outputs(est[n][1:] - X[1:], cov[n][1:])
+                nis[n][i] = nis_r[n]
+    X, _, us = _truth(case, s, runs)
+    return _summary(errors, s, nees, nis, {n: metrics.no_whiteness() for n in makers}, case_bound(s, case, X, us))
 
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True):
-    """Both cases; returns (table of errors at the report times, summary per case, wall time).
+    """Both cases; returns a :class:`Seed001Result`.
 
     Parameters
     ----------
@@ -198,45 +270,61 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
         for j, tr in enumerate(times):
             rows.append({"case": case, "time": tr, **{f"{n} |x error| [m]": r[n]["pos_err"][:, j].mean()
                                                       for n in FILTERS}})
-    return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall)
+    cons = []
+    for case, r in zip(CASES, res):
+        for n in FILTERS:
+            cons.append({"case": case, "filter": n, **{f"rmse_{x}": float(np.sqrt(np.mean(r[n]["rmse"][:, a] ** 2)))
+                                                       for a, x in enumerate(STATES)},
+                         **{f"pcrb_ratio_{x}": float(r[n]["pcrb_ratio"][a]) for a, x in enumerate(STATES)},
+                         "pcrb_ratio_max": float(np.max(r[n]["pcrb_ratio"])),
+                         **{f"pcrb_ratio_se_{x}": float(r[n]["pcrb_ratio_se"][a]) for a, x in enumerate(STATES)},
+                         **r[n]["tests"]})
+        cons.append({"case": case, "filter": "PCRB", "runs": settings.runs,
+                     **{f"rmse_{x}": float(np.sqrt(r["bound"][1:, a].mean())) for a, x in enumerate(STATES)},
+                     **{f"pcrb_ratio_{x}": 1.0 for x in STATES}, "pcrb_ratio_max": 1.0})
+    return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall, pd.DataFrame(cons))
 
 
 class Seed001Result(NamedTuple):
     """What :func:`run` returns: the ``table`` of mean position errors at the report times,
-    the ``summary`` per case (per filter: errors, divergence times, RMSE) and the ``wall``
-    time [s]."""
+    the ``summary`` per case (per filter: errors, divergence times, RMSE, RMSE / PCRB, the
+    consistency tests; and the PCRB per step under ``"bound"``), the ``wall`` time [s], and
+    ``consistency``: one row per case and filter (and one for the PCRB) with each state's
+    RMSE, its ratio to the PCRB and the tests of
+    :func:`~cosim.experiments.metrics.consistency_rule`."""
 
     table: pd.DataFrame
     summary: dict
     wall: float
+    consistency: pd.DataFrame
 
 
-def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
-    """The tables, the error figure, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
+def write_report(result: Seed001Result, settings: Settings, out_dir, path: str = "fast") -> Path:
+    """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
 
     Parameters
     ----------
-    table
-        Errors at the report times.
-    summary
-        Per case and filter: errors, divergence, RMSE.
-    wall
-        Wall time [s].
+    result
+        What :func:`run` returned.
     settings
         The settings.
     out_dir
         Output folder.
+    path
+        The path that ran.
     """
-
-
+    table, summary, wall, cons = result
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed001")))
     atomic_write(out / "errors_at_times.csv", lambda p: table.to_csv(p, index=False))
+    atomic_write(out / "consistency.csv", lambda p: cons.to_csv(p, index=False))
     t = np.arange(settings.steps + 1) * settings.T
     fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
     lines = ["# Seed 001: KF on the linearised model against the EKF", "",
-             f"{settings.runs} realisations per case, {settings.duration:g} s; wall time {wall:.2f} s.", "",
+             f"Regime: both filters given the true noise (q = {settings.q:g} per step, r = {settings.r_std:g}^2), "
+             f"started at the true state with P0 = {settings.P0:g} I; {settings.runs} realisations per case, "
+             f"{settings.duration:g} s ({settings.steps} steps), {path} path; wall time {wall:.2f} s.", "",
              "## Settings", "", "| setting | value |", "|---|---|",
              *[f"| {k} | {v} |" for k, v in asdict(settings).items()], "",
              "## Mean absolute cart-position error", "", table.to_markdown(index=False, floatfmt=".4g"), "",
@@ -257,9 +345,54 @@ def write_report(table, summary, wall, settings: Settings, out_dir) -> Path:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     atomic_write(out / "errors.png", lambda p: fig.savefig(p, dpi=100, format="png"))
+    ratio_cols = [f"pcrb_ratio_{x}" for x in STATES]
+    shown = cons[["case", "filter", *[f"rmse_{x}" for x in STATES], *ratio_cols]]
+    lines += ["", "## RMSE per state over the posterior Cramér-Rao bound", "",
+              f"The PCRB is the lowest mean-square error any estimator can have on these {settings.runs} "
+              f"realisations (prior: {PCRB_PRIORS[settings.pcrb_prior]}); each ratio is the RMSE over the "
+              "realisations and steps 1..K over the root of the bound's mean over the same steps (1 is the best "
+              "possible; pcrb_ratio_se_* in consistency.csv: the Monte Carlo standard error of each ratio).", "",
+              shown.to_markdown(index=False, floatfmt=".4g"), "",
+              "## Consistency: chi-square bands of NEES and NIS, whiteness of the innovations", "",
+              "Rule: " + metrics.consistency_rule(settings.confidence, settings.whiteness_lags) + ".", "",
+              *metrics.consistency_markdown(cons[cons["filter"] != "PCRB"], ["case"]), ""]
+    if path == "master":
+        lines += ["On the master path the estimator components do not publish their innovations, so whiteness "
+                  "is not tested there (the fast path gives the same numbers).", ""]
+    _limit_figures(summary, settings, out)
+    lines += ["Figures: " + ", ".join(sorted(p.name for p in out.glob("*.png")))]
     md = out / "summary.md"
     atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
     return md
+
+
+def _limit_figures(summary: dict, settings: Settings, out: Path) -> None:
+    """Average NEES with its band, and RMSE against the PCRB, per case."""
+    t = np.arange(settings.steps + 1) * settings.T
+    fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
+    for (case, res), ax in zip(summary.items(), axes[:, 0]):
+        lo, hi = res[FILTERS[0]]["nees_band"]
+        ax.fill_between(t[1:], lo, hi, color="0.85", label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
+        for n in FILTERS:
+            ax.semilogy(t[1:], res[n]["anees"], lw=0.8, label=n)
+        ax.set_title(f"{case}: average NEES over {settings.runs} realisations")
+        ax.set_xlabel("time [s]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    atomic_write(out / "nees.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+    fig, axes = new_figure(4, len(summary), figsize=(5 * len(summary), 9), sharex=True)
+    for j, (case, res) in enumerate(summary.items()):
+        for a, x in enumerate(STATES):
+            ax = axes[a, j]
+            for n in FILTERS:
+                ax.semilogy(t[1:], res[n]["rmse_k"][:, a], lw=0.8, label=n)
+            ax.semilogy(t[1:], np.sqrt(res["bound"][1:, a]), "k-", lw=1.2, label="sqrt(PCRB)")
+            ax.set_ylabel(f"RMSE {x}")
+            ax.grid(alpha=0.3)
+        axes[0, j].set_title(case)
+        axes[0, j].legend(fontsize=7)
+        axes[-1, j].set_xlabel("time [s]")
+    atomic_write(out / "rmse_pcrb.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
 
 
 class Seed001(Experiment, register="seed001"):
@@ -274,7 +407,7 @@ class Seed001(Experiment, register="seed001"):
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
         """:func:`write_report`."""
-        return write_report(*result, settings, out_dir)
+        return write_report(result, settings, out_dir, path)
 
     def summary(self, result, settings, path="fast", config="custom"):
         """The errors at the report times, and the divergence of each filter."""
@@ -285,4 +418,9 @@ class Seed001(Experiment, register="seed001"):
             when = f"median {np.nanmedian(td):.2f} s" if np.isfinite(td).any() else "never"
             lines.append(f"{case}: KF diverged in {int(np.isfinite(td).sum())} of {len(td)} runs ({when}); "
                          f"EKF in {int(np.isfinite(res['EKF']['t_div']).sum())}")
+            for n in FILTERS:
+                ratio = ", ".join(f"{x} {v:.3f}" for x, v in zip(STATES, res[n]["pcrb_ratio"]))
+                lines.append(f"  {n}: RMSE / sqrt(PCRB) {ratio}; "
+                             f"{'consistent' if res[n]['tests']['consistent'] else 'not consistent'} "
+                             f"(avg NEES {res[n]['tests']['anees']:.3g})")
         return "\n".join(lines)

@@ -93,7 +93,7 @@ def test_paper_configuration_reproduces_table3_mfiae_row():
     table = seed000.summary_table(per_run)
     ratio = table["MF-IAE"] / table["paper MF-IAE"]
     assert ratio.between(0.9, 1.1).all(), ratio.tolist()
-    assert (table["MF-IAE / bound"] < 1.25).all()
+    assert (table["MF-IAE / EKF true Q,R"] < 1.25).all()
     assert (table["MF-IAE"] < 0.7 * table["EKF"]).all()
 
 
@@ -118,16 +118,29 @@ def test_sweep_cells_equal_single_campaign_runs():
     campaign = replace(seed000.CONFIGS["paper"], runs=4, duration=0.6, scenarios=((0.2, 0.1), (0.3, 0.2)))
     sweep = seed000_sweep.SweepSettings(factors=(0.01, 10.0), campaign=campaign)
     table, _ = seed000_sweep.run(sweep, backend="serial", progress=False)
-    assert len(table) == 2 * 4 * 5                        # scenarios x cells x filters
-    single = seed000.run(replace(campaign, q0_factor=10.0, r0_factor=0.01), backend="serial", progress=False)[0]
-    for name in ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML"):
+    assert len(table) == 2 * 4 * 6                        # scenarios x cells x (filters + EKF true Q,R)
+    one = seed000.run(replace(campaign, q0_factor=10.0, r0_factor=0.01), backend="serial", progress=False)
+    single = one.per_run
+    for name in ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R"):
         for sc in (1, 2):
             cell = table[(table.q_factor == 10.0) & (table.r_factor == 0.01) & (table["filter"] == name)
                          & (table.scenario == sc)]
             ref = single[(single["filter"] == name) & (single.scenario == sc)]["eta"].mean()
             assert cell["eta"].item() == pytest.approx(ref, rel=1e-12)
     g = seed000_sweep.goals(table, sweep)
-    assert set(g["filter"]) == {"IAE", "MF-IAE", "EKF EM", "SWML"} and (g["cells"] == 4).all()
+    assert set(g["filter"]) == {"IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R"} and (g["cells"] == 4).all()
+    # the EKF given the true noise, the PCRB ratios and the verdicts are the single campaign's
+    cons = one.consistency
+    for name in ("SWML", "EKF true Q,R"):
+        for sc in (1, 2):
+            cell = table[(table.q_factor == 10.0) & (table.r_factor == 0.01) & (table["filter"] == name)
+                         & (table.scenario == sc)].iloc[0]
+            ref = cons[(cons["filter"] == name) & (cons.scenario == sc)].iloc[0]
+            for col in ("pcrb_ratio_x", "pcrb_ratio_theta_dot", "anees", "anis", "acf_max"):
+                assert cell[col] == pytest.approx(ref[col], rel=1e-12), col
+            assert cell["consistent"] == ref["consistent"]
+    true = table[table["filter"] == "EKF true Q,R"]
+    assert (true.groupby("scenario")["pcrb_ratio_x"].nunique() == 1).all()      # the same in every cell
 
 
 def test_cli_paper_config_and_sweep_write_their_reports(tmp_path, capsys):
@@ -142,7 +155,10 @@ def test_cli_paper_config_and_sweep_write_their_reports(tmp_path, capsys):
     sweep = tmp_path / "sweep"
     assert main(["experiment", "seed000-sweep", "--runs", "2", "--set", "duration=0.3",
                  "--set", "factors=[0.1, 10]", "--out", str(sweep), "--quiet", "--backend", "serial"]) == 0
-    for name in ("sweep.csv", "goals.csv", "heatmap_eta_over_bound.png", "heatmap_anees.png", "summary.md"):
+    for name in ("sweep.csv", "goals.csv", "heatmap_eta_over_true_ekf.png", "heatmap_pcrb_ratio_max.png",
+                 "heatmap_consistent.png", "heatmap_anees.png", "summary.md"):
         assert (sweep / name).exists(), name
+    text = (sweep / "summary.md").read_text()
+    assert "Consistency rule: consistent at 95%" in text and "RMSE / PCRB" in text
     assert main(["experiment", "seed000", "--set", "nope=1", "--out", str(tmp_path / "x")]) == 2
     assert "unknown setting(s) nope" in capsys.readouterr().err and not (tmp_path / "x").exists()

@@ -1,0 +1,329 @@
+"""Consistency tests of a filter over Monte Carlo runs: chi-square bands of the NEES and NIS,
+and the whiteness of the innovations (Bar-Shalom, Li and Kirubarajan, *Estimation with
+Applications to Tracking and Navigation*, 2001, section 5.4).
+
+A filter is consistent when its errors agree with the covariances it reports. Over ``N``
+independent runs, at each step ``k``:
+
+* the NEES ``e_k^T P_k^-1 e_k`` of a consistent filter is chi-square with ``n_x`` degrees of
+  freedom, so ``N`` times the average over the runs is chi-square with ``N n_x``: at
+  confidence ``1 - alpha`` the average lies in ``[chi2(alpha/2, N n_x) / N,
+  chi2(1 - alpha/2, N n_x) / N]`` (for ``N = 100``, ``n_x = 4``: about
+  [3.46, 4.57]);
+* the same for the NIS ``nu_k^T S_k^-1 nu_k`` with the number of measured channels;
+* the innovations are white: the normalised autocorrelation over the runs
+  ``rho(k, k+l) = sum_r nu_r(k) nu_r(k+l) / sqrt(sum_r nu_r(k)^2 sum_r nu_r(k+l)^2)`` (per
+  channel, each innovation divided by its predicted standard deviation) is approximately
+  normal with variance ``1/N`` at every lag ``l >= 1``: inside
+  ``+-z_{1-alpha/2} / sqrt(N)``.
+
+Each test gives the statistic at every step beside its band, the share of steps inside,
+and a verdict on the time average: the average over runs *and steps* must lie inside the
+per-step band. That verdict tests the filter's average behaviour at the level of one
+step's test; it is conservative (the steps of a run are correlated, so the time average is
+treated as one sample, not as ``N x steps``); the tighter band for independent steps is
+given too (``strict_band``), exact for the NIS and the innovations of an optimal filter,
+whose innovations are independent in time.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2, norm
+
+from fmu_models.errors import ConfigurationError, InputError
+from fmu_models.infra import checks
+
+__all__ = ["BandTest", "WhitenessTest", "chi2_band", "nees_test", "nis_test", "whiteness_test"]
+
+
+def _confidence(confidence) -> float:
+    c = checks.finite(confidence, "confidence")
+    if not 0.0 < c < 1.0:
+        raise ConfigurationError(f"confidence must lie strictly between 0 and 1 (e.g. 0.95), got {confidence!r}")
+    return c
+
+
+def chi2_band(runs, dof, confidence: float = 0.95) -> tuple[float, float]:
+    """Two-sided band of the average over ``runs`` independent chi-square(``dof``) values
+    at ``confidence``: ``(chi2.ppf(alpha/2, runs dof) / runs, chi2.ppf(1 - alpha/2, runs dof) / runs)``
+    with ``alpha = 1 - confidence`` (Bar-Shalom et al. 2001, section 5.4).
+
+    Parameters
+    ----------
+    runs : int
+        Number of independent values averaged (the Monte Carlo runs), >= 1.
+    dof : float
+        Degrees of freedom of each value (n_x for the NEES, n_y for the NIS), > 0.
+    confidence : float
+        Probability of the band, in (0, 1).
+    """
+    n = checks.positive_int(runs, "runs")
+    d = checks.positive(dof, "degrees of freedom dof")
+    a = 1.0 - _confidence(confidence)
+    lo, hi = chi2.ppf([a / 2, 1 - a / 2], n * d) / n
+    return float(lo), float(hi)
+
+
+@dataclass(frozen=True)
+class BandTest:
+    """A chi-square band test of the NEES or the NIS over ``runs`` Monte Carlo runs.
+
+    Attributes
+    ----------
+    statistic : str
+        ``"NEES"`` or ``"NIS"``.
+    confidence : float
+        Probability of the bands.
+    runs : int
+        Number of runs ``N``.
+    dof : float
+        Degrees of freedom of one value (mean over runs and steps if channels were missing).
+    per_step : ndarray, shape (K,)
+        Average over the runs at each step (NaN at a step without degrees of freedom).
+    lower, upper : ndarray, shape (K,)
+        The per-step band (varies only if channels were missing).
+    average : float
+        Average over runs and steps.
+    band : tuple of float
+        The per-step band of the average's degrees of freedom: the verdict's band.
+    strict_band : tuple of float
+        The band of the average if all runs and steps were independent (``N K`` values).
+    share_inside : float
+        Share of the steps whose average lies inside its band (1 - alpha expected).
+    consistent : bool
+        ``average`` inside ``band``.
+    """
+
+    statistic: str
+    confidence: float
+    runs: int
+    dof: float
+    per_step: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    average: float
+    band: tuple
+    strict_band: tuple
+    share_inside: float
+    consistent: bool
+
+
+def _values(values, what: str) -> np.ndarray:
+    v = checks.float_array(values, what)
+    if v.ndim == 1:                     # one run
+        v = v[None, :]
+    if v.ndim != 2:
+        raise InputError(f"{what} must have shape (runs, steps), got {v.shape}")
+    if v.shape[0] < 1 or v.shape[1] < 1:
+        raise InputError(f"{what} is empty (shape {v.shape}): at least one run and one step are needed")
+    if np.isnan(v).any():
+        r, k = map(int, np.argwhere(np.isnan(v))[0])
+        raise InputError(f"{what} contains NaN (first: run {r}, step {k}); mark a diverged run with inf, "
+                         "which fails the test")
+    if (v < 0).any():
+        raise InputError(f"{what} must be non-negative (a normalised squared error)")
+    return v
+
+
+def _band_test(statistic: str, values, dof, confidence: float) -> BandTest:
+    v = _values(values, statistic.lower())
+    c = _confidence(confidence)
+    a = 1.0 - c
+    N, K = v.shape
+    if np.ndim(dof) == 0:
+        d = np.full((N, K), checks.positive(dof, "degrees of freedom dof"))
+    else:
+        d = checks.float_array(dof, "degrees of freedom dof")
+        if d.shape != (N, K):
+            raise InputError(f"degrees of freedom dof must be a number or have the shape of the values {v.shape}, "
+                             f"got {d.shape}")
+        if not (np.isfinite(d).all() and (d >= 0).all() and d.sum() > 0):
+            raise InputError("degrees of freedom dof must be finite, >= 0 and not all 0")
+    total = d.sum(axis=0)                                   # chi-square dof of the sum over runs
+    has = total > 0
+    # the quantiles once per distinct number of degrees of freedom (one without missing data)
+    levels, where = np.unique(np.where(has, total, 1), return_inverse=True)
+    q_lo, q_hi = (chi2.ppf(p, levels) / N for p in (a / 2, 1 - a / 2))
+    with np.errstate(invalid="ignore"):
+        per_step = np.where(has, v.mean(axis=0), np.nan)
+        lower = np.where(has, q_lo[where.ravel()], np.nan)
+        upper = np.where(has, q_hi[where.ravel()], np.nan)
+    inside = (per_step >= lower) & (per_step <= upper)
+    mean_dof = float(total[has].mean() / N)
+    average = float(per_step[has].mean())
+    band = chi2_band(N, mean_dof, c)
+    n_all = int(has.sum()) * N
+    strict = tuple(float(x) for x in chi2.ppf([a / 2, 1 - a / 2], n_all * mean_dof) / n_all)
+    return BandTest(statistic, c, N, mean_dof, per_step, lower, upper, average, band, strict,
+                    float(inside[has].mean()), bool(band[0] <= average <= band[1]))
+
+
+def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:
+    """The NEES test over Monte Carlo runs (Bar-Shalom et al. 2001, section 5.4).
+
+    Parameters
+    ----------
+    nees : array_like, shape (runs, steps) or (steps,)
+        Normalised estimation errors squared ``e^T P^-1 e`` of each run and step (a 1-D
+        array is one run); a diverged run may be ``inf`` (it fails the test), NaN is refused.
+    nx : int
+        State dimension (the degrees of freedom).
+    confidence : float
+        Probability of the bands (default 0.95).
+
+    Returns
+    -------
+    BandTest
+        Per-step averages and bands, the share of steps inside, and the verdict on the
+        average over runs and steps (see the module documentation).
+    """
+    return _band_test("NEES", nees, checks.positive_int(nx, "state dimension nx"), confidence)
+
+
+def nis_test(nis, dof, confidence: float = 0.95) -> BandTest:
+    """The NIS test over Monte Carlo runs (Bar-Shalom et al. 2001, section 5.4).
+
+    Parameters
+    ----------
+    nis : array_like, shape (runs, steps) or (steps,)
+        Normalised innovations squared ``nu^T S^-1 nu`` (a 1-D array is one run).
+    dof : int or array_like, shape (runs, steps)
+        Measured channels of each value: ``n_y``, or per run and step the number of valid
+        channels (0 where the measurement was missing: no information, no degree of freedom).
+    confidence : float
+        Probability of the bands (default 0.95).
+
+    Returns
+    -------
+    BandTest
+        As :func:`nees_test`.
+    """
+    return _band_test("NIS", nis, dof, confidence)
+
+
+@dataclass(frozen=True)
+class WhitenessTest:
+    """The whiteness test of the innovations over Monte Carlo runs.
+
+    Attributes
+    ----------
+    confidence : float
+        Probability of the bands.
+    runs : int
+        Number of runs ``N``.
+    lags : ndarray of int, shape (L,)
+        The lags tested (>= 1).
+    autocorrelation : ndarray, shape (ny, L)
+        Normalised autocorrelation of each channel's normalised innovations at each lag,
+        pooled over runs and steps.
+    per_step : ndarray, shape (ny, L, K)
+        Bar-Shalom's ``rho(k, k + l)`` over the runs at each step ``k`` (NaN where fewer
+        than one valid pair, or beyond the record).
+    band : float
+        Half-width of the per-step band, ``z_{1-alpha/2} / sqrt(N)`` (``N``: the mean number
+        of runs with a valid pair at a step, the runs if none is missing): the verdict's band.
+    strict_band : ndarray, shape (ny, L)
+        Half-width for the pooled autocorrelation if all pairs were independent,
+        ``z_{1-alpha/2} / sqrt(pairs)`` (exact for an optimal filter).
+    share_inside : ndarray, shape (ny, L)
+        Share of the steps whose ``rho(k, k + l)`` lies inside the band.
+    white : bool
+        Every pooled autocorrelation inside ``+-band`` (channels without a valid pair left out).
+    """
+
+    confidence: float
+    runs: int
+    lags: np.ndarray
+    autocorrelation: np.ndarray
+    per_step: np.ndarray
+    band: float
+    strict_band: np.ndarray
+    share_inside: np.ndarray
+    white: bool
+
+
+def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.95, valid=None) -> WhitenessTest:
+    """The whiteness test of the innovations (Bar-Shalom et al. 2001, section 5.4).
+
+    Each channel's innovation is divided by its predicted standard deviation
+    ``sqrt(S_jj)``; missing channels (``valid`` False) take no part in the sums.
+
+    Parameters
+    ----------
+    innovations : array_like, shape (runs, steps, ny)
+        Innovations ``y_k - h(x_k^-)`` of each run [measurement units].
+    S : array_like, shape (runs, steps, ny, ny) or (runs, steps, ny)
+        Their predicted covariances (or only the variances).
+    lags : sequence of int
+        Lags to test, each >= 1 and shorter than the record.
+    confidence : float
+        Probability of the bands (default 0.95).
+    valid : array_like of bool, shape (runs, steps, ny), optional
+        The channels measured (default: all).
+
+    Returns
+    -------
+    WhitenessTest
+        The autocorrelations, the bands, the share of steps inside and the verdict.
+    """
+    nu = checks.float_array(innovations, "innovations")
+    if nu.ndim != 3 or min(nu.shape) < 1:
+        raise InputError(f"innovations must have shape (runs, steps, ny) with none empty, got {nu.shape}")
+    N, K, ny = nu.shape
+    var = checks.float_array(S, "innovation covariances S")
+    if var.shape == (N, K, ny, ny):
+        var = np.diagonal(var, axis1=2, axis2=3)
+    if var.shape != (N, K, ny):
+        raise InputError(f"innovation covariances S must have shape ({N}, {K}, {ny}, {ny}) or ({N}, {K}, {ny}), "
+                         f"got {var.shape}")
+    if valid is None:
+        ok = np.ones((N, K, ny), dtype=bool)
+    else:
+        m = checks.float_array(valid, "valid")
+        if m.shape != (N, K, ny) or not np.isin(m, (0.0, 1.0)).all():
+            raise InputError(f"valid must hold 0/1 (or bools) with shape ({N}, {K}, {ny}), got {m.shape}")
+        ok = m != 0
+    if not np.isfinite(nu[ok]).all():
+        raise InputError("innovations contain NaN or inf in a valid channel (mark missing channels with valid)")
+    if not (np.isfinite(var[ok]).all() and (var[ok] > 0).all()):
+        raise InputError("innovation variances must be positive and finite in every valid channel")
+    lags = np.array([checks.positive_int(v, "a lag") for v in np.atleast_1d(lags)], dtype=int)
+    if not len(lags) or lags.max() >= K:
+        raise ConfigurationError(f"lags must be a non-empty list of integers in 1..{K - 1} (the record has {K} "
+                                 f"steps), got {lags.tolist()}")
+    c = _confidence(confidence)
+    z = float(norm.ppf(1 - (1 - c) / 2))
+    e = np.where(ok, nu / np.sqrt(np.where(ok, var, 1.0)), 0.0)
+    acf = np.empty((ny, len(lags)))
+    strict = np.empty((ny, len(lags)))
+    per_step = np.full((ny, len(lags), K), np.nan)
+    share = np.empty((ny, len(lags)))
+    counts = []
+    all_valid = bool(ok.all())
+    for i, lag in enumerate(lags):
+        if all_valid:
+            a, b = e[:, :-lag], e[:, lag:]
+            n_k = np.full((K - lag, ny), N)
+        else:
+            pairs = ok[:, :-lag] & ok[:, lag:]              # (N, K - lag, ny)
+            a, b = e[:, :-lag] * pairs, e[:, lag:] * pairs
+            n_k = pairs.sum(axis=0)                          # valid pairs at each step
+        num, da, db = (np.einsum("rkj,rkj->kj", x, y) for x, y in ((a, b), (a, a), (b, b)))   # (K - lag, ny)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rk = np.where(n_k > 0, num / np.sqrt(da * db), np.nan)
+            acf[:, i] = num.sum(axis=0) / np.sqrt(da.sum(axis=0) * db.sum(axis=0))
+            inside = np.abs(rk) <= z / np.sqrt(n_k)
+        defined = np.isfinite(rk)
+        strict[:, i] = z / np.sqrt(np.maximum(n_k.sum(axis=0), 1))
+        per_step[:, i, :K - lag] = rk.T
+        share[:, i] = np.where(defined.any(axis=0), (inside & defined).sum(axis=0) / np.maximum(defined.sum(axis=0), 1),
+                               np.nan)
+        counts.append(n_k[n_k > 0])
+    if not np.isfinite(acf).any():
+        raise InputError("no channel has a valid pair of innovations at the lags tested")
+    # the per-step band at the average number of runs with a valid pair (N without missing data)
+    band = z / np.sqrt(float(np.mean(np.concatenate(counts))))
+    white = bool(np.all(np.abs(acf[np.isfinite(acf)]) <= band))
+    return WhitenessTest(c, N, lags, acf, per_step, band, strict, share, white)

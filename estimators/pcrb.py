@@ -1,0 +1,375 @@
+"""The posterior Cramér-Rao bound (PCRB): the lowest mean-square error any estimator can reach.
+
+For ``x_{k+1} = f(x_k, u_k) + w_k``, ``y_k = h(x_k) + v_k`` with ``w_k ~ N(0, Q)``,
+``v_k ~ N(0, R)`` and a Gaussian prior ``x_0 ~ N(m_0, P_0)``, the Fisher information
+``J_k`` of the state at step ``k`` follows the recursion of Tichavský, Muravchik and Nehorai
+(IEEE Trans. Signal Processing 46(5), 1998: the Fisher information recursion and its form for
+additive Gaussian noise):
+
+    J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
+    D11 = E[F^T Q^-1 F],  D12 = D21^T = -E[F^T] Q^-1,  D22 = Q^-1 + E[H^T R^-1 H],
+
+with ``J_0 = P_0^-1``, ``F`` the Jacobian of ``f`` at the true ``x_k`` and ``H`` that of
+``h`` at the true ``x_{k+1}``; every estimator's error covariance at step ``k`` is at least
+``J_k^-1`` (in the positive semi-definite order), so its mean-square error on state ``i``
+is at least ``[J_k^-1]_ii``. The expectations are taken by Monte Carlo over true
+trajectories (a campaign's own realisations), with the exact Jacobians of the model's
+CasADi expressions.
+
+Numerics. With ``F_bar = E[F]`` and the spread ``V = E[(F - F_bar)^T Q^-1 (F - F_bar)]``,
+the matrix inversion lemma turns the recursion into the covariance form of a Kalman filter
+(no difference of large matrices when Q is small, and no inverse of an ill-conditioned
+information matrix):
+
+    B_k' = (B_k^-1 + V)^-1,    P_pred = F_bar B_k' F_bar^T + Q,    B_{k+1} = (P_pred^-1 + E[H^T R^-1 H])^-1,
+
+with ``B_k = J_k^-1``, which is exactly the recursion above. The first and the last step
+are measurement updates with the pseudo-measurement ``Z`` of unit noise, ``Z^T Z = V``
+(or ``E[H^T R^-1 H]``; ``Z`` from the symmetric eigendecomposition), in Joseph form with
+Cholesky solves; a known initial state is ``B_0 = 0``. On a linear model (``V = 0``) it is
+the Kalman filter's covariance recursion, which the bound then equals.
+
+Missing measurements: a channel that is missing (a NaN measurement, or masked out) carries
+no information. For a realisation whose valid channels at step ``k`` are ``s``, the
+measurement information is ``H_s^T (R_ss)^-1 H_s`` (the marginal of the Gaussian
+measurement on those channels), and ``E[H^T R^-1 H]`` is its mean over the realisations:
+the bound of an estimator that knows which channels are missing, averaged over the
+realisations' patterns of missing data, as the mean-square error of a Monte Carlo campaign
+is.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+
+from fmu_models.errors import InputError, NumericalError, TypeMismatchError
+from fmu_models.infra import checks
+from fmu_models.infra.memory import check_fits
+
+from ._buffered import BufferedFunction
+from ._compiled import compile_functions
+from .discrete import DiscreteModel
+
+__all__ = ["PCRB", "posterior_crb", "rmse_ratio"]
+
+#: Steps whose Jacobians are evaluated in one batched call (bounds the memory of a call
+#: to ``runs x PCRB_CHUNK x nx^2`` numbers).
+PCRB_CHUNK = 500
+
+
+@dataclass
+class PCRB:
+    """The posterior Cramér-Rao bound along ``N`` steps (what :func:`posterior_crb` returns).
+
+    Attributes
+    ----------
+    P : ndarray, shape (N + 1, nx, nx)
+        The bound ``J_k^-1`` on the error covariance of any estimator of ``x_k`` from
+        ``y_1 .. y_k``, k = 0..N (row 0: the prior covariance, zero for a known initial
+        state) [state units squared].
+    runs : int
+        Number of realisations the expectations were taken over.
+    state_names : list of str
+        The model's state names.
+    known_initial_state : bool
+        True if the bound assumed ``x_0`` known exactly (``P[0] = 0``).
+    """
+
+    P: np.ndarray
+    runs: int
+    state_names: list = field(default_factory=list)
+    known_initial_state: bool = False
+
+    @property
+    def mse(self) -> np.ndarray:
+        """Lower bound of the mean-square error of each state, ``[J_k^-1]_ii``, shape (N + 1, nx)."""
+        return np.diagonal(self.P, axis1=1, axis2=2).copy()
+
+    @property
+    def rmse(self) -> np.ndarray:
+        """Square root of :attr:`mse`, shape (N + 1, nx) [state units]."""
+        return np.sqrt(self.mse)
+
+    def __len__(self) -> int:
+        """Number of steps ``N``."""
+        return len(self.P) - 1
+
+
+def _model(system) -> DiscreteModel:
+    if not isinstance(system, DiscreteModel):
+        raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize), got "
+                                f"{type(system).__name__}")
+    return system
+
+
+def _trajectories(X, nx: int) -> np.ndarray:
+    X = checks.float_array(X, "true trajectories X")
+    if X.ndim != 3 or X.shape[2] != nx:
+        raise InputError(f"true trajectories X must have shape (runs, N + 1, {nx}), got {X.shape}")
+    if X.shape[0] < 1:
+        raise InputError("true trajectories X hold no realisation (runs = 0): the expectations need at least one")
+    if X.shape[1] < 2:
+        raise InputError(f"true trajectories X must hold at least two steps (x_0 and x_1), got {X.shape[1]}")
+    bad = ~np.isfinite(X)
+    if bad.any():
+        r, k, i = map(int, np.argwhere(bad)[0])
+        raise InputError(f"true trajectories X contain NaN or inf ({int(bad.sum())} entries; first: realisation "
+                         f"{r}, step {k}, state {i})")
+    return np.ascontiguousarray(X)
+
+
+def _inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
+    us = checks.float_array(us, "inputs us")
+    try:
+        us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
+    except ValueError:
+        raise InputError(f"inputs us must have shape ({N}, {nu}) or ({runs}, {N}, {nu}), got {us.shape}") from None
+    if not np.isfinite(us).all():
+        raise InputError("inputs us contain NaN or inf")
+    return us
+
+
+def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
+    """The used channels (runs, N, ny) of bool, or None if all are used."""
+    valid = None
+    if masks is not None:
+        m = checks.float_array(masks, "masks")
+        try:
+            m = np.broadcast_to(m, (runs, N, ny))
+        except ValueError:
+            raise InputError(f"masks must have shape ({runs}, {N}, {ny}), got {m.shape}") from None
+        if not np.isin(m, (0.0, 1.0)).all():
+            raise InputError("masks must hold 0/1 (or False/True) only")
+        valid = m != 0
+    if ys is not None:
+        y = checks.float_array(ys, "measurements ys")
+        if y.shape != (runs, N, ny):
+            raise InputError(f"measurements ys must have shape ({runs}, {N}, {ny}), got {y.shape}")
+        if np.isinf(y).any():
+            raise InputError("measurements ys contain inf (a missing channel is NaN)")
+        ok = ~np.isnan(y)
+        valid = ok if valid is None else valid & ok
+    if valid is not None and valid.all():
+        return None
+    return valid
+
+
+def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: int) -> np.ndarray | None:
+    """``W[r, k]`` (ny, ny): ``(R_ss)^-1`` embedded at the valid channels ``s`` of realisation
+    ``r`` at step ``k + 1`` (zeros elsewhere); None if every channel is valid."""
+    if valid is None:
+        return None
+    ny = R.shape[0]
+    codes = valid.astype(np.int64) @ (1 << np.arange(ny, dtype=np.int64))
+    W = np.zeros((runs, N, ny, ny))
+    for code in np.unique(codes):
+        s = np.flatnonzero((int(code) >> np.arange(ny)) & 1)
+        if not len(s):
+            continue
+        w = np.zeros((ny, ny))
+        w[np.ix_(s, s)] = scipy.linalg.cho_solve(scipy.linalg.cho_factor(R[np.ix_(s, s)], lower=True), np.eye(len(s)))
+        W[codes == code] = w
+    return W
+
+
+#: Points per call of the compiled Jacobians (one compiled library per model, whatever the
+#: number of realisations and steps).
+JACOBIAN_BLOCK = 1024
+
+
+class _Jacobians:
+    """The exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) of ``system``: one
+    CasADi Function mapped over :data:`JACOBIAN_BLOCK` points, compiled to native code
+    (cached on disk; CasADi's VM without a C compiler), bound to numpy arrays."""
+
+    def __init__(self, system: DiscreteModel, backend: str = "compiled"):
+        x, u = system.x, system.u
+        xn = ca.SX.sym("x_next", system.nx)
+        fn = ca.Function("pcrb_jacobians", [x, u, xn],
+                         [ca.densify(ca.jacobian(system.fx, x)),
+                          ca.densify(ca.substitute(ca.jacobian(system.hx, x), x, xn))])
+        (mapped,), self.backend = compile_functions([fn.map(JACOBIAN_BLOCK, "serial")], backend)
+        self.nx, self.nu, self.ny = system.nx, system.nu, system.ny
+        self.fn = BufferedFunction(mapped)
+
+    def __call__(self, xs: np.ndarray, us: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``F`` at (``xs``, ``us``) and ``H`` at ``xn``: ``m`` points (..., nx), (..., nu),
+        (..., nx) -> (m, nx, nx), (m, ny, nx)."""
+        nx, ny, b = self.nx, self.ny, JACOBIAN_BLOCK
+        pts = [np.ascontiguousarray(a).reshape(-1, a.shape[-1]) for a in (xs, us, xn)]
+        m = len(pts[0])
+        F, H = np.empty((m, nx, nx)), np.empty((m, ny, nx))
+        args, res = self.fn.args, self.fn.res
+        for i0 in range(0, m, b):
+            i1 = min(i0 + b, m)
+            for a, p in zip(args, pts):
+                blk = a.reshape(b, -1)              # point-major = CasADi's column-major (dim, b)
+                blk[:i1 - i0] = p[i0:i1]
+                blk[i1 - i0:] = p[i1 - 1]           # pad the last block with a valid point
+            self.fn.trigger()
+            F[i0:i1] = res[0].reshape(b, nx, nx)[:i1 - i0].transpose(0, 2, 1)
+            H[i0:i1] = res[1].reshape(b, nx, ny)[:i1 - i0].transpose(0, 2, 1)
+        return F, H
+
+
+def _jacobians(system: DiscreteModel) -> _Jacobians:
+    """The :class:`_Jacobians` of ``system``, built once per model."""
+    return system.compiled("pcrb", (JACOBIAN_BLOCK,), "compiled", lambda: _Jacobians(system))
+
+
+def _root(M: np.ndarray) -> np.ndarray:
+    """``Z`` (..., n, n) with ``Z^T Z = M`` for symmetric positive semi-definite ``M`` (..., n, n)
+    (eigendecomposition; rounding's negative eigenvalues become zero)."""
+    lam, U = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
+    return np.sqrt(np.clip(lam, 0.0, None))[..., :, None] * np.swapaxes(U, -1, -2)
+
+
+def _joseph(P: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """``(P^+ + Z^T Z)^-1`` for a covariance ``P`` (PSD, zero allowed): the update of ``P``
+    with the measurement matrix ``Z`` and unit noise, in Joseph form (symmetric and positive
+    semi-definite by construction; the gain by a Cholesky solve of ``I + Z P Z^T``)."""
+    S = np.eye(len(Z)) + Z @ P @ Z.T
+    L = np.linalg.cholesky(0.5 * (S + S.T))
+    K = np.linalg.solve(L.T, np.linalg.solve(L, Z @ P)).T       # P Z^T S^-1 by the Cholesky factor
+    A = np.eye(len(P)) - K @ Z
+    out = A @ P @ A.T + K @ K.T
+    return 0.5 * (out + out.T)
+
+
+def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=None) -> PCRB:
+    """The posterior Cramér-Rao bound along true trajectories (Tichavský, Muravchik and
+    Nehorai 1998, the recursion for additive Gaussian noise; see the module documentation
+    for the form computed and for missing data).
+
+    Parameters
+    ----------
+    system : DiscreteModel
+        The model ``x_{k+1} = f(x_k, u_k) + w_k``, ``y_k = h(x_k) + v_k``; its exact
+        Jacobians give ``F`` and ``H``.
+    X : array_like, shape (runs, N + 1, nx)
+        True trajectories (``X[:, 0]``: the initial states) [state units]; the expectations
+        are means over the ``runs`` realisations.
+    us : array_like, shape (N, nu) or (runs, N, nu)
+        Inputs; ``us[k]`` is held over the step ``k -> k + 1`` (as in
+        :meth:`~estimators.base.KalmanBase.run`).
+    Q : array_like
+        Process noise covariance (nx, nx), diagonal (nx,) or scalar (times I); symmetric
+        positive definite.
+    R : array_like
+        Measurement noise covariance (ny, ny), diagonal or scalar; symmetric positive definite.
+    P0 : array_like, optional
+        Covariance of the prior of ``x_0`` (``J_0 = P0^-1``), symmetric positive definite;
+        None (default): the initial state is known exactly (``J_0`` infinite, so the first
+        prediction's covariance is ``Q``), as in a campaign whose truth starts at a fixed state.
+    masks : array_like of bool, shape (runs, N, ny), optional
+        ``masks[r, k, j]`` False: channel ``j`` of the measurement ``y_{k+1}`` of realisation
+        ``r`` is missing (no information).
+    ys : array_like, shape (runs, N, ny), optional
+        Measurements ``y_1 .. y_N``; only where they are NaN (missing channels) is used.
+
+    Returns
+    -------
+    PCRB
+        The bound matrices ``J_k^-1``, k = 0..N.
+
+    Raises
+    ------
+    TypeMismatchError
+        ``system`` is not a DiscreteModel, or an argument is not numbers.
+    ConfigurationError
+        ``Q``, ``R`` or ``P0`` has the wrong shape, is not finite, not symmetric or not
+        positive definite.
+    InputError
+        ``X``, ``us``, ``masks`` or ``ys`` has the wrong shape, ``X`` or ``us`` is not
+        finite, ``X`` holds no realisation.
+    NumericalError
+        A Jacobian along the trajectories is not finite, or the recursion lost positive
+        definiteness (an ill-posed model).
+    ResourceError
+        The work arrays would not fit in memory.
+    """
+    s = _model(system)
+    nx, nu, ny = s.nx, s.nu, s.ny
+    X = _trajectories(X, nx)
+    runs, N = X.shape[0], X.shape[1] - 1
+    us = _inputs(us, runs, N, nu)
+    Q = checks.covariance(Q, nx, "PCRB: Q")
+    R = checks.covariance(R, ny, "PCRB: R")
+    if P0 is not None:
+        P0 = checks.covariance(P0, nx, "PCRB: P0 (None for a known initial state)")
+    valid = _valid_channels(masks, ys, runs, N, ny)
+    chunk = min(N, PCRB_CHUNK)
+    check_fits(8.0 * (runs * chunk * (4 * nx * nx + 3 * ny * nx) + (N + 1) * 4 * nx * nx
+                      + (0 if valid is None else runs * N * ny * ny)),
+               f"the PCRB over {runs} realisations x {N} steps", "fewer realisations")
+    W = _measurement_weights(R, valid, runs, N)
+    Rinv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(R, lower=True), np.eye(ny))
+    Rinv = 0.5 * (Rinv + Rinv.T)
+    Lq = scipy.linalg.cholesky(Q, lower=True)
+
+    bound = np.empty((N + 1, nx, nx))
+    bound[0] = np.zeros((nx, nx)) if P0 is None else P0
+    for k0 in range(0, N, chunk):
+        n = min(chunk, N - k0)
+        F, H = _jacobians(s)(X[:, k0:k0 + n], us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
+        F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
+        if not (np.isfinite(F).all() and np.isfinite(H).all()):
+            r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])
+            raise NumericalError(f"PCRB: a Jacobian of the model is not finite along realisation {r} at step {k0 + k}")
+        Fbar = F.mean(axis=0)                                                    # (n, nx, nx)
+        # D = Lq^-1 (F - F_bar): V = E[D^T D], the spread of the Jacobians over the realisations
+        D = scipy.linalg.solve_triangular(Lq, (F - Fbar).transpose(2, 0, 1, 3).reshape(nx, -1), lower=True)
+        Dk = D.reshape(nx, runs, n, nx).transpose(2, 0, 1, 3).reshape(n, nx * runs, nx)    # (k, (j, r), i)
+        Zv = _root(np.swapaxes(Dk, 1, 2) @ Dk / runs) if runs > 1 else None
+        WH = (Rinv @ H) if W is None else W[:, k0:k0 + n] @ H                              # (r, k, ny, nx)
+        Hk, WHk = (a.transpose(1, 0, 2, 3).reshape(n, runs * ny, nx) for a in (H, WH))
+        Iy = np.swapaxes(Hk, 1, 2) @ WHk / runs
+        Zy = _root(Iy)
+        with np.errstate(over="ignore", invalid="ignore"):          # a non-finite bound is refused below
+            for j in range(n):
+                k = k0 + j
+                try:
+                    Bk = bound[k] if Zv is None else _joseph(bound[k], Zv[j])
+                    P_pred = Fbar[j] @ Bk @ Fbar[j].T + Q
+                    bound[k + 1] = _joseph(0.5 * (P_pred + P_pred.T), Zy[j])
+                except (np.linalg.LinAlgError, ValueError):
+                    raise NumericalError(f"PCRB: the bound became non-finite at step {k + 1} (an ill-posed model "
+                                         "or noise)") from None
+        if not np.isfinite(bound[k0 + 1:k0 + n + 1]).all():
+            k = k0 + 1 + int(np.argwhere(~np.isfinite(bound[k0 + 1:k0 + n + 1]).all(axis=(1, 2)))[0, 0])
+            raise NumericalError(f"PCRB: the bound became non-finite at step {k} (an ill-posed model or noise)")
+    return PCRB(bound, runs, list(s.state_names), P0 is None)
+
+
+def rmse_ratio(err, bound: PCRB, steps=None) -> np.ndarray:
+    """Each state's RMSE over realisations and steps as a multiple of the PCRB:
+    ``sqrt(mean_{r,k} e_{r,k,i}^2 / mean_k [J_k^-1]_ii)``, shape (nx,) (1 is the best any
+    estimator can do, in expectation).
+
+    Parameters
+    ----------
+    err : array_like, shape (runs, N + 1, nx) or (runs, N, nx)
+        Estimation errors ``x_hat - x`` along the bound's steps (with or without k = 0)
+        [state units].
+    bound : PCRB
+        The bound along the same steps.
+    steps : slice, optional
+        Which steps k to average over (default: 1..N, after the first measurement).
+    """
+    if not isinstance(bound, PCRB):
+        raise TypeMismatchError(f"bound must be a PCRB (from estimators.posterior_crb), got {type(bound).__name__}")
+    e = checks.float_array(err, "errors err")
+    N, nx = len(bound), bound.P.shape[1]
+    if e.ndim != 3 or e.shape[2] != nx or e.shape[1] not in (N, N + 1):
+        raise InputError(f"errors err must have shape (runs, {N + 1} or {N}, {nx}), got {e.shape}")
+    if e.shape[1] == N:
+        e = np.concatenate([np.zeros_like(e[:, :1]), e], axis=1)
+    sl = slice(1, None) if steps is None else steps
+    mse = np.mean(np.square(e[:, sl]), axis=(0, 1))
+    b = bound.mse[sl].mean(axis=0)
+    if not (b > 0).all():
+        raise InputError("the bound is zero on the steps chosen (a known initial state at k = 0)")
+    return np.sqrt(mse / b)
