@@ -11,7 +11,7 @@ output of a marked example of a page (the same examples the tests run, see
 ``readme_estimate.png``                ``README.md``              ``estimate.png``
 ``tutorial_fading.png``                ``docs/tutorial.md``       ``tutorial_fading.png``
 ``filter_smoother_truth.png``          ``docs/guide/offline.md``  ``filter_smoother_truth.png``
-``seed000_sweep_eta_over_bound.png``   ``docs/guide/experiments``  ``out/sweep/heatmap_eta_over_bound.png``
+``seed000_sweep_eta_over_true_ekf.png``   ``docs/guide/experiments``  ``out/sweep/heatmap_eta_over_true_ekf.png``
 =====================================  =========================  ==============================
 """
 from __future__ import annotations
@@ -35,8 +35,8 @@ FIGURES = {
     "readme_estimate.png": ("README.md", "readme-example", "estimate.png"),
     "tutorial_fading.png": ("docs/tutorial.md", "tutorial-compare", "tutorial_fading.png"),
     "filter_smoother_truth.png": ("docs/guide/offline.md", "offline", "filter_smoother_truth.png"),
-    "seed000_sweep_eta_over_bound.png": ("docs/guide/experiments.md", "experiments-sweep",
-                                         "out/sweep/heatmap_eta_over_bound.png"),
+    "seed000_sweep_eta_over_true_ekf.png": ("docs/guide/experiments.md", "experiments-sweep",
+                                         "out/sweep/heatmap_eta_over_true_ekf.png"),
 }
 
 
