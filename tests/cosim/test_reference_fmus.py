@@ -82,6 +82,8 @@ def test_api(case: rc.Case):
 
 @pytest.mark.parametrize("case", CASES, ids=IDS)
 def test_cli(case: rc.Case, tmp_path):
+    """Every case through the command line's main() (in this process: a process start per
+    case costs more than the case)."""
     df, proc = rc.run_cli(case, tmp_path)
     assert "Traceback" not in proc.stderr
     if case.refused:
@@ -120,3 +122,11 @@ def test_roberts_reference_is_independent_of_the_fmu():
     assert ref["y2"].iloc[1] == pytest.approx(3.386380e-05, rel=1e-3)
     assert ref["y1"].iloc[2] == pytest.approx(1.831976e-01, rel=1e-3)
     assert ref["y1"].iloc[-1] < 1e-4 and ref["y3"].iloc[-1] > 0.9999
+
+
+def test_the_cli_in_a_process_of_its_own_gives_what_main_gives(tmp_path):
+    case = next(c for c in CASES if not c.refused and c.interface == "cs")
+    df, proc = rc.run_cli(case, tmp_path / "process", in_process=False)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    same, _ = rc.run_cli(case, tmp_path / "main")
+    np.testing.assert_array_equal(df.to_numpy(float), same.to_numpy(float))

@@ -16,6 +16,9 @@ the table's.
 """
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import os
 import subprocess
 import sys
@@ -24,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from cosim.cli import main as cli_main
 
 ROOT = Path(__file__).parents[2]
 RTOL = 1e-6          # the master's ME tolerance in these cases (and fmpy's, compared)
@@ -175,8 +180,11 @@ def run_api(case: Case) -> pd.DataFrame:
     return df
 
 
-def run_cli(case: Case, folder: Path) -> tuple[pd.DataFrame | None, subprocess.CompletedProcess]:
-    """The case through ``pendulum-cosim run`` with a minimal scenario file."""
+def run_cli(case: Case, folder: Path, in_process: bool = True) -> tuple[pd.DataFrame | None,
+                                                                          subprocess.CompletedProcess]:
+    """The case through ``pendulum-cosim run`` with a minimal scenario file: the command
+    line's ``main`` in this process (its output captured), or, with ``in_process=False``, a
+    process of its own."""
     folder.mkdir(parents=True, exist_ok=True)
     text = (f'[simulation]\nstart_time = {case.start!r}\nstop_time = {case.stop!r}\n\n[[component]]\nname = "m"\n'
             f'type = "fmu"\npath = "{fmu_path(case)}"\nperiod = {case.period!r}\ninterface = "{case.interface}"\n')
@@ -189,9 +197,24 @@ def run_cli(case: Case, folder: Path) -> tuple[pd.DataFrame | None, subprocess.C
     else:
         text += f"rtol = {RTOL!r}\n"
     (folder / "s.toml").write_text(text)
-    proc = subprocess.run([sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())",
-                           "run", "s.toml", "--out", "out", "--no-progress"], cwd=folder, capture_output=True,
-                          text=True, timeout=600)
+    argv = ["run", str(folder / "s.toml"), "--out", str(folder / "out"), "--no-progress"]
+    if in_process:                    # the command line's own main(), without a process start per case
+        out, err = io.StringIO(), io.StringIO()
+        handler = logging.StreamHandler(err)            # what main() configures when logging is unset
+        handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+        root, level = logging.getLogger(), logging.getLogger().level
+        root.addHandler(handler)
+        root.setLevel(logging.INFO)
+        try:
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                code = cli_main(argv)
+        finally:
+            root.removeHandler(handler)
+            root.setLevel(level)
+        proc = subprocess.CompletedProcess(argv, code, out.getvalue(), err.getvalue())
+    else:
+        proc = subprocess.run([sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())",
+                               *argv], cwd=folder, capture_output=True, text=True, timeout=600)
     csv = folder / "out" / "results.csv"
     if proc.returncode != 0 or not csv.exists():
         return None, proc
