@@ -55,7 +55,8 @@ def test_the_command_line_prints_a_fallback_as_one_warning_line(tmp_path):
     bin_dir = _failing_cc(tmp_path)
     env = _env(tmp_path, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
     proc = subprocess.run([*CLI, "experiment", "seed000", "--runs", "2", "--out", str(tmp_path / "o"), "--quiet",
-                           "--set", "scenarios=[[0.2, 0.1]]"], env=env, capture_output=True, text=True, timeout=600,
+                           "--set", "scenarios=[[0.2, 0.1]]", "--set", 'readings=["eqs"]', "--set", "duration=0.5"],
+                          env=env, capture_output=True, text=True, timeout=600,
                           cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if "virtual machine" in ln]
