@@ -44,7 +44,7 @@ import pandas as pd
 from estimators import EKF, IAE, MFIAE, SWML, discretize, em_noise, posterior_crb
 from fmu_models import build_fmu, get_model
 from fmu_models.errors import ConfigurationError, Interrupted, UnknownNameError
-from fmu_models.infra.checks import finite, positive, positive_int
+from fmu_models.infra.checks import positive, positive_int
 from fmu_models.infra.files import atomic_write
 
 from ..components.sources import PRBS
@@ -60,7 +60,7 @@ from .common import (
 )
 from .common import simulate_truth as common_truth
 from .experiment import Experiment
-from .settings import check_common, to_toml
+from .settings import check_common, check_consistency, to_toml
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
 READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 the measurement variance (R)",
@@ -140,16 +140,8 @@ class Settings:
     transient_steps: int = 100
 
     def __post_init__(self):
-
         check_common(self)
-        if self.pcrb_prior not in PCRB_PRIORS:
-            raise UnknownNameError(f"pcrb_prior must be one of {list(PCRB_PRIORS)}, got {self.pcrb_prior!r}")
-        if not 0.0 < finite(self.confidence, "confidence") < 1.0:
-            raise ConfigurationError(f"confidence must lie strictly between 0 and 1, got {self.confidence!r}")
-        positive_int(self.whiteness_lags, "whiteness_lags")
-        if self.whiteness_lags >= self.steps:
-            raise ConfigurationError(f"whiteness_lags = {self.whiteness_lags} must be shorter than the "
-                                     f"{self.steps} steps")
+        check_consistency(self, PCRB_PRIORS)
         positive_int(self.transient_steps, "transient_steps", minimum=0)
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
             positive(getattr(self, name), name)

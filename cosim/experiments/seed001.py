@@ -34,8 +34,6 @@ import pandas as pd
 
 from estimators import EKF, KF, discretize, posterior_crb
 from fmu_models import build_fmu, get_model
-from fmu_models.errors import ConfigurationError, UnknownNameError
-from fmu_models.infra.checks import finite, positive_int
 from fmu_models.infra.files import atomic_write
 
 from ..components.sources import Constant
@@ -44,7 +42,7 @@ from . import metrics
 from .campaign import realisation_seeds, run_tasks
 from .common import batch_run, master_realisation, nees_from_outputs, new_figure, noise_components, simulate_truth
 from .experiment import Experiment
-from .settings import check_common, to_toml
+from .settings import check_common, check_consistency, to_toml
 
 CASES = {"hanging": (0.0, 0.0, np.pi, 0.0), "upright": (0.0, 0.0, 0.1, 0.0)}
 REPORT_TIMES = (1.0, 30.0, 60.0, 90.0, 100.0, 120.0)
@@ -84,16 +82,8 @@ class Settings:
     whiteness_lags: int = 5
 
     def __post_init__(self):
-
         check_common(self)
-        if self.pcrb_prior not in PCRB_PRIORS:
-            raise UnknownNameError(f"pcrb_prior must be one of {list(PCRB_PRIORS)}, got {self.pcrb_prior!r}")
-        if not 0.0 < finite(self.confidence, "confidence") < 1.0:
-            raise ConfigurationError(f"confidence must lie strictly between 0 and 1, got {self.confidence!r}")
-        positive_int(self.whiteness_lags, "whiteness_lags")
-        if self.whiteness_lags >= self.steps:
-            raise ConfigurationError(f"whiteness_lags = {self.whiteness_lags} must be shorter than the "
-                                     f"{self.steps} steps")
+        check_consistency(self, PCRB_PRIORS)
 
     @property
     def steps(self) -> int:

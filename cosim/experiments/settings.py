@@ -13,17 +13,32 @@ import typing
 from collections.abc import Iterable
 
 from fmu_models.errors import ConfigurationError, PendulumCosimError, UnknownNameError
-from fmu_models.infra.checks import positive, positive_int
+from fmu_models.infra.checks import finite, positive, positive_int
 from fmu_models.infra.memory import check_fits
 
 from .. import tomlfile
 
-__all__ = ["RECORD_BYTES_PER_STEP", "apply_overrides", "check_common", "from_mapping", "load_settings", "to_toml"]
+__all__ = ["RECORD_BYTES_PER_STEP", "apply_overrides", "check_common", "check_consistency", "from_mapping",
+           "load_settings", "to_toml"]
 
 
 #: Bytes an experiment keeps per realisation and step (truth, measurements, each filter's
 #: estimate and variances), the basis of the cap on ``runs x steps``.
 RECORD_BYTES_PER_STEP = 512
+
+
+def check_consistency(settings, priors) -> None:
+    """Checks of the consistency and bound settings a campaign shares: ``pcrb_prior`` one of
+    ``priors``, ``confidence`` strictly between 0 and 1, ``whiteness_lags`` an integer >= 1
+    shorter than the run's ``steps``."""
+    if settings.pcrb_prior not in priors:
+        raise UnknownNameError(f"pcrb_prior must be one of {list(priors)}, got {settings.pcrb_prior!r}")
+    if not 0.0 < finite(settings.confidence, "confidence") < 1.0:
+        raise ConfigurationError(f"confidence must lie strictly between 0 and 1, got {settings.confidence!r}")
+    positive_int(settings.whiteness_lags, "whiteness_lags")
+    if settings.whiteness_lags >= settings.steps:
+        raise ConfigurationError(f"whiteness_lags = {settings.whiteness_lags} must be shorter than the "
+                                 f"{settings.steps} steps")
 
 
 def check_common(settings) -> None:
@@ -32,7 +47,6 @@ def check_common(settings) -> None:
     ``runs x steps`` within memory (:data:`RECORD_BYTES_PER_STEP` each), and every other
     number finite."""
     import math
-
 
     positive_int(settings.runs, "runs")
     positive_int(settings.seed, "seed", minimum=0)
