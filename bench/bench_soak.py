@@ -3,6 +3,7 @@ given number of sequences. Measured, not asserted.
 
 Run: python bench/bench_soak.py --fuzz-seconds 600 [--jobs 2] [--seed 1]
      python bench/bench_soak.py --fuzz-sequences 100000      (per FMU kind and FMI version)
+     python bench/bench_soak.py --parts chaos --chaos-runs 10000
 
 Part "fuzz": every FMU kind (plant: cartpole and iwp; estimator: EKF and MF-IAE; signal: PRBS
 and sensor), FMI 2.0 and 3.0, rebuilt from its own ``sources/`` with AddressSanitizer and
@@ -11,9 +12,15 @@ chunks of seeded sequences. Reported per kind and version: sequences, calls, ill
 how many were answered Error, legal calls and how many OK, sanitizer reports, crashes, hangs,
 state-machine violations, and the replay command of every failing sequence.
 
+Part "chaos": the co-simulation master against the chaos FMU (tests/data/chaos: every call
+may return Warning, Discard, Error or Fatal, give NaN or inf outputs or sleep, by seed), for
+a number of runs or a time; each run must end normally with finite results, or with a named
+error (the FMU, the FMI call or the signal, the time) that keeps its rows, and the FMU's log
+must show no call the standard forbids (tests/testkit/chaos.py). Reported: runs, outcomes
+by class, failures (a broken rule, a bare exception), and the seeds that failed.
+
 The parts are listed in PARTS (name -> function(args) -> report lines); each runs when asked
-for with --parts (default: all), so another part (a master under a misbehaving FMU) is one
-more function and one more entry.
+for with --parts (default: all).
 """
 from __future__ import annotations
 
@@ -107,7 +114,39 @@ def fuzz_part(args) -> list[str]:
 
 
 #: The parts of the soak benchmark, by name.
-PARTS = {"fuzz": fuzz_part}
+def chaos_part(args) -> list[str]:
+    """The master against the chaos FMU over many seeds; the report lines."""
+    import collections
+    import logging
+    import os
+
+    from testkit import chaos, handwritten
+
+    outcomes, failures = collections.Counter(), []
+    with tempfile.TemporaryDirectory(prefix="pendulum_soak_chaos_") as tmp:
+        fmu = handwritten.build("chaos", "Chaos", 2, Path(tmp) / "fmu")
+        log = Path(tmp) / "chaos.log"
+        os.environ["CHAOS_LOG"] = str(log)
+        logging.getLogger("cosim.fmu").setLevel(logging.CRITICAL + 1)     # the FMU's own chatter, by the thousand
+        t0, seed = time.perf_counter(), 0
+        while (seed < args.chaos_runs if args.chaos_seconds is None
+               else time.perf_counter() - t0 < args.chaos_seconds):
+            rate = 0.005 + 0.02 * (seed % 5) / 4            # 0.5 % to 2.5 % of the calls misbehave
+            try:
+                outcomes[chaos.run_seed(fmu, args.seed * 1_000_003 + seed, rate, chaos.NO_CRASH, log)] += 1
+            except AssertionError as e:                    # a rule of the run broken
+                failures.append(f"seed {seed}: {e}")
+            except Exception as e:  # noqa: BLE001 - a bare exception out of the master is a failure too
+                failures.append(f"seed {seed}: {type(e).__name__}: {e}")
+            seed += 1
+        wall = time.perf_counter() - t0
+    lines = [f"runs: {seed} in {wall:.0f} s ({wall / max(seed, 1) * 1e3:.1f} ms a run)",
+             "outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())),
+             f"failures (a broken rule or a bare exception): {len(failures)}"]
+    return lines + failures[:20]
+
+
+PARTS = {"fuzz": fuzz_part, "chaos": chaos_part}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -121,6 +160,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--chunk", type=int, default=2000, help="sequences per driver process")
     p.add_argument("--kinds", default="plant,estimator,signal")
     p.add_argument("--versions", default="2,3")
+    p.add_argument("--chaos-runs", type=int, default=1000, help="runs of the chaos part (default 1000)")
+    p.add_argument("--chaos-seconds", type=float, default=None, help="time for the chaos part instead [s]")
     p.add_argument("--parts", default=",".join(PARTS))
     args = p.parse_args(argv)
     if args.fuzz_seconds is None and args.fuzz_sequences is None:

@@ -19,13 +19,10 @@ import os
 import re
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
-import zipfile
 from pathlib import Path
 
-import fmpy
 import pytest
 
 import cosim  # noqa: F401 - the real packages first
@@ -34,6 +31,7 @@ import fmu_models  # noqa: F401
 
 sys.path.append(str(Path(__file__).parent))
 
+from testkit import handwritten
 from testkit.processes import become_subreaper
 
 DATA = Path(__file__).parent / "data"
@@ -106,23 +104,12 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 
 def build_test_fmu(folder: str, identifier: str, version: int, out: Path,
                    description: str = "modelDescription.xml") -> Path:
-    """Compile a hand-written test FMU of ``tests/data/<folder>`` and zip it into ``out``
-    (``description``: the folder's model description to ship, as ``modelDescription.xml``)."""
-    src = DATA / folder
-    plat = ("linux64" if version == 2 else "x86_64-linux") if sys.platform.startswith("linux") else None
-    if plat is None:
-        pytest.skip("the hand-written test FMUs are built for Linux only")
-    binaries = out / "binaries" / plat
-    binaries.mkdir(parents=True)
-    headers = Path(fmpy.__file__).parent / "c-code"
-    cc = shutil.which("cc") or shutil.which("gcc")
-    subprocess.run([cc, "-shared", "-fPIC", "-O2", f"-I{headers}", str(src / f"{identifier}.c"),
-                    "-o", str(binaries / f"{identifier}.so"), "-lm"], check=True)
-    fmu = out / f"{identifier}.fmu"
-    with zipfile.ZipFile(fmu, "w") as z:
-        z.write(src / description, "modelDescription.xml")
-        z.write(binaries / f"{identifier}.so", f"binaries/{plat}/{identifier}.so")
-    return fmu
+    """Compile a hand-written test FMU of ``tests/data/<folder>`` (see
+    :func:`testkit.handwritten.build`); skip where they cannot be built."""
+    try:
+        return handwritten.build(folder, identifier, version, out, description)
+    except handwritten.NotBuildable as e:
+        pytest.skip(str(e))
 
 
 @pytest.fixture(scope="session")
