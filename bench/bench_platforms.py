@@ -23,8 +23,8 @@ from estimators.filter_fmu import export_filter_fmu
 from fmu_models import build_fmu, get_model
 from fmu_models.export.platforms import add_platforms
 
-sys.path.append(str(Path(__file__).parents[1] / "tests"))     # the driver helpers (tests/cross_run.py),
-import cross_run  # after the packages (tests/estimators)
+sys.path.append(str(Path(__file__).parents[1] / "tests"))     # the driver helpers (tests/testkit/cross_run.py),
+from testkit import cross_run  # after the packages (tests/estimators is no package)
 
 PLATFORMS = ["win64", "darwin", "aarch64-linux"]
 

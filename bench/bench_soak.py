@@ -31,6 +31,10 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import cosim  # noqa: F401 - the real packages before tests/ is on the path
+import estimators  # noqa: F401
+import fmu_models  # noqa: F401
+
 sys.path.append(str(Path(__file__).parents[1] / "tests"))   # the fuzzer's helpers (tests/testkit)
 from testkit import fuzz_run  # after the path
 
