@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 CLI = [sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())"]
 FILTER = ("from estimators import EKF, discretize; from fmu_models import get_model; "
           "f = EKF(discretize(get_model('cartpole'), 0.01), [0, 0, 0, 0], 1.0, 0.1, 0.1); print(f.backend)")
@@ -51,6 +53,7 @@ def test_a_failing_compiler_found_on_the_path_is_named_with_the_fallback(tmp_pat
     assert "virtual machine" in proc.stderr
 
 
+@pytest.mark.slow
 def test_the_command_line_prints_a_fallback_as_one_warning_line(tmp_path):
     bin_dir = _failing_cc(tmp_path)
     env = _env(tmp_path, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}")

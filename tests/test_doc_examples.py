@@ -110,6 +110,12 @@ CHECKS = {"offline": _offline, "another-tool-loop": _another_tool_loop, "another
 
 
 # ------------------------------------------------------------------ the runs
+#: Pages whose default examples build FMUs and run the command line on scenarios (several
+#: seconds each): run with the slow tests; the README's, the tutorial's and the smaller
+#: pages' examples stay in the default run.
+SLOW_PAGES = {"docs/guide/cosimulation.md", "docs/guide/another-tool.md", "docs/guide/extending.md",
+              "docs/guide/reliability.md", "docs/guide/third-party-fmus.md"}
+
 def _cases():
     cases = []
     for page in examples.pages():
@@ -117,6 +123,8 @@ def _cases():
         for todo in examples.runnable(examples.blocks(page)):
             last = todo[-1]
             marks = [getattr(pytest.mark, last.marker)] if last.marker else []
+            if last.marker is None and rel in SLOW_PAGES:
+                marks.append(pytest.mark.slow)
             ident = rel if last.marker is None else f"{rel}::{last.name}"
             cases.append(pytest.param(todo, id=ident, marks=marks))
     return cases

@@ -15,7 +15,7 @@ import pytest
 from testkit.docstrings import modules, public_objects
 
 ROOT = Path(__file__).parents[1]
-pytestmark = pytest.mark.docs
+pytestmark = [pytest.mark.docs, pytest.mark.slow]
 _spec = importlib.util.spec_from_file_location("doc_examples", ROOT / "docs" / "examples.py")
 examples = importlib.util.module_from_spec(_spec)
 sys.modules["doc_examples"] = examples

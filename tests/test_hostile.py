@@ -241,8 +241,9 @@ class _Stderr:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
-@pytest.mark.parametrize("sig, backend", [(signal.SIGINT, "processes"), (signal.SIGTERM, "processes"),
-                                          (signal.SIGINT, "dask")])
+@pytest.mark.parametrize("sig, backend", [(signal.SIGINT, "processes"),
+                                          pytest.param(signal.SIGTERM, "processes", marks=pytest.mark.slow),
+                                          pytest.param(signal.SIGINT, "dask", marks=pytest.mark.slow)])
 def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp_path, sig, backend):
     out = tmp_path / f"campaign-{sig.name}-{backend}"
     proc = subprocess.Popen([*CLI, "experiment", "seed000", "--path", "master", "--runs", "200", "--jobs", "2",
@@ -265,6 +266,7 @@ def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp
     assert processes_mentioning(str(out)) == []   # no worker left behind
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
 def test_interrupting_a_run_writes_partial_results_not_finished_ones(tmp_path):
     sc = scenario(tmp_path, """
@@ -392,6 +394,7 @@ def _probe(env: dict) -> subprocess.Popen:
                             text=True, env={**os.environ, **env}, cwd=ROOT)
 
 
+@pytest.mark.slow
 def test_eight_processes_fill_an_empty_cache_at_once(tmp_path):
     procs = [_probe({"PENDULUM_COSIM_CACHE": str(tmp_path / "cache")}) for _ in range(8)]
     outs = [(p.wait(timeout=300), *p.communicate()) for p in procs]
@@ -401,7 +404,8 @@ def test_eight_processes_fill_an_empty_cache_at_once(tmp_path):
     assert leftovers == [], leftovers
 
 
-@pytest.mark.parametrize("damage", ["truncate", "empty", "garbage"])
+@pytest.mark.parametrize("damage", [pytest.param("truncate", marks=pytest.mark.slow),
+                                    pytest.param("empty", marks=pytest.mark.slow), "garbage"])
 def test_a_damaged_cache_entry_is_rebuilt_in_one_run(tmp_path, damage):
     env = {"PENDULUM_COSIM_CACHE": str(tmp_path)}
     first = _probe(env)

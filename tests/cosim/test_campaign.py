@@ -40,6 +40,7 @@ def _etas(per_run):
     return per_run.sort_values(["reading", "scenario", "filter", "run"])["eta"].to_numpy()
 
 
+@pytest.mark.slow
 def test_campaign_is_reproducible_and_order_independent():
     a = seed000.run(SMALL, readings=("eqs",), backend="serial", progress=False)[0]
     b = seed000.run(SMALL, readings=("eqs",), backend="processes", n_jobs=2, progress=False)[0]
@@ -54,7 +55,7 @@ def test_campaign_is_reproducible_and_order_independent():
     assert not np.allclose(_etas(a), _etas(c))
 
 
-@pytest.mark.parametrize("reading", ["eqs", "prose"])
+@pytest.mark.parametrize("reading", ["eqs", pytest.param("prose", marks=pytest.mark.slow)])
 def test_fast_path_equals_master_path_with_the_plant_fmu(reading):
     fast = seed000.fast_task(0, reading, SMALL)
     master = seed000.master_task(0, reading, SMALL)
@@ -69,6 +70,7 @@ def test_fast_path_equals_master_path_with_the_plant_fmu(reading):
         assert master["whiteness"][name]["white_ok"] is None and fast["whiteness"][name]["white_ok"] is not None
 
 
+@pytest.mark.slow
 def test_report_is_written(tmp_path):
     result = seed000.run(SMALL, backend="serial", progress=False)
     md = seed000.write_report(result, SMALL, tmp_path, "fast")
@@ -206,6 +208,7 @@ def test_seed001_report_has_the_pcrb_and_the_verdicts(tmp_path):
         seed001.Settings(pcrb_prior="x")
 
 
+@pytest.mark.slow
 def test_dask_backend_gives_the_same_numbers():
     """The campaign on a local dask.distributed cluster equals the serial run."""
     a = seed000.run(SMALL, readings=("eqs",), backend="dask", n_jobs=2, progress=False)[0]

@@ -98,6 +98,7 @@ def test_cli_crash_leaves_nothing_behind(call_rules_fmu, tmp_path):
     assert _children() == []
 
 
+@pytest.mark.slow
 @linux_only
 def test_ctrl_c_ends_an_fmu_stuck_in_its_code(call_rules_fmu, tmp_path):
     """An FMU that never returns from doStep: Ctrl-C ends the run (exit 130), the child is

@@ -53,6 +53,7 @@ SEED000_WIRING = {"plant.F": "force.out", "sensor.x": "plant.x", "sensor.theta":
                   **{f"plant.w_{s}": f"noise.w_{s}" for s in ("x", "x_dot", "theta", "theta_dot")}}
 
 
+@pytest.mark.slow
 def test_any_component_order_gives_the_papers_loop(fmu_paths):
     """Every permutation of the seed 000 loop gives identical signals, and the filter sees
     exactly the paper's timing (predict with u_{k-1}, update with y_k)."""

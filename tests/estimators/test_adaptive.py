@@ -143,6 +143,7 @@ def test_sweep_cells_equal_single_campaign_runs():
     assert (true.groupby("scenario")["pcrb_ratio_x"].nunique() == 1).all()      # the same in every cell
 
 
+@pytest.mark.slow
 def test_cli_paper_config_and_sweep_write_their_reports(tmp_path, capsys):
     from cosim.cli import main
 

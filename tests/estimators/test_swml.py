@@ -182,6 +182,7 @@ def make(cp):
     return SWML(cp, [0.5, 0.0, 1.8, 0.5], 1.0, 1e-3, 10.0, window=50, every=25)
 
 
+@pytest.mark.slow
 def test_step_run_batch_and_fmu_agree(cp, record, tmp_path):
     from estimators.filter_fmu import export_filter_fmu
 

@@ -79,6 +79,7 @@ def test_the_fuzzed_fmus_validate(fuzz_targets, kind, label, version):
     assert validate_fmu(str(fuzz_targets(label, version).fmu)) == []
 
 
+@pytest.mark.slow
 def test_the_fuzzer_catches_a_missing_state_check(fuzz_targets, tmp_path):
     """A mutant whose fmi3DoStep skips the state check (allowed in every state): the fuzzer
     reports a forbidden call answered OK, with the replay command."""
