@@ -49,7 +49,7 @@ def check_clocked(clocked: bool, fmi_version: int, what: str) -> None:
 
 def clock_variables(variables: VariableList, groups: Sequence[str], period: float, description: str) -> VariableList:
     """``variables`` with the clock ``sample`` appended (group ``CLOCK``) and the variables of
-    ``groups`` clocked by it.
+    ``groups`` clocked by it (and discrete, as clocked variables are).
 
     Parameters
     ----------
@@ -67,7 +67,7 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
     vr = len(variables.variables)
     out = VariableList()
     for v in variables.variables:
-        out.variables.append(dataclasses.replace(v, clocks=(vr,)) if v.group in groups else v)
+        out.variables.append(dataclasses.replace(v, clocks=(vr,), variability="discrete") if v.group in groups else v)
     out.add(name=CLOCK_NAME, type="Clock", causality="input", variability="discrete", initial=None, start=None,
             unit=None, description=description, group="CLOCK",
             clock=dict(intervalVariability="constant", intervalDecimal=repr(float(period)), priority=0))
