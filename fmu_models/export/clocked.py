@@ -76,7 +76,15 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
 
 def clock_defines(variables: VariableList, period: float) -> list[tuple[str, object]]:
     """The ``model_config.h`` defines of the clocked form (``CLOCK_VR``, ``CLOCK_INTERVAL``
-    [s]); none for an FMU without the clock."""
+    [s]); none for an FMU without the clock.
+
+    Parameters
+    ----------
+    variables
+        The FMU's variables (with the clock from :func:`clock_variables`, or without).
+    period
+        The clock's interval [s].
+    """
     clock = variables.group("CLOCK")
     if not clock:
         return []
