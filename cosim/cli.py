@@ -240,8 +240,9 @@ def _export(args) -> int:
             for n in names:
                 exported = export_component(comps[n], out, args.fmi_version, args.clocked)
                 notes = add_platforms(exported.path, platforms) if platforms else []
-                version = str(read_description(exported.path).fmiVersion)[:1]
-                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {version}.0, "
+                md = read_description(exported.path)
+                clocked = ", clocked" if any(v.type == "Clock" for v in md.modelVariables) else ""
+                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {str(md.fmiVersion)[:1]}.0{clocked}, "
                       f"period {comps[n].period:g} s)")
                 for note in ([exported.note] if exported.note else []) + notes:
                     print(f"note: {note}")

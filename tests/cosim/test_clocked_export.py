@@ -43,7 +43,7 @@ def test_cli_export_fmu_clocked(tmp_path, capsys):
                  "--clocked", "--component", "ekf", "--component", "sensor"]) == 0
     for name in ("ekf", "sensor"):
         assert clocks(tmp_path / "f" / f"{name}.fmu") == [("sample", "input", "constant")]
-    capsys.readouterr()
+    assert "(EstimatorComponent ekf, FMI 3.0, clocked, period 0.01 s)" in capsys.readouterr().out
     assert main(["export-ssp", "seed000_cartpole", "--out", str(tmp_path / "s"), "--clocked"]) == 2
     err = capsys.readouterr().err
     assert "export-ssp: the clocked form needs FMI 3.0" in err and "Traceback" not in err
