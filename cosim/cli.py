@@ -26,6 +26,7 @@ import numpy as np
 
 from fmu_models import get_model, model_names
 from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
+from fmu_models.export.clocked import check_clocked
 from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
 from fmu_models.infra.cli import run_command
 from fmu_models.infra.files import atomic_write
@@ -38,7 +39,7 @@ from .experiments import EXPERIMENTS
 from .fmi.archive import read_description
 from .output import OutputFolder, plot_estimates, save_results
 from .scenario import Scenario
-from .ssp import export_ssp
+from .ssp import export_component, export_ssp
 
 
 def _scenario_dir() -> Path:
@@ -206,6 +207,7 @@ def _export(args) -> int:
 
 
 
+    check_clocked(args.clocked, args.fmi_version, args.command)  # named before anything is written
     platforms = parse_platforms(args.platforms)
     if platforms:
         zig_command()                              # a missing extra is named before anything is written
@@ -228,7 +230,7 @@ def _export(args) -> int:
         with OutputFolder(Path(args.out), args.overwrite) as out:
             if args.command == "export-ssp":
                 result = export_ssp(sc, out, fmi_version=args.fmi_version, name=args.name or path.stem,
-                                    platforms=platforms)
+                                    platforms=platforms, clocked=args.clocked)
                 print(f"wrote {result.archive} (and {result.ssd.name}, resources/ beside it): "
                       f"{len(result.fmus)} FMUs, FMI {args.fmi_version}.0")
                 for note in result.notes:
@@ -236,10 +238,11 @@ def _export(args) -> int:
                 return 0
 
             for n in names:
-                exported = comps[n].export_fmu(out, args.fmi_version)
+                exported = export_component(comps[n], out, args.fmi_version, args.clocked)
                 notes = add_platforms(exported.path, platforms) if platforms else []
-                version = str(read_description(exported.path).fmiVersion)[:1]
-                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {version}.0, "
+                md = read_description(exported.path)
+                clocked = ", clocked" if any(v.type == "Clock" for v in md.modelVariables) else ""
+                print(f"wrote {exported.path} ({type(comps[n]).__name__} {n}, FMI {str(md.fmiVersion)[:1]}.0{clocked}, "
                       f"period {comps[n].period:g} s)")
                 for note in ([exported.note] if exported.note else []) + notes:
                     print(f"note: {note}")
@@ -361,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--out", required=True, help="output directory")
         p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
         p.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
+        p.add_argument("--clocked", action="store_true",
+                       help="FMI 3.0: estimators and signal FMUs with an input clock at their sample period "
+                            "(Co-Simulation with Event Mode, Scheduled Execution)")
         p.add_argument("--platforms", metavar="LIST",
                        help="also build binaries for these platforms (comma-separated: linux64,win64,darwin,"
                             "aarch64-linux); needs pip install -e '.[cross]'")

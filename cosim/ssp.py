@@ -33,6 +33,7 @@ project's master.
 from __future__ import annotations
 
 import contextlib
+import inspect
 import os
 import tempfile
 import zipfile
@@ -42,6 +43,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from fmu_models.errors import ConfigurationError, FMUError
+from fmu_models.export.clocked import check_clocked
 from fmu_models.export.description import xml_attrs
 from fmu_models.export.platforms import add_platforms
 from fmu_models.infra.checks import finite, positive
@@ -53,7 +55,7 @@ from .core.schedule import base_step
 from .fmi.archive import Extraction, read_description
 from .fmi.fmu_component import FMUComponent
 
-__all__ = ["SSPExport", "SSPSystem", "export_ssp", "open_ssp"]
+__all__ = ["SSPExport", "SSPSystem", "export_component", "export_ssp", "open_ssp"]
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
       "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
@@ -156,8 +158,21 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
     return "\n".join(lines) + "\n"
 
 
+def export_component(c, folder: Path, fmi_version: int, clocked: bool) -> ExportedFMU:
+    """The component ``c`` as an FMU in ``folder`` (:meth:`~cosim.core.component.ExportsFMU.export_fmu`
+    in FMI ``fmi_version``); ``clocked``: its clocked form if its ``export_fmu`` takes the
+    option, else its unclocked form with a note saying so."""
+    if not clocked:
+        return c.export_fmu(folder, fmi_version)
+    if "clocked" not in inspect.signature(c.export_fmu).parameters:
+        e = c.export_fmu(folder, fmi_version)
+        note = f"{c.name}: {type(c).__name__} has no clocked form; written unclocked"
+        return ExportedFMU(e.path, e.parameters, "; ".join(n for n in (e.note, note) if n))
+    return c.export_fmu(folder, fmi_version, clocked=True)
+
+
 def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
-               stop_time: float | None = None, platforms: Sequence[str] = ()) -> SSPExport:
+               stop_time: float | None = None, platforms: Sequence[str] = (), clocked: bool = False) -> SSPExport:
     """Write a scenario (or a co-simulation) as an SSP into ``out_dir``.
 
     Parameters
@@ -178,13 +193,19 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
     platforms : sequence of str, optional
         Platforms to cross-compile every FMU for besides this one
         (:func:`fmu_models.export.platforms.add_platforms`; needs the ``cross`` extra).
+    clocked : bool
+        Write the estimators and signal FMUs in their clocked form (FMI 3.0 only,
+        :mod:`fmu_models.export.clocked`): each has an input clock ``sample`` at its sample
+        period, which an FMI 3.0 importer schedules from the FMU itself (no clock connection
+        in the SSD); components without a clocked form are written unclocked (a note says so).
 
     Raises
     ------
     ConfigurationError
-        Components without an FMU form (all named at once), or a connection to a port the
-        exported FMU lacks.
+        Components without an FMU form (all named at once), a connection to a port the
+        exported FMU lacks, or ``clocked`` with FMI 2.0.
     """
+    check_clocked(clocked, fmi_version, "the SSP")
 
     cosim = system if isinstance(system, Cosimulation) else system.cosim
     start = getattr(system, "start_time", 0.0)
@@ -205,7 +226,7 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
                 refused.append(f"component {c.name!r} ({type(c).__name__}) has no FMU form")
                 continue
             try:
-                exported[c.name] = c.export_fmu(resources, fmi_version)
+                exported[c.name] = export_component(c, resources, fmi_version, clocked)
             except ConfigurationError as e:
                 refused.append(str(e))
         if refused:

@@ -64,9 +64,9 @@ __all__ += ["PCRB", "BandTest", "WhitenessTest", "chi2_band", "nees_test", "nis_
             "whiteness_test"]
 
 
-def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None):
+def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None, clocked: bool = False):
     """Export the filter ``filt`` as a Co-Simulation FMU; see
     :func:`estimators.filter_fmu.export_filter_fmu` (parameters ``filt``, ``out_dir``,
-    ``fmi_version``, ``name``, ``file_name``)."""
+    ``fmi_version``, ``name``, ``file_name``, ``clocked``)."""
 
-    return export_filter_fmu(filt, out_dir, fmi_version, name, file_name)
+    return export_filter_fmu(filt, out_dir, fmi_version, name, file_name, clocked)

@@ -39,6 +39,17 @@ communication step (``canHandleVariableCommunicationStepSize="true"``), as
 * between instants the outputs hold the latest estimate; a step shorter than a period only
   advances time.
 
+Clocked form (``clocked=True``, FMI 3.0 only): the FMU has an input clock ``sample``
+(``intervalVariability="constant"``, ``intervalDecimal`` the filter's sample period, first
+activation at the start time) that clocks every input, measurement, valid flag and output;
+Co-Simulation with Event Mode (``hasEventMode="true"``, instantiated with ``eventModeUsed``)
+and Scheduled Execution (the partition of ``sample``, priority 0). Activation 0 shows the
+initial estimate and takes the input; activation ``k >= 1`` is the filter step of instant
+``t_k`` (predicted with the input set at activation ``k - 1``, updated with the measurements
+set at activation ``k``): in Co-Simulation the outputs show it after ``fmi3SetClock`` and
+``fmi3UpdateDiscreteStates`` commits it, in Scheduled Execution ``fmi3ActivateModelPartition``
+runs it. Nothing runs between activations; a ``fmi3DoStep`` past a due activation is refused.
+
 See ``c/filter_core.h``.
 """
 from __future__ import annotations
@@ -48,6 +59,7 @@ from pathlib import Path
 import casadi as ca
 
 from fmu_models.errors import ConfigurationError, TypeMismatchError
+from fmu_models.export.clocked import check_clocked, clock_defines, clock_variables
 from fmu_models.export.config import c_array, config_header, work_sizes
 from fmu_models.export.description import Description, Unknown, fmi2, fmi3
 from fmu_models.export.pack import pack_fmu
@@ -86,7 +98,7 @@ def filter_parameters(filt) -> dict[str, float]:
 
 
 def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None = None,
-                      file_name: str | None = None) -> Path:
+                      file_name: str | None = None, clocked: bool = False) -> Path:
     """Export ``filt`` (any filter of :mod:`estimators`, on any model) as a Co-Simulation FMU;
     returns the ``.fmu`` path.
 
@@ -102,6 +114,8 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``).
     file_name : str, optional
         The FMU file name (default ``<name>.fmu``).
+    clocked : bool
+        Write the clocked form (FMI 3.0 only; see the module documentation).
 
     Raises
     ------
@@ -109,8 +123,10 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         Not a filter, or a filter whose adaptation is not all in its step (an IAE with
         ``form="full"``).
     ConfigurationError
-        A non-diagonal P, Q or R, a bad name, or parameters the FMU cannot hold.
+        A non-diagonal P, Q or R, a bad name, or parameters the FMU cannot hold;
+        ``clocked=True`` with ``fmi_version=2`` (FMI 2.0 has no clocks).
     """
+    check_clocked(clocked, fmi_version, "the filter FMU")
     if not _is_filter(filt):
         raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
     if not filt.supports_batch:
@@ -192,6 +208,9 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
               unit=None, description=f"measurement {n} is valid (false: its update is skipped)", group="VALID")
     v.add(name="time", type="Real", causality="independent", variability="continuous", initial=None, start=None,
           unit="s", description="simulation time", group="TIME")
+    if clocked:
+        v = clock_variables(v, ("U", "Y", "OUT", "VALID"), s.dt,
+                            f"the filter's sample instants (every {s.dt:g} s from the start time)")
     names = [x.name for x in v.variables]
     if len(set(names)) != len(names):
         dup = sorted({x for x in names if names.count(x) > 1})
@@ -216,7 +235,7 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
             defines=[("NSTATE", max(nstate, 1)), ("NFIXED", max(nfixed, 1)), ("NDIAG", max(ndiag, 1)),
                      ("PERIOD", repr(s.dt)), ("N_LESS", len(less)),
                      ("INIT_NOUT", len(state_names) + len(fixed_names)), ("STEP_NIN", len(names_in)),
-                     ("STEP_NOUT", len(names_out))],
+                     ("STEP_NOUT", len(names_out))] + clock_defines(v, s.dt),
             tables=[c_array("int", "LESS_LO", [a for a, _ in less]), c_array("int", "LESS_HI", [b for _, b in less]),
                     c_array("int", "INIT_DST", [0] * len(state_names) + [1] * len(fixed_names)),
                     c_array("int", "INIT_OFF", [st_off[n] for n in state_names] + [fx_off[n] for n in fixed_names]),
@@ -228,7 +247,7 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         (folder / "model_config.h").write_text(header)
         return ["model_funcs.c"]
 
-    y_idx = v.indices(["Y", "VALID"])
+    y_idx = v.indices(["Y", "VALID"]) + v.indices(["CLOCK"])
     p_idx = v.indices(["P"])
     out_idx = v.indices(["OUT"])
 
@@ -238,9 +257,10 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
                                     f"of {s.dt:g} s (pendulum-cosim)",
                         variables=v.variables,
                         outputs=[Unknown(k, y_idx, ["dependent"] * len(y_idx)) for k in out_idx],
-                        initial_unknowns=[Unknown(k, p_idx) for k in out_idx],
-                        variable_step=True, default_step=s.dt, source_files=c_files)
+                        initial_unknowns=[] if clocked else [Unknown(k, p_idx) for k in out_idx],
+                        variable_step=True, default_step=s.dt, source_files=c_files, clocked=clocked)
         return fmi2(d) if fmi_version == 2 else fmi3(d)
 
     return pack_fmu(name, "filter", fmi_version, generate, xml, out_dir,
-                    fingerprint=f"{filt.cache_key}|{rows}|{s.dt}|{names_in}|{names_out}", file_name=file_name)
+                    fingerprint=f"{filt.cache_key}|{rows}|{s.dt}|{names_in}|{names_out}|{clocked}",
+                    file_name=file_name)

@@ -144,12 +144,13 @@ class EstimatorComponent(Component, kind="estimator"):
         """Keep the input read at ``t`` for the next prediction."""
         self._u_prev = np.array(u[: self._nu])
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """The filter as an estimator FMU (:func:`estimators.filter_fmu.export_filter_fmu`),
-        with the same timing as this component. Its outputs are the state estimate,
-        ``P_<state>`` and ``nis`` as here (not the off-diagonal ``P_<i>_<j>``), and more."""
+    def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
+        """The filter as an estimator FMU (:func:`estimators.filter_fmu.export_filter_fmu`;
+        ``clocked``: its clocked form, FMI 3.0), with the same timing as this component. Its
+        outputs are the state estimate, ``P_<state>`` and ``nis`` as here (not the
+        off-diagonal ``P_<i>_<j>``), and more."""
 
         filt = self.make_filter()
         path = export_filter_fmu(filt, folder, fmi_version, name=self._fmu_identifier(),
-                                 file_name=f"{self.name}.fmu")
+                                 file_name=f"{self.name}.fmu", clocked=clocked)
         return ExportedFMU(path, filter_parameters(filt))

@@ -103,9 +103,9 @@ class Sensor(Component, kind="sensor"):
         if self.delay:
             self._queue.append(self._measure(t, u))
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+    def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This sensor as a signal FMU (kind ``sensor``, :mod:`fmu_models.export.signal_fmu`) drawing
-        from the counter generator; refused with a delay."""
+        from the counter generator (``clocked``: its clocked form, FMI 3.0); refused with a delay."""
 
         if self.delay:
             raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
@@ -117,7 +117,7 @@ class Sensor(Component, kind="sensor"):
                                            "quantisation step (0: none)"),
                           ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
                           description=f"sensor {self.name}: y = q(s + bias + std z) (pendulum-cosim)")
-        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu")
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
         return ExportedFMU(path, spec.parameters(), _generator_note(self))
 
 
@@ -176,9 +176,10 @@ class ProcessNoise(Component, kind="process_noise"):
         """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
         return self.L @ self._noise.at(t)
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+    def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
-        drawing from the counter generator; refused for a non-diagonal ``cov``."""
+        drawing from the counter generator (``clocked``: its clocked form, FMI 3.0); refused for a
+        non-diagonal ``cov``."""
 
         if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "
@@ -188,7 +189,7 @@ class ProcessNoise(Component, kind="process_noise"):
                                                "standard deviation"),
                           ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
                           description=f"Gaussian noise {self.name} (pendulum-cosim)")
-        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu")
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
         return ExportedFMU(path, spec.parameters(), _generator_note(self))
 
 

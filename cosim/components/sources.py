@@ -29,13 +29,14 @@ class _Source(Component):
         """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`fmu_models.export.signal_fmu`)."""
         raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
-        """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``."""
+    def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
+        """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``
+        (``clocked``: its clocked form, FMI 3.0)."""
 
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,
                           description=f"{type(self).__name__} source {self.name} (pendulum-cosim)")
-        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu")
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
         return ExportedFMU(path, spec.parameters())
 
     def output(self, t, u):

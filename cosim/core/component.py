@@ -262,10 +262,11 @@ class BoundCalls:
 class ExportsFMU(Protocol):
     """A component that can be written as a Co-Simulation FMU."""
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+    def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """Write the component as ``<folder>/<name>.fmu`` with the component's port names
-        (FMI ``fmi_version`` 2 or 3); raises ConfigurationError (saying why) for a
-        configuration without an FMU form."""
+        (FMI ``fmi_version`` 2 or 3); ``clocked``: its clocked form where it has one (FMI 3.0,
+        :mod:`fmu_models.export.clocked`; without one, the unclocked form and a note); raises
+        ConfigurationError (saying why) for a configuration without an FMU form."""
 
 
 @runtime_checkable

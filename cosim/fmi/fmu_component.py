@@ -49,6 +49,7 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
+from fmu_models.export.clocked import check_clocked
 from fmu_models.export.pack import FMI_VERSIONS, library_suffix, platform_dir
 from fmu_models.export.plant_fmu import build_fmu
 from fmu_models.infra.checks import finite, positive
@@ -374,13 +375,23 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         return (f"FMUComponent({self.name!r}, {self.path.name}, FMI {self.version}.0 "
                 f"{self.interface.upper()}, period={self.period})")
 
-    def export_fmu(self, folder: Path, fmi_version: int = 2) -> ExportedFMU:
+    def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """The FMU as ``<folder>/<name>.fmu``, with this component's parameters and start
         values. A plant built from the project's model is written in ``fmi_version`` (built
         again from its model if the run used the other version); an FMU file is copied as it
-        is, and an ``fmi_version`` other than its own is said in the note, not converted."""
+        is, and an ``fmi_version`` other than its own is said in the note, not converted.
+        ``clocked`` (FMI 3.0 only): the FMU has no clocked form; it is written unclocked,
+        which the note says."""
         if fmi_version not in FMI_VERSIONS:
             raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
+        check_clocked(clocked, fmi_version, self.name)
+        exported = self._export_fmu(folder, fmi_version)
+        if not clocked:
+            return exported
+        note = f"{self.name}: an FMU component has no clocked form; written unclocked"
+        return ExportedFMU(exported.path, exported.parameters, "; ".join(n for n in (exported.note, note) if n))
+
+    def _export_fmu(self, folder: Path, fmi_version: int) -> ExportedFMU:
         if self.clock_model is not None:
             raise ConfigurationError(f"{self.name}: an FMU with clocks has no SSP form here (the SSP 1.0 files "
                                      "written have no clock connections)")

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import quoteattr
 
+from ..errors import ConfigurationError
 from ..infra.version import VERSION
 
 __all__ = ["SYMBOLS", "Description", "Unknown", "base_units", "fmi2", "fmi3", "xml_attrs"]
@@ -92,6 +93,9 @@ class Description:
         Enumeration types: name -> [(item, value, description)].
     source_files : sequence of str
         The C files of ``sources/`` to compile.
+    clocked : bool
+        FMI 3.0: the FMU has clocks (``Clock`` variables): its Co-Simulation interface has
+        Event Mode (``hasEventMode``) and it has a Scheduled Execution interface.
     """
 
     model_name: str
@@ -109,6 +113,7 @@ class Description:
     stop_time: float = 5.0
     enumerations: dict = field(default_factory=dict)
     source_files: Sequence[str] = ()
+    clocked: bool = False
 
 
 def _units(variables) -> list[str]:
@@ -137,6 +142,8 @@ def _unknown(tag: str, u: Unknown, key: str, shift: int, indent: int) -> str:
 
 def fmi2(d: Description) -> str:
     """The FMI 2.0 model description."""
+    if d.clocked or any(v.type == "Clock" for v in d.variables):
+        raise ConfigurationError(f"{d.identifier}: clocks are FMI 3.0 only; an FMI 2.0 FMU cannot have them")
     caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUstate="true", canSerializeFMUstate="true",
                 providesDirectionalDerivative="true" if d.directional else "false",
                 canNotUseMemoryManagementFunctions="false")
@@ -200,8 +207,11 @@ def fmi3(d: Description) -> str:
         out.append(f"  <ModelExchange{xml_attrs(**caps, needsCompletedIntegratorStep='false')}/>")
     variable = "true" if d.variable_step else "false"
     cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=variable, maxOutputDerivativeOrder=0,
-                hasEventMode="false", providesIntermediateUpdate="false")
+                hasEventMode="true" if d.clocked else "false", providesIntermediateUpdate="false")
     out.append(f"  <CoSimulation{cs}/>")
+    if d.clocked:
+        se = {k: v for k, v in caps.items() if k != "providesDirectionalDerivative"}
+        out.append(f"  <ScheduledExecution{xml_attrs(**se)}/>")
     out += _units(d.variables)
     if d.enumerations:
         types = "".join(f"<EnumerationType{xml_attrs(name=n)}>{_items(items)}</EnumerationType>"
@@ -214,6 +224,11 @@ def fmi3(d: Description) -> str:
     for v in sorted(d.variables, key=lambda v: v.causality != "independent"):
         a = dict(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
                  variability=v.variability, initial=v.initial)
+        if v.clocks:
+            a["clocks"] = " ".join(str(k) for k in v.clocks)
+        if v.type == "Clock":
+            out.append(f"    <Clock{xml_attrs(**a, **(v.clock or {}))}/>")
+            continue
         tag = _FMI3_TYPES[v.type]
         if v.type == "Real":
             deriv = None if v.derivative_of is None else v.derivative_of - 1

@@ -27,8 +27,8 @@ class FmuVariable:
         FMI name.
     vr : int
         Value reference (the ModelVariables index is ``vr + 1``).
-    type : {"Real", "Integer", "Enumeration", "Boolean"}
-        FMI 2.0 type name (FMI 3.0: Float64, Int32, Enumeration, Boolean).
+    type : {"Real", "Integer", "Enumeration", "Boolean", "Clock"}
+        FMI 2.0 type name (FMI 3.0: Float64, Int32, Enumeration, Boolean; Clock: FMI 3.0 only).
     causality, variability, initial : str
         As the FMI standard (``initial`` may be None).
     start : float, int, bool or None
@@ -45,6 +45,12 @@ class FmuVariable:
         The type of an Enumeration.
     min, max : int, optional
         Range of an Integer or Enumeration.
+    clocks : tuple of int
+        Value references of the clocks of a clocked variable (FMI 3.0 ``clocks``); empty:
+        not clocked.
+    clock : dict, optional
+        For ``type="Clock"`` (FMI 3.0 only): its attributes (``intervalVariability``,
+        ``intervalDecimal`` [s], ``shiftDecimal`` [s], ``priority``, ...).
     """
 
     name: str
@@ -62,6 +68,8 @@ class FmuVariable:
     declared_type: str | None = None
     min: int | None = None
     max: int | None = None
+    clocks: tuple[int, ...] = ()
+    clock: dict | None = None
 
 
 class VariableList:

@@ -18,6 +18,7 @@ import sys
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.etree import ElementTree
 
 import fmpy
 from fmpy import read_model_description
@@ -34,7 +35,7 @@ SAN_ENV = {"ASAN_OPTIONS": "detect_leaks=1:halt_on_error=1:abort_on_error=0",
 SANITIZER_MARKS = ("ERROR: AddressSanitizer", "ERROR: LeakSanitizer", "runtime error:",
                    "UndefinedBehaviorSanitizer")
 _TYPES = {"Real": "R", "Float64": "R", "Integer": "I", "Int32": "I", "Enumeration": "L", "Int64": "L",
-          "Boolean": "B"}
+          "Boolean": "B", "Clock": "K"}
 _CAUSALITY = {"parameter": "p", "calculatedParameter": "c", "input": "i", "output": "o", "local": "l",
               "independent": "t", "structuralParameter": "p"}
 _VARIABILITY = {"constant": "c", "fixed": "f", "tunable": "t", "discrete": "d", "continuous": "n"}
@@ -54,6 +55,7 @@ class Target:
     cs: bool
     me: bool
     directional: bool
+    clock: tuple | None = None      # a clocked FMU: (its input clock's value reference, interval [s])
 
 
 @dataclass
@@ -99,7 +101,7 @@ def variable_table(md) -> str:
     states = {v.derivative.valueReference for v in md.modelVariables if v.derivative is not None}
     lines = []
     for v in md.modelVariables:
-        flag = "S" if v.valueReference in states else "D" if v.derivative is not None else "-"
+        flag = "S" if v.valueReference in states else "D" if v.derivative is not None else "K" if v.clocks else "-"
         start = "-" if v.start in (None, "") else str(int(v.start == "true") if v.type == "Boolean"
                                                       and isinstance(v.start, str) else v.start)
         lines.append(f"{v.valueReference} {_TYPES.get(v.type, 'R')} {_CAUSALITY.get(v.causality, 'l')} "
@@ -149,9 +151,14 @@ def build_target(fmu: str | Path, folder: str | Path, mutate: dict | None = None
     _write_if_changed(vars_file, variable_table(md).encode())
     cs = md.coSimulation is not None
     iface = md.coSimulation or md.modelExchange
+    clock = None
+    if version == 3 and any(v.type == "Clock" for v in md.modelVariables):   # fmpy reads no intervalDecimal
+        with zipfile.ZipFile(fmu) as z:
+            k = ElementTree.fromstring(z.read("modelDescription.xml")).find("ModelVariables/Clock")
+        clock = (int(k.get("valueReference")), float(k.get("intervalDecimal")))
     return Target(fmu, version, lib, build_driver(folder), vars_file,
                   md.guid if version == 2 else md.instantiationToken, cs, md.modelExchange is not None,
-                  bool(iface.providesDirectionalDerivative))
+                  bool(iface.providesDirectionalDerivative), clock)
 
 
 def command(t: Target, seed: int, first: int, count: int, calls: int = 60, timeout: float = 10.0,
@@ -159,7 +166,8 @@ def command(t: Target, seed: int, first: int, count: int, calls: int = 60, timeo
     """The driver's command line for sequences ``first`` .. ``first + count - 1`` of ``seed``."""
     return [str(t.driver), f"lib={t.lib}", f"fmi={t.version}", f"cs={int(t.cs)}", f"me={int(t.me)}",
             f"dd={int(t.directional)}", f"token={t.token}", f"vars={t.vars_file}", f"seed={seed}",
-            f"first={first}", f"count={count}", f"calls={calls}", f"timeout={timeout}", f"trace={int(trace)}"]
+            f"first={first}", f"count={count}", f"calls={calls}", f"timeout={timeout}", f"trace={int(trace)}",
+            *([f"clock={t.clock[0]}", f"interval={t.clock[1]!r}"] if t.clock else [])]
 
 
 def replay_command(t: Target, seed: int, seq: int) -> str:
@@ -201,13 +209,19 @@ def run(t: Target, seed: int, first: int = 0, count: int = 100, calls: int = 60,
     return Result(outcome, counts, report, r.returncode, cmd)
 
 
-#: The FMUs the fuzzer covers: {kind: [labels]}.
-FMU_KINDS = {"plant": ["cartpole", "iwp"], "estimator": ["ekf", "mfiae"], "signal": ["prbs", "sensor"]}
+#: The FMUs the fuzzer covers: {kind: [labels]}. The clocked kind (the clocked form of an
+#: estimator and a signal FMU) exists in FMI 3.0 only (:data:`FMI3_ONLY`).
+FMU_KINDS = {"plant": ["cartpole", "iwp"], "estimator": ["ekf", "mfiae"], "signal": ["prbs", "sensor"],
+             "clocked": ["ekf_clocked", "sensor_clocked"]}
+#: The kinds without an FMI 2.0 form.
+FMI3_ONLY = ("clocked",)
 
 
 def build_fmu_for(label: str, version: int, folder: str | Path) -> Path:
     """Build one of the project's FMUs (a label of :data:`FMU_KINDS`) in FMI ``version``."""
     folder = Path(folder) / f"fmi{version}"
+    clocked = label.endswith("_clocked")
+    label = label.removesuffix("_clocked")
     if label in ("cartpole", "iwp"):
         from fmu_models import build_fmu
 
@@ -220,7 +234,8 @@ def build_fmu_for(label: str, version: int, folder: str | Path) -> Path:
         cp = discretize(get_model("cartpole"), 0.01)
         x0 = [0.5, 0.0, 1.8, 0.5]
         filt = EKF(cp, x0, 1.0, 0.2, 0.1) if label == "ekf" else MFIAE(cp, x0, 1.0, 1e-3, 10.0)
-        return export_filter_fmu(filt, folder, version, name=f"Fuzz{label.upper()}")
+        return export_filter_fmu(filt, folder, version, name=f"Fuzz{label.upper()}{'Clocked' * clocked}",
+                                 clocked=clocked)
     from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 
     if label == "prbs":
@@ -235,7 +250,7 @@ def build_fmu_for(label: str, version: int, folder: str | Path) -> Path:
                           + channel_params("bias", sig, [0.0, 0.1], "real", "bias")
                           + channel_params("quantization", sig, [0.0, 0.01], "nonnegative", "quantisation"),
                           ints=[("seed", 3, 0, 2**31 - 1, "seed")])
-    return build_signal_fmu(spec, folder, version, f"Fuzz{label.capitalize()}")
+    return build_signal_fmu(spec, folder, version, f"Fuzz{label.capitalize()}{'Clocked' * clocked}", clocked=clocked)
 
 
 #: The regression cases of cases.c (the exact call sequences of the classes found).

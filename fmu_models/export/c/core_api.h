@@ -15,6 +15,18 @@
 
 #define ERRLEN 400
 
+/* The clocked form (FMI 3.0 only): model_config.h defines CLOCK_VR, the value reference of
+ * the input clock `sample` (constant interval: the core's period, shift 0), which clocks the
+ * core's inputs and outputs; the core's CoreData then holds `ClockState clk`. The wrapper
+ * drives it: in Co-Simulation with Event Mode fmi3SetClock begins an activation and
+ * fmi3UpdateDiscreteStates ends it; in Scheduled Execution fmi3ActivateModelPartition does
+ * both (the outputs read after it). Activation n is due at t0 + n period. */
+typedef struct {
+    long long n;     /* activations ended */
+    int active;      /* Co-Simulation: the clock is active (set in this super-dense instant) */
+    int fresh;       /* Scheduled Execution: the outputs are computed and no input was set since */
+} ClockState;
+
 /* the core's data types and capabilities */
 #include "core.h"
 
@@ -53,5 +65,18 @@ void core_get_states(const CoreData *d, double x[]);
  * sensitivity[i] = sum_k d unknown_i / d known_k * seed[k] */
 int core_directional(CoreWork *wk, const CoreData *d, const unsigned unk[], size_t nU, const unsigned kn[],
                      size_t nK, const double seed[], double sens[], char *err);
+
+#ifdef CLOCK_VR
+/* 1 if the variable vr is clocked by the sample clock */
+int core_is_clocked(unsigned vr);
+/* where the next activation lies against t: 0 after it, 1 at it (within the tolerance), 2
+ * before it (missed) */
+int core_clock_due(const CoreData *d, double t);
+double core_clock_next(const CoreData *d);
+/* the activation at the current time begins (the outputs then show it) / ends (its update is
+ * committed, the next activation is due) */
+int core_clock_begin(CoreWork *wk, CoreData *d, char *err);
+int core_clock_end(CoreWork *wk, CoreData *d, char *err);
+#endif
 
 #endif

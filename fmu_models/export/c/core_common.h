@@ -178,6 +178,16 @@ static inline int set_int_parameters(long long ip[], const unsigned vr[], size_t
     return 0;
 }
 
+/* core_clock_due and core_clock_next of the clocked form (core_api.h), at file scope: the
+ * activations t0 + n PERIOD_EXPR (an expression of d) for n = d->clk.n. */
+#define CORE_CLOCK_TIMING(PERIOD_EXPR)                                                                 \
+    double core_clock_next(const CoreData *d) { return d->t0 + (double)d->clk.n * (PERIOD_EXPR); }     \
+    int core_clock_due(const CoreData *d, double t) {                                                   \
+        double P = (PERIOD_EXPR);                                                                       \
+        if (at_instant(t, d->t0, P, d->clk.n)) return 1;                                                \
+        return (double)d->clk.n < (t - d->t0) / P ? 2 : 0;                                              \
+    }
+
 #define CORE_NO_MODEL_EXCHANGE(WHAT)                                                                   \
     int core_derivatives(CoreWork *wk, const CoreData *d, double dx[], char *err) {                     \
         (void)wk; (void)d; (void)dx;                                                                    \

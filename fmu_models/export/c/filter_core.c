@@ -41,6 +41,7 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     d->t0 = d->time;
     d->kc = 0;
     d->cand_ok = 0;
+    memset(&d->clk, 0, sizeof d->clk);
     return 0;
 }
 
@@ -179,7 +180,36 @@ int core_check(const CoreData *d, char *err) {
     if (check_finite(d->u, NU, "u", err) || check_finite(d->u_prev, NU, "u_prev", err)
         || check_finite(d->state, NSTATE, "state", err))
         return 1;
+    if (!(d->clk.n >= 0 && (double)d->clk.n <= MAX_INSTANTS) || (d->clk.active != 0 && d->clk.active != 1)
+        || (d->clk.fresh != 0 && d->clk.fresh != 1))
+        FAIL("the FMU state is invalid: clock state %lld, %d, %d", d->clk.n, d->clk.active, d->clk.fresh);
+#ifdef CLOCK_VR
+    if (d->clk.n > 0 && d->kc != d->clk.n - 1)
+        FAIL("the FMU state is invalid: %lld clock activations, committed instant %lld", d->clk.n, d->kc);
+#endif
     return 0;
 }
+
+#ifdef CLOCK_VR
+/* ------------------------------------------------------------------ the clocked form */
+CORE_CLOCK_TIMING(PERIOD)
+
+int core_is_clocked(unsigned r) {
+    return IN(r, VR_U, NU) || IN(r, VR_Y, NY) || IN(r, VR_VALID, NY) || IN(r, VR_OUT, NOUT);
+}
+
+int core_clock_begin(CoreWork *wk, CoreData *d, char *err) {
+    (void)wk; (void)err;
+    d->cand_ok = 0;                      /* activation k >= 1: the outputs show its update */
+    return 0;
+}
+
+int core_clock_end(CoreWork *wk, CoreData *d, char *err) {
+    if (d->clk.n > 0 && commit(wk, d, err)) return 1;     /* activation 0: the initial estimate */
+    memcpy(d->u_prev, d->u, sizeof d->u);                 /* the input predicts the next update */
+    d->clk.n += 1;
+    return 0;
+}
+#endif
 
 CORE_NO_MODEL_EXCHANGE("an estimator FMU")

@@ -21,6 +21,13 @@
  *     only advances time.
  * At the start time the outputs are the initial estimate. The estimate depends directly on
  * y (and the valid flags), never on u at the same instant.
+ *
+ * Clocked form (CLOCK_VR defined, FMI 3.0; core_api.h): the inputs, measurements, valid
+ * flags and outputs are clocked by the input clock `sample` (interval PERIOD, first activation
+ * at the start time). Activation 0 shows the initial estimate and takes the input u_0;
+ * activation k >= 1 is the update of instant t_k, predicted with the input set at activation
+ * k - 1 and updated with the measurements set at activation k; the outputs show it as soon as
+ * the activation begins, and its end commits it. No update runs between activations.
  */
 #ifndef FILTER_CORE_H
 #define FILTER_CORE_H
@@ -55,6 +62,7 @@ typedef struct {
     double diag[NDIAG];          /* diagnostics of the committed step */
     double cand_state[NSTATE];   /* the candidate step */
     double cand_diag[NDIAG];
+    ClockState clk;              /* the clocked form: activation n is the instant t0 + n PERIOD */
 } CoreData;
 
 typedef struct {

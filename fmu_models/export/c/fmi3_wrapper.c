@@ -9,9 +9,27 @@
  * cannot go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions
  * (fmi3SetFMUState restores a saved state) and, for debugging, the getters are accepted,
  * nothing else. The log callback is called only for the enabled categories: none when the
- * instance was created with loggingOn = false (errors included), as the standard says. The
- * Co-Simulation interface has no Event Mode (hasEventMode = false): eventModeUsed = true is
- * refused. */
+ * instance was created with loggingOn = false (errors included), as the standard says.
+ *
+ * Unclocked form: the Co-Simulation interface has no Event Mode (hasEventMode = false):
+ * eventModeUsed = true is refused; there is no Scheduled Execution interface.
+ *
+ * Clocked form (model_config.h defines CLOCK_VR; core_api.h): the input clock `sample`
+ * (intervalVariability constant, the core's period, first activation at the start time)
+ * clocks the core's inputs and outputs, which are set and got only while it is active:
+ *   - Co-Simulation with Event Mode (eventModeUsed = true required): after
+ *     fmi3ExitInitializationMode the instance is in Event Mode; at each activation time the
+ *     importer enters Event Mode, activates the clock with fmi3SetClock (only when it is due),
+ *     sets the clocked inputs, gets the clocked outputs and ends the super-dense instant with
+ *     fmi3UpdateDiscreteStates (which commits the activation). fmi3DoStep only advances time
+ *     and refuses to step past a due activation or from one not made; fmi3EnterStepMode is
+ *     refused while the clock is active.
+ *   - Scheduled Execution: after fmi3ExitInitializationMode the instance is in Clock
+ *     Activation Mode; inputs are set before fmi3ActivateModelPartition(sample, t), which runs
+ *     the activation due at t, and the clocked variables are got after it (not after a set
+ *     without an activation in between, as the standard says).
+ * The clock cannot be deactivated, has no fraction form, and its interval and shift cannot be
+ * set; fmi3GetIntervalDecimal and fmi3GetShiftDecimal answer the declared ones. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -21,7 +39,7 @@
 #include "core_api.h"
 #include "wrapper_modes.h"
 
-typedef enum { ME, CS } Kind;
+typedef enum { ME, CS, SE } Kind;   /* = KIND_CODE */
 
 typedef struct {
     CoreData d;
@@ -58,7 +76,11 @@ static void mem_free(Instance *c, void *p) { (void)c; free(p); }
 #define STATUS fmi3Status
 #define STATUS_OK fmi3OK
 #define STATUS_ERROR fmi3Error
-#define IS_CS(c) ((c)->kind == CS)
+#define IS_CS(c) ((c)->kind != ME)          /* Co-Simulation or Scheduled Execution */
+#define KIND_CODE(c) ((int)(c)->kind)
+#ifdef CLOCK_VR
+#define CS_EXTRA_STATES B(M_EVENT)
+#endif
 #define ERROR_CALLS "fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions and (values for debugging only) the getters"
 #include "wrapper_common.h"
 
@@ -68,12 +90,49 @@ static void mem_free(Instance *c, void *p) { (void)c; free(p); }
  * the getters answer with values for debugging only (as FMI 2.0's tables and the Terminated
  * state's note say). */
 #define CS_RUN B(M_STEP)
+/* the Initialized states of a Co-Simulation or Scheduled Execution instance (Event Mode and
+ * Clock Activation Mode: the clocked form only) */
+#define CS_INITIALIZED (B(M_STEP) | B(M_EVENT) | B(M_ACTIVATION))
 #define ME_RUN (B(M_EVENT) | B(M_CONT))
-#define GET_CS (B(M_INIT) | CS_RUN | B(M_TERMINATED) | B(M_ERROR))
+#define GET_CS (B(M_INIT) | CS_INITIALIZED | B(M_TERMINATED) | B(M_ERROR))
 #define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED) | B(M_ERROR))
-#define SET_CS (B(M_INSTANTIATED) | B(M_INIT) | CS_RUN)
+#define SET_CS (B(M_INSTANTIATED) | B(M_INIT) | CS_INITIALIZED)
 #define SET_FLOAT_ME (B(M_INSTANTIATED) | B(M_INIT) | ME_RUN)
 #define SET_DISCRETE_ME (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT))   /* not in Continuous-Time Mode */
+
+#ifdef CLOCK_VR
+/* 0 if the variables vr[] may be got (set = 0) or set (set = 1) now, else the call is refused:
+ * clocked variables only while the clock is active (Co-Simulation: in Event Mode after
+ * fmi3SetClock, before fmi3UpdateDiscreteStates; Scheduled Execution: set before an
+ * activation, got after one and before any set), and at any time before the run (and, for
+ * debugging, after it). */
+static int clock_gate(Instance *c, const char *fn, const fmi3ValueReference vr[], size_t n, int set) {
+    if (B(c->mode) & (B(M_INSTANTIATED) | B(M_INIT) | B(M_TERMINATED) | B(M_ERROR))) return 0;
+    for (size_t i = 0; i < n; i++) {
+        const char *name;
+        if (vr[i] >= N_VARS || !core_is_clocked(vr[i])) continue;
+        name = VAR_NAMES[vr[i]];
+        if (c->kind == SE) {
+            if (set || c->d.clk.fresh) continue;
+            fail(c, fn, "%s is clocked by the clock sample: get it after fmi3ActivateModelPartition, not before the "
+                        "first activation nor after a set without an activation in between", name);
+            return 1;
+        }
+        if (c->mode == M_EVENT && c->d.clk.active) continue;
+        fail(c, fn, "%s is clocked by the clock sample, which is not active (%s): %s it in Event Mode after "
+                    "fmi3SetClock activated the clock, before fmi3UpdateDiscreteStates", name, mode_name(c->mode),
+             set ? "set" : "get");
+        return 1;
+    }
+    return 0;
+}
+#define CLOCK_GATE(fn, vr, n, set) do { if (clock_gate(c, fn, vr, n, set)) return fmi3Error; } while (0)
+/* Scheduled Execution: after a set, no get before the next activation */
+#define AFTER_SET(n) do { if (c->kind == SE && (n)) c->d.clk.fresh = 0; } while (0)
+#else
+#define CLOCK_GATE(fn, vr, n, set) do { } while (0)
+#define AFTER_SET(n) do { } while (0)
+#endif
 
 /* ------------------------------------------------------------------ lifecycle */
 const char *fmi3GetVersion(void) { return fmi3Version; }
@@ -134,9 +193,15 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3
                                          fmi3IntermediateUpdateCallback upd) {
     const char *fn = "fmi3InstantiateCoSimulation";
     (void)res; (void)visible; (void)earlyReturnAllowed; (void)req; (void)upd;
+#ifdef CLOCK_VR
+    if (!eventModeUsed)
+        return refuse_instance(logging, env, log, fn,
+                               "eventModeUsed = false, but this FMU has clocks: the standard requires eventModeUsed = true");
+#else
     if (eventModeUsed)
         return refuse_instance(logging, env, log, fn,
                                "eventModeUsed = true, but this FMU has no Event Mode in Co-Simulation (hasEventMode = false)");
+#endif
     if (nreq)
         return refuse_instance(logging, env, log, fn,
                                "requiredIntermediateVariables given, but no variable can be accessed in Intermediate "
@@ -149,9 +214,14 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String name, fmi3String token
                                                fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
                                                fmi3ClockUpdateCallback cu, fmi3LockPreemptionCallback lp,
                                                fmi3UnlockPreemptionCallback up) {
-    (void)name; (void)token; (void)res; (void)visible; (void)cu; (void)lp; (void)up;
+    (void)res; (void)visible; (void)cu; (void)lp; (void)up;   /* no output or countdown clocks: no clock update */
+#ifdef CLOCK_VR
+    return instantiate(SE, "fmi3InstantiateScheduledExecution", name, token, logging, env, log);
+#else
+    (void)name; (void)token;
     return refuse_instance(logging, env, log, "fmi3InstantiateScheduledExecution",
                            "this FMU has no Scheduled Execution interface");
+#endif
 }
 
 void fmi3FreeInstance(fmi3Instance inst) {
@@ -177,20 +247,26 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance inst) {
     ALLOW("fmi3ExitInitializationMode", B(M_INIT), B(M_INIT));
     BEGIN_CHANGE(c);
     if (core_exit_init(&c->wk, &c->d, c->err)) return undo(c, "fmi3ExitInitializationMode");
+#ifdef CLOCK_VR
+    c->mode = c->kind == SE ? M_ACTIVATION : M_EVENT;   /* Co-Simulation: eventModeUsed = true */
+#else
     c->mode = c->kind == CS ? M_STEP : M_EVENT;   /* Co-Simulation without Event Mode: Step Mode */
+#endif
     return fmi3OK;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance inst) {
     ALLOW("fmi3EnterEventMode", CS_RUN, B(M_CONT));
+#ifndef CLOCK_VR
     if (IS_CS(c))
         return fail(c, "fmi3EnterEventMode", "this Co-Simulation instance has no Event Mode (hasEventMode = false)");
+#endif
     c->mode = M_EVENT;
     return fmi3OK;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance inst) {
-    ALLOW("fmi3Terminate", CS_RUN, ME_RUN);
+    ALLOW("fmi3Terminate", CS_INITIALIZED, ME_RUN);
     c->mode = M_TERMINATED;
     return fmi3OK;
 }
@@ -211,29 +287,34 @@ fmi3Status fmi3Reset(fmi3Instance inst) {
 fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv) {
     ALLOW("fmi3GetFloat64", GET_CS, GET_ME);
     VALUES("fmi3GetFloat64", vr, n, v, nv);
+    CLOCK_GATE("fmi3GetFloat64", vr, n, 0);
     return core(c, "fmi3GetFloat64", core_get_real(&c->wk, &c->d, vr, n, v, c->err));
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
     ALLOW("fmi3SetFloat64", SET_CS, SET_FLOAT_ME);
     VALUES("fmi3SetFloat64", vr, n, v, nv);
+    CLOCK_GATE("fmi3SetFloat64", vr, n, 1);
     BEGIN_CHANGE(c);
     if (core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err)) return undo(c, "fmi3SetFloat64");
+    AFTER_SET(n);
     return fmi3OK;
 }
 
 /* Integer-valued variables: the core says which width each has (Enumerations use Int64). */
 #define INT_GET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
-    long long tmp; ALLOW(#fn, GET_CS, GET_ME); VALUES(#fn, vr, n, v, nv); \
+    long long tmp; ALLOW(#fn, GET_CS, GET_ME); VALUES(#fn, vr, n, v, nv); CLOCK_GATE(#fn, vr, n, 0); \
     for (size_t i = 0; i < n; i++) { \
         if (core_get_int(&c->d, &vr[i], 1, &tmp, width, c->err)) return core(c, #fn, 1); \
         v[i] = (T)tmp; } \
     return fmi3OK; }
 #define INT_SET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
-    long long tmp; ALLOW(#fn, SET_CS, SET_DISCRETE_ME); VALUES(#fn, vr, n, v, nv); BEGIN_CHANGE(c); \
+    long long tmp; ALLOW(#fn, SET_CS, SET_DISCRETE_ME); VALUES(#fn, vr, n, v, nv); CLOCK_GATE(#fn, vr, n, 1); \
+    BEGIN_CHANGE(c); \
     for (size_t i = 0; i < n; i++) { \
         tmp = (long long)v[i]; \
         if (core_set_int(&c->d, &vr[i], 1, &tmp, width, BEFORE_RUN(c), c->err)) return undo(c, #fn); } \
+    AFTER_SET(n); \
     return fmi3OK; }
 INT_GET(fmi3GetInt64, fmi3Int64, INT_64)
 INT_SET(fmi3SetInt64, fmi3Int64, INT_64)
@@ -243,6 +324,7 @@ INT_SET(fmi3SetInt32, fmi3Int32, INT_32)
 fmi3Status fmi3GetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Boolean v[], size_t nv) {
     ALLOW("fmi3GetBoolean", GET_CS, GET_ME);
     VALUES("fmi3GetBoolean", vr, n, v, nv);
+    CLOCK_GATE("fmi3GetBoolean", vr, n, 0);
     for (size_t i = 0; i < n; i++) {
         int tmp;
         if (core_get_bool(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, "fmi3GetBoolean", 1);
@@ -254,11 +336,13 @@ fmi3Status fmi3GetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size
 fmi3Status fmi3SetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Boolean v[], size_t nv) {
     ALLOW("fmi3SetBoolean", SET_CS, SET_DISCRETE_ME);
     VALUES("fmi3SetBoolean", vr, n, v, nv);
+    CLOCK_GATE("fmi3SetBoolean", vr, n, 1);
     BEGIN_CHANGE(c);
     for (size_t i = 0; i < n; i++) {
         int tmp = v[i] ? 1 : 0;
         if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return undo(c, "fmi3SetBoolean");
     }
+    AFTER_SET(n);
     return fmi3OK;
 }
 
@@ -290,7 +374,42 @@ fmi3Status fmi3SetBinary(fmi3Instance inst, const fmi3ValueReference vr[], size_
     ARRAY("fmi3SetBinary", sizes, nv);
     return n ? fail(c, "fmi3SetBinary", "no Binary variable has value reference %u", vr[0]) : fmi3OK;
 }
-/* Clocks: Event Mode only, which a Co-Simulation instance of this FMU never enters. */
+/* Clocks: Event Mode only (Scheduled Execution has none: fmi3SetClock must not be called there). */
+#ifdef CLOCK_VR
+fmi3Status fmi3GetClock(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Clock v[]) {
+    ALLOW("fmi3GetClock", B(M_EVENT), B(M_EVENT));
+    ARRAY("fmi3GetClock", vr, n); ARRAY("fmi3GetClock", v, n);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != CLOCK_VR) return fail(c, "fmi3GetClock", "no Clock variable has value reference %u", vr[i]);
+        v[i] = c->d.clk.active ? fmi3ClockActive : fmi3ClockInactive;
+    }
+    return fmi3OK;
+}
+fmi3Status fmi3SetClock(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Clock v[]) {
+    const char *fn = "fmi3SetClock";
+    double t;
+    ALLOW(fn, B(M_EVENT), B(M_EVENT));
+    ARRAY(fn, vr, n); ARRAY(fn, v, n);
+    t = core_time(&c->d);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != CLOCK_VR)
+            return fail(c, fn, "no input Clock has value reference %u (the clock sample has %u)", vr[i], (unsigned)CLOCK_VR);
+        if (!v[i]) return fail(c, fn, "the clock sample cannot be deactivated (canBeDeactivated = false)");
+    }
+    if (!n || c->d.clk.active) return fmi3OK;
+    switch (core_clock_due(&c->d, t)) {
+    case 1: break;
+    case 0: return fail(c, fn, "the clock sample is not due at t = %.17g s: its next activation is at %.17g s", t,
+                        core_clock_next(&c->d));
+    default: return fail(c, fn, "the activation of the clock sample at %.17g s was not made (the FMU is at t = %.17g s)",
+                         core_clock_next(&c->d), t);
+    }
+    BEGIN_CHANGE(c);
+    if (core_clock_begin(&c->wk, &c->d, c->err)) return undo(c, fn);
+    c->d.clk.active = 1;
+    return fmi3OK;
+}
+#else
 fmi3Status fmi3GetClock(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Clock v[]) {
     ALLOW("fmi3GetClock", B(M_EVENT), B(M_EVENT));
     ARRAY("fmi3GetClock", vr, n); ARRAY("fmi3GetClock", v, n);
@@ -301,6 +420,7 @@ fmi3Status fmi3SetClock(fmi3Instance inst, const fmi3ValueReference vr[], size_t
     ARRAY("fmi3SetClock", vr, n); ARRAY("fmi3SetClock", v, n);
     return n ? fail(c, "fmi3SetClock", "no Clock variable has value reference %u", vr[0]) : fmi3OK;
 }
+#endif
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance inst, fmi3ValueReference vr, size_t *n) {
     ALLOW("fmi3GetNumberOfVariableDependencies", LIVE, LIVE); (void)vr; (void)n;
@@ -385,6 +505,46 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance inst) {
     ALLOW("fmi3ExitConfigurationMode", ANY, ANY);
     return fail(c, "fmi3ExitConfigurationMode", "not in Configuration Mode (this FMU has no structural parameters)");
 }
+#ifdef CLOCK_VR
+/* The constant clock sample: its interval and shift may be asked in Initialization Mode, Event
+ * Mode and Clock Activation Mode, in decimal form only; they cannot be set. */
+#define CLOCK_ASK (B(M_INIT) | B(M_EVENT) | B(M_ACTIVATION))
+static int clock_refs(Instance *c, const char *fn, const fmi3ValueReference vr[], size_t n) {
+    for (size_t i = 0; i < n; i++)
+        if (vr[i] != CLOCK_VR) {
+            fail(c, fn, "no Clock variable has value reference %u (the clock sample has %u)", vr[i], (unsigned)CLOCK_VR);
+            return 1;
+        }
+    return 0;
+}
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 iv[],
+                                  fmi3IntervalQualifier q[]) {
+    ALLOW("fmi3GetIntervalDecimal", CLOCK_ASK, CLOCK_ASK);
+    ARRAY("fmi3GetIntervalDecimal", vr, n); ARRAY("fmi3GetIntervalDecimal", iv, n); ARRAY("fmi3GetIntervalDecimal", q, n);
+    if (clock_refs(c, "fmi3GetIntervalDecimal", vr, n)) return fmi3Error;
+    for (size_t i = 0; i < n; i++) { iv[i] = CLOCK_INTERVAL; q[i] = fmi3IntervalUnchanged; }
+    return fmi3OK;
+}
+fmi3Status fmi3GetShiftDecimal(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 sh[]) {
+    ALLOW("fmi3GetShiftDecimal", CLOCK_ASK, CLOCK_ASK);
+    ARRAY("fmi3GetShiftDecimal", vr, n); ARRAY("fmi3GetShiftDecimal", sh, n);
+    if (clock_refs(c, "fmi3GetShiftDecimal", vr, n)) return fmi3Error;
+    for (size_t i = 0; i < n; i++) sh[i] = 0.0;
+    return fmi3OK;
+}
+#define NO_FRACTION(fn, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
+    ALLOW(#fn, ANY, ANY); (void)vr; (void)n; \
+    return fail(c, #fn, "the clock sample has no fraction form (supportsFraction = false)"); }
+#define NO_SETTING(fn, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
+    ALLOW(#fn, ANY, ANY); (void)vr; (void)n; \
+    return fail(c, #fn, "the clock sample is constant: its interval and shift cannot be set"); }
+NO_FRACTION(fmi3GetIntervalFraction, fmi3UInt64 cn[], fmi3UInt64 rs[], fmi3IntervalQualifier q[])
+NO_FRACTION(fmi3GetShiftFraction, fmi3UInt64 cn[], fmi3UInt64 rs[])
+NO_SETTING(fmi3SetIntervalDecimal, const fmi3Float64 iv[])
+NO_SETTING(fmi3SetIntervalFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
+NO_SETTING(fmi3SetShiftDecimal, const fmi3Float64 sh[])
+NO_SETTING(fmi3SetShiftFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
+#else
 #define NO_CLOCKS(fn, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
     ALLOW(#fn, ANY, ANY); (void)vr; (void)n; return fail(c, #fn, "this FMU has no clocks"); }
 NO_CLOCKS(fmi3GetIntervalDecimal, fmi3Float64 iv[], fmi3IntervalQualifier q[])
@@ -395,6 +555,7 @@ NO_CLOCKS(fmi3SetIntervalDecimal, const fmi3Float64 iv[])
 NO_CLOCKS(fmi3SetIntervalFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
 NO_CLOCKS(fmi3SetShiftDecimal, const fmi3Float64 sh[])
 NO_CLOCKS(fmi3SetShiftFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
+#endif
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance inst) {
     ALLOW("fmi3EvaluateDiscreteStates", ANY, ANY);
@@ -408,6 +569,13 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance inst, fmi3Boolean *need, fmi3Bo
     NOT_NULL(fn, need); NOT_NULL(fn, term); NOT_NULL(fn, nom); NOT_NULL(fn, vals); NOT_NULL(fn, nextDef);
     NOT_NULL(fn, next);
     *need = fmi3False; *term = fmi3False; *nom = fmi3False; *vals = fmi3False; *nextDef = fmi3False; *next = 0;
+#ifdef CLOCK_VR
+    if (c->d.clk.active) {                   /* the end of the activation: its update is committed */
+        BEGIN_CHANGE(c);
+        if (core_clock_end(&c->wk, &c->d, c->err)) return undo(c, fn);
+        c->d.clk.active = 0;
+    }
+#endif
     return fmi3OK;
 }
 
@@ -487,6 +655,11 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance inst, size_t *n) {
 /* From Event Mode, which a Co-Simulation instance of this FMU never enters. */
 fmi3Status fmi3EnterStepMode(fmi3Instance inst) {
     ALLOW("fmi3EnterStepMode", B(M_EVENT), 0);
+#ifdef CLOCK_VR
+    if (c->d.clk.active)
+        return fail(c, "fmi3EnterStepMode", "the clock sample is active: fmi3UpdateDiscreteStates must end its "
+                                            "super-dense instant first");
+#endif
     c->mode = M_STEP;
     return fmi3OK;
 }
@@ -503,6 +676,23 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
     ALLOW(fn, CS_RUN, 0); (void)noSetPrior;
     NOT_NULL(fn, eventNeeded); NOT_NULL(fn, term); NOT_NULL(fn, early); NOT_NULL(fn, last);
     *eventNeeded = fmi3False; *term = fmi3False; *early = fmi3False;
+#ifdef CLOCK_VR
+    /* the clocked form: time advances, the activations run in Event Mode */
+    *last = core_time(&c->d);
+    if (!isfinite(t) || !(h > 0) || !isfinite(h) || !isfinite(t + h))
+        return fail(c, fn, "currentCommunicationPoint %g and communicationStepSize %g must be finite, the step > 0", t, h);
+    if (fabs(t - core_time(&c->d)) > 1e-9 * fmax(1.0, fabs(t)))
+        return fail(c, fn, "currentCommunicationPoint %.17g differs from the FMU time %.17g", t, core_time(&c->d));
+    if (core_clock_due(&c->d, t))
+        return fail(c, fn, "the activation of the clock sample at %.17g s was not made: enter Event Mode and activate "
+                           "it with fmi3SetClock before stepping on", core_clock_next(&c->d));
+    if (core_clock_due(&c->d, t + h) == 2)
+        return fail(c, fn, "the step from %.17g s to %.17g s passes the activation of the clock sample at %.17g s: "
+                           "step to it and activate it in Event Mode", t, t + h, core_clock_next(&c->d));
+    core_set_time(&c->d, t + h);
+    *last = t + h;
+    return fmi3OK;
+#endif
     BEGIN_CHANGE(c);
     if (core_do_step(&c->wk, &c->d, t, h, c->err)) {
         STATUS st = undo(c, fn);
@@ -513,7 +703,29 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
     return fmi3OK;
 }
 
+#ifdef CLOCK_VR
+fmi3Status fmi3ActivateModelPartition(fmi3Instance inst, fmi3ValueReference clk, fmi3Float64 t) {
+    const char *fn = "fmi3ActivateModelPartition";
+    ALLOW(fn, B(M_ACTIVATION), 0);
+    if (clk != CLOCK_VR)
+        return fail(c, fn, "no input Clock has value reference %u (the clock sample has %u)", clk, (unsigned)CLOCK_VR);
+    if (!isfinite(t)) return fail(c, fn, "activationTime %g is not finite", t);
+    switch (core_clock_due(&c->d, t)) {
+    case 1: break;
+    case 0: return fail(c, fn, "the clock sample is not due at t = %.17g s: its next activation is at %.17g s", t,
+                        core_clock_next(&c->d));
+    default: return fail(c, fn, "activationTime %.17g s skips the activation of the clock sample at %.17g s", t,
+                         core_clock_next(&c->d));
+    }
+    BEGIN_CHANGE(c);
+    core_set_time(&c->d, t);
+    if (core_clock_begin(&c->wk, &c->d, c->err) || core_clock_end(&c->wk, &c->d, c->err)) return undo(c, fn);
+    c->d.clk.fresh = 1;
+    return fmi3OK;
+}
+#else
 fmi3Status fmi3ActivateModelPartition(fmi3Instance inst, fmi3ValueReference clk, fmi3Float64 t) {
     ALLOW("fmi3ActivateModelPartition", ANY, ANY); (void)clk; (void)t;
     return fail(c, "fmi3ActivateModelPartition", "Scheduled Execution is not supported by this FMU");
 }
+#endif

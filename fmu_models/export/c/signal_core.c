@@ -77,6 +77,12 @@ int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
 #endif
     d->t0 = d->time;
     d->ts = d->time;
+    memset(&d->clk, 0, sizeof d->clk);
+#ifdef CLOCK_VR
+    if (d->p[P_PERIOD] != CLOCK_INTERVAL)
+        FAIL("parameter period = %g differs from the interval %g s of the constant clock sample", d->p[P_PERIOD],
+             CLOCK_INTERVAL);
+#endif
     return 0;
 }
 
@@ -184,6 +190,9 @@ int core_check(const CoreData *d, char *err) {
     if (!isfinite(d->time) || !isfinite(d->t0) || !isfinite(d->ts))
         FAIL("the FMU state is invalid: its time is not finite");
     if (check_parameters(d->p, d->ip, err)) return 1;
+    if (!(d->clk.n >= 0 && (double)d->clk.n <= MAX_INSTANTS) || (d->clk.active != 0 && d->clk.active != 1)
+        || (d->clk.fresh != 0 && d->clk.fresh != 1))
+        FAIL("the FMU state is invalid: clock state %lld, %d, %d", d->clk.n, d->clk.active, d->clk.fresh);
 #if SIGNAL_KIND == KIND_PRBS
     if (d->nbits != 0) {
         int order = (int)d->ip[IP_ORDER];
@@ -195,5 +204,25 @@ int core_check(const CoreData *d, char *err) {
 #endif
     return 0;
 }
+
+#ifdef CLOCK_VR
+/* ------------------------------------------------------------------ the clocked form */
+CORE_CLOCK_TIMING(d->p[P_PERIOD])
+
+int core_is_clocked(unsigned r) { return IN(r, VR_IN, NIN) || IN(r, VR_OUT, NCH); }
+
+int core_clock_begin(CoreWork *wk, CoreData *d, char *err) {
+    (void)wk; (void)err;
+    d->ts = d->time;                         /* the outputs: this instant, the inputs as set */
+    memcpy(d->in, d->in_set, sizeof d->in);
+    return 0;
+}
+
+int core_clock_end(CoreWork *wk, CoreData *d, char *err) {
+    (void)wk; (void)err;
+    d->clk.n += 1;
+    return 0;
+}
+#endif
 
 CORE_NO_MODEL_EXCHANGE("a signal FMU")

@@ -13,6 +13,11 @@
  * a doStep that ends between instants they hold the value of the latest instant, computed
  * from the inputs as held at it. Any step size is accepted.
  *
+ * Clocked form (CLOCK_VR defined, FMI 3.0; core_api.h): the inputs and outputs are clocked by
+ * the input clock `sample` (interval `period`, which must keep its declared value, first
+ * activation at the start time); an activation samples the signal at its time from the
+ * inputs as set (direct feedthrough), the outputs hold it until the next activation.
+ *
  * Noise (documented generator, equal to cosim.noise.counter_normal): channel c at sample
  * k = round(t / period) draws words i = 2 (k NCH + c) and i + 1 of SplitMix64 seeded with
  * `seed` (word i = mix(seed + (i + 1) 0x9E3779B97F4A7C15), Steele, Lea & Flood 2014),
@@ -51,6 +56,7 @@ typedef struct {
     double in_set[NIN > 0 ? NIN : 1]; /* inputs as set by the master */
     double t0;                        /* s, the start time: instants t0 + k period */
     double ts;                        /* s, the sample time the outputs show */
+    ClockState clk;                   /* the clocked form: activation n at t0 + n period */
 #if SIGNAL_KIND == KIND_PRBS
     int nbits;
     unsigned char bits[PRBS_MAX_BITS];

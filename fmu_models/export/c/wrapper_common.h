@@ -4,8 +4,11 @@
  * Include wrapper_modes.h first, then this after defining: the status type STATUS with values
  * STATUS_OK, STATUS_ERROR; the instance type Instance (fields `mode`, `d` and `undo` (CoreData),
  * `cats` (enabled log categories), `char err[ERRLEN]` and the FMU-state registry `states`,
- * `nstates`, `cap_states`); IS_CS(c), true for a Co-Simulation instance; ERROR_CALLS, the
- * functions allowed after an error (for the message); and
+ * `nstates`, `cap_states`); IS_CS(c), true for a Co-Simulation (or Scheduled Execution)
+ * instance; ERROR_CALLS, the functions allowed after an error (for the message); optionally
+ * KIND_CODE(c) (0 Model Exchange, 1 Co-Simulation, 2 Scheduled Execution; default from
+ * IS_CS) and CS_EXTRA_STATES (states a Co-Simulation instance can also be in: Event Mode in
+ * the clocked form; default none); and
  *   static void logmsg(Instance *c, STATUS st, const char *cat, const char *fn, const char *text);
  *   static void *mem_alloc(Instance *c, size_t size);   (zeroed memory or NULL)
  *   static void mem_free(Instance *c, void *p);
@@ -53,7 +56,17 @@ static STATUS undo(Instance *c, const char *fn) {
     return core(c, fn, 1);
 }
 
-static const char *kind_name(int cs) { return cs ? "Co-Simulation" : "Model Exchange"; }
+#ifndef KIND_CODE
+#define KIND_CODE(c) (IS_CS(c) ? 1 : 0)
+#endif
+#ifndef CS_EXTRA_STATES
+#define CS_EXTRA_STATES 0u
+#endif
+
+/* The interface type of KIND_CODE `code`. */
+static const char *kind_name(int code) {
+    return code == 2 ? "Scheduled Execution" : code ? "Co-Simulation" : "Model Exchange";
+}
 
 /* The answer to a call in a state whose bit is not in `mask` (`other`: the mask of the other
  * interface type). */
@@ -62,8 +75,8 @@ static STATUS refuse_state(Instance *c, const char *fn, unsigned mask, unsigned 
         return fail(c, fn, "not allowed after a call returned Error: only %s may follow", ERROR_CALLS);
     if (!mask && other)
         return fail(c, fn, "a %s function, not allowed on this %s instance", kind_name(!IS_CS(c)),
-                    kind_name(IS_CS(c)));
-    return fail(c, fn, "not allowed in %s (%s instance)", mode_name(c->mode), kind_name(IS_CS(c)));
+                    kind_name(KIND_CODE(c)));
+    return fail(c, fn, "not allowed in %s (%s instance)", mode_name(c->mode), kind_name(KIND_CODE(c)));
 }
 
 #define ALLOW_IN(handle, fn, cs_mask, me_mask) Instance *c = (Instance *)(handle); \
@@ -161,15 +174,17 @@ static SavedState *own_state(Instance *c, const char *fn, const void *s) {
 /* 0 if s can be restored into c (message in c->err otherwise). */
 static int check_state(const Instance *c, const SavedState *s, char *err) {
     /* a state saved after an Error restores the error state */
-    unsigned allowed = IS_CS(c) ? (B(M_INSTANTIATED) | B(M_INIT) | B(M_STEP) | B(M_TERMINATED) | B(M_ERROR))
-                                : (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT) | B(M_CONT) | B(M_TERMINATED) | B(M_ERROR));
+    int code = KIND_CODE(c);
+    unsigned common = B(M_INSTANTIATED) | B(M_INIT) | B(M_TERMINATED) | B(M_ERROR);
+    unsigned allowed = code == 2 ? common | B(M_ACTIVATION)
+                     : code == 1 ? common | B(M_STEP) | CS_EXTRA_STATES : common | B(M_EVENT) | B(M_CONT);
     if (s->magic != STATE_MAGIC || s->size != sizeof(SavedState)) {
         snprintf(err, ERRLEN, "not an FMU state of this FMU");
         return 1;
     }
-    if (s->cosim != (IS_CS(c) ? 1 : 0)) {
-        snprintf(err, ERRLEN, "a %s state cannot be restored into a %s instance", kind_name(s->cosim != 0),
-                 kind_name(IS_CS(c)));
+    if (s->cosim != code) {
+        snprintf(err, ERRLEN, "a %s state cannot be restored into a %s instance",
+                 s->cosim == 2 ? kind_name(2) : kind_name(s->cosim != 0), kind_name(code));
         return 1;
     }
     if (s->mode < 0 || s->mode > (int)M_ERROR || !(B(s->mode) & allowed)) {
@@ -184,7 +199,7 @@ static void save_state(SavedState *s, const Instance *c) {
     s->magic = STATE_MAGIC;
     s->size = sizeof(SavedState);
     s->mode = (int)c->mode;
-    s->cosim = IS_CS(c) ? 1 : 0;
+    s->cosim = KIND_CODE(c);
     memcpy(&s->d, &c->d, sizeof s->d);
 }
 

@@ -29,9 +29,23 @@
  *
  * VARFILE has one variable a line: vr type causality variability initial start flags, where
  * type is R (Real / Float64), I (Integer / Int32), L (Enumeration: Int64 in FMI 3.0), B
- * (Boolean); causality p(arameter) c(alculatedParameter) i(nput) o(utput) l(ocal)
+ * (Boolean), K (Clock); causality p(arameter) c(alculatedParameter) i(nput) o(utput) l(ocal)
  * t (independent); variability c(onstant) f(ixed) t(unable) d(iscrete) n (continuous); initial
- * e(xact) a(pprox) c(alculated) - (none); flags S (a continuous state), D (a derivative), -.
+ * e(xact) a(pprox) c(alculated) - (none); flags S (a continuous state), D (a derivative),
+ * K (clocked by the clock), -.
+ *
+ * Clocked FMUs (FMI 3.0; arguments clock=VR interval=T): the FMU's one input clock, constant,
+ * interval T, first activation at the start time, clocks the variables flagged K. The model
+ * then follows the standard's clock rules (the clocked rows of the table, CLOCK_ROWS, and
+ * the clock state of each instance): Co-Simulation instances need eventModeUsed = true and
+ * enter Event Mode after initialisation; fmi3SetClock is legal only when the activation is due
+ * (t0 + n T within 1e-6 T of the time) or the clock already active; clocked variables are set
+ * and got in Event Mode only while the clock is active, never in Step Mode; fmi3EnterStepMode
+ * only after fmi3UpdateDiscreteStates ended the activation; fmi3DoStep neither from a due
+ * activation nor past the next one. Scheduled Execution instances (Clock Activation Mode)
+ * activate with fmi3ActivateModelPartition(clock, t0 + n T) only, set inputs before and get
+ * clocked variables after an activation (not after a set). fmi3GetIntervalDecimal answers T,
+ * fmi3IntervalUnchanged.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <dlfcn.h>
@@ -155,6 +169,31 @@ static const Row FMI3_TABLE[] = {
     {"fmi3DoStep", "S", "-"},
     {NULL, NULL, NULL}};
 
+/* FMI 3.0, clocked FMUs: the rows that differ (Co-Simulation with Event Mode: E; Scheduled
+ * Execution: A; both use the first column, their states being disjoint but for I, N, T, X). */
+static const Row CLOCK_ROWS[] = {
+    {"fmi3SetDebugLogging", "INSEATX", "-"},
+    {"fmi3EnterEventMode", "S", "-"},
+    {"fmi3Terminate", "SEA", "-"},
+    {"fmi3Reset", "INSEATX", "-"},
+    {"fmi3GetFloat64", "NSEATX", "-"}, {"fmi3GetInt32", "NSEATX", "-"}, {"fmi3GetInt64", "NSEATX", "-"},
+    {"fmi3GetBoolean", "NSEATX", "-"}, {"fmi3GetString", "NSEATX", "-"}, {"fmi3GetFloat32", "NSEATX", "-"},
+    {"fmi3GetUInt8", "NSEATX", "-"}, {"fmi3GetBinary", "NSEATX", "-"},
+    {"fmi3SetFloat64", "INSEA", "-"}, {"fmi3SetFloat32", "INSEA", "-"}, {"fmi3SetInt32", "INSEA", "-"},
+    {"fmi3SetInt64", "INSEA", "-"}, {"fmi3SetBoolean", "INSEA", "-"}, {"fmi3SetString", "INSEA", "-"},
+    {"fmi3SetUInt8", "INSEA", "-"}, {"fmi3SetBinary", "INSEA", "-"},
+    {"fmi3GetClock", "E", "-"},
+    {"fmi3SetClock", "E", "-"},
+    {"fmi3GetFMUState", "INSEATX", "-"}, {"fmi3SetFMUState", "INSEATX", "-"}, {"fmi3FreeFMUState", "INSEATX", "-"},
+    {"fmi3SerializedFMUStateSize", "INSEATX", "-"}, {"fmi3SerializeFMUState", "INSEATX", "-"},
+    {"fmi3DeserializeFMUState", "INSEATX", "-"},
+    {"fmi3GetDirectionalDerivative", "NSEATX", "-"}, {"fmi3GetAdjointDerivative", "NSEATX", "-"},
+    {"fmi3GetIntervalDecimal", "NEA", "-"},
+    {"fmi3ActivateModelPartition", "A", "-"},
+    {"fmi3UpdateDiscreteStates", "E", "-"},
+    {"fmi3EnterStepMode", "E", "-"},
+    {NULL, NULL, NULL}};
+
 /* ------------------------------------------------------------------ configuration */
 #define MAXVARS 256
 #define MAXINST 8
@@ -170,6 +209,9 @@ static const char *TOKEN;
 static void *LIB;
 static Var VARS[MAXVARS];
 static int NVARS, NX;               /* variables, continuous states */
+static int CLOCKED;                 /* a clocked FMU (arguments clock=, interval=) */
+static unsigned CLOCK_VR;           /* its input clock */
+static double INTERVAL;             /* its constant interval [s] */
 static double TIMEOUT = 10;
 static int TRACE, MAXCALLS = 60;
 static uint64_t SEED;
@@ -179,19 +221,23 @@ static const char *CUR_FN = "";
 /* counters of the summary line */
 static long long n_seq, n_calls, n_illegal, n_illegal_err, n_legal, n_legal_ok, n_any, n_inst;
 
-typedef struct { void *h; int owner; int alive; int st; double time; int dirty; } StateRec;
-typedef struct { unsigned char *bytes; size_t size; int cs; int st; double time; int dirty; } Blob;
+/* The clock state of an instance of a clocked FMU: activations ended (n), active (Event Mode,
+ * after fmi3SetClock), fresh (Scheduled Execution: activated, no set since), the start time. */
+typedef struct { long long n; int active, fresh; double t0; } Clk;
+typedef struct { void *h; int owner; int alive; int st; double time; int dirty; Clk clk; } StateRec;
+typedef struct { unsigned char *bytes; size_t size; int cs; int st; double time; int dirty; Clk clk; } Blob;
 
 typedef struct {
     void *h;              /* the FMU instance (NULL: none in this slot) */
     int id;               /* unique within the sequence */
-    int cs;               /* Co-Simulation (else Model Exchange) */
+    int cs;               /* Co-Simulation (else Model Exchange; 2: Scheduled Execution) */
     int st;               /* the model's state */
     int logging;          /* error messages expected (see the header) */
     int has_logger;
     int flaky;            /* FMI 2.0: the allocator fails now and then */
     int dirty;            /* accepted a hostile value: legal calls may fail */
     double time;          /* the FMU's time as the model tracks it */
+    Clk clk;              /* a clocked FMU's clock state */
     char name[32];
 } Inst;
 
@@ -283,6 +329,9 @@ static void *flaky_alloc(size_t n, size_t size) { return chance(&ALLOC_RNG, 0.2)
 /* ------------------------------------------------------------------ the model */
 static const Row *row_of(const char *fn) {
     const Row *t = V == 2 ? FMI2_TABLE : FMI3_TABLE;
+    if (CLOCKED)
+        for (const Row *c = CLOCK_ROWS; c->name; c++)
+            if (!strcmp(c->name, fn)) return c;
     for (; t->name; t++)
         if (!strcmp(t->name, fn)) return t;
     fprintf(stderr, "fuzz: %s is not in the state table\n", fn);
@@ -404,7 +453,7 @@ static int set_rule(const Var *v, int st) {
     switch (st) {
     case S_INST: return exact ? EXP_OK : (in ? EXP_ANY : EXP_ERR);
     case S_INIT: return exact || in ? EXP_OK : EXP_ERR;
-    case S_STEP: case S_EVENT:
+    case S_STEP: case S_EVENT: case S_ACT:
         if (in || (v->caus == 'p' && v->var == 't')) return EXP_OK;
         return EXP_ERR;
     case S_CONT:
@@ -414,6 +463,35 @@ static int set_rule(const Var *v, int st) {
     default: return EXP_ERR;
     }
 }
+
+/* ------------------------------------------------------------------ the clock (clocked FMUs) */
+/* Where the instance's next activation t0 + n T lies against t: 0 after it, 1 at it (within
+ * 1e-6 T), 2 before it (missed). */
+static int clock_due(const Inst *in, double t) {
+    double q = (t - in->clk.t0) / INTERVAL;
+    if (fabs(q - (double)in->clk.n) <= 1e-6) return 1;
+    return (double)in->clk.n < q ? 2 : 0;
+}
+
+/* The clock's rule for getting (set = 0) or setting a clocked variable in the instance's
+ * state (the state table decides the rest); EXP_ANY once the instance holds values the model
+ * cannot follow (a crafted FMU state). */
+static int clock_access(const Inst *in, int set) {
+    int ok;
+    switch (in->st) {
+    case S_EVENT: ok = in->clk.active; break;
+    case S_STEP: ok = 0; break;
+    case S_ACT: ok = set || in->clk.fresh; break;
+    default: return EXP_OK;
+    }
+    if (in->dirty) return EXP_ANY;
+    return ok ? EXP_OK : EXP_ERR;
+}
+
+/* EXP_OK if the clock allows the call (legal), else EXP_ERR; EXP_ANY for a dirty instance. */
+static int clock_exp(const Inst *in, int legal) { return in->dirty ? EXP_ANY : legal ? EXP_OK : EXP_ERR; }
+
+static void clock_reset(Inst *in) { memset(&in->clk, 0, sizeof in->clk); in->clk.t0 = in->time; }
 
 /* ------------------------------------------------------------------ FMU states held by the driver */
 static StateRec *state_rec(void *h, int owner) {
@@ -443,6 +521,7 @@ static void state_add(void *h, const Inst *in) {
         r = &STATES[NSTATES_HELD++];
     }
     r->h = h; r->owner = in->id; r->alive = 1; r->st = in->st; r->time = in->time; r->dirty = in->dirty;
+    r->clk = in->clk;
 }
 
 /* A state handle to pass: one of this instance's (alive, or freed), another instance's, or NULL. */
@@ -505,6 +584,7 @@ static void op_instantiate(Rng *r, double p_bad) {
     snprintf(tmp.name, sizeof tmp.name, "fuzz%d", tmp.id);
     name = tmp.name;
     tmp.cs = HAS_ME ? chance(r, 0.5) : 1;
+    if (CLOCKED && !bad && chance(r, 0.35)) variant = 3;  /* Scheduled Execution: legal here */
     tmp.logging = chance(r, 0.7);
     tmp.has_logger = !chance(r, 0.1);
     if (bad) {
@@ -517,7 +597,7 @@ static void op_instantiate(Rng *r, double p_bad) {
         case 4: if (HAS_ME) exp = EXP_OK; else tmp.cs = 0; break;    /* Model Exchange on a CS-only FMU */
         case 5: variant = 1; break;
         case 6: if (V == 3) variant = 2; else exp = EXP_OK; break;
-        case 7: if (V == 3) variant = 3; else { tmp.flaky = 1; exp = EXP_ANY; } break;
+        case 7: if (V == 3) variant = 3; else { tmp.flaky = 1; exp = EXP_ANY; } break;   /* CLOCKED: legal */
         default: if (V == 2) { tmp.flaky = 1; exp = EXP_ANY; } else exp = EXP_OK;
         }
     }
@@ -536,7 +616,9 @@ static void op_instantiate(Rng *r, double p_bad) {
         end();
     } else {
         fmi3LogMessageCallback log = tmp.has_logger ? logger3 : NULL;
+        if (CLOCKED && variant == 3 && what == 7) exp = EXP_OK;
         if (variant == 3) {
+            tmp.cs = 2;
             begin("fmi3InstantiateScheduledExecution", in);
             h = F3(fmi3InstantiateScheduledExecution)(name, token, NULL, fmi3False, tmp.logging, in, log, NULL, NULL, NULL);
         } else if (!tmp.cs && !variant) {
@@ -546,7 +628,9 @@ static void op_instantiate(Rng *r, double p_bad) {
             fmi3ValueReference req[1] = {VARS[0].vr};
             tmp.cs = 1;
             begin("fmi3InstantiateCoSimulation", in);
-            h = F3(fmi3InstantiateCoSimulation)(name, token, NULL, fmi3False, tmp.logging, variant == 1, fmi3False,
+            /* eventModeUsed: required by a clocked FMU, refused by the others (variant 1: the wrong one) */
+            h = F3(fmi3InstantiateCoSimulation)(name, token, NULL, fmi3False, tmp.logging,
+                                                CLOCKED ? variant != 1 : variant == 1, fmi3False,
                                                 variant == 2 ? req : NULL, variant == 2 ? 1 : 0, in, log, NULL);
         }
         end();
@@ -660,7 +744,10 @@ static void op_exit_init(Rng *r, Inst *in, int bad) {
     st = V == 2 ? (int)F2(fmi2ExitInitializationMode)(H(in)) : (int)F3(fmi3ExitInitializationMode)(H(in));
     end();
     check(in, STATE_EXP(in, fn, EXP_OK), st, "");
-    if (st == 0) in->st = in->cs ? S_STEP : S_EVENT;
+    if (st == 0) {
+        in->st = in->cs == 2 ? S_ACT : in->cs && !CLOCKED ? S_STEP : S_EVENT;
+        clock_reset(in);
+    }
 }
 
 static void op_terminate(Rng *r, Inst *in, int bad) {
@@ -682,7 +769,7 @@ static void op_reset(Rng *r, Inst *in, int bad) {
     st = V == 2 ? (int)F2(fmi2Reset)(H(in)) : (int)F3(fmi3Reset)(H(in));
     end();
     check(in, STATE_EXP(in, fn, EXP_OK), st, "");
-    if (st == 0) { in->st = S_INST; in->dirty = 0; in->time = 0; }
+    if (st == 0) { in->st = S_INST; in->dirty = 0; in->time = 0; clock_reset(in); }
 }
 
 /* Getters and setters. t: the variable type the function takes (R, I, L, B; 0: a type this
@@ -704,6 +791,11 @@ static void op_values(Rng *r, Inst *in, int bad, int set, char t, const char *fn
         vr[i] = v->vr;
         if (set) {
             int e = set_rule(v, in->st);
+            if (e == EXP_ERR) exp = EXP_ERR;
+            else if (e == EXP_ANY && exp == EXP_OK) exp = EXP_ANY;
+        }
+        if (CLOCKED && v->flag == 'K') {
+            int e = clock_access(in, set);
             if (e == EXP_ERR) exp = EXP_ERR;
             else if (e == EXP_ANY && exp == EXP_OK) exp = EXP_ANY;
         }
@@ -788,6 +880,7 @@ static void op_values(Rng *r, Inst *in, int bad, int set, char t, const char *fn
     }
     check(in, exp, st, args);
     if (st == 0 && exp == EXP_ANY) in->dirty = 1;
+    if (st == 0 && set && n && in->st == S_ACT) in->clk.fresh = 0;     /* no get after a set */
 }
 
 static char value_type(Rng *r, const char **get, const char **set) {
@@ -862,7 +955,7 @@ static void op_set_state(Rng *r, Inst *in, int bad) {
         check(in, exp, st, args);
         in->dirty = d;
     }
-    if (st == 0 && rec) { in->st = rec->st; in->time = rec->time; in->dirty = rec->dirty; }
+    if (st == 0 && rec) { in->st = rec->st; in->time = rec->time; in->dirty = rec->dirty; in->clk = rec->clk; }
 }
 
 static void op_free_state(Rng *r, Inst *in, int bad) {
@@ -924,6 +1017,7 @@ static void op_serialize(Rng *r, Inst *in, int bad) {
         if (NBLOBS == MAXBLOBS) { free(BLOBS[0].bytes); memmove(BLOBS, BLOBS + 1, sizeof(Blob) * (MAXBLOBS - 1)); NBLOBS--; }
         b = &BLOBS[NBLOBS++];
         b->bytes = buf; b->size = size; b->cs = in->cs; b->st = rec->st; b->time = rec->time; b->dirty = rec->dirty;
+        b->clk = rec->clk;
     } else {
         free(buf);
     }
@@ -986,9 +1080,11 @@ static void op_deserialize(Rng *r, Inst *in, int bad) {
         int keep = in->st;
         double t = in->time;
         int d = in->dirty;
+        Clk c = in->clk;
         in->st = b ? b->st : keep; in->time = b ? b->time : t; in->dirty = b ? b->dirty || k >= 5 : 1;
+        if (b) in->clk = b->clk;
         state_add(s, in);
-        in->st = keep; in->time = t; in->dirty = d;
+        in->st = keep; in->time = t; in->dirty = d; in->clk = c;
     }
     if (bytes != junk) free(bytes);
 }
@@ -1036,10 +1132,14 @@ static void op_directional(Rng *r, Inst *in, int bad) {
 }
 
 /* ------------------------------------------------------------------ Model Exchange */
+static void op_enter_event(Rng *r, Inst *in, int bad);
+static void op_update_discrete(Rng *r, Inst *in, int bad);
+
 static void op_me_mode(Rng *r, Inst *in, int bad) {
     int k = pick(r, 4), st, exp;
     const char *fn;
     char args[60] = "";
+    if (CLOCKED && k < 2) { (k ? op_update_discrete : op_enter_event)(r, in, bad); return; }   /* the clock's rules */
     if (V == 2) {
         fmi2EventInfo e;
         if (k == 0) {
@@ -1165,6 +1265,10 @@ static void op_do_step(Rng *r, Inst *in, int bad) {
     fmi3Boolean ev = 0, term = 0, early = 0;
     fmi3Float64 last = 0;
     char args[80];
+    if (CLOCKED && in->st == S_STEP && chance(r, 0.6)) {        /* step to the next activation */
+        double next = in->clk.t0 + (double)in->clk.n * INTERVAL;
+        if (next > t) h = next - t;
+    }
     if (k == 0) { t = NAN; exp = EXP_ERR; }
     else if (k == 1) { t = chance(r, 0.5) ? INFINITY : -INFINITY; exp = EXP_ERR; }
     else if (k == 2) { t = in->time + 1.0 + 1e-6 * fabs(in->time); exp = EXP_ERR; }   /* beyond the FMU's 1e-9 relative tolerance */
@@ -1177,6 +1281,7 @@ static void op_do_step(Rng *r, Inst *in, int bad) {
     else if (k == 9) { t = 1e300; exp = EXP_ERR; }
     else if (k == 10 && V == 3) { exp = EXP_ERR; }      /* NULL output pointers, below */
     else if (k == 11) { h = 1.7976931348623157e308; exp = EXP_ANY; }
+    if (CLOCKED && exp == EXP_OK && (clock_due(in, t) != 0 || clock_due(in, t + h) == 2)) exp = clock_exp(in, 0);
     exp = STATE_EXP(in, fn, exp);
     if (t == 1e300 && in->time == 1e300) exp = EXP_ANY;
     snprintf(args, sizeof args, "t=%.17g h=%g%s", t, h, k == 10 && V == 3 ? " outputs=NULL" : "");
@@ -1193,8 +1298,19 @@ static void op_do_step(Rng *r, Inst *in, int bad) {
     }
 }
 
+static void op_set_clock(Rng *r, Inst *in, int bad);
+static void op_get_clock(Rng *r, Inst *in, int bad);
+static void op_enter_step(Rng *r, Inst *in, int bad);
+static void op_interval(Rng *r, Inst *in, int bad);
+static void op_activate(Rng *r, Inst *in, int bad);
+
 static void op_cs_misc(Rng *r, Inst *in, int bad) {
     int k = pick(r, 4), st, exp;
+    if (CLOCKED && V == 3 && k > 0) {          /* the clock functions, with the clock's rules */
+        static const Op ops[] = {op_enter_step, op_set_clock, op_get_clock, op_interval, op_activate};
+        ops[pick(r, 5)](r, in, bad);
+        return;
+    }
     const char *fn;
     unsigned vr[1] = {VARS[0].vr};
     char args[40];
@@ -1278,6 +1394,115 @@ static void op_cs_misc(Rng *r, Inst *in, int bad) {
     }
 }
 
+/* ------------------------------------------------------------------ clocks (clocked FMUs) */
+static void op_set_clock(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3SetClock";
+    fmi3ValueReference vr[2] = {CLOCK_VR, CLOCK_VR};
+    fmi3Clock v[2] = {fmi3ClockActive, fmi3ClockActive};
+    size_t n = 1;
+    int exp, st, k = bad ? pick(r, 4) : -1;
+    char args[60];
+    exp = clock_exp(in, in->clk.active || clock_due(in, in->time) == 1);
+    if (k == 0) { v[0] = fmi3ClockInactive; exp = EXP_ERR; }                    /* canBeDeactivated = false */
+    else if (k == 1) { vr[1] = VARS[0].vr == CLOCK_VR ? 0xFFFFFFFFu : VARS[0].vr; n = 2; exp = EXP_ERR; }
+    else if (k == 2) { n = 0; exp = EXP_OK; }
+    else if (k == 3) { vr[0] = unknown_vr(r); exp = EXP_ERR; }
+    exp = STATE_EXP(in, fn, exp);
+    snprintf(args, sizeof args, "n=%zu vr0=%u v0=%d t=%.17g", n, vr[0], (int)v[0], in->time);
+    begin(fn, in);
+    st = (int)F3(fmi3SetClock)(H(in), vr, n, v);
+    end();
+    check(in, exp, st, args);
+    if (st == 0 && n) in->clk.active = 1;
+}
+
+static void op_get_clock(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3GetClock";
+    fmi3ValueReference vr[1] = {bad ? unknown_vr(r) : CLOCK_VR};
+    fmi3Clock v[1] = {7};
+    int st, exp = STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK);
+    begin(fn, in);
+    st = (int)F3(fmi3GetClock)(H(in), vr, 1, v);
+    end();
+    check(in, exp, st, bad ? "unknown vr" : "the clock");
+    if (st == 0 && !in->dirty && (v[0] != 0) != (in->clk.active != 0))
+        violation("fmi3GetClock says %d, the clock is %sactive", (int)v[0], in->clk.active ? "" : "in");
+}
+
+static void op_update_discrete(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3UpdateDiscreteStates";
+    fmi3Boolean b[5] = {1, 1, 1, 1, 1};
+    fmi3Float64 next = 0;
+    int st, exp = STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK);
+    (void)r;
+    begin(fn, in);
+    st = (int)F3(fmi3UpdateDiscreteStates)(H(in), &b[0], &b[1], &b[2], &b[3], &b[4], bad ? NULL : &next);
+    end();
+    check(in, exp, st, bad ? "nextEventTime=NULL" : "");
+    if (st == 0) {
+        if (b[0] || b[1] || b[2] || b[3] || b[4]) violation("fmi3UpdateDiscreteStates asks for more (%d%d%d%d%d)",
+                                                            b[0], b[1], b[2], b[3], b[4]);
+        if (in->clk.active) { in->clk.active = 0; in->clk.n++; }
+    }
+}
+
+static void op_enter_step(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3EnterStepMode";
+    int st, exp = STATE_EXP(in, fn, clock_exp(in, !in->clk.active));
+    (void)r; (void)bad;
+    begin(fn, in);
+    st = (int)F3(fmi3EnterStepMode)(H(in));
+    end();
+    check(in, exp, st, in->clk.active ? "clock active" : "");
+    if (st == 0) in->st = S_STEP;
+}
+
+static void op_enter_event(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3EnterEventMode";
+    int st, exp = STATE_EXP(in, fn, EXP_OK);
+    (void)r; (void)bad;
+    begin(fn, in);
+    st = (int)F3(fmi3EnterEventMode)(H(in));
+    end();
+    check(in, exp, st, "");
+    if (st == 0) in->st = S_EVENT;
+}
+
+static void op_activate(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3ActivateModelPartition";
+    fmi3ValueReference vr = CLOCK_VR;
+    double t = in->clk.t0 + (double)in->clk.n * INTERVAL;
+    int st, exp = clock_exp(in, 1), k = bad ? pick(r, 5) : -1;
+    char args[60];
+    if (k == 0) { t += INTERVAL; exp = clock_exp(in, 0); }                       /* skips one */
+    else if (k == 1) { t -= INTERVAL; exp = clock_exp(in, 0); }                  /* again, or before the start */
+    else if (k == 2) { t = chance(r, 0.5) ? NAN : INFINITY; exp = EXP_ERR; }
+    else if (k == 3) { vr = unknown_vr(r); exp = EXP_ERR; }
+    else if (k == 4) { vr = VARS[0].vr == CLOCK_VR ? 0xFFFFFFFFu : VARS[0].vr; exp = EXP_ERR; }
+    exp = STATE_EXP(in, fn, exp);
+    snprintf(args, sizeof args, "clock=%u t=%.17g", vr, t);
+    begin(fn, in);
+    st = (int)F3(fmi3ActivateModelPartition)(H(in), vr, t);
+    end();
+    check(in, exp, st, args);
+    if (st == 0) { in->clk.n++; in->clk.fresh = 1; in->time = t; }
+}
+
+static void op_interval(Rng *r, Inst *in, int bad) {
+    const char *fn = "fmi3GetIntervalDecimal";
+    fmi3ValueReference vr[1] = {bad ? unknown_vr(r) : CLOCK_VR};
+    fmi3Float64 iv[1] = {-1};
+    fmi3IntervalQualifier q[1] = {fmi3IntervalNotYetKnown};
+    int st, exp = STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK);
+    begin(fn, in);
+    st = (int)F3(fmi3GetIntervalDecimal)(H(in), vr, 1, iv, q);
+    end();
+    check(in, exp, st, bad ? "unknown vr" : "the clock");
+    if (st == 0 && (iv[0] != INTERVAL || q[0] != fmi3IntervalUnchanged))
+        violation("fmi3GetIntervalDecimal: %g (qualifier %d), the clock is constant with interval %g", iv[0], (int)q[0],
+                  INTERVAL);
+}
+
 /* A call with a NULL instance: Error, nothing else happens. */
 static void op_null_instance(Rng *r) {
     int st;
@@ -1326,21 +1551,74 @@ static const Choice CHOICES[] = {
 };
 #define NCHOICES ((int)(sizeof CHOICES / sizeof CHOICES[0]))
 
+/* Clocked FMUs: one step of the standard's call sequence for the clock from the instance's
+ * state (initialise; Event Mode: activate the due clock, its inputs and outputs, end the
+ * activation, Step Mode; Step Mode: step to the next activation, Event Mode there; Scheduled
+ * Execution: inputs, the due activation, outputs; after an Error: Reset), each call checked
+ * as any other: the sequences reach many activations between the hostile calls. */
+static void values_r(Rng *r, Inst *in) {
+    int set = chance(r, 0.5);
+    op_values(r, in, 0, set, 'R', set ? "fmi3SetFloat64" : "fmi3GetFloat64");
+}
+
+static void op_advance(Rng *r, Inst *in, int bad) {
+    (void)bad;
+    switch (in->st) {
+    case S_INST: op_setup_experiment(r, in, 0); break;
+    case S_INIT: op_exit_init(r, in, 0); break;
+    case S_EVENT:
+        if (!in->clk.active && clock_due(in, in->time) == 1) op_set_clock(r, in, 0);
+        else if (in->clk.active && chance(r, 0.6)) values_r(r, in);
+        else if (in->clk.active) op_update_discrete(r, in, 0);
+        else op_enter_step(r, in, 0);
+        break;
+    case S_STEP:
+        if (clock_due(in, in->time) != 0) op_enter_event(r, in, 0);
+        else op_do_step(r, in, 0);
+        break;
+    case S_ACT:
+        if (chance(r, 0.4)) values_r(r, in);
+        else op_activate(r, in, 0);
+        break;
+    default: op_reset(r, in, 0);
+    }
+}
+
+/* Clocked FMUs: the clock's calls besides (FMI 3.0). */
+static const Choice CLOCK_CHOICES[] = {
+    {op_set_clock, NULL, "fmi3SetClock", 6, 0},
+    {op_get_clock, NULL, "fmi3GetClock", 1, 0},
+    {op_update_discrete, NULL, "fmi3UpdateDiscreteStates", 6, 0},
+    {op_enter_step, NULL, "fmi3EnterStepMode", 5, 0},
+    {op_enter_event, NULL, "fmi3EnterEventMode", 5, 0},
+    {op_activate, NULL, "fmi3ActivateModelPartition", 10, 0},
+    {op_interval, NULL, "fmi3GetIntervalDecimal", 1, 0},
+    {op_advance, NULL, "fmi3Reset", 30, 0},
+};
+#define NCLOCK ((int)(sizeof CLOCK_CHOICES / sizeof CLOCK_CHOICES[0]))
+
 static void call_one(Rng *r, Inst *in) {
-    int legal[NCHOICES], nl = 0, total = 0, bad = chance(r, 0.2);
-    for (int i = 0; i < NCHOICES; i++) {
-        const char *fn = V == 2 ? CHOICES[i].fn2 : CHOICES[i].fn3;
-        if (CHOICES[i].me_only && !HAS_ME) continue;
-        if (allowed(in, fn)) { legal[nl++] = i; total += CHOICES[i].weight; }
+    /* clocked FMUs: fewer hostile calls, so that sequences reach many activations */
+    int legal[NCHOICES + NCLOCK], nl = 0, total = 0, bad = chance(r, CLOCKED ? 0.06 : 0.2);
+    int n = NCHOICES + (CLOCKED ? NCLOCK : 0);
+#define CHOICE(i) ((i) < NCHOICES ? &CHOICES[i] : &CLOCK_CHOICES[(i) - NCHOICES])
+    for (int i = 0; i < n; i++) {
+        const char *fn = V == 2 ? CHOICE(i)->fn2 : CHOICE(i)->fn3;
+        if (CHOICE(i)->me_only && !HAS_ME) continue;
+        if (allowed(in, fn)) { legal[nl++] = i; total += CHOICE(i)->weight; }
     }
     if (nl && chance(r, 0.75)) {
         int w = pick(r, total);
         for (int j = 0; j < nl; j++) {
-            w -= CHOICES[legal[j]].weight;
-            if (w < 0) { CHOICES[legal[j]].op(r, in, bad); return; }
+            w -= CHOICE(legal[j])->weight;
+            if (w < 0) { CHOICE(legal[j])->op(r, in, bad); return; }
         }
     }
-    CHOICES[pick(r, NCHOICES)].op(r, in, bad);
+    {
+        int i = pick(r, n);
+        CHOICE(i)->op(r, in, bad);
+    }
+#undef CHOICE
 }
 
 static void free_all(void) {
@@ -1400,11 +1678,14 @@ int main(int argc, char **argv) {
         else if (!strcmp(k, "timeout")) TIMEOUT = atof(v);
         else if (!strcmp(k, "trace")) TRACE = atoi(v);
         else if (!strcmp(k, "case")) case_name = v;
+        else if (!strcmp(k, "clock")) { CLOCKED = 1; CLOCK_VR = (unsigned)strtoul(v, NULL, 10); }
+        else if (!strcmp(k, "interval")) INTERVAL = atof(v);
         else { fprintf(stderr, "fuzz: unknown argument %s\n", k); return 2; }
     }
-    if (!lib || !TOKEN || !vars || (V != 2 && V != 3) || MAXCALLS < 1 || !(TIMEOUT > 0)) {
+    if (!lib || !TOKEN || !vars || (V != 2 && V != 3) || MAXCALLS < 1 || !(TIMEOUT > 0)
+        || (CLOCKED && (V != 3 || !(INTERVAL > 0)))) {
         fprintf(stderr, "usage: fuzz lib=PATH fmi=2|3 cs=0|1 me=0|1 dd=0|1 token=T vars=FILE seed=S first=I count=N "
-                        "[calls=60] [timeout=10] [trace=0]\n");
+                        "[calls=60] [timeout=10] [trace=0] [clock=VR interval=T]\n");
         return 2;
     }
     if (load_vars(vars)) { fprintf(stderr, "fuzz: no variables in %s\n", vars); return 2; }

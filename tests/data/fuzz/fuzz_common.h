@@ -14,11 +14,12 @@
 #include <string.h>
 
 /* The model's states: I Instantiated, N Initialization Mode, S Step Mode, E Event Mode,
- * C Continuous-Time Mode, T Terminated, X after a call returned Error. */
-enum { S_INST, S_INIT, S_STEP, S_EVENT, S_CONT, S_TERM, S_ERR, S_COUNT };
-static const char STATE_LETTERS[] = "INSECTX";
+ * C Continuous-Time Mode, T Terminated, A Clock Activation Mode (Scheduled Execution), X after
+ * a call returned Error. */
+enum { S_INST, S_INIT, S_STEP, S_EVENT, S_CONT, S_TERM, S_ACT, S_ERR, S_COUNT };
+static const char STATE_LETTERS[] = "INSECTAX";
 static const char *STATE_NAMES[] = {"Instantiated", "InitializationMode", "StepMode", "EventMode",
-                                    "ContinuousTimeMode", "Terminated", "Error"};
+                                    "ContinuousTimeMode", "Terminated", "ClockActivationMode", "Error"};
 
 /* The answer a call must get: OK, Error, or either (the value decides, or the instance holds
  * a hostile value it accepted before). */
