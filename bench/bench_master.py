@@ -28,7 +28,7 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.components.sources import Step
+from cosim.components.sources import Constant, Step
 from cosim.core.master import Cosimulation
 from cosim.fmi.fmu_component import FMUComponent
 from fmu_models import build_fmu, get_model
@@ -114,7 +114,7 @@ def long_run(path, steps: int) -> str:
 import resource, tempfile, sys
 from cosim.fmi.fmu_component import FMUComponent
 from cosim.core.master import Cosimulation
-from cosim.components.sources import Step
+from cosim.components.sources import Constant, Step
 plant = FMUComponent("plant", {str(path)!r}, {H}, parameters={{"step_size": {H}}})
 cs = Cosimulation([plant, Step("force", 0.01, 2.0, -0.5, 0.5)], {{"plant.F": "force.out"}})
 with tempfile.TemporaryDirectory() as d:
@@ -124,6 +124,17 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, cs.timings["loo
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     rss, loop = map(float, out.split())
     return f"{steps:>9d} steps streamed: peak RSS {rss:6.1f} MiB, loop {loop:6.2f} s ({loop / steps * 1e6:.2f} us/step)"
+
+
+def setup_time(n: int) -> tuple[float, float]:
+    """Wall times [s] to prepare ``n`` independent constant sources: the constructor
+    (checks, layout, evaluation order) and the run's own setup (binding, schedule)."""
+    comps = [Constant(f"c{i}", 0.01, 1.0) for i in range(n)]
+    t0 = time.perf_counter()
+    cs = Cosimulation(comps, {})
+    built = time.perf_counter() - t0
+    cs.run(0.01, progress=False)
+    return built, cs.timings["setup"]
 
 
 def main() -> None:
@@ -143,6 +154,10 @@ def main() -> None:
         print(f"  master (plant + source){m * 1e3:7.2f} ms  {m / N * 1e6:5.2f} us/step")
         print(f"  master own cost over the raw loop: {(m - r) / N * 1e6:+.2f} us per base step; "
               f"master / fmpy loop = {m / f:.2f}")
+        print("setup of n independent constant sources (constructor + run setup):")
+        for count in (1_000, 10_000, 100_000):
+            built, bound = setup_time(count)
+            print(f"  n = {count:>7d}: {built + bound:7.3f} s  (constructor {built:.3f} s, run setup {bound:.3f} s)")
         if args.long:
             fmu = Path(out, "keep.fmu")
             fmu.write_bytes(Path(path).read_bytes())
