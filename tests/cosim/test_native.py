@@ -153,7 +153,7 @@ def test_a_misbehaving_fmu_gives_the_same_errors_and_rows(chaos_fmu, tmp_path, m
     monkeypatch.setenv("CHAOS_LOG", str(tmp_path / "chaos.log"))
     classes = set()
     for seed in range(30):
-        def make(engine):
+        def make(engine, seed=seed):
             comp = FMUComponent("chaos", chaos_fmu, 0.01,
                                 parameters={"seed": seed, "rate": 0.01, "actions": NO_CRASH, "sleep_us": 0})
             return Cosimulation([Sine("src", 0.01, 1.0, 1.0), comp], {"chaos.u": "src.out"}, engine=engine)
