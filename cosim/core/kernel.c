@@ -92,6 +92,7 @@ typedef struct {
     op_t *ops;
     /* resumable state */
     int64_t k, phase, pc, j, jb, k0, kstop;
+    int64_t at;           /* the op an EV_PY / EV_FAIL event is about (index into ops) */
 } kstate_t;
 
 static int finite_rows(const double *buf, int64_t ncols, int64_t lo, int64_t hi) {
@@ -190,7 +191,7 @@ int kernel_run(kstate_t *s) {
             op_t *ops = s->ops + s->out_start[p];
             for (int64_t len = s->out_len[p]; s->pc < len; s->pc++) {
                 int e = run_op(s, ops + s->pc, t);
-                if (e) return e;
+                if (e) { s->at = s->out_start[p] + s->pc; return e; }
             }
             s->phase = 1;
             s->pc = 0;
@@ -221,7 +222,7 @@ int kernel_run(kstate_t *s) {
             op_t *ops = s->ops + s->upd_start[p];
             for (int64_t len = s->upd_len[p]; s->pc < len; s->pc++) {
                 int e = run_op(s, ops + s->pc, t);
-                if (e) return e;
+                if (e) { s->at = s->upd_start[p] + s->pc; return e; }
             }
         }
         s->phase = 0;

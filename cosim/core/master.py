@@ -64,7 +64,18 @@ from .component import (
     ports_compatible,
     split_port,
 )
-from .native import ENGINES, EV_CHUNK, EV_DONE, EV_FLUSH, EV_NONFINITE, EV_PY, KState, build_program, load_kernel
+from .native import (
+    ENGINES,
+    EV_CHUNK,
+    EV_DONE,
+    EV_FAIL,
+    EV_FLUSH,
+    EV_NONFINITE,
+    EV_PY,
+    KState,
+    build_program,
+    load_kernel,
+)
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, Unit, base_step, evaluation_order
 
@@ -558,7 +569,7 @@ class Cosimulation:
         int_idx = sel_idx[int_cols] if len(int_cols) else None
         sel64 = np.ascontiguousarray(sel_idx, dtype=np.int64)
         isel64 = np.ascontiguousarray(sel_idx[int_cols] if len(int_cols) else np.zeros(0), dtype=np.int64)
-        kst = None
+        kst = program = stop = None
         buf, ibuf = sink.buffer, sink.ibuffer
         cap = len(buf)
         clock = time.perf_counter()
@@ -613,54 +624,62 @@ class Cosimulation:
                              upd_start=program.upd_start.ctypes.data, upd_len=program.upd_len.ctypes.data,
                              ops=ctypes.addressof(program.ops), kstop=CHUNK)
                 run = self._kernel.kernel_run
+                state = ctypes.byref(kst)
+                calls, updates, meta = program.calls, program.updates, program.meta
                 done = 0
                 phase = "output"
+                for sync in program.syncs_in:
+                    sync()
                 while True:
-                    for sync in program.syncs_in:
-                        sync()
-                    event = run(ctypes.byref(kst))
-                    for sync in program.syncs_out:
-                        sync()
-                    k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
+                    event = run(state)
+                    if event == EV_PY:                  # a Python call: as the Python loop makes it
+                        at, k = kst.at, kst.k
+                        f = calls[at]
+                        try:
+                            f(t0 + k * hf)
+                        except StopRequest as request:
+                            if not updates[at]:
+                                raise
+                            stop = request
+                        if stop is None:
+                            kst.pc += 1
+                            continue
                     if event == EV_CHUNK:
-                        bar.update(k - done)
-                        done, kst.kstop = k, k + CHUNK
+                        bar.update(kst.k - done)
+                        done, kst.kstop = kst.k, kst.k + CHUNK
                         continue
                     if event == EV_FLUSH:
                         sink.flush(cap)
-                        kst.j = j = 0
+                        kst.j = 0
                         continue
+                    for sync in program.syncs_out:
+                        sync()
+                    k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
                     if event == EV_DONE:
                         bar.update(n + 1 - done)
                         break
                     if event == EV_NONFINITE:
                         k = n if kst.phase == 3 else k - 1
                         self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                    # a call back into Python, or a failed native call: Python does what it would do
+                    at = kst.at
+                    f, t = calls[at], t0 + k * hf
+                    phase = "update" if updates[at] else "output"
+                    if event == EV_FAIL:                # the Python call's own error
+                        try:
+                            meta[at].fail(program.ops[at], t)
+                            raise CosimError(f"native call of {owner.get(f, '?')} failed with status "
+                                             f"{program.ops[at].status}")
+                        except StopRequest as request:
+                            if phase != "update":
+                                raise
+                            stop = request
                     outs, upds = schedule[k % L]
-                    t = t0 + k * hf
-                    p = program.pattern[k % L]
-                    at = (program.out_start if kst.phase == 0 else program.upd_start)[p] + kst.pc
-                    op, meta = program.ops[at], program.meta[at]
-                    phase = "output" if kst.phase == 0 else "update"
-                    f = (outs if kst.phase == 0 else upds)[op.owner]
-                    try:
-                        if event == EV_PY:
-                            f(t)
-                        else:
-                            meta.fail(op, t)
-                            raise CosimError(f"native call of {owner.get(f, '?')} failed with status {op.status}")
-                    except StopRequest as request:
-                        if phase != "update":
-                            raise
-                        stop = request
-                        j = self._finish_stop(request, upds, op.owner, bound, schedule, k, t0, record, j, sink,
-                                              values, jacobi, source, owner)
-                        if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
-                            j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                        bar.update(k + 1 - done)
-                        break
-                    kst.pc += 1
+                    j = self._finish_stop(stop, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
+                                          values, jacobi, source, owner)
+                    if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
+                        j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
+                    bar.update(k + 1 - done)
+                    break
             else:
                 for k0 in range(0, n + 1, BLOCK):
                     k1 = min(k0 + BLOCK, n + 1)
@@ -701,19 +720,26 @@ class Cosimulation:
                                                "reason": stop.reason}
             return result
         except KeyboardInterrupt:
-            if kst is not None:
+            if kst is not None and stop is None:
                 k, j = kst.k, kst.j
+                self._sync_out(program)
             sink.flush(j)
             partial = sink.abort()
             raise Interrupted(f"interrupted at t = {t0 + k * hf:g} s"
                               + (f"; rows so far in {partial}" if isinstance(partial, Path) else ""),
                               partial) from None
         except CosimError as e:
+            if kst is not None and stop is None and e.results is None:
+                k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
+                self._sync_out(program)
             if e.results is None:
                 sink.flush(j)
                 e.results = sink.abort()
             raise
         except Exception as e:
+            if kst is not None and stop is None:
+                k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
+                self._sync_out(program)
             if phase != "reset" and not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
                 # a non-finite signal is the root cause of what failed after it
                 try:
@@ -738,6 +764,12 @@ class Cosimulation:
             for c in self.components:
                 c.close()
             self.timings["teardown"] = time.perf_counter() - clock
+
+    @staticmethod
+    def _sync_out(program) -> None:
+        """The state the native kernel keeps for Python objects, back into them."""
+        for sync in program.syncs_out:
+            sync()
 
     def _finish_stop(self, request: StopRequest, upds, at: int, bound, schedule, k: int, t0: float, record,
                      j: int, sink, values, jacobi, source, owner) -> int:

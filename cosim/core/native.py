@@ -61,7 +61,7 @@ class KState(ctypes.Structure):
                 ("nsig", _I), ("block", _I), ("values", _P), ("integers", _P), ("buf", _P), ("ibuf", _P),
                 ("sel", _P), ("isel", _P), ("pattern", _P), ("out_start", _P), ("out_len", _P), ("upd_start", _P),
                 ("upd_len", _P), ("ops", _P), ("k", _I), ("phase", _I), ("pc", _I), ("j", _I), ("jb", _I),
-                ("k0", _I), ("kstop", _I)]
+                ("k0", _I), ("kstop", _I), ("at", _I)]
 
 
 @dataclass
@@ -158,6 +158,8 @@ class Program:
     syncs_in: list
     syncs_out: list
     n_native: int
+    calls: list
+    updates: list
 
 
 def build_program(schedule: list) -> Program:
@@ -167,22 +169,23 @@ def build_program(schedule: list) -> Program:
     pattern = np.empty(len(schedule), dtype=np.int64)
     structs: list[OpStruct] = []
     meta: list = []
+    calls: list = []            # per op: the Python call it belongs to
+    updates: list = []          # per op: whether it is an update
     starts: list[tuple[int, int, int, int]] = []
     for i, entry in enumerate(schedule):
         if id(entry) not in index:
             index[id(entry)] = len(starts)
             spans = []
-            for calls in entry:
+            for phase, fns in enumerate(entry):
                 first = len(structs)
-                for owner, fn in enumerate(calls):
+                for owner, fn in enumerate(fns):
                     ops = native_ops(fn)
-                    if ops is None:
-                        structs.append(OpStruct(kind=OP_PY, owner=owner))
-                        meta.append(None)
-                        continue
-                    for op in ops:
-                        structs.append(OpStruct(kind=op.kind, owner=owner, **op.fields))
+                    for op in ops if ops is not None else (None,):
+                        structs.append(OpStruct(kind=OP_PY, owner=owner) if op is None else
+                                       OpStruct(kind=op.kind, owner=owner, **op.fields))
                         meta.append(op)
+                        calls.append(fn)
+                        updates.append(phase == 1)
                 spans += [first, len(structs) - first]
             starts.append(tuple(spans))
         pattern[i] = index[id(entry)]
@@ -199,4 +202,4 @@ def build_program(schedule: list) -> Program:
                 syncs_out.append(op.sync_out)
     return Program(arr, meta, pattern, np.ascontiguousarray(cols[:, 0]), np.ascontiguousarray(cols[:, 1]),
                    np.ascontiguousarray(cols[:, 2]), np.ascontiguousarray(cols[:, 3]), syncs_in, syncs_out,
-                   sum(m is not None for m in meta))
+                   sum(m is not None for m in meta), calls, updates)
