@@ -7,13 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.adaptive import AdaptationRecord
 from estimators.base import KalmanBase
 from estimators.filter_fmu import export_filter_fmu, filter_parameters
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import positive
 
 from ..core.component import Component, ExportedFMU
-from ..core.native import OP_FILTER, OP_HOLD, Op
+from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY, Op
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
@@ -116,7 +117,7 @@ class EstimatorComponent(Component, kind="estimator"):
         else:
             u_at, y_at = inputs[:nu], inputs[nu:]
         u_prev = np.zeros(nu)
-        cur = np.zeros(3, dtype=np.int64)          # the native kernel's [state copy, step count, started]
+        cur = np.zeros(4, dtype=np.int64)   # the native kernel's [state copy, step count, started, stepped]
         step = f.step
 
         def output_fn(t: float) -> None:
@@ -139,7 +140,7 @@ class EstimatorComponent(Component, kind="estimator"):
         f = self.filter
         if f.backend != "compiled" or getattr(f, "_step_library", None) is None:
             return "the filter runs in CasADi's virtual machine (no compiled step)"
-        if type(f).step is not KalmanBase.step or getattr(f, "_after", False):
+        if type(f).step is not KalmanBase.step:
             return f"{type(f).__name__} runs Python code in its step"
         return None
 
@@ -192,9 +193,19 @@ class EstimatorComponent(Component, kind="estimator"):
                       out=values[outputs].ctypes.data, uidx=uidx.ctypes.data, upi=upi.ctypes.data,
                       upj=upj.ctypes.data)
         keep = (lib, iw, w, ptrs, upi, upj, uidx, yidx, u_prev, cur, bound)
-        out_op = Op(OP_FILTER, fields, keep, fail, sync_in, sync_out)
-        hold = Op(OP_HOLD, dict(fields), keep)
-        return [out_op], [hold]
+        ops = [Op(OP_FILTER, fields, keep, fail, sync_in, sync_out)]
+        if getattr(f, "_after", False):           # the filter's after_step, from Python
+            flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
+            after = f.after_step
+
+            def hook() -> None:
+                sync_out()
+                after()
+                sync_in()
+            ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
+                          (cur, flag), hook=hook))
+        ops.append(Op(OP_SUMMARY, dict(fields), keep))
+        return ops, [Op(OP_HOLD, dict(fields), keep)]
 
     def reset(self, t0):
         super().reset(t0)

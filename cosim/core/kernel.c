@@ -31,8 +31,10 @@ enum {
     OP_STEP3 = 4,    /* fmi3DoStep(t, h, true, ...) */
     OP_CONST = 5,    /* values[slot] = a */
     OP_SWITCH = 6,   /* values[slot] = t >= a ? c : b */
-    OP_FILTER = 7,   /* a filter's output: its compiled step (after its first instant), summary */
-    OP_HOLD = 8      /* a filter's update: keep the inputs for the next step */
+    OP_FILTER = 7,   /* a filter's output: its compiled step (after its first instant) */
+    OP_HOLD = 8,     /* a filter's update: keep the inputs for the next step */
+    OP_HOOK = 9,     /* after a filter's step: its Python hook (if the flag buf[0] is set; no flag: always) */
+    OP_SUMMARY = 10  /* a filter's outputs: estimate, covariance entries, NIS */
 };
 
 enum {
@@ -41,7 +43,8 @@ enum {
     EV_FAIL = 2,      /* op pc failed (status in the op's result fields) */
     EV_FLUSH = 3,     /* the record buffer is full: flush it, set j = 0, resume */
     EV_NONFINITE = 4, /* a non-finite value at the end of the block that began at k0 */
-    EV_CHUNK = 5      /* the chunk of steps is done (at a block boundary) */
+    EV_CHUNK = 5,     /* the chunk of steps is done (at a block boundary) */
+    EV_HOOK = 6       /* run the Python hook of op pc, then resume at pc + 1 */
 };
 
 typedef struct {
@@ -69,7 +72,7 @@ typedef struct {
     double *uprev;        /* the input held from the previous instant */
     const int64_t *yidx;  /* measurement signals */
     int64_t ny, nu, nx, nup; /* nup: upper covariance entries in the summary */
-    int64_t *cur;         /* [0]: current state copy, [1]: step count, [2]: started */
+    int64_t *cur;         /* [0]: current state copy, [1]: step count, [2]: started, [3]: stepped now */
     const double *status_out; /* the step's status output */
     const double *x[2], *P[2]; const double *nis;
     double *out;          /* summary destination (values + first output) */
@@ -146,6 +149,7 @@ static int run_op(kstate_t *s, op_t *o, double t) {
         return 0;
     case OP_FILTER: {
         int64_t c = o->cur[0];
+        o->cur[3] = 0;
         if (o->cur[2]) {
             for (int64_t i = 0; i < o->nu; i++) o->ub[i] = o->uprev[i];
             for (int64_t i = 0; i < o->ny; i++) o->yb[i] = v[o->yidx[i]];
@@ -154,7 +158,12 @@ static int run_op(kstate_t *s, op_t *o, double t) {
             c ^= 1;
             o->cur[0] = c;
             o->cur[1] += 1;
+            o->cur[3] = 1;
         }
+        return 0;
+    }
+    case OP_SUMMARY: {
+        int64_t c = o->cur[0];
         {
             const double *x = o->x[c], *P = o->P[c];
             int64_t nx = o->nx;
@@ -166,6 +175,9 @@ static int run_op(kstate_t *s, op_t *o, double t) {
         }
         return 0;
     }
+    case OP_HOOK:
+        if (o->cur[3] && (o->buf == NULL || o->buf[0] != 0.0)) return EV_HOOK;
+        return 0;
     case OP_HOLD:
         for (int64_t i = 0; i < o->nu; i++) o->uprev[i] = v[o->uidx[i]];
         o->cur[2] = 1;

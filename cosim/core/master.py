@@ -70,6 +70,7 @@ from .native import (
     EV_DONE,
     EV_FAIL,
     EV_FLUSH,
+    EV_HOOK,
     EV_NONFINITE,
     EV_PY,
     KState,
@@ -644,6 +645,12 @@ class Cosimulation:
                         if stop is None:
                             kst.pc += 1
                             continue
+                    if event == EV_HOOK:                # a filter's Python hook after its step
+                        at = kst.at
+                        f = calls[at]
+                        meta[at].hook()
+                        kst.pc += 1
+                        continue
                     if event == EV_CHUNK:
                         bar.update(kst.k - done)
                         done, kst.kstop = kst.k, kst.k + CHUNK

@@ -35,8 +35,8 @@ __all__ = ["ENGINES", "KState", "Op", "OpStruct", "load_kernel", "native_ops"]
 
 ENGINES = ("auto", "native", "python")
 
-OP_PY, OP_GET, OP_SET, OP_STEP2, OP_STEP3, OP_CONST, OP_SWITCH, OP_FILTER, OP_HOLD = range(9)
-EV_DONE, EV_PY, EV_FAIL, EV_FLUSH, EV_NONFINITE, EV_CHUNK = range(6)
+OP_PY, OP_GET, OP_SET, OP_STEP2, OP_STEP3, OP_CONST, OP_SWITCH, OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY = range(11)
+EV_DONE, EV_PY, EV_FAIL, EV_FLUSH, EV_NONFINITE, EV_CHUNK, EV_HOOK = range(7)
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int64
@@ -72,7 +72,8 @@ class Op:
     they point into; ``fail(op, t)`` raises the error of a failed operation (``op`` the
     OpStruct with ``status``, ``flag``, ``d`` set) as the Python path does; ``sync_in`` /
     ``sync_out`` move state the Python objects keep (a filter's current state copy and
-    step count) into and out of the kernel's arrays around every kernel call.
+    step count) into and out of the kernel's arrays when Python needs it; ``hook()`` is
+    the Python code an ``OP_HOOK`` runs (a filter's ``after_step``).
     """
 
     kind: int
@@ -81,6 +82,7 @@ class Op:
     fail: Callable | None = None
     sync_in: Callable[[], None] | None = None
     sync_out: Callable[[], None] | None = None
+    hook: Callable[[], None] | None = None
 
 
 def native_ops(fn) -> list[Op] | None:

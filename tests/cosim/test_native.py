@@ -206,3 +206,29 @@ def test_ctrl_c_is_seen_within_a_chunk_of_native_steps(fmu_builds):
     rows = info.value.partial
     assert isinstance(rows, pd.DataFrame) and len(rows) > 0 and np.isfinite(rows.to_numpy()).all()
     assert plant.instance is None                              # freed
+
+
+ARGS = {"IAE": {"window": 10}, "SWML": {"window": 20, "every": 10, "early_until": 4}}
+
+
+@pytest.mark.parametrize("kind", ["IAE", "SWML"])
+def test_adaptive_filters_run_their_hook_and_keep_the_same_history(fmu_builds, kind):
+    system = estimators.discretize(get_model("cartpole"), 0.01)
+    cls = getattr(estimators, kind)
+    comps = {}
+
+    def make(engine):
+        filt = EstimatorComponent("f", lambda: cls(system, [0.5, 0, 1.8, 0.5], 1.0, 0.2, 0.1, **ARGS[kind]))
+        comps[engine] = filt
+        plant = FMUComponent("plant", fmu_builds["cartpole", 2], 0.01, start={"theta": 1.8})
+        return Cosimulation([filt, plant, Step("force", 0.01, 0.5, -0.5, 0.5)],
+                            {"plant.F": "force.out", "f.F": "force.out", "f.y_x": "plant.y_x",
+                             "f.y_theta": "plant.y_theta"}, engine=engine)
+
+    assert_same(outcome(make, lambda cs: cs.run(2.0, progress=False)))
+    a, b = (comps[e].filter for e in ENGINES)
+    assert a.k == b.k == 200
+    np.testing.assert_array_equal(a.x, b.x)
+    hist = a.noise_history()
+    assert len(hist) > 1 and hist.equals(b.noise_history())
+    assert "f                native" in make("auto").describe()
