@@ -77,13 +77,21 @@ class Constant(_Source, kind="constant"):
         """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
         the native kernel runs itself: the value is a constant, or a switch at ``t_step``
         (:mod:`cosim.core.native`)."""
-        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
-        if self.native_reason() is None:
-            if type(self)._value is Step._value:
-                op = Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
-            else:
-                op = Op(OP_CONST, dict(slot=outputs.start, a=self.value))
-            output_fn.native, update_fn.native = [op], []
+        if self.native_reason() is not None:
+            return bind_protocol(self, values, values, inputs, outputs, integers)
+        value = self._value
+
+        def output_fn(t: float) -> None:
+            values[outputs] = value(t)
+
+        def update_fn(t: float) -> None:
+            pass
+
+        if type(self)._value is Step._value:
+            op = Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
+        else:
+            op = Op(OP_CONST, dict(slot=outputs.start, a=self.value))
+        output_fn.native, update_fn.native = [op], []
         return output_fn, update_fn
 
 

@@ -91,7 +91,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
     return base, ratios, hyper
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)       # identity: each unit is made once per analysis
 class Unit:
     """One evaluation of a component's ``output`` at an instant.
 
