@@ -68,12 +68,22 @@ class KState(ctypes.Structure):
 class Op:
     """One native operation of a bound call.
 
-    ``fields`` are :class:`OpStruct` fields (pointers as integers); ``keep`` holds what
-    they point into; ``fail(op, t)`` raises the error of a failed operation (``op`` the
-    OpStruct with ``status``, ``flag``, ``d`` set) as the Python path does; ``sync_in`` /
-    ``sync_out`` move state the Python objects keep (a filter's current state copy and
-    step count) into and out of the kernel's arrays when Python needs it; ``hook()`` is
-    the Python code an ``OP_HOOK`` runs (a filter's ``after_step``).
+    Parameters
+    ----------
+    kind : int
+        The operation (``OP_GET``, ``OP_SET``, ``OP_STEP2``, ... of this module).
+    fields : dict
+        :class:`OpStruct` fields (pointers as integers).
+    keep : tuple
+        What the pointers point into (kept alive with the operation).
+    fail : callable, optional
+        ``fail(op, t)`` raises the error of the failed operation as the Python path does
+        (``op``: the OpStruct with ``status``, ``flag``, ``d`` set; ``t`` [s]).
+    sync_in, sync_out : callable, optional
+        Move state the Python objects keep (a filter's current state copy and step count)
+        into and out of the kernel's arrays, when Python needs it.
+    hook : callable, optional
+        The Python code an ``OP_HOOK`` runs (a filter's ``after_step``).
     """
 
     kind: int
@@ -86,13 +96,14 @@ class Op:
 
 
 def native_ops(fn) -> list[Op] | None:
-    """The native operations of a bound call, or None if it runs in Python."""
+    """The native operations of a bound call, or None if it runs in Python.
+
+    Parameters
+    ----------
+    fn : callable
+        An output or update call of a component's binding.
+    """
     return getattr(fn, "native", None)
-
-
-def addr(a: np.ndarray) -> int:
-    """The address of a numpy array's data."""
-    return a.ctypes.data
 
 
 _SOURCE = Path(__file__).with_name("kernel.c")
@@ -145,9 +156,25 @@ def load_kernel() -> tuple[ctypes.CDLL | None, str]:
 class Program:
     """The kernel's program for one run: the operations of every pattern of due components.
 
-    ``pattern[k % L]`` is the pattern of base step ``k``; pattern ``p``'s output operations
-    are ``ops[out_start[p] : out_start[p] + out_len[p]]`` (likewise its updates);
-    ``meta[i]`` is the :class:`Op` of operation ``i`` (None for a call back into Python).
+    Parameters
+    ----------
+    ops : ctypes array of OpStruct
+        Every operation.
+    meta : list
+        The :class:`Op` of each operation (None: a call back into Python).
+    pattern : ndarray of int64, shape (L,)
+        The pattern of base step ``k`` is ``pattern[k % L]``.
+    out_start, out_len, upd_start, upd_len : ndarray of int64
+        Pattern ``p``'s output operations are ``ops[out_start[p] : out_start[p] +
+        out_len[p]]``, likewise its updates.
+    syncs_in, syncs_out : list of callable
+        Every operation's ``sync_in`` / ``sync_out``.
+    n_native : int
+        How many operations run natively.
+    calls : list of callable
+        The Python call each operation belongs to.
+    updates : list of bool
+        Whether each operation is part of an update.
     """
 
     ops: ctypes.Array
@@ -165,8 +192,14 @@ class Program:
 
 
 def build_program(schedule: list) -> Program:
-    """The program of ``schedule`` (per base step of the hyperperiod, the pair ``(output
-    calls, update calls)`` the Python path runs)."""
+    """The kernel's program of a run.
+
+    Parameters
+    ----------
+    schedule : list of (tuple, tuple)
+        Per base step of the hyperperiod, the output calls and the update calls the Python
+        loop makes (equal entries shared).
+    """
     index: dict[int, int] = {}
     pattern = np.empty(len(schedule), dtype=np.int64)
     structs: list[OpStruct] = []
