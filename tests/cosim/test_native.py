@@ -232,3 +232,48 @@ def test_adaptive_filters_run_their_hook_and_keep_the_same_history(fmu_builds, k
     hist = a.noise_history()
     assert len(hist) > 1 and hist.equals(b.noise_history())
     assert "f                native" in make("auto").describe()
+
+
+def test_a_failure_streamed_to_parquet_leaves_the_same_partial_file(fmu_builds, tmp_path):
+    def make(engine):
+        plant = FMUComponent("plant", fmu_builds["cartpole", 3], 0.01)
+        return Cosimulation([plant, Failing("bad", 0.01, 0.73, "raise")], {"plant.F": "bad.y"}, engine=engine)
+
+    def run(cs):
+        return cs.run_to_parquet(tmp_path / f"{cs.engine}.parquet", 1.0, chunk_rows=7, progress=False)
+
+    out = outcome(make, run)
+    (a, ea, ma), (b, eb, mb) = out["python"], out["native"]
+    assert ea == eb == "CosimError" and ma.replace("python", "native") == mb
+    assert a.name == "python.partial.parquet" and b.name == "native.partial.parquet"
+    pa, pb = pd.read_parquet(a), pd.read_parquet(b)
+    assert len(pa) == 73 and pa.equals(pb)
+
+
+def _same(a, b) -> bool:
+    """Exact equality of nested results (dicts, lists, arrays, frames)."""
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, (pd.DataFrame, pd.Series)):
+        return a.equals(b)
+    if isinstance(a, np.ndarray):
+        return a.shape == b.shape and np.array_equal(a, b, equal_nan=a.dtype.kind in "fc")
+    if isinstance(a, float) and np.isnan(a):
+        return isinstance(b, float) and np.isnan(b)
+    return a == b
+
+
+@pytest.mark.slow
+def test_the_seed_000_campaign_on_the_master_path_is_the_same_on_both_engines(monkeypatch):
+    from cosim.experiments import seed000
+
+    s = seed000.Settings(runs=2, duration=1.0)
+    init = Cosimulation.__init__
+    results = {}
+    for engine in ENGINES:
+        monkeypatch.setattr(Cosimulation, "__init__", lambda self, *a, engine=engine, **k: init(
+            self, *a, **{**k, "engine": engine}))
+        results[engine] = [seed000.master_task(i, "eqs", s) for i in range(len(s.scenarios))]
+    assert _same(results["python"], results["native"])
