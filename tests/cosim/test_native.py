@@ -78,6 +78,8 @@ class Failing(Component):
                 return np.array([np.nan])
             if self.what == "interrupt":
                 raise KeyboardInterrupt
+            if self.what == "huge":
+                return np.array([1.7e308])
             raise RuntimeError("deliberate failure")
         return np.array([0.1])
 
@@ -277,3 +279,19 @@ def test_the_seed_000_campaign_on_the_master_path_is_the_same_on_both_engines(mo
             self, *a, **{**k, "engine": engine}))
         results[engine] = [seed000.master_task(i, "eqs", s) for i in range(len(s.scenarios))]
     assert _same(results["python"], results["native"])
+
+
+def test_a_filter_driven_out_of_range_ends_the_run_the_same_way(fmu_builds):
+    system = estimators.discretize(get_model("cartpole"), 0.01)
+
+    def make(engine):
+        filt = EstimatorComponent("ekf", lambda: estimators.EKF(system, [0.5, 0, 1.8, 0.5], 1.0, 0.2, 0.1,
+                                                                 nan_is_missing=False))
+        plant = FMUComponent("plant", fmu_builds["cartpole", 2], 0.01)
+        return Cosimulation([filt, plant, Failing("y", 0.01, 0.42, "huge"), Constant("force", 0.01, 0.2)],
+                            {"plant.F": "force.out", "ekf.F": "force.out", "ekf.y_x": "plant.y_x",
+                             "ekf.y_theta": "y.y"}, engine=engine)
+
+    out = outcome(make)
+    assert out["python"][1] == "CosimError" and "ekf" in out["python"][2], out["python"][2]
+    assert_same(out)
