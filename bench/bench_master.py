@@ -3,14 +3,18 @@
 Run: python bench/bench_master.py [--long]
 
 Same FMU (the cart-pole plant, FMI 2.0 Co-Simulation, 1 ms steps, 5 s = 5000 steps), same
-work per step (set the force, doStep, read the 6 outputs into a record), three ways:
+work per step (set the force, doStep, read the 6 outputs into a record, the EKF's step),
+four ways, for the plant alone, the plant with a force source, the plant with a source
+and an EKF, and a chain of 10 plant FMUs:
 
 * fmpy's ``FMU2Slave`` loop: ``setReal``, ``doStep``, ``getReal`` and a row copy;
 * a raw ctypes loop: the FMU's functions called with prebuilt ctypes arguments (the
   cheapest a Python loop can be), rows copied into a preallocated array;
-* the master: plant FMU and a force source held at 10 ms, every signal recorded.
+* the master's Python loop (``engine="python"``) and its native kernel
+  (``engine="native"``): every signal recorded.
 
-"master own cost" = (master loop - raw loop) / steps. Medians of 7 repeats, all in this
+Also the EKF's compiled step alone (a native run of the filter over 5000 steps) and the
+setup of 1e3, 1e4 and 1e5 independent constant sources. Medians of 7 repeats, all in this
 run. ``--long`` adds a 1e6-step run streamed to Parquet and reports its peak RSS beside a
 1e5-step one (constant memory means equal peaks).
 """
@@ -28,84 +32,150 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.components.sources import Step
+import estimators
+from cosim.components.estimation import EstimatorComponent
+from cosim.components.sources import Constant, Step
 from cosim.core.master import Cosimulation
 from cosim.fmi.fmu_component import FMUComponent
 from fmu_models import build_fmu, get_model
 
 T_END, H, REPEATS = 5.0, 0.001, 7
 N = round(T_END / H)
+OUTS = ("x", "x_dot", "theta", "theta_dot", "y_x", "y_theta")
+#: the cases: (FMUs, force source, EKF)
+CASES = {"plant alone": (1, False, False), "plant + source": (1, True, False),
+         "plant + source + EKF": (1, True, True), "10-FMU chain": (10, True, False)}
 
 
-def _instance(path):
+def _instance(path, name="bare"):
     md = read_model_description(path)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path),
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bare")
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
     fmu.instantiate()
     fmu.setupExperiment(startTime=0.0)
     fmu.setReal([vr["step_size"]], [H])
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
-    outs = [vr[n] for n in ("x", "x_dot", "theta", "theta_dot", "y_x", "y_theta")]
-    return fmu, vr, outs
+    return fmu, vr, [vr[n] for n in OUTS]
 
 
-def fmpy_loop(path) -> float:
-    """What a user would write with fmpy alone."""
-    fmu, vr, outs = _instance(path)
-    rec = np.empty((N + 1, len(outs)))
-    rec[0] = fmu.getReal(outs)
+def _ekf():
+    system = estimators.discretize(get_model("cartpole"), H)
+    return estimators.EKF(system, [0.0, 0.0, 0.1, 0.0], 1.0, 0.2, 0.1)
+
+
+def _force(t: float) -> float:
+    return -0.5 if t < 2.0 - 1e-12 else 0.5
+
+
+def fmpy_loop(path, case) -> float:
+    """What a user would write with fmpy alone: set the force (the source's value, or the
+    previous FMU's ``x`` in the chain), doStep, getReal, a row copy (and the EKF's step)."""
+    n_fmu, source, with_ekf = CASES[case]
+    fmus = [_instance(path, f"bare{i}") for i in range(n_fmu)]
+    ekf = _ekf() if with_ekf else None
+    vf = [fmu[1]["F"] for fmu in fmus]
+    rec = np.empty((N + 1, 6 * n_fmu))
+    for i, (fmu, _, outs) in enumerate(fmus):
+        rec[0, 6 * i:6 * i + 6] = fmu.getReal(outs)
     t0 = time.perf_counter()
     for k in range(N):
         t = k * H
-        fmu.setReal([vr["F"]], [-0.5 if t < 2.0 else 0.5])
-        fmu.doStep(t, H)
-        rec[k + 1] = fmu.getReal(outs)
+        for i, (fmu, _, outs) in enumerate(fmus):
+            if source:
+                fmu.setReal([vf[i]], [_force(t) if i == 0 else rec[k, 6 * i - 6]])
+            fmu.doStep(t, H)
+            rec[k + 1, 6 * i:6 * i + 6] = fmu.getReal(outs)
+        if ekf is not None:
+            ekf.step([_force(t)], rec[k + 1, 4:6])
     wall = time.perf_counter() - t0
-    fmu.terminate()
-    fmu.freeInstance()
+    for fmu, _, _ in fmus:
+        fmu.terminate()
+        fmu.freeInstance()
     return wall
 
 
-def raw_loop(path) -> float:
+def raw_loop(path, case) -> float:
     """The same calls through raw ctypes pointers with prebuilt arguments."""
-    fmu, vr, outs = _instance(path)
-    dll, c = fmu.dll, ctypes.c_void_p(fmu.component)
+    n_fmu, source, with_ekf = CASES[case]
+    ekf = _ekf() if with_ekf else None
+    fmus, calls = [], []
+    for i in range(n_fmu):
+        fmu, vr, outs = _instance(path, f"bare{i}")
+        dll, c = fmu.dll, ctypes.c_void_p(fmu.component)
 
-    def fn(name):
-        f = getattr(dll, name)
-        f = type(f).from_address(ctypes.addressof(f))
-        f.restype, f.argtypes = ctypes.c_int, None
-        return f
+        def fn(name, dll=dll):
+            f = getattr(dll, name)
+            f = type(f).from_address(ctypes.addressof(f))
+            f.restype, f.argtypes = ctypes.c_int, None
+            return f
 
-    set_real, do_step, get_real = fn("fmi2SetReal"), fn("fmi2DoStep"), fn("fmi2GetReal")
-    in_vr, out_vr = (ctypes.c_uint32 * 1)(vr["F"]), (ctypes.c_uint32 * len(outs))(*outs)
-    in_buf, out_buf = (ctypes.c_double * 1)(), (ctypes.c_double * len(outs))()
-    out_np = np.ctypeslib.as_array(out_buf)
-    one, n_out, D = ctypes.c_size_t(1), ctypes.c_size_t(len(outs)), ctypes.c_double
-    rec = np.empty((N + 1, len(outs)))
-    get_real(c, out_vr, n_out, out_buf)
-    rec[0] = out_np
+        in_vr, out_vr = (ctypes.c_uint32 * 1)(vr["F"]), (ctypes.c_uint32 * len(outs))(*outs)
+        in_buf, out_buf = (ctypes.c_double * 1)(), (ctypes.c_double * len(outs))()
+        fmus.append(fmu)
+        calls.append((fn("fmi2SetReal"), fn("fmi2DoStep"), fn("fmi2GetReal"), c, in_vr, in_buf, out_vr, out_buf,
+                      np.ctypeslib.as_array(out_buf)))
+    one, n_out, D = ctypes.c_size_t(1), ctypes.c_size_t(6), ctypes.c_double
+    rec = np.empty((N + 1, 6 * n_fmu))
+    for i, (_, _, get_real, c, _, _, out_vr, out_buf, out_np) in enumerate(calls):
+        get_real(c, out_vr, n_out, out_buf)
+        rec[0, 6 * i:6 * i + 6] = out_np
     t0 = time.perf_counter()
     for k in range(N):
         t = k * H
-        in_buf[0] = -0.5 if t < 2.0 else 0.5
-        set_real(c, in_vr, one, in_buf)
-        do_step(c, D(t), D(H), 1)
-        get_real(c, out_vr, n_out, out_buf)
-        rec[k + 1] = out_np
+        for i, (set_real, do_step, get_real, c, in_vr, in_buf, out_vr, out_buf, out_np) in enumerate(calls):
+            if source:
+                in_buf[0] = _force(t) if i == 0 else rec[k, 6 * i - 6]
+                set_real(c, in_vr, one, in_buf)
+            do_step(c, D(t), D(H), 1)
+            get_real(c, out_vr, n_out, out_buf)
+            rec[k + 1, 6 * i:6 * i + 6] = out_np
+        if ekf is not None:
+            ekf.step([_force(t)], rec[k + 1, 4:6])
     wall = time.perf_counter() - t0
-    fmu.terminate()
-    fmu.freeInstance()
+    for fmu in fmus:
+        fmu.terminate()
+        fmu.freeInstance()
     return wall
 
 
-def master(path) -> float:
-    plant = FMUComponent("plant", path, H, parameters={"step_size": H})
-    cs = Cosimulation([plant, Step("force", 0.01, 2.0, -0.5, 0.5)], {"plant.F": "force.out"})
+def master(path, case="plant + source", engine="auto") -> float:
+    """The master's loop time [s]: plant FMU(s), a force source held at 10 ms, the EKF
+    component, every signal recorded."""
+    n_fmu, source, with_ekf = CASES[case]
+    plants = [FMUComponent(f"p{i}", path, H, parameters={"step_size": H}) for i in range(n_fmu)]
+    comps, conn = list(plants), {f"p{i}.F": f"p{i - 1}.x" for i in range(1, n_fmu)}
+    if source:
+        comps.append(Step("force", 0.01, 2.0, -0.5, 0.5))
+        conn["p0.F"] = "force.out"
+    if with_ekf:
+        comps.append(EstimatorComponent("ekf", _ekf, H))
+        conn.update({"ekf.F": "force.out", "ekf.y_x": "p0.y_x", "ekf.y_theta": "p0.y_theta"})
+    cs = Cosimulation(comps, conn, engine=engine)
     cs.run(T_END, progress=False)
     return cs.timings["loop"]
+
+
+def filter_step() -> float:
+    """The EKF's compiled step [s per step]: a native run over N steps (no Python per step)."""
+    ekf = _ekf()
+    rng = np.random.default_rng(0)
+    us, ys = np.zeros((N, 1)), rng.normal(size=(N, 2)) * 0.1
+    t0 = time.perf_counter()
+    ekf.run(us, ys, keep="estimates")
+    return (time.perf_counter() - t0) / N
+
+
+def setup_time(n: int) -> tuple[float, float]:
+    """Wall times [s] to prepare ``n`` independent constant sources: the constructor
+    (checks, layout, evaluation order) and the run's own setup (binding, schedule)."""
+    comps = [Constant(f"c{i}", 0.01, 1.0) for i in range(n)]
+    t0 = time.perf_counter()
+    cs = Cosimulation(comps, {})
+    built = time.perf_counter() - t0
+    cs.run(0.01, progress=False)
+    return built, cs.timings["setup"]
 
 
 def long_run(path, steps: int) -> str:
@@ -114,7 +184,9 @@ def long_run(path, steps: int) -> str:
 import resource, tempfile, sys
 from cosim.fmi.fmu_component import FMUComponent
 from cosim.core.master import Cosimulation
-from cosim.components.sources import Step
+import estimators
+from cosim.components.estimation import EstimatorComponent
+from cosim.components.sources import Constant, Step
 plant = FMUComponent("plant", {str(path)!r}, {H}, parameters={{"step_size": {H}}})
 cs = Cosimulation([plant, Step("force", 0.01, 2.0, -0.5, 0.5)], {{"plant.F": "force.out"}})
 with tempfile.TemporaryDirectory() as d:
@@ -132,17 +204,30 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as out:
         path = str(build_fmu(get_model("cartpole"), out))
-        master(path)                                     # warm-up
-        f = np.median([fmpy_loop(path) for _ in range(REPEATS)])
-        r = np.median([raw_loop(path) for _ in range(REPEATS)])
-        m = np.median([master(path) for _ in range(REPEATS)])
-        print(f"cart-pole FMU (FMI 2.0 CS), {N} steps of {H * 1e3:g} ms, 6 outputs recorded per step; "
-              f"medians of {REPEATS}")
-        print(f"  fmpy FMU2Slave loop    {f * 1e3:7.2f} ms  {f / N * 1e6:5.2f} us/step")
-        print(f"  raw ctypes loop        {r * 1e3:7.2f} ms  {r / N * 1e6:5.2f} us/step")
-        print(f"  master (plant + source){m * 1e3:7.2f} ms  {m / N * 1e6:5.2f} us/step")
-        print(f"  master own cost over the raw loop: {(m - r) / N * 1e6:+.2f} us per base step; "
-              f"master / fmpy loop = {m / f:.2f}")
+        master(path, engine="native")                    # warm-up (compiles the kernel once)
+        us = {}
+        print(f"cart-pole FMU (FMI 2.0 CS), {N} steps of {H * 1e3:g} ms, every output recorded per step; "
+              f"medians of {REPEATS} [us per base step]")
+        print(f"  {'case':22s} {'fmpy loop':>10s} {'raw ctypes':>10s} {'master py':>10s} {'native':>10s}")
+        for case in CASES:
+            row = [np.median([fn(*a) for _ in range(REPEATS)]) / N * 1e6 for fn, a in (
+                (fmpy_loop, (path, case)), (raw_loop, (path, case)), (master, (path, case, "python")),
+                (master, (path, case, "native")))]
+            us[case] = row
+            print(f"  {case:22s} " + " ".join(f"{x:10.3f}" for x in row))
+        step = np.median([filter_step() for _ in range(REPEATS)]) * 1e6
+        print(f"  EKF compiled step (native run): {step:.3f} us")
+        ps, pse = us["plant + source"], us["plant + source + EKF"]
+        print(f"goal: native plant + source / raw ctypes loop = {ps[3] / ps[1]:.3f} (at most 0.3)")
+        print(f"goal: native plant + source + EKF = {pse[3]:.3f} us, at most native plant + source + 1.5 x "
+              f"EKF step = {ps[3] + 1.5 * step:.3f} us")
+        print(f"per FMU: native 10-FMU chain {us['10-FMU chain'][3] / 10:.3f} us, plant alone "
+              f"{us['plant alone'][3]:.3f} us (python master: {us['10-FMU chain'][2] / 10:.3f} and "
+              f"{us['plant alone'][2]:.3f} us)")
+        print("setup of n independent constant sources (constructor + run setup):")
+        for count in (1_000, 10_000, 100_000):
+            built, bound = setup_time(count)
+            print(f"  n = {count:>7d}: {built + bound:7.3f} s  (constructor {built:.3f} s, run setup {bound:.3f} s)")
         if args.long:
             fmu = Path(out, "keep.fmu")
             fmu.write_bytes(Path(path).read_bytes())

@@ -47,6 +47,7 @@ nitpicky = True
 # build (no intersphinx downloads), so a reference to them cannot resolve; each is listed.
 nitpick_ignore = [
     ("py:class", "abc.ABC"),        # the standard library's: a base class shown by show-inheritance
+    ("py:class", "ctypes.Structure"),  # likewise (the native kernel's structures)
 ]
 
 # the API reference

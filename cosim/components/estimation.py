@@ -1,17 +1,20 @@
 """The estimator component: any filter of :mod:`estimators` as a co-simulation component."""
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from estimators.adaptive import AdaptationRecord
 from estimators.base import KalmanBase
 from estimators.filter_fmu import export_filter_fmu, filter_parameters
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import positive
 
 from ..core.component import Component, ExportedFMU
+from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY, Op
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
@@ -114,19 +117,95 @@ class EstimatorComponent(Component, kind="estimator"):
         else:
             u_at, y_at = inputs[:nu], inputs[nu:]
         u_prev = np.zeros(nu)
-        started = [False]
+        cur = np.zeros(4, dtype=np.int64)   # the native kernel's [state copy, step count, started, stepped]
         step = f.step
 
         def output_fn(t: float) -> None:
-            if started[0]:
+            if cur[2]:
                 step(u_prev, values[y_at])
             summary()
 
         def update_fn(t: float) -> None:
             u_prev[:] = values[u_at]
-            started[0] = True
+            cur[2] = 1
 
+        ops = self._native_ops(values, u_at, y_at, outputs, u_prev, cur)
+        if ops is not None:
+            output_fn.native, update_fn.native = ops
         return output_fn, update_fn
+
+    def native_reason(self) -> str | None:
+        """Why this filter's calls run in Python (None: its compiled step runs in the native
+        kernel, see :mod:`cosim.core.native`)."""
+        f = self.filter
+        if f.backend != "compiled" or getattr(f, "_step_library", None) is None:
+            return "the filter runs in CasADi's virtual machine (no compiled step)"
+        if type(f).step is not KalmanBase.step:
+            return f"{type(f).__name__} runs Python code in its step"
+        return None
+
+    def _native_ops(self, values, u_at, y_at, outputs: slice, u_prev, cur):
+        """The kernel's operations (output: the compiled step, then the summary; update: keep
+        the inputs), or None. The step is the very function :meth:`step` evaluates, called
+        through its symbol in the filter's compiled library, on the same arrays."""
+        if self.native_reason() is not None:
+            return None
+        f = self.filter
+        rt = f._rt
+        bound = rt._steps
+        fn = bound[0].fn
+        try:
+            lib = ctypes.CDLL(str(f._step_library))
+            sym = ctypes.cast(getattr(lib, fn.name()), ctypes.c_void_p).value
+        except (OSError, AttributeError):
+            return None
+        iw = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64)
+        w = np.zeros(max(fn.sz_w(), 1))
+        ptrs = []
+        for b in bound:
+            arg = (ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args])
+            res = (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])
+            ptrs.append((arg, res))
+        n = self._nx
+        upper = np.triu_indices(n, 1) if self.covariance == "full" else (np.zeros(0, int),) * 2
+        upi, upj = (np.ascontiguousarray(a, np.int64) for a in upper)
+        idx = np.arange(len(values))
+        uidx = np.ascontiguousarray(idx[u_at], np.int64)
+        yidx = np.ascontiguousarray(idx[y_at], np.int64)
+        xs, Ps = rt.pairs["x"], rt.pairs["P"]
+        cell, count = rt.cell, f._count
+
+        def sync_in() -> None:
+            cur[0], cur[1] = cell[0], count[0]
+
+        def sync_out() -> None:
+            cell[0], count[0] = int(cur[0]), int(cur[1])
+
+        def fail(op, t: float) -> None:
+            f._explain("step")
+
+        fields = dict(fn=sym, arg=tuple(ctypes.addressof(a) for a, _ in ptrs),
+                      res=tuple(ctypes.addressof(r) for _, r in ptrs), iw=iw.ctypes.data, w=w.ctypes.data,
+                      ub=f._u.ctypes.data, yb=f._y.ctypes.data, uprev=u_prev.ctypes.data, yidx=yidx.ctypes.data,
+                      ny=len(yidx), nu=len(uidx), nx=n, nup=len(upi), cur=cur.ctypes.data,
+                      status_out=rt.status.ctypes.data, x=(xs[0].ctypes.data, xs[1].ctypes.data),
+                      P=(Ps[0].ctypes.data, Ps[1].ctypes.data), nis=rt.outputs["nis"].ctypes.data,
+                      out=values[outputs].ctypes.data, uidx=uidx.ctypes.data, upi=upi.ctypes.data,
+                      upj=upj.ctypes.data)
+        keep = (lib, iw, w, ptrs, upi, upj, uidx, yidx, u_prev, cur, bound)
+        ops = [Op(OP_FILTER, fields, keep, fail, sync_in, sync_out)]
+        if getattr(f, "_after", False):           # the filter's after_step, from Python
+            flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
+            after = f.after_step
+
+            def hook() -> None:
+                sync_out()
+                after()
+                sync_in()
+            ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
+                          (cur, flag), hook=hook))
+        ops.append(Op(OP_SUMMARY, dict(fields), keep))
+        return ops, [Op(OP_HOLD, dict(fields), keep)]
 
     def reset(self, t0):
         super().reset(t0)

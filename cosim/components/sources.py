@@ -14,7 +14,8 @@ from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
 from fmu_models.infra.checks import finite, positive, positive_int
 
-from ..core.component import Component, ExportedFMU
+from ..core.component import Component, ExportedFMU, bind_protocol
+from ..core.native import OP_CONST, OP_SWITCH, Op
 
 
 class _Source(Component):
@@ -64,6 +65,35 @@ class Constant(_Source, kind="constant"):
 
     def _signal(self):
         return "constant", [("value", self.value, "real", "the output")], []
+
+    def native_reason(self) -> str | None:
+        """Why this source's calls run in Python (None: in the native kernel)."""
+        cls = type(self)
+        if (cls.output is not _Source.output or cls.update is not Component.update
+                or cls._value not in (Constant._value, Step._value)):
+            return "a Python component (its own output or update)"
+        return None
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
+        the native kernel runs itself: the value is a constant, or a switch at ``t_step``
+        (:mod:`cosim.core.native`)."""
+        if self.native_reason() is not None:
+            return bind_protocol(self, values, values, inputs, outputs, integers)
+        value = self._value
+
+        def output_fn(t: float) -> None:
+            values[outputs] = value(t)
+
+        def update_fn(t: float) -> None:
+            pass
+
+        if type(self)._value is Step._value:
+            op = Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
+        else:
+            op = Op(OP_CONST, dict(slot=outputs.start, a=self.value))
+        output_fn.native, update_fn.native = [op], []
+        return output_fn, update_fn
 
 
 class Step(Constant, kind="step"):

@@ -150,7 +150,8 @@ class ClockedComponent(Protocol):
 
 def clocked(component: Component) -> bool:
     """Whether ``component`` takes part in clocks."""
-    return isinstance(component, ClockedComponent) and bool(component.clock_infos)
+    # the attribute first: a Protocol isinstance check is slow, and most components have none
+    return bool(getattr(component, "clock_infos", None)) and isinstance(component, ClockedComponent)
 
 
 def _port_type(comp: Component, port: str, direction: str) -> str:

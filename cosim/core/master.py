@@ -36,6 +36,7 @@ a linear loop) or by fixed-point iteration (``loop_solver="fixed-point"``), to
 """
 from __future__ import annotations
 
+import ctypes
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -57,12 +58,24 @@ from .clocking import ClockPlan
 from .component import (
     CLOCK,
     Component,
-    FastBinding,
     StopRequest,
     bind_protocol,
     port_kind,
     ports_compatible,
     split_port,
+)
+from .native import (
+    ENGINES,
+    EV_CHUNK,
+    EV_DONE,
+    EV_FAIL,
+    EV_FLUSH,
+    EV_HOOK,
+    EV_NONFINITE,
+    EV_PY,
+    KState,
+    build_program,
+    load_kernel,
 )
 from .recording import MemorySink, ParquetSink, select_signals
 from .schedule import Group, Unit, base_step, evaluation_order
@@ -74,6 +87,8 @@ LOOPS = ("refuse", "iterate")
 LOOP_SOLVERS = ("newton", "fixed-point")
 #: Base steps between checks that every signal is finite (and progress updates).
 BLOCK = 64
+#: Base steps the native kernel runs before it returns to Python (Ctrl-C, progress).
+CHUNK = 64 * BLOCK
 #: Largest number of base steps of one run.
 MAX_STEPS = 10**10
 
@@ -114,6 +129,14 @@ class Cosimulation:
         Iteration limit per instant; reaching it stops the run with a CosimError (default 50).
     loop_solver : {"newton", "fixed-point"}
         How loops are iterated (default Newton).
+    engine : {"auto", "native", "python"}
+        What runs the base-step loop: the native kernel (:mod:`cosim.core.native`), the
+        Python loop, or (default) the native kernel when anything of the run can take it
+        and a C compiler is available. Both give the same results bit for bit; calls that
+        cannot run natively (Python components, Model Exchange, isolated FMUs, integer
+        ports, algebraic loops) return to Python between native segments; runs with clocks
+        or ``order="jacobi"`` take the Python loop. :meth:`describe` says which path each
+        component takes.
 
     Attributes
     ----------
@@ -142,13 +165,13 @@ class Cosimulation:
 
     def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
                  order: str = "auto", loops: str = "refuse", loop_tolerance: float = 1e-10,
-                 loop_max_iter: int = 50, loop_solver: str = "newton"):
+                 loop_max_iter: int = 50, loop_solver: str = "newton", engine: str = "auto"):
 
         for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
-                                   ("loop_solver", loop_solver, LOOP_SOLVERS)):
+                                   ("loop_solver", loop_solver, LOOP_SOLVERS), ("engine", engine, ENGINES)):
             if value not in valid:
                 raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
-        self.order, self.loops, self.loop_solver = order, loops, loop_solver
+        self.order, self.loops, self.loop_solver, self.engine = order, loops, loop_solver, engine
         self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
         self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
@@ -156,7 +179,8 @@ class Cosimulation:
             if not isinstance(c, Component):
                 raise TypeMismatchError(f"{c!r} is not a cosim.core.component.Component")
         names = [c.name for c in self.components]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        seen: set[str] = set()
+        dup = sorted({n for n in names if n in seen or seen.add(n)})
         if dup:
             raise ConfigurationError(f"duplicate component names: {dup}")
         self.by_name = {c.name: c for c in self.components}
@@ -172,6 +196,10 @@ class Cosimulation:
         #: The clocks and clock connections, checked here before any run (None without any).
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
+        self._kernel = None
+        if engine == "native" and self._whole_run_python() not in (None, "engine='python'"):
+            raise ConfigurationError(f"engine='native' cannot run this co-simulation: {self._whole_run_python()}; "
+                                     "use engine='auto'")
         #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
@@ -250,6 +278,43 @@ class Cosimulation:
             else:
                 self._in_specs[c.name] = (ports, idx)
 
+    # ---------------------------------------------------------------- engine
+    def _whole_run_python(self) -> str | None:
+        """Why every call of a run takes the Python path, or None."""
+        if self.engine == "python":
+            return "engine='python'"
+        if self.order == "jacobi":
+            return "order='jacobi' (every component reads the values before the instant)"
+        if self.clock_plan is not None:
+            return "the run has clocks"
+        return None
+
+    def component_paths(self) -> dict[str, str | None]:
+        """Per component, why its calls run in Python (None: in the native kernel)."""
+        whole = self._whole_run_python()
+        out = {}
+        for c in self.components:
+            reason = getattr(c, "native_reason", None)
+            out[c.name] = whole or (reason() if callable(reason) else "a Python component")
+        return out
+
+    def _program(self, schedule):
+        """The native kernel's program for this run, or None for the Python path."""
+        why = self._whole_run_python()
+        if why is not None:
+            if self.engine == "native":
+                raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
+            return None
+        self._kernel, reason = load_kernel()
+        if self._kernel is None:
+            if self.engine == "native":
+                raise ConfigurationError(f"engine='native': the native kernel is not available ({reason})")
+            return None
+        program = build_program(schedule)
+        if program.n_native == 0 and self.engine == "auto":
+            return None                  # nothing runs natively: the Python loop costs less
+        return program
+
     def _due(self, name: str, j: int) -> bool:
         return j % self._ratio[name] == 0
 
@@ -269,6 +334,15 @@ class Cosimulation:
             lines.append(f"  {i}. {label}" + ("   [algebraic loop, solved by iteration]" if g.loop else ""))
         if self.clock_plan is not None:
             lines += ["", *self.clock_plan.describe_lines()]
+        whole = self._whole_run_python()
+        lines += ["", f"engine: {self.engine}; " + (f"every call runs in Python ({whole})" if whole else
+                  "the base-step loop runs in the native kernel (when a C compiler is available), calls "
+                  "marked Python return to the interpreter:")]
+        if whole is None:
+            for name, why in self.component_paths().items():
+                lines.append(f"  {name:16s} " + ("native" if why is None else f"Python ({why})"))
+            if any(g.loop for g in self.schedule):
+                lines.append("  algebraic loops: Python (solved by iteration)")
         position = {}
         for i, g in enumerate(self.schedule):
             for u in g.units:
@@ -396,10 +470,10 @@ class Cosimulation:
 
     def _bind_all(self, values, source, integers):
         bound = {}
-        for c in self.components:
+        for c in self.components:       # hasattr(c, "bind") = isinstance(c, FastBinding), faster
             inp, out = self._in_specs[c.name][1], self._out_slices[c.name]
             try:
-                bound[c.name] = (c.bind(values, inp, out, integers) if source is values and isinstance(c, FastBinding)
+                bound[c.name] = (c.bind(values, inp, out, integers) if source is values and hasattr(c, "bind")
                                  else bind_protocol(c, values, source, inp, out, integers))
             except Exception as e:
                 if isinstance(e, CosimError):
@@ -494,6 +568,9 @@ class Cosimulation:
         all_sel = len(sel) == self._n_signals
         int_cols = sink.int_positions
         int_idx = sel_idx[int_cols] if len(int_cols) else None
+        sel64 = np.ascontiguousarray(sel_idx, dtype=np.int64)
+        isel64 = np.ascontiguousarray(sel_idx[int_cols] if len(int_cols) else np.zeros(0), dtype=np.int64)
+        kst = program = stop = None
         buf, ibuf = sink.buffer, sink.ibuffer
         cap = len(buf)
         clock = time.perf_counter()
@@ -533,40 +610,113 @@ class Cosimulation:
                 owner[o], owner[u] = name, name
             schedule = self._entries(bound, values)
             L = self._hyper
+            program = self._program(schedule)
             self.timings["setup"] = time.perf_counter() - clock
             clock = time.perf_counter()
             bar = tqdm(total=n + 1, unit="step", delay=0 if progress else 2.0, disable=progress is False,
                        leave=False, desc="co-simulation", mininterval=0.5)
             stop = None
-            for k0 in range(0, n + 1, BLOCK):
-                k1 = min(k0 + BLOCK, n + 1)
-                jb = j                                  # the block's first row in the buffer
-                for k in range(k0, k1):
-                    t = t0 + k * hf
+            if program is not None:
+                kst = KState(t0=t0, h=hf, n=n, m=m, L=L, cap=cap, ncols=buf.shape[1], nint=ibuf.shape[1],
+                             nsig=self._n_signals, block=BLOCK, values=values.ctypes.data,
+                             integers=integers.ctypes.data, buf=buf.ctypes.data, ibuf=ibuf.ctypes.data,
+                             sel=sel64.ctypes.data, isel=isel64.ctypes.data, pattern=program.pattern.ctypes.data,
+                             out_start=program.out_start.ctypes.data, out_len=program.out_len.ctypes.data,
+                             upd_start=program.upd_start.ctypes.data, upd_len=program.upd_len.ctypes.data,
+                             ops=ctypes.addressof(program.ops), kstop=CHUNK)
+                run = self._kernel.kernel_run
+                state = ctypes.byref(kst)
+                calls, updates, meta = program.calls, program.updates, program.meta
+                done = 0
+                phase = "output"
+                for sync in program.syncs_in:
+                    sync()
+                while True:
+                    event = run(state)
+                    if event == EV_PY:                  # a Python call: as the Python loop makes it
+                        at, k = kst.at, kst.k
+                        f = calls[at]
+                        try:
+                            f(t0 + k * hf)
+                        except StopRequest as request:
+                            if not updates[at]:
+                                raise
+                            stop = request
+                        if stop is None:
+                            kst.pc += 1
+                            continue
+                    if event == EV_HOOK:                # a filter's Python hook after its step
+                        at = kst.at
+                        f = calls[at]
+                        meta[at].hook()
+                        kst.pc += 1
+                        continue
+                    if event == EV_CHUNK:
+                        bar.update(kst.k - done)
+                        done, kst.kstop = kst.k, kst.k + CHUNK
+                        continue
+                    if event == EV_FLUSH:
+                        sink.flush(cap)
+                        kst.j = 0
+                        continue
+                    for sync in program.syncs_out:
+                        sync()
+                    k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
+                    if event == EV_DONE:
+                        bar.update(n + 1 - done)
+                        break
+                    if event == EV_NONFINITE:
+                        k = n if kst.phase == 3 else k - 1
+                        self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
+                    at = kst.at
+                    f, t = calls[at], t0 + k * hf
+                    phase = "update" if updates[at] else "output"
+                    if event == EV_FAIL:                # the Python call's own error
+                        try:
+                            meta[at].fail(program.ops[at], t)
+                            raise CosimError(f"native call of {owner.get(f, '?')} failed with status "
+                                             f"{program.ops[at].status}")
+                        except StopRequest as request:
+                            if phase != "update":
+                                raise
+                            stop = request
                     outs, upds = schedule[k % L]
-                    if jacobi:
-                        source[:] = values
-                    phase = "output"
-                    for f in outs:
-                        f(t)
-                    if k % m == 0:
-                        j = record(j)
-                    if k == n:
-                        break
-                    phase = "update"
-                    try:
-                        for f in upds:
-                            f(t)
-                    except StopRequest as request:
-                        stop = request
-                        j = self._finish_stop(request, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
-                                              values, jacobi, source, owner)
-                        break
-                if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
-                    j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                bar.update(k1 - k0)
-                if stop is not None:
+                    j = self._finish_stop(stop, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
+                                          values, jacobi, source, owner)
+                    if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
+                        j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
+                    bar.update(k + 1 - done)
                     break
+            else:
+                for k0 in range(0, n + 1, BLOCK):
+                    k1 = min(k0 + BLOCK, n + 1)
+                    jb = j                                  # the block's first row in the buffer
+                    for k in range(k0, k1):
+                        t = t0 + k * hf
+                        outs, upds = schedule[k % L]
+                        if jacobi:
+                            source[:] = values
+                        phase = "output"
+                        for f in outs:
+                            f(t)
+                        if k % m == 0:
+                            j = record(j)
+                        if k == n:
+                            break
+                        phase = "update"
+                        try:
+                            for f in upds:
+                                f(t)
+                        except StopRequest as request:
+                            stop = request
+                            j = self._finish_stop(request, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
+                                                  values, jacobi, source, owner)
+                            break
+                    if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
+                        j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
+                    bar.update(k1 - k0)
+                    if stop is not None:
+                        break
             sink.flush(j)
             self.timings["loop"] = time.perf_counter() - clock
             result = sink.finish()
@@ -577,17 +727,26 @@ class Cosimulation:
                                                "reason": stop.reason}
             return result
         except KeyboardInterrupt:
+            if kst is not None and stop is None:
+                k, j = kst.k, kst.j
+                self._sync_out(program)
             sink.flush(j)
             partial = sink.abort()
             raise Interrupted(f"interrupted at t = {t0 + k * hf:g} s"
                               + (f"; rows so far in {partial}" if isinstance(partial, Path) else ""),
                               partial) from None
         except CosimError as e:
+            if kst is not None and stop is None and e.results is None:
+                k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
+                self._sync_out(program)
             if e.results is None:
                 sink.flush(j)
                 e.results = sink.abort()
             raise
         except Exception as e:
+            if kst is not None and stop is None:
+                k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
+                self._sync_out(program)
             if phase != "reset" and not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
                 # a non-finite signal is the root cause of what failed after it
                 try:
@@ -612,6 +771,12 @@ class Cosimulation:
             for c in self.components:
                 c.close()
             self.timings["teardown"] = time.perf_counter() - clock
+
+    @staticmethod
+    def _sync_out(program) -> None:
+        """The state the native kernel keeps for Python objects, back into them."""
+        for sync in program.syncs_out:
+            sync()
 
     def _finish_stop(self, request: StopRequest, upds, at: int, bound, schedule, k: int, t0: float, record,
                      j: int, sink, values, jacobi, source, owner) -> int:

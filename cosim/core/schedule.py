@@ -15,6 +15,8 @@
 """
 from __future__ import annotations
 
+import functools
+import heapq
 import itertools
 import math
 from collections.abc import Mapping, Sequence
@@ -34,6 +36,7 @@ MAX_RATIO = 1_000_000
 MAX_HYPERPERIOD = 100_000
 
 
+@functools.lru_cache(maxsize=1024)
 def _fraction(x: float) -> Fraction:
     return Fraction(x).limit_denominator(10**9)
 
@@ -88,7 +91,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
     return base, ratios, hyper
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)       # identity: each unit is made once per analysis
 class Unit:
     """One evaluation of a component's ``output`` at an instant.
 
@@ -180,7 +183,7 @@ def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
         for q in sorted(u.needs):
             src = conn[(u.comp.name, q)]
             s = publisher[src]
-            if u not in edges[s]:
+            if (s, u) not in why:
                 edges[s].append(u)
             why[(s, u)] = (f"{src[0]}.{src[1]}", f"{u.comp.name}.{q}")
     return edges, why
@@ -219,7 +222,10 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
         or become a :class:`Group` with ``loop=True`` (all its components must be
         ``reentrant``).
     """
-    connected = {c.name: {q for (d, q) in conn if d == c.name} for c in components}
+    connected: dict[str, set] = {c.name: set() for c in components}
+    for (d, q) in conn:
+        if d in connected:
+            connected[d].add(q)
     rank = {c.name: i for i, c in enumerate(components)}
     split: set[str] = set()
     while True:
@@ -261,18 +267,20 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
                 succ[a].add(b)
                 indeg[b] += 1
 
-    def key(n):
-        return min((rank[u.comp.name], u.part != "free") for u in members[n])
-
-    ready = sorted((n for n in members if indeg[n] == 0), key=key)
+    # the key of a node: its first member in the components' list order (free part first)
+    keys = {}
+    for n, ms in members.items():
+        ms.sort(key=lambda u: (rank[u.comp.name], u.part != "free"))
+        keys[n] = (rank[ms[0].comp.name], ms[0].part != "free")
+    seq = {n: i for i, n in enumerate(members)}          # a total order among equal keys
+    ready = [(keys[n], seq[n], n) for n in members if indeg[n] == 0]
+    heapq.heapify(ready)
     order: list[Group] = []
     while ready:
-        n = ready.pop(0)
-        ms = sorted(members[n], key=lambda u: (rank[u.comp.name], u.part != "free"))
-        order.append(Group(tuple(ms), loop=isinstance(n, tuple)))
+        _, _, n = heapq.heappop(ready)
+        order.append(Group(tuple(members[n]), loop=isinstance(n, tuple)))
         for m in succ[n]:
             indeg[m] -= 1
             if indeg[m] == 0:
-                ready.append(m)
-        ready.sort(key=key)
+                heapq.heappush(ready, (keys[m], seq[m], m))
     return order

@@ -216,8 +216,21 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
         conn.update({f"{t}.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)})
         conn.update({f"{t}.y_{m}": f"sensor.y_{m}" for m in sensor.input_names})
     df = Cosimulation([plant, sensor, *ests, source, noise], conn).run(duration)
-    X = df[[f"plant.{x}" for x in states]].to_numpy()
-    est = {n: df[[f"{t}.{x}" for x in states]].to_numpy() for n, t in tags.items()}
-    cov = {n: covariance_from_frame(df, t, states) for n, t in tags.items()}
-    nis = {n: df[f"{t}.nis"].to_numpy()[1:] for n, t in tags.items()}
+    data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
+    col = {c: i for i, c in enumerate(df.columns)}
+
+    def cols(names):
+        return data[:, [col[c] for c in names]]
+
+    X = cols([f"plant.{x}" for x in states])
+    est = {n: cols([f"{t}.{x}" for x in states]) for n, t in tags.items()}
+    cov = {}
+    for n, t in tags.items():
+        P = np.empty((len(data), len(states), len(states)))
+        for i, x in enumerate(states):
+            P[:, i, i] = data[:, col[f"{t}.P_{x}"]]
+            for j in range(i + 1, len(states)):
+                P[:, i, j] = P[:, j, i] = data[:, col[f"{t}.P_{i}_{j}"]]
+        cov[n] = P
+    nis = {n: data[1:, col[f"{t}.nis"]] for n, t in tags.items()}
     return X, est, cov, nis

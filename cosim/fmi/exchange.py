@@ -25,6 +25,7 @@ import numpy as np
 
 from fmu_models.errors import FMUError, InputError, TypeMismatchError
 
+from ..core.native import OP_GET, OP_SET, Op
 from .ports import ElementPort, integer_range
 
 __all__ = ["Exchange", "raw_function"]
@@ -168,14 +169,33 @@ class Exchange:
                 st = fn(*args)
                 if st > 1:
                     fail(label, st)
+            call.native = [self._op(fn, label, g, values.ctypes.data + 8 * index.start, None, values)]
             return call
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
         idx = np.arange(len(values))[index] if isinstance(index, slice) else np.asarray(index, np.intp)
         parts = [(fn, label, g, self._args(g, g.buf), idx[g.positions]) for fn, label, g in self.groups]
-        if self.direction == "get":
-            return self._getter(parts, values, integers)
-        return self._setter(parts, values, integers, changes)
+        call = (self._getter(parts, values, integers) if self.direction == "get"
+                else self._setter(parts, values, integers, changes))
+        if not changes and all(g.type_name in ("Real", "Float64") for _, _, g in self.groups):
+            call.native = [self._op(fn, label, g, ctypes.addressof(g.buf), where, values)
+                           for fn, label, g, _, where in parts]
+        return call
+
+    def _op(self, fn, label: str, g: _Group, buf: int, where, values):
+        """The native kernel's operation (:mod:`cosim.core.native`) of group ``g``'s call:
+        ``buf`` the address the FMU reads or writes, ``where`` the signal of every port (None:
+        the FMU works in ``values`` in place)."""
+        fail = self._fail
+        if where is None:
+            idx = off = np.zeros(0, np.int64)
+        else:
+            idx, off = np.ascontiguousarray(where, np.int64), np.ascontiguousarray(g.offsets, np.int64)
+        fields = dict(fn=ctypes.cast(fn, ctypes.c_void_p).value, inst=self.inst.value, vr=ctypes.addressof(g.vr),
+                      nvr=g.n_vr.value, nbuf=-1 if self.version == 2 else g.n.value, buf=buf, n=len(idx),
+                      idx=idx.ctypes.data, off=off.ctypes.data)
+        return Op(OP_GET if self.direction == "get" else OP_SET, fields, (g, idx, off, values),
+                  lambda op, t: fail(label, op.status))
 
     def _getter(self, parts, values, integers):
         fail = self._fail
@@ -254,6 +274,7 @@ def no_exchange() -> bool:
 
 
 no_exchange.differs = no_exchange
+no_exchange.native = []
 
 
 def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:

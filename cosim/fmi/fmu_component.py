@@ -57,6 +57,7 @@ from fmu_models.infra.files import atomic_copy, private_tempdir
 
 from ..core.clocking import ClockBoard
 from ..core.component import CLOCK, PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest, port_kind
+from ..core.native import OP_STEP2, OP_STEP3, Op, native_ops
 from .archive import Extraction, read_description
 from .clock_run import ClockedRun, initialise
 from .clocks import read_clocks
@@ -644,12 +645,31 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
     @staticmethod
     def _output_fn(set_ft, get_out):
         if set_ft is None:
-            return lambda t: get_out()
-
-        def output_fn(t: float) -> None:
-            set_ft()
-            get_out()
+            def output_fn(t: float) -> None:
+                get_out()
+        else:
+            def output_fn(t: float) -> None:
+                set_ft()
+                get_out()
+        parts = [native_ops(x) for x in ((set_ft,) if set_ft is not None else ()) + (get_out,)]
+        if all(p is not None for p in parts):
+            output_fn.native = [op for p in parts for op in p]
         return output_fn
+
+    def native_reason(self) -> str | None:
+        """Why this FMU's calls run in Python (None: in the native kernel, see
+        :mod:`cosim.core.native`)."""
+        if self.isolate:
+            return "isolated in a process of its own"
+        if self.interface != "cs":
+            return {"me": "Model Exchange", "se": "Scheduled Execution"}[self.interface]
+        if self.clock_model is not None:
+            return "clocked"
+        ports = [self.element_ports[n] for n in (*self.connected_inputs, *self.output_names)]
+        other = sorted({p.type for p in ports if p.type not in ("Real", "Float64")})
+        if other:
+            return f"{', '.join(other)} ports"
+        return None
 
     def _cs_update(self, set_all):
         inst, h, name = self.instance, self.period, self.name
@@ -665,7 +685,15 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                         if when is not None:
                             raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
                     inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
-            return update_fn
+
+            def fail2(op, t: float) -> None:
+                st = op.status
+                if st == 2:
+                    when = inst.discard_reason()
+                    if when is not None:
+                        raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
+                inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
+            return self._native_update(update_fn, set_all, OP_STEP2, do_step, fail2)
         flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
         refs = [ctypes.byref(x) for x in flags]
         term, last = flags[1], flags[3]
@@ -678,6 +706,24 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             if term.value:
                 when = last.value if st == 2 or last.value > t else t + h
                 raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
+
+        def fail3(op, t: float) -> None:
+            st, terminate, last_time = op.status, bool(op.flag), op.d
+            if st > 1 and not (st == 2 and terminate):
+                inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
+            if terminate:
+                when = last_time if st == 2 or last_time > t else t + h
+                raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
+        return self._native_update(update_fn, set_all, OP_STEP3, do_step, fail3)
+
+    def _native_update(self, update_fn, set_all, kind: int, do_step, fail):
+        """``update_fn`` with its native operations (set the inputs, ``doStep``) when the
+        inputs can be set natively."""
+        ops = native_ops(set_all)
+        if ops is not None and self.native_reason() is None:
+            step = Op(kind, dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=self.instance.handle,
+                                 a=float(self.period)), (do_step,), fail)
+            update_fn.native = [*ops, step]
         return update_fn
 
     def _bind_me(self, ports, exchange, all_pos, ft_pos, get_out):

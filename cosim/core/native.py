@@ -1,0 +1,240 @@
+"""The native kernel: the master's base-step loop in compiled C.
+
+One generic kernel (``kernel.c``, shipped with the package), compiled once per machine and
+kept in the compiled-code cache (:mod:`fmu_models.infra.cache`), interprets a program the
+master prepares from the bound components: per pattern of due components, the operations
+of every component's output and update calls. A call that can run natively says so with
+a ``native`` attribute: a list of :class:`Op` (FMUs' get/set of Real or Float64
+variables and ``doStep`` through the function pointers of the loaded library, the
+compiled step of a filter, a constant or step source); any other call (a Python
+component, Model Exchange, an isolated FMU, integer ports, an algebraic loop being
+iterated) is an operation that returns to Python, which calls it and resumes the kernel,
+so Python components split the loop into native segments.
+
+The kernel computes what the Python path computes, operation for operation (``t = t0 + k
+h`` and the same comparisons, compiled without fused multiply-adds), so the results are
+the same bit for bit. A failed call returns to Python with its status, and the call's own
+``fail`` handler raises the error the Python path raises.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fmu_models.errors import BuildError, CompilerNotFoundError
+from fmu_models.infra.cache import cached_file, writable_cache
+from fmu_models.infra.compiler import find_compiler, run_compiler
+
+__all__ = ["ENGINES", "KState", "Op", "OpStruct", "load_kernel", "native_ops"]
+
+ENGINES = ("auto", "native", "python")
+
+OP_PY, OP_GET, OP_SET, OP_STEP2, OP_STEP3, OP_CONST, OP_SWITCH, OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY = range(11)
+EV_DONE, EV_PY, EV_FAIL, EV_FLUSH, EV_NONFINITE, EV_CHUNK, EV_HOOK = range(7)
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+_D = ctypes.c_double
+
+
+class OpStruct(ctypes.Structure):
+    """One operation of the kernel (``op_t`` in ``kernel.c``)."""
+
+    _fields_ = [("kind", _I), ("owner", _I), ("n", _I), ("nvr", _I), ("nbuf", _I), ("status", _I), ("flag", _I),
+                ("slot", _I), ("fn", _P), ("inst", _P), ("vr", _P), ("buf", _P), ("idx", _P), ("off", _P),
+                ("a", _D), ("b", _D), ("c", _D), ("d", _D), ("arg", _P * 2), ("res", _P * 2), ("iw", _P),
+                ("w", _P), ("ub", _P), ("yb", _P), ("uprev", _P), ("yidx", _P), ("ny", _I), ("nu", _I),
+                ("nx", _I), ("nup", _I), ("cur", _P), ("status_out", _P), ("x", _P * 2), ("P", _P * 2),
+                ("nis", _P), ("out", _P), ("uidx", _P), ("upi", _P), ("upj", _P)]
+
+
+class KState(ctypes.Structure):
+    """The kernel's run description and resumable state (``kstate_t`` in ``kernel.c``)."""
+
+    _fields_ = [("t0", _D), ("h", _D), ("n", _I), ("m", _I), ("L", _I), ("cap", _I), ("ncols", _I), ("nint", _I),
+                ("nsig", _I), ("block", _I), ("values", _P), ("integers", _P), ("buf", _P), ("ibuf", _P),
+                ("sel", _P), ("isel", _P), ("pattern", _P), ("out_start", _P), ("out_len", _P), ("upd_start", _P),
+                ("upd_len", _P), ("ops", _P), ("k", _I), ("phase", _I), ("pc", _I), ("j", _I), ("jb", _I),
+                ("k0", _I), ("kstop", _I), ("at", _I)]
+
+
+@dataclass
+class Op:
+    """One native operation of a bound call.
+
+    Parameters
+    ----------
+    kind : int
+        The operation (``OP_GET``, ``OP_SET``, ``OP_STEP2``, ... of this module).
+    fields : dict
+        :class:`OpStruct` fields (pointers as integers).
+    keep : tuple
+        What the pointers point into (kept alive with the operation).
+    fail : callable, optional
+        ``fail(op, t)`` raises the error of the failed operation as the Python path does
+        (``op``: the OpStruct with ``status``, ``flag``, ``d`` set; ``t`` [s]).
+    sync_in, sync_out : callable, optional
+        Move state the Python objects keep (a filter's current state copy and step count)
+        into and out of the kernel's arrays, when Python needs it.
+    hook : callable, optional
+        The Python code an ``OP_HOOK`` runs (a filter's ``after_step``).
+    """
+
+    kind: int
+    fields: dict = field(default_factory=dict)
+    keep: tuple = ()
+    fail: Callable | None = None
+    sync_in: Callable[[], None] | None = None
+    sync_out: Callable[[], None] | None = None
+    hook: Callable[[], None] | None = None
+
+
+def native_ops(fn) -> list[Op] | None:
+    """The native operations of a bound call, or None if it runs in Python.
+
+    Parameters
+    ----------
+    fn : callable
+        An output or update call of a component's binding.
+    """
+    return getattr(fn, "native", None)
+
+
+_SOURCE = Path(__file__).with_name("kernel.c")
+#: No fused multiply-add: the kernel's arithmetic must be Python's, operation for operation.
+_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-ffp-contract=off", "-fno-fast-math")
+_kernel: list = []          # [library or None, reason]
+
+
+def load_kernel() -> tuple[ctypes.CDLL | None, str]:
+    """The compiled kernel (built on first use, cached on disk), or None and why not (no C
+    compiler, an unwritable cache, a compiler that fails)."""
+    if _kernel:
+        return _kernel[0], _kernel[1]
+    lib, why = None, ""
+    try:
+        cc = find_compiler()
+        code = _SOURCE.read_text()
+        directory = writable_cache("the co-simulation runs in Python")
+        if directory is None:
+            why = "the compiled-code cache cannot be written"
+        else:
+            key = "|".join([code, cc, *_FLAGS])
+            entry = directory / f"kernel_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
+
+            def build(out: Path) -> None:
+                src = out.with_suffix(".c")
+                src.write_text(code)
+                run_compiler([cc, *_FLAGS, str(src), "-o", str(out), "-lm"], "the co-simulation kernel")
+
+            def check(p: Path) -> None:
+                try:
+                    if not hasattr(ctypes.CDLL(str(p)), "kernel_run"):
+                        raise AttributeError("no kernel_run")
+                except (OSError, AttributeError) as e:
+                    raise BuildError(f"the compiled kernel does not load: {e}") from None
+
+            path = cached_file(entry, build, check)
+            lib = ctypes.CDLL(str(path))
+            lib.kernel_run.restype = ctypes.c_int
+            lib.kernel_run.argtypes = [ctypes.POINTER(KState)]
+    except (CompilerNotFoundError, BuildError, OSError) as e:
+        lib, why = None, " ".join(str(e).split())
+        warnings.warn(f"the native co-simulation kernel is not available ({why}); runs take the Python path "
+                      "(same results, slower)", stacklevel=3)
+    _kernel[:] = [lib, why]
+    return lib, why
+
+
+@dataclass
+class Program:
+    """The kernel's program for one run: the operations of every pattern of due components.
+
+    Parameters
+    ----------
+    ops : ctypes array of OpStruct
+        Every operation.
+    meta : list
+        The :class:`Op` of each operation (None: a call back into Python).
+    pattern : ndarray of int64, shape (L,)
+        The pattern of base step ``k`` is ``pattern[k % L]``.
+    out_start, out_len, upd_start, upd_len : ndarray of int64
+        Pattern ``p``'s output operations are ``ops[out_start[p] : out_start[p] +
+        out_len[p]]``, likewise its updates.
+    syncs_in, syncs_out : list of callable
+        Every operation's ``sync_in`` / ``sync_out``.
+    n_native : int
+        How many operations run natively.
+    calls : list of callable
+        The Python call each operation belongs to.
+    updates : list of bool
+        Whether each operation is part of an update.
+    """
+
+    ops: ctypes.Array
+    meta: list
+    pattern: np.ndarray
+    out_start: np.ndarray
+    out_len: np.ndarray
+    upd_start: np.ndarray
+    upd_len: np.ndarray
+    syncs_in: list
+    syncs_out: list
+    n_native: int
+    calls: list
+    updates: list
+
+
+def build_program(schedule: list) -> Program:
+    """The kernel's program of a run.
+
+    Parameters
+    ----------
+    schedule : list of (tuple, tuple)
+        Per base step of the hyperperiod, the output calls and the update calls the Python
+        loop makes (equal entries shared).
+    """
+    index: dict[int, int] = {}
+    pattern = np.empty(len(schedule), dtype=np.int64)
+    structs: list[OpStruct] = []
+    meta: list = []
+    calls: list = []            # per op: the Python call it belongs to
+    updates: list = []          # per op: whether it is an update
+    starts: list[tuple[int, int, int, int]] = []
+    for i, entry in enumerate(schedule):
+        if id(entry) not in index:
+            index[id(entry)] = len(starts)
+            spans = []
+            for phase, fns in enumerate(entry):
+                first = len(structs)
+                for owner, fn in enumerate(fns):
+                    ops = native_ops(fn)
+                    for op in ops if ops is not None else (None,):
+                        structs.append(OpStruct(kind=OP_PY, owner=owner) if op is None else
+                                       OpStruct(kind=op.kind, owner=owner, **op.fields))
+                        meta.append(op)
+                        calls.append(fn)
+                        updates.append(phase == 1)
+                spans += [first, len(structs) - first]
+            starts.append(tuple(spans))
+        pattern[i] = index[id(entry)]
+    arr = (OpStruct * max(len(structs), 1))(*structs)
+    cols = np.array(starts, dtype=np.int64).reshape(-1, 4)
+    seen: set[int] = set()
+    syncs_in, syncs_out = [], []
+    for op in meta:
+        if op is not None and id(op) not in seen:
+            seen.add(id(op))
+            if op.sync_in is not None:
+                syncs_in.append(op.sync_in)
+            if op.sync_out is not None:
+                syncs_out.append(op.sync_out)
+    return Program(arr, meta, pattern, np.ascontiguousarray(cols[:, 0]), np.ascontiguousarray(cols[:, 1]),
+                   np.ascontiguousarray(cols[:, 2]), np.ascontiguousarray(cols[:, 3]), syncs_in, syncs_out,
+                   sum(m is not None for m in meta), calls, updates)
