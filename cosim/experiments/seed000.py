@@ -224,7 +224,8 @@ def _system(T: float):
     return discretize(get_model("cartpole"), T)
 
 
-def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) -> tuple[float, float]:
+def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, shared: dict | None = None
+                ) -> tuple[float, float]:
     """(q, r) learned by EM from the nominal values on the scenario's training realisation.
 
     Parameters
@@ -239,9 +240,14 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) ->
         True process variance.
     r
         True measurement variance.
+    shared
+        Keeps the training realisation between the calls of :func:`fast_task` that share it
+        (default: simulated here).
     """
-
-    _X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+    shared = {} if shared is None else shared
+    if "training" not in shared:
+        shared["training"] = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+    _X, Y, u = shared["training"]
     q0, r0 = nominal_noise(s, q, r)
     f = EKF(system, np.array(s.x0), s.P0, q0, r0)
     res = em_noise(f, u[:-1, None], Y[0, 1:], n_iter=s.em_iterations, tol=s.em_tol, structure="scalar")
@@ -378,7 +384,8 @@ def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, e
     return out
 
 
-def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None) -> dict:
+def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None,
+              shared: dict | None = None) -> dict:
     """All realisations of one scenario and reading, every filter over all of them in
     native calls, with the PCRB over the same realisations and the innovations' whiteness.
 
@@ -395,22 +402,36 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
     bound
         The PCRB of these realisations (:func:`scenario_bound`), if the caller has it
         (default: computed here).
+    shared
+        A dict the caller keeps between calls that differ only in the nominal noise (``q0``,
+        ``r0`` and their factors, as the sweep's cells): the truth, the training realisation
+        and the results of the EKF given the true Q and R (which does not start from the
+        nominal noise) are computed at the first call and reused (the same numbers; default:
+        nothing kept).
     """
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    seeds = [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in runs]
-    X, Y, u = simulate_truth(s, q, r, seeds)
+    shared = {} if shared is None else shared
+    if "truth" not in shared:
+        shared["truth"] = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, run))
+                                                   for run in runs])
+    X, Y, u = shared["truth"]
     system = _system(s.T)
-    learned = learn_noise(system, s, scenario_index, q, r)
+    learned = learn_noise(system, s, scenario_index, q, r, shared)
     errors, nees, nis, failed, white, late = {}, {}, {}, {}, {}, {}
     L = s.transient_steps
     for name, make in make_filters(system, s, q, r, learned).items():
+        if name == TRUE_EKF and name in shared:
+            errors[name], nees[name], nis[name], failed[name], white[name], late[name] = shared[name]
+            continue
         res = batch_run(make, X, Y, u[:, None])
         errors[name], nees[name], nis[name], failed[name] = res.x - X, res.nees, res.nis, res.failed
         white[name] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
         late[name] = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
                       if s.has_late else None)
+        if name == TRUE_EKF:
+            shared[name] = errors[name], nees[name], nis[name], failed[name], white[name], late[name]
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
     out = _summarise(errors, nees, nis, failed, s, example)
     out["learned"] = learned
