@@ -28,6 +28,30 @@ stored state at the window's start:
 5. the filter continues from the end of the window re-run with the kept ``(q, r)`` (the
    window is re-filtered, not only Q and R replaced).
 
+Two named options (off by default; the campaigns use both), for short windows and
+consistency:
+
+- ``prior_sd`` (**MAP**): a Gaussian prior on ``theta`` of standard deviation ``prior_sd``
+  in each of ``ln q``, ``ln r``, centred at the initial values (the step parameter
+  ``noise_prior``); every likelihood of steps 1-4 becomes the log-posterior
+  ``l(theta) - |theta - theta_0|^2 / (2 prior_sd^2)``. A window of a few steps no longer
+  drives a variance to a bound (the maximum-likelihood estimate of a short window is often
+  on the boundary), so the safeguards of step 4 can be relaxed (``keep_r_nats = 0``, a
+  larger ``max_fall``).
+- ``posterior_average`` (needs the prior): the filter's state and covariance are averaged
+  over the posterior of ``theta`` (Laplace approximation: precision minus the
+  finite-difference Hessian of the log-posterior of step 3, at least the prior's on its
+  diagonal where it is not positive definite, centred at the kept point), represented by
+  five unscented points (the centre, weight 1/3, and ``theta +- sqrt(3) L e_i``, weight
+  1/6, ``L L^T`` the posterior covariance). At an update the window is re-run at the four
+  outer points too; between updates every step is one EKF step at each of the five points
+  from the shared state; the state is the mixture's mean ``x = sum w_i x_i`` and ``P =
+  sum w_i (P_i + (x_i - x)(x_i - x)^T)`` (the mixture collapsed to one Gaussian at every
+  step). Until the first update the points are the prior's. The covariance thereby
+  accounts for what the window does not know about the noise, which the ML form ignores
+  (it is overconfident while ``(q, r)`` is still uncertain, e.g. when started far too
+  small).
+
 Everything is one compiled Function (:meth:`SWML.wrap_step`): the EKF step, then a
 conditional (CasADi's ``Function.conditional``: only the branch taken runs) whose
 update branches fold the EKF step over the window (``mapaccum``), so the update runs in
@@ -97,6 +121,13 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         Largest factor by which a variance may fall in one update (default 2).
     q_bounds, r_bounds : (float, float), optional
         Bounds of q and r (default 1e-4 and 1e4 times the initial values).
+    prior_sd : float, optional
+        Standard deviation [nats] of a Gaussian prior on ``ln q`` and ``ln r`` centred at
+        the initial values: the updates maximise the window's posterior (MAP) instead of its
+        likelihood (default None: maximum likelihood).
+    posterior_average : bool
+        Average the state and covariance over the posterior of ``(ln q, ln r)`` at every
+        step (five unscented points; needs ``prior_sd``; default False).
 
     Attributes
     ----------
