@@ -56,6 +56,22 @@ def one_length(cp, x0, n: int) -> str:
             f"{be / n / 100 * 1e6:.2f} / {bs / n / 100 * 1e6:.2f} |")
 
 
+def campaign_form(cp, x0) -> None:
+    """SWML as the campaigns run it (MAP with the posterior average, an update every step up
+    to step 20) against the plain form and the EKF, ``run`` over 500 steps."""
+    us, ys = record(cp, 500)
+    forms = {"EKF": EKF(cp, x0, 1.0, 1e-3, 10.0), "SWML (ML)": SWML(cp, x0, 1.0, 1e-3, 10.0),
+             "SWML (MAP, posterior-averaged)": SWML(cp, x0, 1.0, 1e-3, 10.0, prior_sd=math.log(100.0),
+                                                    posterior_average=True, early_every=1, keep_r_nats=0.0,
+                                                    max_fall=10.0)}
+    cost = {}
+    for name, f in forms.items():
+        f.run(us, ys)                                                   # compile and warm
+        cost[name] = best(partial(rerun, f, x0, us, ys)) / 500 * 1e6
+    print("\n500 steps, run [us/step]: " + ", ".join(f"{n} {c:.2f} ({c / cost['EKF']:.1f}x the EKF)"
+                                                    for n, c in cost.items()))
+
+
 def main() -> None:
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = [0.5, 0.0, 1.8, 0.5]
@@ -64,6 +80,7 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for n in (500, 5000):
         print(one_length(cp, x0, n))
+    campaign_form(cp, x0)
     us, ys = record(cp, 200)
     g = SWML(cp, x0, 1.0, 1e-3, 10.0)
     times = []

@@ -28,6 +28,30 @@ stored state at the window's start:
 5. the filter continues from the end of the window re-run with the kept ``(q, r)`` (the
    window is re-filtered, not only Q and R replaced).
 
+Two named options (off by default; the campaigns use both), for short windows and
+consistency:
+
+- ``prior_sd`` (**MAP**): a Gaussian prior on ``theta`` of standard deviation ``prior_sd``
+  in each of ``ln q``, ``ln r``, centred at the initial values (the step parameter
+  ``noise_prior``); every likelihood of steps 1-4 becomes the log-posterior
+  ``l(theta) - |theta - theta_0|^2 / (2 prior_sd^2)``. A window of a few steps no longer
+  drives a variance to a bound (the maximum-likelihood estimate of a short window is often
+  on the boundary), so the safeguards of step 4 can be relaxed (``keep_r_nats = 0``, a
+  larger ``max_fall``).
+- ``posterior_average`` (needs the prior): the filter's state and covariance are averaged
+  over the posterior of ``theta`` (Laplace approximation: precision minus the
+  finite-difference Hessian of the log-posterior of step 3, at least the prior's on its
+  diagonal where it is not positive definite, centred at the kept point), represented by
+  five unscented points (the centre, weight 1/3, and ``theta +- sqrt(3) L e_i``, weight
+  1/6, ``L L^T`` the posterior covariance). At an update the window is re-run at the four
+  outer points too; between updates every step is one EKF step at each of the five points
+  from the shared state; the state is the mixture's mean ``x = sum w_i x_i`` and ``P =
+  sum w_i (P_i + (x_i - x)(x_i - x)^T)`` (the mixture collapsed to one Gaussian at every
+  step). Until the first update the points are the prior's. The covariance thereby
+  accounts for what the window does not know about the noise, which the ML form ignores
+  (it is overconfident while ``(q, r)`` is still uncertain, e.g. when started far too
+  small).
+
 Everything is one compiled Function (:meth:`SWML.wrap_step`): the EKF step, then a
 conditional (CasADi's ``Function.conditional``: only the branch taken runs) whose
 update branches fold the EKF step over the window (``mapaccum``), so the update runs in
@@ -97,6 +121,13 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         Largest factor by which a variance may fall in one update (default 2).
     q_bounds, r_bounds : (float, float), optional
         Bounds of q and r (default 1e-4 and 1e4 times the initial values).
+    prior_sd : float, optional
+        Standard deviation [nats] of a Gaussian prior on ``ln q`` and ``ln r`` centred at
+        the initial values: the updates maximise the window's posterior (MAP) instead of its
+        likelihood (default None: maximum likelihood).
+    posterior_average : bool
+        Average the state and covariance over the posterior of ``(ln q, ln r)`` at every
+        step (five unscented points; needs ``prior_sd``; default False).
 
     Attributes
     ----------
@@ -111,6 +142,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, window: int = 100, every: int = 50,
                  early_until: int = 20, early_every: int = 2, fd_step: float = 0.25, max_factor: float = 10.0,
                  keep_r_nats: float = 2.0, max_fall: float = 2.0, q_bounds=None, r_bounds=None,
+                 prior_sd: float | None = None, posterior_average: bool = False,
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
         if not isinstance(system, DiscreteModel):
 
@@ -137,6 +169,12 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         self.max_fall = checks.positive(max_fall, "max_fall")
         if self.max_factor <= 1 or self.max_fall < 1:
             raise ConfigurationError(f"SWML: max_factor must be > 1 and max_fall >= 1, got {max_factor}, {max_fall}")
+        self.prior_sd = None if prior_sd is None else checks.positive(prior_sd, "prior_sd")
+        self.posterior_average = bool(posterior_average)
+        if self.posterior_average and self.prior_sd is None:
+            raise ConfigurationError("SWML: posterior_average needs a prior (set prior_sd): the posterior of "
+                                     "(ln q, ln r) of a short window is not proper without one")
+        self._prior_centre = (q0, r0)
         self.q_bounds = bounds_around(np.array([q0]), q_bounds, "q_bounds")
         self.r_bounds = bounds_around(np.array([r0]), r_bounds, "r_bounds")
         self._start = (checks.vector(x0, system.nx, "x0", ConfigurationError),
@@ -148,11 +186,16 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     def config_key(self) -> tuple:
         """Window, schedule and the update's constants (the bounds are step inputs)."""
         return (self.window, self.every, self.early_until, self.early_every, self.fd_step, self.max_factor,
-                self.keep_r_nats, self.max_fall)
+                self.keep_r_nats, self.max_fall, self.prior_sd, self.posterior_average)
 
     def step_parameters(self) -> list[Parameter]:
-        """The bounds of q and r (``q_bounds``, ``r_bounds``)."""
-        return bound_parameters(self.q_bounds, self.r_bounds)
+        """The bounds of q and r (``q_bounds``, ``r_bounds``) and, with a prior, its centre
+        (``noise_prior``: the initial q and r; FMU parameters ``q_prior``, ``r_prior``)."""
+        prior = [] if self.prior_sd is None else [
+            Parameter("noise_prior", self._prior_centre, "positive",
+                      ("centre of the prior of the process noise variance",
+                       "centre of the prior of the measurement noise variance"), ("q_prior", "r_prior"))]
+        return bound_parameters(self.q_bounds, self.r_bounds) + prior
 
     def extra_state(self) -> dict:
         """The window (``wu``, ``wy``, ``wv``: inputs, measurements, valid channels; ``wa``:
@@ -163,7 +206,15 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         x0, P0 = self._start
         return {"wu": np.zeros(s.nu * W), "wy": np.zeros(s.ny * W), "wv": np.zeros(s.ny * W), "wa": np.zeros(W),
                 "snap_x": np.tile(x0, n_snap), "snap_P": np.tile(P0.ravel(order="F"), n_snap),
-                "x_init": x0.copy(), "P_init": P0.ravel(order="F").copy(), "count": np.zeros(1)}
+                "x_init": x0.copy(), "P_init": P0.ravel(order="F").copy(), "count": np.zeros(1),
+                **({"sigma": self._prior_points()} if self.posterior_average else {})}
+
+    def _prior_points(self) -> np.ndarray:
+        """The four outer unscented points of the prior of ``(ln q, ln r)`` (centred at the
+        initial q and r), flat ``(lq_1, lr_1, ..., lq_4, lr_4)``."""
+        lq, lr = (math.log(v) for v in self._prior_centre)
+        d = math.sqrt(3.0) * self.prior_sd
+        return np.array([lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d])
 
     def reset(self, x0=None, P0=None) -> None:
         """As :meth:`KalmanBase.reset <estimators.base.KalmanBase.reset>`; the window empties
@@ -189,6 +240,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         n_snap = self.window // self.every
         P = ca.reshape(ca.diag(p["P0"]), -1, 1)
         out.update(snap_x=ca.repmat(p["x0"], n_snap, 1), snap_P=ca.repmat(P, n_snap, 1), x_init=p["x0"], P_init=P)
+        if self.posterior_average:
+            lq, lr, d = ca.log(p["q0"]), ca.log(p["r0"]), math.sqrt(3.0) * self.prior_sd
+            out["sigma"] = ca.vertcat(lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d)
         return out
 
     # ------------------------------------------------------------------ the step
@@ -206,7 +260,8 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         due = ca.fmod(count, M) == 0                     # ctx.x is the state after step `count`
         sx, sP = ca.reshape(st["snap_x"], n, n_snap), ca.reshape(st["snap_P"], n * n, n_snap)
         ctx.output("adapted", ca.SX(0))
-        return {"wu": push(st["wu"], s.nu, ctx.u), "wy": push(st["wy"], s.ny, ctx.y),
+        keep = {"sigma": st["sigma"]} if self.posterior_average else {}
+        return {**keep, "wu": push(st["wu"], s.nu, ctx.u), "wy": push(st["wy"], s.ny, ctx.y),
                 "wv": push(st["wv"], s.ny, ctx.valid), "wa": push(st["wa"], 1, ca.SX(1)),
                 "snap_x": ca.if_else(due, push(sx, n, ctx.x), sx),
                 "snap_P": ca.if_else(due, push(sP, n * n, ca.reshape(ctx.P, -1, 1)), sP),
@@ -300,10 +355,10 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         x, P, Q, R = MX.sym("x", n), MX.sym("P", n, n), MX.sym("Q", n, n), MX.sym("R", p, p)
         wu, wy, wv, wa = MX.sym("wu", s.nu * W), MX.sym("wy", p * W), MX.sym("wv", p * W), MX.sym("wa", W)
         sx, sP, xi, Pi = MX.sym("sx", n), MX.sym("sP", n * n), MX.sym("xi", n), MX.sym("Pi", n * n)
-        gate, qb, rb = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2)
-        ins = [x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate, qb, rb]
+        gate, qb, rb, pc, sg = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2), MX.sym("pc", 2), MX.sym("sg", 8)
+        ins = [x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate, qb, rb, pc, sg]
         if slots == 0:                                     # no update
-            return ca.Function("swml_none", ins, [x, P, Q, R, MX(0)])
+            return ca.Function("swml_none", ins, [x, P, Q, R, MX(0), sg])
         N = W if slots is None else slots
         cols = slice(W - N, W)
         U, Y = ca.reshape(wu, s.nu, W)[:, cols], ca.reshape(wy, p, W)[:, cols]
@@ -312,9 +367,16 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         rep = lambda z: ca.repmat(z, 1, N)                   # noqa: E731
         lfold = self._window_step().mapaccum("swml_ll", N, [0, 1, 2], [0, 1, 2])
 
+        sd = self.prior_sd
+        mq, mr = ca.log(pc[0]), ca.log(pc[1])
+
+        def objective(ll, lq, lr):
+            """The window's log-likelihood, with a prior plus its log-density (MAP)."""
+            return ll if sd is None else ll - 0.5 * ((lq - mq) ** 2 + (lr - mr) ** 2) / sd ** 2
+
         def run(lq, lr):
             xs, Ps, lls = lfold(x_s, P_s, 0, U, Y, V, A, rep(lq), rep(lr), rep(gate))
-            return lls[-1], xs[:, -1], Ps[:, -n:]
+            return objective(lls[-1], lq, lr), xs[:, -1], Ps[:, -n:]
 
         q0, r0 = Q[0, 0], R[0, 0]
         lq0, lr0 = ca.log(q0), ca.log(r0)
@@ -323,7 +385,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         c_init = ca.vertcat(MX.zeros(2 * n * n), ca.reshape(P_s, -1, 1), MX.zeros(als.size1_in(3) - 3 * n * n))
         afold = als.mapaccum("swml_als", N, [0, 1, 2, 3], [0, 1, 2, 3])
         xs0, Ps0, lls0, cs = afold(x_s, P_s, 0, c_init, U, Y, V, A, rep(lq0), rep(lr0), rep(gate))
-        l0, end0 = lls0[-1], (xs0[:, -1], Ps0[:, -n:])
+        l0, end0 = objective(lls0[-1], lq0, lr0), (xs0[:, -1], Ps0[:, -n:])
         sums = cs[-5:, -1]
         a11, a12, a22, b1, b2 = (sums[i] for i in range(5))
         det = a11 * a22 - a12 * a12
@@ -385,12 +447,55 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite_flag([evk[0]])), evk[0] > best_l - keep)
         best_t = (best_t[0], ca.if_else(back, lr0, best_t[1]))
         best_x, best_P = ca.if_else(back, evk[1], best_x), ca.if_else(back, evk[2], best_P)
+        sigma = sg
+        if self.posterior_average:
+            best_x, best_P, sigma = self._posterior_average(run, best_t, best_x, best_P, (H11, H12, H22), qb, rb)
         ok_end = finite_flag([best_x, best_P])
         x_new, P_new = ca.if_else(ok_end, best_x, x), ca.if_else(ok_end, best_P, P)
         Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), q0) * MX.eye(n)
         R_new = ca.if_else(ok_end, ca.exp(best_t[1]), r0) * MX.eye(p)
         name = "swml_window" if slots is None else "swml_early"
-        return ca.Function(name, ins, [x_new, P_new, Q_new, R_new, MX(1)])
+        return ca.Function(name, ins, [x_new, P_new, Q_new, R_new, MX(1), ca.if_else(ok_end, sigma, sg)])
+
+    def _posterior_average(self, run, theta, x_best, P_best, hess, qb, rb):
+        """The window's end state and covariance averaged over the Laplace approximation of
+        the posterior of ``theta = (ln q, ln r)``: precision ``Lambda = -H`` (the finite-difference
+        Hessian of the log-posterior; where it is not positive definite, its diagonal, each
+        entry at least the prior's precision ``1 / prior_sd^2``), centred at the kept point;
+        five unscented points (the centre with weight 1/3, ``theta +- sqrt(3) L e_i`` with
+        weight 1/6, ``L L^T = Lambda^-1``; clipped to the bounds), each a window re-run; the
+        mixture's mean ``x = sum w_i x_i`` and covariance ``P = sum w_i (P_i + d_i d_i^T)``,
+        ``d_i = x_i - x``. If a point's run is not finite, the kept point's alone."""
+        H11, H12, H22 = hess
+        a, b, d = -H11, -H12, -H22
+        pd = ca.logic_and(a > 0, a * d - b * b > 0)
+        floor = 1.0 / self.prior_sd ** 2
+        a, b, d = ca.if_else(pd, a, ca.fmax(a, floor)), ca.if_else(pd, b, 0), ca.if_else(pd, d, ca.fmax(d, floor))
+        det = a * d - b * b
+        s11, s12, s22 = d / det, -b / det, a / det                    # Lambda^-1
+        l11 = ca.sqrt(s11)
+        l21 = s12 / l11
+        l22 = ca.sqrt(ca.fmax(s22 - l21 * l21, 0))
+        c = math.sqrt(3.0)
+        lo_q, hi_q, lo_r, hi_r = ca.log(qb[0]), ca.log(qb[1]), ca.log(rb[0]), ca.log(rb[1])
+        pts = []
+        for sign in (1.0, -1.0):
+            for dq, dr in ((l11, l21), (0, l22)):
+                pts.append((ca.fmin(ca.fmax(theta[0] + sign * c * dq, lo_q), hi_q),
+                            ca.fmin(ca.fmax(theta[1] + sign * c * dr, lo_r), hi_r)))
+        ends = [(x_best, P_best)] + [run(*pt)[1:] for pt in pts]
+        xm, Pm = self._mixture(ends)
+        ok = finite_flag([xm, Pm])
+        return ca.if_else(ok, xm, x_best), ca.if_else(ok, Pm, P_best), ca.vertcat(*[v for pt in pts for v in pt])
+
+    @staticmethod
+    def _mixture(ends):
+        """Mean and covariance of the unscented mixture of ``[(x_c, P_c), (x_1, P_1), ...,
+        (x_4, P_4)]`` (weights 1/3 and 1/6)."""
+        w = [1.0 / 3.0] + [1.0 / 6.0] * 4
+        xm = sum(wi * xe for wi, (xe, _) in zip(w, ends))
+        Pm = sum(wi * (Pe + ca.mtimes(xe - xm, (xe - xm).T)) for wi, (xe, Pe) in zip(w, ends))
+        return xm, 0.5 * (Pm + Pm.T)
 
     def wrap_step(self, step: ca.Function) -> ca.Function:
         """The EKF step (with the window bookkeeping of :meth:`adapt_expr`), then the update
@@ -409,11 +514,24 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         cond = ca.Function.conditional("swml_update", branches, branches[0])
         sx = ca.reshape(out["snap_x_new"], n, n_snap)[:, 0]
         sP = ca.reshape(out["snap_P_new"], n * n, n_snap)[:, 0]
+        sg = by["sigma"] if self.posterior_average else ca.MX.zeros(8)
+        if self.posterior_average:               # the step at the posterior's outer points, mixed
+            ws, last = self._window_step(), slice(W - 1, W)
+            uk = ca.reshape(out["wu_new"], s.nu, W)[:, last]
+            yk, vk = (ca.reshape(out[k], s.ny, W)[:, last] for k in ("wy_new", "wv_new"))
+            xc, Pc = ca.reshape(out["x_new"], n, 1), ca.reshape(out["P_new"], n, n)
+            ends = [(xc, Pc)] + [tuple(ws(by["x"], ca.reshape(by["P"], n, n), 0, uk, yk, vk, 1, sg[2 * i],
+                                          sg[2 * i + 1], by["gate"])[:2]) for i in range(4)]
+            xm, Pm = self._mixture(ends)
+            ok = finite_flag([xm, Pm])
+            out["x_new"] = ca.reshape(ca.if_else(ok, xm, xc), out["x_new"].shape)
+            out["P_new"] = ca.reshape(ca.if_else(ok, Pm, Pc), out["P_new"].shape)
         res = cond(index, ca.reshape(out["x_new"], n, 1), ca.reshape(out["P_new"], n, n),
                    ca.reshape(out["Q_new"], n, n), ca.reshape(out["R_new"], s.ny, s.ny), out["wu_new"],
                    out["wy_new"], out["wv_new"], out["wa_new"], sx, sP, by["x_init"], by["P_init"], by["gate"],
-                   by["q_bounds"], by["r_bounds"])
-        for key, val in zip(("x_new", "P_new", "Q_new", "R_new", "adapted"), res):
+                   by["q_bounds"], by["r_bounds"], by.get("noise_prior", ca.DM.ones(2)), sg)
+        keys = ("x_new", "P_new", "Q_new", "R_new", "adapted") + (("sigma_new",) if self.posterior_average else ())
+        for key, val in zip(keys, res):
             out[key] = ca.densify(ca.reshape(val, out[key].shape))
         out["status"] = ca.if_else(out["status"] != 0, out["status"],
                                    ca.if_else(finite_flag([out["x_new"], out["P_new"]]), OK, BAD_RESULT))

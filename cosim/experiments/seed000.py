@@ -32,6 +32,7 @@ numbers); its PCRB is computed on the fast path's truth of the same seeds.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass
 from functools import lru_cache
@@ -73,6 +74,9 @@ FILTERS = ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R")
 TRUE_EKF = "EKF true Q,R"
 #: Run index of the training realisation EM learns from (never one of the test runs).
 TRAINING_RUN = 2**31 - 1
+#: SWML's prior standard deviation of ``ln q`` and ``ln r`` in the campaigns: ``ln 100`` (a
+#: factor 100 either way at one standard deviation).
+SWML_PRIOR_SD = math.log(100.0)
 STATES = ("x", "x_dot", "theta", "theta_dot")
 #: The prior of the PCRB (``pcrb_prior``).
 PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at x0 in every realisation)",
@@ -95,7 +99,16 @@ class Settings:
     (:func:`estimators.em_noise`, scalar forms, from the nominal values) on one separate
     training realisation of the scenario, ``em_iterations`` at most, relative tolerance
     ``em_tol``. "SWML" (:class:`estimators.SWML`, beyond the paper): window ``swml_window``,
-    an update every ``swml_every`` steps, started from the nominal values. ``seed`` of all
+    an update every ``swml_every`` steps (every ``swml_early_every`` steps over the first 20),
+    started from the nominal values; by default the MAP form with posterior averaging: a
+    Gaussian prior on ``(ln q, ln r)`` of standard deviation ``swml_prior_sd`` (default
+    ``ln 100``: a factor 100 either way) centred at the nominal values, the state and
+    covariance averaged over the posterior of the noise (``swml_posterior_average``), and
+    the safeguards ``swml_keep_r_nats`` (default 0) and ``swml_max_fall`` (default 10)
+    that the prior makes unnecessary relaxed (``swml_prior_sd = none``,
+    ``swml_posterior_average = false``, ``swml_early_every = 2``, ``swml_keep_r_nats = 2``,
+    ``swml_max_fall = 2``: the plain maximum-likelihood form, :class:`estimators.SWML`'s
+    defaults). ``seed`` of all
     random streams; ``divergence_threshold`` [state units]. The limit and consistency:
     ``pcrb_prior`` (:data:`PCRB_PRIORS`: ``"known"``, the truth's own start, or ``"P0"``,
     the filters' prior), the ``confidence`` of the chi-square bands and the whiteness test
@@ -132,6 +145,11 @@ class Settings:
     em_tol: float = 1e-6
     swml_window: int = 100
     swml_every: int = 50
+    swml_early_every: int = 1
+    swml_prior_sd: float | None = SWML_PRIOR_SD
+    swml_posterior_average: bool = True
+    swml_keep_r_nats: float = 0.0
+    swml_max_fall: float = 10.0
     seed: int = 2026
     divergence_threshold: float = 1e3
     pcrb_prior: str = "known"
@@ -149,8 +167,16 @@ class Settings:
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
 
-        for name in ("swml_window", "swml_every"):
+        for name in ("swml_window", "swml_every", "swml_early_every"):
             positive_int(getattr(self, name), name)
+        if self.swml_prior_sd is not None:
+            positive(self.swml_prior_sd, "swml_prior_sd")
+        if self.swml_posterior_average and self.swml_prior_sd is None:
+            raise ConfigurationError("swml_posterior_average needs a prior: set swml_prior_sd")
+        if not self.swml_keep_r_nats >= 0:
+            raise ConfigurationError(f"swml_keep_r_nats must be >= 0, got {self.swml_keep_r_nats}")
+        if not self.swml_max_fall >= 1:
+            raise ConfigurationError(f"swml_max_fall must be >= 1, got {self.swml_max_fall}")
         if self.swml_window % self.swml_every:
             raise ConfigurationError(f"swml_window = {self.swml_window} must be a multiple of swml_every = "
                                      f"{self.swml_every}")
@@ -198,7 +224,8 @@ def _system(T: float):
     return discretize(get_model("cartpole"), T)
 
 
-def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) -> tuple[float, float]:
+def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, shared: dict | None = None
+                ) -> tuple[float, float]:
     """(q, r) learned by EM from the nominal values on the scenario's training realisation.
 
     Parameters
@@ -213,9 +240,14 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float) ->
         True process variance.
     r
         True measurement variance.
+    shared
+        Keeps the training realisation between the calls of :func:`fast_task` that share it
+        (default: simulated here).
     """
-
-    _X, Y, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+    shared = {} if shared is None else shared
+    if "training" not in shared:
+        shared["training"] = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+    _X, Y, u = shared["training"]
     q0, r0 = nominal_noise(s, q, r)
     f = EKF(system, np.array(s.x0), s.P0, q0, r0)
     res = em_noise(f, u[:-1, None], Y[0, 1:], n_iter=s.em_iterations, tol=s.em_tol, structure="scalar")
@@ -250,7 +282,10 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
                                     gain_r=s.mfiae_gain_r, q_mapping=s.mfiae_q_mapping,
                                     per_channel=s.mfiae_per_channel),
             **em,
-            "SWML": lambda: SWML(system, x0, s.P0, q0, r0, window=s.swml_window, every=s.swml_every),
+            "SWML": lambda: SWML(system, x0, s.P0, q0, r0, window=s.swml_window, every=s.swml_every,
+                                 early_every=s.swml_early_every, prior_sd=s.swml_prior_sd,
+                                 posterior_average=s.swml_posterior_average, keep_r_nats=s.swml_keep_r_nats,
+                                 max_fall=s.swml_max_fall),
             "EKF true Q,R": lambda: EKF(system, x0, s.P0, q, r)}
 
 
@@ -349,7 +384,8 @@ def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, e
     return out
 
 
-def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None) -> dict:
+def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None,
+              shared: dict | None = None) -> dict:
     """All realisations of one scenario and reading, every filter over all of them in
     native calls, with the PCRB over the same realisations and the innovations' whiteness.
 
@@ -366,22 +402,36 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
     bound
         The PCRB of these realisations (:func:`scenario_bound`), if the caller has it
         (default: computed here).
+    shared
+        A dict the caller keeps between calls that differ only in the nominal noise (``q0``,
+        ``r0`` and their factors, as the sweep's cells): the truth, the training realisation
+        and the results of the EKF given the true Q and R (which does not start from the
+        nominal noise) are computed at the first call and reused (the same numbers; default:
+        nothing kept).
     """
     s = settings
     runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    seeds = [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in runs]
-    X, Y, u = simulate_truth(s, q, r, seeds)
+    shared = {} if shared is None else shared
+    if "truth" not in shared:
+        shared["truth"] = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, run))
+                                                   for run in runs])
+    X, Y, u = shared["truth"]
     system = _system(s.T)
-    learned = learn_noise(system, s, scenario_index, q, r)
+    learned = learn_noise(system, s, scenario_index, q, r, shared)
     errors, nees, nis, failed, white, late = {}, {}, {}, {}, {}, {}
     L = s.transient_steps
     for name, make in make_filters(system, s, q, r, learned).items():
+        if name == TRUE_EKF and name in shared:
+            errors[name], nees[name], nis[name], failed[name], white[name], late[name] = shared[name]
+            continue
         res = batch_run(make, X, Y, u[:, None])
         errors[name], nees[name], nis[name], failed[name] = res.x - X, res.nees, res.nis, res.failed
         white[name] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
         late[name] = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
                       if s.has_late else None)
+        if name == TRUE_EKF:
+            shared[name] = errors[name], nees[name], nis[name], failed[name], white[name], late[name]
     example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
     out = _summarise(errors, nees, nis, failed, s, example)
     out["learned"] = learned

@@ -81,10 +81,10 @@ def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: s
         The campaign settings of every cell.
     """
     rows = []
-    bound = None                  # the truth, hence the PCRB, is the same in every cell
+    bound, shared = None, {}      # the truth, the PCRB and the EKF given the true Q, R: the same in every cell
     for fq, fr in cells:
         s = replace(settings, q0_factor=fq, r0_factor=fr, readings=("eqs",))
-        res = seed000.fast_task(scenario_index, "eqs", s, bound=bound)
+        res = seed000.fast_task(scenario_index, "eqs", s, bound=bound, shared=shared)
         bound = res["bound"]
         true_eta = res["per_run"][TRUE_EKF]["eta"]
         ekf = res["per_run"]["EKF"]["eta"]

@@ -104,6 +104,13 @@ def test_settings_from_the_command_line_and_files_round_trip(tmp_path):
     path = tmp_path / "settings.toml"
     path.write_text(to_toml(s, "seed000"))
     assert load_settings(seed000.Settings(), path) == s
+    ml = apply_overrides(seed000.Settings(), ["swml_prior_sd=none", "swml_posterior_average=false",
+                                              "swml_early_every=2", "swml_keep_r_nats=2", "swml_max_fall=2"])
+    assert (ml.swml_prior_sd, ml.swml_posterior_average) == (None, False)          # the plain ML form
+    path.write_text(to_toml(ml, "seed000"))
+    assert load_settings(seed000.Settings(), path) == ml
+    with pytest.raises(ValueError, match="swml_posterior_average needs a prior"):
+        apply_overrides(seed000.Settings(), ["swml_prior_sd=none"])
     with pytest.raises(KeyError, match="unknown setting.*q_0.*valid: runs"):
         apply_overrides(seed000.Settings(), ["q_0=1"])
     with pytest.raises(ValueError, match="runs must be an integer >= 1"):

@@ -7,12 +7,14 @@ equal; refusals named."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
 from testkit.fmu_helpers import Instance
 
 from estimators import SWML, BatchFilter, linear_model
+from estimators.consistency import nees_test, nis_test
 from fmu_models.errors import ConfigurationError, InputError
 
 A = np.array([[1.0, 0.1], [0.0, 0.9]])
@@ -46,6 +48,30 @@ def test_converges_to_the_true_q_and_r_from_1000x_wrong(lin, factor):
     q, r = late["Q_x1"].mean(), late["R_y1"].mean()
     assert q == pytest.approx(Q_TRUE, rel=0.15) and r == pytest.approx(R_TRUE, rel=0.1), (q, r)
     assert hist.index[1:12].tolist() == [2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 50]   # the schedule
+
+
+def test_posterior_average_keeps_the_filter_consistent_from_1000x_too_small_noise(lin):
+    """100 realisations of 200 steps from Q0 = R0 = 1e-3 times the truth: with the prior and
+    the posterior average the average NEES and NIS lie inside their two-sided 95 % chi-square
+    bands; the plain ML form (the same data) is far above them (overconfident start)."""
+    runs, n = 100, 200
+    rng = np.random.default_rng(5)
+    us = np.sin(0.05 * np.arange(n))[:, None]
+    X, Y = np.zeros((runs, n + 1, 2)), np.zeros((runs, n, 2))
+    for k in range(n):
+        X[:, k + 1] = X[:, k] @ A.T + us[k] @ B.T + rng.normal(0, math.sqrt(Q_TRUE), (runs, 2))
+        Y[:, k] = X[:, k + 1] @ C.T + rng.normal(0, math.sqrt(R_TRUE), (runs, 2))
+    verdicts = {}
+    for name, options in (("ML", {}), ("MAP averaged", {"prior_sd": math.log(100.0), "posterior_average": True,
+                                                        "early_every": 1, "keep_r_nats": 0.0, "max_fall": 10.0})):
+        out = BatchFilter(SWML(lin, [0.0, 0.0], 1.0, 1e-3 * Q_TRUE, 1e-3 * R_TRUE, **options), runs).run(us, Y)
+        e = out.x[:, 1:] - X[:, 1:]
+        nees = np.einsum("rki,rki->rk", e, np.linalg.solve(out.P[:, 1:], e[..., None])[..., 0])
+        verdicts[name] = (nees_test(nees, 2), nis_test(out.nis, 2))
+    ne, ni = verdicts["MAP averaged"]
+    assert ne.consistent and ni.consistent, (ne.average, ni.average)
+    ne, ni = verdicts["ML"]
+    assert ne.average > 10 * ne.band[1] and not ni.consistent, (ne.average, ni.average)
 
 
 # ---------------------------------------------------------------------------- numpy oracle
@@ -89,10 +115,23 @@ def np_window(x, P, lq, lr, us, ys, als=False):
     return (ll, x, P, sums) if als else (ll, x, P)
 
 
-def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.0, max_fall=2.0):
-    """One SWML update (the method of issue 21 as documented in estimators/swml.py)."""
+def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.0, max_fall=2.0, prior=None,
+              average=False):
+    """One SWML update (the method of issue 21 as documented in estimators/swml.py); with
+    ``prior = (sd, q_c, r_c)`` the window's log-posterior (MAP), with ``average`` also the
+    posterior-averaged end state and the new outer points: ``(q, r, x, P[, points])``."""
     lq0, lr0 = math.log(q0), math.log(r0)
-    l0, x0, P0, (a11, a12, a22, b1, b2) = np_window(x_s, P_s, lq0, lr0, us, ys, als=True)
+    window = np_window
+
+    if prior is not None:
+        sd, qc, rc = prior
+
+        def window(x_s, P_s, lq, lr, us, ys, als=False):
+            out = np_window(x_s, P_s, lq, lr, us, ys, als)
+            pen = 0.5 * ((lq - math.log(qc)) ** 2 + (lr - math.log(rc)) ** 2) / sd ** 2
+            return (out[0] - pen, *out[1:])
+
+    l0, x0, P0, (a11, a12, a22, b1, b2) = window(x_s, P_s, lq0, lr0, us, ys, als=True)
     det = a11 * a22 - a12 ** 2
     qa, ra = ((a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det) if det > 1e-300 else (q0, r0)
     lo_q, hi_q = math.log(max(qb[0], q0 / max_fall)), math.log(qb[1])
@@ -102,11 +141,11 @@ def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.
         return min(max(lq, lo_q), hi_q), min(max(lr, lo_r), hi_r)
 
     ta = clamp(math.log(max(qa, 1e-300)), math.log(max(ra, 1e-300)))
-    ea = np_window(x_s, P_s, *ta, us, ys)
+    ea = window(x_s, P_s, *ta, us, ys)
     use_a = ea[0] > l0 and (ta[1] >= lr0 or ea[0] >= l0 + keep)
     ts, ls = (ta, ea[0]) if use_a else ((lq0, lr0), l0)
     pts = [(ts[0] + h, ts[1]), (ts[0] - h, ts[1]), (ts[0], ts[1] + h), (ts[0], ts[1] - h), (ts[0] + h, ts[1] + h)]
-    evs = [np_window(x_s, P_s, *pt, us, ys) for pt in pts]
+    evs = [window(x_s, P_s, *pt, us, ys) for pt in pts]
     lpq, lmq, lpr, lmr, lpp = (e[0] for e in evs)
     g = np.array([(lpq - lmq) / (2 * h), (lpr - lmr) / (2 * h)])
     Hm = np.array([[(lpq - 2 * ls + lmq) / h ** 2, (lpp - lpq - lpr + ls) / h ** 2],
@@ -117,7 +156,7 @@ def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.
         step = h * g / max(np.linalg.norm(g), 1e-300)
     step = np.clip(step, -math.log(max_factor), math.log(max_factor))
     tn = clamp(ts[0] + step[0], ts[1] + step[1])
-    en = np_window(x_s, P_s, *tn, us, ys)
+    en = window(x_s, P_s, *tn, us, ys)
     cands = [(ta, ea), *zip(pts, evs), (tn, en)]
     best = ((lq0, lr0), (l0, x0, P0))
 
@@ -133,27 +172,58 @@ def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.
             best = (t, ev)
     (lq, lr), (lb, xb, Pb) = best
     if lr < lr0:                                          # lowering r must pay at the chosen q too
-        ek = np_window(x_s, P_s, lq, max(lr0, lr), us, ys)
+        ek = window(x_s, P_s, lq, max(lr0, lr), us, ys)
         if ek[0] > lb - keep:
             lr, xb, Pb = lr0, ek[1], ek[2]
-    return math.exp(lq), math.exp(lr), xb, Pb
+    if not average:
+        return math.exp(lq), math.exp(lr), xb, Pb
+    lam = -Hm
+    if not (lam[0, 0] > 0 and np.linalg.det(lam) > 0):
+        lam = np.diag(np.maximum(np.diag(lam), 1.0 / prior[0] ** 2))
+    L = np.linalg.cholesky(np.linalg.inv(lam))
+    lo, hi = np.log([qb[0], rb[0]]), np.log([qb[1], rb[1]])
+    pts = [np.clip(np.array([lq, lr]) + sign * math.sqrt(3.0) * L[:, j], lo, hi) for sign in (1, -1) for j in (0, 1)]
+    ends = [(xb, Pb)] + [window(x_s, P_s, *pt, us, ys)[1:] for pt in pts]
+    xm, Pm = np_mixture(ends)
+    return math.exp(lq), math.exp(lr), xm, Pm, pts
 
 
-def test_one_window_update_equals_a_numpy_reimplementation(lin):
+def np_mixture(ends):
+    """The unscented mixture: weights 1/3 (the centre) and 1/6."""
+    w = [1 / 3] + [1 / 6] * 4
+    xm = sum(wi * x for wi, (x, _) in zip(w, ends))
+    return xm, sum(wi * (P + np.outer(x - xm, x - xm)) for wi, (x, P) in zip(w, ends))
+
+
+@pytest.mark.parametrize("options", [{}, {"prior_sd": 1.5}, {"prior_sd": 1.5, "posterior_average": True}],
+                         ids=["ML", "MAP", "MAP averaged"])
+def test_one_window_update_equals_a_numpy_reimplementation(lin, options):
     """W = 20, M = 10, no early updates: the updates at steps 10 (a half-empty window from
     the initial state), 20 (full, from the initial state) and 30 (from the state stored at
-    step 10) against the numpy oracle, to 1e-9."""
+    step 10) against the numpy oracle, to 1e-9: the window's maximum likelihood, with a prior
+    (MAP), and with the state and covariance averaged over the posterior (at every step: the
+    Kalman step at the centre and at the four outer points, mixed)."""
     us, ys = linear_record(40, seed=3)
     x0, P0 = np.zeros(2), np.eye(2)
-    f = SWML(lin, x0, P0, 1e-3, 3.0, window=20, every=10, early_until=0)
+    f = SWML(lin, x0, P0, 1e-3, 3.0, window=20, every=10, early_until=0, **options)
     qb, rb = f.q_bounds, f.r_bounds
     x, P, q, r = x0.copy(), P0.copy(), 1e-3, 3.0
+    sd = options.get("prior_sd")
+    prior = None if sd is None else (sd, 1e-3, 3.0)
+    average = options.get("posterior_average", False)
+    d = math.sqrt(3.0) * (sd or 0.0)
+    pts = [np.log([1e-3, 3.0]) + o for o in ([d, 0], [0, d], [-d, 0], [0, -d])]   # the prior's points
     stored = {0: (x0.copy(), P0.copy())}
     for k in range(1, 31):
-        x, P = np_window(x, P, math.log(q), math.log(r), us[k - 1:k], ys[k - 1:k])[1:]
+        ends = [np_window(x, P, math.log(q), math.log(r), us[k - 1:k], ys[k - 1:k])[1:]]
+        if average:
+            ends += [np_window(x, P, *pt, us[k - 1:k], ys[k - 1:k])[1:] for pt in pts]
+        x, P = np_mixture(ends) if average else ends[0]
         if k % 10 == 0:
             start = max(0, k - 20)
-            q, r, x, P = np_update(*stored[start], q, r, us[start:k], ys[start:k], qb, rb)
+            res = np_update(*stored[start], q, r, us[start:k], ys[start:k], qb, rb, prior=prior, average=average)
+            q, r, x, P = res[:4]
+            pts = res[4] if average else pts
             stored[k] = (x.copy(), P.copy())
         got = f.step(us[k - 1], ys[k - 1])
         np.testing.assert_allclose(got, x, rtol=0, atol=1e-9, err_msg=f"k = {k}")
@@ -178,15 +248,18 @@ def record(cp):
     return np.array(us), ys
 
 
-def make(cp):
-    return SWML(cp, [0.5, 0.0, 1.8, 0.5], 1.0, 1e-3, 10.0, window=50, every=25)
+def make(cp, **options):
+    return SWML(cp, [0.5, 0.0, 1.8, 0.5], 1.0, 1e-3, 10.0, window=50, every=25, **options)
 
 
 @pytest.mark.slow
-def test_step_run_batch_and_fmu_agree(cp, record, tmp_path):
+@pytest.mark.parametrize("options", [{}, {"prior_sd": 2.0, "posterior_average": True, "early_every": 1}],
+                         ids=["ML", "MAP averaged"])
+def test_step_run_batch_and_fmu_agree(cp, record, tmp_path, options):
     from estimators.filter_fmu import export_filter_fmu
 
     us, ys = record
+    make = partial(globals()["make"], **options)
     stepped = make(cp)
     xs = np.array([stepped.step(us[k], ys[k]) for k in range(len(ys))])
     run = make(cp).run(us, ys)
@@ -223,7 +296,9 @@ def test_bad_settings_and_inputs_are_named(cp):
                     ({"early_until": 200}, "early_until must be a whole number of steps in 0..window"),
                     ({"max_factor": 1.0}, "max_factor must be > 1"),
                     ({"keep_r_nats": -1}, "keep_r_nats must be >= 0"),
-                    ({"window": 10**6, "every": 10}, "window = 1000000 is longer than 2000 steps")):
+                    ({"window": 10**6, "every": 10}, "window = 1000000 is longer than 2000 steps"),
+                    ({"posterior_average": True}, "posterior_average needs a prior"),
+                    ({"prior_sd": -1.0}, "prior_sd")):
         with pytest.raises(ConfigurationError, match=msg):
             SWML(cp, x0, 1.0, 0.1, 0.1, **kw)
     with pytest.raises(ConfigurationError, match="Q must be a multiple of the identity"):
