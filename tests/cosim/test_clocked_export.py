@@ -55,3 +55,40 @@ def test_export_ssp_refuses_the_clocked_form_in_fmi2(tmp_path):
     with pytest.raises(ConfigurationError, match="the SSP: the clocked form needs FMI 3.0"):
         export_ssp(scenario, tmp_path / "ssp", fmi_version=2, clocked=True)
     assert not (tmp_path / "ssp").exists()
+
+
+def test_a_clocked_signal_fmu_keeps_its_period_and_samples_at_each_activation(tmp_path):
+    """The clock's interval is the period: another period is refused leaving Initialization
+    Mode, with the reason; with the declared one, each activation samples the sine at its time."""
+    from fmpy import extract
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import FMU3ScheduledExecution, fmi3LogMessageCallback
+
+    from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
+
+    spec = SignalSpec("sine", 0.01, ["out"], reals=[("amplitude", 2.0, "real", "a"), ("frequency", 1.5, "real", "f"),
+                                                    ("phase", 0.0, "real", "p"), ("offset", 0.5, "real", "o")])
+    path = build_signal_fmu(spec, tmp_path, 3, "ClockedSine", clocked=True)
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    messages = []
+    log = fmi3LogMessageCallback(lambda env, status, cat, msg: messages.append(msg.decode()))
+    for period in (0.02, 0.01):
+        fmu = FMU3ScheduledExecution(guid=md.guid, unzipDirectory=extract(str(path), str(tmp_path / str(period))),
+                                     modelIdentifier=md.scheduledExecution.modelIdentifier, instanceName="sine")
+        fmu.instantiate(loggingOn=True, logMessage=log)
+        fmu.setFloat64([vr["period"]], [period])
+        fmu.enterInitializationMode(startTime=0.0)
+        if period != 0.01:
+            with pytest.raises(FMICallException):
+                fmu.exitInitializationMode()
+            assert "period = 0.02 differs from the interval 0.01 s of the constant clock sample" in messages[-1]
+        else:
+            fmu.exitInitializationMode()
+            got = []
+            for k in range(5):
+                fmu.activateModelPartition(vr["sample"], k * 0.01)
+                got.append(fmu.getFloat64([vr["out"]])[0])
+            np.testing.assert_allclose(got, 0.5 + 2.0 * np.sin(2 * np.pi * 1.5 * np.arange(5) * 0.01), rtol=0,
+                                       atol=1e-15)
+        fmu.freeInstance()

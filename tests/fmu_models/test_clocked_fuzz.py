@@ -33,7 +33,7 @@ def _assert_clean(res):
     assert c["illegal_error"] == c["illegal"] and c["legal_ok"] == c["legal"], c
 
 
-@pytest.mark.parametrize("label", LABELS)
+@pytest.mark.parametrize("label", [LABELS[0], pytest.param(LABELS[1], marks=pytest.mark.slow)])
 def test_a_short_fuzz_of_the_clocked_fmus_finds_nothing(clocked_targets, label):
     t = clocked_targets(label)
     assert t.clock == (t.clock[0], 0.01)
@@ -60,7 +60,12 @@ MUTANTS = {
 }
 
 
-@pytest.mark.parametrize("mutant", list(MUTANTS))
+#: The mutants of the default run; the others in the slow one (each is a sanitizer build).
+DEFAULT_MUTANTS = ("Step Mode while the clock is active", "a get after a set in Scheduled Execution")
+
+
+@pytest.mark.parametrize("mutant", [m if m in DEFAULT_MUTANTS else pytest.param(m, marks=pytest.mark.slow)
+                                    for m in MUTANTS])
 def test_the_fuzzer_catches_a_missing_clock_check(clocked_targets, tmp_path, mutant):
     source, text, replacement = MUTANTS[mutant]
     t = clocked_targets("ekf_clocked")
