@@ -32,6 +32,11 @@ def _verdict(case, outcome, stopped: bool) -> str:
         if r["reference"] == "none published":
             return "runs (nothing published)" + note
         return f"exact: {r['rows']} rows, error {r['error']:.0f}" + note
+    if case.interface == "se":
+        ticks = sum(len(t) for t in r["ticks"].values())
+        if r["wrong_ticks"]:
+            return f"clock ticks differ: {sorted(r['wrong_ticks'])}" + note
+        return f"every tick as its table ({ticks} ticks), counters error {r['error']:.0f}" + note
     rel = r["error"] / r["scale"] if r["scale"] else 0.0
     peer = "fmpy's" if r["peer"].startswith("fmpy") else "scipy's"
     return f"relative error {rel:.0e}, {r['ratio']:.2f}x {peer}" + note
@@ -60,7 +65,8 @@ def reference_table(cli: bool) -> None:
           "(vs CVODE at 1e-10; ratio to fmpy's error at 1e-6) |")
     print("|---|---|---|---|")
     for (model, version), r in rows.items():
-        print(f"| {model} | {version}.0 | {r.get('cs', '-')} | {r.get('me', '-')} |")
+        me = r.get("me", "-") if "se" not in r else f"Scheduled Execution: {r['se']}"
+        print(f"| {model} | {version}.0 | {r.get('cs', '-')} | {me} |")
     if cli:
         n = len(rc.cases())
         print(f"\nThe CLI (`pendulum-cosim run`, a minimal scenario file) gives the same rows or the same "
