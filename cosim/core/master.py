@@ -87,8 +87,11 @@ LOOPS = ("refuse", "iterate")
 LOOP_SOLVERS = ("newton", "fixed-point")
 #: Base steps between checks that every signal is finite (and progress updates).
 BLOCK = 64
-#: Base steps the native kernel runs before it returns to Python (Ctrl-C, progress).
+#: Most base steps the native kernel runs before it returns to Python (Ctrl-C, progress);
+#: fewer when they take longer than :data:`CHUNK_SECONDS`.
 CHUNK = 64 * BLOCK
+#: Wall time [s] the native kernel aims at between two returns to Python.
+CHUNK_SECONDS = 0.02
 #: Largest number of base steps of one run.
 MAX_STEPS = 10**10
 
@@ -623,11 +626,11 @@ class Cosimulation:
                              sel=sel64.ctypes.data, isel=isel64.ctypes.data, pattern=program.pattern.ctypes.data,
                              out_start=program.out_start.ctypes.data, out_len=program.out_len.ctypes.data,
                              upd_start=program.upd_start.ctypes.data, upd_len=program.upd_len.ctypes.data,
-                             ops=ctypes.addressof(program.ops), kstop=CHUNK)
+                             ops=ctypes.addressof(program.ops), kstop=BLOCK)
                 run = self._kernel.kernel_run
                 state = ctypes.byref(kst)
                 calls, updates, meta = program.calls, program.updates, program.meta
-                done = 0
+                done, chunk, since = 0, BLOCK, time.perf_counter()
                 phase = "output"
                 for sync in program.syncs_in:
                     sync()
@@ -651,9 +654,12 @@ class Cosimulation:
                         meta[at].hook()
                         kst.pc += 1
                         continue
-                    if event == EV_CHUNK:
+                    if event == EV_CHUNK:             # a chunk of about CHUNK_SECONDS, at most CHUNK steps
                         bar.update(kst.k - done)
-                        done, kst.kstop = kst.k, kst.k + CHUNK
+                        now = time.perf_counter()
+                        ratio = CHUNK_SECONDS / max(now - since, 1e-6)
+                        chunk = max(BLOCK, min(CHUNK, int(chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
+                        done, since, kst.kstop = kst.k, now, kst.k + chunk
                         continue
                     if event == EV_FLUSH:
                         sink.flush(cap)
