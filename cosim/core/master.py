@@ -308,10 +308,8 @@ class Cosimulation:
             if self.engine == "native":
                 raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
             return None
-        self._kernel, reason = load_kernel()
+        self._kernel, _ = load_kernel()
         if self._kernel is None:
-            if self.engine == "native":
-                raise ConfigurationError(f"engine='native': the native kernel is not available ({reason})")
             return None
         program = build_program(schedule)
         if program.n_native == 0 and self.engine == "auto":
@@ -561,6 +559,10 @@ class Cosimulation:
 
     def _simulate(self, sink, sel, n: int, m: int, t0: float, progress):
         from tqdm.auto import tqdm
+
+        if self.engine == "native" and load_kernel()[0] is None:     # refused before anything starts
+            sink.abort()
+            raise ConfigurationError(f"engine='native': the native kernel is not available ({load_kernel()[1]})")
 
         hf = self.step_size
         values = np.zeros(self._n_signals)
