@@ -284,6 +284,8 @@ def test_interrupting_a_run_writes_partial_results_not_finished_ones(tmp_path):
         value = 0.0
         [connections]
         "plant.F" = "f.out"
+        [recording]
+        output_interval = 0.1           # the native kernel records ~1e7 base steps a second
     """)
     out = tmp_path / "out"
     proc = subprocess.Popen([*CLI, "run", str(sc), "--out", str(out)], stdout=subprocess.PIPE,

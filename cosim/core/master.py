@@ -87,8 +87,11 @@ LOOPS = ("refuse", "iterate")
 LOOP_SOLVERS = ("newton", "fixed-point")
 #: Base steps between checks that every signal is finite (and progress updates).
 BLOCK = 64
-#: Base steps the native kernel runs before it returns to Python (Ctrl-C, progress).
+#: Most base steps the native kernel runs before it returns to Python (Ctrl-C, progress);
+#: fewer when they take longer than :data:`CHUNK_SECONDS`.
 CHUNK = 64 * BLOCK
+#: Wall time [s] the native kernel aims at between two returns to Python.
+CHUNK_SECONDS = 0.02
 #: Largest number of base steps of one run.
 MAX_STEPS = 10**10
 
@@ -305,10 +308,8 @@ class Cosimulation:
             if self.engine == "native":
                 raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
             return None
-        self._kernel, reason = load_kernel()
+        self._kernel, _ = load_kernel()
         if self._kernel is None:
-            if self.engine == "native":
-                raise ConfigurationError(f"engine='native': the native kernel is not available ({reason})")
             return None
         program = build_program(schedule)
         if program.n_native == 0 and self.engine == "auto":
@@ -559,6 +560,10 @@ class Cosimulation:
     def _simulate(self, sink, sel, n: int, m: int, t0: float, progress):
         from tqdm.auto import tqdm
 
+        if self.engine == "native" and load_kernel()[0] is None:     # refused before anything starts
+            sink.abort()
+            raise ConfigurationError(f"engine='native': the native kernel is not available ({load_kernel()[1]})")
+
         hf = self.step_size
         values = np.zeros(self._n_signals)
         integers = np.zeros(self._n_signals, dtype=np.int64)      # exact integer and Boolean signals
@@ -623,11 +628,11 @@ class Cosimulation:
                              sel=sel64.ctypes.data, isel=isel64.ctypes.data, pattern=program.pattern.ctypes.data,
                              out_start=program.out_start.ctypes.data, out_len=program.out_len.ctypes.data,
                              upd_start=program.upd_start.ctypes.data, upd_len=program.upd_len.ctypes.data,
-                             ops=ctypes.addressof(program.ops), kstop=CHUNK)
+                             ops=ctypes.addressof(program.ops), kstop=BLOCK)
                 run = self._kernel.kernel_run
                 state = ctypes.byref(kst)
                 calls, updates, meta = program.calls, program.updates, program.meta
-                done = 0
+                done, chunk, since = 0, BLOCK, time.perf_counter()
                 phase = "output"
                 for sync in program.syncs_in:
                     sync()
@@ -651,9 +656,12 @@ class Cosimulation:
                         meta[at].hook()
                         kst.pc += 1
                         continue
-                    if event == EV_CHUNK:
+                    if event == EV_CHUNK:             # a chunk of about CHUNK_SECONDS, at most CHUNK steps
                         bar.update(kst.k - done)
-                        done, kst.kstop = kst.k, kst.k + CHUNK
+                        now = time.perf_counter()
+                        ratio = CHUNK_SECONDS / max(now - since, 1e-6)
+                        chunk = max(BLOCK, min(CHUNK, int(chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
+                        done, since, kst.kstop = kst.k, now, kst.k + chunk
                         continue
                     if event == EV_FLUSH:
                         sink.flush(cap)

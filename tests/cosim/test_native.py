@@ -295,3 +295,18 @@ def test_a_filter_driven_out_of_range_ends_the_run_the_same_way(fmu_builds):
     out = outcome(make)
     assert out["python"][1] == "CosimError" and "ekf" in out["python"][2], out["python"][2]
     assert_same(out)
+
+
+def test_without_a_working_compiler_auto_takes_the_python_loop_and_native_is_refused(tmp_path, monkeypatch):
+    from cosim.core import native
+
+    monkeypatch.setattr(native, "_kernel", [])
+    monkeypatch.setenv("PENDULUM_COSIM_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("CC", "/bin/false")
+    comps = [Step("s", 0.01, 0.5, 0.0, 1.0), Gain("g", 0.01, 2.0)]
+    with pytest.warns(UserWarning, match="native co-simulation kernel is not available"):
+        df = Cosimulation(comps, {"g.u": "s.out"}).run(1.0, progress=False)
+    assert df["g.y"].iloc[-1] == 2.0
+    with pytest.raises(ConfigurationError, match="engine='native': the native kernel is not available"):
+        Cosimulation(comps, {"g.u": "s.out"}, engine="native").run(1.0, progress=False)
+    assert list(tmp_path.glob("cache/kernel_*")) == []
