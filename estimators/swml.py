@@ -77,7 +77,7 @@ from .protocol import Parameter, StepContext, StepResult
 
 __all__ = ["MAX_WINDOW", "SWML"]
 
-#: The unscented weights of the posterior average: the centre, then the four outer points.
+#: The unscented weights of the posterior average (the centre, then the four outer points).
 UT_WEIGHTS = (1.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0)
 #: An outer point of the posterior average whose window log-posterior lies more than this
 #: many nats below the kept point's is left out, the other weights renormalised (its re-run
