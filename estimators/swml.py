@@ -47,7 +47,9 @@ consistency:
   outer points too; between updates every step is one EKF step at each of the five points
   from the shared state; the state is the mixture's mean ``x = sum w_i x_i`` and ``P =
   sum w_i (P_i + (x_i - x)(x_i - x)^T)`` (the mixture collapsed to one Gaussian at every
-  step). Until the first update the points are the prior's. The covariance thereby
+  step); an outer point whose window re-run diverged (log-posterior more than
+  ``DROP_NATS`` below the kept point's) is left out and the weights renormalised. Until
+  the first update the points are the prior's. The covariance thereby
   accounts for what the window does not know about the noise, which the ML form ignores
   (it is overconfident while ``(q, r)`` is still uncertain, e.g. when started far too
   small).
@@ -76,6 +78,14 @@ from .linalg import BAD_RESULT, OK, finite_flag, log_det, mask_measurement
 from .protocol import Parameter, StepContext, StepResult
 
 __all__ = ["MAX_WINDOW", "SWML"]
+
+#: The unscented weights of the posterior average (the centre, then the four outer points).
+UT_WEIGHTS = (1.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0)
+#: An outer point of the posterior average whose window log-posterior lies more than this
+#: many nats below the kept point's is left out, the other weights renormalised (its re-run
+#: has diverged). Measured on the seed 000 sweep: with 50 a cell loses its consistency
+#: (points that carry the noise's uncertainty left out), with 1000 a diverged re-run is kept.
+DROP_NATS = 200.0
 
 #: Longest window, whose re-runs are compiled into the step (about 1.7 s of C compilation per
 #: 100 steps of window, once per configuration, then cached).
@@ -211,10 +221,11 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
 
     def _prior_points(self) -> np.ndarray:
         """The four outer unscented points of the prior of ``(ln q, ln r)`` (centred at the
-        initial q and r), flat ``(lq_1, lr_1, ..., lq_4, lr_4)``."""
+        initial q and r), flat ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights
+        (centre first: 1/3, 1/6, 1/6, 1/6, 1/6)."""
         lq, lr = (math.log(v) for v in self._prior_centre)
         d = math.sqrt(3.0) * self.prior_sd
-        return np.array([lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d])
+        return np.array([lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS])
 
     def reset(self, x0=None, P0=None) -> None:
         """As :meth:`KalmanBase.reset <estimators.base.KalmanBase.reset>`; the window empties
@@ -242,7 +253,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         out.update(snap_x=ca.repmat(p["x0"], n_snap, 1), snap_P=ca.repmat(P, n_snap, 1), x_init=p["x0"], P_init=P)
         if self.posterior_average:
             lq, lr, d = ca.log(p["q0"]), ca.log(p["r0"]), math.sqrt(3.0) * self.prior_sd
-            out["sigma"] = ca.vertcat(lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d)
+            out["sigma"] = ca.vertcat(lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS)
         return out
 
     # ------------------------------------------------------------------ the step
@@ -355,7 +366,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         x, P, Q, R = MX.sym("x", n), MX.sym("P", n, n), MX.sym("Q", n, n), MX.sym("R", p, p)
         wu, wy, wv, wa = MX.sym("wu", s.nu * W), MX.sym("wy", p * W), MX.sym("wv", p * W), MX.sym("wa", W)
         sx, sP, xi, Pi = MX.sym("sx", n), MX.sym("sP", n * n), MX.sym("xi", n), MX.sym("Pi", n * n)
-        gate, qb, rb, pc, sg = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2), MX.sym("pc", 2), MX.sym("sg", 8)
+        gate, qb, rb, pc, sg = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2), MX.sym("pc", 2), MX.sym("sg", 13)
         ins = [x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate, qb, rb, pc, sg]
         if slots == 0:                                     # no update
             return ca.Function("swml_none", ins, [x, P, Q, R, MX(0), sg])
@@ -447,9 +458,11 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite_flag([evk[0]])), evk[0] > best_l - keep)
         best_t = (best_t[0], ca.if_else(back, lr0, best_t[1]))
         best_x, best_P = ca.if_else(back, evk[1], best_x), ca.if_else(back, evk[2], best_P)
+        best_l = ca.if_else(back, evk[0], best_l)
         sigma = sg
         if self.posterior_average:
-            best_x, best_P, sigma = self._posterior_average(run, best_t, best_x, best_P, (H11, H12, H22), qb, rb)
+            best_x, best_P, sigma = self._posterior_average(run, best_t, best_l, best_x, best_P, (H11, H12, H22),
+                                                            qb, rb)
         ok_end = finite_flag([best_x, best_P])
         x_new, P_new = ca.if_else(ok_end, best_x, x), ca.if_else(ok_end, best_P, P)
         Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), q0) * MX.eye(n)
@@ -457,15 +470,19 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         name = "swml_window" if slots is None else "swml_early"
         return ca.Function(name, ins, [x_new, P_new, Q_new, R_new, MX(1), ca.if_else(ok_end, sigma, sg)])
 
-    def _posterior_average(self, run, theta, x_best, P_best, hess, qb, rb):
+    def _posterior_average(self, run, theta, l_best, x_best, P_best, hess, qb, rb):
         """The window's end state and covariance averaged over the Laplace approximation of
         the posterior of ``theta = (ln q, ln r)``: precision ``Lambda = -H`` (the finite-difference
         Hessian of the log-posterior; where it is not positive definite, its diagonal, each
         entry at least the prior's precision ``1 / prior_sd^2``), centred at the kept point;
         five unscented points (the centre with weight 1/3, ``theta +- sqrt(3) L e_i`` with
         weight 1/6, ``L L^T = Lambda^-1``; clipped to the bounds), each a window re-run; the
+        weights renormalised without an outer point whose run is not finite or whose window
+        log-posterior ``l_i`` is more than ``DROP_NATS`` below the kept point's (a diverged
+        re-run; the Gaussian approximation puts it 3/2 below); the
         mixture's mean ``x = sum w_i x_i`` and covariance ``P = sum w_i (P_i + d_i d_i^T)``,
-        ``d_i = x_i - x``. If a point's run is not finite, the kept point's alone."""
+        ``d_i = x_i - x``. If the mixture is not finite, the kept point's alone. Returns the
+        state, covariance and the points and weights (13)."""
         H11, H12, H22 = hess
         a, b, d = -H11, -H12, -H22
         pd = ca.logic_and(a > 0, a * d - b * b > 0)
@@ -483,16 +500,23 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             for dq, dr in ((l11, l21), (0, l22)):
                 pts.append((ca.fmin(ca.fmax(theta[0] + sign * c * dq, lo_q), hi_q),
                             ca.fmin(ca.fmax(theta[1] + sign * c * dr, lo_r), hi_r)))
-        ends = [(x_best, P_best)] + [run(*pt)[1:] for pt in pts]
-        xm, Pm = self._mixture(ends)
+        ends, raw = [(x_best, P_best)], [ca.MX(UT_WEIGHTS[0])]
+        for pt, w0 in zip(pts, UT_WEIGHTS[1:]):
+            li, xe, Pe = run(*pt)
+            fine = finite_flag([li, xe, Pe])
+            ends.append((ca.if_else(fine, xe, x_best), ca.if_else(fine, Pe, P_best)))
+            raw.append(ca.if_else(ca.logic_and(fine, li > l_best - DROP_NATS), w0, 0))
+        total = sum(raw)
+        w = [wi / total for wi in raw]
+        xm, Pm = self._mixture(ends, w)
         ok = finite_flag([xm, Pm])
-        return ca.if_else(ok, xm, x_best), ca.if_else(ok, Pm, P_best), ca.vertcat(*[v for pt in pts for v in pt])
+        return (ca.if_else(ok, xm, x_best), ca.if_else(ok, Pm, P_best),
+                ca.vertcat(*[v for pt in pts for v in pt], *[ca.if_else(ok, wi, w0) for wi, w0 in zip(w, UT_WEIGHTS)]))
 
     @staticmethod
-    def _mixture(ends):
-        """Mean and covariance of the unscented mixture of ``[(x_c, P_c), (x_1, P_1), ...,
-        (x_4, P_4)]`` (weights 1/3 and 1/6)."""
-        w = [1.0 / 3.0] + [1.0 / 6.0] * 4
+    def _mixture(ends, w):
+        """Mean and covariance of the mixture of ``[(x_c, P_c), (x_1, P_1), ..., (x_4, P_4)]``
+        with weights ``w``."""
         xm = sum(wi * xe for wi, (xe, _) in zip(w, ends))
         Pm = sum(wi * (Pe + ca.mtimes(xe - xm, (xe - xm).T)) for wi, (xe, Pe) in zip(w, ends))
         return xm, 0.5 * (Pm + Pm.T)
@@ -514,7 +538,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         cond = ca.Function.conditional("swml_update", branches, branches[0])
         sx = ca.reshape(out["snap_x_new"], n, n_snap)[:, 0]
         sP = ca.reshape(out["snap_P_new"], n * n, n_snap)[:, 0]
-        sg = by["sigma"] if self.posterior_average else ca.MX.zeros(8)
+        sg = by["sigma"] if self.posterior_average else ca.MX.zeros(13)
         if self.posterior_average:               # the step at the posterior's outer points, mixed
             ws, last = self._window_step(), slice(W - 1, W)
             uk = ca.reshape(out["wu_new"], s.nu, W)[:, last]
@@ -522,7 +546,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             xc, Pc = ca.reshape(out["x_new"], n, 1), ca.reshape(out["P_new"], n, n)
             ends = [(xc, Pc)] + [tuple(ws(by["x"], ca.reshape(by["P"], n, n), 0, uk, yk, vk, 1, sg[2 * i],
                                           sg[2 * i + 1], by["gate"])[:2]) for i in range(4)]
-            xm, Pm = self._mixture(ends)
+            xm, Pm = self._mixture(ends, [sg[8 + i] for i in range(5)])
             ok = finite_flag([xm, Pm])
             out["x_new"] = ca.reshape(ca.if_else(ok, xm, xc), out["x_new"].shape)
             out["P_new"] = ca.reshape(ca.if_else(ok, Pm, Pc), out["P_new"].shape)

@@ -74,7 +74,7 @@ FILTERS = ("EKF", "IAE", "MF-IAE", "EKF EM", "SWML", "EKF true Q,R")
 TRUE_EKF = "EKF true Q,R"
 #: Run index of the training realisation EM learns from (never one of the test runs).
 TRAINING_RUN = 2**31 - 1
-#: SWML's prior standard deviation of ``ln q`` and ``ln r`` in the campaigns: ``ln 100`` (a
+#: SWML's prior standard deviation of ``ln q`` and ``ln r`` in the campaigns, ``ln 100`` (a
 #: factor 100 either way at one standard deviation).
 SWML_PRIOR_SD = math.log(100.0)
 STATES = ("x", "x_dot", "theta", "theta_dot")

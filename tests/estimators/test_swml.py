@@ -174,7 +174,7 @@ def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.
     if lr < lr0:                                          # lowering r must pay at the chosen q too
         ek = window(x_s, P_s, lq, max(lr0, lr), us, ys)
         if ek[0] > lb - keep:
-            lr, xb, Pb = lr0, ek[1], ek[2]
+            lr, lb, xb, Pb = lr0, ek[0], ek[1], ek[2]
     if not average:
         return math.exp(lq), math.exp(lr), xb, Pb
     lam = -Hm
@@ -183,14 +183,18 @@ def np_update(x_s, P_s, q0, r0, us, ys, qb, rb, h=0.25, max_factor=10.0, keep=2.
     L = np.linalg.cholesky(np.linalg.inv(lam))
     lo, hi = np.log([qb[0], rb[0]]), np.log([qb[1], rb[1]])
     pts = [np.clip(np.array([lq, lr]) + sign * math.sqrt(3.0) * L[:, j], lo, hi) for sign in (1, -1) for j in (0, 1)]
-    ends = [(xb, Pb)] + [window(x_s, P_s, *pt, us, ys)[1:] for pt in pts]
-    xm, Pm = np_mixture(ends)
-    return math.exp(lq), math.exp(lr), xm, Pm, pts
+    ends, w = [(xb, Pb)], [1 / 3]
+    for pt in pts:                                        # a diverged re-run (200 nats below) is left out
+        li, xe, Pe = window(x_s, P_s, *pt, us, ys)
+        ends.append((xe, Pe))
+        w.append(1 / 6 if li > lb - 200.0 else 0.0)
+    w = [wi / sum(w) for wi in w]
+    xm, Pm = np_mixture(ends, w)
+    return math.exp(lq), math.exp(lr), xm, Pm, pts, w
 
 
-def np_mixture(ends):
-    """The unscented mixture: weights 1/3 (the centre) and 1/6."""
-    w = [1 / 3] + [1 / 6] * 4
+def np_mixture(ends, w=(1 / 3, 1 / 6, 1 / 6, 1 / 6, 1 / 6)):
+    """The mixture of the centre and the four outer points with weights ``w``."""
     xm = sum(wi * x for wi, (x, _) in zip(w, ends))
     return xm, sum(wi * (P + np.outer(x - xm, x - xm)) for wi, (x, P) in zip(w, ends))
 
@@ -213,17 +217,18 @@ def test_one_window_update_equals_a_numpy_reimplementation(lin, options):
     average = options.get("posterior_average", False)
     d = math.sqrt(3.0) * (sd or 0.0)
     pts = [np.log([1e-3, 3.0]) + o for o in ([d, 0], [0, d], [-d, 0], [0, -d])]   # the prior's points
+    weights = [1 / 3] + [1 / 6] * 4
     stored = {0: (x0.copy(), P0.copy())}
     for k in range(1, 31):
         ends = [np_window(x, P, math.log(q), math.log(r), us[k - 1:k], ys[k - 1:k])[1:]]
         if average:
             ends += [np_window(x, P, *pt, us[k - 1:k], ys[k - 1:k])[1:] for pt in pts]
-        x, P = np_mixture(ends) if average else ends[0]
+        x, P = np_mixture(ends, weights) if average else ends[0]
         if k % 10 == 0:
             start = max(0, k - 20)
             res = np_update(*stored[start], q, r, us[start:k], ys[start:k], qb, rb, prior=prior, average=average)
             q, r, x, P = res[:4]
-            pts = res[4] if average else pts
+            pts, weights = (res[4], res[5]) if average else (pts, weights)
             stored[k] = (x.copy(), P.copy())
         got = f.step(us[k - 1], ys[k - 1])
         np.testing.assert_allclose(got, x, rtol=0, atol=1e-9, err_msg=f"k = {k}")
