@@ -54,6 +54,7 @@ from fmu_models.errors import (
 )
 from fmu_models.infra.checks import finite, positive, positive_int
 
+from . import crash_guard
 from .clocking import ClockPlan
 from .component import (
     CLOCK,
@@ -631,6 +632,7 @@ class Cosimulation:
                              ops=ctypes.addressof(program.ops), kstop=BLOCK)
                 run = self._kernel.kernel_run
                 state = ctypes.byref(kst)
+                crash_guard.set_step_counter(ctypes.addressof(kst) + KState.k.offset, t0, hf)
                 calls, updates, meta = program.calls, program.updates, program.meta
                 done, chunk, since = 0, BLOCK, time.perf_counter()
                 phase = "output"
@@ -696,10 +698,16 @@ class Cosimulation:
                     bar.update(k + 1 - done)
                     break
             else:
+                guarded = crash_guard.active()               # an FMU's crash names the time
+                step_now = np.zeros(1, dtype=np.int64)
+                if guarded:
+                    crash_guard.set_step_counter(step_now.ctypes.data, t0, hf)
                 for k0 in range(0, n + 1, BLOCK):
                     k1 = min(k0 + BLOCK, n + 1)
                     jb = j                                  # the block's first row in the buffer
                     for k in range(k0, k1):
+                        if guarded:
+                            step_now[0] = k
                         t = t0 + k * hf
                         outs, upds = schedule[k % L]
                         if jacobi:
@@ -768,6 +776,7 @@ class Cosimulation:
             where = f"component {name!r} failed at t = {t:g} s" + ("" if phase != "reset" else " (reset)")
             raise CosimError(f"{where}: {e}", name, t, results) from e
         finally:
+            crash_guard.set_step_counter(None)
             if bar is not None:
                 bar.close()
             if board is not None:

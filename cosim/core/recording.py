@@ -28,6 +28,8 @@ import pandas as pd
 from fmu_models.errors import ConfigurationError, ResourceError, UnknownNameError
 from fmu_models.infra.memory import MEMORY_FRACTION, available_memory
 
+from . import crash_guard
+
 __all__ = ["MemorySink", "ParquetSink", "partial_path", "select_signals"]
 
 
@@ -152,7 +154,7 @@ class ParquetSink:
         if self.path.is_dir():
             raise ConfigurationError(f"{self.path} is a folder; give a .parquet file name")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        need = n_rows * (len(columns) + 1) * 8
+        need = 2 * n_rows * (len(columns) + 1) * 8        # the Parquet file and its crash-safe stream
         free = shutil.disk_usage(self.path.parent).free
         if need > free:
             raise ResourceError(f"streaming {n_rows} rows x {len(columns)} signals needs up to "
@@ -176,6 +178,12 @@ class ParquetSink:
         self.schema = pa.schema(fields, metadata=meta)
         self._pa = pa
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
+        # every chunk also goes to an Arrow stream, complete on disk once written: if an FMU's
+        # code kills the process, the crash guard's salvage turns it into the partial file
+        self.ipc_path = self.path.with_name(f".{self.path.name}.{os.getpid()}.arrows")
+        self._ipc_file = pa.OSFile(str(self.ipc_path), "wb")
+        self._ipc = pa.ipc.new_stream(self._ipc_file, self.schema)
+        crash_guard.stream_started(id(self), str(self.ipc_path), str(self.tmp), str(partial_path(self.path)))
 
     def flush(self, rows: int) -> None:
         """Write the first ``rows`` rows of ``buffer`` as one row group."""
@@ -193,12 +201,23 @@ class ParquetSink:
             col = self.ibuffer[:rows, k]
             return pa.array(col.view(np.uint64) if type_name == "UInt64" else col)
         arrays = [pa.array(times)] + [column(j) for j in range(len(self.columns))]
-        self.writer.write_table(pa.Table.from_arrays(arrays, schema=self.schema))
+        table = pa.Table.from_arrays(arrays, schema=self.schema)
+        self.writer.write_table(table)
+        self._ipc.write_table(table)
         self.total += rows
+
+    def _end_stream(self) -> None:
+        crash_guard.stream_ended(id(self))
+        with contextlib.suppress(OSError, self._pa.ArrowException):
+            self._ipc.close()
+            self._ipc_file.close()
+        with contextlib.suppress(OSError):
+            os.unlink(self.ipc_path)
 
     def finish(self) -> Path:
         """End of a successful run: close and rename to the target; returns it."""
         self.writer.close()
+        self._end_stream()
         os.replace(self.tmp, self.path)
         return self.path
 
@@ -206,6 +225,7 @@ class ParquetSink:
         """End of a failed or interrupted run (after the last :meth:`flush`): keep the rows so far as
         ``<name>.partial.parquet`` (returned), or nothing if no row was recorded."""
         self.writer.close()
+        self._end_stream()
         if self.total == 0:
             with contextlib.suppress(OSError):
                 os.unlink(self.tmp)

@@ -18,6 +18,8 @@ from pathlib import Path
 
 from fmu_models.errors import FMUError
 
+from ..core import crash_guard
+
 __all__ = ["MAX_FILES", "MAX_UNPACKED_BYTES", "Extraction", "read_description"]
 
 #: Largest total unpacked size of an FMU [bytes].
@@ -106,6 +108,11 @@ def _complete_ranges(path: Path, md) -> None:
             v.min, v.max = el.get("min"), el.get("max")
 
 
+def _remove(directory: str) -> None:
+    shutil.rmtree(directory, True)
+    crash_guard.temp_folder_removed(directory)
+
+
 class Extraction:
     """An FMU (or SSP) unpacked into a private temporary folder, removed by :meth:`~.Extraction.close`.
 
@@ -139,7 +146,8 @@ class Extraction:
                  required: str = "modelDescription.xml", label: str = "FMU"):
         path = Path(path)
         self.directory = tempfile.mkdtemp(prefix=f"pendulum_cosim_{label.lower()}_")
-        self._finalizer = weakref.finalize(self, shutil.rmtree, self.directory, True)
+        self._finalizer = weakref.finalize(self, _remove, self.directory)
+        crash_guard.temp_folder_made(self.directory)      # removed by the salvage if an FMU crashes
         try:
             with _open_zip(path, label) as z:
                 _check_members(z, path, max_bytes, max_files, required, label)

@@ -25,6 +25,7 @@ from collections import deque
 
 from fmu_models.errors import FMUError
 
+from ..core import crash_guard
 from .exchange import raw_function
 
 __all__ = ["STATUS", "FMUInstance"]
@@ -102,6 +103,7 @@ class FMUInstance:
         self.version = 3 if str(md.fmiVersion).startswith("3") else 2
         self.messages: deque = deque(maxlen=200)
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
+        self._guard_entry = -1
         self._freed = False
         ident = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}[
             interface].modelIdentifier
@@ -110,7 +112,7 @@ class FMUInstance:
         fmu = None
         try:
             if self.version == 2:
-                fmu = (fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args)
+                fmu = self._guarded((fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args))
 
                 from fmpy.logging import addLoggerProxy
 
@@ -133,14 +135,14 @@ class FMUInstance:
                 # always on, so that a failing call names its reason (_log keeps the debug
                 # messages off the log unless logging_on)
                 if interface == "se":
-                    fmu = fmi3.FMU3ScheduledExecution(**args)
+                    fmu = self._guarded(fmi3.FMU3ScheduledExecution(**args))
                     self._instantiate_se(fmu, directory, clock_update)
                 elif interface == "cs":
-                    fmu = fmi3.FMU3Slave(**args)
+                    fmu = self._guarded(fmi3.FMU3Slave(**args))
                     fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
                                     earlyReturnAllowed=bool(early_return))
                 else:
-                    fmu = fmi3.FMU3Model(**args)
+                    fmu = self._guarded(fmi3.FMU3Model(**args))
                     fmu.instantiate(loggingOn=True, logMessage=log3)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
@@ -149,6 +151,7 @@ class FMUInstance:
                     fmu.freeLibrary()
                 except Exception:
                     LOGGER.debug("freeLibrary failed", exc_info=True)
+            crash_guard.forget_library(self._guard_entry)
             raise FMUError(f"{owner}: cannot load or instantiate {ident}: {e}" + self._last(" (", ")")) from None
         finally:
             if os.getcwd() != cwd:              # fmpy changes directory to load the library
@@ -161,6 +164,14 @@ class FMUInstance:
                 fmu.setDebugLogging(True, [])
             except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
                 LOGGER.debug("%s: setDebugLogging refused", owner)
+
+    def _guarded(self, fmu):
+        """``fmu`` (its library just loaded), registered with the crash guard: a fatal signal in
+        its code names this component (:mod:`cosim.core.crash_guard`)."""
+        version = getattr(fmu.dll, f"fmi{self.version}GetVersion", None)
+        address = ctypes.cast(version, ctypes.c_void_p).value if version is not None else None
+        self._guard_entry = crash_guard.register_library(address, self.owner)
+        return fmu
 
     def _instantiate_se(self, fmu, directory: str, clock_update) -> None:
         """``fmi3InstantiateScheduledExecution`` with this instance's logger and the
@@ -260,6 +271,7 @@ class FMUInstance:
             self.fmu.freeInstance()
         except Exception:  # noqa: BLE001
             LOGGER.debug("%s: freeInstance failed", self.owner)
+        crash_guard.forget_library(self._guard_entry)
 
 
 def c_bool_type(version: int):

@@ -1,0 +1,151 @@
+"""The crash guard: an FMU's code that kills the master's process says so before it dies.
+
+An FMU that is not isolated (``isolate = false``, the default) runs its C code in the
+master's own process; a fatal signal there (a NULL dereference, a stack overflow, an
+abort) ends the process, and no Python code can run after it. The guard is a fatal-signal
+handler, compiled once and cached like the project's other native code
+(``crash_guard.c``), that
+
+- names the component whose FMU crashed (its library is registered when it is loaded),
+  the FMI function the master was in (the outermost frame in the FMU's library) and the
+  time of the base step (the master registers its step counter),
+- tells the user to set ``isolate = true`` for that component,
+- starts the salvage program (:mod:`cosim.core.salvage`): the rows streamed to Parquet so
+  far become ``<name>.partial.parquet``, the run's temporary folders are removed,
+- then hands the signal on to the previous handler (or the default action): the process
+  ends as it would have, with the same status.
+
+Without a C compiler there is no guard (the crash is then only the signal), which
+:func:`guard` reports as ``None``.
+"""
+from __future__ import annotations
+
+import ctypes
+import sys
+from pathlib import Path
+
+from fmu_models.infra.native_library import compiled_library
+
+__all__ = [
+    "active",
+    "forget_library",
+    "guard",
+    "register_library",
+    "set_step_counter",
+    "stream_ended",
+    "stream_started",
+    "temp_folder_made",
+    "temp_folder_removed",
+]
+
+_SOURCE = Path(__file__).with_name("crash_guard.c")
+_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99")
+_state: dict = {}
+_streams: dict[int, tuple[str, str, str]] = {}
+_folders: list[str] = []
+
+
+def guard() -> ctypes.CDLL | None:
+    """The installed guard library, or None where it cannot be built (no C compiler, no
+    writable cache) or installed."""
+    if "lib" in _state:
+        return _state["lib"]
+    lib, _ = compiled_library(_SOURCE.read_text(), "crash_guard", _FLAGS, "guard_install",
+                              "the crash guard", "an FMU's crash is not explained")
+    if lib is not None:
+        lib.guard_install.restype = ctypes.c_int
+        lib.guard_register.argtypes = [ctypes.c_void_p, ctypes.c_char_p]
+        lib.guard_register.restype = ctypes.c_int
+        lib.guard_unregister.argtypes = [ctypes.c_int]
+        lib.guard_time.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
+        lib.guard_salvage.argtypes = [ctypes.POINTER(ctypes.c_char_p), ctypes.c_int]
+        lib.guard_salvage.restype = ctypes.c_int
+        if lib.guard_install() != 0:
+            lib = None
+    _state["lib"] = lib
+    _update()                      # the streams and folders noted before the guard was loaded
+    return lib
+
+
+def active() -> bool:
+    """Whether the guard is installed in this process (an FMU was loaded with it)."""
+    return _state.get("lib") is not None
+
+
+def register_library(function_address: int | None, component: str) -> int:
+    """The FMU library holding the function at ``function_address`` (e.g. its
+    ``fmi2GetVersion``) belongs to ``component``; returns its entry for
+    :func:`forget_library` (-1: no guard, or not registered)."""
+    lib = guard()
+    if lib is None or not function_address:
+        return -1
+    return int(lib.guard_register(function_address, component.encode(errors="replace")[:150]))
+
+
+def forget_library(entry: int) -> None:
+    """The FMU library of ``entry`` (from :func:`register_library`) was unloaded."""
+    lib = _state.get("lib")
+    if lib is not None and entry >= 0:
+        lib.guard_unregister(entry)
+
+
+def set_step_counter(address: int | None, t0: float = 0.0, h: float = 0.0) -> None:
+    """A crash happens at ``t0 + k h`` s, ``k`` the int64 at ``address`` (the master's
+    base step); None: no run in progress."""
+    lib = _state.get("lib")
+    if lib is not None:
+        lib.guard_time(address, t0, h)
+
+
+def stream_started(key: int, ipc: str, tmp: str, partial: str) -> None:
+    """A streamed recording begins.
+
+    Parameters
+    ----------
+    key : int
+        The recording's key (for :func:`stream_ended`).
+    ipc : str
+        The Arrow stream holding its rows so far.
+    tmp : str
+        Its Parquet file being written.
+    partial : str
+        Where its partial result goes.
+    """
+    _streams[key] = (ipc, tmp, partial)
+    _update()
+
+
+def stream_ended(key: int) -> None:
+    """The streamed recording ``key`` ended (finished, or its partial file written)."""
+    if _streams.pop(key, None) is not None:
+        _update()
+
+
+def temp_folder_made(folder: str) -> None:
+    """A temporary folder the salvage removes if the process dies."""
+    _folders.append(folder)
+    _update()
+
+
+def temp_folder_removed(folder: str) -> None:
+    """The temporary folder was removed."""
+    if folder in _folders:
+        _folders.remove(folder)
+        _update()
+
+
+def _update() -> None:
+    lib = _state.get("lib")
+    if lib is None:
+        return
+    argv = [sys.executable, "-m", "cosim.core.salvage"]
+    for ipc, tmp, partial in _streams.values():
+        argv += ["--stream", ipc, tmp, partial]
+    argv += [a for f in _folders for a in ("--remove", f)]
+    if len(_streams) + len(_folders) == 0:
+        lib.guard_salvage(None, 0)
+        return
+    encoded = [a.encode(errors="surrogateescape") for a in argv]
+    array = (ctypes.c_char_p * len(encoded))(*encoded)
+    if lib.guard_salvage(array, len(encoded)) != 0:          # too many: at least the streams
+        lib.guard_salvage(array, min(len(encoded), 3 + 4 * len(_streams)))

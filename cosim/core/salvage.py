@@ -1,0 +1,96 @@
+"""The salvage program: what a run leaves when an FMU's code killed its process.
+
+Started by the crash guard (:mod:`cosim.core.crash_guard`) from the dying process, before it
+ends::
+
+    python -m cosim.core.salvage [--stream IPC TMP PARTIAL]... [--remove FOLDER]...
+
+For each streamed recording, the rows written so far (the Arrow stream ``IPC`` the
+recording keeps beside its Parquet file; every chunk in it is complete once written)
+become the Parquet file ``PARTIAL``; the unfinished Parquet file ``TMP`` and the stream are
+removed. Each ``FOLDER`` (the run's temporary folders) is removed. It prints one line per
+file kept and exits 0; what it cannot do is said on stderr, never a traceback.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from collections.abc import Sequence
+
+__all__ = ["main", "salvage_stream"]
+
+
+def salvage_stream(ipc: str, tmp: str, partial: str) -> int:
+    """Rows of the Arrow stream ``ipc`` (up to its last complete chunk) written to the
+    Parquet file ``partial``; ``ipc`` and ``tmp`` removed. Returns the rows kept."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    rows = 0
+    try:
+        with pa.OSFile(ipc, "rb") as f:
+            try:
+                reader = pa.ipc.open_stream(f)
+            except (pa.ArrowInvalid, OSError):                # not even its schema: no chunk written
+                return 0
+            writer = None
+            part = f"{partial}.{os.getpid()}.tmp"
+            try:
+                while True:
+                    try:
+                        batch = reader.read_next_batch()
+                    except StopIteration:
+                        break
+                    except (pa.ArrowInvalid, OSError):       # the chunk being written when it died
+                        break
+                    if writer is None:
+                        writer = pq.ParquetWriter(part, reader.schema)
+                    writer.write_batch(batch)
+                    rows += batch.num_rows
+            finally:
+                if writer is not None:
+                    writer.close()
+            if rows:
+                os.replace(part, partial)
+    finally:
+        for path in (ipc, tmp):
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+    return rows
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The program (see the module documentation); returns its exit status.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments (default ``sys.argv[1:]``).
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    status = 0
+    while args:
+        flag = args.pop(0)
+        try:
+            if flag == "--stream" and len(args) >= 3:
+                ipc, tmp, partial = args[:3]
+                del args[:3]
+                rows = salvage_stream(ipc, tmp, partial)
+                print(f"rows so far ({rows}) kept in {partial}" if rows else "no row had been recorded",
+                      file=sys.stderr)
+            elif flag == "--remove" and args:
+                shutil.rmtree(args.pop(0), ignore_errors=True)
+            else:
+                print(f"salvage: unknown argument {flag!r}", file=sys.stderr)
+                status = 2
+        except Exception as e:  # noqa: BLE001 - a dying run's last words: said, never a traceback
+            print(f"salvage: {type(e).__name__}: {e}", file=sys.stderr)
+            status = 1
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,74 @@
+"""A small C library of the project's own, compiled once and kept in the compiled-code cache.
+
+One helper for every such library (the co-simulation master's crash guard, and any other
+piece of native support code): the source is keyed by its text, the compiler and the flags;
+the build goes through :func:`~fmu_models.infra.cache.cached_file` (private temporary path,
+checked to load, renamed into place), so concurrent processes and damaged entries are
+handled as for every cached build.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+from fmu_models.errors import BuildError, CompilerNotFoundError
+
+from .cache import cached_file, writable_cache
+from .compiler import find_compiler, run_compiler
+
+__all__ = ["compiled_library"]
+
+
+def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, what: str,
+                     fallback: str) -> tuple[ctypes.CDLL | None, str]:
+    """The library compiled from the C source ``code`` (built on first use, cached on disk).
+
+    Parameters
+    ----------
+    code : str
+        The C source.
+    stem : str
+        The cache entry's name prefix.
+    flags : sequence of str
+        Compiler flags (``-shared -fPIC`` among them).
+    symbol : str
+        A function the library must export (checked before the entry is kept).
+    what : str
+        What the library is, in messages.
+    fallback : str
+        What happens without it, in the warning.
+
+    Returns
+    -------
+    (library or None, reason)
+        None, with the reason, where there is no C compiler, the cache cannot be written or
+        the build fails; a warning says so once per call.
+    """
+    try:
+        cc = find_compiler()
+        directory = writable_cache(fallback)
+        if directory is None:
+            return None, "the compiled-code cache cannot be written"
+        key = "|".join([code, cc, *flags])
+        entry = directory / f"{stem}_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
+
+        def build(out: Path) -> None:
+            src = out.with_suffix(".c")
+            src.write_text(code)
+            run_compiler([cc, *flags, str(src), "-o", str(out)], what)
+
+        def check(p: Path) -> None:
+            try:
+                if not hasattr(ctypes.CDLL(str(p)), symbol):
+                    raise AttributeError(f"no {symbol}")
+            except (OSError, AttributeError) as e:
+                raise BuildError(f"{what}: the compiled library does not load: {e}") from None
+
+        return ctypes.CDLL(str(cached_file(entry, build, check))), ""
+    except (CompilerNotFoundError, BuildError, OSError) as e:
+        why = " ".join(str(e).split())
+        warnings.warn(f"{what} is not available ({why}); {fallback}", stacklevel=3)
+        return None, why
