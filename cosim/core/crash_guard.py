@@ -67,6 +67,11 @@ def guard() -> ctypes.CDLL | None:
     return lib
 
 
+def disable() -> None:
+    """No guard in this process (an isolated FMU's own process: its parent names the crash)."""
+    _state["lib"] = None
+
+
 def active() -> bool:
     """Whether the guard is installed in this process (an FMU was loaded with it)."""
     return _state.get("lib") is not None

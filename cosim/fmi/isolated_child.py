@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 
+from ..core import crash_guard
 from ..core.component import StopRequest
 from .fmu_component import FMUComponent
 from .isolated import HEAD, REPLY, read_exactly, write_all
@@ -90,6 +91,7 @@ def _serve(fd_in: int, fd_out: int) -> None:
 def main() -> None:
     """The child process: serve one FMU on stdin/stdout until told to close."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    crash_guard.disable()          # the parent names a crash here as a named error, with its results
     _die_with_parent()
     fd_in, fd_out = sys.stdin.buffer.fileno(), os.dup(sys.stdout.buffer.fileno())
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # FMU prints go to stderr, not the pipe

@@ -148,3 +148,19 @@ def test_salvage_of_nothing_and_bad_arguments(tmp_path, capsys):
     assert not folder.exists()
     err = capsys.readouterr().err
     assert "unknown argument '--what'" in err and "Traceback" not in err
+
+
+def test_an_isolated_fmu_s_crash_is_the_parent_s_named_error_not_the_guard_s(chaos_fmu, tmp_path):
+    code = textwrap.dedent(f"""
+        from cosim import Cosimulation, FMUComponent, Sine
+        from fmu_models.errors import PendulumCosimError
+        comp = FMUComponent("chaos", {str(chaos_fmu)!r}, 0.01, isolate=True, parameters={CRASHING!r})
+        try:
+            Cosimulation([Sine("src", 0.01, 1.0, 1.0), comp], {{"chaos.u": "src.out"}}).run(5.0, progress=False)
+        except PendulumCosimError as e:
+            print("named:", e)
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "CHAOS_LOG": str(tmp_path / "chaos.log")})
+    assert proc.returncode == 0 and "named:" in proc.stdout and "died (signal SIGSEGV)" in proc.stdout, proc
+    assert "error: the FMU" not in proc.stderr and "isolate = true" not in proc.stderr
