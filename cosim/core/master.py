@@ -73,6 +73,7 @@ from .native import (
     EV_HOOK,
     EV_NONFINITE,
     EV_PY,
+    EV_REFILL,
     KState,
     build_program,
     load_kernel,
@@ -650,6 +651,11 @@ class Cosimulation:
                         if stop is None:
                             kst.pc += 1
                             continue
+                    if event == EV_REFILL:              # a noise stream drawn to its end: the next block
+                        at = kst.at
+                        f = calls[at]
+                        meta[at].hook()
+                        continue
                     if event == EV_HOOK:                # a filter's Python hook after its step
                         at = kst.at
                         f = calls[at]

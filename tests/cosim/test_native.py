@@ -114,6 +114,48 @@ def test_plant_source_filter_and_a_python_component_give_the_same_bits(fmu_build
     assert "plant            native" in text and "gain             Python (a Python component)" in text
 
 
+def test_noise_sensor_and_prbs_run_natively_and_draw_the_same_numbers(fmu_builds):
+    """Sensor, process noise and PRBS in the kernel: the same rows of the same block-drawn
+    noise streams (over several blocks, with periods of 1 and 2 base steps), beside a delayed
+    sensor and a counter-generator one that stay in Python and share nothing with them."""
+    from cosim.components.noise import PerInstantNoise
+    from cosim.components.sensors import ProcessNoise, Sensor
+    from cosim.components.sources import PRBS
+
+    def make(engine):
+        plant = FMUComponent("plant", fmu_builds["cartpole", 2], 0.01, start={"theta": 1.8})
+        states = ["x", "x_dot", "theta", "theta_dot"]
+        return Cosimulation(
+            [plant, PRBS("force", 0.01, 0.5, 0.07, 5, 3, offset=0.1),
+             ProcessNoise("noise", 0.01, states, [[1e-4, 2e-5, 0, 0], [2e-5, 1e-4, 0, 0], [0, 0, 1e-4, 0],
+                                                  [0, 0, 0, 3e-4]], seed=4),
+             Sensor("s", 0.02, ["x", "theta"], noise_std=[0.1, 0.2], bias=[0.01, -0.02], seed=5),
+             Sensor("late", 0.01, ["x"], noise_std=0.1, delay=2, seed=6),
+             Sensor("ctr", 0.01, ["theta"], noise_std=0.1, generator="counter", seed=7)],
+            {"plant.F": "force.out", **{f"plant.w_{x}": f"noise.w_{x}" for x in states},
+             "s.x": "plant.x", "s.theta": "plant.theta", "late.x": "plant.x", "ctr.theta": "plant.theta"},
+            engine=engine)
+
+    steps = 3 * PerInstantNoise.BLOCK + 17
+    out = outcome(make, lambda cs: cs.run(steps * 0.01, progress=False))
+    assert out["python"][1] is None and len(out["python"][0]) == steps + 1
+    assert_same(out)
+    text = make("auto").describe()
+    paths = {line.split()[0]: line.split()[1] for line in text.splitlines() if len(line.split()) > 1}
+    assert [paths[c] for c in ("force", "noise", "s", "late", "ctr")] == ["native"] * 3 + ["Python"] * 2
+    assert "delay or quantisation" in text and "counter generator" in text
+
+
+def test_block_drawn_noise_is_the_stream_drawn_one_instant_at_a_time():
+    from cosim.components.noise import PerInstantNoise
+
+    noise, rng = PerInstantNoise(11, 3), np.random.default_rng(11)
+    for k in range(2 * PerInstantNoise.BLOCK + 5):
+        first = noise.at(0.5 * k)
+        np.testing.assert_array_equal(noise.at(0.5 * k), first)        # the same instant: the same draw
+        np.testing.assert_array_equal(first, rng.standard_normal(3))
+
+
 def test_an_fmu_chain_streamed_to_parquet_in_small_chunks_gives_the_same_file(fmu_builds, tmp_path):
     def make(engine):
         plants = [FMUComponent(f"p{i}", fmu_builds["cartpole", 2], 0.01) for i in range(4)]
