@@ -14,7 +14,7 @@ from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownName
 from fmu_models.infra.checks import positive
 
 from ..core.component import Component, ExportedFMU
-from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY, Op
+from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_RECORD, OP_SUMMARY, Op
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
@@ -202,8 +202,22 @@ class EstimatorComponent(Component, kind="estimator"):
                 sync_out()
                 after()
                 sync_in()
-            ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
-                          (cur, flag), hook=hook))
+            records = getattr(f, "records_only", None)
+            if flag is not None and callable(records) and records() and "Q" in rt.pairs and "R" in rt.pairs:
+                history = f.history       # the kernel writes the rows _record writes, Python when they are full
+                Qs, Rs = rt.pairs["Q"], rt.pairs["R"]
+
+                def rebind(op) -> None:
+                    op.out, op.n = history.rows.ctypes.data, len(history.rows)
+
+                ops.append(Op(OP_RECORD, dict(cur=cur.ctypes.data, buf=flag.ctypes.data, out=history.rows.ctypes.data,
+                                              n=len(history.rows), iw=history.count.ctypes.data, nx=n,
+                                              ny=len(yidx), x=(Qs[0].ctypes.data, Qs[1].ctypes.data),
+                                              P=(Rs[0].ctypes.data, Rs[1].ctypes.data)),
+                              (cur, flag, history, Qs, Rs), hook=hook, rebind=rebind))
+            else:
+                ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
+                              (cur, flag), hook=hook))
         ops.append(Op(OP_SUMMARY, dict(fields), keep))
         return ops, [Op(OP_HOLD, dict(fields), keep)]
 

@@ -36,7 +36,8 @@ enum {
     OP_HOOK = 9,     /* after a filter's step: its Python hook (if the flag buf[0] is set; no flag: always) */
     OP_SUMMARY = 10, /* a filter's outputs: estimate, covariance entries, NIS */
     OP_NOISE = 11,   /* a noise stream's row of the instant (a new instant: the next row); flag: a sensor */
-    OP_PRBS = 12     /* values[slot] = b + (bits[floor(t / a + 1e-9) mod n] ? c : -c) */
+    OP_PRBS = 12,    /* values[slot] = b + (bits[floor(t / a + 1e-9) mod n] ? c : -c) */
+    OP_RECORD = 13   /* after a filter's step that adapted (flag buf[0]): a row of its noise history */
 };
 
 enum {
@@ -198,6 +199,17 @@ static int run_op(kstate_t *s, op_t *o, double t) {
         int64_t q = (int64_t)floor(t / o->a + 1e-9) % o->n;
         if (q < 0) q += o->n;
         v[o->slot] = o->b + (o->buf[q] != 0.0 ? o->c : -o->c);
+        return 0;
+    }
+    case OP_RECORD: {     /* out: rows of [k, diag Q, diag R], n of them; iw: rows written; x, P: Q, R */
+        if (!o->cur[3] || o->buf[0] == 0.0) return 0;
+        if (o->iw[0] >= o->n) return EV_HOOK;       /* full: Python records (and grows the rows) */
+        int64_t c = o->cur[0], nx = o->nx, ny = o->ny;
+        double *row = o->out + o->iw[0] * (1 + nx + ny);
+        row[0] = (double)o->cur[1];
+        for (int64_t i = 0; i < nx; i++) row[1 + i] = o->x[c][i * (nx + 1)];
+        for (int64_t i = 0; i < ny; i++) row[1 + nx + i] = o->P[c][i * (ny + 1)];
+        o->iw[0] += 1;
         return 0;
     }
     case OP_HOLD:

@@ -660,6 +660,8 @@ class Cosimulation:
                         at = kst.at
                         f = calls[at]
                         meta[at].hook()
+                        if meta[at].rebind is not None:
+                            meta[at].rebind(program.ops[at])
                         kst.pc += 1
                         continue
                     if event == EV_CHUNK:             # a chunk of about CHUNK_SECONDS, at most CHUNK steps
