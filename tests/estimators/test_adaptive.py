@@ -170,3 +170,31 @@ def test_cli_paper_config_and_sweep_write_their_reports(tmp_path, capsys):
     assert "Consistency rule: consistent at 95%" in text and "RMSE / PCRB" in text
     assert main(["experiment", "seed000", "--set", "nope=1", "--out", str(tmp_path / "x")]) == 2
     assert "unknown setting(s) nope" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("kind", ["EKF", "IAE", "IAE full", "MFIAE", "SWML"])
+def test_a_restored_filter_steps_like_a_new_one(lin, kind):
+    """snapshot / restore: after steps that adapted, the restored filter gives a new
+    filter's numbers bit for bit (state, covariance, NIS, noise history)."""
+    import estimators
+
+    args = {"IAE full": {"form": "full"}, "SWML": {"window": 20, "every": 10, "early_until": 4}}.get(kind, {})
+
+    def make():
+        return getattr(estimators, kind.split()[0])(lin, [0.1, 0], 1.0, Q_TRUE, R_TRUE, **args)
+
+    def steps(f, ys):
+        return [(f.step([0.0], y).copy(), f.P, f.nis) for y in ys]
+
+    ys = simulate(120, 3)
+    f = make()
+    initial = f.snapshot()
+    steps(f, simulate(80, 4))                            # another realisation first
+    f.restore(initial)
+    assert f.k == 0
+    fresh = make()
+    for (xa, Pa, na), (xb, Pb, nb) in zip(steps(f, ys), steps(fresh, ys)):
+        np.testing.assert_array_equal(xa, xb)
+        np.testing.assert_array_equal(Pa, Pb)
+        assert na == nb
+    assert f.noise_history().equals(fresh.noise_history()) and (len(fresh.noise_history()) > 1) == (kind != "EKF")
