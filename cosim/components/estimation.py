@@ -153,19 +153,23 @@ class EstimatorComponent(Component, kind="estimator"):
         f = self.filter
         rt = f._rt
         bound = rt._steps
-        fn = bound[0].fn
-        try:
-            lib = ctypes.CDLL(str(f._step_library))
-            sym = ctypes.cast(getattr(lib, fn.name()), ctypes.c_void_p).value
-        except (OSError, AttributeError):
-            return None
-        iw = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64)
-        w = np.zeros(max(fn.sz_w(), 1))
-        ptrs = []
-        for b in bound:
-            arg = (ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args])
-            res = (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])
-            ptrs.append((arg, res))
+        cached = getattr(self, "_compiled", None)
+        if cached is None or cached[0] is not f:          # the same filter (restored): the same pointers
+            fn = bound[0].fn
+            try:
+                lib = ctypes.CDLL(str(f._step_library))
+                sym = ctypes.cast(getattr(lib, fn.name()), ctypes.c_void_p).value
+            except (OSError, AttributeError):
+                return None
+            iw = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64)
+            w = np.zeros(max(fn.sz_w(), 1))
+            ptrs = []
+            for b in bound:
+                arg = (ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args])
+                res = (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])
+                ptrs.append((arg, res))
+            self._compiled = cached = (f, lib, sym, iw, w, ptrs)
+        _, lib, sym, iw, w, ptrs = cached
         n = self._nx
         upper = np.triu_indices(n, 1) if self.covariance == "full" else (np.zeros(0, int),) * 2
         upi, upj = (np.ascontiguousarray(a, np.int64) for a in upper)

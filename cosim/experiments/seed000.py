@@ -516,7 +516,7 @@ class CampaignResult(NamedTuple):
 
 
 #: Realisations per task on the master path.
-MASTER_CHUNK = 10
+MASTER_CHUNK = 25
 
 
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,

@@ -355,3 +355,20 @@ def test_without_a_working_compiler_auto_takes_the_python_loop_and_native_is_ref
     with pytest.raises(ConfigurationError, match="engine='native': the native kernel is not available"):
         Cosimulation(comps, {"g.u": "s.out"}, engine="native").run(1.0, progress=False)
     assert list(tmp_path.glob("cache/kernel_*")) == []
+
+
+@pytest.mark.parametrize("version", (2, 3))
+def test_a_co_simulation_fmu_keeps_its_library_loaded_between_runs(fmu_builds, version):
+    """The next run instantiates again on the loaded library (the same functions, the same
+    numbers); release() unloads it, and a run after that loads it anew."""
+    plant = FMUComponent("plant", fmu_builds["cartpole", version], 0.01, start={"theta": 1.8})
+    cs = Cosimulation([plant, Step("force", 0.01, 0.3, -0.5, 0.5)], {"plant.F": "force.out"})
+    first = cs.run(1.0, progress=False)
+    kept = plant._library_box[0]
+    assert kept is not None and plant.instance is None
+    second = cs.run(1.0, progress=False)
+    assert plant._library_box[0] is kept and first.equals(second)
+    plant.release()
+    assert plant._library_box[0] is None
+    assert cs.run(1.0, progress=False).equals(first) and plant._library_box[0] is not kept
+    plant.release()
