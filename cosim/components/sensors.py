@@ -209,10 +209,20 @@ class ProcessNoise(Component, kind="process_noise"):
         if self.native_reason() is None:
             noise, L = self._noise, self.L
             rows = np.empty_like(noise.block)
+            d = np.diag(L).copy()
+            # a diagonal L with d > 0: L v is d v exactly (each entry one non-zero product plus
+            # exact zeros, in any order), except for the sign of a zero draw's entry
+            diagonal = not np.count_nonzero(L - np.diag(d)) and bool(np.all(d > 0))
 
             def derive() -> None:
-                for i, v in enumerate(noise.block):
-                    rows[i] = L @ v
+                block = noise.block
+                if diagonal:
+                    np.multiply(block, d, out=rows)
+                    for i in np.flatnonzero((block == 0).any(axis=1)):
+                        rows[i] = L @ block[i]
+                else:
+                    for i, v in enumerate(block):
+                        rows[i] = L @ v
 
             noise.on_refill.append(derive)
             output_fn.native = [_noise_op(noise, rows, outputs, values, dict(flag=0), ())]

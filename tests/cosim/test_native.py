@@ -114,7 +114,8 @@ def test_plant_source_filter_and_a_python_component_give_the_same_bits(fmu_build
     assert "plant            native" in text and "gain             Python (a Python component)" in text
 
 
-def test_noise_sensor_and_prbs_run_natively_and_draw_the_same_numbers(fmu_builds):
+@pytest.mark.parametrize("cov", ["full", "diagonal"])
+def test_noise_sensor_and_prbs_run_natively_and_draw_the_same_numbers(fmu_builds, cov):
     """Sensor, process noise and PRBS in the kernel: the same rows of the same block-drawn
     noise streams (over several blocks, with periods of 1 and 2 base steps), beside a delayed
     sensor and a counter-generator one that stay in Python and share nothing with them."""
@@ -128,7 +129,8 @@ def test_noise_sensor_and_prbs_run_natively_and_draw_the_same_numbers(fmu_builds
         return Cosimulation(
             [plant, PRBS("force", 0.01, 0.5, 0.07, 5, 3, offset=0.1),
              ProcessNoise("noise", 0.01, states, [[1e-4, 2e-5, 0, 0], [2e-5, 1e-4, 0, 0], [0, 0, 1e-4, 0],
-                                                  [0, 0, 0, 3e-4]], seed=4),
+                                                  [0, 0, 0, 3e-4]] if cov == "full" else [1e-4, 2e-4, 3e-5, 3e-4],
+                          seed=4),
              Sensor("s", 0.02, ["x", "theta"], noise_std=[0.1, 0.2], bias=[0.01, -0.02], seed=5),
              Sensor("late", 0.01, ["x"], noise_std=0.1, delay=2, seed=6),
              Sensor("ctr", 0.01, ["theta"], noise_std=0.1, generator="counter", seed=7)],
