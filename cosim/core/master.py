@@ -175,7 +175,7 @@ class Cosimulation:
                                    ("loop_solver", loop_solver, LOOP_SOLVERS), ("engine", engine, ENGINES)):
             if value not in valid:
                 raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
-        self.order, self.loops, self.loop_solver, self.engine = order, loops, loop_solver, engine
+        self.order, self.loops, self.loop_solver, self._engine = order, loops, loop_solver, engine
         self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
         self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
@@ -283,6 +283,23 @@ class Cosimulation:
                 self._in_specs[c.name] = (ports, idx)
 
     # ---------------------------------------------------------------- engine
+    @property
+    def engine(self) -> str:
+        """Which loop runs (:data:`~cosim.core.native.ENGINES`): ``"auto"`` (the native kernel
+        where it can run, the Python loop elsewhere), ``"native"`` (refused where the kernel
+        cannot run the co-simulation) or ``"python"``; may be changed between runs."""
+        return self._engine
+
+    @engine.setter
+    def engine(self, value: str) -> None:
+        if value not in ENGINES:
+            raise ConfigurationError(f"engine must be one of {ENGINES}, got {value!r}")
+        old, self._engine = self._engine, value
+        why = self._whole_run_python()
+        if value == "native" and why is not None:
+            self._engine = old
+            raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
+
     def _whole_run_python(self) -> str | None:
         """Why every call of a run takes the Python path, or None."""
         if self.engine == "python":

@@ -231,6 +231,14 @@ def test_engine_choices_are_checked_and_described():
         Cosimulation([Constant("c", 0.1, 1.0)], {}, order="jacobi", engine="native")
     text = Cosimulation([Constant("c", 0.1, 1.0)], {}, engine="python").describe()
     assert "every call runs in Python (engine='python')" in text
+    cs = Cosimulation([Constant("c", 0.1, 1.0)], {}, order="jacobi")
+    with pytest.raises(ConfigurationError, match="engine must be one of"):
+        cs.engine = "fast"
+    with pytest.raises(ConfigurationError, match="engine='native' cannot run .*jacobi"):
+        cs.engine = "native"
+    assert cs.engine == "auto"
+    cs.engine = "python"
+    assert cs.engine == "python"
 
 
 def test_ctrl_c_is_seen_within_a_chunk_of_native_steps(fmu_builds):
