@@ -111,7 +111,7 @@ class EstimatorComponent(Component, kind="estimator"):
         entries, NIS) is written straight into ``values[outputs]`` (``integers``: unused,
         every port is real)."""
         f, nu = self.filter, self._nu
-        summary = f.bind_summary(values[outputs], self.covariance)
+        summary = None              # bound at the first call from Python (the native kernel writes its own)
         if isinstance(inputs, slice):
             u_at, y_at = slice(inputs.start, inputs.start + nu), slice(inputs.start + nu, inputs.stop)
         else:
@@ -121,8 +121,11 @@ class EstimatorComponent(Component, kind="estimator"):
         step = f.step
 
         def output_fn(t: float) -> None:
+            nonlocal summary
             if cur[2]:
                 step(u_prev, values[y_at])
+            if summary is None:
+                summary = f.bind_summary(values[outputs], self.covariance)
             summary()
 
         def update_fn(t: float) -> None:

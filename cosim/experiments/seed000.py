@@ -516,7 +516,7 @@ class CampaignResult(NamedTuple):
 
 
 #: Realisations per task on the master path.
-MASTER_CHUNK = 25
+MASTER_CHUNK = 50
 
 
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,
@@ -552,7 +552,7 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     if path == "master":
         # one task per scenario and slice of at most MASTER_CHUNK realisations: every core
         # stays busy, and an interrupted campaign keeps all but the last few seconds
-        n_chunks = max(4, -(-settings.runs // MASTER_CHUNK))
+        n_chunks = max(2, -(-settings.runs // MASTER_CHUNK))
         chunks = [c for c in np.array_split(np.arange(settings.runs), min(settings.runs, n_chunks)) if len(c)]
     else:
         chunks = [np.arange(settings.runs)]
