@@ -23,7 +23,7 @@ class NoiseHistory:
 
     @property
     def rows(self) -> np.ndarray:
-        """The allocated rows (capacity, 1 + nx + ny); the first :attr:`count` are written."""
+        """The allocated rows (capacity, 1 + nx + ny); the first ``count`` are written."""
         return self._rows
 
     @property

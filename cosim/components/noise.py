@@ -75,10 +75,10 @@ class PerInstantNoise:
     """``n`` standard normal numbers per instant from a seeded PCG64 stream, drawn once
     per instant (a repeated call at the same instant returns the same draw).
 
-    The numbers are drawn :data:`BLOCK` instants at a time into :attr:`block` (numpy's
+    The numbers are drawn :data:`BLOCK` instants at a time into ``block`` (numpy's
     generator gives the same numbers drawn in a block as one vector at a time), so the
-    native co-simulation kernel reads the same rows as :meth:`at`: :attr:`state` holds
-    the current row and the rows drawn, :attr:`last` the instant of the current row (NaN
+    native co-simulation kernel reads the same rows as :meth:`at`: ``state`` holds
+    the current row and the rows drawn, ``last`` the instant of the current row (NaN
     before the first). ``on_refill`` callables run after every new block.
     """
 

@@ -285,7 +285,7 @@ class Cosimulation:
     # ---------------------------------------------------------------- engine
     @property
     def engine(self) -> str:
-        """Which loop runs (:data:`~cosim.core.native.ENGINES`): ``"auto"`` (the native kernel
+        """The loop that runs the co-simulation, ``"auto"`` (the native kernel
         where it can run, the Python loop elsewhere), ``"native"`` (refused where the kernel
         cannot run the co-simulation) or ``"python"``; may be changed between runs."""
         return self._engine
