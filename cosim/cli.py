@@ -35,6 +35,7 @@ from fmu_models.infra.resources import shipped
 from fmu_models.infra.version import VERSION
 
 from .core.component import ExportsFMU, StateEstimator
+from .core.native import ENGINES
 from .experiments import EXPERIMENTS
 from .fmi.archive import read_description
 from .output import OutputFolder, plot_estimates, save_results
@@ -123,20 +124,25 @@ def _resolve_scenario(name: str) -> Path:
 
 
 def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
-                  stream: bool | None = None, progress: bool | None = None) -> int:
-    """Load and check the scenario, then (only then) take ``out`` and run it."""
+                  stream: bool | None = None, progress: bool | None = None, engine: str | None = None) -> int:
+    """Load and check the scenario, then (only then) take ``out`` and run it (``engine``:
+    replaces the scenario's ``[simulation] engine``)."""
     import tempfile
 
 
     if dry_run:
         with tempfile.TemporaryDirectory() as tmp:
             sc = Scenario.load(path, fmu_dir=Path(tmp) / "fmus")
+            if engine is not None:
+                sc.cosim.engine = engine
             print(f"scenario: {sc.title or path.name}")
             print(sc.cosim.describe())
         return 0
     with tempfile.TemporaryDirectory() as fmus:
         t0 = time.perf_counter()
         sc = Scenario.load(path, fmu_dir=fmus)         # read and checked before --out is touched
+        if engine is not None:
+            sc.cosim.engine = engine
         with OutputFolder(out, overwrite) as folder:
             return _run_loaded(sc, path, folder, Path(fmus), t0, stream, progress)
 
@@ -328,6 +334,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--stream", action="store_true", default=None,
                      help="stream the rows to results.parquet in chunks (constant memory; long runs)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--engine", choices=ENGINES,
+                     help="which loop runs the co-simulation: auto (the native kernel where it can, the "
+                          "default unless the scenario's [simulation] engine says otherwise), native "
+                          "(refused where the kernel cannot run it) or python")
     sub.add_parser("scenarios", help="list the shipped scenario files")
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
     models.add_argument("--duration", type=_number(float, 0, "the duration", strict=True, high=MAX_MODELS_DURATION),
@@ -394,7 +404,7 @@ def _dispatch(args) -> int:
     if not args.dry_run and not args.out:
         raise ConfigurationError("run needs --out DIR (or --dry-run)")
     return _run_scenario(_resolve_scenario(args.scenario), Path(args.out or "."), args.overwrite,
-                         args.dry_run, args.stream, False if args.no_progress else None)
+                         args.dry_run, args.stream, False if args.no_progress else None, args.engine)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -71,6 +71,12 @@ class AdaptationRecord:
         """Runs after every step from Python that adapted Q and R: records them."""
         self._record()
 
+    def records_only(self) -> bool:
+        """Whether :meth:`on_adapted` only records Q and R (then a co-simulation kernel that
+        runs the compiled step may write the record itself)."""
+        return type(self).on_adapted is AdaptationRecord.on_adapted and type(self).after_step is \
+            AdaptationRecord.after_step
+
     def after_run(self, outputs: dict) -> None:
         """Records the Q and R of every step of a native run that adapted."""
         nx, ny = self.system.nx, self.system.ny

@@ -377,6 +377,29 @@ class KalmanBase:
         rt.cur, self.k = 0, 0
         self._record()
 
+    def snapshot(self) -> dict:
+        """The filter's whole state, for :meth:`restore`: copies of every array its step
+        reads or writes (state copies, outputs, inputs, fixed inputs, status), the current
+        state copy, the step count, the noise history's length and the attributes."""
+        rt, seen, arrays = self._rt, set(), []
+        for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(), *rt.inputs.values(),
+                  *self._fixed.values(), rt.status]:
+            if id(a) not in seen:
+                seen.add(id(a))
+                arrays.append((a, a.copy()))
+        return {"arrays": arrays, "cur": rt.cur, "k": self.k, "history": len(self.history),
+                "attributes": dict(self.__dict__)}
+
+    def restore(self, snapshot: dict) -> None:
+        """Return to the state :meth:`snapshot` took (of this filter): the same numbers as
+        a new filter built the same way, without building one."""
+        for a, saved in snapshot["arrays"]:
+            a[:] = saved
+        self.__dict__.clear()
+        self.__dict__.update(snapshot["attributes"])
+        self._rt.cur, self.k = snapshot["cur"], snapshot["k"]
+        self.history.count[0] = snapshot["history"]
+
     def set_noise(self, Q=None, R=None) -> None:
         """Replace Q and/or R (validated first: symmetric positive definite; on a refusal
         nothing changes)."""

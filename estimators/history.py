@@ -19,7 +19,16 @@ class NoiseHistory:
     def __init__(self, nx: int, ny: int, capacity: int = 1024):
         self.nx, self.ny = nx, ny
         self._rows = np.empty((capacity, 1 + nx + ny))
-        self._n = 0
+        self.count = np.zeros(1, dtype=np.int64)      # rows written (an array: compiled code appends too)
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The allocated rows (capacity, 1 + nx + ny); the first ``count`` are written."""
+        return self._rows
+
+    @property
+    def _n(self) -> int:
+        return int(self.count[0])
 
     def append(self, k: int, qr_diag) -> None:
         """Add the row ``k, qr_diag`` where ``qr_diag = [diag Q, diag R]`` (nx + ny)."""
@@ -38,7 +47,7 @@ class NoiseHistory:
             self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
         row = self._rows[n]
         row[0] = k
-        self._n = n + 1
+        self.count[0] = n + 1
         return row
 
     def __len__(self):

@@ -7,7 +7,7 @@ import numpy as np
 from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.infra import checks
 
-from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
+from .adaptive import AdaptationRecord, WindowedAdaptiveEKF, bound_parameters, bounds_around
 from .discrete import DiscreteModel
 
 __all__ = ["ADAPT", "FORMS", "IAE", "project_pd"]
@@ -99,6 +99,12 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
     def supports_batch(self):
         """False for ``form="full"`` (its projection runs in numpy)."""
         return self.form != "full"
+
+    def records_only(self) -> bool:
+        """Whether :meth:`on_adapted` only records Q and R: not with ``form="full"`` (its
+        projection runs in numpy)."""
+        return (self.form != "full" and type(self).on_adapted is IAE.on_adapted
+                and type(self).after_step is AdaptationRecord.after_step)
 
     def config_key(self) -> tuple:
         """Window, adapted covariances and form (the bounds are step inputs)."""

@@ -14,7 +14,7 @@ from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownName
 from fmu_models.infra.checks import positive
 
 from ..core.component import Component, ExportedFMU
-from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY, Op
+from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_RECORD, OP_SUMMARY, Op
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
@@ -111,7 +111,7 @@ class EstimatorComponent(Component, kind="estimator"):
         entries, NIS) is written straight into ``values[outputs]`` (``integers``: unused,
         every port is real)."""
         f, nu = self.filter, self._nu
-        summary = f.bind_summary(values[outputs], self.covariance)
+        summary = None              # bound at the first call from Python (the native kernel writes its own)
         if isinstance(inputs, slice):
             u_at, y_at = slice(inputs.start, inputs.start + nu), slice(inputs.start + nu, inputs.stop)
         else:
@@ -121,8 +121,11 @@ class EstimatorComponent(Component, kind="estimator"):
         step = f.step
 
         def output_fn(t: float) -> None:
+            nonlocal summary
             if cur[2]:
                 step(u_prev, values[y_at])
+            if summary is None:
+                summary = f.bind_summary(values[outputs], self.covariance)
             summary()
 
         def update_fn(t: float) -> None:
@@ -153,19 +156,23 @@ class EstimatorComponent(Component, kind="estimator"):
         f = self.filter
         rt = f._rt
         bound = rt._steps
-        fn = bound[0].fn
-        try:
-            lib = ctypes.CDLL(str(f._step_library))
-            sym = ctypes.cast(getattr(lib, fn.name()), ctypes.c_void_p).value
-        except (OSError, AttributeError):
-            return None
-        iw = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64)
-        w = np.zeros(max(fn.sz_w(), 1))
-        ptrs = []
-        for b in bound:
-            arg = (ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args])
-            res = (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])
-            ptrs.append((arg, res))
+        cached = getattr(self, "_compiled", None)
+        if cached is None or cached[0] is not f:          # the same filter (restored): the same pointers
+            fn = bound[0].fn
+            try:
+                lib = ctypes.CDLL(str(f._step_library))
+                sym = ctypes.cast(getattr(lib, fn.name()), ctypes.c_void_p).value
+            except (OSError, AttributeError):
+                return None
+            iw = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64)
+            w = np.zeros(max(fn.sz_w(), 1))
+            ptrs = []
+            for b in bound:
+                arg = (ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args])
+                res = (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])
+                ptrs.append((arg, res))
+            self._compiled = cached = (f, lib, sym, iw, w, ptrs)
+        _, lib, sym, iw, w, ptrs = cached
         n = self._nx
         upper = np.triu_indices(n, 1) if self.covariance == "full" else (np.zeros(0, int),) * 2
         upi, upj = (np.ascontiguousarray(a, np.int64) for a in upper)
@@ -202,8 +209,22 @@ class EstimatorComponent(Component, kind="estimator"):
                 sync_out()
                 after()
                 sync_in()
-            ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
-                          (cur, flag), hook=hook))
+            records = getattr(f, "records_only", None)
+            if flag is not None and callable(records) and records() and "Q" in rt.pairs and "R" in rt.pairs:
+                history = f.history       # the kernel writes the rows _record writes, Python when they are full
+                Qs, Rs = rt.pairs["Q"], rt.pairs["R"]
+
+                def rebind(op) -> None:
+                    op.out, op.n = history.rows.ctypes.data, len(history.rows)
+
+                ops.append(Op(OP_RECORD, dict(cur=cur.ctypes.data, buf=flag.ctypes.data, out=history.rows.ctypes.data,
+                                              n=len(history.rows), iw=history.count.ctypes.data, nx=n,
+                                              ny=len(yidx), x=(Qs[0].ctypes.data, Qs[1].ctypes.data),
+                                              P=(Rs[0].ctypes.data, Rs[1].ctypes.data)),
+                              (cur, flag, history, Qs, Rs), hook=hook, rebind=rebind))
+            else:
+                ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
+                              (cur, flag), hook=hook))
         ops.append(Op(OP_SUMMARY, dict(fields), keep))
         return ops, [Op(OP_HOLD, dict(fields), keep)]
 

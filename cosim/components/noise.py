@@ -73,16 +73,40 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
 
 class PerInstantNoise:
     """``n`` standard normal numbers per instant from a seeded PCG64 stream, drawn once
-    per instant (a repeated call at the same instant returns the same draw)."""
+    per instant (a repeated call at the same instant returns the same draw).
+
+    The numbers are drawn :data:`BLOCK` instants at a time into ``block`` (numpy's
+    generator gives the same numbers drawn in a block as one vector at a time), so the
+    native co-simulation kernel reads the same rows as :meth:`at`: ``state`` holds
+    the current row and the rows drawn, ``last`` the instant of the current row (NaN
+    before the first). ``on_refill`` callables run after every new block.
+    """
+
+    #: Instants drawn at a time.
+    BLOCK = 256
 
     def __init__(self, seed: int, n: int):
-        self.rng, self.n, self.t, self.value = np.random.default_rng(seed), n, None, None
+        self.rng, self.n = np.random.default_rng(seed), n
+        self.block = np.empty((self.BLOCK, n))
+        self.state = np.array([-1, 0], dtype=np.int64)
+        self.last = np.array([np.nan])
+        self.on_refill: list = []
+
+    def refill(self) -> None:
+        """Draw the next block of instants (the current row becomes row -1: none)."""
+        self.rng.standard_normal(out=self.block)
+        self.state[0], self.state[1] = -1, len(self.block)
+        for fn in self.on_refill:
+            fn()
 
     def at(self, t: float) -> np.ndarray:
         """The draw of instant ``t`` [s], shape (n,)."""
-        if t != self.t:
-            self.t, self.value = t, self.rng.standard_normal(self.n)
-        return self.value
+        if t != self.last[0]:
+            if self.state[0] + 1 >= self.state[1]:
+                self.refill()
+            self.state[0] += 1
+            self.last[0] = t
+        return self.block[self.state[0]].copy()
 
 
 class CounterNoise:

@@ -15,8 +15,9 @@ from fmu_models.errors import ConfigurationError
 from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu, channel_params
 from fmu_models.infra.checks import float_array, positive_int
 
-from ..core.component import Component, ExportedFMU
-from .noise import make_noise
+from ..core.component import Component, ExportedFMU, bind_protocol
+from ..core.native import OP_NOISE, Op
+from .noise import PerInstantNoise, make_noise
 
 
 def _per_channel(value, n, what, owner, positive=False):
@@ -89,6 +90,25 @@ class Sensor(Component, kind="sensor"):
         if q.any():
             y = np.where(q > 0, np.round(y / np.where(q > 0, q, 1)) * q, y)
         return y
+
+    def native_reason(self) -> str | None:
+        """Why this sensor's calls run in Python (None: in the native kernel, which reads
+        the very rows of its noise stream, :class:`~cosim.components.noise.PerInstantNoise`)."""
+        return _noise_reason(self, Sensor, ("_measure",)) or (
+            "a sensor with a delay or quantisation" if self.delay or self.quantization.any() else None)
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
+        the native kernel runs itself when :meth:`native_reason` is None: ``y = u + bias +
+        std z`` with ``z`` the row of the instant in the noise stream's block."""
+        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
+        if self.native_reason() is None:
+            uidx = np.ascontiguousarray(np.arange(len(values))[inputs], dtype=np.int64)
+            output_fn.native = [_noise_op(self._noise, self._noise.block, outputs, values,
+                                          dict(flag=1, uidx=uidx.ctypes.data, ub=self.bias.ctypes.data,
+                                               yb=self.noise_std.ctypes.data), (uidx, self.bias, self.noise_std))]
+            update_fn.native = []
+        return output_fn, update_fn
 
     def output(self, t, u):
         """The measurement at ``t``: the sample ``delay`` instants old (the first one until
@@ -176,6 +196,39 @@ class ProcessNoise(Component, kind="process_noise"):
         """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
         return self.L @ self._noise.at(t)
 
+    def native_reason(self) -> str | None:
+        """Why this component's calls run in Python (None: in the native kernel, which reads
+        ``L v`` of each row of its noise stream, computed in Python for each block)."""
+        return _noise_reason(self, ProcessNoise, ())
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
+        the native kernel runs itself when :meth:`native_reason` is None: the rows ``L v`` of
+        the noise stream's block, computed when the block is drawn (as :meth:`output` does)."""
+        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
+        if self.native_reason() is None:
+            noise, L = self._noise, self.L
+            rows = np.empty_like(noise.block)
+            d = np.diag(L).copy()
+            # a diagonal L with d > 0: L v is d v exactly (each entry one non-zero product plus
+            # exact zeros, in any order), except for the sign of a zero draw's entry
+            diagonal = not np.count_nonzero(L - np.diag(d)) and bool(np.all(d > 0))
+
+            def derive() -> None:
+                block = noise.block
+                if diagonal:
+                    np.multiply(block, d, out=rows)
+                    for i in np.flatnonzero((block == 0).any(axis=1)):
+                        rows[i] = L @ block[i]
+                else:
+                    for i, v in enumerate(block):
+                        rows[i] = L @ v
+
+            noise.on_refill.append(derive)
+            output_fn.native = [_noise_op(noise, rows, outputs, values, dict(flag=0), ())]
+            update_fn.native = []
+        return output_fn, update_fn
+
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
         drawing from the counter generator (``clocked``: its clocked form, FMI 3.0); refused for a
@@ -191,6 +244,27 @@ class ProcessNoise(Component, kind="process_noise"):
                           description=f"Gaussian noise {self.name} (pendulum-cosim)")
         path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
         return ExportedFMU(path, spec.parameters(), _generator_note(self))
+
+
+def _noise_reason(component, cls, methods) -> str | None:
+    """Why a noise component runs in Python: a subclass with its own calls, or another
+    generator than the block-drawn PCG64 stream."""
+    kind = type(component)
+    if any(getattr(kind, m) is not getattr(cls, m) for m in ("output", "update", "reset", *methods)):
+        return "a Python component (its own output or update)"
+    if component.generator != "pcg64":
+        return "the counter generator runs in Python"
+    return None
+
+
+def _noise_op(noise: PerInstantNoise, rows: np.ndarray, outputs: slice, values: np.ndarray, fields: dict,
+              keep: tuple) -> Op:
+    """The kernel's ``OP_NOISE`` on ``noise``'s stream: the rows ``rows`` (the block's shape),
+    written to ``values[outputs]`` (``fields``: the sensor's part), refilled from Python."""
+    idx = np.ascontiguousarray(np.arange(len(values))[outputs], dtype=np.int64)
+    return Op(OP_NOISE, dict(fields, buf=rows.ctypes.data, n=rows.shape[1], idx=idx.ctypes.data,
+                             cur=noise.state.ctypes.data, w=noise.last.ctypes.data),
+              (noise, rows, idx, *keep), hook=noise.refill)
 
 
 def _generator_note(component) -> str:

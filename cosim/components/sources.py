@@ -15,7 +15,7 @@ from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
 from fmu_models.infra.checks import finite, positive, positive_int
 
 from ..core.component import Component, ExportedFMU, bind_protocol
-from ..core.native import OP_CONST, OP_SWITCH, Op
+from ..core.native import OP_CONST, OP_PRBS, OP_SWITCH, Op
 
 
 class _Source(Component):
@@ -206,6 +206,24 @@ class PRBS(_Source, kind="prbs"):
     def _value(self, t):
         b = self.bits[int(np.floor(t / self.bit_time + 1e-9)) % len(self.bits)]
         return self.offset + (self.amplitude if b else -self.amplitude)
+
+    def native_reason(self) -> str | None:
+        """Why this source's calls run in Python (None: in the native kernel)."""
+        cls = type(self)
+        if cls.output is not _Source.output or cls.update is not Component.update or cls._value is not PRBS._value:
+            return "a Python component (its own output or update)"
+        return None
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
+        the native kernel runs itself (the same bit of the same arithmetic, :mod:`cosim.core.native`)."""
+        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
+        if self.native_reason() is None:
+            bits = np.ascontiguousarray(self.bits, dtype=float)
+            output_fn.native = [Op(OP_PRBS, dict(slot=outputs.start, a=self.bit_time, b=self.offset,
+                                                 c=self.amplitude, buf=bits.ctypes.data, n=len(bits)), (bits,))]
+            update_fn.native = []
+        return output_fn, update_fn
 
     def _signal(self):
         reals = [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),

@@ -34,7 +34,10 @@ enum {
     OP_FILTER = 7,   /* a filter's output: its compiled step (after its first instant) */
     OP_HOLD = 8,     /* a filter's update: keep the inputs for the next step */
     OP_HOOK = 9,     /* after a filter's step: its Python hook (if the flag buf[0] is set; no flag: always) */
-    OP_SUMMARY = 10  /* a filter's outputs: estimate, covariance entries, NIS */
+    OP_SUMMARY = 10, /* a filter's outputs: estimate, covariance entries, NIS */
+    OP_NOISE = 11,   /* a noise stream's row of the instant (a new instant: the next row); flag: a sensor */
+    OP_PRBS = 12,    /* values[slot] = b + (bits[floor(t / a + 1e-9) mod n] ? c : -c) */
+    OP_RECORD = 13   /* after a filter's step that adapted (flag buf[0]): a row of its noise history */
 };
 
 enum {
@@ -44,7 +47,8 @@ enum {
     EV_FLUSH = 3,     /* the record buffer is full: flush it, set j = 0, resume */
     EV_NONFINITE = 4, /* a non-finite value at the end of the block that began at k0 */
     EV_CHUNK = 5,     /* the chunk of steps is done (at a block boundary) */
-    EV_HOOK = 6       /* run the Python hook of op pc, then resume at pc + 1 */
+    EV_HOOK = 6,      /* run the Python hook of op pc, then resume at pc + 1 */
+    EV_REFILL = 7     /* op pc's noise stream has no row left: refill it, then resume at pc */
 };
 
 typedef struct {
@@ -178,6 +182,36 @@ static int run_op(kstate_t *s, op_t *o, double t) {
     case OP_HOOK:
         if (o->cur[3] && (o->buf == NULL || o->buf[0] != 0.0)) return EV_HOOK;
         return 0;
+    case OP_NOISE: {      /* buf: rows of n values; cur: [row, rows]; w: [instant of the row] */
+        if (t != o->w[0]) {
+            if (o->cur[0] + 1 >= o->cur[1]) return EV_REFILL;
+            o->cur[0] += 1;
+            o->w[0] = t;
+        }
+        const double *z = o->buf + o->cur[0] * o->n;
+        if (o->flag)      /* a sensor: y = u + bias + std z (ub: bias, yb: std, uidx: u) */
+            for (int64_t i = 0; i < o->n; i++) v[o->idx[i]] = (v[o->uidx[i]] + o->ub[i]) + o->yb[i] * z[i];
+        else
+            for (int64_t i = 0; i < o->n; i++) v[o->idx[i]] = z[i];
+        return 0;
+    }
+    case OP_PRBS: {       /* buf: the bits as 0.0 / 1.0, n of them */
+        int64_t q = (int64_t)floor(t / o->a + 1e-9) % o->n;
+        if (q < 0) q += o->n;
+        v[o->slot] = o->b + (o->buf[q] != 0.0 ? o->c : -o->c);
+        return 0;
+    }
+    case OP_RECORD: {     /* out: rows of [k, diag Q, diag R], n of them; iw: rows written; x, P: Q, R */
+        if (!o->cur[3] || o->buf[0] == 0.0) return 0;
+        if (o->iw[0] >= o->n) return EV_HOOK;       /* full: Python records (and grows the rows) */
+        int64_t c = o->cur[0], nx = o->nx, ny = o->ny;
+        double *row = o->out + o->iw[0] * (1 + nx + ny);
+        row[0] = (double)o->cur[1];
+        for (int64_t i = 0; i < nx; i++) row[1 + i] = o->x[c][i * (nx + 1)];
+        for (int64_t i = 0; i < ny; i++) row[1 + nx + i] = o->P[c][i * (ny + 1)];
+        o->iw[0] += 1;
+        return 0;
+    }
     case OP_HOLD:
         for (int64_t i = 0; i < o->nu; i++) o->uprev[i] = v[o->uidx[i]];
         o->cur[2] = 1;

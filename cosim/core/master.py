@@ -74,6 +74,7 @@ from .native import (
     EV_HOOK,
     EV_NONFINITE,
     EV_PY,
+    EV_REFILL,
     KState,
     build_program,
     load_kernel,
@@ -175,7 +176,7 @@ class Cosimulation:
                                    ("loop_solver", loop_solver, LOOP_SOLVERS), ("engine", engine, ENGINES)):
             if value not in valid:
                 raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
-        self.order, self.loops, self.loop_solver, self.engine = order, loops, loop_solver, engine
+        self.order, self.loops, self.loop_solver, self._engine = order, loops, loop_solver, engine
         self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
         self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
@@ -283,6 +284,23 @@ class Cosimulation:
                 self._in_specs[c.name] = (ports, idx)
 
     # ---------------------------------------------------------------- engine
+    @property
+    def engine(self) -> str:
+        """The loop that runs the co-simulation, ``"auto"`` (the native kernel
+        where it can run, the Python loop elsewhere), ``"native"`` (refused where the kernel
+        cannot run the co-simulation) or ``"python"``; may be changed between runs."""
+        return self._engine
+
+    @engine.setter
+    def engine(self, value: str) -> None:
+        if value not in ENGINES:
+            raise ConfigurationError(f"engine must be one of {ENGINES}, got {value!r}")
+        old, self._engine = self._engine, value
+        why = self._whole_run_python()
+        if value == "native" and why is not None:
+            self._engine = old
+            raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
+
     def _whole_run_python(self) -> str | None:
         """Why every call of a run takes the Python path, or None."""
         if self.engine == "python":
@@ -652,10 +670,17 @@ class Cosimulation:
                         if stop is None:
                             kst.pc += 1
                             continue
+                    if event == EV_REFILL:              # a noise stream drawn to its end: the next block
+                        at = kst.at
+                        f = calls[at]
+                        meta[at].hook()
+                        continue
                     if event == EV_HOOK:                # a filter's Python hook after its step
                         at = kst.at
                         f = calls[at]
                         meta[at].hook()
+                        if meta[at].rebind is not None:
+                            meta[at].rebind(program.ops[at])
                         kst.pc += 1
                         continue
                     if event == EV_CHUNK:             # a chunk of about CHUNK_SECONDS, at most CHUNK steps

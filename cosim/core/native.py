@@ -35,8 +35,9 @@ __all__ = ["ENGINES", "KState", "Op", "OpStruct", "load_kernel", "native_ops"]
 
 ENGINES = ("auto", "native", "python")
 
-OP_PY, OP_GET, OP_SET, OP_STEP2, OP_STEP3, OP_CONST, OP_SWITCH, OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY = range(11)
-EV_DONE, EV_PY, EV_FAIL, EV_FLUSH, EV_NONFINITE, EV_CHUNK, EV_HOOK = range(7)
+(OP_PY, OP_GET, OP_SET, OP_STEP2, OP_STEP3, OP_CONST, OP_SWITCH, OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY, OP_NOISE,
+ OP_PRBS, OP_RECORD) = range(14)
+EV_DONE, EV_PY, EV_FAIL, EV_FLUSH, EV_NONFINITE, EV_CHUNK, EV_HOOK, EV_REFILL = range(8)
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int64
@@ -83,7 +84,11 @@ class Op:
         Move state the Python objects keep (a filter's current state copy and step count)
         into and out of the kernel's arrays, when Python needs it.
     hook : callable, optional
-        The Python code an ``OP_HOOK`` runs (a filter's ``after_step``).
+        The Python code an ``OP_HOOK`` runs (a filter's ``after_step``; an ``OP_RECORD``'s
+        when its rows are full), or the refill of an ``OP_NOISE`` stream.
+    rebind : callable, optional
+        ``rebind(op)`` after the hook: point the operation's fields at arrays the hook
+        replaced (``op``: the OpStruct in the program).
     """
 
     kind: int
@@ -93,6 +98,7 @@ class Op:
     sync_in: Callable[[], None] | None = None
     sync_out: Callable[[], None] | None = None
     hook: Callable[[], None] | None = None
+    rebind: Callable[[OpStruct], None] | None = None
 
 
 def native_ops(fn) -> list[Op] | None:

@@ -185,7 +185,7 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
     """One realisation through the co-simulation master: plant FMU, sensor, the filters,
     the source and the process noise (the order follows from the wiring). Returns truth
     (N+1, nx), estimates by filter (N+1, nx), their full covariances (N+1, nx, nx) and
-    NIS (N,).
+    NIS (N,). Many realisations: :class:`MasterRealisations`.
 
     Parameters
     ----------
@@ -205,32 +205,79 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
         Simulated time [s].
     """
 
-    states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
-    inp = [p for p in plant.input_names if not p.startswith("w_")]
-    tags = {name: f"f{i}" for i, name in enumerate(makers)}
-    ests = [EstimatorComponent(tags[n], makers[n], T, covariance="full") for n in makers]
-    conn = {**{f"plant.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)},
-            **{f"sensor.{m}": f"plant.{m}" for m in sensor.input_names},
-            **{f"plant.w_{x}": f"noise.w_{x}" for x in states}}
-    for t in tags.values():
-        conn.update({f"{t}.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)})
-        conn.update({f"{t}.y_{m}": f"sensor.y_{m}" for m in sensor.input_names})
-    df = Cosimulation([plant, sensor, *ests, source, noise], conn).run(duration)
-    data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
-    col = {c: i for i, c in enumerate(df.columns)}
+    return MasterRealisations(plant, source, noise, sensor, makers, T).run(noise.seed, sensor.seed, duration)
 
-    def cols(names):
-        return data[:, [col[c] for c in names]]
 
-    X = cols([f"plant.{x}" for x in states])
-    est = {n: cols([f"{t}.{x}" for x in states]) for n, t in tags.items()}
-    cov = {}
-    for n, t in tags.items():
-        P = np.empty((len(data), len(states), len(states)))
-        for i, x in enumerate(states):
-            P[:, i, i] = data[:, col[f"{t}.P_{x}"]]
-            for j in range(i + 1, len(states)):
-                P[:, i, j] = P[:, j, i] = data[:, col[f"{t}.P_{i}_{j}"]]
-        cov[n] = P
-    nis = {n: data[1:, col[f"{t}.nis"]] for n, t in tags.items()}
-    return X, est, cov, nis
+class MasterRealisations:
+    """The co-simulation of :func:`master_realisation` built once for many realisations that
+    differ only in the seeds of the process noise and the sensor: each filter is built once
+    and restored to its initial state before each run
+    (:meth:`~estimators.base.KalmanBase.restore`, the numbers of a new filter).
+
+    Parameters
+    ----------
+    plant, source, noise, sensor, makers, T
+        As :func:`master_realisation`.
+    """
+
+    def __init__(self, plant, source, noise, sensor, makers: dict, T: float):
+        states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
+        inp = [p for p in plant.input_names if not p.startswith("w_")]
+        self.tags = tags = {name: f"f{i}" for i, name in enumerate(makers)}
+        ests = [EstimatorComponent(tags[n], _restored(makers[n]), T, covariance="full") for n in makers]
+        conn = {**{f"plant.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)},
+                **{f"sensor.{m}": f"plant.{m}" for m in sensor.input_names},
+                **{f"plant.w_{x}": f"noise.w_{x}" for x in states}}
+        for t in tags.values():
+            conn.update({f"{t}.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)})
+            conn.update({f"{t}.y_{m}": f"sensor.y_{m}" for m in sensor.input_names})
+        self.noise, self.sensor, self.states = noise, sensor, states
+        self.cosim = Cosimulation([plant, sensor, *ests, source, noise], conn)
+        self._columns = None
+
+    def run(self, seed_w: int, seed_v: int, duration: float):
+        """One realisation with process-noise seed ``seed_w`` and sensor seed ``seed_v``,
+        ``duration`` [s] long; returns what :func:`master_realisation` returns."""
+        self.noise.seed, self.sensor.seed = int(seed_w), int(seed_v)
+        df = self.cosim.run(duration)
+        data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
+        if self._columns is None:
+            self._columns = self._index(list(df.columns))
+        xi, ei, pi, ni = self._columns
+        n = len(self.states)
+        X = data[:, xi]
+        est, cov, nis = {}, {}, {}
+        for name in self.tags:
+            est[name] = data[:, ei[name]]
+            P = np.empty((len(data), n, n))
+            for (i, j), c in pi[name].items():
+                P[:, i, j] = data[:, c]
+                if i != j:
+                    P[:, j, i] = data[:, c]
+            cov[name] = P
+            nis[name] = data[1:, ni[name]]
+        return X, est, cov, nis
+
+    def _index(self, columns: list):
+        """Column positions: truth, estimates, covariance entries (i, j) and NIS by filter."""
+        col = {c: i for i, c in enumerate(columns)}
+        states, n = self.states, len(self.states)
+        xi = [col[f"plant.{x}"] for x in states]
+        ei = {nm: [col[f"{t}.{x}"] for x in states] for nm, t in self.tags.items()}
+        pi = {nm: {**{(i, i): col[f"{t}.P_{x}"] for i, x in enumerate(states)},
+                   **{(i, j): col[f"{t}.P_{i}_{j}"] for i in range(n) for j in range(i + 1, n)}}
+              for nm, t in self.tags.items()}
+        ni = {nm: col[f"{t}.nis"] for nm, t in self.tags.items()}
+        return xi, ei, pi, ni
+
+
+def _restored(make):
+    """A factory returning one filter of ``make``, restored to its initial state at each call."""
+    filt = make()
+    initial = filt.snapshot()
+
+    def again():
+        filt.restore(initial)
+        return filt
+
+    return again

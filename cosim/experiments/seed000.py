@@ -53,8 +53,8 @@ from ..fmi.fmu_component import FMUComponent
 from . import metrics
 from .campaign import realisation_seeds, run_tasks
 from .common import (
+    MasterRealisations,
     batch_run,
-    master_realisation,
     nees_from_outputs,
     new_figure,
     noise_components,
@@ -477,10 +477,12 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     with tempfile.TemporaryDirectory() as tmp:
         plant = FMUComponent("plant", build_fmu("cartpole", fmu_dir or tmp), s.T,
                              start=dict(zip(STATES, s.x0)))
+        master = None
         for i, run in enumerate(runs):
-            noise, sensor = _noise(s, q, r, *realisation_seeds(s.seed, scenario_index, run))
-            X[i], est, cov, nis = master_realisation(plant, figure2_prbs(s), noise, sensor, makers, s.T,
-                                                     s.duration)
+            seeds = realisation_seeds(s.seed, scenario_index, run)
+            if master is None:
+                master = MasterRealisations(plant, figure2_prbs(s), *_noise(s, q, r, *seeds), makers, s.T)
+            X[i], est, cov, nis = master.run(*seeds, s.duration)
             for n in makers:
                 E[n][i], NIS[n][i] = est[n], nis[n]
                 NEES[n][i] = nees_from_outputs(est[n][1:] - X[i][1:], cov[n][1:])
@@ -514,7 +516,7 @@ class CampaignResult(NamedTuple):
 
 
 #: Realisations per task on the master path.
-MASTER_CHUNK = 10
+MASTER_CHUNK = 50
 
 
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,
@@ -550,7 +552,7 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
     if path == "master":
         # one task per scenario and slice of at most MASTER_CHUNK realisations: every core
         # stays busy, and an interrupted campaign keeps all but the last few seconds
-        n_chunks = max(4, -(-settings.runs // MASTER_CHUNK))
+        n_chunks = max(2, -(-settings.runs // MASTER_CHUNK))
         chunks = [c for c in np.array_split(np.arange(settings.runs), min(settings.runs, n_chunks)) if len(c)]
     else:
         chunks = [np.arange(settings.runs)]

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import ctypes
 import logging as _logging
+import weakref
 from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -55,6 +56,7 @@ from fmu_models.export.plant_fmu import build_fmu
 from fmu_models.infra.checks import finite, positive
 from fmu_models.infra.files import atomic_copy, private_tempdir
 
+from ..core import crash_guard
 from ..core.clocking import ClockBoard
 from ..core.component import CLOCK, PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest, port_kind
 from ..core.native import OP_STEP2, OP_STEP3, Op, native_ops
@@ -63,7 +65,7 @@ from .clock_run import ClockedRun, initialise
 from .clocks import read_clocks
 from .exchange import Exchange
 from .exchange import no_exchange as _nothing
-from .instance import FMUInstance
+from .instance import _ERROR, _FATAL, FMUInstance
 from .isolated import RemoteFMU
 from .model_exchange import SOLVERS, FMUModel, MEIntegrator
 from .ports import array_shape, check_declared_range, check_integer, element_ports, parse_start
@@ -77,6 +79,22 @@ LOGGER = _logging.getLogger("cosim.fmu")
 #: Euler/RK4 ``solver_step`` in Model Exchange) a run may take: beyond it the run is refused
 #: before it starts instead of running for days inside one call nobody can interrupt.
 MAX_INTERNAL_STEPS = 10**9
+
+
+def _unload(fmu) -> None:
+    """Unload the library of an fmpy FMU object whose instance was freed."""
+    try:
+        fmu.freeLibrary()
+    except Exception:
+        LOGGER.debug("freeLibrary failed", exc_info=True)
+    crash_guard.forget_library(getattr(fmu, "pendulum_guard_entry", -1))
+
+
+def _unload_box(box: list) -> None:
+    """Unload the library a component keeps in ``box[0]`` (if any)."""
+    fmu, box[0] = box[0], None
+    if fmu is not None:
+        _unload(fmu)
 
 
 class FMUComponent(BoundCalls, Component, kind="fmu"):
@@ -226,6 +244,10 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
         self._extraction: Extraction | None = None
+        # the loaded library of the last instance (Co-Simulation), reused by the next; unloaded
+        # by release() or when the component is garbage-collected
+        self._library_box: list = [None]
+        weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
         self._sources: list | None = None
         self._private = None
@@ -547,7 +569,13 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         options = {}
         if self.clock_model is not None:
             options = dict(event_mode=True, early_return=True, clock_update=self._clock_update)
-        inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging, **options)
+        library, self._library_box[0] = self._library_box[0], None
+        if library is not None and (options or self.interface != "cs"):
+            _unload(library)
+            library = None
+        inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging, **options,
+                           library=library)
+        inst.keep_library = not options and self.interface == "cs"      # reused by the next run
         self.instance = inst
         self.messages = inst.messages
         fmu = inst.fmu
@@ -771,11 +799,17 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self._private, self.integrator, self._run = None, None, None
         if inst is not None:
             inst.finish()
+            if inst.keep_library and inst.worst < _ERROR:   # the library stays loaded for the next instance
+                self._library_box[0] = inst.fmu
+            elif inst.keep_library and inst.worst < _FATAL:
+                _unload(inst.fmu)
 
     def release(self) -> None:
-        """:meth:`close`, and remove the unpacked FMU (kept between runs otherwise; removed
-        anyway when the component is garbage-collected or at interpreter exit)."""
+        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (both kept
+        between runs otherwise; removed anyway when the component is garbage-collected or
+        at interpreter exit)."""
         self.close()
+        _unload_box(self._library_box)
         if self._extraction is not None:
             self._extraction.close()
             self._extraction = None

@@ -78,6 +78,11 @@ class FMUInstance:
     clock_update : callable, optional
         Scheduled Execution: the ``clockUpdate`` callback, called with the instance
         environment (it must not raise: a ctypes callback cannot).
+    library : fmpy FMU object, optional
+        The FMU's library loaded by an earlier instance of the same FMU and interface,
+        whose instance was freed (:attr:`keep_library`): instantiated again without loading
+        the library and its functions again (the standard allows a new instance after
+        ``FreeInstance``).
 
     Attributes
     ----------
@@ -95,7 +100,7 @@ class FMUInstance:
     """
 
     def __init__(self, owner: str, md, directory: str, interface: str, logging_on: bool = False, *,
-                 event_mode: bool = False, early_return: bool = False, clock_update=None):
+                 event_mode: bool = False, early_return: bool = False, clock_update=None, library=None):
         from fmpy import fmi2, fmi3
         from fmpy.fmi1 import calloc, free
 
@@ -105,6 +110,8 @@ class FMUInstance:
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
         self._guard_entry = -1
         self._freed = False
+        #: Free only the instance at the end, not the library (its owner reuses or frees it).
+        self.keep_library = False
         ident = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}[
             interface].modelIdentifier
         args = dict(guid=md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
@@ -112,7 +119,7 @@ class FMUInstance:
         fmu = None
         try:
             if self.version == 2:
-                fmu = self._guarded((fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args))
+                fmu = self._guarded(library or (fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args))
 
                 from fmpy.logging import addLoggerProxy
 
@@ -138,7 +145,7 @@ class FMUInstance:
                     fmu = self._guarded(fmi3.FMU3ScheduledExecution(**args))
                     self._instantiate_se(fmu, directory, clock_update)
                 elif interface == "cs":
-                    fmu = self._guarded(fmi3.FMU3Slave(**args))
+                    fmu = self._guarded(library or fmi3.FMU3Slave(**args))
                     fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
                                     earlyReturnAllowed=bool(early_return))
                 else:
@@ -146,7 +153,7 @@ class FMUInstance:
                     fmu.instantiate(loggingOn=True, logMessage=log3)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
-            if fmu is not None and getattr(fmu, "dll", None) is not None:
+            if fmu is not None and getattr(fmu, "dll", None) is not None:  # a reused library too: not again
                 try:
                     fmu.freeLibrary()
                 except Exception:
@@ -171,6 +178,7 @@ class FMUInstance:
         version = getattr(fmu.dll, f"fmi{self.version}GetVersion", None)
         address = ctypes.cast(version, ctypes.c_void_p).value if version is not None else None
         self._guard_entry = crash_guard.register_library(address, self.owner)
+        fmu.pendulum_guard_entry = self._guard_entry       # forgotten when its library is unloaded
         return fmu
 
     def _instantiate_se(self, fmu, directory: str, clock_update) -> None:
@@ -268,10 +276,14 @@ class FMUInstance:
             except Exception:  # noqa: BLE001 - a refusal changes nothing: free it anyway
                 LOGGER.debug("%s: terminate refused", self.owner)
         try:
-            self.fmu.freeInstance()
+            if self.keep_library:       # fmpy's freeInstance would unload the library too
+                (self.fmu.fmi2FreeInstance if self.version == 2 else self.fmu.fmi3FreeInstance)(self.fmu.component)
+            else:
+                self.fmu.freeInstance()
         except Exception:  # noqa: BLE001
             LOGGER.debug("%s: freeInstance failed", self.owner)
-        crash_guard.forget_library(self._guard_entry)
+        if not self.keep_library:
+            crash_guard.forget_library(self._guard_entry)
 
 
 def c_bool_type(version: int):

@@ -49,3 +49,25 @@ def test_bad_scenario_is_reported(tmp_path, capsys):
                    "period = 0.1\nvalue = 1\n[connections]\n\"a.b\" = \"c.d\"\n")
     assert main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "unknown component 'c'" in capsys.readouterr().err
+
+
+def test_run_engine_option_gives_the_same_results_and_is_checked(tmp_path, capsys):
+    """--engine replaces the scenario's [simulation] engine: python and native give the same
+    file; native is refused (a named error, no traceback, --out untouched) where the kernel
+    cannot run the scenario; a bad choice is refused by the parser."""
+    for engine in ("python", "native"):
+        assert main(["run", "seed000_cartpole", "--engine", engine, "--no-progress",
+                     "--out", str(tmp_path / engine)]) == 0
+    a, b = (pd.read_csv(tmp_path / e / "results.csv") for e in ("python", "native"))
+    assert a.equals(b)
+    assert main(["run", "seed000_cartpole", "--engine", "python", "--dry-run"]) == 0
+    assert "every call runs in Python (engine='python')" in capsys.readouterr().out
+    jacobi = tmp_path / "jacobi.toml"
+    jacobi.write_text("[simulation]\nstop_time = 1\norder = \"jacobi\"\n[[component]]\nname = \"a\"\n"
+                      "type = \"constant\"\nperiod = 0.1\nvalue = 1\n")
+    assert main(["run", str(jacobi), "--engine", "native", "--out", str(tmp_path / "j")]) == 2
+    err = capsys.readouterr().err
+    assert "engine='native' cannot run this co-simulation" in err and "Traceback" not in err
+    assert not (tmp_path / "j").exists()
+    with pytest.raises(SystemExit):
+        main(["run", "seed000_cartpole", "--engine", "fast", "--dry-run"])

@@ -192,3 +192,31 @@ def test_swml_posterior_average_leaves_out_a_diverged_outer_point():
     assert np.abs(np.array(est)[:, 3] - X[0, 1:, 3]).max() < 10.0
     assert min(w.min() for w in weights) == 0.0                     # a point was left out
     assert all(abs(w.sum() - 1.0) < 1e-12 for w in weights)
+
+
+@pytest.mark.parametrize("kind", ["EKF", "IAE", "IAE full", "MFIAE", "SWML"])
+def test_a_restored_filter_steps_like_a_new_one(lin, kind):
+    """snapshot / restore: after steps that adapted, the restored filter gives a new
+    filter's numbers bit for bit (state, covariance, NIS, noise history)."""
+    import estimators
+
+    args = {"IAE full": {"form": "full"}, "SWML": {"window": 20, "every": 10, "early_until": 4}}.get(kind, {})
+
+    def make():
+        return getattr(estimators, kind.split()[0])(lin, [0.1, 0], 1.0, Q_TRUE, R_TRUE, **args)
+
+    def steps(f, ys):
+        return [(f.step([0.0], y).copy(), f.P, f.nis) for y in ys]
+
+    ys = simulate(120, 3)
+    f = make()
+    initial = f.snapshot()
+    steps(f, simulate(80, 4))                            # another realisation first
+    f.restore(initial)
+    assert f.k == 0
+    fresh = make()
+    for (xa, Pa, na), (xb, Pb, nb) in zip(steps(f, ys), steps(fresh, ys)):
+        np.testing.assert_array_equal(xa, xb)
+        np.testing.assert_array_equal(Pa, Pb)
+        assert na == nb
+    assert f.noise_history().equals(fresh.noise_history()) and (len(fresh.noise_history()) > 1) == (kind != "EKF")
