@@ -164,3 +164,18 @@ def test_an_isolated_fmu_s_crash_is_the_parent_s_named_error_not_the_guard_s(cha
                           env={**os.environ, "CHAOS_LOG": str(tmp_path / "chaos.log")})
     assert proc.returncode == 0 and "named:" in proc.stdout and "died (signal SIGSEGV)" in proc.stdout, proc
     assert "error: the FMU" not in proc.stderr and "isolate = true" not in proc.stderr
+
+
+def test_a_crash_in_a_later_run_on_the_kept_library_is_named_too(chaos_fmu, tmp_path):
+    """Between runs a component keeps its FMU's library loaded: the guard still knows it."""
+    code = textwrap.dedent(f"""
+        from cosim import Cosimulation, FMUComponent, Sine
+        comp = FMUComponent("chaos", {str(chaos_fmu)!r}, 0.01, parameters={CRASHING!r})
+        sim = Cosimulation([Sine("src", 0.01, 1.0, 1.0), comp], {{"chaos.u": "src.out"}})
+        assert len(sim.run(1.0, progress=False)) == 101
+        sim.run(5.0, progress=False)
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "CHAOS_LOG": str(tmp_path / "chaos.log")})
+    assert proc.returncode == -signal.SIGSEGV
+    assert "error: the FMU of component 'chaos' crashed the process (SIGSEGV) in fmi2SetReal at t = 2.1 s" in proc.stderr
