@@ -19,17 +19,13 @@ the same bit for bit. A failed call returns to Python with its status, and the c
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from fmu_models.errors import BuildError, CompilerNotFoundError
-from fmu_models.infra.cache import cached_file, writable_cache
-from fmu_models.infra.compiler import find_compiler, run_compiler
+from fmu_models.infra.native_library import compiled_library
 
 __all__ = ["ENGINES", "KState", "Op", "OpStruct", "load_kernel", "native_ops"]
 
@@ -123,37 +119,11 @@ def load_kernel() -> tuple[ctypes.CDLL | None, str]:
     compiler, an unwritable cache, a compiler that fails)."""
     if _kernel:
         return _kernel[0], _kernel[1]
-    lib, why = None, ""
-    try:
-        cc = find_compiler()
-        code = _SOURCE.read_text()
-        directory = writable_cache("the co-simulation runs in Python")
-        if directory is None:
-            why = "the compiled-code cache cannot be written"
-        else:
-            key = "|".join([code, cc, *_FLAGS])
-            entry = directory / f"kernel_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
-
-            def build(out: Path) -> None:
-                src = out.with_suffix(".c")
-                src.write_text(code)
-                run_compiler([cc, *_FLAGS, str(src), "-o", str(out), "-lm"], "the co-simulation kernel")
-
-            def check(p: Path) -> None:
-                try:
-                    if not hasattr(ctypes.CDLL(str(p)), "kernel_run"):
-                        raise AttributeError("no kernel_run")
-                except (OSError, AttributeError) as e:
-                    raise BuildError(f"the compiled kernel does not load: {e}") from None
-
-            path = cached_file(entry, build, check)
-            lib = ctypes.CDLL(str(path))
-            lib.kernel_run.restype = ctypes.c_int
-            lib.kernel_run.argtypes = [ctypes.POINTER(KState)]
-    except (CompilerNotFoundError, BuildError, OSError) as e:
-        lib, why = None, " ".join(str(e).split())
-        warnings.warn(f"the native co-simulation kernel is not available ({why}); runs take the Python path "
-                      "(same results, slower)", stacklevel=3)
+    lib, why = compiled_library(_SOURCE.read_text(), "kernel", _FLAGS, "kernel_run", "the native co-simulation kernel",
+                                "runs take the Python path (same results, slower)", link=("-lm",))
+    if lib is not None:
+        lib.kernel_run.restype = ctypes.c_int
+        lib.kernel_run.argtypes = [ctypes.POINTER(KState)]
     _kernel[:] = [lib, why]
     return lib, why
 

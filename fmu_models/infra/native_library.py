@@ -23,7 +23,7 @@ __all__ = ["compiled_library"]
 
 
 def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, what: str,
-                     fallback: str) -> tuple[ctypes.CDLL | None, str]:
+                     fallback: str, link: Sequence[str] = ()) -> tuple[ctypes.CDLL | None, str]:
     """The library compiled from the C source ``code`` (built on first use, cached on disk).
 
     Parameters
@@ -40,6 +40,8 @@ def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, wh
         What the library is, in messages.
     fallback : str
         What happens without it, in the warning.
+    link : sequence of str
+        Libraries to link, after the source (e.g. ``-lm``).
 
     Returns
     -------
@@ -52,13 +54,13 @@ def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, wh
         directory = writable_cache(fallback)
         if directory is None:
             return None, "the compiled-code cache cannot be written"
-        key = "|".join([code, cc, *flags])
+        key = "|".join([code, cc, *flags, *link])
         entry = directory / f"{stem}_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
 
         def build(out: Path) -> None:
             src = out.with_suffix(".c")
             src.write_text(code)
-            run_compiler([cc, *flags, str(src), "-o", str(out)], what)
+            run_compiler([cc, *flags, str(src), "-o", str(out), *link], what)
 
         def check(p: Path) -> None:
             try:
