@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import textwrap
 
 import numpy as np
 import pandas as pd
 import pytest
-from testkit.chaos import CRASH, NO_CRASH, STOP, run_seed
+from testkit.chaos import CRASH, NO_CRASH, STOP, run_seed, scenario
 
 from cosim import Cosimulation, FMUComponent, Sine
 from fmu_models.errors import PendulumCosimError
@@ -41,24 +40,7 @@ def run_seed_raising(fmu, seed, log):
 
 
 def test_a_failing_chaos_run_from_the_command_line_is_one_line_and_keeps_its_rows(chaos_fmu, tmp_path):
-    (tmp_path / "s.toml").write_text(textwrap.dedent(f"""
-        [simulation]
-        stop_time = 1.0
-        [[component]]
-        name = "src"
-        type = "sine"
-        period = 0.01
-        amplitude = 1.0
-        frequency = 1.0
-        [[component]]
-        name = "chaos"
-        type = "fmu"
-        path = "{chaos_fmu}"
-        period = 0.01
-        parameters = {{ seed = 9, rate = 0.02, actions = 12 }}
-        [connections]
-        "chaos.u" = "src.out"
-    """))
+    (tmp_path / "s.toml").write_text(scenario(chaos_fmu, "seed = 9, rate = 0.02, actions = 12", 1.0))
     proc = subprocess.run([sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())", "run",
                            "s.toml", "--out", "out"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2, proc.stderr

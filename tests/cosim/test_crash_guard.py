@@ -13,7 +13,7 @@ import textwrap
 import pandas as pd
 import pyarrow as pa
 import pytest
-from testkit.chaos import CRASH
+from testkit.chaos import CRASH, scenario
 
 from cosim.core import salvage
 
@@ -57,26 +57,8 @@ def test_a_crash_names_the_fmu_the_call_and_the_time_and_keeps_the_streamed_rows
 
 
 def test_the_command_line_says_it_in_one_line(chaos_fmu, tmp_path):
-    (tmp_path / "s.toml").write_text(textwrap.dedent(f"""
-        [simulation]
-        stop_time = 5.0
-        [recording]
-        stream = true
-        [[component]]
-        name = "src"
-        type = "sine"
-        period = 0.01
-        amplitude = 1.0
-        frequency = 1.0
-        [[component]]
-        name = "chaos"
-        type = "fmu"
-        path = "{chaos_fmu}"
-        period = 0.01
-        parameters = {{ seed = 3, rate = 0.0005, actions = {CRASH} }}
-        [connections]
-        "chaos.u" = "src.out"
-        """))
+    text = scenario(chaos_fmu, f"seed = 3, rate = 0.0005, actions = {CRASH}", 5.0, stream=True)
+    (tmp_path / "s.toml").write_text(text)
     out = tmp_path / "out"
     env = {**os.environ, "CHAOS_LOG": str(tmp_path / "chaos.log")}
     proc = subprocess.run([sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())", "run",

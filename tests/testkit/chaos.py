@@ -41,3 +41,13 @@ def run_seed(fmu, seed: int, rate: float, actions: int, log, isolate: bool = Fal
     if not isolate or "died" not in outcome:
         assert fatal or "fmi2FreeInstance" in text, f"seed {seed}: the instance was never freed"
     return outcome
+
+
+def scenario(fmu, parameters: str, stop_time: float, stream: bool = False) -> str:
+    """A scenario file's text: a sine source into the chaos FMU ``fmu`` with ``parameters``
+    (TOML inline-table entries, e.g. ``"seed = 9, rate = 0.02, actions = 12"``)."""
+    recording = "[recording]\nstream = true\n" if stream else ""
+    return (f"[simulation]\nstop_time = {stop_time!r}\n{recording}"
+            "[[component]]\nname = \"src\"\ntype = \"sine\"\nperiod = 0.01\namplitude = 1.0\nfrequency = 1.0\n"
+            f"[[component]]\nname = \"chaos\"\ntype = \"fmu\"\npath = \"{fmu}\"\nperiod = 0.01\n"
+            f"parameters = {{ {parameters} }}\n[connections]\n\"chaos.u\" = \"src.out\"\n")
