@@ -183,7 +183,8 @@ class ParquetSink:
         self.ipc_path = self.path.with_name(f".{self.path.name}.{os.getpid()}.arrows")
         self._ipc_file = pa.OSFile(str(self.ipc_path), "wb")
         self._ipc = pa.ipc.new_stream(self._ipc_file, self.schema)
-        crash_guard.stream_started(id(self), str(self.ipc_path), str(self.tmp), str(partial_path(self.path)))
+        crash_guard.stream_started(id(self), os.path.abspath(self.ipc_path), os.path.abspath(self.tmp),
+                                   os.path.abspath(partial_path(self.path)))     # whatever the cwd then
 
     def flush(self, rows: int) -> None:
         """Write the first ``rows`` rows of ``buffer`` as one row group."""
