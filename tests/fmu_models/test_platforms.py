@@ -225,3 +225,15 @@ def test_a_clocked_ekf_in_scheduled_execution_gives_linux64_bits_on_the_other_pl
     assert ref.shape == (100, 11) and np.isfinite(ref).all() and np.ptp(ref, axis=0).min() > 0
     np.testing.assert_array_equal(ref, scheduled_in_fmpy(clocked_ekf, tmp_path_factory.mktemp("se-fmpy")))
     np.testing.assert_array_equal(got, ref, err_msg=f"clocked ekf, Scheduled Execution, {platform}")
+
+
+@needs_cross
+def test_the_scheduled_execution_driver_stops_at_an_error_with_the_fmus_message(clocked_ekf, tmp_path):
+    """Activations every 20 ms of a clock of interval 10 ms: the second skips a tick, the FMU
+    answers Error, and the driver stops there with status 4 and the FMU's reason."""
+    lib = tmp_path / "ekf.so"
+    with zipfile.ZipFile(clocked_ekf) as z:
+        lib.write_bytes(z.read("binaries/x86_64-linux/ekf.so"))
+    with pytest.raises(AssertionError, match=r"(?s)the driver failed \(4\).*skips the activation of the clock "
+                                             r"sample at 0.01.*fmi3ActivateModelPartition.* returned 3"):
+        cross_run.run(cross_run.harness(tmp_path, None), lib, clocked_ekf, "3se", tmp_path, steps=3, step=0.02)

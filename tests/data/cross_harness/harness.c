@@ -11,7 +11,8 @@
  * clocked inputs are set (the standard's Clock Activation Mode sequence: set, activate, get).
  * TOKEN is the FMU's guid / instantiationToken. Exit status 0 only if every call returned OK
  * (and, in 3se, the FMU neither called clockUpdate, having no output or countdown clock, nor
- * left preemption locked after an activation).
+ * left preemption locked after an activation). In 3se logging is on: the FMU's messages go
+ * to stderr.
  */
 #include <stdarg.h>
 #include <stdio.h>
@@ -103,7 +104,7 @@ int main(int argc, char **argv) {
     } else if (se) {
         fmi3ValueReference clock = (fmi3ValueReference)strtoul(argv[8], NULL, 10);
         fmi3Instance c = ((fmi3InstantiateScheduledExecutionTYPE *)need("fmi3InstantiateScheduledExecution"))(
-            "h", argv[3], "/tmp", fmi3False, fmi3False, NULL, log_fmi3, clock_update, lock_preemption,
+            "h", argv[3], "/tmp", fmi3False, fmi3True, NULL, log_fmi3, clock_update, lock_preemption,
             unlock_preemption);
         if (!c) { fprintf(stderr, "fmi3InstantiateScheduledExecution failed\n"); return 4; }
         CHECK(((fmi3EnterInitializationModeTYPE *)need("fmi3EnterInitializationMode"))(c, fmi3False, 0.0, 0.0,
