@@ -5,7 +5,8 @@ validate_fmu; every binary's exports, imports and architecture read with lief; t
 Windows DLL run under wine and the aarch64-linux library under qemu-user by a small FMI
 driver (tests/data/cross_harness/harness.c) cross-compiled with the same compiler, against
 the linux64 library driven by the same program built with gcc, over 100 steps of both
-plants and the EKF FMU. macOS code cannot run here: its files are checked statically
+plants and the EKF FMU, and over 100 activations of a clocked EKF FMU in Scheduled
+Execution. macOS code cannot run here: its files are checked statically
 (universal header, architectures, exports, libSystem only, the Apple-silicon signature).
 """
 from __future__ import annotations
@@ -145,15 +146,20 @@ def test_an_fmu_without_sources_is_refused_and_left_as_it_was(cross_fmus, tmp_pa
 
 
 # ---------------------------------------------------------------------------- running them
-@needs_cross
-@pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
-@pytest.mark.parametrize("name", ["cartpole", "iwp", "ekf"])
-def test_the_other_platforms_binaries_run_and_equal_linux64(cross_fmus, tmp_path_factory, platform, name):
+def skip_without_runner(platform: str) -> None:
+    """Skip, with the reason, where the program that runs ``platform``'s code is missing."""
     if platform == "win64" and WINE is None:
         pytest.skip("wine64 is not installed (Debian: apt-get install wine64); .ci/run installs it")
     if platform == "aarch64-linux" and (QEMU is None or not (ARM_ROOT / "lib").is_dir()):
         pytest.skip("qemu-user and libc6-arm64-cross are not installed (Debian: apt-get install qemu-user "
                     "libc6-arm64-cross); .ci/run installs them")
+
+
+@needs_cross
+@pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+@pytest.mark.parametrize("name", ["cartpole", "iwp", "ekf"])
+def test_the_other_platforms_binaries_run_and_equal_linux64(cross_fmus, tmp_path_factory, platform, name):
+    skip_without_runner(platform)
     fmus, _ = cross_fmus
     tmp = tmp_path_factory.getbasetemp() / "cross-run"
     tmp.mkdir(exist_ok=True)
@@ -162,3 +168,72 @@ def test_the_other_platforms_binaries_run_and_equal_linux64(cross_fmus, tmp_path
         assert ref.shape[0] == 100 and np.isfinite(ref).all() and np.ptp(ref, axis=0).max() > 0
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * max(1.0, np.abs(ref).max()),
                                    err_msg=f"{name} FMI {v} {platform}")
+
+
+@pytest.fixture(scope="module")
+def clocked_ekf(tmp_path_factory):
+    """The clocked EKF FMU (FMI 3.0, input clock ``sample``) with every platform's binary."""
+    if importlib.util.find_spec("ziglang") is None or importlib.util.find_spec("lief") is None:
+        pytest.skip("the cross extra (ziglang, lief) is not installed: pip install -e '.[cross]'")
+    from estimators import EKF, discretize
+    from estimators.filter_fmu import export_filter_fmu
+
+    cp = discretize(get_model("cartpole"), 0.01)
+    fmu = export_filter_fmu(EKF(cp, [0.5, 0, 1.8, 0.5], 1.0, 0.2, 0.1), tmp_path_factory.mktemp("clocked"),
+                            fmi_version=3, clocked=True, name="ekf")
+    assert add_platforms(fmu, ["win64", "aarch64-linux"]) == []
+    return fmu
+
+
+def scheduled_in_fmpy(fmu: Path, folder: Path, steps: int = 100) -> np.ndarray:
+    """The linux64 binary in fmpy's Scheduled Execution driver, the clocked inputs set to the
+    harness's sequence before each activation at k 10 ms: the outputs after each."""
+    from fmpy import extract
+    from fmpy.fmi3 import FMU3ScheduledExecution
+
+    md = read_model_description(str(fmu))
+    inputs = [v.valueReference for v in md.modelVariables if v.causality == "input" and v.type == "Float64"]
+    outputs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    (clock,) = [v.valueReference for v in md.modelVariables if v.type == "Clock"]
+    f = FMU3ScheduledExecution(guid=md.instantiationToken, unzipDirectory=extract(str(fmu), str(folder)),
+                               modelIdentifier=md.scheduledExecution.modelIdentifier, instanceName="se")
+    f.instantiate()
+    f.enterInitializationMode(startTime=0.0)
+    f.exitInitializationMode()
+    got = []
+    for k in range(steps):
+        f.setFloat64(inputs, [((37 * k + 11 * j) % 101 - 50) / 50.0 for j in range(len(inputs))])
+        f.activateModelPartition(clock, k * 0.01)
+        got.append(f.getFloat64(outputs))
+    f.terminate()
+    f.freeInstance()
+    return np.array(got)
+
+
+@needs_cross
+@pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+def test_a_clocked_ekf_in_scheduled_execution_gives_linux64_bits_on_the_other_platforms(
+        clocked_ekf, tmp_path_factory, platform):
+    """The driver's Scheduled Execution mode (instantiate, initialise, then per activation
+    set the clocked inputs, fmi3ActivateModelPartition(sample, t_k), get the estimates) run on
+    the Windows DLL under wine and the aarch64-linux library under qemu: bit for bit the
+    linux64 library's estimates under the same driver, which are fmpy's own."""
+    skip_without_runner(platform)
+    tmp = tmp_path_factory.getbasetemp() / "cross-run"
+    tmp.mkdir(exist_ok=True)
+    ref, got = cross_run.compare(clocked_ekf, "3se", platform, tmp)
+    assert ref.shape == (100, 11) and np.isfinite(ref).all() and np.ptp(ref, axis=0).min() > 0
+    np.testing.assert_array_equal(ref, scheduled_in_fmpy(clocked_ekf, tmp_path_factory.mktemp("se-fmpy")))
+    np.testing.assert_array_equal(got, ref, err_msg=f"clocked ekf, Scheduled Execution, {platform}")
+
+
+@needs_cross
+def test_the_scheduled_execution_driver_stops_at_an_error_with_the_fmus_message(clocked_ekf, tmp_path):
+    """Activations every 20 ms of a clock of interval 10 ms: the second skips a tick, the FMU
+    answers Error, and the driver stops there with status 4 and the FMU's reason."""
+    lib = tmp_path / "ekf.so"
+    with zipfile.ZipFile(clocked_ekf) as z:
+        lib.write_bytes(z.read("binaries/x86_64-linux/ekf.so"))
+    with pytest.raises(AssertionError, match=r"(?s)the driver failed \(4\).*skips the activation of the clock "
+                                             r"sample at 0.01.*fmi3ActivateModelPartition.* returned 3"):
+        cross_run.run(cross_run.harness(tmp_path, None), lib, clocked_ekf, "3se", tmp_path, steps=3, step=0.02)

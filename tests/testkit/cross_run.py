@@ -41,29 +41,39 @@ def harness(tmp: Path, target: str | None) -> list[str]:
     return [QEMU, "-L", str(ARM_ROOT), str(exe)]
 
 
-def run(cmd: list[str], lib: Path, fmu: Path, version: int, tmp: Path, steps: int = 100) -> np.ndarray:
-    """The outputs after each of ``steps`` 10 ms steps, every Real input driven by the
-    driver's exact sequence (process noise inputs scaled by 0.01)."""
+def run(cmd: list[str], lib: Path, fmu: Path, version: int | str, tmp: Path, steps: int = 100,
+        step: float = 0.01) -> np.ndarray:
+    """The outputs after each of ``steps`` steps of ``step`` seconds, every Real input driven
+    by the driver's exact sequence (process noise inputs scaled by 0.01). ``version`` 2 or 3:
+    Co-Simulation; ``"3se"``: Scheduled Execution of a clocked FMU, its input clock's model
+    partition activated every ``step`` seconds from 0 s after the clocked inputs are set."""
     md = read_model_description(str(fmu))
     token = md.guid if version == 2 else md.instantiationToken
     inputs = ",".join(f"{v.valueReference}:{0.01 if v.name.startswith('w_') else 1.0}"
                       for v in md.modelVariables if v.causality == "input" and v.type in ("Real", "Float64"))
     outputs = ",".join(str(v.valueReference) for v in md.modelVariables if v.causality == "output")
+    clock = []
+    if version == "3se":
+        clock = [str(v.valueReference) for v in md.modelVariables if v.type == "Clock" and v.causality == "input"]
+        assert len(clock) == 1, f"{fmu.name}: Scheduled Execution here needs one input clock, not {len(clock)}"
     env = {"WINEDEBUG": "-all", "WINEPREFIX": str(tmp / "wine"), "PATH": "/usr/bin:/bin", "HOME": str(tmp)}
-    r = subprocess.run([*cmd, str(lib), str(version), token, str(steps), "0.01", inputs, outputs],
+    r = subprocess.run([*cmd, str(lib), str(version), token, str(steps), repr(step), inputs, outputs, *clock],
                        capture_output=True, text=True, env=env, timeout=300)
     if r.returncode != 0:
         raise AssertionError(f"the driver failed ({r.returncode}): {r.stderr[-2000:]}")
     return np.array([[float(x) for x in line.split()] for line in r.stdout.splitlines()])
 
 
-def compare(fmu: Path, version: int, platform: str, tmp: Path) -> tuple[np.ndarray, np.ndarray]:
-    """``(linux64 outputs, platform outputs)`` of the FMU's two binaries under the driver."""
-    ident = read_model_description(str(fmu)).coSimulation.modelIdentifier
+def compare(fmu: Path, version: int | str, platform: str, tmp: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``(linux64 outputs, platform outputs)`` of the FMU's two binaries under the driver
+    (``version`` as in :func:`run`)."""
+    md = read_model_description(str(fmu))
+    ident = (md.scheduledExecution if version == "3se" else md.coSimulation).modelIdentifier
+    fmi = int(str(version)[0])
     libs = {}
     with zipfile.ZipFile(fmu) as z:
         for key in ("native", platform):
-            folder = FOLDERS[version, key]
+            folder = FOLDERS[fmi, key]
             suffix = ".dll" if "win" in folder else ".so"
             libs[key] = tmp / f"{Path(fmu).stem}{version}-{folder}" / f"{ident}{suffix}"
             libs[key].parent.mkdir(exist_ok=True)
