@@ -173,10 +173,10 @@ class Cosimulation:
                  loop_max_iter: int = 50, loop_solver: str = "newton", engine: str = "auto"):
 
         for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
-                                   ("loop_solver", loop_solver, LOOP_SOLVERS), ("engine", engine, ENGINES)):
+                                   ("loop_solver", loop_solver, LOOP_SOLVERS)):
             if value not in valid:
                 raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
-        self.order, self.loops, self.loop_solver, self._engine = order, loops, loop_solver, engine
+        self.order, self.loops, self.loop_solver, self._engine = order, loops, loop_solver, "auto"
         self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
         self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
@@ -202,9 +202,7 @@ class Cosimulation:
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
         self._kernel = None
-        if engine == "native" and self._whole_run_python() not in (None, "engine='python'"):
-            raise ConfigurationError(f"engine='native' cannot run this co-simulation: {self._whole_run_python()}; "
-                                     "use engine='auto'")
+        self.engine = engine                    # checked by the property, like a later change
         #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
