@@ -314,10 +314,10 @@ class FMIClocks:
                            "(hasEventMode is not true); clocks are activated only in Event Mode")
 
     # ------------------------------------------------------------------ ports
-    def port(self, name: str, direction: str, owner: str) -> Port:
+    def port(self, name: str, direction: str) -> Port:
         """The Clock port ``name`` (a triggered input clock or an output clock), or a named
         refusal of a clock that is no port."""
-        k = self.by_name[name]
+        k, owner = self.by_name[name], self.owner
         if direction == "input":
             if k.causality != "input":
                 raise UnknownNameError(f"{owner}: {name!r} is an {k.causality} clock, not an input")

@@ -1,15 +1,8 @@
-"""What an FMU declares, read once from its archive, and a component's choices checked
-against it.
-
-An :class:`FMUDescription` is made once per component from the ``.fmu`` file
-(:func:`~cosim.fmi.archive.read_archive`: the archive checked, the model description
-parsed): the FMI version, the interfaces the FMU has, its variables by name, its clocks
-(:class:`~cosim.fmi.clocks.FMIClocks`) and the direct dependencies its ``ModelStructure``
-declares. Against it, :class:`~cosim.fmi.fmu_component.FMUComponent` resolves its interface,
-checks its clock intervals, parameters and start values (exact integers, finite reals,
-declared ranges, lists for arrays), expands its ports (an array variable is one port per
-element, its size from the structural parameters: :mod:`cosim.fmi.ports`) and derives the
-direct dependencies of its output ports on its input ports.
+"""What an FMU declares, read once from its archive (:class:`FMUDescription`: the FMI
+version, the interfaces, the variables, the clocks, the ``ModelStructure``), and a
+component's choices checked against it: the interface, the clock intervals, the parameter
+and start values, the ports (an array variable is one port per element, its size from the
+structural parameters: :mod:`cosim.fmi.ports`) and their direct dependencies.
 """
 from __future__ import annotations
 
@@ -209,7 +202,7 @@ class FMUDescription:
                 seen.add(n)
                 e = available[n]
                 if e.type == CLOCK and clocks is not None:
-                    ports.append(clocks.port(n, direction, owner))
+                    ports.append(clocks.port(n, direction))
                 elif e.type not in PORT_TYPES:
                     raise TypeMismatchError(f"{owner}: {direction} {n!r} is of type {e.type}; ports can be "
                                             f"{', '.join(sorted(set(PORT_TYPES)))}")

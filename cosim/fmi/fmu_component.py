@@ -85,6 +85,7 @@ class HeldInputs:
 
     reentrant = True
     holds_inputs = True
+    _sources: list | None = None
 
     def required_inputs(self) -> list[str]:
         """None: unconnected inputs keep their start values."""
@@ -151,6 +152,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     Attributes
     ----------
+    description : FMUDescription
+        What the FMU declares (:mod:`cosim.fmi.description`), read once.
     md : fmpy ModelDescription
     version : int
         2 or 3.
@@ -208,8 +211,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self._library_box: list = [None]
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
-        self._sources: list | None = None
-        self._private = None
         self._remote = None
 
     def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,

@@ -201,10 +201,8 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                 for p in m.output_ports]
         super().__init__(name, period, ins, outs, feedthrough=self._feedthrough_map(), port_names_are_identifiers=False)
         self.connected_inputs = list(self.input_names)
-        self._sources: list | None = None
         self.integrator: MEIntegrator | None = None
         self._model: _Coupled | None = None
-        self._private = None
 
     @classmethod
     def from_scenario(cls, name, table, context):

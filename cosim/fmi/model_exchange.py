@@ -45,19 +45,8 @@ _DP = ctypes.POINTER(ctypes.c_double)
 
 
 def check_solver(owner: str, solver: str, solver_step: float | None, rtol: float) -> tuple[str, float | None, float]:
-    """The solver options of the component ``owner`` checked; returns ``(solver, solver_step,
-    rtol)``.
-
-    Parameters
-    ----------
-    owner : str
-        The component's name (in messages).
-    solver : {"cvode", "euler", "rk4"}
-    solver_step : float or None
-        The fixed step of Euler and RK4, or CVODE's largest step [s]; positive.
-    rtol : float
-        CVODE's relative tolerance; positive.
-    """
+    """``(solver, solver_step, rtol)`` of the component ``owner`` checked: ``solver`` one of
+    :data:`SOLVERS`, ``solver_step`` [s] None or positive, ``rtol`` positive."""
     if solver not in SOLVERS:
         raise UnknownNameError(f"{owner}: solver must be one of {SOLVERS}, got {solver!r}")
     rtol = positive(rtol, f"{owner}: rtol")
