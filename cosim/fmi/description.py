@@ -1,8 +1,9 @@
-"""What an FMU declares, read once from its archive (:class:`FMUDescription`: the FMI
-version, the interfaces, the variables, the clocks, the ``ModelStructure``), and a
-component's choices checked against it: the interface, the clock intervals, the parameter
-and start values, the ports (an array variable is one port per element, its size from the
-structural parameters: :mod:`cosim.fmi.ports`) and their direct dependencies.
+"""What an FMU declares, read once from its archive
+(:class:`~cosim.fmi.description.FMUDescription`: the FMI version, the interfaces, the
+variables, the clocks, the ``ModelStructure``), and a component's choices checked against
+it: the interface, the clock intervals, the parameter and start values, the ports (an array
+variable is one port per element, its size from the structural parameters:
+:mod:`cosim.fmi.ports`) and their direct dependencies.
 """
 from __future__ import annotations
 
@@ -23,6 +24,8 @@ from .ports import ElementPort, array_shape, check_declared_range, check_integer
 
 __all__ = ["INTERFACES", "FMUDescription"]
 
+#: The interfaces a component may ask for (``"auto"``, Co-Simulation, Model Exchange,
+#: Scheduled Execution).
 INTERFACES = ("auto", "cs", "me", "se")
 _WORDS = {"cs": "Co-Simulation", "me": "Model Exchange", "se": "Scheduled Execution"}
 

@@ -40,6 +40,7 @@ from ..core.component import StopRequest
 
 __all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs"]
 
+#: The Model Exchange solvers (see the module documentation).
 SOLVERS = ("cvode", "euler", "rk4")
 _DP = ctypes.POINTER(ctypes.c_double)
 
