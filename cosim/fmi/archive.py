@@ -121,14 +121,13 @@ def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX
             z.testzip()
         except (zipfile.BadZipFile, OSError, EOFError) as e:
             raise FMUError(f"{path.name} is damaged: {e}") from None
-        members, xml = frozenset(z.namelist()), z.read("modelDescription.xml")
-    try:
-        md = read_model_description(str(path), validate=False)
-    except Exception as e:  # noqa: BLE001 - lxml, attrs and fmpy raise a variety of types for bad XML
-        first = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
-                       f"{first}") from None
-    archive = FMUArchive(md, members, xml)
+        try:
+            md = read_model_description(str(path), validate=False)
+        except Exception as e:  # noqa: BLE001 - lxml, attrs and fmpy raise a variety of types for bad XML
+            first = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
+                           f"{first}") from None
+        archive = FMUArchive(md, frozenset(z.namelist()), z.read("modelDescription.xml"))   # read by fmpy: readable
     _complete_ranges(archive)
     return archive
 
