@@ -28,17 +28,7 @@ from .campaign import realisation_seeds, run_tasks
 def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tuple[int, int]]:
     """The (process, measurement) seeds of the realisations ``runs`` (default all
     ``settings.runs``) of task ``key`` (e.g. a scenario's index):
-    :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``.
-
-    Parameters
-    ----------
-    settings
-        The experiment's settings (``seed``, ``runs``).
-    key
-        The task's key.
-    runs
-        The realisations' indices.
-    """
+    :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``."""
     runs = range(settings.runs) if runs is None else runs
     return [tuple(realisation_seeds(settings.seed, key, r)) for r in runs]
 
@@ -46,21 +36,11 @@ def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tu
 def run_campaign(tasks: Sequence[tuple[Callable, dict]], assemble: Callable, desc: str, backend: str = "processes",
                  n_jobs: int | None = None, progress: bool = True, partial: bool = True):
     """``assemble(results, wall)``: the campaign's result from the results of its ``tasks``
-    (run by :func:`~cosim.experiments.campaign.run_tasks`) and their wall time [s].
-
-    Parameters
-    ----------
-    tasks
-        ``(function, kwargs)`` of each task.
-    assemble
-        Makes the result.
-    desc, backend, n_jobs, progress
-        As :func:`~cosim.experiments.campaign.run_tasks`.
-    partial
-        Interrupted, the :class:`~fmu_models.errors.Interrupted` raised carries as ``partial``
-        what ``assemble`` makes of the finished tasks (None for the others); if False, the
-        list of the tasks' results as it is.
-    """
+    (``(function, kwargs)``, run by :func:`~cosim.experiments.campaign.run_tasks` with
+    ``desc``, ``backend``, ``n_jobs`` and ``progress``) and their wall time [s]. Interrupted,
+    the :class:`~fmu_models.errors.Interrupted` raised carries as ``partial`` what
+    ``assemble`` makes of the finished tasks (None for the others), or if ``partial`` is
+    False their results as they are."""
     t0 = time.perf_counter()
     try:
         results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=desc)
@@ -105,20 +85,12 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
 
     Parameters
     ----------
-    model
-        The plant model.
+    model, T, q, measured, r_std
+        As :func:`noise_components`.
     x0
         Initial state.
     us
         Inputs, shape (N+1, nu).
-    T
-        Sample period [s].
-    q
-        Process noise covariance.
-    measured
-        The measured states.
-    r_std
-        Measurement noise standard deviations.
     seeds
         (process, measurement) seed pairs, one per realisation.
     method
@@ -311,33 +283,11 @@ def _restored(make):
 
 
 # ---------------------------------------------------------------------------- the reports' tables
-def rmse_columns(rmse_runs: np.ndarray, states: Sequence[str]) -> dict:
-    """``rmse_<state>``: each state's RMSE over the realisations and steps.
-
-    Parameters
-    ----------
-    rmse_runs
-        Each realisation's RMSE per state, shape (runs, nx).
-    states
-        The state names.
-    """
-    return {f"rmse_{x}": float(np.sqrt(np.mean(rmse_runs[:, a] ** 2))) for a, x in enumerate(states)}
-
-
 def pcrb_columns(rmse_runs: np.ndarray, bound_mse: np.ndarray | None, states: Sequence[str]) -> dict:
-    """``pcrb_ratio_<state>`` (:func:`~cosim.experiments.metrics.pcrb_ratio`),
-    ``pcrb_ratio_max`` and ``pcrb_ratio_se_<state>`` (its Monte Carlo standard error); NaN
-    without a bound.
-
-    Parameters
-    ----------
-    rmse_runs
-        Each realisation's RMSE per state over steps 1..K, shape (runs, nx).
-    bound_mse
-        The PCRB on the MSE at steps 1..K, shape (K, nx), or None.
-    states
-        The state names.
-    """
+    """``pcrb_ratio_<state>`` of each of the ``states``
+    (:func:`~cosim.experiments.metrics.pcrb_ratio` of the realisations' RMSE ``rmse_runs``
+    (runs, nx) over the bound ``bound_mse`` (K, nx) at steps 1..K), ``pcrb_ratio_max`` and
+    ``pcrb_ratio_se_<state>`` (its Monte Carlo standard error); NaN without a bound (None)."""
     if bound_mse is None:
         ratio = se = np.full(len(states), np.nan)
     else:
@@ -347,20 +297,9 @@ def pcrb_columns(rmse_runs: np.ndarray, bound_mse: np.ndarray | None, states: Se
 
 
 def pcrb_row(ident: dict, bound_mse: np.ndarray, runs: int, states: Sequence[str]) -> dict:
-    """The row of the PCRB itself in a consistency table: the root of its mean over steps
-    1..K per state (``rmse_<state>``), every ratio 1.
-
-    Parameters
-    ----------
-    ident
-        The row's identifying columns (e.g. reading and scenario).
-    bound_mse
-        The PCRB on the MSE at steps 0..K, shape (K+1, nx).
-    runs
-        The realisations it is computed over.
-    states
-        The state names.
-    """
+    """The row of the PCRB itself in a consistency table: the identifying columns ``ident``,
+    the ``runs`` it is computed over, per state of ``states`` the root of the bound's mean
+    over steps 1..K (``bound_mse``: shape (K+1, nx), from k = 0), and every ratio 1."""
     return {**ident, "filter": "PCRB", "runs": runs,
             **{f"rmse_{x}": float(np.sqrt(bound_mse[1:, a].mean())) for a, x in enumerate(states)},
             **{f"pcrb_ratio_{x}": 1.0 for x in states}, "pcrb_ratio_max": 1.0}
@@ -378,23 +317,10 @@ def settings_table(settings, leave_out: Sequence[str] = ()) -> list[str]:
 
 
 def consistency_section(table, keys: Sequence[str], settings, path: str, after: Sequence[str] = ()) -> list[str]:
-    """The reports' section on the consistency tests: the rule, the tests of the filters
-    (:func:`~cosim.experiments.metrics.consistency_markdown`), the lines ``after``, and on
-    the master path why whiteness is not tested.
-
-    Parameters
-    ----------
-    table
-        The consistency table (its PCRB rows are left out).
-    keys
-        The identifying columns shown first.
-    settings
-        The settings (``confidence``, ``whiteness_lags``).
-    path
-        The path that ran.
-    after
-        Lines after the table.
-    """
+    """The reports' section on the consistency tests: the rule at ``settings.confidence`` and
+    ``settings.whiteness_lags``, the tests of the filters of the consistency ``table`` (its
+    PCRB rows left out; :func:`~cosim.experiments.metrics.consistency_markdown` with
+    ``keys``), the lines ``after``, and on the master ``path`` why whiteness is not tested."""
     lines = ["## Consistency: chi-square bands of NEES and NIS, whiteness of the innovations", "",
              "Rule: " + metrics.consistency_rule(settings.confidence, settings.whiteness_lags) + ".", "",
              *metrics.consistency_markdown(table[table["filter"] != "PCRB"], keys), "", *after]
@@ -406,17 +332,8 @@ def consistency_section(table, keys: Sequence[str], settings, path: str, after: 
 
 # ---------------------------------------------------------------------------- the reports' files and figures
 def report_folder(out_dir, settings_toml: str, tables: dict) -> Path:
-    """``out_dir`` (made if need be) with ``settings.toml`` and the ``tables`` written into it.
-
-    Parameters
-    ----------
-    out_dir
-        The folder.
-    settings_toml
-        The text of ``settings.toml``.
-    tables
-        DataFrames by file name, as :func:`write_tables`.
-    """
+    """The folder ``out_dir`` (made if need be) with ``settings.toml`` (the text
+    ``settings_toml``) and the ``tables`` (:func:`write_tables`) written into it."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "settings.toml", lambda p: p.write_text(settings_toml))
@@ -451,20 +368,9 @@ def new_figure(rows: int = 1, cols: int = 1, figsize=(8, 4), **subplot_kw):
 
 def style_axes(ax, xlabel: str = "", ylabel: str = "", title: str = "", log: bool = False, legend: int = 0,
                ncol: int = 1) -> None:
-    """The reports' look of one axes: a log y axis if ``log``, the labels and the title
-    given, a light grid, and a legend of font size ``legend`` in ``ncol`` columns (none if 0).
-
-    Parameters
-    ----------
-    ax
-        The matplotlib Axes.
-    xlabel, ylabel, title
-        Its labels and title (none if empty).
-    log
-        A logarithmic y axis.
-    legend, ncol
-        The legend's font size and columns.
-    """
+    """The reports' look of the matplotlib Axes ``ax``: a log y axis if ``log``, the
+    ``xlabel``, ``ylabel`` and ``title`` given, a light grid, and a legend of font size
+    ``legend`` in ``ncol`` columns (none if 0)."""
     if log:
         ax.set_yscale("log")
     if xlabel:

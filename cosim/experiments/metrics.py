@@ -190,10 +190,8 @@ def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    rmse_runs
-        Each realisation's RMSE per state over steps 1..K, shape (runs, nx).
-    bound_mse
-        The bound on the MSE at steps 1..K, shape (K, nx).
+    rmse_runs, bound_mse
+        As :func:`pcrb_ratio`.
     """
     m = np.square(rmse_runs)
     N = len(m)
@@ -227,22 +225,16 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
 
     Parameters
     ----------
-    nees
-        NEES, shape (runs, K).
-    nis
-        NIS, shape (runs, K).
+    nees, nis, ny, confidence
+        As :func:`band_row`.
     mse
         Each state's mean-square error over the runs at steps 1..K, shape (K, nx).
     bound_mse
         The PCRB on it at steps 1..K, shape (K, nx).
-    ny
-        Measured channels.
     start
         Steps left out (0 <= start < K).
     whiteness
         :func:`whiteness_row` of the innovations after ``start`` (None: not tested).
-    confidence
-        Probability of the bands.
     """
     with np.errstate(invalid="ignore", over="ignore"):
         ratio = np.sqrt(mse[start:].mean(axis=0) / bound_mse[start:].mean(axis=0))

@@ -47,26 +47,7 @@ from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.infra.checks import positive, positive_int
 
 from ..components.sources import PRBS
-from . import metrics
-from .common import (
-    batch_run,
-    consistency_section,
-    markdown_table,
-    master_runs,
-    new_figure,
-    noise_components,
-    pcrb_columns,
-    pcrb_row,
-    report_folder,
-    rmse_columns,
-    run_campaign,
-    save_figure,
-    seed_pairs,
-    settings_table,
-    style_axes,
-    write_summary,
-)
-from .common import simulate_truth as common_truth
+from . import common, metrics
 from .experiment import Experiment
 from .settings import check_common, check_consistency, to_toml
 
@@ -250,7 +231,7 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, sh
     """
     shared = {} if shared is None else shared
     if "training" not in shared:
-        shared["training"] = simulate_truth(s, q, r, seed_pairs(s, scenario_index, [TRAINING_RUN]))
+        shared["training"] = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index, [TRAINING_RUN]))
     _X, Y, u = shared["training"]
     q0, r0 = nominal_noise(s, q, r)
     f = EKF(system, np.array(s.x0), s.P0, q0, r0)
@@ -311,7 +292,7 @@ def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]
         (process, measurement) seed pairs, one per realisation.
     """
     u = _inputs(s)
-    X, Y = common_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, MEASURED, np.sqrt(r), seeds)
+    X, Y = common.simulate_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, MEASURED, np.sqrt(r), seeds)
     return X, Y, u
 
 
@@ -343,7 +324,7 @@ def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndar
     """
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    X, _, u = simulate_truth(s, q, r, seed_pairs(s, scenario_index))
+    X, _, u = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index))
     return scenario_bound(s, X, u, q, r)
 
 
@@ -362,7 +343,7 @@ class _FilterRun(NamedTuple):
 
 def _fast_filter(make, X: np.ndarray, Y: np.ndarray, u: np.ndarray, s: Settings) -> _FilterRun:
     """One filter batched over the realisations ``X``, ``Y`` with inputs ``u``."""
-    res = batch_run(make, X, Y, u[:, None])
+    res = common.batch_run(make, X, Y, u[:, None])
     L = s.transient_steps
     late = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
             if s.has_late else None)
@@ -419,7 +400,7 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
     q, r = true_noise(s.scenarios[scenario_index], reading)
     shared = {} if shared is None else shared
     if "truth" not in shared:
-        shared["truth"] = simulate_truth(s, q, r, seed_pairs(s, scenario_index, runs))
+        shared["truth"] = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index, runs))
     X, Y, u = shared["truth"]
     system = _system(s.T)
     learned = learn_noise(system, s, scenario_index, q, r, shared)
@@ -451,10 +432,10 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
     system, model = _system(s.T), get_model("cartpole")
     learned = learn_noise(system, s, scenario_index, q, r) if learned is None else learned
     makers = make_filters(system, s, q, r, learned)
-    seeds = seed_pairs(s, scenario_index, runs)
-    X, est, nees, nis = master_runs(model, dict(zip(STATES, s.x0)), figure2_prbs(s),
-                                    *noise_components(model, s.T, q, MEASURED, np.sqrt(r), *seeds[0]),
-                                    makers, s.T, s.duration, seeds, fmu_dir)
+    seeds = common.seed_pairs(s, scenario_index, runs)
+    X, est, nees, nis = common.master_runs(model, dict(zip(STATES, s.x0)), figure2_prbs(s),
+                                           *common.noise_components(model, s.T, q, MEASURED, np.sqrt(r), *seeds[0]),
+                                           makers, s.T, s.duration, seeds, fmu_dir)
     filters = {n: _FilterRun(est[n] - X, nees[n], nis[n], np.zeros(len(seeds), dtype=bool), metrics.no_whiteness(),
                              None) for n in makers}
     return _summarise(filters, s, {"truth": X[0], **{f"est {n}": est[n][0] for n in makers}}, learned)
@@ -493,14 +474,10 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
 
     Parameters
     ----------
-    settings
-        The campaign's settings.
-    path
-        ``fast`` or ``master``.
+    settings, path, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
     readings
         The readings to run (default the settings').
-    backend, n_jobs, progress
-        As :func:`~cosim.experiments.campaign.run_tasks`.
     """
     if path not in ("fast", "master"):
         raise UnknownNameError(f"path must be 'fast' or 'master', got {path!r}")
@@ -511,8 +488,8 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
         tasks = [(fast_task, dict(scenario_index=i, reading=rd, settings=settings)) for rd, i in keys]
     else:
         chunks, tasks = _master_tasks(settings, keys)
-    return run_campaign(tasks, lambda results, wall: _assemble(settings, keys, chunks, results, wall),
-                        f"seed000 ({path})", backend, n_jobs, progress)
+    return common.run_campaign(tasks, lambda results, wall: _assemble(settings, keys, chunks, results, wall),
+                               f"seed000 ({path})", backend, n_jobs, progress)
 
 
 def _master_tasks(s: Settings, keys: list) -> tuple[list, list]:
@@ -569,7 +546,7 @@ def _scenario_tables(s: Settings, rd: str, i: int, parts: list, bound, whole: bo
         cons.append(row)
         eps.append(frame)
     if bound is not None:
-        cons.append(pcrb_row(ident, bound, s.runs, STATES))
+        cons.append(common.pcrb_row(ident, bound, s.runs, STATES))
         k = np.arange(s.steps + 1)
         bounds.append(pd.DataFrame({**ident, "k": k, "time": k * s.T,
                                     **{f"mse_{x}": bound[:, a] for a, x in enumerate(STATES)}}))
@@ -598,8 +575,8 @@ def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list,
                                     first["whiteness_late"][name] if whole else None, s.confidence)
             if bound is not None and s.has_late else {})
     row = {**ident, "filter": name, "eta": float(pr["eta"].mean()), "diverged": int(pr["diverged"].sum()),
-           **rmse_columns(pr["rmse"], STATES), **pcrb_columns(pr["rmse"], None if bound is None else bound[1:], STATES),
-           **tests, **late}
+           **{f"rmse_{x}": float(np.sqrt(np.mean(pr["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
+           **common.pcrb_columns(pr["rmse"], None if bound is None else bound[1:], STATES), **tests, **late}
     k = np.arange(1, s.steps + 1)
     frame = pd.DataFrame({**ident, "filter": name, "k": k, "time": k * s.T, "eps": eps, **per_step,
                           **{f"mse_{x}": mse[:, a] for a, x in enumerate(STATES)}})
@@ -745,24 +722,15 @@ def write_report(result: CampaignResult, settings: Settings, out_dir, path: str 
 
     Parameters
     ----------
-    result
-        What :func:`run` returned.
-    settings
-        The settings used.
-    out_dir
-        Output folder.
-    path
-        The path that ran.
-    config
-        The configuration's name.
-    partial
-        The campaign was interrupted.
+    result, settings, out_dir, path, config, partial
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
+        (``result``: what :func:`run` returned).
     """
     per_run, eps, examples, wall, cons, bound = result
     table = summary_table(per_run) if len(per_run) else pd.DataFrame()
-    out = report_folder(out_dir, to_toml(settings, "seed000"),
-                        {"per_run.csv": per_run, "per_run.parquet": per_run, "eps_k.csv": eps, "consistency.csv": cons,
-                         "pcrb.csv": bound, "table3.csv": table})
+    out = common.report_folder(out_dir, to_toml(settings, "seed000"),
+                               {"per_run.csv": per_run, "per_run.parquet": per_run, "eps_k.csv": eps,
+                                "consistency.csv": cons, "pcrb.csv": bound, "table3.csv": table})
     _figures(eps, examples, settings, out)
     _limit_figures(eps, bound, settings, out)
     lines = [f"# Seed 000 campaign ({path} path, configuration: {config})", ""]
@@ -773,17 +741,17 @@ def write_report(result: CampaignResult, settings: Settings, out_dir, path: str 
     if len(table):
         lines += _table3_section(table, settings)
     if len(cons):
-        lines += [*_limit_section(cons, settings), *consistency_section(cons, ["reading", "scenario"], settings, path,
-                                                                        transient_sentences(cons, settings))]
+        lines += [*_limit_section(cons, settings), *common.consistency_section(
+            cons, ["reading", "scenario"], settings, path, transient_sentences(cons, settings))]
     lines += ["## Settings (the paper gives none of the filter settings)", "",
               "Rerun with `pendulum-cosim experiment seed000 --settings settings.toml` (this folder's file), "
-              "or change one with `--set name=value`.", "", *settings_table(settings), "",
+              "or change one with `--set name=value`.", "", *common.settings_table(settings), "",
               "Readings of the noise names:", "", *[f"- **{k}**: {v}" for k, v in READINGS.items()], "",
               "Files: per_run.csv|parquet (every realisation), eps_k.csv (per step: eps_k, average NEES and NIS "
               "with their bands, mean-square errors), consistency.csv (per scenario and filter: RMSE, RMSE / PCRB, "
               "the tests), pcrb.csv (the bound per step), table3.csv.", "",
               "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
-    return write_summary(out, lines)
+    return common.write_summary(out, lines)
 
 
 def _regime(settings: Settings, config: str, wall: float) -> list[str]:
@@ -804,8 +772,8 @@ def _table3_section(table: pd.DataFrame, settings: Settings) -> list[str]:
     cols = ["reading", "scenario", "sigma_q2", "sigma_r2", "paper EKF", "paper MF-IAE", *FILTERS]
     div = {c: int(table[c].sum()) for c in table.columns if c.endswith("diverged")}
     return ["## Table 3: eta (eq 44), mean over realisations", "",
-            *markdown_table(cols, ([f"{row[c]:.4f}" if isinstance(row[c], float) else str(row[c]) for c in cols]
-                                   for _, row in table.iterrows())),
+            *common.markdown_table(cols, ([f"{row[c]:.4f}" if isinstance(row[c], float) else str(row[c])
+                                           for c in cols] for _, row in table.iterrows())),
             "", "## Where we agree with the paper, and where not", "", *agreement(table), "",
             f"Diverged realisations (error not finite or above {settings.divergence_threshold:g}): "
             + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), ""]
@@ -852,7 +820,7 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
         e1 = eps[(eps.reading == rd) & (eps.scenario == eps.scenario.min())]
         sc = int(e1["scenario"].iloc[0])
         for stat, label, ny in (("anees", "average NEES", 4), ("anis", "average NIS", 2)):
-            fig, axes = new_figure(1, 1, figsize=(8, 4))
+            fig, axes = common.new_figure(1, 1, figsize=(8, 4))
             ax = axes[0, 0]
             first = e1[e1["filter"] == FILTERS[0]]
             lo, hi = ("nees_lo", "nees_hi") if stat == "anees" else ("nis_lo", "nis_hi")
@@ -862,11 +830,11 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
                 f = e1[e1["filter"] == name]
                 ax.plot(f["time"], f[stat], lw=0.9, label=name)
             ax.axhline(ny, color="k", lw=0.6, ls=":")
-            style_axes(ax, "time [s]", f"{label} over {settings.runs} runs",
-                       f"Seed 000: {label} with its chi-square band, scenario {sc} ({rd} reading)", True, 7, 2)
-            save_figure(fig, out / f"figure_{stat[1:]}_{rd}.png")
+            common.style_axes(ax, "time [s]", f"{label} over {settings.runs} runs",
+                              f"Seed 000: {label} with its chi-square band, scenario {sc} ({rd} reading)", True, 7, 2)
+            common.save_figure(fig, out / f"figure_{stat[1:]}_{rd}.png")
         b = bound[(bound.reading == rd) & (bound.scenario == sc)] if len(bound) else bound
-        fig, axes = new_figure(4, 1, figsize=(8, 9), sharex=True)
+        fig, axes = common.new_figure(4, 1, figsize=(8, 9), sharex=True)
         for a, x in enumerate(STATES):
             ax = axes[a, 0]
             for name in ("EKF", "MF-IAE", "SWML", TRUE_EKF):
@@ -874,11 +842,11 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
                 ax.plot(f["time"], np.sqrt(f[f"mse_{x}"]), lw=0.9, label=name)
             if len(b):
                 ax.plot(b["time"].iloc[1:], np.sqrt(b[f"mse_{x}"].iloc[1:]), "k-", lw=1.4, label="sqrt(PCRB)")
-            style_axes(ax, ylabel=f"RMSE {x}", log=True)
+            common.style_axes(ax, ylabel=f"RMSE {x}", log=True)
         axes[0, 0].legend(fontsize=7, ncol=3)
         axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"Seed 000: RMSE over {settings.runs} runs against the PCRB, scenario {sc} ({rd} reading)")
-        save_figure(fig, out / f"figure_rmse_pcrb_{rd}.png")
+        common.save_figure(fig, out / f"figure_rmse_pcrb_{rd}.png")
 
 
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
@@ -889,24 +857,24 @@ def _figures(eps, examples, settings: Settings, out: Path) -> None:
             continue
         ex = examples[(rd, 1)]
         t = np.arange(ex["truth"].shape[0]) * settings.T
-        fig, axes = new_figure(4, 1, figsize=(8, 8), sharex=True)
+        fig, axes = common.new_figure(4, 1, figsize=(8, 8), sharex=True)
         for a in range(4):
             ax = axes[a, 0]
             ax.plot(t, ex["truth"][:, a], "k-", lw=1.2, label="truth")
             for name, style in (("EKF", "b--"), ("MF-IAE", "r-.")):
                 ax.plot(t, ex[f"est {name}"][:, a], style, lw=0.9, label=name)
-            style_axes(ax, ylabel=STATES[a])
+            common.style_axes(ax, ylabel=STATES[a])
         axes[0, 0].legend(fontsize=8)
         axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"Seed 000 Figure 3: scenario 1, realisation 0 ({rd} reading)")
-        save_figure(fig, out / f"figure3_{rd}.png")
-        fig, axes = new_figure(1, 1, figsize=(8, 3.5))
+        common.save_figure(fig, out / f"figure3_{rd}.png")
+        fig, axes = common.new_figure(1, 1, figsize=(8, 3.5))
         for name in FILTERS:
             e = eps[(eps.reading == rd) & (eps.scenario == 1) & (eps["filter"] == name)]
             axes[0, 0].plot(e["time"], e["eps"], lw=1, label=name)
-        style_axes(axes[0, 0], "time [s]", "eps_k (eq 43)",
-                   f"Seed 000 Figure 4: scenario 1, {settings.runs} realisations ({rd} reading)", True, 8)
-        save_figure(fig, out / f"figure4_{rd}.png")
+        common.style_axes(axes[0, 0], "time [s]", "eps_k (eq 43)",
+                          f"Seed 000 Figure 4: scenario 1, {settings.runs} realisations ({rd} reading)", True, 8)
+        common.save_figure(fig, out / f"figure4_{rd}.png")
 
 
 class Seed000(Experiment, register="seed000"):

@@ -26,17 +26,7 @@ import pandas as pd
 from fmu_models.errors import ConfigurationError
 from fmu_models.infra.checks import positive
 
-from . import metrics, seed000
-from .common import (
-    new_figure,
-    pcrb_columns,
-    report_folder,
-    run_campaign,
-    save_figure,
-    settings_table,
-    write_summary,
-    write_tables,
-)
+from . import common, metrics, seed000
 from .experiment import Experiment
 from .settings import apply_overrides, to_toml
 
@@ -105,8 +95,8 @@ def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: s
                          "eta_over_true_ekf": float(np.mean(pr["eta"]) / np.mean(true_eta)),
                          "eta_over_ekf": float(np.mean(pr["eta"]) / np.mean(ekf)),
                          "worse_than_ekf": float(np.mean(pr["eta"] > ekf)) if name in ADAPTIVE else 0.0,
-                         **pcrb_columns(pr["rmse"], bound[1:], STATES), "diverged": int(pr["diverged"].sum()), **test,
-                         **late})
+                         **common.pcrb_columns(pr["rmse"], bound[1:], STATES), "diverged": int(pr["diverged"].sum()),
+                         **test, **late})
     return rows
 
 
@@ -126,17 +116,15 @@ def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n
 
     Parameters
     ----------
-    settings
-        The sweep's settings.
-    backend, n_jobs, progress
-        As :func:`~cosim.experiments.campaign.run_tasks`.
+    settings, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
     """
     s = settings.campaign
     cells = [(fq, fr) for fq in settings.factors for fr in settings.factors]
     chunks = [cells[i:i + len(settings.factors)] for i in range(0, len(cells), len(settings.factors))]
     tasks = [(cell_task, dict(scenario_index=i, cells=c, settings=s))
              for i in range(len(s.scenarios)) for c in chunks]
-    return run_campaign(tasks, lambda results, wall: SweepResult(
+    return common.run_campaign(tasks, lambda results, wall: SweepResult(
         pd.DataFrame([r for rows in results if rows for r in rows]), wall), "seed000 sweep", backend, n_jobs, progress)
 
 
@@ -233,21 +221,17 @@ def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_
     ----------
     table, wall
         The fields of :class:`SweepResult`.
-    settings
-        The sweep's settings.
-    out_dir
-        Output folder.
-    partial
-        The sweep was interrupted.
+    settings, out_dir, partial
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
     """
-    out = report_folder(out_dir, to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n",
-                        {"sweep.csv": table, "sweep.parquet": table})
+    toml = to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"
+    out = common.report_folder(out_dir, toml, {"sweep.csv": table, "sweep.parquet": table})
     lines = ["# Seed 000 robustness sweep: EKF, IAE, MF-IAE, the EM-learned EKF and SWML from wrong Q0 and R0", ""]
     if partial:
         lines += ["**PARTIAL RESULTS: the sweep was interrupted; only finished cells are here.**", ""]
     if len(table):
         g = goals(table, settings)
-        write_tables(out, {"goals.csv": g})
+        common.write_tables(out, {"goals.csv": g})
         _heatmaps(table, settings, out)
         lines += _goal_lines(table, g, wall, settings)
         for title, metric, how, fmt, names in GRIDS:
@@ -255,8 +239,8 @@ def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_
             for name in names:
                 lines += [f"**{name}**", "", _grid(table, name, metric, how).to_markdown(floatfmt=fmt), ""]
         lines += ["Heat maps: " + ", ".join(sorted(p.name for p in out.glob("heatmap_*.png"))), ""]
-    lines += ["## Settings of every cell", "", *settings_table(settings.campaign, ("q0_factor", "r0_factor"))]
-    return write_summary(out, lines)
+    lines += ["## Settings of every cell", "", *common.settings_table(settings.campaign, ("q0_factor", "r0_factor"))]
+    return common.write_summary(out, lines)
 
 
 def _goal_lines(table: pd.DataFrame, g: pd.DataFrame, wall: float, settings: SweepSettings) -> list[str]:
@@ -299,7 +283,7 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
                                     ("anees", "mean", "average NEES (nx = 4)", True),
                                     ("consistent", "sum", "scenarios consistent (of 4)", False),
                                     ("worse_than_ekf", "mean", "share of runs worse than the EKF", False)):
-        fig, axes = new_figure(1, len(FILTERS), figsize=(4.6 * len(FILTERS), 4.4))
+        fig, axes = common.new_figure(1, len(FILTERS), figsize=(4.6 * len(FILTERS), 4.4))
         grids = [_grid(table, name, metric, how).to_numpy() for name in FILTERS]
         values = np.log10(np.concatenate([g.ravel() for g in grids]).clip(1e-3)) if log else \
             np.concatenate([g.ravel() for g in grids])
@@ -319,7 +303,7 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
                         color="w" if (shown[i, j] - vmin) < 0.5 * (vmax - vmin) else "k")
         fig.colorbar(im, ax=list(axes[0]), shrink=0.8, label=("log10 " if log else "") + title)
         fig.suptitle(f"Seed 000 sweep: {title}" + (", mean over scenarios" if how == "mean" else ""))
-        save_figure(fig, out / f"heatmap_{metric}.png")
+        common.save_figure(fig, out / f"heatmap_{metric}.png")
 
 
 class Sweep(Experiment, register="seed000-sweep"):

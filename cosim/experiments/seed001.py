@@ -35,26 +35,7 @@ from estimators import EKF, KF, discretize, posterior_crb
 from fmu_models import get_model
 
 from ..components.sources import Constant
-from . import metrics
-from .common import (
-    batch_run,
-    consistency_section,
-    markdown_table,
-    master_runs,
-    new_figure,
-    noise_components,
-    pcrb_columns,
-    pcrb_row,
-    report_folder,
-    rmse_columns,
-    run_campaign,
-    save_figure,
-    seed_pairs,
-    settings_table,
-    simulate_truth,
-    style_axes,
-    write_summary,
-)
+from . import common, metrics
 from .experiment import Experiment
 from .settings import check_common, check_consistency, to_toml
 
@@ -174,7 +155,7 @@ def case_bound(s: Settings, case: str, X: np.ndarray, us: np.ndarray) -> np.ndar
 
 def _truth(case: str, s: Settings, seeds: list[tuple[int, int]]):
     us = np.full((s.steps + 1, 1), s.force)
-    X, Y = simulate_truth(get_model("cartpole"), CASES[case], us, s.T, s.q, MEASURED, s.r_std, seeds)
+    X, Y = common.simulate_truth(get_model("cartpole"), CASES[case], us, s.T, s.q, MEASURED, s.r_std, seeds)
     return X, Y, us
 
 
@@ -192,10 +173,10 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
         Which realisations (default all).
     """
     s = settings
-    X, Y, us = _truth(case, s, seed_pairs(s, list(CASES).index(case), runs))
+    X, Y, us = _truth(case, s, common.seed_pairs(s, list(CASES).index(case), runs))
     errors, nees, nis, white = {}, {}, {}, {}
     for n, m in make_filters(s, case).items():
-        res = batch_run(m, X, Y, us)
+        res = common.batch_run(m, X, Y, us)
         errors[n], nees[n], nis[n] = res.x - X, res.nees, res.nis
         white[n] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
     return _summary(errors, s, nees, nis, white, case_bound(s, case, X, us))
@@ -211,10 +192,11 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
         As :func:`fast_task`.
     """
     s = settings
-    model, seeds, makers = get_model("cartpole"), seed_pairs(s, list(CASES).index(case), runs), make_filters(s, case)
-    X, est, nees, nis = master_runs(model, dict(zip(model.state_names, CASES[case])), _source(s),
-                                    *noise_components(model, s.T, s.q, MEASURED, s.r_std, *seeds[0]), makers, s.T,
-                                    s.duration, seeds)
+    model, seeds = get_model("cartpole"), common.seed_pairs(s, list(CASES).index(case), runs)
+    makers = make_filters(s, case)
+    X, est, nees, nis = common.master_runs(model, dict(zip(model.state_names, CASES[case])), _source(s),
+                                           *common.noise_components(model, s.T, s.q, MEASURED, s.r_std, *seeds[0]),
+                                           makers, s.T, s.duration, seeds)
     truth, _, us = _truth(case, s, seeds)
     return _summary({n: est[n] - X for n in makers}, s, nees, nis, {n: metrics.no_whiteness() for n in makers},
                     case_bound(s, case, truth, us))
@@ -240,17 +222,13 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
 
     Parameters
     ----------
-    settings
-        The settings.
-    path
-        ``fast`` or ``master``.
-    backend, n_jobs, progress
-        As :func:`~cosim.experiments.campaign.run_tasks`.
+    settings, path, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
     """
     fn = fast_task if path == "fast" else master_task
-    return run_campaign([(fn, dict(case=c, settings=settings)) for c in CASES],
-                        lambda res, wall: _result(res, settings, wall), f"seed001 ({path})", backend, n_jobs, progress,
-                        partial=False)
+    return common.run_campaign([(fn, dict(case=c, settings=settings)) for c in CASES],
+                               lambda res, wall: _result(res, settings, wall), f"seed001 ({path})", backend, n_jobs,
+                               progress, partial=False)
 
 
 def _result(res: list, s: Settings, wall: float) -> Seed001Result:
@@ -260,9 +238,10 @@ def _result(res: list, s: Settings, wall: float) -> Seed001Result:
             for case, r in zip(CASES, res) for j, tr in enumerate(times)]
     cons = []
     for case, r in zip(CASES, res):
-        cons += [{"case": case, "filter": n, **rmse_columns(r[n]["rmse"], STATES),
-                  **pcrb_columns(r[n]["rmse"], r["bound"][1:], STATES), **r[n]["tests"]} for n in FILTERS]
-        cons.append(pcrb_row({"case": case}, r["bound"], s.runs, STATES))
+        cons += [{"case": case, "filter": n,
+                  **{f"rmse_{x}": float(np.sqrt(np.mean(r[n]["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
+                  **common.pcrb_columns(r[n]["rmse"], r["bound"][1:], STATES), **r[n]["tests"]} for n in FILTERS]
+        cons.append(common.pcrb_row({"case": case}, r["bound"], s.runs, STATES))
     return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall, pd.DataFrame(cons))
 
 
@@ -271,18 +250,13 @@ def write_report(result: Seed001Result, settings: Settings, out_dir, path: str =
 
     Parameters
     ----------
-    result
-        What :func:`run` returned.
-    settings
-        The settings.
-    out_dir
-        Output folder.
-    path
-        The path that ran.
+    result, settings, out_dir, path
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
+        (``result``: what :func:`run` returned).
     """
     table, summary, wall, cons = result
     s = settings
-    out = report_folder(out_dir, to_toml(s, "seed001"), {"errors_at_times.csv": table, "consistency.csv": cons})
+    out = common.report_folder(out_dir, to_toml(s, "seed001"), {"errors_at_times.csv": table, "consistency.csv": cons})
     _error_figure(summary, s, out)
     _limit_figures(summary, s, out)
     shown = cons[["case", "filter", *[f"rmse_{x}" for x in STATES], *[f"pcrb_ratio_{x}" for x in STATES]]]
@@ -290,20 +264,20 @@ def write_report(result: Seed001Result, settings: Settings, out_dir, path: str =
              f"Regime: both filters given the true noise (q = {s.q:g} per step, r = {s.r_std:g}^2), started at the "
              f"true state with P0 = {s.P0:g} I; {s.runs} realisations per case, {s.duration:g} s ({s.steps} steps), "
              f"{path} path; wall time {wall:.2f} s.", "",
-             "## Settings", "", *settings_table(s), "",
+             "## Settings", "", *common.settings_table(s), "",
              "## Mean absolute cart-position error", "", table.to_markdown(index=False, floatfmt=".4g"), "",
              "Paper (seed 001 Table 1, position errors [m]):", "", PAPER.to_markdown(index=False), "",
              "## Divergence and RMSE", "",
-             *markdown_table(["case", "filter", "diverged runs", "median time of divergence [s]",
-                              *[f"RMSE {x}" for x in STATES]], _divergence_rows(summary)), "",
+             *common.markdown_table(["case", "filter", "diverged runs", "median time of divergence [s]",
+                                     *[f"RMSE {x}" for x in STATES]], _divergence_rows(summary)), "",
              "## RMSE per state over the posterior Cramér-Rao bound", "",
              f"The PCRB is the lowest mean-square error any estimator can have on these {s.runs} realisations "
              f"(prior: {PCRB_PRIORS[s.pcrb_prior]}); each ratio is the RMSE over the realisations and steps 1..K "
              "over the root of the bound's mean over the same steps (1 is the best possible; pcrb_ratio_se_* in "
              "consistency.csv: the Monte Carlo standard error of each ratio).", "",
-             shown.to_markdown(index=False, floatfmt=".4g"), "", *consistency_section(cons, ["case"], s, path),
+             shown.to_markdown(index=False, floatfmt=".4g"), "", *common.consistency_section(cons, ["case"], s, path),
              "Figures: " + ", ".join(sorted(p.name for p in out.glob("*.png")))]
-    return write_summary(out, lines)
+    return common.write_summary(out, lines)
 
 
 def _divergence_rows(summary: dict):
@@ -320,39 +294,39 @@ def _divergence_rows(summary: dict):
 def _error_figure(summary: dict, settings: Settings, out: Path) -> None:
     """The RMS error over the states, mean over the realisations, per case."""
     t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
+    fig, axes = common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
     for (case, res), ax in zip(summary.items(), axes[:, 0]):
         for n in FILTERS:
             ax.semilogy(t, res[n]["rms_mean"], label=n)
         ax.axhline(settings.divergence_error, color="k", ls=":", lw=0.8, label="divergence threshold")
-        style_axes(ax, "time [s]", title=f"{case}: RMS error over the states, mean of {settings.runs} realisations",
-                   legend=8)
-    save_figure(fig, out / "errors.png")
+        common.style_axes(ax, "time [s]", legend=8,
+                          title=f"{case}: RMS error over the states, mean of {settings.runs} realisations")
+    common.save_figure(fig, out / "errors.png")
 
 
 def _limit_figures(summary: dict, settings: Settings, out: Path) -> None:
     """Average NEES with its band, and RMSE against the PCRB, per case."""
     t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
+    fig, axes = common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
     for (case, res), ax in zip(summary.items(), axes[:, 0]):
         lo, hi = res[FILTERS[0]]["nees_band"]
         ax.fill_between(t[1:], lo, hi, color="0.85", label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
         for n in FILTERS:
             ax.semilogy(t[1:], res[n]["anees"], lw=0.8, label=n)
-        style_axes(ax, "time [s]", title=f"{case}: average NEES over {settings.runs} realisations", legend=8)
-    save_figure(fig, out / "nees.png")
-    fig, axes = new_figure(4, len(summary), figsize=(5 * len(summary), 9), sharex=True)
+        common.style_axes(ax, "time [s]", title=f"{case}: average NEES over {settings.runs} realisations", legend=8)
+    common.save_figure(fig, out / "nees.png")
+    fig, axes = common.new_figure(4, len(summary), figsize=(5 * len(summary), 9), sharex=True)
     for j, (case, res) in enumerate(summary.items()):
         for a, x in enumerate(STATES):
             ax = axes[a, j]
             for n in FILTERS:
                 ax.semilogy(t[1:], res[n]["rmse_k"][:, a], lw=0.8, label=n)
             ax.semilogy(t[1:], np.sqrt(res["bound"][1:, a]), "k-", lw=1.2, label="sqrt(PCRB)")
-            style_axes(ax, ylabel=f"RMSE {x}")
+            common.style_axes(ax, ylabel=f"RMSE {x}")
         axes[0, j].set_title(case)
         axes[0, j].legend(fontsize=7)
         axes[-1, j].set_xlabel("time [s]")
-    save_figure(fig, out / "rmse_pcrb.png")
+    common.save_figure(fig, out / "rmse_pcrb.png")
 
 
 class Seed001(Experiment, register="seed001"):

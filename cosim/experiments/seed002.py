@@ -34,8 +34,8 @@ from ..components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
 from ..components.plant_model import ModelComponent
 from ..core.master import Cosimulation
 from ..fmi.fmu_component import FMUComponent
+from . import common
 from .campaign import realisation_seeds
-from .common import new_figure, report_folder, run_campaign, save_figure, settings_table, style_axes, write_summary
 from .experiment import Experiment
 from .settings import check_common, to_toml
 
@@ -178,17 +178,13 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
 
     Parameters
     ----------
-    settings
-        The settings.
-    path
-        ``fast`` or ``master``.
-    backend, n_jobs, progress
-        As :func:`~cosim.experiments.campaign.run_tasks`.
+    settings, path, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
     """
     chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
     tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
              for c in CASES for ch in chunks]
-    return run_campaign(tasks, _result, f"seed002 ({path})", backend, n_jobs, progress, partial=False)
+    return common.run_campaign(tasks, _result, f"seed002 ({path})", backend, n_jobs, progress, partial=False)
 
 
 def _result(res: list, wall: float) -> Seed002Result:
@@ -223,33 +219,30 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
     ----------
     per_run, traces, wall
         The fields of :class:`Seed002Result`.
-    settings
-        The settings.
-    out_dir
-        Output folder.
-    path
-        The path that ran.
+    settings, out_dir, path
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
     """
     table = summary_table(per_run)
-    out = report_folder(out_dir, to_toml(settings, "seed002"), {"per_run.csv": per_run, "ekf_vs_inputs.csv": table})
-    fig, axes = new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
+    out = common.report_folder(out_dir, to_toml(settings, "seed002"),
+                               {"per_run.csv": per_run, "ekf_vs_inputs.csv": table})
+    fig, axes = common.new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
     for c, (case, df) in enumerate(traces.items()):
         for j, (x, fed) in enumerate(zip(STATES, ("fusion.alpha", "fusion.alpha_dot", "encoder.phi_dot"))):
             ax = axes[j, c]
             ax.plot(df.index, df[fed], ".", ms=1.5, color="0.7", label="EKF input")
             ax.plot(df.index, df[f"plant.{x}"], "k-", lw=1, label="truth")
             ax.plot(df.index, df[f"ekf.{x}"], "r--", lw=1, label="EKF")
-            style_axes(ax, ylabel=x)
+            common.style_axes(ax, ylabel=x)
         axes[0, c].set_title(case)
         axes[0, c].legend(fontsize=7)
         axes[-1, c].set_xlabel("time [s]")
-    save_figure(fig, out / "estimates.png")
+    common.save_figure(fig, out / "estimates.png")
     agg = per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
                                                "alpha amplitude ratio", "max |i| [A]"]].mean()
-    return write_summary(out, [
+    return common.write_summary(out, [
         f"# Seed 002: wheel pendulum, EKF on the sensor chain, LQR on the estimate ({path} path)", "",
         f"{settings.runs} realisations per case, {settings.duration:g} s; wall time {wall:.2f} s.", "",
-        "## Settings", "", *settings_table(settings), "",
+        "## Settings", "", *common.settings_table(settings), "",
         "## What the EKF adds over its inputs (RMSE over the second half, mean of realisations)", "",
         table.to_markdown(index=False, floatfmt=".4g"), "",
         "## Loop, offset, lag and attenuation (means; balanced = fraction of realisations)", "",
