@@ -145,9 +145,8 @@ def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> B
     """
     R = X.shape[0]
     out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
-    e = out.x[:, 1:] - X[:, 1:]
     with np.errstate(invalid="ignore", over="ignore"):
-        nees = np.einsum("rki,rki->rk", e, np.linalg.solve(out.P[:, 1:], e[..., None])[..., 0])
+        nees = metrics.nees(out.x[:, 1:] - X[:, 1:], out.P[:, 1:])
     return BatchOutcome(out.x, nees, out.nis, out.failed.copy(), out.innovation, out.S)
 
 
@@ -182,7 +181,8 @@ def master_runs(model, start: dict, source, noise, sensor, makers: dict, T: floa
 
     X = np.empty((len(seeds), round(duration / T) + 1, model.nx))
     est = {n: np.empty_like(X) for n in makers}
-    nees, nis = ({n: np.empty((len(seeds), X.shape[1] - 1)) for n in makers} for _ in range(2))
+    nees = {n: np.empty((len(seeds), X.shape[1] - 1)) for n in makers}
+    nis = {n: np.empty_like(nees[n]) for n in makers}
     with tempfile.TemporaryDirectory() as tmp:
         plant = FMUComponent("plant", build_fmu(model, fmu_dir or tmp), T, start=start)
         master = MasterRealisations(plant, source, noise, sensor, makers, T)

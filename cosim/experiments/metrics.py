@@ -170,12 +170,8 @@ def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence:
     ----------
     nees, nis, nx, ny, confidence
         As :func:`band_row`.
-    innovation
-        Innovations (runs, K, ny), or None (whiteness not tested).
-    S
-        Their covariances (runs, K, ny, ny).
-    lags
-        Whiteness at lags 1..lags.
+    innovation, S, lags
+        As :func:`whiteness_row` (``innovation`` None: whiteness not tested).
     """
     return consistency_row(nees, nis, nx, ny, confidence,
                            None if innovation is None else whiteness_row(innovation, S, confidence, lags))

@@ -156,7 +156,6 @@ class Settings:
         for name in ("q0_factor", "r0_factor"):
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
-
         for name in ("swml_window", "swml_every", "swml_early_every"):
             positive_int(getattr(self, name), name)
         if self.swml_prior_sd is not None:
