@@ -244,10 +244,8 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
     Parameters
     ----------
-    system
-        The discrete model.
-    s, q, r
-        The campaign's settings, the true process and measurement variances.
+    system, s, q, r
+        As :func:`learn_noise`.
     learned
         The EM-learned (q, r), for the EM EKF.
     """
