@@ -226,9 +226,8 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
     for (d, q) in conn:
         if d in connected:
             connected[d].add(q)
-    rank = {c.name: i for i, c in enumerate(components)}
     split: set[str] = set()
-    while True:
+    while True:                 # split the reentrant components of a cycle, while that breaks one
         units = [u for c in components for u in _units(c, connected[c.name], c.name in split)]
         edges, why = _graph(units, conn)
         cyclic = [s for s in _sccs(units, edges) if len(s) > 1 or s[0] in edges[s[0]]]
@@ -238,23 +237,33 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
         if not more:
             break
         split |= more
-    loop_of = {}
-    for i, s in enumerate(cyclic):
-        if loops != "iterate":
-            raise ConfigurationError(
-                f"algebraic loop: {_cycle(s, edges, why)}. Each of these components' outputs depends "
-                "directly on its input at the same instant, so no order can evaluate them. Break the "
-                "loop (a component without feedthrough, e.g. an FMU with feedthrough='none', or a "
-                "delay), or solve it with loops='iterate'")
-        stiff = sorted({u.comp.name for u in s if not u.comp.reentrant})
-        if stiff:
-            raise ConfigurationError(
-                f"algebraic loop {_cycle(s, edges, why)} cannot be iterated: {', '.join(stiff)} "
-                "cannot evaluate its outputs twice at one instant (reentrant = False)")
-        for u in s:
-            loop_of[u] = i
-    # Kahn's algorithm on the condensation, ties broken by the components' list order
-    node_of = {u: (("loop", loop_of[u]) if u in loop_of else u) for u in units}
+    for s in cyclic:
+        _check_loop(s, edges, why, loops)
+    node_of = {u: u for u in units} | {u: ("loop", i) for i, s in enumerate(cyclic) for u in s}
+    rank = {c.name: i for i, c in enumerate(components)}
+    return _topological(units, edges, node_of, lambda u: (rank[u.comp.name], u.part != "free"))
+
+
+def _check_loop(scc: list, edges: dict, why: dict, loops: str) -> None:
+    """Refuse the algebraic loop ``scc`` unless ``loops="iterate"`` and every one of its
+    components can evaluate its outputs twice at an instant."""
+    if loops != "iterate":
+        raise ConfigurationError(
+            f"algebraic loop: {_cycle(scc, edges, why)}. Each of these components' outputs depends "
+            "directly on its input at the same instant, so no order can evaluate them. Break the "
+            "loop (a component without feedthrough, e.g. an FMU with feedthrough='none', or a "
+            "delay), or solve it with loops='iterate'")
+    stiff = sorted({u.comp.name for u in scc if not u.comp.reentrant})
+    if stiff:
+        raise ConfigurationError(
+            f"algebraic loop {_cycle(scc, edges, why)} cannot be iterated: {', '.join(stiff)} "
+            "cannot evaluate its outputs twice at one instant (reentrant = False)")
+
+
+def _topological(units: list[Unit], edges: dict, node_of: dict, key) -> list[Group]:
+    """The groups in a topological order of the condensation (``node_of``: each unit's node,
+    itself or its loop), by Kahn's algorithm; among the nodes ready, the one whose first
+    member (by ``key``) comes first."""
     members: dict = {}
     for u in units:
         members.setdefault(node_of[u], []).append(u)
@@ -266,12 +275,10 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
             if a != b and b not in succ[a]:
                 succ[a].add(b)
                 indeg[b] += 1
-
-    # the key of a node: its first member in the components' list order (free part first)
     keys = {}
     for n, ms in members.items():
-        ms.sort(key=lambda u: (rank[u.comp.name], u.part != "free"))
-        keys[n] = (rank[ms[0].comp.name], ms[0].part != "free")
+        ms.sort(key=key)
+        keys[n] = key(ms[0])
     seq = {n: i for i, n in enumerate(members)}          # a total order among equal keys
     ready = [(keys[n], seq[n], n) for n in members if indeg[n] == 0]
     heapq.heapify(ready)
