@@ -37,6 +37,7 @@ a linear loop) or by fixed-point iteration (``loop_solver="fixed-point"``), to
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -394,11 +395,7 @@ class Cosimulation:
         ResourceError
             The recording would not fit in memory (the message gives the numbers).
         """
-        n, m = self._steps(stop_time, start_time, output_interval)
-        sel = select_signals(self.signal_names, signals)
-        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 2, float(start_time), self.step_size, m,
-                          self._integer_columns(sel))
-        return Run(self, sink, sel, n, m, float(start_time), progress).execute()
+        return self._run(MemorySink, stop_time, start_time, signals, output_interval, progress)
 
     def run_to_parquet(self, path, stop_time: float, start_time: float = 0.0, *, signals=None,
                        output_interval: float | None = None, progress: bool | None = None,
@@ -410,14 +407,16 @@ class Cosimulation:
         interrupted run leaves ``<name>.partial.parquet`` with the rows so far (named in
         the error). ``pandas.read_parquet(path)`` gives the DataFrame :meth:`run` returns.
         """
+        return self._run(partial(ParquetSink, path, chunk_rows=chunk_rows), stop_time, start_time, signals,
+                         output_interval, progress)
+
+    def _run(self, sink_type, stop_time, start_time, signals, output_interval, progress):
+        """A run (see :mod:`cosim.core.run`) recording into ``sink_type(columns, n_rows, t0, step,
+        every, int_columns=...)``; the arguments as :meth:`run` takes them."""
         n, m = self._steps(stop_time, start_time, output_interval)
         sel = select_signals(self.signal_names, signals)
-        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 2, float(start_time),
-                           self.step_size, m, chunk_rows, self._integer_columns(sel))
+        exact = {pos: ("Int64" if self.signal_types[i] == CLOCK else self.signal_types[i]) for pos, i in enumerate(sel)
+                 if port_kind(self.signal_types[i]) in ("integer", "clock")}      # integer columns, kept exact
+        sink = sink_type([self.signal_names[i] for i in sel], n // m + 2, float(start_time), self.step_size, m,
+                         int_columns=exact)
         return Run(self, sink, sel, n, m, float(start_time), progress).execute()
-
-    def _integer_columns(self, sel) -> dict[int, str]:
-        """The recorded columns of integer signals (position in ``sel``: FMI type), kept exact."""
-
-        return {pos: ("Int64" if self.signal_types[i] == CLOCK else self.signal_types[i]) for pos, i in enumerate(sel)
-                if port_kind(self.signal_types[i]) in ("integer", "clock")}

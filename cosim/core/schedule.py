@@ -130,44 +130,36 @@ def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
 
 def _sccs(nodes: list, edges: dict) -> list[list]:
     """Strongly connected components (Tarjan, iterative), each in discovery order."""
-    index, low, on, stack, out = {}, {}, set(), [], []
-    counter = [0]
+    index, low, on, stack, work, out = {}, {}, set(), [], [], []
+
+    def visit(v) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        work.append((v, iter(edges.get(v, ()))))
+
     for root in nodes:
         if root in index:
             continue
-        work = [(root, iter(edges.get(root, ())))]
-        index[root] = low[root] = counter[0]
-        counter[0] += 1
-        stack.append(root)
-        on.add(root)
+        visit(root)
         while work:
             v, it = work[-1]
-            advanced = False
             for w in it:
                 if w not in index:
-                    index[w] = low[w] = counter[0]
-                    counter[0] += 1
-                    stack.append(w)
-                    on.add(w)
-                    work.append((w, iter(edges.get(w, ()))))
-                    advanced = True
+                    visit(w)
                     break
                 if w in on:
                     low[v] = min(low[v], index[w])
-            if advanced:
-                continue
-            work.pop()
-            if work:
-                low[work[-1][0]] = min(low[work[-1][0]], low[v])
-            if low[v] == index[v]:
-                comp = []
-                while True:
-                    w = stack.pop()
-                    on.discard(w)
-                    comp.append(w)
-                    if w == v:
-                        break
-                out.append(comp)
+            else:                               # every successor seen: v is done
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while not comp or comp[-1] != v:
+                        comp.append(stack.pop())
+                        on.discard(comp[-1])
+                    out.append(comp)
     return out
 
 
