@@ -6,10 +6,10 @@ arrays (``values``; ``integers``, the exact values of integer and Boolean signal
 ``source``, what the components read: ``values`` itself, or with ``order="jacobi"`` a copy
 taken before each instant), the sink and its row writer, the bound calls, the schedule
 entries (per base step of the hyperperiod, the output calls and the update calls made
-then), the position (base step ``k``, next row ``j``, and the block of :data:`BLOCK` base
-steps being run: its first base step ``k0`` and first row ``jb``), the phase (``reset``,
-``bind``, ``output``, ``update``), the call being made (``failing``), a component's stop
-request, the progress bar and the clock board.
+then), the position (base step ``k``, next row ``j``, and the block of
+:data:`~cosim.core.native_loop.BLOCK` base steps being run: its first base step ``k0`` and
+first row ``jb``), the phase (``reset``, ``bind``, ``output``, ``update``), the call being
+made (``failing``), a component's stop request, the progress bar and the clock board.
 
 1. Setup (:meth:`Run.setup`): every component is reset to the start time, the clocked ones
    attached to the clock board, each one bound to the signal arrays; the schedule entries
@@ -78,7 +78,7 @@ class Run:
         self.values = np.zeros(len(cosim.signal_names))
         self.integers = np.zeros(len(self.values), dtype=np.int64)
         self.source = np.zeros_like(self.values) if self.jacobi else self.values
-        self.record = RowWriter(sink, self.values, self.integers, sel)
+        self.writer = RowWriter(sink, self.values, self.integers, sel)
         self.k = self.j = self.jb = self.k0 = 0
         self.phase, self.failing, self.stop = "reset", None, None
         self.bound, self.owner, self.schedule = {}, {}, []
@@ -153,9 +153,9 @@ class Run:
             if self.source is self.values and hasattr(c, "bind"):
                 return c.bind(self.values, inputs, outputs, self.integers)
             return bind_protocol(c, self.values, self.source, inputs, outputs, self.integers)
+        except CosimError:
+            raise
         except Exception as e:
-            if isinstance(e, CosimError):
-                raise
             raise CosimError(f"component {c.name!r} failed before the run (bind): {e}", c.name) from e
 
     def _entry(self, due: frozenset) -> tuple[tuple, tuple]:
@@ -187,11 +187,11 @@ class Run:
 
     # ---------------------------------------------------------------- the Python loop
     def python_loop(self) -> None:
-        """The base steps in Python, by blocks of :data:`BLOCK`: at each, the due components'
-        outputs, the row (every ``m`` base steps), their updates."""
-        n, m, t0, h, schedule, values, source, jacobi = (self.n, self.m, self.t0, self.h, self.schedule, self.values,
-                                                         self.source, self.jacobi)
-        record, bar, L = self.record.write, self.bar, len(schedule)
+        """The base steps in Python, by blocks of :data:`~cosim.core.native_loop.BLOCK`: at
+        each, the due components' outputs, the row (every ``m`` base steps), their updates."""
+        n, m, t0, h, L = self.n, self.m, self.t0, self.h, len(self.schedule)
+        schedule, values, source, jacobi = self.schedule, self.values, self.source, self.jacobi
+        record, bar = self.writer.write, self.bar
         guarded = crash_guard.active()               # an FMU's crash names the time
         step_now = np.zeros(1, dtype=np.int64)
         if guarded:
@@ -273,7 +273,7 @@ class Run:
         request.time = ts
         logging.getLogger("cosim").warning("%s asked to stop the run at t = %g s%s; the run ends there",
                                            request.component, ts, f" ({request.reason})" if request.reason else "")
-        self.j = self.record.write(self.j)
+        self.j = self.writer.write(self.j)
 
     def abort(self):
         """The rows recorded so far, flushed: the sink's partial result (see its ``abort``)."""
