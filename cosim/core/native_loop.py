@@ -55,7 +55,7 @@ class NativeLoop:
 
     def __init__(self, run) -> None:
         self.run, self.program = run, run.program
-        rec, program = run.writer, run.program
+        rec, program = run.writer, self.program
         self.sel = np.ascontiguousarray(rec.sel, dtype=np.int64)          # kept alive with the state
         self.isel = np.ascontiguousarray(rec.int_sel if rec.int_sel is not None else np.zeros(0), dtype=np.int64)
         arrays = dict(values=run.values, integers=run.integers, buf=rec.buffer, ibuf=rec.ibuffer, sel=self.sel,
