@@ -223,18 +223,14 @@ class Cosimulation:
         self._slots = slots
         self.signal_names = [f"{c}.{p}" for (c, p) in slots]
         self.signal_types = [p.type for c in self.components for p in c.output_ports]
-        self._n_signals = n
-        self._in_specs = {}
+        self._inputs = {}           # per component, where its connected inputs are: a slice, else indices
         for c in self.components:
             ports = [p for p in c.input_names if (c.name, p) in self.connections]
             srcs = [self.connections[(c.name, p)] for p in ports]
-            sources = [(".".join(s), self.signal_types[slots[s]]) for s in srcs]
-            c.use_inputs(ports, sources)
-            idx = np.array([slots[self.connections[(c.name, p)]] for p in ports], dtype=np.intp)
-            if len(idx) and np.all(np.diff(idx) == 1):
-                self._in_specs[c.name] = (ports, slice(int(idx[0]), int(idx[-1]) + 1))
-            else:
-                self._in_specs[c.name] = (ports, idx)
+            c.use_inputs(ports, [(".".join(s), self.signal_types[slots[s]]) for s in srcs])
+            idx = np.array([slots[s] for s in srcs], dtype=np.intp)
+            contiguous = len(idx) and np.all(np.diff(idx) == 1)
+            self._inputs[c.name] = slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx
 
     # ---------------------------------------------------------------- engine
     @property

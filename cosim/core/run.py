@@ -148,7 +148,7 @@ class Run:
         """``(output call, update call)`` of component ``c`` on the signal arrays (its fast
         path, or the protocol's calls)."""
         cs = self.cosim
-        inputs, outputs = cs._in_specs[c.name][1], cs._out_slices[c.name]
+        inputs, outputs = cs._inputs[c.name], cs._out_slices[c.name]
         try:                # hasattr(c, "bind") = isinstance(c, FastBinding), faster
             if self.source is self.values and hasattr(c, "bind"):
                 return c.bind(self.values, inputs, outputs, self.integers)
