@@ -24,6 +24,11 @@ needed), Continuous-Time Mode, the states read again (they may jump), the solver
 reinitialised. Discrete-time inputs change only in Event Mode (:meth:`MEIntegrator.at_event`).
 A model that asks to terminate ends the run at that time
 (:class:`~cosim.core.component.StopRequest`).
+
+FMI 1.0 has no Event Mode and no Continuous-Time Mode: its event iteration is
+``fmiEventUpdate`` until ``iterationConverged`` (discrete inputs set just before it),
+``fmiCompletedIntegratorStep`` follows every integrator step (FMI 1.0 has no flag to skip
+it), and what ``fmiInitialize`` said about events starts the run.
 """
 from __future__ import annotations
 
@@ -122,9 +127,9 @@ class ContinuousModel:
 
 
 class FMUModel(ContinuousModel):
-    """One Model Exchange FMU instance (after ``ExitInitializationMode``) as a
-    :class:`ContinuousModel`: its states, derivatives, indicators and nominals are calls of
-    the FMU's raw FMI functions, bound when it is made.
+    """One Model Exchange FMU instance (after ``ExitInitializationMode``; FMI 1.0: after
+    ``fmiInitialize``) as a :class:`ContinuousModel`: its states, derivatives, indicators and
+    nominals are calls of the FMU's raw FMI functions, bound when it is made.
 
     Parameters
     ----------
@@ -134,12 +139,12 @@ class FMUModel(ContinuousModel):
 
     def __init__(self, instance):
         md = instance.md
-        self.inst, self.name = instance, instance.owner
-        self.v3 = instance.version == 3
+        self.inst, self.name, self.version = instance, instance.owner, instance.version
         self.nx = int(md.numberOfContinuousStates)
         self.nz = int(md.numberOfEventIndicators)
-        self.needs_completed_step = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
-        p = "fmi3" if self.v3 else "fmi2"
+        self.needs_completed_step = self.version == 1 or bool(getattr(md.modelExchange, "needsCompletedIntegratorStep",
+                                                                      True))
+        p = f"fmi{self.version}"
         c, fail = ctypes.c_void_p(instance.handle), instance.fail
 
         def check(st, what):
@@ -153,44 +158,70 @@ class FMUModel(ContinuousModel):
 
         self.get_states = vector("GetContinuousStates", self.nx, "GetContinuousStates")
         self.set_states = vector("SetContinuousStates", self.nx, "SetContinuousStates")
-        self.derivatives = vector("GetContinuousStateDerivatives" if self.v3 else "GetDerivatives", self.nx,
+        self.derivatives = vector("GetContinuousStateDerivatives" if self.version == 3 else "GetDerivatives", self.nx,
                                   "GetDerivatives")
         self.indicators = vector("GetEventIndicators", self.nz, "GetEventIndicators")
-        self.nominals = vector("GetNominalsOfContinuousStates", self.nx, "GetNominalsOfContinuousStates")
+        nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
+        self.nominals = vector(nominals, self.nx, nominals)
         set_time, completed = instance.raw(f"{p}SetTime"), instance.raw(f"{p}CompletedIntegratorStep")
         self.set_time = lambda t: check(set_time(c, ctypes.c_double(t)), "SetTime")
-        flag = ctypes.c_bool if self.v3 else ctypes.c_int
+        flag = {1: ctypes.c_int8, 2: ctypes.c_int}.get(self.version, ctypes.c_bool)       # fmiBoolean is a char
         self._enter, self._term = flag(0), flag(0)
-        args = (c, 1, ctypes.byref(self._enter), ctypes.byref(self._term))
+        args = ((c, ctypes.byref(self._enter)) if self.version == 1 else       # FMI 1.0: callEventUpdate only
+                (c, 1, ctypes.byref(self._enter), ctypes.byref(self._term)))
         self._completed = lambda: check(completed(*args), "CompletedIntegratorStep")
 
     def completed_step(self):
-        """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)``."""
+        """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)`` (FMI 1.0:
+        ``callEventUpdate``; it never terminates here)."""
         self._completed()
         return bool(self._enter.value), bool(self._term.value)
 
+    def enter_event_mode(self) -> None:
+        """``EnterEventMode`` (FMI 1.0 has none)."""
+        if self.version > 1:
+            self.inst.call("EnterEventMode", self.inst.fmu.enterEventMode)
+
+    def enter_continuous_time_mode(self) -> None:
+        """``EnterContinuousTimeMode`` (FMI 1.0 has none)."""
+        if self.version > 1:
+            self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
+
     def event(self, t, set_inputs=None):
         """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
-        self.inst.call("EnterEventMode", self.inst.fmu.enterEventMode)
+        self.enter_event_mode()
         if set_inputs is not None:
             set_inputs()
-        return self.initial_event(t)
+        return self._settle(t)
 
     def initial_event(self, t):
-        """The event iteration after initialisation, then Continuous-Time Mode."""
+        """The event iteration after initialisation, then Continuous-Time Mode; FMI 1.0:
+        what ``fmiInitialize`` said (its initial event iteration is its own)."""
+        if self.version == 1:
+            return self.inst.initial_events
+        return self._settle(t)
+
+    def _settle(self, t: float) -> tuple[bool, float | None]:
+        """The event iteration, then Continuous-Time Mode unless the model terminates."""
         terminate, nxt = self.iterate(t)
         if not terminate:
-            self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
+            self.enter_continuous_time_mode()
         return terminate, nxt
 
     def iterate(self, t: float) -> tuple[bool, float | None]:
         """In Event Mode: update the discrete states until no more update is needed
-        (at most 1000 rounds); returns ``(terminate, next event time or None)``."""
+        (at most 1000 rounds; FMI 1.0: ``fmiEventUpdate`` until ``iterationConverged``);
+        returns ``(terminate, next event time or None)``."""
         fmu, inst = self.inst.fmu, self.inst
-        update = fmu.updateDiscreteStates if self.v3 else fmu.newDiscreteStates
-        name = "UpdateDiscreteStates" if self.v3 else "NewDiscreteStates"
+        name = {1: "EventUpdate", 2: "NewDiscreteStates", 3: "UpdateDiscreteStates"}[self.version]
+        update = getattr(fmu, name[0].lower() + name[1:])
         for _ in range(1000):
-            need, term, _nominals, _values, defined, nxt = inst.call(name, update)
+            info = inst.call(name, update)
+            if self.version == 1:       # (converged, stateValueReferencesChanged, stateValuesChanged, ...)
+                info = (not info[0], *info[3:])
+            else:
+                info = (info[0], info[1], *info[4:])
+            need, term, defined, nxt = info
             if term:
                 return True, None
             if not need:
