@@ -67,7 +67,7 @@ from .exchange import Exchange
 from .exchange import no_exchange as _nothing
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
-from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs
+from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
 from .ports import element_ports, parse_start
 
 __all__ = ["FEEDTHROUGH_MODES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError", "HeldInputs"]
@@ -221,6 +221,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
         self._remote = None
+        #: Model Exchange: the FMU's nominals call returned Error, its states' nominal values
+        #: are 1 (see :mod:`cosim.fmi.model_exchange`).
+        self.unit_nominals = False
 
     def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,
                  logging: bool, isolate: bool) -> None:
@@ -410,9 +413,24 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return
         self.instantiate(t0)
         if self.interface == "me":
-            self.integrator = MEIntegrator(FMUModel(self.instance), self.solver, self.solver_step, self.rtol)
-            if self.clock_model is None:        # a clocked FMU's first Event Mode ends in its first update
-                self.integrator.start(t0)
+            self._start_integrator(t0)
+
+    def _start_integrator(self, t0: float) -> None:
+        """Model Exchange: the integrator of the new instance, started at ``t0`` [s] (a
+        clocked FMU's first Event Mode ends in its first update); an FMU whose nominals call
+        returned Error there runs on a new instance with nominals of 1
+        (:func:`~cosim.fmi.model_exchange.unit_nominals_instead`)."""
+        model = FMUModel(self.instance, self.unit_nominals)
+        self.integrator = MEIntegrator(model, self.solver, self.solver_step, self.rtol)
+        if self.clock_model is not None:
+            return
+        try:
+            self.integrator.start(t0)
+        except FMUError:
+            if not unit_nominals_instead([model], [self]):
+                raise
+            self.instantiate(t0)
+            self._start_integrator(t0)
 
     def instantiate(self, t0: float) -> FMUInstance:
         """A new instance of the FMU (closing any previous one), initialised at ``t0``

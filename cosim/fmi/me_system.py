@@ -33,7 +33,7 @@ from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, U
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
 from .exchange import Exchange, no_exchange
 from .fmu_component import FMUComponent, HeldInputs
-from .model_exchange import ContinuousModel, FMUModel, MEIntegrator, check_solver, held_inputs
+from .model_exchange import ContinuousModel, FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
 
 __all__ = ["MESystem"]
 
@@ -314,7 +314,12 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             m.instantiate(t0)
         self._model = self._coupled()
         self.integrator = MEIntegrator(self._model, self.solver, self.solver_step, self.rtol)
-        self.integrator.start(t0)
+        try:
+            self.integrator.start(t0)
+        except FMUError:
+            if not unit_nominals_instead(self._model.models, self.order):      # else: on new instances
+                raise
+            self.reset(t0)
 
     def _coupled(self) -> _Coupled:
         """The members' FMUModels and the propagation of the connections over a buffer of
@@ -362,7 +367,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                         get()
             return changed
 
-        return _Coupled(self.name, [FMUModel(m.instance) for m in self.order], propagate)
+        return _Coupled(self.name, [FMUModel(m.instance, m.unit_nominals) for m in self.order], propagate)
 
     def bind(self, values, inputs, outputs, integers=None):
         """Output and update closures (see :class:`~cosim.core.component.FastBinding`):

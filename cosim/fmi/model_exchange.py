@@ -22,6 +22,16 @@ exactly; state events (CVODE's roots of the event indicators) and step events
 Mode, the event iteration (``NewDiscreteStates``/``UpdateDiscreteStates`` until no more is
 needed), Continuous-Time Mode, the states read again (they may jump), the solver
 reinitialised. Discrete-time inputs change only in Event Mode (:meth:`MEIntegrator.at_event`).
+
+The states' nominal values (CVODE's absolute tolerances) come from
+``GetNominalsOfContinuousStates``. Some exporters leave that helper unimplemented and return
+Error; after an Error the FMI rules allow only ``FreeInstance`` (or ``Reset``) on that
+instance (FMI 2.0 section 2.1.3, FMI 3.0 section 2.2.3, no exception for this function), so
+an FMU whose nominals call returns Error when its integrator starts is not continued: the
+component frees it, warns (logger ``cosim.fmu``, naming the FMU), instantiates it afresh and
+integrates with nominal values of 1, the value the standard asks of an FMU without nominal
+information, never calling that function again (:func:`unit_nominals_instead`). An Error
+later in the run (the call worked at the start) ends the run as any Error does.
 A model that asks to terminate ends the run at that time
 (:class:`~cosim.core.component.StopRequest`).
 
@@ -33,6 +43,7 @@ it), and what ``fmiInitialize`` said about events starts the run.
 from __future__ import annotations
 
 import ctypes
+import logging
 import math
 from collections.abc import Callable
 
@@ -43,10 +54,12 @@ from fmu_models.infra.checks import positive
 
 from ..core.component import StopRequest
 
-__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs"]
+__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs",
+           "unit_nominals_instead"]
 
 #: The Model Exchange solvers (see the module documentation).
 SOLVERS = ("cvode", "euler", "rk4")
+LOGGER = logging.getLogger("cosim.fmu")
 _DP = ctypes.POINTER(ctypes.c_double)
 
 
@@ -135,11 +148,20 @@ class FMUModel(ContinuousModel):
     ----------
     instance : FMUInstance
         The instance (:mod:`cosim.fmi.instance`).
+    unit_nominals : bool
+        The states' nominal values are 1, the FMU is not asked (see the module
+        documentation).
+
+    Attributes
+    ----------
+    nominals_refused : bool
+        ``GetNominalsOfContinuousStates`` returned Error.
     """
 
-    def __init__(self, instance):
+    def __init__(self, instance, unit_nominals: bool = False):
         md = instance.md
         self.inst, self.name, self.version = instance, instance.owner, instance.version
+        self.nominals_refused = False
         self.nx = int(md.numberOfContinuousStates)
         self.nz = int(md.numberOfEventIndicators)
         self.needs_completed_step = self.version == 1 or bool(getattr(md.modelExchange, "needsCompletedIntegratorStep",
@@ -162,7 +184,15 @@ class FMUModel(ContinuousModel):
                                   "GetDerivatives")
         self.indicators = vector("GetEventIndicators", self.nz, "GetEventIndicators")
         nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
-        self.nominals = vector(nominals, self.nx, nominals)
+        get_nominals, n = instance.raw(f"{p}{nominals}"), ctypes.c_size_t(self.nx)
+
+        def ask_nominals(x: np.ndarray) -> None:
+            st = get_nominals(c, x.ctypes.data_as(_DP), n) if self.nx else 0
+            if st > 1:
+                self.nominals_refused = st == 3         # Error
+                fail(nominals, st)
+        if not unit_nominals:                           # else ContinuousModel's: 1 for every state
+            self.nominals = ask_nominals
         set_time, completed = instance.raw(f"{p}SetTime"), instance.raw(f"{p}CompletedIntegratorStep")
         self.set_time = lambda t: check(set_time(c, ctypes.c_double(t)), "SetTime")
         flag = {1: ctypes.c_int8, 2: ctypes.c_int}.get(self.version, ctypes.c_bool)       # fmiBoolean is a char
@@ -232,7 +262,8 @@ class FMUModel(ContinuousModel):
 class _Callbacks:
     """The functions fmpy's CVODE binding calls, for a :class:`ContinuousModel`; an exception
     inside one (a failing FMU call) is kept and raised after CVODE returns (a ctypes
-    callback cannot raise)."""
+    callback cannot raise), and no model call follows it (after an Error only FreeInstance
+    may)."""
 
     def __init__(self, model: ContinuousModel):
         self.m = model
@@ -242,6 +273,8 @@ class _Callbacks:
         self.z = np.zeros(max(model.nz, 1))
 
     def _guard(self, fn):
+        if self.pending is not None:
+            return -1
         try:
             fn()
             return 0
@@ -254,6 +287,8 @@ class _Callbacks:
         ctypes.memmove(ptr, self.x.ctypes.data, 8 * n)
 
     def set_x(self, ptr, n):
+        if self.pending is not None:        # fmpy sets the states after a failed CVode call too
+            return
         ctypes.memmove(self.x.ctypes.data, ptr, 8 * n)
         self.m.set_states(self.x)
 
@@ -280,8 +315,12 @@ class _NoInput:
 
 
 def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
-    """fmpy's CVodeSolver for ``model``, with its callbacks guarded (see :class:`_Callbacks`)."""
-    from fmpy.sundials import NV_DATA_S, CVodeSolver
+    """fmpy's CVodeSolver for ``model``, with its callbacks guarded (see :class:`_Callbacks`),
+    a destructor that cannot fail (fmpy's reads ``cvode_mem``, which a constructor that
+    failed on a model call never set: "Exception ignored in ..." on stderr) and SUNDIALS'
+    error messages kept for the FMUError instead of printed on stderr."""
+    from fmpy.sundials import NV_DATA_S, CVodeSolver, SUNContext_PushErrHandler
+    from fmpy.sundials.libraries import sundials_core
 
     cb = _Callbacks(model)
 
@@ -304,9 +343,20 @@ def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
                 cb.get_z(gout, self.nz)
             return cb._guard(run)
 
-    solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
-                     get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
-                     startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+        def __del__(self):
+            if "cvode_mem" in vars(self):       # made: freed (a constructor that failed before made none)
+                super().__del__()
+
+    try:
+        solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
+                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
+                         startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+    except FMUError:
+        raise
+    except Exception as e:  # noqa: BLE001 - fmpy's binding raises a plain Exception when a CVODE call fails
+        raise FMUError(f"{model.name}: CVODE could not be set up at t = {t0:g} s: {e}") from None
+    sundials_core.SUNContext_ClearErrHandlers(solver.sunctx)         # only fmpy's handler, which keeps them
+    SUNContext_PushErrHandler(solver.sunctx, solver.ehfun_, None)
     return solver, cb
 
 
@@ -467,6 +517,23 @@ class MEIntegrator:
                 self._after_event(t_next, terminate, nxt)
             t = t_next
         self.t = t_end
+
+
+def unit_nominals_instead(models: list[FMUModel], components: list) -> bool:
+    """After an integrator failed to start: each of ``models`` whose nominals call returned
+    Error (see the module documentation) gets, in its component (``components``, in the same
+    order), ``unit_nominals = True``, with a warning naming the FMU. Returns whether there
+    was one (the caller then instantiates afresh and starts again)."""
+    refused = False
+    for model, comp in zip(models, components):
+        if model.nominals_refused:
+            refused = comp.unit_nominals = True
+            call = ("fmiGetNominalContinuousStates" if comp.version == 1 else
+                    f"fmi{comp.version}GetNominalsOfContinuousStates")
+            LOGGER.warning("%s: %s returned Error from %s when the integrator started; the FMI rules allow only "
+                           "FreeInstance after an Error, so that instance was freed and a new one integrates with "
+                           "nominal values of 1 for its states", comp.name, comp.path.name, call)
+    return refused
 
 
 def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthrough: tuple[list, list],
