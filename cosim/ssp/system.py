@@ -209,6 +209,11 @@ class FlatSystem:
                                          f"{'.'.join(node[0]) or 'the system'!s} does not declare")
             ends.append(node)
         src, dst = ends
+        for node, allowed, word in ((src, SOURCE_KINDS, "starts at an output"), (dst, ("input",), "ends at an input")):
+            kind = self.connectors[node][0]
+            if node[0] in self.elements and kind not in allowed:
+                raise ConfigurationError(f"{self.where}: {'.'.join((*node[0], node[1]))} is an {kind or 'untyped'} "
+                                         f"connector; a connection {word} of a component")
         if dst in self.edges:
             raise ConfigurationError(f"{self.where}: {'.'.join((*dst[0], dst[1]))} is connected twice")
         where = f"{self.where}: connection {self._label(c)}"
@@ -256,10 +261,6 @@ class FlatSystem:
             if src not in self.edges:
                 return None
             node = src
-        kind = self.elements[src[0]].connectors[src[1]]
-        if kind not in SOURCE_KINDS:
-            raise ConfigurationError(f"{self.where}: {'.'.join((*src[0], src[1]))} is an {kind or 'untyped'} "
-                                     f"connector; a connection starts at an output")
         return Link((self.elements[src[0]].name, src[1]), (self.elements[dst[0]].name, dst[1]), steps)
 
     # ------------------------------------------------------------------ parameters
