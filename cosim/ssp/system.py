@@ -184,7 +184,7 @@ class FlatSystem:
             raise ConfigurationError(f"component {label!r}: type {kind!r} is not an FMU (a Component that "
                                      "references another SSD or SSP is not read; give it as a nested System)")
         if not source:
-            raise ConfigurationError(f"{self.where}: component {label!r} has no source (its FMU)")
+            raise ConfigurationError(f"{self.where}: component {label!r} without a source (its FMU)")
         fmu = (self.base / source).resolve()
         if self.root.resolve() not in fmu.parents:
             raise FMUError(f"component {label!r}: source {source!r} points outside the SSP")
