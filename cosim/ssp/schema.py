@@ -27,7 +27,7 @@ BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 
 
 def q(tag: str) -> str:
-    """``"ssd:System"`` as ElementTree's ``"{namespace}System"``."""
+    """The prefixed ``tag`` (``"ssd:System"``) as ElementTree names it (``"{namespace}System"``)."""
     prefix, local = tag.split(":")
     return f"{{{NS[prefix]}}}{local}"
 
@@ -55,7 +55,15 @@ def parse_xml(path: Path, what: str) -> ET.Element:
 @dataclass(frozen=True)
 class Unit:
     """A unit as SSP and FMI define it: ``value_SI = factor * value + offset`` in the SI base
-    units with the exponents ``exponents`` (kg, m, s, A, K, mol, cd, rad)."""
+    units with the exponents ``exponents`` (kg, m, s, A, K, mol, cd, rad).
+
+    Attributes
+    ----------
+    name : str
+    exponents : tuple of int
+        Empty for a unit known by name only (no definition).
+    factor, offset : float
+    """
 
     name: str
     exponents: tuple[int, ...]
@@ -77,7 +85,8 @@ def _base_unit(name: str, base, where: str) -> Unit:
 
 
 def read_units(units, where: str) -> dict[str, Unit]:
-    """The ``ssc:Unit`` definitions below ``units`` (an ``Units`` element or None) by name."""
+    """The ``ssc:Unit`` definitions below ``units`` (an ``Units`` element or None) by name;
+    ``where`` names the file in messages."""
     if units is None:
         return {}
     return {u.get("name"): _base_unit(u.get("name"), u.find("ssc:BaseUnit", NS), where)
