@@ -1,17 +1,54 @@
 """Pieces shared by the experiments: the same random streams on the fast path and through
-the master, vectorised truth, batched filters, and one realisation through the master."""
+the master, vectorised truth, batched filters, realisations through the master, the
+campaign's plumbing, and the reports' tables, figures and files."""
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from estimators import BatchFilter
+from fmu_models import build_fmu
+from fmu_models.errors import Interrupted
+from fmu_models.infra.files import atomic_write
 
 from ..components.estimation import EstimatorComponent
 from ..components.sensors import ProcessNoise, Sensor
 from ..core.master import Cosimulation
+from ..fmi.fmu_component import FMUComponent
+from . import metrics
+from .campaign import realisation_seeds, run_tasks
+
+
+# ---------------------------------------------------------------------------- the campaign's plumbing
+def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tuple[int, int]]:
+    """The (process, measurement) seeds of the realisations ``runs`` (default all
+    ``settings.runs``) of task ``key`` (e.g. a scenario's index):
+    :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``."""
+    runs = range(settings.runs) if runs is None else runs
+    return [tuple(realisation_seeds(settings.seed, key, r)) for r in runs]
+
+
+def run_campaign(tasks: Sequence[tuple[Callable, dict]], assemble: Callable, desc: str, backend: str = "processes",
+                 n_jobs: int | None = None, progress: bool = True, partial: bool = True):
+    """``assemble(results, wall)``: the campaign's result from the results of its ``tasks``
+    (``(function, kwargs)``, run by :func:`~cosim.experiments.campaign.run_tasks` with
+    ``desc``, ``backend``, ``n_jobs`` and ``progress``) and their wall time [s]. Interrupted,
+    the :class:`~fmu_models.errors.Interrupted` raised carries as ``partial`` what
+    ``assemble`` makes of the finished tasks (None for the others), or if ``partial`` is
+    False their results as they are."""
+    t0 = time.perf_counter()
+    try:
+        results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=desc)
+    except Interrupted as e:
+        if partial:
+            e.partial = assemble(e.partial or [None] * len(tasks), time.perf_counter() - t0)
+        raise
+    return assemble(results, time.perf_counter() - t0)
 
 
 def noise_components(model, T: float, q, measured: Sequence[str], r_std, seed_w: int, seed_v: int):
@@ -48,20 +85,12 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
 
     Parameters
     ----------
-    model
-        The plant model.
+    model, T, q, measured, r_std
+        As :func:`noise_components`.
     x0
         Initial state.
     us
         Inputs, shape (N+1, nu).
-    T
-        Sample period [s].
-    q
-        Process noise covariance.
-    measured
-        The measured states.
-    r_std
-        Measurement noise standard deviations.
     seeds
         (process, measurement) seed pairs, one per realisation.
     method
@@ -116,32 +145,9 @@ def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> B
     """
     R = X.shape[0]
     out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
-    e = out.x[:, 1:] - X[:, 1:]
     with np.errstate(invalid="ignore", over="ignore"):
-        nees = np.einsum("rki,rki->rk", e, np.linalg.solve(out.P[:, 1:], e[..., None])[..., 0])
+        nees = metrics.nees(out.x[:, 1:] - X[:, 1:], out.P[:, 1:])
     return BatchOutcome(out.x, nees, out.nis, out.failed.copy(), out.innovation, out.S)
-
-
-def batch_estimates(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray, x0):
-    """Run one filter over all realisations in one native call: estimates (runs, N+1, nx)
-    (the initial estimate at k = 0), NEES (from the full covariance) and NIS (runs, N), and
-    the realisations that failed (:func:`batch_run` without the innovations).
-
-    Parameters
-    ----------
-    make
-        Returns a new filter (the template of every realisation).
-    X
-        Truth, shape (runs, N+1, nx).
-    Y
-        Measurements, shape (runs, N+1, ny); row 0 is not used.
-    us
-        Inputs, shape (N+1, nu).
-    x0
-        The initial estimate (unused: the template carries it; kept for the callers' symmetry).
-    """
-    out = batch_run(make, X, Y, us)
-    return out.x, out.nees, out.nis, out.failed
 
 
 def nees_from_outputs(err: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -149,43 +155,52 @@ def nees_from_outputs(err: np.ndarray, P: np.ndarray) -> np.ndarray:
     return np.einsum("ki,ki->k", err, np.linalg.solve(P, err[..., None])[..., 0])
 
 
-def covariance_from_frame(df, tag: str, states) -> np.ndarray:
-    """Full covariances (steps, nx, nx) from an estimator component's outputs
-    (``P_<state>`` diagonal, ``P_<i>_<j>`` above it; ``covariance="full"``).
+def master_runs(model, start: dict, source, noise, sensor, makers: dict, T: float, duration: float,
+                seeds: Sequence[tuple[int, int]], fmu_dir=None):
+    """Realisations through the co-simulation master, one per (process, measurement) seed pair
+    of ``seeds`` (:class:`MasterRealisations`, the plant FMU built once). Returns truth
+    (runs, N+1, nx), the estimates by filter (runs, N+1, nx), and NEES (from the full
+    covariance) and NIS by filter (runs, N).
 
     Parameters
     ----------
-    df
-        The co-simulation results.
-    tag
-        The estimator component's name.
-    states
-        The state names.
+    model
+        The plant model.
+    start
+        The plant's initial state by name.
+    source, noise, sensor, makers, T
+        As :class:`MasterRealisations`.
+    duration
+        Simulated time [s].
+    seeds
+        (process, measurement) seed pairs, one per realisation.
+    fmu_dir
+        Where to build the plant FMU (default a temporary folder).
     """
-    n = len(states)
-    P = np.empty((len(df), n, n))
-    for i, s in enumerate(states):
-        P[:, i, i] = df[f"{tag}.P_{s}"].to_numpy()
-        for j in range(i + 1, n):
-            P[:, i, j] = P[:, j, i] = df[f"{tag}.P_{i}_{j}"].to_numpy()
-    return P
+    import tempfile
+
+    X = np.empty((len(seeds), round(duration / T) + 1, model.nx))
+    est = {n: np.empty_like(X) for n in makers}
+    nees = {n: np.empty((len(seeds), X.shape[1] - 1)) for n in makers}
+    nis = {n: np.empty_like(nees[n]) for n in makers}
+    with tempfile.TemporaryDirectory() as tmp:
+        plant = FMUComponent("plant", build_fmu(model, fmu_dir or tmp), T, start=start)
+        master = MasterRealisations(plant, source, noise, sensor, makers, T)
+        for i, (seed_w, seed_v) in enumerate(seeds):
+            X[i], e, P, v = master.run(seed_w, seed_v, duration)
+            for n in makers:
+                est[n][i], nis[n][i] = e[n], v[n]
+                with np.errstate(over="ignore", invalid="ignore"):
+                    nees[n][i] = nees_from_outputs(e[n][1:] - X[i][1:], P[n][1:])
+    return X, est, nees, nis
 
 
-def new_figure(rows: int = 1, cols: int = 1, figsize=(8, 4), **subplot_kw):
-    """A matplotlib Figure of ``figsize`` (inches) and its ``rows x cols`` axes (2-D array),
-    without pyplot (no global backend or state); ``subplot_kw`` go to ``Figure.subplots``
-    (e.g. ``sharex=True``)."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=figsize, layout="constrained")
-    return fig, fig.subplots(rows, cols, squeeze=False, **subplot_kw)
-
-
-def master_realisation(plant, source, noise, sensor, makers: dict, T: float, duration: float):
-    """One realisation through the co-simulation master: plant FMU, sensor, the filters,
-    the source and the process noise (the order follows from the wiring). Returns truth
-    (N+1, nx), estimates by filter (N+1, nx), their full covariances (N+1, nx, nx) and
-    NIS (N,). Many realisations: :class:`MasterRealisations`.
+class MasterRealisations:
+    """One co-simulation built once for many realisations that differ only in the seeds of
+    the process noise and the sensor: plant FMU, sensor, the filters, the source and the
+    process noise (the order follows from the wiring). Each filter is built once and
+    restored to its initial state before each run
+    (:meth:`~estimators.base.KalmanBase.restore`, the numbers of a new filter).
 
     Parameters
     ----------
@@ -201,23 +216,6 @@ def master_realisation(plant, source, noise, sensor, makers: dict, T: float, dur
         Filter factories by name.
     T
         Sample period [s].
-    duration
-        Simulated time [s].
-    """
-
-    return MasterRealisations(plant, source, noise, sensor, makers, T).run(noise.seed, sensor.seed, duration)
-
-
-class MasterRealisations:
-    """The co-simulation of :func:`master_realisation` built once for many realisations that
-    differ only in the seeds of the process noise and the sensor: each filter is built once
-    and restored to its initial state before each run
-    (:meth:`~estimators.base.KalmanBase.restore`, the numbers of a new filter).
-
-    Parameters
-    ----------
-    plant, source, noise, sensor, makers, T
-        As :func:`master_realisation`.
     """
 
     def __init__(self, plant, source, noise, sensor, makers: dict, T: float):
@@ -237,7 +235,8 @@ class MasterRealisations:
 
     def run(self, seed_w: int, seed_v: int, duration: float):
         """One realisation with process-noise seed ``seed_w`` and sensor seed ``seed_v``,
-        ``duration`` [s] long; returns what :func:`master_realisation` returns."""
+        ``duration`` [s] long; returns truth (N+1, nx), estimates by filter (N+1, nx), their
+        full covariances (N+1, nx, nx) and NIS (N,)."""
         self.noise.seed, self.sensor.seed = int(seed_w), int(seed_v)
         df = self.cosim.run(duration)
         data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
@@ -281,3 +280,110 @@ def _restored(make):
         return filt
 
     return again
+
+
+# ---------------------------------------------------------------------------- the reports' tables
+def pcrb_columns(rmse_runs: np.ndarray, bound_mse: np.ndarray | None, states: Sequence[str]) -> dict:
+    """``pcrb_ratio_<state>`` of each of the ``states``
+    (:func:`~cosim.experiments.metrics.pcrb_ratio` of the realisations' RMSE ``rmse_runs``
+    (runs, nx) over the bound ``bound_mse`` (K, nx) at steps 1..K), ``pcrb_ratio_max`` and
+    ``pcrb_ratio_se_<state>`` (its Monte Carlo standard error); NaN without a bound (None)."""
+    if bound_mse is None:
+        ratio = se = np.full(len(states), np.nan)
+    else:
+        ratio, se = metrics.pcrb_ratio(rmse_runs, bound_mse), metrics.pcrb_ratio_se(rmse_runs, bound_mse)
+    return {**{f"pcrb_ratio_{x}": float(r) for x, r in zip(states, ratio)}, "pcrb_ratio_max": float(np.max(ratio)),
+            **{f"pcrb_ratio_se_{x}": float(e) for x, e in zip(states, se)}}
+
+
+def pcrb_row(ident: dict, bound_mse: np.ndarray, runs: int, states: Sequence[str]) -> dict:
+    """The row of the PCRB itself in a consistency table: the identifying columns ``ident``,
+    the ``runs`` it is computed over, per state of ``states`` the root of the bound's mean
+    over steps 1..K (``bound_mse``: shape (K+1, nx), from k = 0), and every ratio 1."""
+    return {**ident, "filter": "PCRB", "runs": runs,
+            **{f"rmse_{x}": float(np.sqrt(bound_mse[1:, a].mean())) for a, x in enumerate(states)},
+            **{f"pcrb_ratio_{x}": 1.0 for x in states}, "pcrb_ratio_max": 1.0}
+
+
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    """The lines of a Markdown table of ``header`` and ``rows`` (cells as text)."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header), *("| " + " | ".join(r) + " |" for r in rows)]
+
+
+def settings_table(settings, leave_out: Sequence[str] = ()) -> list[str]:
+    """The Markdown table of the dataclass ``settings``, but the fields ``leave_out``."""
+    return markdown_table(["setting", "value"],
+                          ([k, f"{v}"] for k, v in asdict(settings).items() if k not in leave_out))
+
+
+def consistency_section(table, keys: Sequence[str], settings, path: str, after: Sequence[str] = ()) -> list[str]:
+    """The reports' section on the consistency tests: the rule at ``settings.confidence`` and
+    ``settings.whiteness_lags``, the tests of the filters of the consistency ``table`` (its
+    PCRB rows left out; :func:`~cosim.experiments.metrics.consistency_markdown` with
+    ``keys``), the lines ``after``, and on the master ``path`` why whiteness is not tested."""
+    lines = ["## Consistency: chi-square bands of NEES and NIS, whiteness of the innovations", "",
+             "Rule: " + metrics.consistency_rule(settings.confidence, settings.whiteness_lags) + ".", "",
+             *metrics.consistency_markdown(table[table["filter"] != "PCRB"], keys), "", *after]
+    if path == "master":
+        lines += ["On the master path the estimator components do not publish their innovations, so whiteness "
+                  "is not tested there (the fast path gives the same numbers).", ""]
+    return lines
+
+
+# ---------------------------------------------------------------------------- the reports' files and figures
+def report_folder(out_dir, settings_toml: str, tables: dict) -> Path:
+    """The folder ``out_dir`` (made if need be) with ``settings.toml`` (the text
+    ``settings_toml``) and the ``tables`` (:func:`write_tables`) written into it."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write(out / "settings.toml", lambda p: p.write_text(settings_toml))
+    write_tables(out, tables)
+    return out
+
+
+def write_tables(out: Path, tables: dict) -> None:
+    """Each DataFrame of ``tables`` into the folder ``out`` under its file name: Parquet for
+    ``*.parquet``, else CSV without the index."""
+    for name, frame in tables.items():
+        atomic_write(out / name, frame.to_parquet if name.endswith(".parquet") else
+                     lambda p, frame=frame: frame.to_csv(p, index=False))
+
+
+def write_summary(out: Path, lines: Sequence[str]) -> Path:
+    """``summary.md`` in the folder ``out``: the ``lines``; returns its path."""
+    md = out / "summary.md"
+    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
+    return md
+
+
+def new_figure(rows: int = 1, cols: int = 1, figsize=(8, 4), **subplot_kw):
+    """A matplotlib Figure of ``figsize`` (inches) and its ``rows x cols`` axes (2-D array),
+    without pyplot (no global backend or state); ``subplot_kw`` go to ``Figure.subplots``
+    (e.g. ``sharex=True``)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(rows, cols, squeeze=False, **subplot_kw)
+
+
+def style_axes(ax, xlabel: str = "", ylabel: str = "", title: str = "", log: bool = False, legend: int = 0,
+               ncol: int = 1) -> None:
+    """The reports' look of the matplotlib Axes ``ax``: a log y axis if ``log``, the
+    ``xlabel``, ``ylabel`` and ``title`` given, a light grid, and a legend of font size
+    ``legend`` in ``ncol`` columns (none if 0)."""
+    if log:
+        ax.set_yscale("log")
+    if xlabel:
+        ax.set_xlabel(xlabel)
+    if ylabel:
+        ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    if legend:
+        ax.legend(fontsize=legend, ncol=ncol)
+    if title:
+        ax.set_title(title)
+
+
+def save_figure(fig, path: Path) -> None:
+    """The matplotlib Figure ``fig`` as a PNG of 100 dpi at ``path``, written whole or not at all."""
+    atomic_write(path, lambda p: fig.savefig(p, dpi=100, format="png"))

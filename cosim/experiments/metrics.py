@@ -142,35 +142,39 @@ def verdict(row: dict) -> bool:
     return bool(row["nees_ok"] and row["nis_ok"] and row.get("white_ok") in (True, None))
 
 
-def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95,
-                innovation: np.ndarray | None = None, S: np.ndarray | None = None, lags: int = 5) -> tuple[dict, dict]:
-    """All three tests of :func:`consistency_rule`: ``(row, per_step)`` of :func:`band_row`, the
-    row with :func:`whiteness_row` (or :func:`no_whiteness` without innovations) and
-    ``consistent`` (:func:`verdict`).
+def consistency_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float,
+                    whiteness: dict | None) -> tuple[dict, dict]:
+    """All three tests of :func:`consistency_rule` with the whiteness already tested:
+    ``(row, per_step)`` of :func:`band_row`, the row with ``whiteness`` (a row of
+    :func:`whiteness_row`, or None: :func:`no_whiteness`) and ``consistent`` (:func:`verdict`).
 
     Parameters
     ----------
-    nees
-        NEES of each run and step, shape (runs, K).
-    nis
-        NIS, shape (runs, K).
-    nx
-        State dimension.
-    ny
-        Measured channels.
-    confidence
-        Probability of the bands.
-    innovation
-        Innovations (runs, K, ny), or None (whiteness not tested).
-    S
-        Their covariances (runs, K, ny, ny).
-    lags
-        Whiteness at lags 1..lags.
+    nees, nis, nx, ny, confidence
+        As :func:`band_row`.
+    whiteness
+        The :func:`whiteness_row` of the innovations, or None (not tested).
     """
     row, per_step = band_row(nees, nis, nx, ny, confidence)
-    row.update(no_whiteness() if innovation is None else whiteness_row(innovation, S, confidence, lags))
+    row.update(no_whiteness() if whiteness is None else whiteness)
     row["consistent"] = verdict(row)
     return row, per_step
+
+
+def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95,
+                innovation: np.ndarray | None = None, S: np.ndarray | None = None, lags: int = 5) -> tuple[dict, dict]:
+    """:func:`consistency_row` with the whiteness of the innovations tested here
+    (:func:`whiteness_row`; not tested without innovations).
+
+    Parameters
+    ----------
+    nees, nis, nx, ny, confidence
+        As :func:`band_row`.
+    innovation, S, lags
+        As :func:`whiteness_row` (``innovation`` None: whiteness not tested).
+    """
+    return consistency_row(nees, nis, nx, ny, confidence,
+                           None if innovation is None else whiteness_row(innovation, S, confidence, lags))
 
 
 def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
@@ -182,10 +186,8 @@ def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    rmse_runs
-        Each realisation's RMSE per state over steps 1..K, shape (runs, nx).
-    bound_mse
-        The bound on the MSE at steps 1..K, shape (K, nx).
+    rmse_runs, bound_mse
+        As :func:`pcrb_ratio`.
     """
     m = np.square(rmse_runs)
     N = len(m)
@@ -219,29 +221,22 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
 
     Parameters
     ----------
-    nees
-        NEES, shape (runs, K).
-    nis
-        NIS, shape (runs, K).
+    nees, nis, ny, confidence
+        As :func:`band_row`.
     mse
         Each state's mean-square error over the runs at steps 1..K, shape (K, nx).
     bound_mse
         The PCRB on it at steps 1..K, shape (K, nx).
-    ny
-        Measured channels.
     start
         Steps left out (0 <= start < K).
     whiteness
         :func:`whiteness_row` of the innovations after ``start`` (None: not tested).
-    confidence
-        Probability of the bands.
     """
     with np.errstate(invalid="ignore", over="ignore"):
         ratio = np.sqrt(mse[start:].mean(axis=0) / bound_mse[start:].mean(axis=0))
-    row, _ = band_row(nees[:, start:], nis[:, start:], mse.shape[1], ny, confidence)
-    row.update(no_whiteness() if whiteness is None else whiteness)
+    row, _ = consistency_row(nees[:, start:], nis[:, start:], mse.shape[1], ny, confidence, whiteness)
     return {"pcrb_ratio_max_late": float(np.max(ratio)), "anees_late": row["anees"], "anis_late": row["anis"],
-            "consistent_late": verdict(row)}
+            "consistent_late": row["consistent"]}
 
 
 def consistency_markdown(table, keys: list[str]) -> list[str]:

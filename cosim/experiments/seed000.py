@@ -33,8 +33,7 @@ numbers); its PCRB is computed on the fast path's truth of the same seeds.
 from __future__ import annotations
 
 import math
-import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import NamedTuple
@@ -43,23 +42,12 @@ import numpy as np
 import pandas as pd
 
 from estimators import EKF, IAE, MFIAE, SWML, discretize, em_noise, posterior_crb
-from fmu_models import build_fmu, get_model
-from fmu_models.errors import ConfigurationError, Interrupted, UnknownNameError
+from fmu_models import get_model
+from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.infra.checks import positive, positive_int
-from fmu_models.infra.files import atomic_write
 
 from ..components.sources import PRBS
-from ..fmi.fmu_component import FMUComponent
-from . import metrics
-from .campaign import realisation_seeds, run_tasks
-from .common import (
-    MasterRealisations,
-    batch_run,
-    nees_from_outputs,
-    new_figure,
-    noise_components,
-)
-from .common import simulate_truth as common_truth
+from . import common, metrics
 from .experiment import Experiment
 from .settings import check_common, check_consistency, to_toml
 
@@ -78,6 +66,8 @@ TRAINING_RUN = 2**31 - 1
 #: factor 100 either way at one standard deviation).
 SWML_PRIOR_SD = math.log(100.0)
 STATES = ("x", "x_dot", "theta", "theta_dot")
+#: The measured states (``y = [x, theta] + v``).
+MEASURED = ("x", "theta")
 #: The prior of the PCRB (``pcrb_prior``).
 PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at x0 in every realisation)",
                "P0": "x_0 ~ N(x0, P0 I), the filters' own prior (J_0 = (P0 I)^-1)"}
@@ -166,7 +156,6 @@ class Settings:
         for name in ("q0_factor", "r0_factor"):
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
-
         for name in ("swml_window", "swml_every", "swml_early_every"):
             positive_int(getattr(self, name), name)
         if self.swml_prior_sd is not None:
@@ -220,7 +209,6 @@ def nominal_noise(s: Settings, q: float, r: float) -> tuple[float, float]:
 
 @lru_cache(maxsize=4)
 def _system(T: float):
-
     return discretize(get_model("cartpole"), T)
 
 
@@ -232,21 +220,17 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, sh
     ----------
     system
         The discrete model.
-    s
-        The campaign's settings.
+    s, q, r
+        The campaign's settings, the true process and measurement variances.
     scenario_index
         Which scenario (its training realisation).
-    q
-        True process variance.
-    r
-        True measurement variance.
     shared
         Keeps the training realisation between the calls of :func:`fast_task` that share it
         (default: simulated here).
     """
     shared = {} if shared is None else shared
     if "training" not in shared:
-        shared["training"] = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, TRAINING_RUN))])
+        shared["training"] = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index, [TRAINING_RUN]))
     _X, Y, u = shared["training"]
     q0, r0 = nominal_noise(s, q, r)
     f = EKF(system, np.array(s.x0), s.P0, q0, r0)
@@ -260,18 +244,11 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
     Parameters
     ----------
-    system
-        The discrete model.
-    s
-        The campaign's settings.
-    q
-        True process variance.
-    r
-        True measurement variance.
+    system, s, q, r
+        As :func:`learn_noise`.
     learned
         The EM-learned (q, r), for the EM EKF.
     """
-
     x0 = np.array(s.x0)
     q0, r0 = nominal_noise(s, q, r)
     em = {} if learned is None else {"EKF EM": lambda: EKF(system, x0, s.P0, *learned)}
@@ -291,7 +268,6 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
 def figure2_prbs(s: Settings):
     """The input source: Figure 2's PRBS (see the module documentation)."""
-
     return PRBS("force", s.T, s.input_amplitude, s.input_bit_time, s.input_order, s.input_seed)
 
 
@@ -301,29 +277,19 @@ def _inputs(s: Settings) -> np.ndarray:
     return np.array([src.output(k * s.T, None)[0] for k in range(s.steps + 1)])
 
 
-def _noise(s: Settings, q: float, r: float, seed_w: int, seed_v: int):
-
-    return noise_components(get_model("cartpole"), s.T, q, ["x", "theta"], np.sqrt(r), seed_w, seed_v)
-
-
 def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]):
     """Truth ``X`` (runs, steps+1, 4), measurements ``Y`` (runs, steps+1, 2) and the input
     sequence, drawing the same numbers as the components of the master path.
 
     Parameters
     ----------
-    s
-        The campaign's settings.
-    q
-        True process variance.
-    r
-        True measurement variance.
+    s, q, r
+        The campaign's settings, the true process and measurement variances.
     seeds
         (process, measurement) seed pairs, one per realisation.
     """
-
     u = _inputs(s)
-    X, Y = common_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, ["x", "theta"], np.sqrt(r), seeds)
+    X, Y = common.simulate_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, MEASURED, np.sqrt(r), seeds)
     return X, Y, u
 
 
@@ -333,16 +299,12 @@ def scenario_bound(s: Settings, X: np.ndarray, u: np.ndarray, q: float, r: float
 
     Parameters
     ----------
-    s
-        The campaign's settings.
+    s, q, r
+        The campaign's settings, the true process and measurement variances.
     X
         The true trajectories.
     u
         The input sequence.
-    q
-        True process variance.
-    r
-        True measurement variance.
     """
     P0 = None if s.pcrb_prior == "known" else s.P0
     return posterior_crb(_system(s.T), X, u[:-1, None], q, r, P0).mse
@@ -354,33 +316,55 @@ def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndar
 
     Parameters
     ----------
-    scenario_index
-        Which scenario (0-based).
-    reading
-        Which reading of the noise names.
-    settings
-        The campaign's settings.
+    scenario_index, reading, settings
+        As :func:`fast_task`.
     """
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    X, _, u = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, run)) for run in range(s.runs)])
+    X, _, u = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index))
     return scenario_bound(s, X, u, q, r)
 
 
-def _summarise(errors: dict, nees: dict, nis: dict, failed: dict, s: Settings, example: dict) -> dict:
-    """Per-filter metrics of one task (errors over k = 1..N): eps_k, the per-realisation
-    numbers, and the per-step NEES, NIS and mean-square errors the consistency tests and
-    the figures need."""
-    out = {"eps_k": {}, "per_run": {}, "steps": {}, "example": example}
-    for name, err in errors.items():
-        e = err[:, 1:]
-        div = metrics.diverged(e, s.divergence_threshold) | failed[name]
+class _FilterRun(NamedTuple):
+    """One filter over the realisations of a task: errors (runs, N+1, 4), NEES and NIS
+    (runs, N), the realisations that failed (runs,), and the whiteness rows of its
+    innovations over all steps and after the transient (None: not tested)."""
+
+    errors: np.ndarray
+    nees: np.ndarray
+    nis: np.ndarray
+    failed: np.ndarray
+    whiteness: dict
+    whiteness_late: dict | None
+
+
+def _fast_filter(make, X: np.ndarray, Y: np.ndarray, u: np.ndarray, s: Settings) -> _FilterRun:
+    """One filter batched over the realisations ``X``, ``Y`` with inputs ``u``."""
+    res = common.batch_run(make, X, Y, u[:, None])
+    L = s.transient_steps
+    late = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
+            if s.has_late else None)
+    return _FilterRun(res.x - X, res.nees, res.nis, res.failed,
+                      metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags), late)
+
+
+def _summarise(filters: dict, s: Settings, example: dict, learned) -> dict:
+    """A task's result from its :class:`_FilterRun` by filter (errors over k = 1..N): eps_k,
+    the per-realisation numbers, the per-step NEES, NIS and mean-square errors the
+    consistency tests and the figures need, the whiteness rows, the ``example`` realisation
+    and EM's ``learned`` (q, r)."""
+    out = {"eps_k": {}, "per_run": {}, "steps": {}, "example": example, "learned": learned,
+           "whiteness": {n: f.whiteness for n, f in filters.items()},
+           "whiteness_late": {n: f.whiteness_late for n, f in filters.items()}}
+    for name, f in filters.items():
+        e = f.errors[:, 1:]
+        div = metrics.diverged(e, s.divergence_threshold) | f.failed
         with np.errstate(invalid="ignore", over="ignore"):
             out["eps_k"][name] = metrics.eps_k(e)
             out["per_run"][name] = {"eta": metrics.eta_per_run(e), "diverged": div,
                                     "rmse": np.sqrt(np.mean(e**2, axis=1)),
-                                    "anees": nees[name].mean(axis=1), "anis": nis[name].mean(axis=1)}
-            out["steps"][name] = {"nees": nees[name], "nis": nis[name], "mse": np.mean(e**2, axis=0)}
+                                    "anees": f.nees.mean(axis=1), "anis": f.nis.mean(axis=1)}
+            out["steps"][name] = {"nees": f.nees, "nis": f.nis, "mse": np.mean(e**2, axis=0)}
     return out
 
 
@@ -410,32 +394,18 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
         nothing kept).
     """
     s = settings
-    runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
     shared = {} if shared is None else shared
     if "truth" not in shared:
-        shared["truth"] = simulate_truth(s, q, r, [tuple(realisation_seeds(s.seed, scenario_index, run))
-                                                   for run in runs])
+        shared["truth"] = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index, runs))
     X, Y, u = shared["truth"]
     system = _system(s.T)
     learned = learn_noise(system, s, scenario_index, q, r, shared)
-    errors, nees, nis, failed, white, late = {}, {}, {}, {}, {}, {}
-    L = s.transient_steps
-    for name, make in make_filters(system, s, q, r, learned).items():
-        if name == TRUE_EKF and name in shared:
-            errors[name], nees[name], nis[name], failed[name], white[name], late[name] = shared[name]
-            continue
-        res = batch_run(make, X, Y, u[:, None])
-        errors[name], nees[name], nis[name], failed[name] = res.x - X, res.nees, res.nis, res.failed
-        white[name] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
-        late[name] = (metrics.whiteness_row(res.innovation[:, L:], res.S[:, L:], s.confidence, s.whiteness_lags)
-                      if s.has_late else None)
-        if name == TRUE_EKF:
-            shared[name] = errors[name], nees[name], nis[name], failed[name], white[name], late[name]
-    example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + errors[n][0] for n in errors}}
-    out = _summarise(errors, nees, nis, failed, s, example)
-    out["learned"] = learned
-    out["whiteness"], out["whiteness_late"] = white, late
+    filters = {name: shared[name] if name == TRUE_EKF and name in shared else _fast_filter(make, X, Y, u, s)
+               for name, make in make_filters(system, s, q, r, learned).items()}
+    shared[TRUE_EKF] = filters[TRUE_EKF]
+    example = {"truth": X[0], "y": Y[0], **{f"est {n}": X[0] + f.errors[0] for n, f in filters.items()}}
+    out = _summarise(filters, s, example, learned)
     out["bound"] = scenario_bound(s, X, u, q, r) if bound is None else bound
     return out
 
@@ -447,53 +417,25 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
 
     Parameters
     ----------
-    scenario_index
-        Which scenario (0-based).
-    reading
-        Which reading of the noise names.
-    settings
-        The campaign's settings.
-    runs
-        Which realisations (default all).
+    scenario_index, reading, settings, runs
+        As :func:`fast_task`.
     fmu_dir
         Where to build the plant FMU (default a temporary folder).
     learned
         The EM-learned (q, r) (default: learned here).
     """
-    import tempfile
-
-
-
     s = settings
-    runs = list(range(s.runs)) if runs is None else list(runs)
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    system = _system(s.T)
+    system, model = _system(s.T), get_model("cartpole")
     learned = learn_noise(system, s, scenario_index, q, r) if learned is None else learned
     makers = make_filters(system, s, q, r, learned)
-    X = np.empty((len(runs), s.steps + 1, 4))
-    E = {name: np.empty_like(X) for name in makers}
-    NIS = {name: np.zeros((len(runs), s.steps)) for name in makers}
-    NEES = {name: np.zeros((len(runs), s.steps)) for name in makers}
-    with tempfile.TemporaryDirectory() as tmp:
-        plant = FMUComponent("plant", build_fmu("cartpole", fmu_dir or tmp), s.T,
-                             start=dict(zip(STATES, s.x0)))
-        master = None
-        for i, run in enumerate(runs):
-            seeds = realisation_seeds(s.seed, scenario_index, run)
-            if master is None:
-                master = MasterRealisations(plant, figure2_prbs(s), *_noise(s, q, r, *seeds), makers, s.T)
-            X[i], est, cov, nis = master.run(*seeds, s.duration)
-            for n in makers:
-                E[n][i], NIS[n][i] = est[n], nis[n]
-                NEES[n][i] = nees_from_outputs(est[n][1:] - X[i][1:], cov[n][1:])
-    errors = {n: E[n] - X for n in makers}
-    failed = {n: np.zeros(len(runs), dtype=bool) for n in makers}
-    example = {"truth": X[0], **{f"est {n}": E[n][0] for n in makers}}
-    out = _summarise(errors, NEES, NIS, failed, s, example)
-    out["learned"] = learned
-    out["whiteness"] = {n: metrics.no_whiteness() for n in makers}
-    out["whiteness_late"] = {n: None for n in makers}
-    return out
+    seeds = common.seed_pairs(s, scenario_index, runs)
+    X, est, nees, nis = common.master_runs(model, dict(zip(STATES, s.x0)), figure2_prbs(s),
+                                           *common.noise_components(model, s.T, q, MEASURED, np.sqrt(r), *seeds[0]),
+                                           makers, s.T, s.duration, seeds, fmu_dir)
+    filters = {n: _FilterRun(est[n] - X, nees[n], nis[n], np.zeros(len(seeds), dtype=bool), metrics.no_whiteness(),
+                             None) for n in makers}
+    return _summarise(filters, s, {"truth": X[0], **{f"est {n}": est[n][0] for n in makers}}, learned)
 
 
 # ---------------------------------------------------------------------------- campaign
@@ -529,119 +471,113 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
 
     Parameters
     ----------
-    settings
-        The campaign's settings.
-    path
-        ``fast`` or ``master``.
+    settings, path, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
     readings
         The readings to run (default the settings').
-    backend
-        Parallel backend (:func:`~cosim.experiments.campaign.run_tasks`).
-    n_jobs
-        Worker processes.
-    progress
-        Show a progress bar.
     """
-
     if path not in ("fast", "master"):
         raise UnknownNameError(f"path must be 'fast' or 'master', got {path!r}")
     readings = tuple(settings.readings if readings is None else readings)
-    fn = fast_task if path == "fast" else master_task
     keys = [(rd, i) for rd in readings for i in range(len(settings.scenarios))]
-    t0 = time.perf_counter()
-    if path == "master":
-        # one task per scenario and slice of at most MASTER_CHUNK realisations: every core
-        # stays busy, and an interrupted campaign keeps all but the last few seconds
-        n_chunks = max(2, -(-settings.runs // MASTER_CHUNK))
-        chunks = [c for c in np.array_split(np.arange(settings.runs), min(settings.runs, n_chunks)) if len(c)]
-    else:
+    if path == "fast":
         chunks = [np.arange(settings.runs)]
-    extra = {}
-    if path == "master":         # EM learns once per scenario, not once per task
-        system = _system(settings.T)
-        extra = {(rd, i): {"learned": learn_noise(system, settings, i, *true_noise(settings.scenarios[i], rd))}
-                 for rd, i in keys}
-    tasks = [(fn, dict(scenario_index=i, reading=rd, settings=settings,
-                       **({"runs": list(c), **extra[(rd, i)]} if path == "master" else {})))
+        tasks = [(fast_task, dict(scenario_index=i, reading=rd, settings=settings)) for rd, i in keys]
+    else:
+        chunks, tasks = _master_tasks(settings, keys)
+    return common.run_campaign(tasks, lambda results, wall: _assemble(settings, keys, chunks, results, wall),
+                               f"seed000 ({path})", backend, n_jobs, progress)
+
+
+def _master_tasks(s: Settings, keys: list) -> tuple[list, list]:
+    """The master path's chunks and tasks: one task per scenario and slice of at most
+    :data:`MASTER_CHUNK` realisations (every core stays busy, and an interrupted campaign
+    keeps all but the last few seconds), EM learned once per scenario, not once per task;
+    then one task per scenario for the PCRB over all its realisations."""
+    n_chunks = max(2, -(-s.runs // MASTER_CHUNK))
+    chunks = [c for c in np.array_split(np.arange(s.runs), min(s.runs, n_chunks)) if len(c)]
+    system = _system(s.T)
+    learned = {(rd, i): learn_noise(system, s, i, *true_noise(s.scenarios[i], rd)) for rd, i in keys}
+    tasks = [(master_task, dict(scenario_index=i, reading=rd, settings=s, runs=list(c), learned=learned[(rd, i)]))
              for rd, i in keys for c in chunks]
-    if path == "master":         # the PCRB of each scenario over all its realisations
-        tasks += [(bound_task, dict(scenario_index=i, reading=rd, settings=settings)) for rd, i in keys]
-    try:
-        results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=f"seed000 ({path})")
-    except Interrupted as e:
-        done = e.partial or [None] * len(tasks)
-        e.partial = _assemble(settings, keys, chunks, done, time.perf_counter() - t0)
-        raise
-    return _assemble(settings, keys, chunks, results, time.perf_counter() - t0)
+    return chunks, tasks + [(bound_task, dict(scenario_index=i, reading=rd, settings=s)) for rd, i in keys]
 
 
 def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult:
     """The campaign's tables from the task results (None for tasks that did not finish):
     ``len(keys) * len(chunks)`` filter tasks, then (master path) one PCRB task per key."""
-    rows, eps_frames, cons_rows, bound_frames, examples = [], [], [], [], {}
     n = len(chunks)
-    s = settings
-    K = s.steps
+    tables, examples = ([], [], [], []), {}
     for j, (rd, i) in enumerate(keys):
         parts = [(c, res) for c, res in zip(chunks, results[j * n:(j + 1) * n]) if res is not None]
         if not parts:
             continue
-        q, r = true_noise(s.scenarios[i], rd)
-        q0, r0 = nominal_noise(s, q, r)
-        q_em, r_em = parts[0][1]["learned"]
         bound = parts[0][1].get("bound")
         if bound is None and len(results) > len(keys) * n:
             bound = results[len(keys) * n + j]
-        complete = sum(len(c) for c, _ in parts) == s.runs
-        ident = {"reading": rd, "scenario": i + 1}
-        for name in FILTERS:
-            for c, res in parts:
-                pr = res["per_run"][name]
-                for m, run_id in enumerate(c):
-                    rows.append({**ident, "sigma_q2": s.scenarios[i][0],
-                                 "sigma_r2": s.scenarios[i][1], "q_true": q, "r_true": r,
-                                 "q0": q0, "r0": r0, "q_em": q_em, "r_em": r_em,
-                                 "filter": name, "run": int(run_id), "eta": pr["eta"][m],
-                                 "diverged": bool(pr["diverged"][m]), "anees": pr["anees"][m],
-                                 "anis": pr["anis"][m],
-                                 **{f"rmse_{x}": pr["rmse"][m, a] for a, x in enumerate(STATES)}})
-            w = np.array([len(c) for c, _ in parts], float)
-            eps = sum(res["eps_k"][name] * wi for (_, res), wi in zip(parts, w)) / w.sum()
-            mse = sum(res["steps"][name]["mse"] * wi for (_, res), wi in zip(parts, w)) / w.sum()
-            nees = np.concatenate([res["steps"][name]["nees"] for _, res in parts])
-            nis = np.concatenate([res["steps"][name]["nis"] for _, res in parts])
-            row, per_step = metrics.band_row(nees, nis, 4, 2, s.confidence)
-            row.update(parts[0][1]["whiteness"][name] if n == 1 else metrics.no_whiteness())
-            row["consistent"] = metrics.verdict(row)
-            rmse_runs = np.concatenate([res["per_run"][name]["rmse"] for _, res in parts])
-            ratio, se = ((metrics.pcrb_ratio(rmse_runs, bound[1:]), metrics.pcrb_ratio_se(rmse_runs, bound[1:]))
-                         if bound is not None and complete else (np.full(4, np.nan), np.full(4, np.nan)))
-            late = (metrics.after_transient(nees, nis, mse, bound[1:], 2, s.transient_steps,
-                                            parts[0][1]["whiteness_late"][name] if n == 1 else None, s.confidence)
-                    if bound is not None and complete and s.has_late else {})
-            cons_rows.append({**ident, "filter": name, "eta": float(np.concatenate(
-                [res["per_run"][name]["eta"] for _, res in parts]).mean()),
-                "diverged": int(sum(res["per_run"][name]["diverged"].sum() for _, res in parts)),
-                **{f"rmse_{x}": float(np.sqrt(np.mean(rmse_runs[:, a] ** 2))) for a, x in enumerate(STATES)},
-                **{f"pcrb_ratio_{x}": float(ratio[a]) for a, x in enumerate(STATES)},
-                "pcrb_ratio_max": float(np.max(ratio)),
-                **{f"pcrb_ratio_se_{x}": float(se[a]) for a, x in enumerate(STATES)}, **row, **late})
-            eps_frames.append(pd.DataFrame({**ident, "filter": name, "k": np.arange(1, K + 1),
-                                            "time": np.arange(1, K + 1) * s.T, "eps": eps, **per_step,
-                                            **{f"mse_{x}": mse[:, a] for a, x in enumerate(STATES)}}))
-        if bound is not None:
-            cons_rows.append({**ident, "filter": "PCRB", "runs": s.runs,
-                              **{f"rmse_{x}": float(np.sqrt(bound[1:, a].mean())) for a, x in enumerate(STATES)},
-                              **{f"pcrb_ratio_{x}": 1.0 for x in STATES}, "pcrb_ratio_max": 1.0})
-            bound_frames.append(pd.DataFrame({**ident, "k": np.arange(K + 1), "time": np.arange(K + 1) * s.T,
-                                              **{f"mse_{x}": bound[:, a] for a, x in enumerate(STATES)}}))
+        for table, rows in zip(tables, _scenario_tables(settings, rd, i, parts, bound, n == 1)):
+            table.extend(rows)
         examples[(rd, i + 1)] = parts[0][1]["example"]
+    per_run, eps, cons, bounds = tables
 
     def frame(parts):
         return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
-    return CampaignResult(pd.DataFrame(rows), frame(eps_frames), examples, wall, pd.DataFrame(cons_rows),
-                          frame(bound_frames))
+    return CampaignResult(pd.DataFrame(per_run), frame(eps), examples, wall, pd.DataFrame(cons), frame(bounds))
+
+
+def _scenario_tables(s: Settings, rd: str, i: int, parts: list, bound, whole: bool) -> tuple[list, list, list, list]:
+    """One reading and scenario's rows of the per-run and consistency tables and its frames
+    of eps_k and of the bound, from the results ``parts`` ((runs, result) of its tasks;
+    ``whole``: one task ran all realisations, so its whiteness tests hold)."""
+    q, r = true_noise(s.scenarios[i], rd)
+    (q0, r0), (q_em, r_em) = nominal_noise(s, q, r), parts[0][1]["learned"]
+    ident = {"reading": rd, "scenario": i + 1}
+    head = {**ident, "sigma_q2": s.scenarios[i][0], "sigma_r2": s.scenarios[i][1], "q_true": q, "r_true": r,
+            "q0": q0, "r0": r0, "q_em": q_em, "r_em": r_em}
+    complete = sum(len(c) for c, _ in parts) == s.runs
+    per_run, cons, eps, bounds = [], [], [], []
+    for name in FILTERS:
+        rows, row, frame = _filter_tables(s, head, ident, name, parts, bound if complete else None, whole)
+        per_run += rows
+        cons.append(row)
+        eps.append(frame)
+    if bound is not None:
+        cons.append(common.pcrb_row(ident, bound, s.runs, STATES))
+        k = np.arange(s.steps + 1)
+        bounds.append(pd.DataFrame({**ident, "k": k, "time": k * s.T,
+                                    **{f"mse_{x}": bound[:, a] for a, x in enumerate(STATES)}}))
+    return per_run, eps, cons, bounds
+
+
+def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list, bound, whole: bool):
+    """One filter's rows of the per-run table (beginning with ``head``), its row of the
+    consistency table and its frame of eps_k, over the tasks' results ``parts``; ``bound``:
+    the PCRB of all the realisations (None: not known)."""
+    runs = np.concatenate([c for c, _ in parts])
+    pr = {k: np.concatenate([res["per_run"][name][k] for _, res in parts])
+          for k in ("eta", "diverged", "anees", "anis", "rmse")}
+    rows = [{**head, "filter": name, "run": int(run_id), "eta": pr["eta"][m], "diverged": bool(pr["diverged"][m]),
+             "anees": pr["anees"][m], "anis": pr["anis"][m],
+             **{f"rmse_{x}": pr["rmse"][m, a] for a, x in enumerate(STATES)}} for m, run_id in enumerate(runs)]
+    w = np.array([len(c) for c, _ in parts], float)
+    eps = sum(res["eps_k"][name] * wi for (_, res), wi in zip(parts, w)) / w.sum()
+    mse = sum(res["steps"][name]["mse"] * wi for (_, res), wi in zip(parts, w)) / w.sum()
+    nees = np.concatenate([res["steps"][name]["nees"] for _, res in parts])
+    nis = np.concatenate([res["steps"][name]["nis"] for _, res in parts])
+    first = parts[0][1]
+    tests, per_step = metrics.consistency_row(nees, nis, 4, 2, s.confidence,
+                                              first["whiteness"][name] if whole else None)
+    late = (metrics.after_transient(nees, nis, mse, bound[1:], 2, s.transient_steps,
+                                    first["whiteness_late"][name] if whole else None, s.confidence)
+            if bound is not None and s.has_late else {})
+    row = {**ident, "filter": name, "eta": float(pr["eta"].mean()), "diverged": int(pr["diverged"].sum()),
+           **{f"rmse_{x}": float(np.sqrt(np.mean(pr["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
+           **common.pcrb_columns(pr["rmse"], None if bound is None else bound[1:], STATES), **tests, **late}
+    k = np.arange(1, s.steps + 1)
+    frame = pd.DataFrame({**ident, "filter": name, "k": k, "time": k * s.T, "eps": eps, **per_step,
+                          **{f"mse_{x}": mse[:, a] for a, x in enumerate(STATES)}})
+    return rows, row, frame
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
@@ -776,17 +712,6 @@ def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[s
     return lines + [""]
 
 
-def consistency_lines(consistency: pd.DataFrame) -> list[str]:
-    """A markdown table of the consistency tests, one row per reading, scenario and filter.
-
-    Parameters
-    ----------
-    consistency
-        The ``consistency`` table of :class:`CampaignResult`.
-    """
-    return metrics.consistency_markdown(consistency[consistency["filter"] != "PCRB"], ["reading", "scenario"])
-
-
 def write_report(result: CampaignResult, settings: Settings, out_dir, path: str = "fast",
                  config: str = "custom", partial: bool = False) -> Path:
     """Tables (CSV, Parquet), figures (PNG), ``settings.toml`` and a markdown summary into
@@ -794,77 +719,61 @@ def write_report(result: CampaignResult, settings: Settings, out_dir, path: str 
 
     Parameters
     ----------
-    result
-        What :func:`run` returned.
-    settings
-        The settings used.
-    out_dir
-        Output folder.
-    path
-        The path that ran.
-    config
-        The configuration's name.
-    partial
-        The campaign was interrupted.
+    result, settings, out_dir, path, config, partial
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
+        (``result``: what :func:`run` returned).
     """
     per_run, eps, examples, wall, cons, bound = result
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed000")))
-    atomic_write(out / "per_run.csv", lambda p: per_run.to_csv(p, index=False))
-    atomic_write(out / "per_run.parquet", per_run.to_parquet)
-    atomic_write(out / "eps_k.csv", lambda p: eps.to_csv(p, index=False))
-    atomic_write(out / "consistency.csv", lambda p: cons.to_csv(p, index=False))
-    atomic_write(out / "pcrb.csv", lambda p: bound.to_csv(p, index=False))
     table = summary_table(per_run) if len(per_run) else pd.DataFrame()
-    atomic_write(out / "table3.csv", lambda p: table.to_csv(p, index=False))
+    out = common.report_folder(out_dir, to_toml(settings, "seed000"),
+                               {"per_run.csv": per_run, "per_run.parquet": per_run, "eps_k.csv": eps,
+                                "consistency.csv": cons, "pcrb.csv": bound, "table3.csv": table})
     _figures(eps, examples, settings, out)
     _limit_figures(eps, bound, settings, out)
-
     lines = [f"# Seed 000 campaign ({path} path, configuration: {config})", ""]
     if partial:
         lines += ["**PARTIAL RESULTS: the campaign was interrupted; only the tasks that finished "
                   "are in these tables.**", ""]
-    regime = (f"filters from Q0 = {settings.q0:g} I, R0 = {settings.r0:g} I" if settings.q0_factor is None
-              else f"filters from Q0 = {settings.q0_factor:g} q I, R0 = {settings.r0_factor:g} r I")
-    lines += [f"Regime: configuration {config} ({regime}, P0 = {settings.P0:g} I, readings "
-              f"{', '.join(settings.readings)}); {settings.runs} realisations x {len(settings.scenarios)} scenarios "
-              f"x {len(FILTERS)} filters x {settings.steps} steps per reading; wall time {wall:.2f} s.", "",
-              "Input: the PRBS of seed 000 Figure 2: maximal-length LFSR of order "
-              f"{settings.input_order} started from state {settings.input_seed}, {settings.input_bit_time:g} s "
-              f"per bit, +/-{settings.input_amplitude:g} N (its first bits 0 0 1 1 1: -0.5 N until 2 s, "
-              "then +0.5 N).", ""]
+    lines += _regime(settings, config, wall)
     if len(table):
-        cols = ["reading", "scenario", "sigma_q2", "sigma_r2", "paper EKF", "paper MF-IAE", *FILTERS]
-        lines += ["## Table 3: eta (eq 44), mean over realisations", "",
-                  "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-        for _, row in table.iterrows():
-            lines.append("| " + " | ".join(f"{row[c]:.4f}" if isinstance(row[c], float) else str(row[c])
-                                           for c in cols) + " |")
-        lines += ["", "## Where we agree with the paper, and where not", "", *agreement(table), ""]
-        div = {c: int(table[c].sum()) for c in table.columns if c.endswith("diverged")}
-        lines += ["Diverged realisations (error not finite or above "
-                  f"{settings.divergence_threshold:g}): " + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), ""]
+        lines += _table3_section(table, settings)
     if len(cons):
-        lines += _limit_section(cons, settings)
-        lines += ["## Consistency: chi-square bands of NEES and NIS, whiteness of the innovations", "",
-                  "Rule: " + metrics.consistency_rule(settings.confidence, settings.whiteness_lags) + ".", "",
-                  *consistency_lines(cons), "", *transient_sentences(cons, settings)]
-        if path == "master":
-            lines += ["On the master path the estimator components do not publish their innovations, so "
-                      "whiteness is not tested there (the fast path gives the same numbers).", ""]
+        lines += [*_limit_section(cons, settings), *common.consistency_section(
+            cons, ["reading", "scenario"], settings, path, transient_sentences(cons, settings))]
     lines += ["## Settings (the paper gives none of the filter settings)", "",
               "Rerun with `pendulum-cosim experiment seed000 --settings settings.toml` (this folder's file), "
-              "or change one with `--set name=value`.", "", "| setting | value |", "|---|---|"]
-    lines += [f"| {k} | {v} |" for k, v in asdict(settings).items()]
-    lines += ["", "Readings of the noise names:", ""] + [f"- **{k}**: {v}" for k, v in READINGS.items()]
-    lines += ["", "Files: per_run.csv|parquet (every realisation), eps_k.csv (per step: eps_k, average NEES and NIS "
+              "or change one with `--set name=value`.", "", *common.settings_table(settings), "",
+              "Readings of the noise names:", "", *[f"- **{k}**: {v}" for k, v in READINGS.items()], "",
+              "Files: per_run.csv|parquet (every realisation), eps_k.csv (per step: eps_k, average NEES and NIS "
               "with their bands, mean-square errors), consistency.csv (per scenario and filter: RMSE, RMSE / PCRB, "
               "the tests), pcrb.csv (the bound per step), table3.csv.", "",
               "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
-    md = out / "summary.md"
-    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return md
+    return common.write_summary(out, lines)
+
+
+def _regime(settings: Settings, config: str, wall: float) -> list[str]:
+    """The report's lines on the regime: the filters' start, the size of the campaign, the input."""
+    s = settings
+    regime = (f"filters from Q0 = {s.q0:g} I, R0 = {s.r0:g} I" if s.q0_factor is None
+              else f"filters from Q0 = {s.q0_factor:g} q I, R0 = {s.r0_factor:g} r I")
+    return [f"Regime: configuration {config} ({regime}, P0 = {s.P0:g} I, readings {', '.join(s.readings)}); "
+            f"{s.runs} realisations x {len(s.scenarios)} scenarios x {len(FILTERS)} filters x {s.steps} steps per "
+            f"reading; wall time {wall:.2f} s.", "",
+            f"Input: the PRBS of seed 000 Figure 2: maximal-length LFSR of order {s.input_order} started from state "
+            f"{s.input_seed}, {s.input_bit_time:g} s per bit, +/-{s.input_amplitude:g} N (its first bits 0 0 1 1 1: "
+            "-0.5 N until 2 s, then +0.5 N).", ""]
+
+
+def _table3_section(table: pd.DataFrame, settings: Settings) -> list[str]:
+    """The report's Table 3 beside the paper's, the agreement in words and the divergences."""
+    cols = ["reading", "scenario", "sigma_q2", "sigma_r2", "paper EKF", "paper MF-IAE", *FILTERS]
+    div = {c: int(table[c].sum()) for c in table.columns if c.endswith("diverged")}
+    return ["## Table 3: eta (eq 44), mean over realisations", "",
+            *common.markdown_table(cols, ([f"{row[c]:.4f}" if isinstance(row[c], float) else str(row[c])
+                                           for c in cols] for _, row in table.iterrows())),
+            "", "## Where we agree with the paper, and where not", "", *agreement(table), "",
+            f"Diverged realisations (error not finite or above {settings.divergence_threshold:g}): "
+            + ", ".join(f"{k[:-9]}: {v}" for k, v in div.items()), ""]
 
 
 def _limit_section(cons: pd.DataFrame, settings: Settings) -> list[str]:
@@ -908,7 +817,7 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
         e1 = eps[(eps.reading == rd) & (eps.scenario == eps.scenario.min())]
         sc = int(e1["scenario"].iloc[0])
         for stat, label, ny in (("anees", "average NEES", 4), ("anis", "average NIS", 2)):
-            fig, axes = new_figure(1, 1, figsize=(8, 4))
+            fig, axes = common.new_figure(1, 1, figsize=(8, 4))
             ax = axes[0, 0]
             first = e1[e1["filter"] == FILTERS[0]]
             lo, hi = ("nees_lo", "nees_hi") if stat == "anees" else ("nis_lo", "nis_hi")
@@ -918,15 +827,11 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
                 f = e1[e1["filter"] == name]
                 ax.plot(f["time"], f[stat], lw=0.9, label=name)
             ax.axhline(ny, color="k", lw=0.6, ls=":")
-            ax.set_yscale("log")
-            ax.set_xlabel("time [s]")
-            ax.set_ylabel(f"{label} over {settings.runs} runs")
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7, ncol=2)
-            ax.set_title(f"Seed 000: {label} with its chi-square band, scenario {sc} ({rd} reading)")
-            atomic_write(out / f"figure_{stat[1:]}_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+            common.style_axes(ax, "time [s]", f"{label} over {settings.runs} runs",
+                              f"Seed 000: {label} with its chi-square band, scenario {sc} ({rd} reading)", True, 7, 2)
+            common.save_figure(fig, out / f"figure_{stat[1:]}_{rd}.png")
         b = bound[(bound.reading == rd) & (bound.scenario == sc)] if len(bound) else bound
-        fig, axes = new_figure(4, 1, figsize=(8, 9), sharex=True)
+        fig, axes = common.new_figure(4, 1, figsize=(8, 9), sharex=True)
         for a, x in enumerate(STATES):
             ax = axes[a, 0]
             for name in ("EKF", "MF-IAE", "SWML", TRUE_EKF):
@@ -934,46 +839,39 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
                 ax.plot(f["time"], np.sqrt(f[f"mse_{x}"]), lw=0.9, label=name)
             if len(b):
                 ax.plot(b["time"].iloc[1:], np.sqrt(b[f"mse_{x}"].iloc[1:]), "k-", lw=1.4, label="sqrt(PCRB)")
-            ax.set_yscale("log")
-            ax.set_ylabel(f"RMSE {x}")
-            ax.grid(alpha=0.3)
+            common.style_axes(ax, ylabel=f"RMSE {x}", log=True)
         axes[0, 0].legend(fontsize=7, ncol=3)
         axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"Seed 000: RMSE over {settings.runs} runs against the PCRB, scenario {sc} ({rd} reading)")
-        atomic_write(out / f"figure_rmse_pcrb_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+        common.save_figure(fig, out / f"figure_rmse_pcrb_{rd}.png")
 
 
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
-
+    """Figures 3 (scenario 1, realisation 0: truth and the EKF's and MF-IAE's estimates) and
+    4 (scenario 1: eps_k of every filter) of the paper, one per reading."""
     for rd in sorted({k[0] for k in examples}):
         if (rd, 1) not in examples:
             continue
         ex = examples[(rd, 1)]
         t = np.arange(ex["truth"].shape[0]) * settings.T
-        fig, axes = new_figure(4, 1, figsize=(8, 8), sharex=True)
+        fig, axes = common.new_figure(4, 1, figsize=(8, 8), sharex=True)
         for a in range(4):
             ax = axes[a, 0]
             ax.plot(t, ex["truth"][:, a], "k-", lw=1.2, label="truth")
             for name, style in (("EKF", "b--"), ("MF-IAE", "r-.")):
                 ax.plot(t, ex[f"est {name}"][:, a], style, lw=0.9, label=name)
-            ax.set_ylabel(STATES[a])
-            ax.grid(alpha=0.3)
+            common.style_axes(ax, ylabel=STATES[a])
         axes[0, 0].legend(fontsize=8)
         axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"Seed 000 Figure 3: scenario 1, realisation 0 ({rd} reading)")
-        atomic_write(out / f"figure3_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
-        fig, axes = new_figure(1, 1, figsize=(8, 3.5))
-        ax = axes[0, 0]
+        common.save_figure(fig, out / f"figure3_{rd}.png")
+        fig, axes = common.new_figure(1, 1, figsize=(8, 3.5))
         for name in FILTERS:
             e = eps[(eps.reading == rd) & (eps.scenario == 1) & (eps["filter"] == name)]
-            ax.plot(e["time"], e["eps"], lw=1, label=name)
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("eps_k (eq 43)")
-        ax.set_yscale("log")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        ax.set_title(f"Seed 000 Figure 4: scenario 1, {settings.runs} realisations ({rd} reading)")
-        atomic_write(out / f"figure4_{rd}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+            axes[0, 0].plot(e["time"], e["eps"], lw=1, label=name)
+        common.style_axes(axes[0, 0], "time [s]", "eps_k (eq 43)",
+                          f"Seed 000 Figure 4: scenario 1, {settings.runs} realisations ({rd} reading)", True, 8)
+        common.save_figure(fig, out / f"figure4_{rd}.png")
 
 
 class Seed000(Experiment, register="seed000"):

@@ -16,21 +16,17 @@ the same Q0, R0. The goals are checked cell by cell and summarised in ``summary.
 """
 from __future__ import annotations
 
-import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
 
-from fmu_models.errors import ConfigurationError, Interrupted
+from fmu_models.errors import ConfigurationError
 from fmu_models.infra.checks import positive
-from fmu_models.infra.files import atomic_write
 
-from . import metrics, seed000
-from .campaign import run_tasks
-from .common import new_figure
+from . import common, metrics, seed000
 from .experiment import Experiment
 from .settings import apply_overrides, to_toml
 
@@ -90,25 +86,17 @@ def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: s
         ekf = res["per_run"]["EKF"]["eta"]
         for name in (*FILTERS, TRUE_EKF):
             pr, st = res["per_run"][name], res["steps"][name]
-            test, _ = metrics.band_row(st["nees"], st["nis"], 4, 2, s.confidence)
-            test.update(res["whiteness"][name])
-            test["consistent"] = metrics.verdict(test)
-            ratio = metrics.pcrb_ratio(pr["rmse"], bound[1:])
+            test, _ = metrics.consistency_row(st["nees"], st["nis"], 4, 2, s.confidence, res["whiteness"][name])
             late = (metrics.after_transient(st["nees"], st["nis"], st["mse"], bound[1:], 2, s.transient_steps,
                                             res["whiteness_late"][name], s.confidence) if s.has_late else
-                    {"pcrb_ratio_max_late": np.nan, "anees_late": np.nan, "anis_late": np.nan,
-                     "consistent_late": np.nan})
+                    dict.fromkeys(("pcrb_ratio_max_late", "anees_late", "anis_late", "consistent_late"), np.nan))
             rows.append({"scenario": scenario_index + 1, "q_factor": fq, "r_factor": fr, "filter": name,
                          "eta": float(np.mean(pr["eta"])), "eta_true_ekf": float(np.mean(true_eta)),
                          "eta_over_true_ekf": float(np.mean(pr["eta"]) / np.mean(true_eta)),
                          "eta_over_ekf": float(np.mean(pr["eta"]) / np.mean(ekf)),
                          "worse_than_ekf": float(np.mean(pr["eta"] > ekf)) if name in ADAPTIVE else 0.0,
-                         **{f"pcrb_ratio_{x}": float(ratio[a]) for a, x in enumerate(STATES)},
-                         "pcrb_ratio_max": float(np.max(ratio)),
-                         **{f"pcrb_ratio_se_{x}": float(v) for x, v in
-                            zip(STATES, metrics.pcrb_ratio_se(pr["rmse"], bound[1:]))},
-                         "diverged": int(pr["diverged"].sum()), **test,
-                         **late})
+                         **common.pcrb_columns(pr["rmse"], bound[1:], STATES), "diverged": int(pr["diverged"].sum()),
+                         **test, **late})
     return rows
 
 
@@ -121,35 +109,23 @@ class SweepResult(NamedTuple):
 
 
 def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n_jobs=None,
-        progress: bool = True):
-    """Run the sweep; returns ``(table, wall_time)``: one row per scenario, cell and
-    filter (see the module documentation). Interrupted, it raises
+        progress: bool = True) -> SweepResult:
+    """Run the sweep; returns a :class:`SweepResult`: one row per scenario, cell and filter
+    (see the module documentation). Interrupted, it raises
     :class:`~fmu_models.errors.Interrupted` with the rows of the finished tasks.
 
     Parameters
     ----------
-    settings
-        The sweep's settings.
-    backend
-        Parallel backend.
-    n_jobs
-        Worker processes.
-    progress
-        Show a progress bar.
+    settings, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
     """
     s = settings.campaign
     cells = [(fq, fr) for fq in settings.factors for fr in settings.factors]
     chunks = [cells[i:i + len(settings.factors)] for i in range(0, len(cells), len(settings.factors))]
     tasks = [(cell_task, dict(scenario_index=i, cells=c, settings=s))
              for i in range(len(s.scenarios)) for c in chunks]
-    t0 = time.perf_counter()
-    try:
-        results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc="seed000 sweep")
-    except Interrupted as e:
-        e.partial = SweepResult(pd.DataFrame([r for rows in (e.partial or []) if rows for r in rows]),
-                                time.perf_counter() - t0)
-        raise
-    return SweepResult(pd.DataFrame([r for rows in results for r in rows]), time.perf_counter() - t0)
+    return common.run_campaign(tasks, lambda results, wall: SweepResult(
+        pd.DataFrame([r for rows in results if rows for r in rows]), wall), "seed000 sweep", backend, n_jobs, progress)
 
 
 def _cells(table: pd.DataFrame) -> pd.DataFrame:
@@ -228,78 +204,66 @@ def why_not_consistent(table: pd.DataFrame, name: str = "SWML") -> list[str]:
     return lines
 
 
+#: The report's maps: (title, metric, aggregate over the scenarios, number format, filters).
+GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 factor, columns: R0 factor)",
+          "pcrb_ratio_max", "max", ".3f", (*FILTERS, TRUE_EKF)),
+         ("eta / eta of the EKF given the true Q and R, mean over scenarios", "eta_over_true_ekf", "mean", ".2f",
+          FILTERS),
+         ("Average NEES (state dimension 4; mean over scenarios)", "anees", "mean", ".3g", FILTERS),
+         ("Scenarios (of 4) in which the filter is consistent", "consistent", "sum", ".0f", FILTERS))
+
+
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
     """``sweep.csv|parquet``, heat maps (``heatmap_<metric>.png``), ``settings.toml`` and
     ``summary.md`` into ``out_dir``.
 
     Parameters
     ----------
-    table
-        The sweep's table.
-    wall
-        Wall time [s].
-    settings
-        The sweep's settings.
-    out_dir
-        Output folder.
-    partial
-        The sweep was interrupted.
+    table, wall
+        The fields of :class:`SweepResult`.
+    settings, out_dir, partial
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
     """
-
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "settings.toml", lambda p: p.write_text(
-        to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"))
-    atomic_write(out / "sweep.csv", lambda p: table.to_csv(p, index=False))
-    atomic_write(out / "sweep.parquet", table.to_parquet)
+    toml = to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"
+    out = common.report_folder(out_dir, toml, {"sweep.csv": table, "sweep.parquet": table})
     lines = ["# Seed 000 robustness sweep: EKF, IAE, MF-IAE, the EM-learned EKF and SWML from wrong Q0 and R0", ""]
     if partial:
         lines += ["**PARTIAL RESULTS: the sweep was interrupted; only finished cells are here.**", ""]
     if len(table):
         g = goals(table, settings)
-        atomic_write(out / "goals.csv", lambda p: g.to_csv(p, index=False))
+        common.write_tables(out, {"goals.csv": g})
         _heatmaps(table, settings, out)
-        n = len(settings.factors) ** 2
-        c = settings.campaign
-        lines += [f"Regime: the seed 000 paper campaign (eqs reading) with the filters started at Q0 = fq q I, "
-                  f"R0 = fr r I; {len(settings.factors)} x {len(settings.factors)} cells (f in "
-                  f"{', '.join(f'{f:g}' for f in settings.factors)}), {table['scenario'].nunique()} scenarios, "
-                  f"{c.runs} realisations a cell; wall time {wall:.1f} s.", "",
-                  "## Goals", "",
-                  g.to_markdown(index=False, floatfmt=".3f"), "",
-                  f"Goals: eta (mean over the scenarios) within {settings.true_ekf_margin:.0%} of the EKF given the "
-                  f"true Q and R in most of the {n} cells; never more than {settings.ekf_margin:.0%} worse than the "
-                  f"EKF started at the same Q0, R0; every state's RMSE within {settings.pcrb_margin:.0%} of the "
-                  f"PCRB in every scenario of a cell (worst RMSE/PCRB: the largest over the states and the "
-                  f"scenarios); consistent in every scenario of a cell. The EKF given the true Q and R does not "
-                  f"depend on the cell (its row is the reference). The columns 'after the transient' are a "
-                  f"diagnostic, not the goals: the same numbers over the steps after the first "
-                  f"{c.transient_steps} ({c.transient_steps * c.T:g} s), where an adaptive filter's start-up no "
-                  f"longer counts.", "",
-                  "Consistency rule: " + metrics.consistency_rule(c.confidence, c.whiteness_lags) + ".", ""]
-        misses = why_not_consistent(table, "SWML")
-        if misses:
-            lines += ["Where SWML is not consistent:", "", *misses, ""]
-        lines += ["## Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 factor, columns: R0 factor)",
-                  ""]
-        for name in (*FILTERS, TRUE_EKF):
-            lines += [f"**{name}**", "", _grid(table, name, "pcrb_ratio_max", "max").to_markdown(floatfmt=".3f"), ""]
-        lines += ["## eta / eta of the EKF given the true Q and R, mean over scenarios", ""]
-        for name in FILTERS:
-            lines += [f"**{name}**", "", _grid(table, name, "eta_over_true_ekf").to_markdown(floatfmt=".2f"), ""]
-        lines += ["## Average NEES (state dimension 4; mean over scenarios)", ""]
-        for name in FILTERS:
-            lines += [f"**{name}**", "", _grid(table, name, "anees").to_markdown(floatfmt=".3g"), ""]
-        lines += ["## Scenarios (of 4) in which the filter is consistent", ""]
-        for name in FILTERS:
-            lines += [f"**{name}**", "", _grid(table, name, "consistent", "sum").to_markdown(floatfmt=".0f"), ""]
+        lines += _goal_lines(table, g, wall, settings)
+        for title, metric, how, fmt, names in GRIDS:
+            lines += [f"## {title}", ""]
+            for name in names:
+                lines += [f"**{name}**", "", _grid(table, name, metric, how).to_markdown(floatfmt=fmt), ""]
         lines += ["Heat maps: " + ", ".join(sorted(p.name for p in out.glob("heatmap_*.png"))), ""]
-    lines += ["## Settings of every cell", "", "| setting | value |", "|---|---|"]
-    lines += [f"| {k} | {v} |" for k, v in asdict(settings.campaign).items() if k not in ("q0_factor", "r0_factor")]
-    md = out / "summary.md"
-    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return md
+    lines += ["## Settings of every cell", "", *common.settings_table(settings.campaign, ("q0_factor", "r0_factor"))]
+    return common.write_summary(out, lines)
+
+
+def _goal_lines(table: pd.DataFrame, g: pd.DataFrame, wall: float, settings: SweepSettings) -> list[str]:
+    """The report's regime, its goals table ``g`` in words, and where SWML is not consistent."""
+    c, n = settings.campaign, len(settings.factors) ** 2
+    misses = why_not_consistent(table, "SWML")
+    return [f"Regime: the seed 000 paper campaign (eqs reading) with the filters started at Q0 = fq q I, "
+            f"R0 = fr r I; {len(settings.factors)} x {len(settings.factors)} cells (f in "
+            f"{', '.join(f'{f:g}' for f in settings.factors)}), {table['scenario'].nunique()} scenarios, "
+            f"{c.runs} realisations a cell; wall time {wall:.1f} s.", "",
+            "## Goals", "",
+            g.to_markdown(index=False, floatfmt=".3f"), "",
+            f"Goals: eta (mean over the scenarios) within {settings.true_ekf_margin:.0%} of the EKF given the "
+            f"true Q and R in most of the {n} cells; never more than {settings.ekf_margin:.0%} worse than the "
+            f"EKF started at the same Q0, R0; every state's RMSE within {settings.pcrb_margin:.0%} of the "
+            f"PCRB in every scenario of a cell (worst RMSE/PCRB: the largest over the states and the "
+            f"scenarios); consistent in every scenario of a cell. The EKF given the true Q and R does not "
+            f"depend on the cell (its row is the reference). The columns 'after the transient' are a "
+            f"diagnostic, not the goals: the same numbers over the steps after the first "
+            f"{c.transient_steps} ({c.transient_steps * c.T:g} s), where an adaptive filter's start-up no "
+            f"longer counts.", "",
+            "Consistency rule: " + metrics.consistency_rule(c.confidence, c.whiteness_lags) + ".", "",
+            *(["Where SWML is not consistent:", "", *misses, ""] if misses else [])]
 
 
 def _grid(table: pd.DataFrame, name: str, metric: str, how: str = "mean") -> pd.DataFrame:
@@ -311,7 +275,7 @@ def _grid(table: pd.DataFrame, name: str, metric: str, how: str = "mean") -> pd.
 
 
 def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
-
+    """One figure of heat maps per metric, a map per filter of :data:`FILTERS`."""
     labels = [f"{f:g}" for f in settings.factors]
     for metric, how, title, log in (("eta_over_true_ekf", "mean", "eta / eta of the EKF given the true Q, R", False),
                                     ("pcrb_ratio_max", "max", "worst state's RMSE / PCRB (largest over scenarios)",
@@ -319,7 +283,7 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
                                     ("anees", "mean", "average NEES (nx = 4)", True),
                                     ("consistent", "sum", "scenarios consistent (of 4)", False),
                                     ("worse_than_ekf", "mean", "share of runs worse than the EKF", False)):
-        fig, axes = new_figure(1, len(FILTERS), figsize=(4.6 * len(FILTERS), 4.4))
+        fig, axes = common.new_figure(1, len(FILTERS), figsize=(4.6 * len(FILTERS), 4.4))
         grids = [_grid(table, name, metric, how).to_numpy() for name in FILTERS]
         values = np.log10(np.concatenate([g.ravel() for g in grids]).clip(1e-3)) if log else \
             np.concatenate([g.ravel() for g in grids])
@@ -339,7 +303,7 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
                         color="w" if (shown[i, j] - vmin) < 0.5 * (vmax - vmin) else "k")
         fig.colorbar(im, ax=list(axes[0]), shrink=0.8, label=("log10 " if log else "") + title)
         fig.suptitle(f"Seed 000 sweep: {title}" + (", mean over scenarios" if how == "mean" else ""))
-        atomic_write(out / f"heatmap_{metric}.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+        common.save_figure(fig, out / f"heatmap_{metric}.png")
 
 
 class Sweep(Experiment, register="seed000-sweep"):
@@ -356,7 +320,6 @@ class Sweep(Experiment, register="seed000-sweep"):
         """The campaign settings of ``config`` (default ``paper``) with the file, ``runs``,
         ``seed`` and the ``overrides`` that name campaign settings; the others set the
         sweep's own fields."""
-
         own = {f.name for f in fields(SweepSettings)} - {"campaign"}
         overrides = list(overrides or ())
         mine = [x for x in overrides if x.split("=", 1)[0].strip() in own]

@@ -24,8 +24,7 @@ innovations).
 """
 from __future__ import annotations
 
-import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar, NamedTuple
 
@@ -33,14 +32,10 @@ import numpy as np
 import pandas as pd
 
 from estimators import EKF, KF, discretize, posterior_crb
-from fmu_models import build_fmu, get_model
-from fmu_models.infra.files import atomic_write
+from fmu_models import get_model
 
 from ..components.sources import Constant
-from ..fmi.fmu_component import FMUComponent
-from . import metrics
-from .campaign import realisation_seeds, run_tasks
-from .common import batch_run, master_realisation, nees_from_outputs, new_figure, noise_components, simulate_truth
+from . import common, metrics
 from .experiment import Experiment
 from .settings import check_common, check_consistency, to_toml
 
@@ -50,6 +45,8 @@ PAPER = pd.DataFrame({"time": [1, 30, 60, 90, 100], "KF error": [0.012, 0.0047, 
                       "EKF error": [0.006, 0.002, 0.005, 0.011, 0.009]})
 FILTERS = ("KF", "EKF")
 STATES = ("x", "x_dot", "theta", "theta_dot")
+#: The measured states.
+MEASURED = ("x", "theta")
 #: The prior of the PCRB (``pcrb_prior``).
 PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at the case's state)",
                "P0": "x_0 ~ N(x0, P0 I), the filters' own prior"}
@@ -100,7 +97,6 @@ def make_filters(s: Settings, case: str) -> dict:
     case
         Which case (its initial state and KF linearisation point).
     """
-
     system = discretize(get_model("cartpole"), s.T)
     x0 = np.array(CASES[case])
     x_op = x0 if case == "hanging" else np.zeros(4)
@@ -110,7 +106,6 @@ def make_filters(s: Settings, case: str) -> dict:
 
 
 def _source(s: Settings):
-
     return Constant("force", s.T, s.force)
 
 
@@ -128,9 +123,7 @@ def _summary(errors: dict, s: Settings, nees: dict, nis: dict, white: dict, boun
         t_div = np.where(stays.any(axis=1), t[np.argmax(stays, axis=1)], np.nan)
         idx = [round(tr / s.T) for tr in REPORT_TIMES if tr <= s.duration]
         rmse = np.sqrt(np.mean(err[:, 1:] ** 2, axis=1))
-        row, per_step = metrics.band_row(nees[name], nis[name], 4, 2, s.confidence)
-        row.update(white[name])
-        row["consistent"] = metrics.verdict(row)
+        row, per_step = metrics.consistency_row(nees[name], nis[name], 4, 2, s.confidence, white[name])
         with np.errstate(over="ignore", invalid="ignore"):
             mse = np.mean(err[:, 1:] ** 2, axis=0)
         out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": rmse, "t_div": t_div, "rms_mean": rms.mean(axis=0),
@@ -160,10 +153,9 @@ def case_bound(s: Settings, case: str, X: np.ndarray, us: np.ndarray) -> np.ndar
     return posterior_crb(discretize(get_model("cartpole"), s.T), X, us[:-1], s.q, s.r_std**2, P0).mse
 
 
-def _truth(case: str, s: Settings, runs):
-    seeds = [tuple(realisation_seeds(s.seed, list(CASES).index(case), r)) for r in runs]
+def _truth(case: str, s: Settings, seeds: list[tuple[int, int]]):
     us = np.full((s.steps + 1, 1), s.force)
-    X, Y = simulate_truth(get_model("cartpole"), CASES[case], us, s.T, s.q, ["x", "theta"], s.r_std, seeds)
+    X, Y = common.simulate_truth(get_model("cartpole"), CASES[case], us, s.T, s.q, MEASURED, s.r_std, seeds)
     return X, Y, us
 
 
@@ -180,13 +172,11 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
     runs
         Which realisations (default all).
     """
-
     s = settings
-    runs = list(range(s.runs)) if runs is None else list(runs)
-    X, Y, us = _truth(case, s, runs)
+    X, Y, us = _truth(case, s, common.seed_pairs(s, list(CASES).index(case), runs))
     errors, nees, nis, white = {}, {}, {}, {}
     for n, m in make_filters(s, case).items():
-        res = batch_run(m, X, Y, us)
+        res = common.batch_run(m, X, Y, us)
         errors[n], nees[n], nis[n] = res.x - X, res.nees, res.nis
         white[n] = metrics.whiteness_row(res.innovation, res.S, s.confidence, s.whiteness_lags)
     return _summary(errors, s, nees, nis, white, case_bound(s, case, X, us))
@@ -198,81 +188,18 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
 
     Parameters
     ----------
-    case
-        Which case.
-    settings
-        The settings.
-    runs
-        Which realisations (default all).
+    case, settings, runs
+        As :func:`fast_task`.
     """
-    import tempfile
-
-
-
     s = settings
-    runs = list(range(s.runs)) if runs is None else list(runs)
-    model = get_model("cartpole")
+    model, seeds = get_model("cartpole"), common.seed_pairs(s, list(CASES).index(case), runs)
     makers = make_filters(s, case)
-    errors = {n: np.empty((len(runs), s.steps + 1, 4)) for n in makers}
-    nees = {n: np.empty((len(runs), s.steps)) for n in makers}
-    nis = {n: np.empty((len(runs), s.steps)) for n in makers}
-    with tempfile.TemporaryDirectory() as tmp:
-        plant = FMUComponent("plant", build_fmu(model, tmp), s.T,
-                             start=dict(zip(model.state_names, CASES[case])))
-        for i, r in enumerate(runs):
-            noise, sensor = noise_components(model, s.T, s.q, ["x", "theta"], s.r_std,
-                                             *realisation_seeds(s.seed, list(CASES).index(case), r))
-            X, est, cov, nis_r = master_realisation(plant, _source(s), noise, sensor, makers, s.T, s.duration)
-            for n in makers:
-                errors[n][i] = est[n] - X
-                with np.errstate(over="ignore", invalid="ignore"):
-                    nees[n][i] = nees_from_outputs(est[n][1:] - X[1:], cov[n][1:])
-                nis[n][i] = nis_r[n]
-    X, _, us = _truth(case, s, runs)
-    return _summary(errors, s, nees, nis, {n: metrics.no_whiteness() for n in makers}, case_bound(s, case, X, us))
-
-
-def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
-        progress=True):
-    """Both cases; returns a :class:`Seed001Result`.
-
-    Parameters
-    ----------
-    settings
-        The settings.
-    path
-        ``fast`` or ``master``.
-    backend
-        Parallel backend.
-    n_jobs
-        Worker processes.
-    progress
-        Show a progress bar.
-    """
-    fn = fast_task if path == "fast" else master_task
-    t0 = time.perf_counter()
-    res = run_tasks([(fn, dict(case=c, settings=settings)) for c in CASES], backend=backend,
-                    n_jobs=n_jobs, progress=progress, desc=f"seed001 ({path})")
-    wall = time.perf_counter() - t0
-    rows = []
-    times = [tr for tr in REPORT_TIMES if tr <= settings.duration]
-    for case, r in zip(CASES, res):
-        for j, tr in enumerate(times):
-            rows.append({"case": case, "time": tr, **{f"{n} |x error| [m]": r[n]["pos_err"][:, j].mean()
-                                                      for n in FILTERS}})
-    cons = []
-    for case, r in zip(CASES, res):
-        for n in FILTERS:
-            cons.append({"case": case, "filter": n, **{f"rmse_{x}": float(np.sqrt(np.mean(r[n]["rmse"][:, a] ** 2)))
-                                                       for a, x in enumerate(STATES)},
-                         **{f"pcrb_ratio_{x}": float(r[n]["pcrb_ratio"][a]) for a, x in enumerate(STATES)},
-                         "pcrb_ratio_max": float(np.max(r[n]["pcrb_ratio"])),
-                         **{f"pcrb_ratio_se_{x}": float(r[n]["pcrb_ratio_se"][a]) for a, x in enumerate(STATES)},
-                         **r[n]["tests"]})
-        cons.append({"case": case, "filter": "PCRB", "runs": settings.runs,
-                     **{f"rmse_{x}": float(np.sqrt(r["bound"][1:, a].mean())) for a, x in enumerate(STATES)},
-                     **{f"pcrb_ratio_{x}": 1.0 for x in STATES}, "pcrb_ratio_max": 1.0})
-    return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall, pd.DataFrame(cons))
+    X, est, nees, nis = common.master_runs(model, dict(zip(model.state_names, CASES[case])), _source(s),
+                                           *common.noise_components(model, s.T, s.q, MEASURED, s.r_std, *seeds[0]),
+                                           makers, s.T, s.duration, seeds)
+    truth, _, us = _truth(case, s, seeds)
+    return _summary({n: est[n] - X for n in makers}, s, nees, nis, {n: metrics.no_whiteness() for n in makers},
+                    case_bound(s, case, truth, us))
 
 
 class Seed001Result(NamedTuple):
@@ -289,100 +216,117 @@ class Seed001Result(NamedTuple):
     consistency: pd.DataFrame
 
 
+def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
+        progress=True) -> Seed001Result:
+    """Both cases; returns a :class:`Seed001Result`.
+
+    Parameters
+    ----------
+    settings, path, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
+    """
+    fn = fast_task if path == "fast" else master_task
+    return common.run_campaign([(fn, dict(case=c, settings=settings)) for c in CASES],
+                               lambda res, wall: _result(res, settings, wall), f"seed001 ({path})", backend, n_jobs,
+                               progress, partial=False)
+
+
+def _result(res: list, s: Settings, wall: float) -> Seed001Result:
+    """The campaign's result from its tasks' (one per case)."""
+    times = [tr for tr in REPORT_TIMES if tr <= s.duration]
+    rows = [{"case": case, "time": tr, **{f"{n} |x error| [m]": r[n]["pos_err"][:, j].mean() for n in FILTERS}}
+            for case, r in zip(CASES, res) for j, tr in enumerate(times)]
+    cons = []
+    for case, r in zip(CASES, res):
+        cons += [{"case": case, "filter": n,
+                  **{f"rmse_{x}": float(np.sqrt(np.mean(r[n]["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
+                  **common.pcrb_columns(r[n]["rmse"], r["bound"][1:], STATES), **r[n]["tests"]} for n in FILTERS]
+        cons.append(common.pcrb_row({"case": case}, r["bound"], s.runs, STATES))
+    return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall, pd.DataFrame(cons))
+
+
 def write_report(result: Seed001Result, settings: Settings, out_dir, path: str = "fast") -> Path:
     """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
 
     Parameters
     ----------
-    result
-        What :func:`run` returned.
-    settings
-        The settings.
-    out_dir
-        Output folder.
-    path
-        The path that ran.
+    result, settings, out_dir, path
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
+        (``result``: what :func:`run` returned).
     """
     table, summary, wall, cons = result
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed001")))
-    atomic_write(out / "errors_at_times.csv", lambda p: table.to_csv(p, index=False))
-    atomic_write(out / "consistency.csv", lambda p: cons.to_csv(p, index=False))
-    t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
+    s = settings
+    out = common.report_folder(out_dir, to_toml(s, "seed001"), {"errors_at_times.csv": table, "consistency.csv": cons})
+    _error_figure(summary, s, out)
+    _limit_figures(summary, s, out)
+    shown = cons[["case", "filter", *[f"rmse_{x}" for x in STATES], *[f"pcrb_ratio_{x}" for x in STATES]]]
     lines = ["# Seed 001: KF on the linearised model against the EKF", "",
-             f"Regime: both filters given the true noise (q = {settings.q:g} per step, r = {settings.r_std:g}^2), "
-             f"started at the true state with P0 = {settings.P0:g} I; {settings.runs} realisations per case, "
-             f"{settings.duration:g} s ({settings.steps} steps), {path} path; wall time {wall:.2f} s.", "",
-             "## Settings", "", "| setting | value |", "|---|---|",
-             *[f"| {k} | {v} |" for k, v in asdict(settings).items()], "",
+             f"Regime: both filters given the true noise (q = {s.q:g} per step, r = {s.r_std:g}^2), started at the "
+             f"true state with P0 = {s.P0:g} I; {s.runs} realisations per case, {s.duration:g} s ({s.steps} steps), "
+             f"{path} path; wall time {wall:.2f} s.", "",
+             "## Settings", "", *common.settings_table(s), "",
              "## Mean absolute cart-position error", "", table.to_markdown(index=False, floatfmt=".4g"), "",
              "Paper (seed 001 Table 1, position errors [m]):", "", PAPER.to_markdown(index=False), "",
-             "## Divergence and RMSE", "", "| case | filter | diverged runs | median time of divergence [s] | "
-             "RMSE x | RMSE x_dot | RMSE theta | RMSE theta_dot |", "|---|---|---|---|---|---|---|---|"]
-    for (case, res), ax in zip(summary.items(), axes[:, 0]):
+             "## Divergence and RMSE", "",
+             *common.markdown_table(["case", "filter", "diverged runs", "median time of divergence [s]",
+                                     *[f"RMSE {x}" for x in STATES]], _divergence_rows(summary)), "",
+             "## RMSE per state over the posterior Cramér-Rao bound", "",
+             f"The PCRB is the lowest mean-square error any estimator can have on these {s.runs} realisations "
+             f"(prior: {PCRB_PRIORS[s.pcrb_prior]}); each ratio is the RMSE over the realisations and steps 1..K "
+             "over the root of the bound's mean over the same steps (1 is the best possible; pcrb_ratio_se_* in "
+             "consistency.csv: the Monte Carlo standard error of each ratio).", "",
+             shown.to_markdown(index=False, floatfmt=".4g"), "", *common.consistency_section(cons, ["case"], s, path),
+             "Figures: " + ", ".join(sorted(p.name for p in out.glob("*.png")))]
+    return common.write_summary(out, lines)
+
+
+def _divergence_rows(summary: dict):
+    """Per case and filter: the realisations that diverged, their median time of divergence,
+    and the RMSE per state (mean over the realisations)."""
+    for case, res in summary.items():
         for n in FILTERS:
             td = res[n]["t_div"]
             nd = int(np.isfinite(td).sum())
-            med = f"{np.nanmedian(td):.2f}" if nd else "none"
-            rm = res[n]["rmse"].mean(axis=0)
-            lines.append(f"| {case} | {n} | {nd} of {len(td)} | {med} | " + " | ".join(f"{v:.3g}" for v in rm) + " |")
+            yield [case, n, f"{nd} of {len(td)}", f"{np.nanmedian(td):.2f}" if nd else "none",
+                   *(f"{v:.3g}" for v in res[n]["rmse"].mean(axis=0))]
+
+
+def _error_figure(summary: dict, settings: Settings, out: Path) -> None:
+    """The RMS error over the states, mean over the realisations, per case."""
+    t = np.arange(settings.steps + 1) * settings.T
+    fig, axes = common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
+    for (case, res), ax in zip(summary.items(), axes[:, 0]):
+        for n in FILTERS:
             ax.semilogy(t, res[n]["rms_mean"], label=n)
         ax.axhline(settings.divergence_error, color="k", ls=":", lw=0.8, label="divergence threshold")
-        ax.set_title(f"{case}: RMS error over the states, mean of {settings.runs} realisations")
-        ax.set_xlabel("time [s]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    atomic_write(out / "errors.png", lambda p: fig.savefig(p, dpi=100, format="png"))
-    ratio_cols = [f"pcrb_ratio_{x}" for x in STATES]
-    shown = cons[["case", "filter", *[f"rmse_{x}" for x in STATES], *ratio_cols]]
-    lines += ["", "## RMSE per state over the posterior Cramér-Rao bound", "",
-              f"The PCRB is the lowest mean-square error any estimator can have on these {settings.runs} "
-              f"realisations (prior: {PCRB_PRIORS[settings.pcrb_prior]}); each ratio is the RMSE over the "
-              "realisations and steps 1..K over the root of the bound's mean over the same steps (1 is the best "
-              "possible; pcrb_ratio_se_* in consistency.csv: the Monte Carlo standard error of each ratio).", "",
-              shown.to_markdown(index=False, floatfmt=".4g"), "",
-              "## Consistency: chi-square bands of NEES and NIS, whiteness of the innovations", "",
-              "Rule: " + metrics.consistency_rule(settings.confidence, settings.whiteness_lags) + ".", "",
-              *metrics.consistency_markdown(cons[cons["filter"] != "PCRB"], ["case"]), ""]
-    if path == "master":
-        lines += ["On the master path the estimator components do not publish their innovations, so whiteness "
-                  "is not tested there (the fast path gives the same numbers).", ""]
-    _limit_figures(summary, settings, out)
-    lines += ["Figures: " + ", ".join(sorted(p.name for p in out.glob("*.png")))]
-    md = out / "summary.md"
-    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return md
+        common.style_axes(ax, "time [s]", legend=8,
+                          title=f"{case}: RMS error over the states, mean of {settings.runs} realisations")
+    common.save_figure(fig, out / "errors.png")
 
 
 def _limit_figures(summary: dict, settings: Settings, out: Path) -> None:
     """Average NEES with its band, and RMSE against the PCRB, per case."""
     t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
+    fig, axes = common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
     for (case, res), ax in zip(summary.items(), axes[:, 0]):
         lo, hi = res[FILTERS[0]]["nees_band"]
         ax.fill_between(t[1:], lo, hi, color="0.85", label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
         for n in FILTERS:
             ax.semilogy(t[1:], res[n]["anees"], lw=0.8, label=n)
-        ax.set_title(f"{case}: average NEES over {settings.runs} realisations")
-        ax.set_xlabel("time [s]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    atomic_write(out / "nees.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
-    fig, axes = new_figure(4, len(summary), figsize=(5 * len(summary), 9), sharex=True)
+        common.style_axes(ax, "time [s]", title=f"{case}: average NEES over {settings.runs} realisations", legend=8)
+    common.save_figure(fig, out / "nees.png")
+    fig, axes = common.new_figure(4, len(summary), figsize=(5 * len(summary), 9), sharex=True)
     for j, (case, res) in enumerate(summary.items()):
         for a, x in enumerate(STATES):
             ax = axes[a, j]
             for n in FILTERS:
                 ax.semilogy(t[1:], res[n]["rmse_k"][:, a], lw=0.8, label=n)
             ax.semilogy(t[1:], np.sqrt(res["bound"][1:, a]), "k-", lw=1.2, label="sqrt(PCRB)")
-            ax.set_ylabel(f"RMSE {x}")
-            ax.grid(alpha=0.3)
+            common.style_axes(ax, ylabel=f"RMSE {x}")
         axes[0, j].set_title(case)
         axes[0, j].legend(fontsize=7)
         axes[-1, j].set_xlabel("time [s]")
-    atomic_write(out / "rmse_pcrb.png", lambda p, fig=fig: fig.savefig(p, dpi=100, format="png"))
+    common.save_figure(fig, out / "rmse_pcrb.png")
 
 
 class Seed001(Experiment, register="seed001"):

@@ -18,8 +18,7 @@ Paths: ``master`` steps the plant FMU; ``fast`` steps the same CasADi model in P
 """
 from __future__ import annotations
 
-import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar, NamedTuple
 
@@ -28,7 +27,6 @@ import pandas as pd
 
 from estimators import EKF, augment_rate_bias, discretize
 from fmu_models import build_fmu, get_model
-from fmu_models.infra.files import atomic_write
 
 from ..components.control import LQRController
 from ..components.estimation import EstimatorComponent
@@ -36,8 +34,8 @@ from ..components.imu import Accelerometer, Encoder, Gyroscope, TiltFusion
 from ..components.plant_model import ModelComponent
 from ..core.master import Cosimulation
 from ..fmi.fmu_component import FMUComponent
-from .campaign import realisation_seeds, run_tasks
-from .common import new_figure
+from . import common
+from .campaign import realisation_seeds
 from .experiment import Experiment
 from .settings import check_common, to_toml
 
@@ -81,13 +79,10 @@ class Settings:
     seed: int = 3
 
     def __post_init__(self):
-
         check_common(self)
 
 
 def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
-
-
     model = get_model("iwp")
     outs = list(STATES) + ["der(alpha_dot)"]
     # the sensors sample before the new current is applied: the accelerometer reads
@@ -143,8 +138,6 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
     """
     import tempfile
 
-
-
     s = settings
     out = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -170,34 +163,6 @@ def realisations(case: str, settings: Settings, runs, path: str = "fast") -> lis
     return out
 
 
-def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
-        progress=True):
-    """Both cases; returns (per-realisation DataFrame, example traces by case, wall time).
-
-    Parameters
-    ----------
-    settings
-        The settings.
-    path
-        ``fast`` or ``master``.
-    backend
-        Parallel backend.
-    n_jobs
-        Worker processes.
-    progress
-        Show a progress bar.
-    """
-    t0 = time.perf_counter()
-    chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
-    tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
-             for c in CASES for ch in chunks]
-    res = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=f"seed002 ({path})")
-    wall = time.perf_counter() - t0
-    rows = [r for part in res for r in part]
-    traces = {r["case"]: r.pop("_trace") for r in rows if "_trace" in r}
-    return Seed002Result(pd.DataFrame(rows).sort_values(["case", "run"]).reset_index(drop=True), traces, wall)
-
-
 class Seed002Result(NamedTuple):
     """What :func:`run` returns: ``per_run`` (one row per case and realisation), example
     ``traces`` by case, and the ``wall`` time [s]."""
@@ -205,6 +170,28 @@ class Seed002Result(NamedTuple):
     per_run: pd.DataFrame
     traces: dict
     wall: float
+
+
+def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
+        progress=True) -> Seed002Result:
+    """Both cases, each in two tasks; returns a :class:`Seed002Result`.
+
+    Parameters
+    ----------
+    settings, path, backend, n_jobs, progress
+        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
+    """
+    chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
+    tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
+             for c in CASES for ch in chunks]
+    return common.run_campaign(tasks, _result, f"seed002 ({path})", backend, n_jobs, progress, partial=False)
+
+
+def _result(res: list, wall: float) -> Seed002Result:
+    """The campaign's result from its tasks' (lists of realisations)."""
+    rows = [r for part in res for r in part]
+    traces = {r["case"]: r.pop("_trace") for r in rows if "_trace" in r}
+    return Seed002Result(pd.DataFrame(rows).sort_values(["case", "run"]).reset_index(drop=True), traces, wall)
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
@@ -230,54 +217,37 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
 
     Parameters
     ----------
-    per_run
-        The per-realisation table.
-    traces
-        Example traces by case.
-    wall
-        Wall time [s].
-    settings
-        The settings.
-    out_dir
-        Output folder.
-    path
-        The path that ran.
+    per_run, traces, wall
+        The fields of :class:`Seed002Result`.
+    settings, out_dir, path
+        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
     """
-
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "settings.toml", lambda p: p.write_text(to_toml(settings, "seed002")))
-    atomic_write(out / "per_run.csv", lambda p: per_run.to_csv(p, index=False))
     table = summary_table(per_run)
-    atomic_write(out / "ekf_vs_inputs.csv", lambda p: table.to_csv(p, index=False))
-    fig, axes = new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
+    out = common.report_folder(out_dir, to_toml(settings, "seed002"),
+                               {"per_run.csv": per_run, "ekf_vs_inputs.csv": table})
+    fig, axes = common.new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
     for c, (case, df) in enumerate(traces.items()):
         for j, (x, fed) in enumerate(zip(STATES, ("fusion.alpha", "fusion.alpha_dot", "encoder.phi_dot"))):
             ax = axes[j, c]
             ax.plot(df.index, df[fed], ".", ms=1.5, color="0.7", label="EKF input")
             ax.plot(df.index, df[f"plant.{x}"], "k-", lw=1, label="truth")
             ax.plot(df.index, df[f"ekf.{x}"], "r--", lw=1, label="EKF")
-            ax.set_ylabel(x)
-            ax.grid(alpha=0.3)
+            common.style_axes(ax, ylabel=x)
         axes[0, c].set_title(case)
         axes[0, c].legend(fontsize=7)
         axes[-1, c].set_xlabel("time [s]")
-    atomic_write(out / "estimates.png", lambda p: fig.savefig(p, dpi=100, format="png"))
+    common.save_figure(fig, out / "estimates.png")
     agg = per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
                                                "alpha amplitude ratio", "max |i| [A]"]].mean()
-    lines = [f"# Seed 002: wheel pendulum, EKF on the sensor chain, LQR on the estimate ({path} path)", "",
-             f"{settings.runs} realisations per case, {settings.duration:g} s; wall time {wall:.2f} s.", "",
-             "## Settings", "", "| setting | value |", "|---|---|",
-             *[f"| {k} | {v} |" for k, v in asdict(settings).items()], "",
-             "## What the EKF adds over its inputs (RMSE over the second half, mean of realisations)", "",
-             table.to_markdown(index=False, floatfmt=".4g"), "",
-             "## Loop, offset, lag and attenuation (means; balanced = fraction of realisations)", "",
-             agg.to_markdown(floatfmt=".4g"), "",
-             f"The gyroscope offset is {settings.gyro_bias} rad/s.", "", "Figure: estimates.png"]
-    md = out / "summary.md"
-    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return md
+    return common.write_summary(out, [
+        f"# Seed 002: wheel pendulum, EKF on the sensor chain, LQR on the estimate ({path} path)", "",
+        f"{settings.runs} realisations per case, {settings.duration:g} s; wall time {wall:.2f} s.", "",
+        "## Settings", "", *common.settings_table(settings), "",
+        "## What the EKF adds over its inputs (RMSE over the second half, mean of realisations)", "",
+        table.to_markdown(index=False, floatfmt=".4g"), "",
+        "## Loop, offset, lag and attenuation (means; balanced = fraction of realisations)", "",
+        agg.to_markdown(floatfmt=".4g"), "",
+        f"The gyroscope offset is {settings.gyro_bias} rad/s.", "", "Figure: estimates.png"])
 
 
 class Seed002(Experiment, register="seed002"):

@@ -3,7 +3,9 @@
 An FMU is a zip archive; a damaged, hostile or wrong file must end in one
 :class:`~fmu_models.errors.FMUError` that says what is wrong, never a traceback from the
 zip or XML layers, a disk filled by a zip bomb, or a temporary folder left behind.
-:func:`read_description` checks the archive and parses its ``modelDescription.xml``;
+:func:`read_description` checks the archive and parses its ``modelDescription.xml``
+(:func:`read_archive` also keeps the names of its files and the XML itself, one opening of
+the zip for all);
 :class:`Extraction` unpacks it into a private temporary folder with limits on the
 total size and the number of files, and removes the folder when closed (or when the
 object is garbage-collected, or at interpreter exit).
@@ -14,13 +16,15 @@ import shutil
 import tempfile
 import weakref
 import zipfile
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 from fmu_models.errors import FMUError
 
 from ..core import crash_guard
 
-__all__ = ["MAX_FILES", "MAX_UNPACKED_BYTES", "Extraction", "read_description"]
+__all__ = ["MAX_FILES", "MAX_UNPACKED_BYTES", "Extraction", "FMUArchive", "read_archive", "read_description"]
 
 #: Largest total unpacked size of an FMU [bytes].
 MAX_UNPACKED_BYTES = 1 << 30
@@ -68,6 +72,46 @@ def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int =
         Missing file, a folder, not a zip, too large, too many files, unsafe member paths,
         no or unparsable ``modelDescription.xml`` (the message says which).
     """
+    return read_archive(path, max_bytes, max_files).md
+
+
+@dataclass
+class FMUArchive:
+    """An FMU file checked and read by :func:`read_archive`.
+
+    Attributes
+    ----------
+    md : fmpy ModelDescription
+    members : frozenset of str
+        The names of the files it holds.
+    xml : bytes
+        Its ``modelDescription.xml``.
+    """
+
+    md: object
+    members: frozenset
+    xml: bytes
+
+    @cached_property
+    def root(self):
+        """The XML's root element (entities not resolved, no network), for what fmpy leaves
+        unread."""
+        from lxml import etree
+
+        return etree.fromstring(self.xml, etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False))
+
+
+def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES) -> FMUArchive:
+    """The FMU at ``path`` checked as :func:`read_description` does, with the names of the
+    files it holds and its XML.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.fmu`` file.
+    max_bytes, max_files : int
+        Limits on the total unpacked size [bytes] and the number of files.
+    """
     from fmpy import read_model_description
 
     path = Path(path)
@@ -77,31 +121,26 @@ def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int =
             z.testzip()
         except (zipfile.BadZipFile, OSError, EOFError) as e:
             raise FMUError(f"{path.name} is damaged: {e}") from None
-    try:
-        md = read_model_description(str(path), validate=False)
-    except Exception as e:  # noqa: BLE001 - lxml, attrs and fmpy raise a variety of types for bad XML
-        first = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
-                       f"{first}") from None
-    _complete_ranges(path, md)
-    return md
+        try:
+            md = read_model_description(str(path), validate=False)
+        except Exception as e:  # noqa: BLE001 - lxml, attrs and fmpy raise a variety of types for bad XML
+            first = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
+                           f"{first}") from None
+        archive = FMUArchive(md, frozenset(z.namelist()), z.read("modelDescription.xml"))   # read by fmpy: readable
+    _complete_ranges(archive)
+    return archive
 
 
-def _complete_ranges(path: Path, md) -> None:
+def _complete_ranges(archive: FMUArchive) -> None:
     """fmpy leaves ``min``/``max`` of FMI 3.0 integer variables unread (None): read them
-    from the XML (entities not resolved, no network), so declared ranges can be checked."""
+    from the XML, so declared ranges can be checked."""
+    md = archive.md
     if not str(md.fmiVersion).startswith("3"):
         return
     missing = {v.name: v for v in md.modelVariables
                if v.type.startswith(("Int", "UInt")) and v.min is None and v.max is None}
-    if not missing:
-        return
-    from lxml import etree
-
-    with _open_zip(path) as z:
-        root = etree.fromstring(z.read("modelDescription.xml"),
-                                etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False))
-    variables = root.find("ModelVariables")
+    variables = archive.root.find("ModelVariables") if missing else None
     for el in variables if variables is not None else ():
         v = missing.get(el.get("name"))
         if v is not None:

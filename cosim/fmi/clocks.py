@@ -39,9 +39,8 @@ from fmu_models.infra.checks import positive
 
 from ..core.clocking import APERIODIC, PERIODIC, VARIABILITIES, ClockInfo, time_fraction
 from ..core.component import CLOCK, Port
-from .archive import _open_zip
 
-__all__ = ["CHANGED", "NOT_YET_KNOWN", "QUALIFIERS", "UNCHANGED", "FMIClock", "FMIClocks", "read_clocks"]
+__all__ = ["CHANGED", "NOT_YET_KNOWN", "QUALIFIERS", "UNCHANGED", "FMIClock", "FMIClocks"]
 
 #: The values of ``fmi3IntervalQualifier``.
 NOT_YET_KNOWN, UNCHANGED, CHANGED = 0, 1, 2
@@ -58,6 +57,7 @@ class FMIClock:
     Attributes
     ----------
     name : str
+        The Clock variable's name (its port's, if it is a port).
     vr : int
         Value reference.
     causality : {"input", "output", "local"}
@@ -128,25 +128,28 @@ def _bool(text, what: str) -> bool:
     raise FMUError(f"{what} must be true or false, got {text!r}")
 
 
-def _uint(text, what: str) -> int | None:
+def _number(text, what: str, conv, kind: str):
+    """``conv(text)``, None for an attribute not given; an FMUError naming ``what`` if
+    ``text`` is not ``kind``."""
     if text is None:
         return None
     try:
-        v = int(text)
+        return conv(text)
     except ValueError:
-        raise FMUError(f"{what} must be an unsigned integer, got {text!r}") from None
-    if v < 0:
+        raise FMUError(f"{what} must be {kind}, got {text!r}") from None
+
+
+def _uint(text, what: str) -> int | None:
+    v = _number(text, what, int, "an unsigned integer")
+    if v is not None and v < 0:
         raise FMUError(f"{what} must be >= 0, got {v}")
     return v
 
 
 def _decimal(text, what: str) -> Fraction | None:
-    if text is None:
+    f = _number(text, what, float, "a number")
+    if f is None:
         return None
-    try:
-        f = float(text)
-    except ValueError:
-        raise FMUError(f"{what} must be a number, got {text!r}") from None
     if not math.isfinite(f):
         raise FMUError(f"{what} must be finite, got {text!r}")
     try:
@@ -155,14 +158,75 @@ def _decimal(text, what: str) -> Fraction | None:
         return time_fraction(f)
 
 
+def _timing(where: str, var: str, a: dict) -> dict:
+    """The interval and shift attributes ``a`` of the clock ``where`` (of intervalVariability
+    ``var``), parsed and checked: the timing fields of its :class:`FMIClock`."""
+    decimal = _decimal(a["intervalDecimal"], f"{where}: intervalDecimal")
+    shift_decimal = _decimal(a["shiftDecimal"], f"{where}: shiftDecimal")
+    counter = _uint(a["intervalCounter"], f"{where}: intervalCounter")
+    resolution = _uint(a["resolution"], f"{where}: resolution")
+    shift_counter = _uint(a["shiftCounter"], f"{where}: shiftCounter")
+    fraction = _bool(a["supportsFraction"], f"{where}: supportsFraction")
+    if decimal is not None:
+        if var not in PERIODIC:
+            raise FMUError(f"{where} ({var}) declares intervalDecimal, which only periodic clocks (constant, "
+                           "fixed, tunable) may have")
+        if decimal <= 0:
+            raise FMUError(f"{where}: intervalDecimal must be > 0, got {float(decimal):g}")
+    if shift_decimal is not None:
+        if decimal is None:
+            raise FMUError(f"{where} declares shiftDecimal without intervalDecimal (the standard requires both)")
+        if shift_decimal < 0:
+            raise FMUError(f"{where}: shiftDecimal must be >= 0, got {float(shift_decimal):g}")
+    if counter is not None:
+        if var not in PERIODIC or not fraction:
+            raise FMUError(f"{where} declares intervalCounter, which only a periodic clock with "
+                           "supportsFraction = true may have")
+        if counter == 0:
+            raise FMUError(f"{where}: intervalCounter must be > 0")
+        if resolution is None:
+            raise FMUError(f"{where} declares intervalCounter without resolution (the standard requires both)")
+    if resolution is not None:
+        if var not in PERIODIC:
+            raise FMUError(f"{where} ({var}) declares resolution, which only periodic clocks may have")
+        if resolution == 0:
+            raise FMUError(f"{where}: resolution must be > 0")
+    if shift_counter is not None and counter is None:
+        raise FMUError(f"{where} declares shiftCounter without intervalCounter (the standard requires both)")
+    if var == "constant" and decimal is None:
+        raise FMUError(f"{where} is a constant clock without intervalDecimal (the standard requires it)")
+    interval, shift = decimal, shift_decimal or Fraction(0)
+    if counter is not None:
+        exact = Fraction(counter, resolution)
+        if decimal is not None and abs(exact - decimal) > 1e-12 * exact:
+            raise FMUError(f"{where}: intervalDecimal {float(decimal):g} s disagrees with intervalCounter / "
+                           f"resolution = {counter}/{resolution} s")
+        interval = exact
+        if shift_counter is not None:
+            sc = Fraction(shift_counter, resolution)
+            if shift_decimal is not None and abs(sc - shift_decimal) > 1e-12 * max(sc, Fraction(1)):
+                raise FMUError(f"{where}: shiftDecimal {float(shift_decimal):g} s disagrees with shiftCounter / "
+                               f"resolution = {shift_counter}/{resolution} s")
+            shift = sc
+    return dict(interval=interval, shift=shift, has_decimal=decimal is not None, counter=counter,
+                resolution=resolution, shift_counter=shift_counter, supports_fraction=fraction)
+
+
+def _by_name(root, section: str, tag: str) -> dict:
+    """The ``tag`` elements of the XML ``section`` (under ``root``), by name."""
+    parent = root.find(section)
+    elements = parent if parent is not None else ()
+    return {el.get("name"): el for el in elements if el.tag == tag and el.get("name") is not None}
+
+
 class FMIClocks:
     """The clocks of one FMI 3.0 FMU (see the module documentation).
 
     Parameters
     ----------
     md : fmpy ModelDescription
-    path : Path
-        The FMU file (its XML is read for what fmpy leaves out).
+    root : lxml Element
+        The root of its ``modelDescription.xml`` (read for what fmpy leaves out).
     owner : str
         The component's name (for messages).
 
@@ -177,19 +241,9 @@ class FMIClocks:
         Output clock value reference -> what its ``ModelStructure`` ``Output`` lists.
     """
 
-    def __init__(self, md, path, owner: str):
+    def __init__(self, md, root, owner: str):
         self.owner, self.md = owner, md
-        root = _xml(path)
-        types = {}
-        defs = root.find("TypeDefinitions")
-        for el in defs if defs is not None else ():
-            if el.tag == "ClockType" and el.get("name"):
-                types[el.get("name")] = el
-        elements = {}
-        mv = root.find("ModelVariables")
-        for el in mv if mv is not None else ():
-            if el.tag == "Clock" and el.get("name") is not None:
-                elements[el.get("name")] = el
+        types, elements = _by_name(root, "TypeDefinitions", "ClockType"), _by_name(root, "ModelVariables", "Clock")
         self.clocks: list[FMIClock] = []
         for v in md.modelVariables:
             if v.type != "Clock":
@@ -200,7 +254,7 @@ class FMIClocks:
                          (base.get(a) if base is not None else None)) for a in _ATTRS}
             if el is not None and el.find("Dimension") is not None:
                 raise FMUError(f"{owner}: clock {v.name!r} has a Dimension; clocks are scalar")
-            self.clocks.append(self._clock(v, attrs, len(self.clocks), el))
+            self.clocks.append(self._clock(v, attrs, len(self.clocks)))
         self.by_name = {k.name: k for k in self.clocks}
         self.by_vr = {k.vr: k for k in self.clocks}
         self.clocked = {}
@@ -224,7 +278,7 @@ class FMIClocks:
             if u.variable is not None and u.variable.type == "Clock":
                 self.dependencies[u.variable.valueReference] = tuple(d.valueReference for d in u.dependencies or ())
 
-    def _clock(self, v, a: dict, index: int, el) -> FMIClock:
+    def _clock(self, v, a: dict, index: int) -> FMIClock:
         where = f"{self.owner}: clock {v.name!r}"
         var = a["intervalVariability"] or getattr(v, "intervalVariability", None)
         if var not in VARIABILITIES:
@@ -240,56 +294,9 @@ class FMIClocks:
         priority = _uint(a["priority"], f"{where}: priority")
         if causality == "output" and priority is not None:
             raise FMUError(f"{where} is an output clock with a priority; output clocks must not have one")
-        decimal = _decimal(a["intervalDecimal"], f"{where}: intervalDecimal")
-        shift_decimal = _decimal(a["shiftDecimal"], f"{where}: shiftDecimal")
-        counter = _uint(a["intervalCounter"], f"{where}: intervalCounter")
-        resolution = _uint(a["resolution"], f"{where}: resolution")
-        shift_counter = _uint(a["shiftCounter"], f"{where}: shiftCounter")
-        fraction = _bool(a["supportsFraction"], f"{where}: supportsFraction")
-        if decimal is not None:
-            if var not in PERIODIC:
-                raise FMUError(f"{where} ({var}) declares intervalDecimal, which only periodic clocks (constant, "
-                               "fixed, tunable) may have")
-            if decimal <= 0:
-                raise FMUError(f"{where}: intervalDecimal must be > 0, got {float(decimal):g}")
-        if shift_decimal is not None:
-            if decimal is None:
-                raise FMUError(f"{where} declares shiftDecimal without intervalDecimal (the standard requires both)")
-            if shift_decimal < 0:
-                raise FMUError(f"{where}: shiftDecimal must be >= 0, got {float(shift_decimal):g}")
-        if counter is not None:
-            if var not in PERIODIC or not fraction:
-                raise FMUError(f"{where} declares intervalCounter, which only a periodic clock with "
-                               "supportsFraction = true may have")
-            if counter == 0:
-                raise FMUError(f"{where}: intervalCounter must be > 0")
-            if resolution is None:
-                raise FMUError(f"{where} declares intervalCounter without resolution (the standard requires both)")
-        if resolution is not None:
-            if var not in PERIODIC:
-                raise FMUError(f"{where} ({var}) declares resolution, which only periodic clocks may have")
-            if resolution == 0:
-                raise FMUError(f"{where}: resolution must be > 0")
-        if shift_counter is not None and counter is None:
-            raise FMUError(f"{where} declares shiftCounter without intervalCounter (the standard requires both)")
-        if var == "constant" and decimal is None:
-            raise FMUError(f"{where} is a constant clock without intervalDecimal (the standard requires it)")
-        interval, shift = decimal, shift_decimal or Fraction(0)
-        if counter is not None:
-            exact = Fraction(counter, resolution)
-            if decimal is not None and abs(exact - decimal) > 1e-12 * exact:
-                raise FMUError(f"{where}: intervalDecimal {float(decimal):g} s disagrees with intervalCounter / "
-                               f"resolution = {counter}/{resolution} s")
-            interval = exact
-            if shift_counter is not None:
-                sc = Fraction(shift_counter, resolution)
-                if shift_decimal is not None and abs(sc - shift_decimal) > 1e-12 * max(sc, Fraction(1)):
-                    raise FMUError(f"{where}: shiftDecimal {float(shift_decimal):g} s disagrees with shiftCounter / "
-                                   f"resolution = {shift_counter}/{resolution} s")
-                shift = sc
-        return FMIClock(v.name, int(v.valueReference), causality, var, interval, shift, decimal is not None, counter,
-                        resolution, shift_counter, fraction, priority,
-                        _bool(a["canBeDeactivated"], f"{where}: canBeDeactivated"), index, v.description or "")
+        return FMIClock(v.name, int(v.valueReference), causality, var, **_timing(where, var, a), priority=priority,
+                        can_be_deactivated=_bool(a["canBeDeactivated"], f"{where}: canBeDeactivated"), index=index,
+                        description=v.description or "")
 
     # ------------------------------------------------------------------ interface rules
     def check_interface(self, interface: str) -> None:
@@ -307,10 +314,10 @@ class FMIClocks:
                            "(hasEventMode is not true); clocks are activated only in Event Mode")
 
     # ------------------------------------------------------------------ ports
-    def port(self, name: str, direction: str, owner: str) -> Port:
+    def port(self, name: str, direction: str) -> Port:
         """The Clock port ``name`` (a triggered input clock or an output clock), or a named
         refusal of a clock that is no port."""
-        k = self.by_name[name]
+        k, owner = self.by_name[name], self.owner
         if direction == "input":
             if k.causality != "input":
                 raise UnknownNameError(f"{owner}: {name!r} is an {k.causality} clock, not an input")
@@ -415,19 +422,3 @@ class FMIClocks:
                     "from the importer; only fixed and tunable input clocks with an intervalDecimal do")
             out[name] = time_fraction(positive(value, f"{self.owner}: clock_intervals {name} [s]"))
         return out
-
-
-def _xml(path):
-    from lxml import etree
-
-    with _open_zip(path) as z:
-        return etree.fromstring(z.read("modelDescription.xml"),
-                                etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False))
-
-
-def read_clocks(md, path, owner: str) -> FMIClocks | None:
-    """The clocks of the FMU ``md`` (fmpy ModelDescription) at ``path`` (FMI 3.0), read and
-    checked for the component ``owner`` (named in the errors), or None if it declares none."""
-    if not str(md.fmiVersion).startswith("3") or not any(v.type == "Clock" for v in md.modelVariables):
-        return None
-    return FMIClocks(md, path, owner)

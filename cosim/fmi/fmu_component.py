@@ -35,7 +35,6 @@ everything with ``logging=True``), and the last ones are kept in
 from __future__ import annotations
 
 import ctypes
-import logging as _logging
 import weakref
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -43,61 +42,66 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_models.errors import (
-    ConfigurationError,
-    FMUError,
-    ResourceError,
-    TypeMismatchError,
-    UnknownNameError,
-)
+from fmu_models.errors import ConfigurationError, FMUError, ResourceError, TypeMismatchError, UnknownNameError
 from fmu_models.export.clocked import check_clocked
-from fmu_models.export.pack import FMI_VERSIONS, library_suffix, platform_dir
+from fmu_models.export.pack import FMI_VERSIONS
 from fmu_models.export.plant_fmu import build_fmu
-from fmu_models.infra.checks import finite, positive
 from fmu_models.infra.files import atomic_copy, private_tempdir
 
-from ..core import crash_guard
 from ..core.clocking import ClockBoard
-from ..core.component import CLOCK, PORT_TYPES, BoundCalls, Component, ExportedFMU, Port, StopRequest, port_kind
+from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, StopRequest, port_kind
 from ..core.native import OP_STEP2, OP_STEP3, Op, native_ops
-from .archive import Extraction, read_description
+from .archive import Extraction
 from .clock_run import ClockedRun, initialise
-from .clocks import read_clocks
+from .description import FMUDescription
 from .exchange import Exchange
 from .exchange import no_exchange as _nothing
-from .instance import _ERROR, _FATAL, FMUInstance
+from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
-from .model_exchange import SOLVERS, FMUModel, MEIntegrator
-from .ports import array_shape, check_declared_range, check_integer, element_ports, parse_start
+from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs
+from .ports import element_ports, parse_start
 
-__all__ = ["FEEDTHROUGH_MODES", "INTERFACES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError"]
+__all__ = ["FEEDTHROUGH_MODES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError", "HeldInputs"]
 
-INTERFACES = ("auto", "cs", "me", "se")
 FEEDTHROUGH_MODES = ("model", "none")
-LOGGER = _logging.getLogger("cosim.fmu")
 #: The most fixed internal steps (an FMU's ``fixedInternalStepSize`` in Co-Simulation, the
 #: Euler/RK4 ``solver_step`` in Model Exchange) a run may take: beyond it the run is refused
 #: before it starts instead of running for days inside one call nobody can interrupt.
 MAX_INTERNAL_STEPS = 10**9
 
 
-def _unload(fmu) -> None:
-    """Unload the library of an fmpy FMU object whose instance was freed."""
-    try:
-        fmu.freeLibrary()
-    except Exception:
-        LOGGER.debug("freeLibrary failed", exc_info=True)
-    crash_guard.forget_library(getattr(fmu, "pendulum_guard_entry", -1))
-
-
 def _unload_box(box: list) -> None:
     """Unload the library a component keeps in ``box[0]`` (if any)."""
     fmu, box[0] = box[0], None
     if fmu is not None:
-        _unload(fmu)
+        unload_library(fmu)
 
 
-class FMUComponent(BoundCalls, Component, kind="fmu"):
+class HeldInputs:
+    """What the FMU components share about their inputs (a mixin of :class:`FMUComponent`
+    and :class:`~cosim.fmi.me_system.MESystem`): the master sets only the connected ones, in
+    its order (:meth:`use_inputs`); the others keep their start values; all are held over the
+    step."""
+
+    reentrant = True
+    holds_inputs = True
+    _sources: list | None = None
+
+    def required_inputs(self) -> list[str]:
+        """None: unconnected inputs keep their start values."""
+        return []
+
+    def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
+        """Set, at each step, only these input ports (the connected ones), in this order;
+        ``sources``: each one's source signal and FMI type (for the integer range checks)."""
+        unknown = [n for n in names if n not in self.input_names]
+        if unknown:
+            raise UnknownNameError(f"{self.name}: not input ports: {unknown}")
+        self.connected_inputs = list(names)
+        self._sources = list(sources) if sources is not None else None
+
+
+class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     """An FMU stepped by the master.
 
     Parameters
@@ -148,6 +152,8 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
 
     Attributes
     ----------
+    description : FMUDescription
+        What the FMU declares (:mod:`cosim.fmi.description`), read once.
     md : fmpy ModelDescription
     version : int
         2 or 3.
@@ -164,9 +170,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         builds its own copy of the component from).
     """
 
-    reentrant = True
-    holds_inputs = True
-
     def __init__(self, name: str, path, period: float, inputs: Sequence[str] | None = None,
                  outputs: Sequence[str] | None = None, parameters: Mapping[str, object] | None = None,
                  start: Mapping[str, object] | None = None, interface: str = "auto",
@@ -179,63 +182,22 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                               parameters=parameters, start=start, interface=interface, solver=solver,
                               solver_step=solver_step, rtol=rtol, feedthrough=feedthrough, logging=logging,
                               clock_intervals=clock_intervals)
-        self.path = Path(path)
-        md = read_description(self.path)
-        self.md, self.version = md, 3 if str(md.fmiVersion).startswith("3") else 2
-        if interface not in INTERFACES:
-            raise UnknownNameError(f"{name}: interface must be one of {INTERFACES}, got {interface!r}")
-        has = {"cs": md.coSimulation is not None, "me": md.modelExchange is not None,
-               "se": getattr(md, "scheduledExecution", None) is not None}
-        words = {"cs": "Co-Simulation", "me": "Model Exchange", "se": "Scheduled Execution"}
-        if interface == "auto":
-            interface = "cs" if has["cs"] else "me" if has["me"] else "se" if has["se"] else ""
-            if not interface:
-                raise FMUError(f"{name}: {self.path.name} has no Co-Simulation, Model Exchange or Scheduled "
-                               "Execution interface")
-        elif not has[interface]:
-            have = [words[k] for k, v in has.items() if v]
-            raise ConfigurationError(f"{name}: {self.path.name} has no {words[interface]} interface; it has: "
-                                     f"{', '.join(have) or 'none'}")
-        self.clock_model = read_clocks(md, self.path, name)
-        if self.clock_model is not None:
-            self.clock_model.check_interface(interface)
-            if isolate is True:
-                raise ConfigurationError(f"{name}: an FMU with clocks cannot be isolated (isolate = true): its "
-                                         "Event Mode and callbacks run in the master's process")
-        elif interface == "se":
-            raise FMUError(f"{name}: {self.path.name} is a Scheduled Execution FMU without clocks: it has no model "
-                           "partition to activate")
-        if clock_intervals is not None and self.clock_model is None:
-            raise ConfigurationError(f"{name}: clock_intervals given, but {self.path.name} has no clocks")
-        self.clock_overrides = self.clock_model.check_overrides(clock_intervals or {}) if self.clock_model else {}
-        self.interface = interface
-        if solver not in SOLVERS:
-            raise UnknownNameError(f"{name}: solver must be one of {SOLVERS}, got {solver!r}")
-        if feedthrough not in FEEDTHROUGH_MODES:
-            raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
-        self.solver, self.rtol = solver, positive(rtol, f"{name}: rtol")
-        self.solver_step = None if solver_step is None else positive(solver_step, f"{name}: solver_step")
-        self.feedthrough_mode, self.logging = feedthrough, bool(logging)
-        if not isinstance(isolate, bool):
-            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
-        self.isolate = isolate
-        self.variables = {v.name: v for v in md.modelVariables}
-        ident = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}[
-            interface].modelIdentifier
-        self.model_identifier = ident
+        d = self.description = FMUDescription(path, name)
+        self.path, self.md, self.version, self.clock_model = d.path, d.md, d.version, d.clocks
+        self.interface = d.choose_interface(interface)
+        self.clock_overrides = d.clock_overrides(clock_intervals, isolate)
+        self._options(name, solver, solver_step, rtol, feedthrough, logging, isolate)
+        d.check_binary(self.interface)
         #: The project's plant model this FMU was built from (a scenario's ``model = ...``),
         #: or None for an FMU file: an FMU export in another FMI version rebuilds from it.
         self.plant_model = None
-        self._check_binary(name)
-        self.settings, self.structural = self._settings(name, parameters or {}, start or {})
-        self.element_ports = element_ports(md, self.structural)
-        ins = self._ports(name, inputs, ("input",), "input")
-        outs = self._ports(name, outputs, ("output", "local"), "output", default=("output",))
-        ft = self._model_feedthrough(outs, ins) if feedthrough == "model" else False
-        if self.clock_model is not None and ft is not False:
-            ft = self.clock_model.feedthrough(ft, outs, ins, self.element_ports, interface)
+        self.settings, structural = d.settings(parameters or {}, start or {})
+        self.element_ports = element_ports(d.md, structural)
+        ins = d.ports(self.element_ports, inputs, "input")
+        outs = d.ports(self.element_ports, outputs, "output")
+        ft = d.feedthrough(self.element_ports, outs, ins, self.interface) if feedthrough == "model" else False
         super().__init__(name, period, ins, outs, feedthrough=ft, port_names_are_identifiers=False)
-        if interface == "se":
+        if self.interface == "se":
             self.reentrant = False              # a partition is activated once per time
         self._board: ClockBoard | None = None
         self._run: ClockedRun | None = None
@@ -249,107 +211,18 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         self._library_box: list = [None]
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
-        self._sources: list | None = None
-        self._private = None
         self._remote = None
 
-    # ------------------------------------------------------------------ description
-    def _settings(self, name: str, parameters: Mapping, start: Mapping) -> tuple[dict, dict]:
-        """Checked parameter and start values (exact integers, finite reals, lists for arrays),
-        and the structural parameters' values (start values, overridden)."""
-        if not isinstance(parameters, Mapping) or not isinstance(start, Mapping):
-            raise TypeMismatchError(f"{name}: parameters and start must be tables of name = value")
-        structural = {v.name: int(parse_start(v, 1)[0]) for v in self.md.modelVariables
-                      if v.causality == "structuralParameter" and v.type.startswith(("Int", "UInt"))}
-        settings: dict = {}
-        for kind, values in (("parameter", parameters), ("start", start)):
-            for key, val in values.items():
-                v = self.variables.get(key)
-                if v is None:
-                    raise UnknownNameError(f"{name}: FMU {self.md.modelName} has no variable {key!r} (for {kind}); "
-                                           f"valid names: {', '.join(self.variables)}")
-                if v.type not in PORT_TYPES:
-                    raise TypeMismatchError(f"{name}: {key!r} is of type {v.type}; only numeric and Boolean "
-                                            "variables can be set")
-                what = f"{name}: {kind} {key}"
-                if v.causality == "structuralParameter":
-                    structural[key] = check_integer(val, v.type, self.version, what)
-                    check_declared_range([structural[key]], v, what)
-                    settings[key] = structural[key]
-                    continue
-                settings[key] = val
-        for key, val in list(settings.items()):
-            v = self.variables[key]
-            if v.causality == "structuralParameter":
-                continue
-            shape = array_shape(v, structural)
-            count = int(np.prod(shape)) if shape else 1
-            items = list(val) if isinstance(val, (list, tuple)) else [val]
-            if len(items) != count:
-                raise ConfigurationError(f"{name}: {key} takes {count} value(s) (shape {shape or 'scalar'}), "
-                                         f"got {len(items)}")
-            what = f"{name}: {key}"
-            if PORT_TYPES[v.type] == "real":
-                items = [finite(x, what) for x in items]
-            elif PORT_TYPES[v.type] == "boolean":
-                if not all(isinstance(x, bool) or x in (0, 1) for x in items):
-                    raise TypeMismatchError(f"{what}: a Boolean takes true or false, got {val!r}")
-                items = [bool(x) for x in items]
-            else:
-                items = [check_integer(x, v.type, self.version, what) for x in items]
-            if PORT_TYPES[v.type] != "boolean":
-                check_declared_range(items, v, what)
-            settings[key] = items if shape else items[0]
-        return settings, structural
-
-    def _ports(self, name, chosen, causalities, what, default=None) -> list[Port]:
-        default = default or causalities
-        available = {p.name: p for p in self.element_ports.values() if p.variable.causality in causalities}
-        if chosen is None:
-            chosen = [n for n, p in available.items() if p.variable.causality in default and p.type in PORT_TYPES]
-            if self.clock_model is not None:
-                chosen += self.clock_model.default_ports(what)
-        elif isinstance(chosen, str) or not all(isinstance(c, str) for c in chosen):
-            raise TypeMismatchError(f"{name}: {what}s must be a list of variable names, got {chosen!r}")
-        ports, seen = [], set()
-        for p in chosen:
-            names = [p] if p in available else [n for n, e in available.items() if e.variable.name == p and n != p]
-            if not names:
-                raise UnknownNameError(f"{name}: {p!r} is not an FMU {what}; valid {what}s: "
-                                       f"{', '.join(available)}")
-            for n in names:
-                e = available[n]
-                if e.type == CLOCK and self.clock_model is not None:
-                    if n not in seen:
-                        seen.add(n)
-                        ports.append(self.clock_model.port(n, what, name))
-                    continue
-                if e.type not in PORT_TYPES:
-                    raise TypeMismatchError(f"{name}: {what} {n!r} is of type {e.type}; ports can be "
-                                            f"{', '.join(sorted(set(PORT_TYPES)))}")
-                if n not in seen:
-                    seen.add(n)
-                    ports.append(Port(n, e.type, getattr(e.variable, "unit", None) or "", e.variable.description or ""))
-        return ports
-
-    def _model_feedthrough(self, outs: list[Port], ins: list[Port]) -> dict:
-        """Direct dependencies of each output port on input ports, from the ModelStructure
-        (by variable: an array element depends on every element of what its array does)."""
-        declared = {}
-        for unknown in list(self.md.outputs) + list(getattr(self.md, "derivatives", [])):
-            if unknown.variable is not None:
-                declared[unknown.variable.name] = unknown.dependencies
-        by_variable: dict[str, list[str]] = {}
-        for p in ins:
-            by_variable.setdefault(self.element_ports[p.name].variable.name, []).append(p.name)
-        result = {}
-        for p in outs:
-            deps = declared.get(self.element_ports[p.name].variable.name)
-            if deps is None:           # not declared: depends on every input (FMI default)
-                result[p.name] = sorted(q.name for q in ins)
-            else:
-                result[p.name] = sorted(n for d in deps for n in by_variable.get(d.name, []))
-        return result
+    def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,
+                 logging: bool, isolate: bool) -> None:
+        """Check and keep the options that are the component's, not the FMU's."""
+        self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
+        if feedthrough not in FEEDTHROUGH_MODES:
+            raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
+        self.feedthrough_mode, self.logging = feedthrough, bool(logging)
+        if not isinstance(isolate, bool):
+            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
+        self.isolate = isolate
 
     @classmethod
     def from_scenario(cls, name, table, context):
@@ -378,21 +251,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                                              "file")
             path = context.path(table.pop("path"), f"component {name!r}: path")
         return context.construct(cls, name, table, path=path)
-
-    # ------------------------------------------------------------------ description
-    def _check_binary(self, name: str) -> None:
-        import zipfile
-
-
-        want = f"binaries/{platform_dir(self.version)}/{self.model_identifier}{library_suffix()}"
-        with zipfile.ZipFile(self.path) as z:
-            names = z.namelist()
-        if want not in names:
-            have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
-            hint = (" It ships its C sources: rebuild it for this platform (e.g. fmpy's "
-                    "compile_platform_binary)." if any(n.startswith("sources/") for n in names) else "")
-            raise FMUError(f"{name}: {self.path.name} has no binary for this platform ({want}); it has "
-                           f"binaries for: {', '.join(have) or 'none'}.{hint}")
 
     def __repr__(self):
         return (f"FMUComponent({self.name!r}, {self.path.name}, FMI {self.version}.0 "
@@ -450,19 +308,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
                 else f"Model Exchange, {self.solver} solver (step {self.solver_step:g} s)")
         lim = " (left limits: feedthrough='none')" if self.feedthrough_mode == "none" else ""
         return f"FMI {self.version}.0 {kind}: outputs at t{lim}; inputs held over [t, t + {self.period:g}]"
-
-    def required_inputs(self) -> list[str]:
-        """None: unconnected FMU inputs keep their start values."""
-        return []
-
-    def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
-        """Set, at each step, only these input ports (the connected ones), in this order;
-        ``sources``: each one's source signal and FMI type (for the integer range checks)."""
-        unknown = [n for n in names if n not in self.input_names]
-        if unknown:
-            raise UnknownNameError(f"{self.name}: not input ports: {unknown}")
-        self.connected_inputs = list(names)
-        self._sources = list(sources) if sources is not None else None
 
     @property
     def input_sources(self) -> list[tuple[str, str]] | None:
@@ -541,9 +386,6 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             self._extraction = Extraction(self.path)
         return self._extraction.directory
 
-    def _fail(self, what: str, status: int):
-        self.instance.fail(what, status)
-
     def reset(self, t0: float) -> None:
         """Unpack (once) and instantiate the FMU, apply the structural parameters (in
         Configuration Mode), the parameters and start values, initialise it at ``t0`` and,
@@ -571,9 +413,9 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             options = dict(event_mode=True, early_return=True, clock_update=self._clock_update)
         library, self._library_box[0] = self._library_box[0], None
         if library is not None and (options or self.interface != "cs"):
-            _unload(library)
+            unload_library(library)
             library = None
-        inst = FMUInstance(self.name, self.md, self.unpacked, self.interface, self.logging, **options,
+        inst = FMUInstance(self.name, self.description, self.unpacked, self.interface, self.logging, **options,
                            library=library)
         inst.keep_library = not options and self.interface == "cs"      # reused by the next run
         self.instance = inst
@@ -583,7 +425,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             if self.version == 2:
                 inst.call("SetupExperiment", fmu.setupExperiment, None, t0)
             structural = {k: v for k, v in self.settings.items()
-                          if self.variables[k].causality == "structuralParameter"}
+                          if self.description.variables[k].causality == "structuralParameter"}
             if structural:
                 inst.call("EnterConfigurationMode", fmu.enterConfigurationMode)
                 for key, val in structural.items():
@@ -606,7 +448,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         return inst
 
     def _set_setting(self, name: str, value) -> None:
-        v, inst = self.variables[name], self.instance
+        v, inst = self.description.variables[name], self.instance
         fmu, vr = inst.fmu, [v.valueReference]
         items = list(value) if isinstance(value, list) else [value]
         kind = PORT_TYPES[v.type]
@@ -641,11 +483,10 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         ports = [self.element_ports[n] for n in self.connected_inputs]
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
-
-        def exchange(positions, direction, index, changes=False):
+        def exchange(positions, direction, changes=False):
             if not positions:
                 return _nothing
-            ex = Exchange(inst.dll, inst.handle, self.version, [ports[i] for i in positions], direction, self._fail,
+            ex = Exchange(inst.dll, inst.handle, self.version, [ports[i] for i in positions], direction, inst.fail,
                           self.name, [sources[i] for i in positions])
             ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
             return ex.bind(values, idx[positions], integers, changes)
@@ -654,11 +495,11 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         ft_names = set().union(*self.feedthrough.values()) if self.feedthrough else set()
         ft_pos = [i for i, n in enumerate(self.connected_inputs) if n in ft_names]
         get_out = Exchange(inst.dll, inst.handle, self.version, [self.element_ports[n] for n in self.output_names],
-                           "get", self._fail, self.name).bind(values, outputs, integers)
+                           "get", inst.fail, self.name).bind(values, outputs, integers)
         if self.interface == "me":
             return self._bind_me(ports, exchange, all_pos, ft_pos, get_out)
-        set_all = exchange(all_pos, "set", inputs if isinstance(inputs, slice) else None)
-        set_ft = exchange(ft_pos, "set", None) if ft_pos else None
+        set_all = exchange(all_pos, "set")
+        set_ft = exchange(ft_pos, "set") if ft_pos else None
         return self._output_fn(set_ft, get_out), self._cs_update(set_all)
 
     def _input_starts(self) -> list:
@@ -704,45 +545,37 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         do_step, D = inst.raw(f"fmi{self.version}DoStep"), ctypes.c_double
         c, Dh = ctypes.c_void_p(inst.handle), ctypes.c_double(h)
         if self.version == 2:
-            def update_fn(t: float) -> None:
-                set_all()
-                st = do_step(c, D(t), Dh, 1)
-                if st > 1:
-                    if st == 2:
-                        when = inst.discard_reason()
-                        if when is not None:
-                            raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
-                    inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
-
-            def fail2(op, t: float) -> None:
-                st = op.status
+            def failed2(st: int, t: float) -> None:
                 if st == 2:
                     when = inst.discard_reason()
                     if when is not None:
                         raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
                 inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
-            return self._native_update(update_fn, set_all, OP_STEP2, do_step, fail2)
+
+            def update_fn(t: float) -> None:
+                set_all()
+                st = do_step(c, D(t), Dh, 1)
+                if st > 1:
+                    failed2(st, t)
+            return self._native_update(update_fn, set_all, OP_STEP2, do_step, lambda op, t: failed2(op.status, t))
         flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
         refs = [ctypes.byref(x) for x in flags]
         term, last = flags[1], flags[3]
 
-        def update_fn(t: float) -> None:
-            set_all()
-            st = do_step(c, D(t), Dh, True, *refs)
-            if st > 1 and not (st == 2 and term.value):
-                inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
-            if term.value:
-                when = last.value if st == 2 or last.value > t else t + h
-                raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
-
-        def fail3(op, t: float) -> None:
-            st, terminate, last_time = op.status, bool(op.flag), op.d
+        def ended3(st: int, terminate: bool, last_time: float, t: float) -> None:
             if st > 1 and not (st == 2 and terminate):
                 inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
             if terminate:
                 when = last_time if st == 2 or last_time > t else t + h
                 raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
-        return self._native_update(update_fn, set_all, OP_STEP3, do_step, fail3)
+
+        def update_fn(t: float) -> None:
+            set_all()
+            st = do_step(c, D(t), Dh, True, *refs)
+            if st > 1 or term.value:
+                ended3(st, term.value, last.value, t)
+        return self._native_update(update_fn, set_all, OP_STEP3, do_step,
+                                   lambda op, t: ended3(op.status, bool(op.flag), op.d, t))
 
     def _native_update(self, update_fn, set_all, kind: int, do_step, fail):
         """``update_fn`` with its native operations (set the inputs, ``doStep``) when the
@@ -755,32 +588,13 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
         return update_fn
 
     def _bind_me(self, ports, exchange, all_pos, ft_pos, get_out):
-        """Model Exchange: continuous inputs set in Continuous-Time Mode, discrete ones in
-        Event Mode (an event at the communication point where one changed); the solver is
-        reinitialised where a continuous input jumped."""
-        me, h = self.integrator, self.period
-        cont = [i for i in all_pos if not ports[i].discrete]
-        disc = [i for i in all_pos if ports[i].discrete]
-        set_cont = exchange(cont, "set", None, changes=True)
-        set_disc = exchange(disc, "set", None, changes=True)
-        ft_cont = exchange([i for i in ft_pos if not ports[i].discrete], "set", None, changes=True)
-        ft_disc = exchange([i for i in ft_pos if ports[i].discrete], "set", None, changes=True)
-        pending = [False]                        # a continuous input jumped since the last advance
-
-        def output_fn(t: float) -> None:
-            if ft_pos:
-                pending[0] |= bool(ft_cont())
-                if ft_disc.differs():
-                    me.at_event(t, ft_disc)
-            get_out()
-
-        def update_fn(t: float) -> None:
-            pending[0] |= bool(set_cont())
-            if disc and set_disc.differs():      # discrete inputs change only in Event Mode
-                me.at_event(t, set_disc)
-            me.advance(t, h, pending[0])
-            pending[0] = False
-        return output_fn, update_fn
+        """Model Exchange: the inputs held over the step, continuous ones set in
+        Continuous-Time Mode, discrete ones in Event Mode
+        (:func:`~cosim.fmi.model_exchange.held_inputs`)."""
+        def setters(positions: list[int]) -> tuple[list, list]:
+            kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
+            return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
+        return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
 
     def _set_private_inputs(self, buf, ints, u) -> None:
         n_in = len(self.connected_inputs)
@@ -802,7 +616,7 @@ class FMUComponent(BoundCalls, Component, kind="fmu"):
             if inst.keep_library and inst.worst < _ERROR:   # the library stays loaded for the next instance
                 self._library_box[0] = inst.fmu
             elif inst.keep_library and inst.worst < _FATAL:
-                _unload(inst.fmu)
+                unload_library(inst.fmu)
 
     def release(self) -> None:
         """:meth:`close`, unload the FMU's library and remove the unpacked FMU (both kept

@@ -28,7 +28,7 @@ from fmu_models.errors import FMUError
 from ..core import crash_guard
 from .exchange import raw_function
 
-__all__ = ["STATUS", "FMUInstance"]
+__all__ = ["STATUS", "FMUInstance", "unload_library"]
 
 LOGGER = logging.getLogger("cosim.fmu")
 _LEVELS = {0: logging.INFO, 1: logging.WARNING, 2: logging.WARNING, 3: logging.ERROR, 4: logging.CRITICAL}
@@ -57,6 +57,16 @@ def _fmi2_logger():
     return _FMI2_CALLBACK[0]
 
 
+def unload_library(fmu) -> None:
+    """Unload the library of the fmpy FMU object ``fmu`` (its instance freed, or none made)
+    and forget it in the crash guard."""
+    try:
+        fmu.freeLibrary()
+    except Exception:
+        LOGGER.debug("freeLibrary failed", exc_info=True)
+    crash_guard.forget_library(getattr(fmu, "pendulum_guard_entry", -1))
+
+
 class FMUInstance:
     """An instantiated FMU (see the module documentation).
 
@@ -64,7 +74,8 @@ class FMUInstance:
     ----------
     owner : str
         The component's name (the instance name and the messages').
-    md : fmpy ModelDescription
+    description : FMUDescription
+        The FMU's description (:mod:`cosim.fmi.description`).
     directory : str
         Where the FMU is unpacked.
     interface : {"cs", "me", "se"}
@@ -86,6 +97,7 @@ class FMUInstance:
 
     Attributes
     ----------
+    md : fmpy ModelDescription
     fmu : fmpy FMU2Slave, FMU2Model, FMU3Slave, FMU3Model or FMU3ScheduledExecution
     dll : ctypes.CDLL
     handle : int
@@ -99,78 +111,83 @@ class FMUInstance:
         The last 200 log messages (status, text).
     """
 
-    def __init__(self, owner: str, md, directory: str, interface: str, logging_on: bool = False, *,
+    def __init__(self, owner: str, description, directory: str, interface: str, logging_on: bool = False, *,
                  event_mode: bool = False, early_return: bool = False, clock_update=None, library=None):
-        from fmpy import fmi2, fmi3
-        from fmpy.fmi1 import calloc, free
-
-        self.owner, self.md, self.interface = owner, md, interface
-        self.version = 3 if str(md.fmiVersion).startswith("3") else 2
+        self.owner, self.md, self.interface = owner, description.md, interface
+        self.version = description.version
         self.messages: deque = deque(maxlen=200)
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
         self._guard_entry = -1
         self._freed = False
         #: Free only the instance at the end, not the library (its owner reuses or frees it).
         self.keep_library = False
-        ident = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}[
-            interface].modelIdentifier
-        args = dict(guid=md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
+        self.fmu = None
+        ident = description.interfaces[interface].modelIdentifier
+        args = dict(guid=self.md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
         cwd = os.getcwd()
-        fmu = None
         try:
             if self.version == 2:
-                fmu = self._guarded(library or (fmi2.FMU2Slave if interface == "cs" else fmi2.FMU2Model)(**args))
-
-                from fmpy.logging import addLoggerProxy
-
-                self._log_key = next(_FMI2_KEYS)
-                _FMI2_LOGS[self._log_key] = self._log
-                cb = fmi2.fmi2CallbackFunctions()
-                cb.logger = _fmi2_logger()
-                cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
-                cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
-                cb.componentEnvironment = self._log_key
-                addLoggerProxy(ctypes.byref(cb))     # printf-style messages formatted with their arguments
-                self._callbacks = cb
-                fmu.instantiate(callbacks=cb, loggingOn=self.logging_on)
+                self._instantiate2(args, library)
             else:
-                def log3(env, status, category, message):
-                    self._log(status, message)
-
-                self._log3 = log3
-                # an FMI 3.0 FMU calls the log callback only with loggingOn, errors included:
-                # always on, so that a failing call names its reason (_log keeps the debug
-                # messages off the log unless logging_on)
-                if interface == "se":
-                    fmu = self._guarded(fmi3.FMU3ScheduledExecution(**args))
-                    self._instantiate_se(fmu, directory, clock_update)
-                elif interface == "cs":
-                    fmu = self._guarded(library or fmi3.FMU3Slave(**args))
-                    fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
-                                    earlyReturnAllowed=bool(early_return))
-                else:
-                    fmu = self._guarded(fmi3.FMU3Model(**args))
-                    fmu.instantiate(loggingOn=True, logMessage=log3)
+                self._instantiate3(args, directory, event_mode, early_return, clock_update, library)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
             _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
-            if fmu is not None and getattr(fmu, "dll", None) is not None:  # a reused library too: not again
-                try:
-                    fmu.freeLibrary()
-                except Exception:
-                    LOGGER.debug("freeLibrary failed", exc_info=True)
-            crash_guard.forget_library(self._guard_entry)
+            if getattr(self.fmu, "dll", None) is not None:      # a reused library too: not again
+                unload_library(self.fmu)
+            else:
+                crash_guard.forget_library(self._guard_entry)
             raise FMUError(f"{owner}: cannot load or instantiate {ident}: {e}" + self._last(" (", ")")) from None
         finally:
             if os.getcwd() != cwd:              # fmpy changes directory to load the library
                 os.chdir(cwd)
+        fmu = self.fmu
         if not fmu.component:
             raise FMUError(f"{owner}: fmi{self.version}Instantiate returned no instance" + self._last(" (", ")"))
-        self.fmu, self.dll, self.handle = fmu, fmu.dll, fmu.component
+        self.dll, self.handle = fmu.dll, fmu.component
         if self.logging_on:
             try:
                 fmu.setDebugLogging(True, [])
             except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
                 LOGGER.debug("%s: setDebugLogging refused", owner)
+
+    def _instantiate2(self, args: dict, library) -> None:
+        """FMI 2.0: load (or reuse) the library and instantiate with the shared logger."""
+        from fmpy import fmi2
+        from fmpy.fmi1 import calloc, free
+        from fmpy.logging import addLoggerProxy
+
+        fmu = self._guarded(library or (fmi2.FMU2Slave if self.interface == "cs" else fmi2.FMU2Model)(**args))
+        self._log_key = next(_FMI2_KEYS)
+        _FMI2_LOGS[self._log_key] = self._log
+        cb = fmi2.fmi2CallbackFunctions()
+        cb.logger = _fmi2_logger()
+        cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
+        cb.componentEnvironment = self._log_key
+        addLoggerProxy(ctypes.byref(cb))     # printf-style messages formatted with their arguments
+        self._callbacks = cb
+        fmu.instantiate(callbacks=cb, loggingOn=self.logging_on)
+
+    def _instantiate3(self, args: dict, directory: str, event_mode: bool, early_return: bool, clock_update,
+                      library) -> None:
+        """FMI 3.0: load (or reuse) the library and instantiate the interface with this
+        instance's logger (always on: an FMI 3.0 FMU calls it only with loggingOn, errors
+        included, and a failing call names its reason; :meth:`_log` keeps the debug messages
+        off the log unless ``logging_on``)."""
+        from fmpy import fmi3
+
+        def log3(env, status, category, message):
+            self._log(status, message)
+
+        self._log3 = log3
+        if self.interface == "se":
+            self._instantiate_se(self._guarded(fmi3.FMU3ScheduledExecution(**args)), directory, clock_update)
+        elif self.interface == "cs":
+            fmu = self._guarded(library or fmi3.FMU3Slave(**args))
+            fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
+                            earlyReturnAllowed=bool(early_return))
+        else:
+            self._guarded(fmi3.FMU3Model(**args)).instantiate(loggingOn=True, logMessage=log3)
 
     def _guarded(self, fmu):
         """``fmu`` (its library just loaded), registered with the crash guard: a fatal signal in
@@ -179,6 +196,7 @@ class FMUInstance:
         address = ctypes.cast(version, ctypes.c_void_p).value if version is not None else None
         self._guard_entry = crash_guard.register_library(address, self.owner)
         fmu.pendulum_guard_entry = self._guard_entry       # forgotten when its library is unloaded
+        self.fmu = fmu
         return fmu
 
     def _instantiate_se(self, fmu, directory: str, clock_update) -> None:

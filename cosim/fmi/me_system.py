@@ -29,12 +29,11 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
-from fmu_models.infra.checks import positive
 
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
 from .exchange import Exchange, no_exchange
-from .fmu_component import FMUComponent
-from .model_exchange import SOLVERS, ContinuousModel, FMUModel, MEIntegrator
+from .fmu_component import FMUComponent, HeldInputs
+from .model_exchange import ContinuousModel, FMUModel, MEIntegrator, check_solver, held_inputs
 
 __all__ = ["MESystem"]
 
@@ -140,7 +139,7 @@ class _Coupled(ContinuousModel):
                        f"{MAX_EVENT_ROUNDS} rounds (the members' discrete values keep changing each other)")
 
 
-class MESystem(BoundCalls, Component, kind="me_system"):
+class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
     """Model Exchange FMUs connected to each other, integrated as one system (see the
     module documentation).
 
@@ -170,9 +169,6 @@ class MESystem(BoundCalls, Component, kind="me_system"):
         The integrator of the current run.
     """
 
-    reentrant = True
-    holds_inputs = True
-
     def __init__(self, name: str, members: Sequence[FMUComponent], connections: Mapping[str, str],
                  period: float, solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6):
 
@@ -195,10 +191,7 @@ class MESystem(BoundCalls, Component, kind="me_system"):
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ConfigurationError(f"{name}: duplicate member names: {dup}")
-        if solver not in SOLVERS:
-            raise UnknownNameError(f"{name}: solver must be one of {SOLVERS}, got {solver!r}")
-        self.solver, self.rtol = solver, positive(rtol, f"{name}: rtol")
-        self.solver_step = None if solver_step is None else positive(solver_step, f"{name}: solver_step")
+        self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
         self.by_name = {m.name: m for m in self.members}
         self.connections = self._parse(name, connections or {})
         self.order = self._order(name)
@@ -208,10 +201,8 @@ class MESystem(BoundCalls, Component, kind="me_system"):
                 for p in m.output_ports]
         super().__init__(name, period, ins, outs, feedthrough=self._feedthrough_map(), port_names_are_identifiers=False)
         self.connected_inputs = list(self.input_names)
-        self._sources: list | None = None
         self.integrator: MEIntegrator | None = None
         self._model: _Coupled | None = None
-        self._private = None
 
     @classmethod
     def from_scenario(cls, name, table, context):
@@ -306,18 +297,6 @@ class MESystem(BoundCalls, Component, kind="me_system"):
     def timing(self) -> str:
         return ("Model Exchange system: outputs at t; connections between members inside every derivative "
                 "evaluation; external inputs held over the step")
-
-    def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
-        """Set, at each step, only these external inputs (``member.port``), in this order."""
-        unknown = [n for n in names if n not in self.input_names]
-        if unknown:
-            raise UnknownNameError(f"{self.name}: not input ports: {unknown}")
-        self.connected_inputs = list(names)
-        self._sources = list(sources) if sources is not None else None
-
-    def required_inputs(self) -> list[str]:
-        """None: unconnected inputs keep their start values."""
-        return []
 
     def check_run(self, start_time: float, stop_time: float) -> None:
         """Refuse a run of too many fixed solver steps (see FMUComponent.check_run)."""
@@ -418,37 +397,7 @@ class MESystem(BoundCalls, Component, kind="me_system"):
                 ex = Exchange(inst.dll, inst.handle, m.version, [m.element_ports[o] for o in outs], "get", inst.fail,
                               m.name)
                 getters.append(ex.bind(values, out_idx[[out_pos[f"{m.name}.{o}"] for o in outs]], integers))
-        me, model, h = self.integrator, self._model, self.period
-        pending = [False]
-
-        def apply(setters) -> bool:
-            changed = False
-            for s in setters:
-                changed |= bool(s())
-            return changed
-
-        def differs(setters) -> bool:
-            return any(s.differs() for s in setters)
-
-        def output_fn(t: float) -> None:
-            if ft_cont and apply(ft_cont):
-                pending[0] = True
-                model.dirty = True
-            if ft_disc and differs(ft_disc):
-                me.at_event(t, lambda: apply(ft_disc))
-            model.refresh()
-            for g in getters:
-                g()
-
-        def update_fn(t: float) -> None:
-            if set_cont and apply(set_cont):
-                pending[0] = True
-                model.dirty = True
-            if set_disc and differs(set_disc):
-                me.at_event(t, lambda: apply(set_disc))
-            me.advance(t, h, pending[0])
-            pending[0] = False
-        return output_fn, update_fn
+        return held_inputs(self.integrator, self.period, (set_cont, set_disc), (ft_cont, ft_disc), getters)
 
     def close(self) -> None:
         """End every member's instance by the FMI rules (safe twice)."""

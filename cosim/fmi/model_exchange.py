@@ -33,14 +33,25 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, FMUError
+from fmu_models.errors import ConfigurationError, FMUError, UnknownNameError
+from fmu_models.infra.checks import positive
 
 from ..core.component import StopRequest
 
-__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator"]
+__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs"]
 
+#: The Model Exchange solvers (see the module documentation).
 SOLVERS = ("cvode", "euler", "rk4")
 _DP = ctypes.POINTER(ctypes.c_double)
+
+
+def check_solver(owner: str, solver: str, solver_step: float | None, rtol: float) -> tuple[str, float | None, float]:
+    """``(solver, solver_step, rtol)`` of the component ``owner`` checked: ``solver`` one of
+    :data:`SOLVERS`, ``solver_step`` [s] None or positive, ``rtol`` positive."""
+    if solver not in SOLVERS:
+        raise UnknownNameError(f"{owner}: solver must be one of {SOLVERS}, got {solver!r}")
+    rtol = positive(rtol, f"{owner}: rtol")
+    return solver, None if solver_step is None else positive(solver_step, f"{owner}: solver_step"), rtol
 
 
 class ContinuousModel:
@@ -56,6 +67,9 @@ class ContinuousModel:
         ``CompletedIntegratorStep`` must be called after every integrator step.
     stop_reason : str
         Why the model asked to terminate in its last event (for the stop notice).
+    dirty : bool
+        An input changed since the values the outputs are read from were brought up to
+        date (:meth:`refresh`).
     """
 
     nx = 0
@@ -63,6 +77,10 @@ class ContinuousModel:
     name = ""
     needs_completed_step = False
     stop_reason = "the FMU requested termination in its event update"
+    dirty = False
+
+    def refresh(self) -> None:
+        """Bring the values the outputs are read from up to date (nothing to do for one FMU)."""
 
     def set_time(self, t: float) -> None:
         """Set the time [s]."""
@@ -105,7 +123,8 @@ class ContinuousModel:
 
 class FMUModel(ContinuousModel):
     """One Model Exchange FMU instance (after ``ExitInitializationMode``) as a
-    :class:`ContinuousModel`, through its raw FMI functions.
+    :class:`ContinuousModel`: its states, derivatives, indicators and nominals are calls of
+    the FMU's raw FMI functions, bound when it is made.
 
     Parameters
     ----------
@@ -119,64 +138,31 @@ class FMUModel(ContinuousModel):
         self.v3 = instance.version == 3
         self.nx = int(md.numberOfContinuousStates)
         self.nz = int(md.numberOfEventIndicators)
-        me = md.modelExchange
-        self.needs_completed_step = bool(getattr(me, "needsCompletedIntegratorStep", True))
+        self.needs_completed_step = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
         p = "fmi3" if self.v3 else "fmi2"
-        c = ctypes.c_void_p(instance.handle)
-        fail = instance.fail
-        set_time = instance.raw(f"{p}SetTime")
-        set_x = instance.raw(f"{p}SetContinuousStates")
-        get_x = instance.raw(f"{p}GetContinuousStates")
-        get_dx = instance.raw(f"{p}GetContinuousStateDerivatives" if self.v3 else f"{p}GetDerivatives")
-        get_z = instance.raw(f"{p}GetEventIndicators")
-        get_nom = instance.raw(f"{p}GetNominalsOfContinuousStates")
-        completed = instance.raw(f"{p}CompletedIntegratorStep")
-        nx, nz = ctypes.c_size_t(self.nx), ctypes.c_size_t(self.nz)
-        D = ctypes.c_double
+        c, fail = ctypes.c_void_p(instance.handle), instance.fail
 
         def check(st, what):
             if st > 1:
                 fail(what, st)
 
-        self._set_time = lambda t: check(set_time(c, D(t)), "SetTime")
-        self._set_x = lambda ptr: check(set_x(c, ptr, nx), "SetContinuousStates")
-        self._get_x = lambda ptr: check(get_x(c, ptr, nx), "GetContinuousStates")
-        self._get_dx = lambda ptr: check(get_dx(c, ptr, nx), "GetDerivatives")
-        self._get_z = lambda ptr: check(get_z(c, ptr, nz), "GetEventIndicators")
-        self._get_nom = lambda ptr: check(get_nom(c, ptr, nx), "GetNominalsOfContinuousStates")
+        def vector(function: str, n: int, what: str):
+            """``function`` on an array of ``n`` values (nothing to do for none)."""
+            fn, size = instance.raw(f"{p}{function}"), ctypes.c_size_t(n)
+            return (lambda x: check(fn(c, x.ctypes.data_as(_DP), size), what)) if n else (lambda x: None)
+
+        self.get_states = vector("GetContinuousStates", self.nx, "GetContinuousStates")
+        self.set_states = vector("SetContinuousStates", self.nx, "SetContinuousStates")
+        self.derivatives = vector("GetContinuousStateDerivatives" if self.v3 else "GetDerivatives", self.nx,
+                                  "GetDerivatives")
+        self.indicators = vector("GetEventIndicators", self.nz, "GetEventIndicators")
+        self.nominals = vector("GetNominalsOfContinuousStates", self.nx, "GetNominalsOfContinuousStates")
+        set_time, completed = instance.raw(f"{p}SetTime"), instance.raw(f"{p}CompletedIntegratorStep")
+        self.set_time = lambda t: check(set_time(c, ctypes.c_double(t)), "SetTime")
         flag = ctypes.c_bool if self.v3 else ctypes.c_int
         self._enter, self._term = flag(0), flag(0)
         args = (c, 1, ctypes.byref(self._enter), ctypes.byref(self._term))
         self._completed = lambda: check(completed(*args), "CompletedIntegratorStep")
-
-    def set_time(self, t):
-        """Set the time [s]."""
-        self._set_time(t)
-
-    def get_states(self, x):
-        """Write the continuous states into ``x``."""
-        if self.nx:
-            self._get_x(x.ctypes.data_as(_DP))
-
-    def set_states(self, x):
-        """Set the continuous states from ``x``."""
-        if self.nx:
-            self._set_x(x.ctypes.data_as(_DP))
-
-    def derivatives(self, dx):
-        """Write the derivatives into ``dx``."""
-        if self.nx:
-            self._get_dx(dx.ctypes.data_as(_DP))
-
-    def indicators(self, z):
-        """Write the event indicators into ``z``."""
-        if self.nz:
-            self._get_z(z.ctypes.data_as(_DP))
-
-    def nominals(self, out):
-        """Write the nominal values into ``out``."""
-        if self.nx:
-            self._get_nom(out.ctypes.data_as(_DP))
 
     def completed_step(self):
         """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)``."""
@@ -185,14 +171,10 @@ class FMUModel(ContinuousModel):
 
     def event(self, t, set_inputs=None):
         """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
-        fmu, inst = self.inst.fmu, self.inst
-        inst.call("EnterEventMode", fmu.enterEventMode)
+        self.inst.call("EnterEventMode", self.inst.fmu.enterEventMode)
         if set_inputs is not None:
             set_inputs()
-        terminate, nxt = self.iterate(t)
-        if not terminate:
-            inst.call("EnterContinuousTimeMode", fmu.enterContinuousTimeMode)
-        return terminate, nxt
+        return self.initial_event(t)
 
     def initial_event(self, t):
         """The event iteration after initialisation, then Continuous-Time Mode."""
@@ -454,3 +436,52 @@ class MEIntegrator:
                 self._after_event(t_next, terminate, nxt)
             t = t_next
         self.t = t_end
+
+
+def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthrough: tuple[list, list],
+                getters: list) -> tuple[Callable[[float], None], Callable[[float], None]]:
+    """The output and update functions of the model ``me`` integrates, its inputs held over
+    each communication step: continuous inputs set in Continuous-Time Mode (the solver
+    reinitialised where one jumped), discrete ones only in Event Mode (an event at the
+    communication point where one changed).
+
+    Parameters
+    ----------
+    me : MEIntegrator
+    h : float
+        The communication step [s]: the update advances over ``[t, t + h]``.
+    setters : (list, list)
+        The calls that set the continuous and the discrete inputs (each returns whether a
+        value changed; its ``differs()`` whether one would).
+    feedthrough : (list, list)
+        The same for the inputs that feed through, set at ``t`` before the outputs are read.
+    getters : list
+        The calls that read the outputs.
+    """
+    model = me.model
+    pending = [False]                        # a continuous input jumped since the last advance
+
+    def apply(calls) -> bool:
+        changed = False
+        for s in calls:
+            changed |= bool(s())
+        return changed
+
+    def set_inputs(t: float, cont: list, disc: list) -> None:
+        if cont and apply(cont):
+            pending[0] = True
+            model.dirty = True
+        if disc and any(s.differs() for s in disc):
+            me.at_event(t, lambda: apply(disc))
+
+    def output_fn(t: float) -> None:
+        set_inputs(t, *feedthrough)
+        model.refresh()
+        for g in getters:
+            g()
+
+    def update_fn(t: float) -> None:
+        set_inputs(t, *setters)
+        me.advance(t, h, pending[0])
+        pending[0] = False
+    return output_fn, update_fn
