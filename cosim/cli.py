@@ -44,7 +44,7 @@ from .core.master import Cosimulation
 from .core.native import ENGINES
 from .experiments import EXPERIMENTS
 from .fmi.archive import read_description
-from .fmi.fmu_component import INTERFACES
+from .fmi.description import INTERFACES
 from .fmu_run import NAME as FMU_NAME
 from .fmu_run import open_fmu
 from .output import OutputFolder, plot_estimates, plot_signals, save_results
