@@ -36,50 +36,21 @@ a linear loop) or by fixed-point iteration (``loop_solver="fixed-point"``), to
 """
 from __future__ import annotations
 
-import ctypes
-import time
 from collections.abc import Mapping, Sequence
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from fmu_models.errors import (
-    ConfigurationError,
-    CosimError,
-    Interrupted,
-    ResourceError,
-    TypeMismatchError,
-    UnknownNameError,
-)
+from fmu_models.errors import ConfigurationError, CosimError, ResourceError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import finite, positive, positive_int
 
-from . import crash_guard
 from .clocking import ClockPlan
-from .component import (
-    CLOCK,
-    Component,
-    StopRequest,
-    bind_protocol,
-    port_kind,
-    ports_compatible,
-    split_port,
-)
-from .native import (
-    ENGINES,
-    EV_CHUNK,
-    EV_DONE,
-    EV_FAIL,
-    EV_FLUSH,
-    EV_HOOK,
-    EV_NONFINITE,
-    EV_PY,
-    EV_REFILL,
-    KState,
-    build_program,
-    load_kernel,
-)
+from .component import CLOCK, Component, port_kind, ports_compatible, split_port
+from .native import ENGINES
 from .recording import MemorySink, ParquetSink, select_signals
+from .run import Run
 from .schedule import Group, Unit, base_step, evaluation_order
 
 __all__ = ["LOOPS", "LOOP_SOLVERS", "ORDERS", "ConfigurationError", "CosimError", "Cosimulation"]
@@ -87,23 +58,8 @@ __all__ = ["LOOPS", "LOOP_SOLVERS", "ORDERS", "ConfigurationError", "CosimError"
 ORDERS = ("auto", "given", "jacobi")
 LOOPS = ("refuse", "iterate")
 LOOP_SOLVERS = ("newton", "fixed-point")
-#: Base steps between checks that every signal is finite (and progress updates).
-BLOCK = 64
-#: Most base steps the native kernel runs before it returns to Python (Ctrl-C, progress);
-#: fewer when they take longer than :data:`CHUNK_SECONDS`.
-CHUNK = 64 * BLOCK
-#: Wall time [s] the native kernel aims at between two returns to Python.
-CHUNK_SECONDS = 0.02
 #: Largest number of base steps of one run.
 MAX_STEPS = 10**10
-
-
-def _rows_finite(buf: np.ndarray, jb: int, j: int) -> bool:
-    """Whether the rows recorded since a block began (``jb`` up to ``j``, wrapped around the
-    buffer's end if the buffer was flushed meanwhile) are all finite."""
-    if j >= jb:
-        return bool(np.isfinite(buf[jb:j]).all())
-    return bool(np.isfinite(buf[jb:]).all() and np.isfinite(buf[:j]).all())
 
 
 class Cosimulation:
@@ -201,7 +157,6 @@ class Cosimulation:
         #: The clocks and clock connections, checked here before any run (None without any).
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
-        self._kernel = None
         self.engine = engine                    # checked by the property, like a later change
         #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
@@ -268,18 +223,14 @@ class Cosimulation:
         self._slots = slots
         self.signal_names = [f"{c}.{p}" for (c, p) in slots]
         self.signal_types = [p.type for c in self.components for p in c.output_ports]
-        self._n_signals = n
-        self._in_specs = {}
+        self._inputs = {}           # per component, where its connected inputs are: a slice, else indices
         for c in self.components:
             ports = [p for p in c.input_names if (c.name, p) in self.connections]
             srcs = [self.connections[(c.name, p)] for p in ports]
-            sources = [(".".join(s), self.signal_types[slots[s]]) for s in srcs]
-            c.use_inputs(ports, sources)
-            idx = np.array([slots[self.connections[(c.name, p)]] for p in ports], dtype=np.intp)
-            if len(idx) and np.all(np.diff(idx) == 1):
-                self._in_specs[c.name] = (ports, slice(int(idx[0]), int(idx[-1]) + 1))
-            else:
-                self._in_specs[c.name] = (ports, idx)
+            c.use_inputs(ports, [(".".join(s), self.signal_types[slots[s]]) for s in srcs])
+            idx = np.array([slots[s] for s in srcs], dtype=np.intp)
+            contiguous = len(idx) and np.all(np.diff(idx) == 1)
+            self._inputs[c.name] = slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx
 
     # ---------------------------------------------------------------- engine
     @property
@@ -317,24 +268,6 @@ class Cosimulation:
             reason = getattr(c, "native_reason", None)
             out[c.name] = whole or (reason() if callable(reason) else "a Python component")
         return out
-
-    def _program(self, schedule):
-        """The native kernel's program for this run, or None for the Python path."""
-        why = self._whole_run_python()
-        if why is not None:
-            if self.engine == "native":
-                raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
-            return None
-        self._kernel, _ = load_kernel()
-        if self._kernel is None:
-            return None
-        program = build_program(schedule)
-        if program.n_native == 0 and self.engine == "auto":
-            return None                  # nothing runs natively: the Python loop costs less
-        return program
-
-    def _due(self, name: str, j: int) -> bool:
-        return j % self._ratio[name] == 0
 
     # ---------------------------------------------------------------- description
     def describe(self) -> str:
@@ -458,11 +391,7 @@ class Cosimulation:
         ResourceError
             The recording would not fit in memory (the message gives the numbers).
         """
-        n, m = self._steps(stop_time, start_time, output_interval)
-        sel = select_signals(self.signal_names, signals)
-        sink = MemorySink([self.signal_names[i] for i in sel], n // m + 2, float(start_time), self.step_size, m,
-                          self._integer_columns(sel))
-        return self._simulate(sink, sel, n, m, float(start_time), progress)
+        return self._run(MemorySink, stop_time, start_time, signals, output_interval, progress)
 
     def run_to_parquet(self, path, stop_time: float, start_time: float = 0.0, *, signals=None,
                        output_interval: float | None = None, progress: bool | None = None,
@@ -474,414 +403,16 @@ class Cosimulation:
         interrupted run leaves ``<name>.partial.parquet`` with the rows so far (named in
         the error). ``pandas.read_parquet(path)`` gives the DataFrame :meth:`run` returns.
         """
+        return self._run(partial(ParquetSink, path, chunk_rows=chunk_rows), stop_time, start_time, signals,
+                         output_interval, progress)
+
+    def _run(self, sink_type, stop_time, start_time, signals, output_interval, progress):
+        """A run (see :mod:`cosim.core.run`) recording into ``sink_type(columns, n_rows, t0, step,
+        every, int_columns=...)``; the arguments as :meth:`run` takes them."""
         n, m = self._steps(stop_time, start_time, output_interval)
         sel = select_signals(self.signal_names, signals)
-        sink = ParquetSink(path, [self.signal_names[i] for i in sel], n // m + 2, float(start_time),
-                           self.step_size, m, chunk_rows, self._integer_columns(sel))
-        return self._simulate(sink, sel, n, m, float(start_time), progress)
-
-    def _integer_columns(self, sel) -> dict[int, str]:
-        """The recorded columns of integer signals (position in ``sel``: FMI type), kept exact."""
-
-        return {pos: ("Int64" if self.signal_types[i] == CLOCK else self.signal_types[i]) for pos, i in enumerate(sel)
-                if port_kind(self.signal_types[i]) in ("integer", "clock")}
-
-    def _bind_all(self, values, source, integers):
-        bound = {}
-        for c in self.components:       # hasattr(c, "bind") = isinstance(c, FastBinding), faster
-            inp, out = self._in_specs[c.name][1], self._out_slices[c.name]
-            try:
-                bound[c.name] = (c.bind(values, inp, out, integers) if source is values and hasattr(c, "bind")
-                                 else bind_protocol(c, values, source, inp, out, integers))
-            except Exception as e:
-                if isinstance(e, CosimError):
-                    raise
-                raise CosimError(f"component {c.name!r} failed before the run (bind): {e}", c.name) from e
-        return bound
-
-    def _entries(self, bound, values):
-        """Per hyperperiod position: (output callables, update callables)."""
-        patterns: dict = {}
-        index = [0] * self._hyper
-        entries = []
-        for j in range(self._hyper):
-            due = frozenset(c.name for c in self.components if self._due(c.name, j))
-            if due not in patterns:
-                outs = []
-                for g in self.schedule:
-                    units = [u for u in g.units if u.comp.name in due]
-                    if not units:
-                        continue
-                    if g.loop:
-                        outs.append(self._loop_solver(units, bound, values))
-                    else:
-                        outs.extend(bound[u.comp.name][0] for u in units)
-                upds = [bound[c.name][1] for c in self._update_order if c.name in due]
-                patterns[due] = len(entries)
-                entries.append((tuple(outs), tuple(upds)))
-            index[j] = patterns[due]
-        return [entries[i] for i in index]
-
-    def _loop_solver(self, units, bound, values):
-        """A callable solving one algebraic loop at an instant (see the module docs)."""
-        fns = [bound[u.comp.name][0] for u in units]
-        idx = np.concatenate([np.arange(self._out_slices[u.comp.name].start, self._out_slices[u.comp.name].stop)
-                              for u in units])
-        tol, max_iter, newton = self.loop_tolerance, self.loop_max_iter, self.loop_solver == "newton"
-        names = ", ".join(dict.fromkeys(u.comp.name for u in units))
-
-        def jacobi_map(z, t):
-            res = z.copy()
-            for f in fns:
-                values[idx] = z
-                f(t)
-                mine = values[idx]
-                res[mine != z] = mine[mine != z]
-            values[idx] = res
-            return res
-
-        def sweep(z, t):
-            values[idx] = z
-            for f in fns:
-                f(t)
-            return values[idx].copy()
-
-        def solve(t: float) -> None:
-            z = values[idx].copy()
-            for _ in range(max_iter):
-                gz = jacobi_map(z, t) if newton else sweep(z, t)
-                r = gz - z
-                if np.all(np.abs(r) <= tol * (1 + np.abs(z))):
-                    values[idx] = gz
-                    for f in fns:
-                        f(t)
-                    return
-                if not newton:
-                    z = gz
-                    continue
-                J = np.empty((len(z), len(z)))
-                for j in range(len(z)):
-                    eps = 1e-7 * (1 + abs(z[j]))
-                    zp = z.copy()
-                    zp[j] += eps
-                    J[:, j] = (jacobi_map(zp, t) - gz) / eps
-                try:
-                    z = z - np.linalg.solve(J - np.eye(len(z)), r)
-                except np.linalg.LinAlgError:
-                    z = gz
-            raise CosimError(f"algebraic loop through {names} did not converge in {max_iter} iterations "
-                             f"at t = {t:g} s (tolerance {tol:g})", units[0].comp.name, t)
-
-        return solve
-
-    def _simulate(self, sink, sel, n: int, m: int, t0: float, progress):
-        from tqdm.auto import tqdm
-
-        if self.engine == "native" and load_kernel()[0] is None:     # refused before anything starts
-            sink.abort()
-            raise ConfigurationError(f"engine='native': the native kernel is not available ({load_kernel()[1]})")
-
-        hf = self.step_size
-        values = np.zeros(self._n_signals)
-        integers = np.zeros(self._n_signals, dtype=np.int64)      # exact integer and Boolean signals
-        jacobi = self.order == "jacobi"
-        source = np.zeros_like(values) if jacobi else values
-        sel_idx = np.asarray(sel, dtype=np.intp)
-        all_sel = len(sel) == self._n_signals
-        int_cols = sink.int_positions
-        int_idx = sel_idx[int_cols] if len(int_cols) else None
-        sel64 = np.ascontiguousarray(sel_idx, dtype=np.int64)
-        isel64 = np.ascontiguousarray(sel_idx[int_cols] if len(int_cols) else np.zeros(0), dtype=np.int64)
-        kst = program = stop = None
-        buf, ibuf = sink.buffer, sink.ibuffer
-        cap = len(buf)
-        clock = time.perf_counter()
-        self.timings = {}
-        self.stopped = None
-        owner: dict = {}
-        k0, k, j, jb, phase, f = 0, 0, 0, 0, "reset", None
-        bar = None
-        board = None
-        self.clock_ticks = None
-
-        def record(row: int) -> int:
-            if all_sel:
-                buf[row] = values
-            else:
-                np.take(values, sel_idx, out=buf[row])
-            if int_idx is not None:
-                np.take(integers, int_idx, out=ibuf[row])
-            row += 1
-            if row == cap:
-                sink.flush(row)
-                row = 0
-            return row
-
-        try:
-            for c in self.components:
-                f = c
-                c.reset(t0)
-            phase = "bind"
-            if self.clock_plan is not None:
-                board = self.clock_plan.board(values, integers, self._slots)
-                for c in self.clock_plan.members:
-                    f = c
-                    c.attach_clocks(board)
-            bound = self._bind_all(values, source, integers)
-            for name, (o, u) in bound.items():
-                owner[o], owner[u] = name, name
-            schedule = self._entries(bound, values)
-            L = self._hyper
-            program = self._program(schedule)
-            self.timings["setup"] = time.perf_counter() - clock
-            clock = time.perf_counter()
-            bar = tqdm(total=n + 1, unit="step", delay=0 if progress else 2.0, disable=progress is False,
-                       leave=False, desc="co-simulation", mininterval=0.5)
-            stop = None
-            if program is not None:
-                kst = KState(t0=t0, h=hf, n=n, m=m, L=L, cap=cap, ncols=buf.shape[1], nint=ibuf.shape[1],
-                             nsig=self._n_signals, block=BLOCK, values=values.ctypes.data,
-                             integers=integers.ctypes.data, buf=buf.ctypes.data, ibuf=ibuf.ctypes.data,
-                             sel=sel64.ctypes.data, isel=isel64.ctypes.data, pattern=program.pattern.ctypes.data,
-                             out_start=program.out_start.ctypes.data, out_len=program.out_len.ctypes.data,
-                             upd_start=program.upd_start.ctypes.data, upd_len=program.upd_len.ctypes.data,
-                             ops=ctypes.addressof(program.ops), kstop=BLOCK)
-                run = self._kernel.kernel_run
-                state = ctypes.byref(kst)
-                crash_guard.set_step_counter(ctypes.addressof(kst) + KState.k.offset, t0, hf)
-                calls, updates, meta = program.calls, program.updates, program.meta
-                done, chunk, since = 0, BLOCK, time.perf_counter()
-                phase = "output"
-                for sync in program.syncs_in:
-                    sync()
-                while True:
-                    event = run(state)
-                    if event == EV_PY:                  # a Python call: as the Python loop makes it
-                        at, k = kst.at, kst.k
-                        f = calls[at]
-                        try:
-                            f(t0 + k * hf)
-                        except StopRequest as request:
-                            if not updates[at]:
-                                raise
-                            stop = request
-                        if stop is None:
-                            kst.pc += 1
-                            continue
-                    if event == EV_REFILL:              # a noise stream drawn to its end: the next block
-                        at = kst.at
-                        f = calls[at]
-                        meta[at].hook()
-                        continue
-                    if event == EV_HOOK:                # a filter's Python hook after its step
-                        at = kst.at
-                        f = calls[at]
-                        meta[at].hook()
-                        if meta[at].rebind is not None:
-                            meta[at].rebind(program.ops[at])
-                        kst.pc += 1
-                        continue
-                    if event == EV_CHUNK:             # a chunk of about CHUNK_SECONDS, at most CHUNK steps
-                        bar.update(kst.k - done)
-                        now = time.perf_counter()
-                        ratio = CHUNK_SECONDS / max(now - since, 1e-6)
-                        chunk = max(BLOCK, min(CHUNK, int(chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-                        done, since, kst.kstop = kst.k, now, kst.k + chunk
-                        continue
-                    if event == EV_FLUSH:
-                        sink.flush(cap)
-                        kst.j = 0
-                        continue
-                    for sync in program.syncs_out:
-                        sync()
-                    k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
-                    if event == EV_DONE:
-                        bar.update(n + 1 - done)
-                        break
-                    if event == EV_NONFINITE:
-                        k = n if kst.phase == 3 else k - 1
-                        self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                    at = kst.at
-                    f, t = calls[at], t0 + k * hf
-                    phase = "update" if updates[at] else "output"
-                    if event == EV_FAIL:                # the Python call's own error
-                        try:
-                            meta[at].fail(program.ops[at], t)
-                            raise CosimError(f"native call of {owner.get(f, '?')} failed with status "
-                                             f"{program.ops[at].status}")
-                        except StopRequest as request:
-                            if phase != "update":
-                                raise
-                            stop = request
-                    outs, upds = schedule[k % L]
-                    j = self._finish_stop(stop, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
-                                          values, jacobi, source, owner)
-                    if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
-                        j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                    bar.update(k + 1 - done)
-                    break
-            else:
-                guarded = crash_guard.active()               # an FMU's crash names the time
-                step_now = np.zeros(1, dtype=np.int64)
-                if guarded:
-                    crash_guard.set_step_counter(step_now.ctypes.data, t0, hf)
-                for k0 in range(0, n + 1, BLOCK):
-                    k1 = min(k0 + BLOCK, n + 1)
-                    jb = j                                  # the block's first row in the buffer
-                    for k in range(k0, k1):
-                        if guarded:
-                            step_now[0] = k
-                        t = t0 + k * hf
-                        outs, upds = schedule[k % L]
-                        if jacobi:
-                            source[:] = values
-                        phase = "output"
-                        for f in outs:
-                            f(t)
-                        if k % m == 0:
-                            j = record(j)
-                        if k == n:
-                            break
-                        phase = "update"
-                        try:
-                            for f in upds:
-                                f(t)
-                        except StopRequest as request:
-                            stop = request
-                            j = self._finish_stop(request, upds, upds.index(f), bound, schedule, k, t0, record, j, sink,
-                                                  values, jacobi, source, owner)
-                            break
-                    if not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
-                        j = self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                    bar.update(k1 - k0)
-                    if stop is not None:
-                        break
-            sink.flush(j)
-            self.timings["loop"] = time.perf_counter() - clock
-            result = sink.finish()
-            if stop is not None:
-                self.stopped = stop
-                if isinstance(result, pd.DataFrame):
-                    result.attrs["stopped"] = {"component": stop.component, "time": stop.time,
-                                               "reason": stop.reason}
-            return result
-        except KeyboardInterrupt:
-            if kst is not None and stop is None:
-                k, j = kst.k, kst.j
-                self._sync_out(program)
-            sink.flush(j)
-            partial = sink.abort()
-            raise Interrupted(f"interrupted at t = {t0 + k * hf:g} s"
-                              + (f"; rows so far in {partial}" if isinstance(partial, Path) else ""),
-                              partial) from None
-        except CosimError as e:
-            if kst is not None and stop is None and e.results is None:
-                k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
-                self._sync_out(program)
-            if e.results is None:
-                sink.flush(j)
-                e.results = sink.abort()
-            raise
-        except Exception as e:
-            if kst is not None and stop is None:
-                k, j, jb, k0 = kst.k, kst.j, kst.jb, kst.k0
-                self._sync_out(program)
-            if phase != "reset" and not (np.isfinite(values).all() and _rows_finite(buf, jb, j)):
-                # a non-finite signal is the root cause of what failed after it
-                try:
-                    self._raise_nonfinite(values, sink, sel_idx, j, jb, k0, k, m, t0)
-                except CosimError as root:
-                    raise root from e
-            sink.flush(j)
-            results = sink.abort()
-            t = t0 + k * hf
-            name = getattr(f, "name", None) or owner.get(f, "?")
-            where = f"component {name!r} failed at t = {t:g} s" + ("" if phase != "reset" else " (reset)")
-            raise CosimError(f"{where}: {e}", name, t, results) from e
-        finally:
-            crash_guard.set_step_counter(None)
-            if bar is not None:
-                bar.close()
-            if board is not None:
-                self.clock_ticks = board.ticks()
-            reached = k if phase in ("output", "update") else -1
-            for c in self.components:              # the instants each component computed
-                c.n_samples = reached // self._ratio[c.name] + 1 if reached >= 0 else 0
-            clock = time.perf_counter()
-            for c in self.components:
-                c.close()
-            self.timings["teardown"] = time.perf_counter() - clock
-
-    @staticmethod
-    def _sync_out(program) -> None:
-        """The state the native kernel keeps for Python objects, back into them."""
-        for sync in program.syncs_out:
-            sync()
-
-    def _finish_stop(self, request: StopRequest, upds, at: int, bound, schedule, k: int, t0: float, record,
-                     j: int, sink, values, jacobi, source, owner) -> int:
-        """A component asked to stop while stepping from ``t_k``: the other components finish
-        the instant; if it stops at ``t_{k+1}`` (within rounding) the instant ``t_{k+1}`` is
-        computed and recorded, else the stopping component's outputs at its stop time are
-        recorded as the last row (the others hold theirs). Logged as a warning."""
-        import logging
-
-        h = self.step_size
-        t = t0 + k * h
-        t_next = t + h
-        for g in upds[at + 1:]:
-            try:
-                g(t)
-            except StopRequest:
-                pass
-        ts = request.time
-        if not np.isfinite(ts) or abs(ts - t_next) <= 1e-9 * max(1.0, abs(t_next)) or ts > t_next:
-            ts = t_next
-            outs, _ = schedule[(k + 1) % self._hyper]
-            if jacobi:
-                source[:] = values
-            for g in outs:
-                g(t_next)
-            sink.last_time = None
-        else:
-            out_fn = bound[request.component][0] if request.component in bound else None
-            if out_fn is not None:
-                out_fn(ts)
-            sink.last_time = ts
-        request.time = ts
-        logging.getLogger("cosim").warning("%s asked to stop the run at t = %g s%s; the run ends there",
-                                           request.component, ts, f" ({request.reason})" if request.reason else "")
-        return record(j)
-
-    def _raise_nonfinite(self, values, sink, sel_idx, j: int, jb: int, k0: int, k: int, m: int, t0: float) -> int:
-        """Raise CosimError for the first NaN/inf signal of base steps ``k0..k``: in a row
-        recorded since the block began (buffer rows ``jb..j``, the row at each base step
-        ``k % m == 0``), else among the current values.
-
-        A recorded non-finite value is named with its exact time, and the results end just
-        before its row (rows a streamed run already wrote stay written); a signal that is not
-        recorded is named with the window ``t_k0..t_k``.
-        """
-        h = self.step_size
-        buf = sink.buffer
-        segments = [(jb, j)] if j >= jb else [(jb, len(buf)), (0, j)]
-        kr = -(-k0 // m) * m                            # the base step of row jb
-        for lo, hi in segments:
-            bad = ~np.isfinite(buf[lo:hi])
-            if bad.any():
-                row, col = (int(v[0]) for v in np.nonzero(bad))
-                t_bad = t0 + (kr + row * m) * h
-                sig = sink.columns[col]
-                value = buf[lo + row, col]
-                j = lo + row if hi == j else 0           # the rows before it are kept
-                sink.flush(j)
-                raise CosimError(f"signal {sig} is {value} at t = {t_bad:g} s (component {sig.split('.')[0]!r})",
-                                 sig.split(".")[0], t_bad, sink.abort())
-            kr += (hi - lo) * m
-        col = int(np.flatnonzero(~np.isfinite(values))[0])
-        sig = self.signal_names[col]
-        t_bad = t0 + k * h
-        sink.flush(j)
-        raise CosimError(f"signal {sig} is {values[col]} between t = {t0 + k0 * h:g} s and t = {t_bad:g} s "
-                         f"(component {sig.split('.')[0]!r})", sig.split(".")[0], t_bad, sink.abort())
-
+        exact = {pos: ("Int64" if self.signal_types[i] == CLOCK else self.signal_types[i]) for pos, i in enumerate(sel)
+                 if port_kind(self.signal_types[i]) in ("integer", "clock")}      # integer columns, kept exact
+        sink = sink_type([self.signal_names[i] for i in sel], n // m + 2, float(start_time), self.step_size, m,
+                         int_columns=exact)
+        return Run(self, sink, sel, n, m, float(start_time), progress).execute()

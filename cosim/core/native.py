@@ -201,16 +201,10 @@ def build_program(schedule: list) -> Program:
             starts.append(tuple(spans))
         pattern[i] = index[id(entry)]
     arr = (OpStruct * max(len(structs), 1))(*structs)
-    cols = np.array(starts, dtype=np.int64).reshape(-1, 4)
-    seen: set[int] = set()
-    syncs_in, syncs_out = [], []
-    for op in meta:
-        if op is not None and id(op) not in seen:
-            seen.add(id(op))
-            if op.sync_in is not None:
-                syncs_in.append(op.sync_in)
-            if op.sync_out is not None:
-                syncs_out.append(op.sync_out)
-    return Program(arr, meta, pattern, np.ascontiguousarray(cols[:, 0]), np.ascontiguousarray(cols[:, 1]),
-                   np.ascontiguousarray(cols[:, 2]), np.ascontiguousarray(cols[:, 3]), syncs_in, syncs_out,
-                   sum(m is not None for m in meta), calls, updates)
+    columns = np.array(starts, dtype=np.int64).reshape(-1, 4).T
+    out_start, out_len, upd_start, upd_len = (np.ascontiguousarray(c) for c in columns)
+    unique = list({id(op): op for op in meta if op is not None}.values())          # each native Op once
+    return Program(arr, meta, pattern, out_start, out_len, upd_start, upd_len,
+                   [op.sync_in for op in unique if op.sync_in is not None],
+                   [op.sync_out for op in unique if op.sync_out is not None], sum(m is not None for m in meta),
+                   calls, updates)

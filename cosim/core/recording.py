@@ -30,8 +30,7 @@ from fmu_models.infra.memory import MEMORY_FRACTION, available_memory
 
 from . import crash_guard
 
-__all__ = ["MemorySink", "ParquetSink", "partial_path", "select_signals"]
-
+__all__ = ["MemorySink", "ParquetSink", "RowWriter", "partial_path", "select_signals"]
 
 
 def select_signals(names: Sequence[str], patterns: Sequence[str] | str | None) -> list[int]:
@@ -234,6 +233,49 @@ class ParquetSink:
         target = partial_path(self.path)
         os.replace(self.tmp, target)
         return target
+
+
+class RowWriter:
+    """Writes the recorded signals' current values as the next row of a sink's buffer, and
+    flushes the buffer when it is full: the rows of the master's Python loop, and the last
+    row of a stopped run (the native kernel writes its rows itself).
+
+    Parameters
+    ----------
+    sink : MemorySink or ParquetSink
+        Where the rows go (its ``buffer``, and ``ibuffer`` for its exact integer columns).
+    values : ndarray, shape (n_signals,)
+        Every signal's value.
+    integers : ndarray of int64, shape (n_signals,)
+        The exact values of the integer and Boolean signals.
+    sel : sequence of int
+        The recorded signals, one per column of the sink (positions in ``values``).
+    """
+
+    __slots__ = ("buffer", "cap", "every_signal", "ibuffer", "int_sel", "integers", "sel", "sink", "values")
+
+    def __init__(self, sink: MemorySink | ParquetSink, values: np.ndarray, integers: np.ndarray,
+                 sel: Sequence[int]) -> None:
+        self.sink, self.values, self.integers = sink, values, integers
+        self.sel = np.asarray(sel, dtype=np.intp)
+        self.every_signal = len(self.sel) == len(values)
+        self.int_sel = self.sel[sink.int_positions] if len(sink.int_positions) else None
+        self.buffer, self.ibuffer, self.cap = sink.buffer, sink.ibuffer, len(sink.buffer)
+
+    def write(self, row: int) -> int:
+        """Write the values as row ``row`` of the buffer; returns the next row (0 after
+        the full buffer is flushed)."""
+        if self.every_signal:
+            self.buffer[row] = self.values
+        else:
+            np.take(self.values, self.sel, out=self.buffer[row])
+        if self.int_sel is not None:
+            np.take(self.integers, self.int_sel, out=self.ibuffer[row])
+        row += 1
+        if row == self.cap:
+            self.sink.flush(row)
+            row = 0
+        return row
 
 
 def _pandas_metadata(columns: Sequence[str], exact: dict | None = None) -> bytes:

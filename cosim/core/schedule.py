@@ -130,44 +130,36 @@ def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
 
 def _sccs(nodes: list, edges: dict) -> list[list]:
     """Strongly connected components (Tarjan, iterative), each in discovery order."""
-    index, low, on, stack, out = {}, {}, set(), [], []
-    counter = [0]
+    index, low, on, stack, work, out = {}, {}, set(), [], [], []
+
+    def visit(v) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        work.append((v, iter(edges.get(v, ()))))
+
     for root in nodes:
         if root in index:
             continue
-        work = [(root, iter(edges.get(root, ())))]
-        index[root] = low[root] = counter[0]
-        counter[0] += 1
-        stack.append(root)
-        on.add(root)
+        visit(root)
         while work:
             v, it = work[-1]
-            advanced = False
             for w in it:
                 if w not in index:
-                    index[w] = low[w] = counter[0]
-                    counter[0] += 1
-                    stack.append(w)
-                    on.add(w)
-                    work.append((w, iter(edges.get(w, ()))))
-                    advanced = True
+                    visit(w)
                     break
                 if w in on:
                     low[v] = min(low[v], index[w])
-            if advanced:
-                continue
-            work.pop()
-            if work:
-                low[work[-1][0]] = min(low[work[-1][0]], low[v])
-            if low[v] == index[v]:
-                comp = []
-                while True:
-                    w = stack.pop()
-                    on.discard(w)
-                    comp.append(w)
-                    if w == v:
-                        break
-                out.append(comp)
+            else:                               # every successor seen: v is done
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while not comp or comp[-1] != v:
+                        comp.append(stack.pop())
+                        on.discard(comp[-1])
+                    out.append(comp)
     return out
 
 
@@ -226,9 +218,8 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
     for (d, q) in conn:
         if d in connected:
             connected[d].add(q)
-    rank = {c.name: i for i, c in enumerate(components)}
     split: set[str] = set()
-    while True:
+    while True:                 # split the reentrant components of a cycle, while that breaks one
         units = [u for c in components for u in _units(c, connected[c.name], c.name in split)]
         edges, why = _graph(units, conn)
         cyclic = [s for s in _sccs(units, edges) if len(s) > 1 or s[0] in edges[s[0]]]
@@ -238,23 +229,33 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
         if not more:
             break
         split |= more
-    loop_of = {}
-    for i, s in enumerate(cyclic):
-        if loops != "iterate":
-            raise ConfigurationError(
-                f"algebraic loop: {_cycle(s, edges, why)}. Each of these components' outputs depends "
-                "directly on its input at the same instant, so no order can evaluate them. Break the "
-                "loop (a component without feedthrough, e.g. an FMU with feedthrough='none', or a "
-                "delay), or solve it with loops='iterate'")
-        stiff = sorted({u.comp.name for u in s if not u.comp.reentrant})
-        if stiff:
-            raise ConfigurationError(
-                f"algebraic loop {_cycle(s, edges, why)} cannot be iterated: {', '.join(stiff)} "
-                "cannot evaluate its outputs twice at one instant (reentrant = False)")
-        for u in s:
-            loop_of[u] = i
-    # Kahn's algorithm on the condensation, ties broken by the components' list order
-    node_of = {u: (("loop", loop_of[u]) if u in loop_of else u) for u in units}
+    for s in cyclic:
+        _check_loop(s, edges, why, loops)
+    node_of = {u: u for u in units} | {u: ("loop", i) for i, s in enumerate(cyclic) for u in s}
+    rank = {c.name: i for i, c in enumerate(components)}
+    return _topological(units, edges, node_of, lambda u: (rank[u.comp.name], u.part != "free"))
+
+
+def _check_loop(scc: list, edges: dict, why: dict, loops: str) -> None:
+    """Refuse the algebraic loop ``scc`` unless ``loops="iterate"`` and every one of its
+    components can evaluate its outputs twice at an instant."""
+    if loops != "iterate":
+        raise ConfigurationError(
+            f"algebraic loop: {_cycle(scc, edges, why)}. Each of these components' outputs depends "
+            "directly on its input at the same instant, so no order can evaluate them. Break the "
+            "loop (a component without feedthrough, e.g. an FMU with feedthrough='none', or a "
+            "delay), or solve it with loops='iterate'")
+    stiff = sorted({u.comp.name for u in scc if not u.comp.reentrant})
+    if stiff:
+        raise ConfigurationError(
+            f"algebraic loop {_cycle(scc, edges, why)} cannot be iterated: {', '.join(stiff)} "
+            "cannot evaluate its outputs twice at one instant (reentrant = False)")
+
+
+def _topological(units: list[Unit], edges: dict, node_of: dict, key) -> list[Group]:
+    """The groups in a topological order of the condensation (``node_of``: each unit's node,
+    itself or its loop), by Kahn's algorithm; among the nodes ready, the one whose first
+    member (by ``key``) comes first."""
     members: dict = {}
     for u in units:
         members.setdefault(node_of[u], []).append(u)
@@ -266,12 +267,10 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
             if a != b and b not in succ[a]:
                 succ[a].add(b)
                 indeg[b] += 1
-
-    # the key of a node: its first member in the components' list order (free part first)
     keys = {}
     for n, ms in members.items():
-        ms.sort(key=lambda u: (rank[u.comp.name], u.part != "free"))
-        keys[n] = (rank[ms[0].comp.name], ms[0].part != "free")
+        ms.sort(key=key)
+        keys[n] = key(ms[0])
     seq = {n: i for i, n in enumerate(members)}          # a total order among equal keys
     ready = [(keys[n], seq[n], n) for n in members if indeg[n] == 0]
     heapq.heapify(ready)
