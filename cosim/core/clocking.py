@@ -418,19 +418,25 @@ class ClockBoard:
         return self._label_of[key]
 
     def log_functions(self) -> tuple:
-        """``(log_time, log_label)``: the two appends of :meth:`log` without its limit check,
-        for a component's hot path (it checks :meth:`count` once per instant)."""
-        return self._times.append, self._ids.append
+        """``(log_time, log_label, labels)``: the two appends of :meth:`log` without its limit
+        check, and the log's labels (their ``len`` is :meth:`count`), for a component's hot
+        path (it checks the count once per instant, :meth:`check_room` when above the limit)."""
+        return self._times.append, self._ids.append, self._ids
 
     def count(self) -> int:
         """Activations logged so far."""
         return len(self._ids)
 
-    def log(self, time: float, label: int) -> None:
-        """Log one activation of the clock numbered ``label`` at ``time`` [s]."""
-        if len(self._ids) > MAX_TICKS:
+    def check_room(self) -> None:
+        """Refuse (:class:`~fmu_models.errors.ResourceError`) a run that has logged more than
+        :data:`MAX_TICKS` activations."""
+        if self.count() > MAX_TICKS:
             raise ResourceError(f"more than {MAX_TICKS} clock activations in one run: the log would not fit; "
                                 "shorten the run")
+
+    def log(self, time: float, label: int) -> None:
+        """Log one activation of the clock numbered ``label`` at ``time`` [s]."""
+        self.check_room()
         self._times.append(time)
         self._ids.append(label)
 
