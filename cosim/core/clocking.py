@@ -41,6 +41,7 @@ run's log as :attr:`~cosim.core.master.Cosimulation.clock_ticks`).
 """
 from __future__ import annotations
 
+import heapq
 import itertools
 import math
 from array import array
@@ -281,21 +282,20 @@ class ClockPlan:
     def _topological(self) -> list[Component]:
         rank = {c.name: i for i, c in enumerate(self.components)}
         succ = {c.name: set() for c in self.components}
-        indeg = {c.name: 0 for c in self.components}
+        indeg = dict.fromkeys(rank, 0)
         for sn, _, dn, _ in self.links:
             if dn not in succ[sn]:
                 succ[sn].add(dn)
                 indeg[dn] += 1
-        ready = sorted((n for n, d in indeg.items() if d == 0), key=rank.get)
+        ready = [rank[n] for n, d in indeg.items() if d == 0]       # a heap: the first in list order first
         out = []
         while ready:
-            n = ready.pop(0)
-            out.append(self.by_name[n])
-            for m in succ[n]:
+            c = self.components[heapq.heappop(ready)]
+            out.append(c)
+            for m in succ[c.name]:
                 indeg[m] -= 1
                 if indeg[m] == 0:
-                    ready.append(m)
-            ready.sort(key=rank.get)
+                    heapq.heappush(ready, rank[m])
         if len(out) < len(self.components):
             cyc = sorted((n for n, d in indeg.items() if d), key=rank.get)
             hops = ", ".join(f"{sn}.{sp} -> {dn}.{dp}" for sn, sp, dn, dp in self.links if sn in cyc and dn in cyc)

@@ -215,9 +215,7 @@ class CSClockedRun(EventModeRun):
         if st > 1:
             self._fail(f"DoStep(t = {t:g} s, h = {self.P:g} s)", st)
         if ds_any.value:                             # an event, an early return, a stop
-            self._fill()
-            self._keep_base()
-            self._advance(t, self._step_done(t, t + self.P))
+            self._stopped(t, False)
             self.quiet = self._now_quiet()
         else:
             self.quiet = True
@@ -247,16 +245,21 @@ class CSClockedRun(EventModeRun):
             if st > 1:
                 self._fail(f"DoStep(t = {t:g} s, h = {self.P:g} s)", st)
             if self._ds_any.value:
-                if not filled:
-                    self._fill()
-                self._keep_base()
-                self._advance(t, self._step_done(t, t + self.P))
+                self._stopped(t, filled)
         else:
             if not filled:
                 self._fill()
             self._keep_base()
             self._advance(t, t)
         self.quiet = self._now_quiet()
+
+    def _stopped(self, t: float, filled: bool) -> None:
+        """``fmi3DoStep`` from ``t`` over the period returned early (an event, an early return,
+        a stop): the inputs kept, the step on from there."""
+        if not filled:
+            self._fill()
+        self._keep_base()
+        self._advance(t, self._step_done(t, t + self.P))
 
     def _advance(self, t: float, tc: float | None) -> None:
         """Step from ``tc`` to ``t + P``, stopping at every activation on the way."""

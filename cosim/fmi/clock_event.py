@@ -80,14 +80,13 @@ class EventModeRun(ClockedRun):
         if got:
             self._keep_base()
             self._overlay(snap)
-        self._activate(t, ks + got, "output", snap)
+        self._activate(t, ks + got, True, snap)
         return True
 
-    def _activate(self, t: float, ks: list[int], phase: str, snap: dict | None) -> None:
+    def _activate(self, t: float, ks: list[int], direct: bool, snap: dict | None) -> None:
         """Activate the input clocks ``ks`` at ``t``: ``fmi3SetClock``, their clocked inputs
-        set (``phase`` "output": only those outputs depend on, the outputs read into the
-        signals; else all, into the own buffers), their outputs read, the output clocks."""
-        direct = phase == "output"
+        set (``direct``, at an instant: only those outputs depend on, the outputs read into
+        the signals; else all, into the own buffers), their outputs read, the output clocks."""
         if not direct:
             self._use_own()
         if ks:
@@ -146,7 +145,7 @@ class EventModeRun(ClockedRun):
         self._overlay(snap)
         if self.fmu_next is not None and abs(self.fmu_next - t) <= self.tol:
             self.fmu_next = None
-        self._activate(t, ks + got, "intra", snap)
+        self._activate(t, ks + got, False, snap)
 
     # ------------------------------------------------------------------ the event iteration
     def _set_rest(self) -> None:
@@ -178,7 +177,7 @@ class EventModeRun(ClockedRun):
             if ks or got:
                 if got:
                     self._overlay(snap)
-                self._activate(t, ks + got, "late", snap)
+                self._activate(t, ks + got, False, snap)
                 continue
             self.fmu_next = float(self._uds_next.value) if f[4].value else None
             self.ticked.clear()

@@ -32,16 +32,8 @@ def clocked_run(comp, board: ClockBoard, values, inputs, outputs, integers, inte
 
     Parameters
     ----------
-    comp : FMUComponent
-        Reset (instantiated and initialised), with its schedule from the initialisation.
-    board : ClockBoard
-        The run's activations.
-    values, integers : ndarray
-        The master's signal arrays.
-    inputs : slice or ndarray
-        The connected inputs' signal indices.
-    outputs : slice
-        The outputs' signal indices.
+    comp, board, values, inputs, outputs, integers
+        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
     integrator : MEIntegrator, optional
         Model Exchange: the component's integrator, whose events go through the run.
     """
