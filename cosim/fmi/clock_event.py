@@ -84,8 +84,8 @@ class EventModeRun(ClockedRun):
         return True
 
     def _activate(self, t: float, ks: list[int], direct: bool, snap: dict | None) -> None:
-        """Activate the input clocks ``ks`` at ``t``: ``fmi3SetClock``, their clocked inputs
-        set (``direct``, at an instant: only those outputs depend on, the outputs read into
+        """Activate the input clocks ``ks`` at ``t``: ``fmi3SetClock`` (§2.3.5), their clocked
+        inputs set (``direct``, at an instant: those outputs depend on, the outputs read into
         the signals; else all, into the own buffers), their outputs read, the output clocks."""
         if not direct:
             self._use_own()
@@ -156,8 +156,9 @@ class EventModeRun(ClockedRun):
         self.free_in.all()
 
     def _finish(self, t: float) -> bool:
-        """The rest of an Event Mode at ``t``: the event iteration, the intervals,
-        activations due at once; returns whether the FMU asks to terminate."""
+        """The rest of an Event Mode at ``t``: the event iteration (``fmi3UpdateDiscreteStates``
+        until ``discreteStatesNeedUpdate`` is false, §2.3.5), the intervals, activations due at
+        once; returns whether the FMU asks to terminate."""
         f = self._uds_flags
         uds, args = self._update_discrete_states, self._uds_args
         for _ in range(MAX_SUPERDENSE):
@@ -186,8 +187,8 @@ class EventModeRun(ClockedRun):
                        "super-dense instants")
 
     def _read_intervals(self, t: float) -> None:
-        """``fmi3GetInterval*`` after the event iteration: every countdown clock, and the
-        input clocks that ticked whose interval is read after each activation."""
+        """``fmi3GetInterval*`` after the event iteration (§2.3.5): every countdown clock, and
+        the changing (and tunable without ``intervalDecimal``) input clocks that ticked."""
         want = list(self.countdown)
         for vr in self.ticked:
             k = self.model.by_vr[vr]

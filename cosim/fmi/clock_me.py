@@ -63,8 +63,9 @@ class MEClockedRun(EventModeRun):
         self.inputs_changed = False                  # an input without clock changed in Continuous-Time Mode
 
     def output(self, t: float) -> None:
-        """The outputs at instant ``t`` [s]: Event Mode where clocks tick (or an event is
-        pending), else the inputs without clock the outputs depend on set."""
+        """The outputs at instant ``t`` [s]: Event Mode where clocks tick or an event is pending
+        (§2.3.5), else the inputs without clock the outputs depend on set (in Continuous-Time
+        Mode, §3.2.1; a discrete one that changes in an Event Mode of its own)."""
         n = self.instant(t)
         if n == self.done_n:
             self._again()
@@ -118,9 +119,9 @@ class MEClockedRun(EventModeRun):
 
     def _event(self, t: float, set_inputs) -> tuple[bool, float | None]:
         """An Event Mode of the FMU at ``t`` (entered here unless already in it), the inputs
-        set by ``set_inputs``: ``(terminate, next time event)``. An event the integrator finds
-        at the end of the step (within rounding) waits for that instant, whose Event Mode
-        handles it with the instant's activations."""
+        set by ``set_inputs``, ended with ``fmi3EnterContinuousTimeMode`` (§3.2): ``(terminate,
+        next time event)``. An event the integrator finds at the end of the step (within
+        rounding) waits for that instant's Event Mode."""
         if not self.in_event and set_inputs is None and abs(t - self.window_end) <= self.tol:
             self.pending_event = True
             return False, None

@@ -45,10 +45,6 @@ class InputSetters(NamedTuple):
     all_d: object
 
 
-def _calls(fns) -> tuple:
-    return tuple(f for f in fns if f is not None and f is not no_exchange)
-
-
 class Plan:
     """The calls of one set of input clocks activated together (one ``fmi3SetClock``;
     Scheduled Execution: the partitions in priority order), made once per set.
@@ -66,17 +62,17 @@ class Plan:
 
     def __init__(self, ports: ClockPorts, vrs: tuple[int, ...]):
         by_vr, n = ports.model.by_vr, len(vrs)
-        ins = [ports.clock_in.get(v) for v in vrs]
+        ins = [ports.clock_in[v] for v in vrs]
         self.vrs = vrs
         self.args = (ports.c, (_U32 * n)(*vrs), _SIZE(n), (_B * n)(*([True] * n)))
         self.labels = tuple(ports.labels[v] for v in vrs)
         self.names = ", ".join(by_vr[v].name for v in vrs)
-        self.set_ft, self.set_all = _calls(s and s.ft for s in ins), _calls(s and s.all for s in ins)
-        self.set_ft_d, self.set_rest_d = _calls(s and s.ft_d for s in ins), _calls(s and s.rest_d for s in ins)
-        self.get = _calls(ports.get_k.get(v) for v in vrs)
-        self.get_d = _calls(ports.get_kd.get(v) for v in vrs)
+        self.set_ft, self.set_all = ports.calls(s.ft for s in ins), ports.calls(s.all for s in ins)
+        self.set_ft_d, self.set_rest_d = ports.calls(s.ft_d for s in ins), ports.calls(s.rest_d for s in ins)
+        self.get = ports.calls(ports.get_k.get(v) for v in vrs)
+        self.get_d = ports.calls(ports.get_kd.get(v) for v in vrs)
         self.intervals = [by_vr[v] for v in vrs if ports.interval_read(by_vr[v])]
-        self.fill = any(getattr(f, "needs_fill", False) for s in ins if s for f in (s.ft_d, s.rest_d, s.all_d))
+        self.fill = any(getattr(f, "needs_fill", False) for s in ins for f in (s.ft_d, s.rest_d, s.all_d))
         self.short = None                # the short path's calls, made by the interface's run
 
 
@@ -149,6 +145,11 @@ class ClockPorts:
                 fail(label, st)
             return False
         return call
+
+    @staticmethod
+    def calls(fns) -> tuple:
+        """The calls among ``fns`` that do something (None and ``no_exchange`` left out)."""
+        return tuple(f for f in fns if f is not None and f is not no_exchange)
 
     def _build_clocks(self) -> None:
         model = self.model

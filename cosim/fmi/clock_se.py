@@ -18,7 +18,7 @@ import ctypes
 from fmu_models.errors import FMUError
 
 from ..core.clocking import MAX_TICKS, ClockBoard
-from .clock_ports import Plan, _calls
+from .clock_ports import Plan
 from .clock_timing import ClockedRun
 from .clocks import CHANGED, FMIClock
 from .exchange import no_exchange
@@ -81,7 +81,8 @@ class SEClockedRun(ClockedRun):
 
     def _fire(self, plan: Plan, t: float) -> None:
         """The short path of ``plan`` at instant ``t``: one partition whose interval is not
-        read, after the inputs without clock and its own; others go through :meth:`_run_at`."""
+        read, ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its
+        own; others go through :meth:`_run_at`."""
         setters, cv, name, label, getters = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
@@ -114,14 +115,14 @@ class SEClockedRun(ClockedRun):
         vr = plan.vrs[0]
         fill = self.fill_ft if self.fill_ft is not None and (
             plan.fill or getattr(self.free_in.ft_d, "needs_fill", False)) else None
-        setters = _calls([fill, self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d])
+        setters = self.calls([fill, self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d])
         plan.short = (setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0],
-                      _calls([self.get_kd[vr], self.get_ud]))
+                      self.calls([self.get_kd[vr], self.get_ud]))
         return plan.short
 
     def _run_at(self, t: float, ks: list[int], snap: dict | None, direct: bool) -> None:
-        """The partitions ``ks`` at ``t`` in priority order, and any that become due then
-        (outputs into the signals if ``direct``, else into the own buffers)."""
+        """The partitions ``ks`` at ``t`` in priority order (§5.1.1), and any that become due
+        then (outputs into the signals if ``direct``, else into the own buffers)."""
         if not direct:
             self._use_own()
         self.now = t
@@ -159,7 +160,7 @@ class SEClockedRun(ClockedRun):
             self._activation_failed(st, k.name, t)
         self.log_t(t)
         self.log_id(self.labels[vr])
-        for g in _calls([(self.get_kd if direct else self.get_k)[vr], self.get_ud if direct else self.get_u]):
+        for g in self.calls([(self.get_kd if direct else self.get_k)[vr], self.get_ud if direct else self.get_u]):
             g()
 
     def _activation_failed(self, st: int, name: str, t: float) -> None:
@@ -174,7 +175,7 @@ class SEClockedRun(ClockedRun):
 
     # ------------------------------------------------------------------ Clock Update Mode
     def clock_update(self, env) -> None:
-        """The ``clockUpdate`` callback (Clock Update Mode): every output clock read with
+        """The ``clockUpdate`` callback (Clock Update Mode, §5.2.2): every output clock read with
         ``fmi3GetClock``, every countdown clock's interval; an error is kept and raised
         after the activation returns (a callback cannot raise).
 
