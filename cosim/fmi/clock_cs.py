@@ -10,7 +10,7 @@ over the period, ending at every activation between instants (a clock, the FMU's
 handled in Event Mode at its ``lastSuccessfulTime`` (at the step's end: in the next
 instant's). A discrete input without clock that changes where no clock ticks is set in an
 Event Mode of its own. The common instant (periodic clocks, nothing pending) takes a short
-path (:meth:`CSClockedRun._tick`, :meth:`CSClockedRun._tock`).
+path (``_tick``, ``_tock``), its calls made once per set of clocks.
 """
 from __future__ import annotations
 
@@ -63,8 +63,9 @@ class CSClockedRun(EventModeRun):
         self.fast: Plan | None = None    # the plan of the short path's activation at this instant
         # the short path's calls, unpacked into locals by _tick and _tock
         self._tick_calls = (self._enter_event_mode, self._set_clock, self.c, self.set_u_ft_d, self.log_t, self.log_id)
-        self._tock_calls = (self._update_discrete_states, self._uds_args, self._uds_any, self._enter_step_mode,
-                            self._do_step, self._ct, self._ch, self._ds_refs, self._ds_any)
+        self._tock_calls = (self.set_u_all_d, self.set_ud, self._update_discrete_states, self._uds_args,
+                            self._uds_any, self._enter_step_mode, self._do_step, self._ct, self._ch, self._ds_refs,
+                            self._ds_any)
 
     # ------------------------------------------------------------------ at an instant
     def output(self, t: float) -> None:
@@ -178,16 +179,17 @@ class CSClockedRun(EventModeRun):
     def _tock(self, plan: Plan, t: float) -> None:
         """The short path's update: the other inputs set, ``fmi3UpdateDiscreteStates``,
         ``fmi3EnterStepMode`` (§4.2.1 Step Mode), ``fmi3DoStep``."""
-        update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs, ds_any = self._tock_calls
+        (set_u_all, set_ud, update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs,
+         ds_any) = self._tock_calls
         fill_all = plan.short[1]
         if fill_all is not None:
             fill_all()
         for f in plan.set_rest_d:
             f()
-        if self.set_u_all_d is not None:
-            self.set_u_all_d()
-        if self.set_ud is not None:
-            self.set_ud()
+        if set_u_all is not None:
+            set_u_all()
+        if set_ud is not None:
+            set_ud()
         st = update_discrete_states(*uds_args)
         if st > 1:
             self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
@@ -203,7 +205,7 @@ class CSClockedRun(EventModeRun):
                 self._step_mode(t)
             self._step(t, False)
             return
-        if self.ticked and self.out_clocks:
+        if self.out_clocks and self.ticked:
             self.ticked.clear()
         c = self.c
         st = enter_step_mode(c)

@@ -9,7 +9,7 @@ countdown clock that becomes due at the same time joins the queue), each after i
 are set, its outputs (and those of the output clocks it activated) read after it; a
 partition's inputs are direct inputs of its outputs (the partition computes both at once).
 ``fmi3Discard`` counts as an error. The common instant (one periodic partition, nothing
-pending) takes a short path (:meth:`SEClockedRun._fire`).
+pending) takes a short path (``_fire``).
 """
 from __future__ import annotations
 
@@ -83,23 +83,31 @@ class SEClockedRun(ClockedRun):
         """The short path of ``plan`` at instant ``t``: one partition whose interval is not
         read, ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its
         own; others go through :meth:`_run_at`."""
-        setters, cv, name, label, getters = plan.short or self._shorten(plan)
+        fill, set_u_ft, set_u_rest, set_own, cv, name, label, get_own, get_u = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
             self._run_at(t, list(plan.vrs), None, True)
             return
         activate_model_partition, c, at, log_t, log_id = self._fire_calls
         self.now = t
-        for f in setters:
-            f()
+        if fill is not None:
+            fill()
+        if set_u_ft is not None:
+            set_u_ft()
+        if set_u_rest is not None:
+            set_u_rest()
+        if set_own is not None:
+            set_own()
         at.value = t
         st = activate_model_partition(c, cv, at)
         if st > 1 or self._error is not None:
             self._activation_failed(st, name, t)
         log_t(t)
         log_id(label)
-        for g in getters:
-            g()
+        if get_own is not None:
+            get_own()
+        if get_u is not None:
+            get_u()
         if self.reported:
             self._outputs(t, None, True)
         self.now = None
@@ -107,17 +115,17 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, list(self.queue), None, True)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path: ``(setters, clock, name, label, getters)`` (``clock``
-        None: not one)."""
+        """``plan``'s short path: its fill, setters, clock, name, label and getters (each None
+        if nothing to do; the clock None: not one partition)."""
         if len(plan.vrs) > 1 or plan.intervals:
-            plan.short = ((), None, "", 0, ())
+            plan.short = (None,) * 9
             return plan.short
         vr = plan.vrs[0]
-        fill = self.fill_ft if self.fill_ft is not None and (
-            plan.fill or getattr(self.free_in.ft_d, "needs_fill", False)) else None
-        setters = self.calls([fill, self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d])
-        plan.short = (setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0],
-                      self.calls([self.get_kd[vr], self.get_ud]))
+        ft_d = self.free_in.ft_d
+        fill = self.fill_ft if self.fill_ft is not None and (plan.fill or getattr(ft_d, "needs_fill", False)) else None
+        setters = [None if f is no_exchange else f for f in (ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
+        plan.short = (fill, *setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0], self.get_kd[vr],
+                      self.get_ud)
         return plan.short
 
     def _run_at(self, t: float, ks: list[int], snap: dict | None, direct: bool) -> None:
