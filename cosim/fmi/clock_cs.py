@@ -42,6 +42,11 @@ class CSClockedRun(EventModeRun):
         As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
     """
 
+    __slots__ = ("_ch", "_ct", "_do_step", "_ds_any", "_ds_bytes", "_ds_flags", "_ds_last", "_ds_refs",
+                 "_enter_step_mode", "_tick_calls", "_tock_calls", "can_vary", "fast", "quiet", "set_u_all_d",
+                 "set_u_ft_d", "set_ud", "u_fill")
+    discrete_apart = True
+
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
         super().__init__(comp, board, values, inputs, outputs, integers)
         self._enter_step_mode = self._fn("fmi3EnterStepMode")
@@ -53,9 +58,7 @@ class CSClockedRun(EventModeRun):
         self._ds_refs = (*[ctypes.byref(db, i) for i in range(3)], ctypes.byref(self._ds_last))
         self._ct, self._ch = ctypes.c_double(0.0), ctypes.c_double(self.P)
         self.can_vary = bool(getattr(comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
-        disc = self.discrete(self.unclocked_in)          # discrete inputs without clock: set in Event Mode only
-        self.set_ud = _or_none(self._setter(disc, changes=True))
-        self.free_in = self.setters([i for i in self.unclocked_in if i not in disc])
+        self.set_ud = _or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
         self.set_u_ft_d, self.set_u_all_d = _or_none(self.free_in.ft_d), _or_none(self.free_in.all_d)
         self.u_fill = self.set_ud is not None or any(getattr(f, "needs_fill", False)
                                                       for f in (self.set_u_ft_d, self.set_u_all_d))

@@ -38,6 +38,8 @@ class EventModeRun(ClockedRun):
         As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
     """
 
+    __slots__ = ("_enter_event_mode", "_set_clock", "_uds_any", "_uds_args", "_uds_bytes", "_uds_flags", "_uds_next",
+                 "_update_discrete_states", "active", "in_event", "pending_event", "ticked")
     #: Whether the outputs without clock are read again before an activation between
     #: instants is sent (Model Exchange; in Co-Simulation they are the step's left limits).
     read_unclocked_between = False

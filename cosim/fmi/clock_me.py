@@ -45,11 +45,12 @@ class MEClockedRun(EventModeRun):
         The component's integrator, whose events come here.
     """
 
+    __slots__ = ("_pending_inputs", "inputs_changed", "me", "set_cont", "set_cont_ft", "set_disc", "set_disc_ft",
+                 "started", "window_end")
     read_unclocked_between = True
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers, integrator: MEIntegrator):
         super().__init__(comp, board, values, inputs, outputs, integers)
-        self.free_in = self.setters(self.unclocked_in)
         disc = self.discrete(self.unclocked_in)
         cont = [i for i in self.unclocked_in if i not in disc]
         self.set_cont, self.set_disc = self._setter(cont, changes=True), self._setter(disc, changes=True)

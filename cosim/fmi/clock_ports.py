@@ -102,7 +102,18 @@ class ClockPorts:
     get_k, get_kd, get_u, get_ud : dict of int to callable, or callable
         The getters of each clock's outputs and of the outputs without clock (``_d``: into
         the signals, else into the own buffers); None for no output.
+    free_in : InputSetters
+        The inputs without clock (in Co-Simulation: but the discrete ones).
     """
+
+    # a run's state, as slots: the hot paths' attribute and method look-ups stay fast
+    __slots__ = ("_ft", "_get_clock", "_logged", "_n_out", "_out_val", "_out_vr", "_outbox", "_plans", "_raw", "board",
+                 "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k", "get_kd", "get_u",
+                 "get_ud", "idx_in", "iin", "iin_base", "in_ft", "inst", "integers", "labels", "log_id", "log_t",
+                 "model", "n_in", "name", "out", "out_clock_pos", "out_clocks", "out_counts", "own", "own_i",
+                 "port_clock", "priority", "publishers", "sources", "unclocked_in", "values", "vin", "vin_base")
+    #: Whether discrete inputs without clock are set apart, in Event Mode only (Co-Simulation).
+    discrete_apart = False
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
         self.comp, self.board, self.model = comp, board, comp.clock_model
@@ -191,6 +202,8 @@ class ClockPorts:
         by_clock, self.unclocked_in = self._by_clock(names, data_in)
         vrs = dict.fromkeys([*(k.vr for k in model.clocks if k.causality == "input"), *by_clock])
         self.clock_in = {vr: self.setters(by_clock.get(vr, [])) for vr in vrs}
+        apart = self.discrete(self.unclocked_in) if self.discrete_apart else []
+        self.free_in = self.setters([i for i in self.unclocked_in if i not in apart])
 
     def _build_outputs(self, comp) -> None:
         outs = comp.output_names
@@ -240,7 +253,7 @@ class ClockPorts:
         fn, fail = self._fn("fmi3SetFloat64"), self._fail
         slots = [int(self.idx_in[j]) for j in positions]
         if direct and all(b == a + 1 for a, b in itertools.pairwise(slots)):     # the FMU reads the signals
-            return self._checked(fn, (self.c, vrs, n, self._at(self.values, slots[0]), n), "SetFloat64")
+            return self._checked(fn, (self.c, vrs, n, self._pointer(self.values, slots[0]), n), "SetFloat64")
         buf = (_D * len(ports))()
         args = (self.c, vrs, n, buf, n)
         src = self.values if direct else self.vin
@@ -256,7 +269,7 @@ class ClockPorts:
         return set_reals
 
     @staticmethod
-    def _at(array: np.ndarray, index: int):
+    def _pointer(array: np.ndarray, index: int):
         return ctypes.cast(array.ctypes.data + 8 * index, ctypes.POINTER(_D))
 
     # ------------------------------------------------------------------ getters
@@ -304,7 +317,7 @@ class ClockPorts:
         for run in runs:
             n = _SIZE(len(run))
             vrs = (_U32 * len(run))(*[p.variable.valueReference for _, p in run])
-            calls.append((self._fn("fmi3GetFloat64"), (self.c, vrs, n, self._at(self.values, run[0][0]), n),
+            calls.append((self._fn("fmi3GetFloat64"), (self.c, vrs, n, self._pointer(self.values, run[0][0]), n),
                           None, "f", (), "GetFloat64"))
         return rest
 

@@ -35,12 +35,13 @@ class SEClockedRun(ClockedRun):
         As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
     """
 
+    __slots__ = ("_activate_model_partition", "_at", "_cv", "_error", "_fire_calls", "in_callback", "now", "queue",
+                 "reported", "rest_later")
     by_priority = True
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
         super().__init__(comp, board, values, inputs, outputs, integers)
         self._activate_model_partition = self._fn("fmi3ActivateModelPartition")
-        self.free_in = self.setters(self.unclocked_in)
         self.rest_later = self.free_in.rest is not no_exchange      # inputs consumed at the update
         self.reported: list[int] = []                # output clocks reported active in callbacks
         self.now: float | None = None                # the time of the activation under way

@@ -198,6 +198,8 @@ class ClockedRun(ClockPorts):
         As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
     """
 
+    __slots__ = ("P", "_interval_calls", "countdown", "done_n", "first", "fmu_next", "inbox", "inv", "next_at",
+                 "plan_len", "plans", "sched", "t0", "tol")
     #: Whether the periodic clocks due at one instant are activated in priority order.
     by_priority = False
 
