@@ -22,15 +22,10 @@ from ..core.clocking import MAX_TICKS, ClockBoard
 from ..core.component import StopRequest
 from .clock_event import EventModeRun
 from .clock_ports import Plan
-from .exchange import no_exchange
 
 __all__ = ["CSClockedRun"]
 
 _TERMINATE = "the FMU requested termination in its event update"
-
-
-def _or_none(f):
-    return None if f is no_exchange else f
 
 
 class CSClockedRun(EventModeRun):
@@ -58,8 +53,8 @@ class CSClockedRun(EventModeRun):
         self._ds_refs = (*[ctypes.byref(db, i) for i in range(3)], ctypes.byref(self._ds_last))
         self._ct, self._ch = ctypes.c_double(0.0), ctypes.c_double(self.P)
         self.can_vary = bool(getattr(comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
-        self.set_ud = _or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
-        self.set_u_ft_d, self.set_u_all_d = _or_none(self.free_in.ft_d), _or_none(self.free_in.all_d)
+        self.set_ud = self._or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
+        self.set_u_ft_d, self.set_u_all_d = self._or_none(self.free_in.ft_d), self._or_none(self.free_in.all_d)
         self.u_fill = self.set_ud is not None or any(getattr(f, "needs_fill", False)
                                                       for f in (self.set_u_ft_d, self.set_u_all_d))
         self.quiet = False       # nothing pending, nothing held: the short path may run (set by each update)

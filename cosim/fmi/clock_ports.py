@@ -162,6 +162,10 @@ class ClockPorts:
         """The calls among ``fns`` that do something (None and ``no_exchange`` left out)."""
         return tuple(f for f in fns if f is not None and f is not no_exchange)
 
+    @staticmethod
+    def _or_none(f):
+        return None if f is no_exchange else f
+
     def _build_clocks(self) -> None:
         model = self.model
         self.labels = {k.vr: self.board.label(self.name, k.name) for k in model.clocks}

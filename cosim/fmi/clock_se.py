@@ -124,7 +124,7 @@ class SEClockedRun(ClockedRun):
         vr = plan.vrs[0]
         ft_d = self.free_in.ft_d
         fill = self.fill_ft if self.fill_ft is not None and (plan.fill or getattr(ft_d, "needs_fill", False)) else None
-        setters = [None if f is no_exchange else f for f in (ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
+        setters = [self._or_none(f) for f in (ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
         plan.short = (fill, *setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0], self.get_kd[vr],
                       self.get_ud)
         return plan.short
