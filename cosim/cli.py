@@ -39,6 +39,7 @@ from fmu_models.infra.registry import load_plugin
 from fmu_models.infra.resources import shipped
 from fmu_models.infra.version import VERSION
 
+from .core import crash_guard
 from .core.component import ExportsFMU, StateEstimator
 from .core.master import Cosimulation
 from .core.native import ENGINES
@@ -248,9 +249,7 @@ def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool 
                   stream: bool | None = None, progress: bool | None = None, engine: str | None = None) -> int:
     """Load and check the scenario, then (only then) take ``out`` and run it (``engine``:
     replaces the scenario's ``[simulation] engine``)."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as fmus:
+    with crash_guard.temporary_folder("pendulum_cosim_run_") as fmus:
         t0 = time.perf_counter()
         sc = Scenario.load(path, fmu_dir=Path(fmus) / "fmus")      # read and checked before --out is touched
         if engine is not None:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..core.clocking import ClockBoard
 from .exchange import Exchange, no_exchange
+from .ports import parse_start
 
 __all__ = ["ClockPorts", "InputSetters", "Plan"]
 
@@ -216,6 +217,18 @@ class ClockPorts:
         self.get_ud = self._getter(unclocked, True)          # into the signals
         self.get_k = {k.vr: self._getter(by_clock.get(k.vr, []), False) for k in self.model.clocks}
         self.get_kd = {k.vr: self._getter(by_clock.get(k.vr, []), True) for k in self.model.clocks}
+        self._hold_starts(comp, sorted({j for positions in by_clock.values() for j in positions}))
+
+    def _hold_starts(self, comp, positions: list[int]) -> None:
+        """Clocked outputs carry their declared start value until their clock first ticks (they
+        may be read only while it is active)."""
+        start = self.out.start
+        for j in positions:
+            p = comp.element_ports[comp.output_names[j]]
+            v = parse_start(p.variable, p.size)[p.offset]
+            exact = int(v) if p.type != "UInt64" or v < 2**63 else int(v) - 2**64
+            self.values[start + j] = self.own[j] = float(v)
+            self.integers[start + j] = self.own_i[j] = exact
 
     def discrete(self, positions: list[int]) -> list[int]:
         """Those of the input ``positions`` that are discrete variables."""
