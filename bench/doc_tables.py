@@ -112,11 +112,10 @@ def table(header: list[str], rows: list[list[str]]) -> str:
 
 def run_info() -> dict:
     """When, where and on what a benchmark ran: the date, the commit, the machine, the versions."""
-    try:
-        commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, capture_output=True, text=True,
-                                timeout=30).stdout.strip()
-    except OSError:
-        commit = ""
+    commit = _git("rev-parse", "--short", "HEAD")
+    if commit and _git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/figures", ":!docs",
+                       ":!README.md"):
+        commit += " with uncommitted changes"        # to the code: the pages and figures do not count
     versions = {}
     for name in ("numpy", "casadi", "fmpy"):
         module = sys.modules.get(name)
@@ -127,6 +126,13 @@ def run_info() -> dict:
     return {"date": datetime.now(UTC).strftime("%Y-%m-%d"), "commit": commit or "unknown",
             "cores": os.cpu_count(), "cpu": cpu, "python": platform.python_version(), "versions": versions,
             "load": round(os.getloadavg()[0], 1) if hasattr(os, "getloadavg") else None}
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, timeout=30).stdout.strip()
+    except OSError:
+        return ""
 
 
 def _read(path: str) -> str:
