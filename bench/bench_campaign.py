@@ -40,10 +40,9 @@ def campaign_table(saved) -> str:
     f = saved["bench_campaign"]["figures"]
     wall = f["wall_s"]
     what = f"4 scenarios x {f['runs']} realisations x {len(f['filters'])} filters x {f['steps']} steps"
-    return "\n\n".join([doc_tables.table(
+    return doc_tables.with_provenance(saved, "bench_campaign", doc_tables.table(
         ["seed 000 campaign, one reading", "fast path", "FMU master path", "master / fast"],
-        [[what, f"{wall['fast']:.2f} s", f"{wall['master']:.2f} s", f"{wall['master'] / wall['fast']:.2f}x"]]),
-        doc_tables.provenance(saved, "bench_campaign")])
+        [[what, f"{wall['fast']:.2f} s", f"{wall['master']:.2f} s", f"{wall['master'] / wall['fast']:.2f}x"]]))
 
 
 TABLES = {"campaign": campaign_table}

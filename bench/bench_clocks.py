@@ -230,8 +230,8 @@ def clocks_table(saved) -> str:
         label, count = key.rsplit(", ", 1)
         rows.append([f"{label}, {count} FMU{'s connected' if count != '1' else ''}", f"{fmpy_us:.2f} µs",
                      f"{raw:.2f} µs", f"{master:.2f} µs", f"{master - raw:.2f} µs"])
-    return "\n\n".join([doc_tables.table(["", "fmpy's methods", "raw ctypes loop", "master", "master's own time"],
-                                          rows), doc_tables.provenance(saved, "bench_clocks")])
+    return doc_tables.with_provenance(saved, "bench_clocks", doc_tables.table(
+        ["", "fmpy's methods", "raw ctypes loop", "master", "master's own time"], rows))
 
 
 TABLES = {"clocks": clocks_table}

@@ -157,20 +157,18 @@ def steps_table(saved) -> str:
     fp_model = r["filterpy EKF (model via CasADi numpy calls)"]
     fp_algebra = r["filterpy EKF (algebra only, model precomputed)"]
     batched = " / ".join(f"{r[f'batched {n} (100 runs), per realisation-step']:.2f}" for n in ("EKF", "UKF", "MF-IAE"))
-    return "\n".join([
-        "| filter | µs/step, inputs as lists | as numpy rows |",
-        "|---|---|---|",
-        f"| KF / EKF / UKF | {row(('KF', 'EKF', 'UKF'), 'lists')} | {row(('KF', 'EKF', 'UKF'), 'arrays')} |",
-        f"| IAE / MF-IAE (adaptation and fuzzy inference compiled in the step) | {row(('IAE', 'MF-IAE'), 'lists')} "
-        f"| {row(('IAE', 'MF-IAE'), 'arrays')} |",
-        f"| EKF, the one-element `u` as a float / a numpy scalar | {r['EKF (float u)']:.2f} / "
-        f"{r['EKF (numpy scalar u)']:.2f} | |",
-        f"| filterpy EKF, model by CasADi numpy calls | {fp_model:.1f} ({fp_model / ekf:.0f}x our EKF) | |",
-        f"| filterpy EKF, its algebra alone (model values precomputed) | {fp_algebra:.1f} ({fp_algebra / ekf:.0f}x "
-        "our EKF) | |",
-        f"| filterpy UKF | {r['filterpy UKF']:.0f} ({r['filterpy UKF'] / ukf:.0f}x our UKF) | |",
-        f"| batched EKF / UKF / MF-IAE, 100 realisations, per realisation-step | {batched} | |",
-        "", doc_tables.provenance(saved, "bench_estimators")])
+    return doc_tables.with_provenance(saved, "bench_estimators", doc_tables.table(
+        ["filter", "µs/step, inputs as lists", "as numpy rows"], [
+            ["KF / EKF / UKF", row(("KF", "EKF", "UKF"), "lists"), row(("KF", "EKF", "UKF"), "arrays")],
+            ["IAE / MF-IAE (adaptation and fuzzy inference compiled in the step)", row(("IAE", "MF-IAE"), "lists"),
+             row(("IAE", "MF-IAE"), "arrays")],
+            ["EKF, the one-element `u` as a float / a numpy scalar",
+             f"{r['EKF (float u)']:.2f} / {r['EKF (numpy scalar u)']:.2f}", ""],
+            ["filterpy EKF, model by CasADi numpy calls", f"{fp_model:.1f} ({fp_model / ekf:.0f}x our EKF)", ""],
+            ["filterpy EKF, its algebra alone (model values precomputed)",
+             f"{fp_algebra:.1f} ({fp_algebra / ekf:.0f}x our EKF)", ""],
+            ["filterpy UKF", f"{r['filterpy UKF']:.0f} ({r['filterpy UKF'] / ukf:.0f}x our UKF)", ""],
+            ["batched EKF / UKF / MF-IAE, 100 realisations, per realisation-step", batched, ""]]))
 
 
 TABLES = {"steps": steps_table}

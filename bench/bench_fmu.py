@@ -74,14 +74,12 @@ def main():
 def fmu_table(saved) -> str:
     """The performance page's table: the CartPole FMU's build and doStep through fmpy."""
     f = saved["bench_fmu"]["figures"]
-    v2, v3 = f["fmi2"], f["fmi3"]
-    return "\n".join([
-        "| | FMI 2.0 | FMI 3.0 |",
-        "|---|---|---|",
-        f"| build (generate, compile, pack; not cached) | {v2['build_s']:.2f} s | {v3['build_s']:.2f} s |",
-        f"| `doStep` + read 2 outputs | {v2['step_us']:.2f} µs | {v3['step_us']:.2f} µs |",
-        f"| same, setting 1 input each step | {v2['step_input_us']:.2f} µs | {v3['step_input_us']:.2f} µs |",
-        "", doc_tables.provenance(saved, "bench_fmu")])
+    rows = [("build (generate, compile, pack; not cached)", "build_s", "{:.2f} s"),
+            ("`doStep` + read 2 outputs", "step_us", "{:.2f} µs"),
+            ("same, setting 1 input each step", "step_input_us", "{:.2f} µs")]
+    return doc_tables.with_provenance(saved, "bench_fmu", doc_tables.table(
+        ["", "FMI 2.0", "FMI 3.0"], [[label, *(form.format(f[v][key]) for v in ("fmi2", "fmi3"))]
+                                    for label, key, form in rows]))
 
 
 TABLES = {"fmu": fmu_table}

@@ -270,7 +270,7 @@ def master_table(saved) -> str:
         parts.append(doc_tables.table(["`--long`: plant + source streamed to Parquet",
                                        *(f"{int(n):.0e} steps" for n in rss)],
                                       [["peak RSS", *(f"{v:.1f} MiB" for v in rss.values())]]))
-    return "\n\n".join([*parts, doc_tables.provenance(saved, "bench_master")])
+    return doc_tables.with_provenance(saved, "bench_master", *parts)
 
 
 TABLES = {"master": master_table}

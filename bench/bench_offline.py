@@ -161,21 +161,19 @@ def offline_table(saved) -> str:
     f = saved["bench_offline"]["figures"]
     r = f["us_per_step"]
     ours = next(v for k, v in r.items() if k.startswith("ours: KF run + RTS"))
-    pk, fp = r["pykalman filter + smooth"], r["filterpy batch_filter + rts_smoother"]
-    return "\n".join([
-        "| | µs/step |",
-        "|---|---|",
-        f"| EKF `run` (one native call, every diagnostic kept) | {r['EKF run (one native call)']:.3f} |",
-        f"| EKF `run(keep=\"estimates\")` | {r[KEEP]:.3f} |",
-        f"| EKF `step` called N times from Python (numpy rows) | {r['EKF step() x N from Python']:.2f} |",
-        f"| extended RTS smoother | {r['extended RTS smoother']:.3f} |",
-        f"| UKF `run` / MF-IAE `run` | {r['UKF run']:.3f} / {r['MF-IAE run']:.2f} |",
-        f"| **KF `run` + RTS, ours** | **{ours:.3f}** |",
-        f"| pykalman `filter` + `smooth` | {pk:.1f} ({pk / ours:.0f}x ours) |",
-        f"| filterpy `batch_filter` + `rts_smoother` | {fp:.1f} ({fp / ours:.0f}x ours) |",
-        f"| **EM iteration (2000 steps), ours** | **{f['em_ms']:.2f} ms** |",
-        f"| pykalman `em` iteration | {f['em_pykalman_ms']:.0f} ms ({f['em_pykalman_ms'] / f['em_ms']:.0f}x ours) |",
-        "", doc_tables.provenance(saved, "bench_offline")])
+    pk, fp, em, em_pk = (r["pykalman filter + smooth"], r["filterpy batch_filter + rts_smoother"], f["em_ms"],
+                         f["em_pykalman_ms"])
+    return doc_tables.with_provenance(saved, "bench_offline", doc_tables.table(["", "µs/step"], [
+        ["EKF `run` (one native call, every diagnostic kept)", f"{r['EKF run (one native call)']:.3f}"],
+        ['EKF `run(keep="estimates")`', f"{r[KEEP]:.3f}"],
+        ["EKF `step` called N times from Python (numpy rows)", f"{r['EKF step() x N from Python']:.2f}"],
+        ["extended RTS smoother", f"{r['extended RTS smoother']:.3f}"],
+        ["UKF `run` / MF-IAE `run`", f"{r['UKF run']:.3f} / {r['MF-IAE run']:.2f}"],
+        ["**KF `run` + RTS, ours**", f"**{ours:.3f}**"],
+        ["pykalman `filter` + `smooth`", f"{pk:.1f} ({pk / ours:.0f}x ours)"],
+        ["filterpy `batch_filter` + `rts_smoother`", f"{fp:.1f} ({fp / ours:.0f}x ours)"],
+        ["**EM iteration (2000 steps), ours**", f"**{em:.2f} ms**"],
+        ["pykalman `em` iteration", f"{em_pk:.0f} ms ({em_pk / em:.0f}x ours)"]]))
 
 
 TABLES = {"offline": offline_table}

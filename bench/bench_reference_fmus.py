@@ -82,7 +82,7 @@ def reference_table(saved) -> str:
         n, bad = len(f["verdicts"]), f["cli_differs"]
         text += (f"\n\nThe command line (`pendulum-cosim run` with a minimal scenario file) gives the same rows or the "
                  f"same refusal in {n - len(bad)} of {n} cases" + (f"; not in {', '.join(bad)}" if bad else "") + ".")
-    return text + "\n\n" + doc_tables.provenance(saved, "bench_reference_fmus")
+    return doc_tables.with_provenance(saved, "bench_reference_fmus", text)
 
 
 def _per_step(make, stop: float, repeats: int = 5) -> tuple[float, float]:
@@ -125,11 +125,10 @@ def isolation_figures() -> dict:
 
 def isolation_table(saved) -> str:
     f = saved["bench_reference_fmus"]["figures"]["isolation"]
-    return doc_tables.table(
+    return doc_tables.with_provenance(saved, "bench_reference_fmus", doc_tables.table(
         ["FMU (CS)", "round trips per step", "in-process per step", "isolated per step", "isolated start-up"],
         [[m, str(r["round_trips"]), f"{r['in_process_us']:.2g} µs", f"{r['isolated_us']:.0f} µs",
-          f"{r['startup_s']:.2f} s"] for m, r in f.items()]) + "\n\n" + doc_tables.provenance(
-        saved, "bench_reference_fmus")
+          f"{r['startup_s']:.2f} s"] for m, r in f.items()]))
 
 
 def system_figures() -> list:

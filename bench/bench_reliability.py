@@ -151,7 +151,7 @@ def reliability_table(saved) -> str:
         [f"interruption of a campaign to exit ({repeats} runs a signal)",
          f"{signals} after the signal; exit status 130, partial report written, no worker left"],
         ["temporary folders before and after 100 runs", f"{f['temp_folders'][0]} before, {f['temp_folders'][1]} after"]]
-    return doc_tables.table(["check", "measured"], rows) + "\n\n" + doc_tables.provenance(saved, "bench_reliability")
+    return doc_tables.with_provenance(saved, "bench_reliability", doc_tables.table(["check", "measured"], rows))
 
 
 TABLES = {"measured": reliability_table}

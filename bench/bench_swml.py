@@ -63,9 +63,9 @@ def one_length(cp, x0, n: int) -> dict[str, float]:
             "swml_batched": bs / n / 100 * 1e6}
 
 
-def _row(n: int, r: dict[str, float]) -> str:
-    return (f"| {n} steps{' (seed 000)' if n == 500 else ''} | {r['ekf']:.2f} µs | {r['swml']:.2f} µs | "
-            f"{r['swml'] / r['ekf']:.1f}x | {r['ekf_batched']:.2f} / {r['swml_batched']:.2f} µs |")
+def _row(n: int, r: dict[str, float]) -> list[str]:
+    return [f"{n} steps{' (seed 000)' if n == 500 else ''}", f"{r['ekf']:.2f} µs", f"{r['swml']:.2f} µs",
+            f"{r['swml'] / r['ekf']:.1f}x", f"{r['ekf_batched']:.2f} / {r['swml_batched']:.2f} µs"]
 
 
 def campaign_form(cp, x0) -> dict[str, float]:
@@ -92,10 +92,9 @@ def main() -> None:
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = [0.5, 0.0, 1.8, 0.5]
     lengths = {}
-    print(HEAD)
     for n in (500, 5000):
         lengths[str(n)] = one_length(cp, x0, n)
-        print(_row(n, lengths[str(n)]))
+        print(" | ".join(_row(n, lengths[str(n)])))
     forms = campaign_form(cp, x0)
     us, ys = record(cp, 200)
     g = SWML(cp, x0, 1.0, 1e-3, 10.0)
@@ -115,25 +114,20 @@ def main() -> None:
                                          "step_update": update})
 
 
-HEAD = ("| record | EKF `run` | SWML `run` | ratio | batched x100, per realisation-step: EKF / SWML |\n"
-        "|---|---|---|---|---|")
+HEAD = ["record", "EKF `run`", "SWML `run`", "ratio", "batched x100, per realisation-step: EKF / SWML"]
 
 
 def swml_table(saved) -> str:
     """The performance page's tables: SWML's `run` against the EKF's, its campaign form, its step."""
     f = saved["bench_swml"]["figures"]
     forms = f["forms_500"]
-    ekf = forms["EKF"]
-    return "\n".join([
-        HEAD, *(_row(int(n), r) for n, r in f["lengths"].items()), "",
-        "| 500 steps, `run` | µs/step | against the EKF |",
-        "|---|---|---|",
-        *(f"| {name} | {c:.2f} | {c / ekf:.1f}x |" for name, c in forms.items()), "",
-        "| SWML `step` from Python (window 100, an update every 50 steps) | µs |",
-        "|---|---|",
-        f"| between updates | {f['step_between']:.1f} |",
-        f"| at an update | {f['step_update']:.0f} |",
-        "", doc_tables.provenance(saved, "bench_swml")])
+    return doc_tables.with_provenance(
+        saved, "bench_swml", doc_tables.table(HEAD, [_row(int(n), r) for n, r in f["lengths"].items()]),
+        doc_tables.table(["500 steps, `run`", "µs/step", "against the EKF"],
+                         [[name, f"{c:.2f}", f"{c / forms['EKF']:.1f}x"] for name, c in forms.items()]),
+        doc_tables.table(["SWML `step` from Python (window 100, an update every 50 steps)", "µs"],
+                         [["between updates", f"{f['step_between']:.1f}"],
+                          ["at an update", f"{f['step_update']:.0f}"]]))
 
 
 TABLES = {"swml": swml_table}

@@ -50,6 +50,11 @@ class Block:
     span: tuple[int, int]
 
 
+def _name(page: Path) -> str:
+    """``page`` relative to the repository where it is in it."""
+    return str(page.relative_to(ROOT)) if page.is_relative_to(ROOT) else str(page)
+
+
 def pages() -> list[Path]:
     """The README and every Markdown page of ``docs/`` (not the build folder)."""
     return [ROOT / "README.md", *sorted(p for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.parts)]
@@ -61,7 +66,7 @@ def blocks(page: Path) -> list[Block]:
     found = [Block(page, m["script"], m["name"], m["body"], m.span("body")) for m in _BLOCK.finditer(text)]
     markers = len(_OPEN.findall(text))
     if markers != 2 * len(found):
-        raise ValueError(f"{page.relative_to(ROOT)}: {markers} table markers but {len(found)} well-formed blocks "
+        raise ValueError(f"{_name(page)}: {markers} table markers but {len(found)} well-formed blocks "
                          "(<!-- table: bench/SCRIPT.py NAME --> ... <!-- /table -->, each on a line of its own)")
     return found
 
@@ -77,7 +82,7 @@ class Saved(Mapping):
         if stem not in self._cache:
             path = self.folder / f"{stem}.json"
             if not path.exists():
-                raise KeyError(f"no saved figures of bench/{stem}.py ({path.relative_to(ROOT)}): run "
+                raise KeyError(f"no saved figures of bench/{stem}.py ({_name(path)}): run "
                                f"python bench/{stem}.py --write-docs")
             self._cache[stem] = json.loads(path.read_text())
         return self._cache[stem]
@@ -99,7 +104,7 @@ def render(block: Block, saved: Mapping) -> str:
     """What ``block`` must hold: its script's table made from the saved figures."""
     tables = tables_of(block.script)
     if block.name not in tables:
-        raise KeyError(f"{block.page.relative_to(ROOT)}: {block.script} has no table {block.name!r} "
+        raise KeyError(f"{_name(block.page)}: {block.script} has no table {block.name!r} "
                        f"(it has {sorted(tables)})")
     return tables[block.name](saved).strip("\n") + "\n"
 
@@ -108,6 +113,11 @@ def table(header: list[str], rows: list[list[str]]) -> str:
     """A Markdown table."""
     return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
                       *("| " + " | ".join(row) + " |" for row in rows)])
+
+
+def with_provenance(saved: Mapping, stem: str, *tables: str) -> str:
+    """``tables`` and, under them, when, where and how ``bench/<stem>.py`` measured them."""
+    return "\n\n".join([*tables, provenance(saved, stem)])
 
 
 def run_info() -> dict:
@@ -142,17 +152,13 @@ def _read(path: str) -> str:
         return ""
 
 
-def provenance(saved: Mapping, *stems: str) -> str:
-    """A line naming when, where and how the figures of ``stems`` were measured."""
-    parts = []
-    for stem in stems:
-        run = saved[stem]["run"]
-        parts.append(f"`python bench/{stem}.py` on {run['date']} (commit {run['commit']})")
-    run = saved[stems[0]]["run"]
+def provenance(saved: Mapping, stem: str) -> str:
+    """A line naming when, where and how the figures of ``bench/<stem>.py`` were measured."""
+    run = saved[stem]["run"]
     load = f", load average {run['load']} at the end" if run.get("load") is not None else ""
-    versions = ", ".join(f"{k} {v}" for k, v in run["versions"].items())
-    return (f"*Measured by {', '.join(parts)}: {run['cores']} cores ({run['cpu']}), Python {run['python']}"
-            f"{', ' + versions if versions else ''}{load}.*")
+    versions = "".join(f", {k} {v}" for k, v in run["versions"].items())
+    return (f"*Measured by `python bench/{stem}.py` on {run['date']} (commit {run['commit']}): {run['cores']} cores "
+            f"({run['cpu']}), Python {run['python']}{versions}{load}.*")
 
 
 def write_docs(script_file: str, figures: dict) -> list[Path]:
@@ -161,7 +167,7 @@ def write_docs(script_file: str, figures: dict) -> list[Path]:
     FIGURES.mkdir(exist_ok=True)
     path = FIGURES / f"{Path(script_file).stem}.json"
     path.write_text(json.dumps({"run": run_info(), "figures": figures}, indent=1, sort_keys=True) + "\n")
-    print(f"wrote {path.relative_to(ROOT)}")
+    print(f"wrote {_name(path)}")
     return rewrite_pages()
 
 
@@ -176,7 +182,7 @@ def rewrite_pages() -> list[Path]:
             try:
                 body = render(block, saved)
             except KeyError as e:
-                print(f"{page.relative_to(ROOT)}: the table {block.name!r} of {block.script} is left as it was: "
+                print(f"{_name(page)}: the table {block.name!r} of {block.script} is left as it was: "
                       f"{e.args[0]}")
                 body = block.body
             new += [text[end:block.span[0]], body]
@@ -185,7 +191,7 @@ def rewrite_pages() -> list[Path]:
         if "".join(new) != text:
             page.write_text("".join(new), encoding="utf-8")
             changed.append(page)
-            print(f"rewrote the tables of {page.relative_to(ROOT)}")
+            print(f"rewrote the tables of {_name(page)}")
     return changed
 
 
