@@ -50,7 +50,7 @@ def per_step(fn, n):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     doc_tables.add_option(ap)
-    args = ap.parse_args()
+    options = ap.parse_args()
     sys_ = discretize(get_model("cartpole"), 0.01)
     us, ys = data(sys_)
     x0, P0, Q, R = np.array([0.5, 0, 1.8, 0.5]), np.eye(4), 1e-6 * np.eye(4), 2.5e-3 * np.eye(2)
@@ -143,7 +143,7 @@ def main():
           f"UKF/EKF {ukf / ekf:.2f}, MF-IAE/EKF {results['MF-IAE (lists)'] / ekf:.2f}")
     print(f"EKF step with a scalar u against lists: float {results['EKF (float u)'] / ekf:.2f}x, "
           f"numpy float64 {results['EKF (numpy scalar u)'] / ekf:.2f}x")
-    if args.write_docs:
+    if options.write_docs:
         doc_tables.write_docs(__file__, results)
 
 

@@ -225,9 +225,11 @@ def readme_table(saved) -> str:
     runs = [saved[stem]["run"] for stem in stems]
     dates = sorted({run["date"] for run in runs})
     dates = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
+    loads = sorted(run["load"] for run in runs if run.get("load") is not None)
+    load = f", load averages {loads[0]}-{loads[-1]} at the ends of the runs" if loads else ""
     return (table(["", "ours", "baseline"], rows) +
             f"\n\n*Measured on {dates} by `{'`, `'.join(f'bench/{stem}.py' for stem in stems)}` on "
-            f"{runs[0]['cores']} cores ({runs[0]['cpu']}).*")
+            f"{runs[0]['cores']} cores ({runs[0]['cpu']}){load}.*")
 
 
 TABLES = {"readme": readme_table}
