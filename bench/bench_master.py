@@ -245,7 +245,11 @@ def main() -> None:
 
 
 def _us(x: float) -> str:
-    return f"{x:.3g}" if x >= 1 else f"{x:.3f}"
+    return f"{x:.1f}" if x >= 10 else f"{x:.2f}" if x >= 1 else f"{x:.3f}"
+
+
+def _count(n: str) -> str:
+    return f"{int(n):,}".replace(",", " ")
 
 
 def master_table(saved) -> str:
@@ -255,20 +259,20 @@ def master_table(saved) -> str:
     ps, pse, chain, alone = us["plant + source"], us["plant + source + EKF"], us["10-FMU chain"], us["plant alone"]
     parts = [
         doc_tables.table(["", "fmpy `FMU2Slave` loop", "raw ctypes loop", "master, Python loop",
-                          "master, native kernel"], [[case, *map(_us, row)] for case, row in us.items()]),
+                          "master, native kernel"], [[case, *map(_us, us[case])] for case in CASES]),
         doc_tables.table(["derived from the table", ""], [
-            ["native kernel over the raw ctypes loop, plant + source", f"{ps[3] / ps[1]:.2f}x"],
+            ["native kernel over the raw ctypes loop, plant + source", f"{ps[3] / ps[1]:.2g}x"],
             ["what the EKF component adds in the native kernel, per step",
              f"{pse[3] - ps[3]:.3f} µs (its compiled step alone, in a native `run`: {f['ekf_step_us']:.3f} µs)"],
             ["10-FMU chain per FMU, native kernel / Python loop",
              f"{chain[3] / 10:.3f} / {chain[2] / 10:.2f} µs (the plant alone: {alone[3]:.3f} / {alone[2]:.2f} µs)"]]),
         doc_tables.table(["setup (constructor and run) of independent constant sources",
-                          *(f"{int(n):,}".replace(",", " ") for n in f["setup_s"])],
+                          *map(_count, f["setup_s"])],
                          [["seconds", *(f"{s:.2g}" for s in f["setup_s"].values())]])]
     if "streamed_rss_mib" in f:
         rss = f["streamed_rss_mib"]
         parts.append(doc_tables.table(["`--long`: plant + source streamed to Parquet",
-                                       *(f"{int(n):.0e} steps" for n in rss)],
+                                       *(f"{_count(n)} steps" for n in rss)],
                                       [["peak RSS", *(f"{v:.1f} MiB" for v in rss.values())]]))
     return doc_tables.with_provenance(saved, "bench_master", *parts)
 

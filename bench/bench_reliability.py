@@ -1,6 +1,6 @@
 """Reliability figures for the reliability page: measured, not asserted.
 
-Run: python bench/bench_reliability.py [--trials 20] [--write-docs]
+Run: python bench/bench_reliability.py [--trials 20]
 
 * cold cache: ``--trials`` times, 8 processes build the same filter into one empty cache at
   once; counts failed processes and checks that all got the same numbers;
@@ -23,9 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
-import doc_tables
-
 ROOT = Path(__file__).parents[1]
 PROBE = ("import warnings; warnings.simplefilter('always'); "
          "from estimators import EKF, discretize; from fmu_models import get_model; "
@@ -39,7 +36,7 @@ def probe(cache: Path) -> subprocess.Popen:
                             text=True, cwd=ROOT, env={**os.environ, "PENDULUM_COSIM_CACHE": str(cache)})
 
 
-def cold_cache(trials: int) -> dict:
+def cold_cache(trials: int) -> None:
     failures, outputs, walls = 0, set(), []
     for _ in range(trials):
         with tempfile.TemporaryDirectory() as cache:
@@ -52,11 +49,9 @@ def cold_cache(trials: int) -> dict:
             walls.append(time.perf_counter() - t0)
     print(f"cold cache: {trials} trials x 8 processes: {failures} failed, {len(outputs)} distinct result(s), "
           f"{sum(walls) / len(walls):.1f} s per trial")
-    return {"trials": trials, "failed": failures, "results": len(outputs), "trial_s": sum(walls) / len(walls)}
 
 
-def damaged_cache() -> dict:
-    result = {}
+def damaged_cache() -> None:
     for damage in ("truncate", "empty", "garbage"):
         with tempfile.TemporaryDirectory() as cache:
             cache = Path(cache)
@@ -72,12 +67,9 @@ def damaged_cache() -> dict:
                 if "damaged" not in err:
                     break
             print(f"damaged cache ({damage}): same result {out == good}, clean after {runs - 1} repairing run(s)")
-            result[damage] = {"same": out == good, "repairing_runs": runs - 1}
-    return result
 
 
-def interruption(repeats: int) -> dict:
-    result = {}
+def interruption(repeats: int) -> None:
     for sig in (signal.SIGINT, signal.SIGTERM):
         delays = []
         for _ in range(repeats):
@@ -100,11 +92,9 @@ def interruption(repeats: int) -> dict:
                 assert p.returncode == 130 and partial and not left, (p.returncode, partial, left)
         print(f"interruption ({sig.name}): exit 130 with partial results, no worker left, in "
               f"{min(delays):.2f}-{max(delays):.2f} s after the signal ({repeats} runs)")
-        result[sig.name] = delays
-    return result
 
 
-def temp_folders() -> list[int]:
+def temp_folders() -> None:
     from cosim.components.sources import Constant
     from cosim.core.master import Cosimulation
     from cosim.fmi.fmu_component import FMUComponent
@@ -117,44 +107,18 @@ def temp_folders() -> list[int]:
         before = count()
         for _ in range(100):
             cosim.run(0.05)
-        after = count()
-        print(f"temporary folders: {before} before, {after} after 100 runs")
-    return [before, after]
+        print(f"temporary folders: {before} before, {count()} after 100 runs")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=20, help="cold-cache trials (default 20)")
     parser.add_argument("--repeats", type=int, default=3, help="interruptions per signal (default 3)")
-    doc_tables.add_option(parser)
     args = parser.parse_args()
-    figures = {"cold_cache": cold_cache(args.trials), "damaged_cache": damaged_cache(),
-               "interruption_s": interruption(args.repeats), "temp_folders": temp_folders()}
-    if args.write_docs:
-        doc_tables.write_docs(__file__, figures)
-
-
-def reliability_table(saved) -> str:
-    """The reliability page's table of measured figures."""
-    f = saved["bench_reliability"]["figures"]
-    cold, damaged, stop = f["cold_cache"], f["damaged_cache"], f["interruption_s"]
-    words = {"truncate": "truncated", "empty": "empty", "garbage": "overwritten"}
-    repaired = "; ".join(f"{words[d]}: {'same numbers' if r['same'] else 'OTHER NUMBERS'}, clean after "
-                         f"{r['repairing_runs']} repairing run(s)" for d, r in damaged.items())
-    signals = ", ".join(f"{name} {min(d):.2f}-{max(d):.2f} s" for name, d in stop.items())
-    repeats = len(next(iter(stop.values())))
-    rows = [
-        [f"failures in {cold['trials']} cold-cache trials of 8 parallel processes building one filter",
-         f"{cold['failed']} of {8 * cold['trials']} processes failed, {cold['results']} distinct result(s) "
-         f"({cold['trial_s']:.1f} s a trial)"],
-        ["recovery from a damaged cache entry", repaired],
-        [f"interruption of a campaign to exit ({repeats} runs a signal)",
-         f"{signals} after the signal; exit status 130, partial report written, no worker left"],
-        ["temporary folders before and after 100 runs", f"{f['temp_folders'][0]} before, {f['temp_folders'][1]} after"]]
-    return doc_tables.with_provenance(saved, "bench_reliability", doc_tables.table(["check", "measured"], rows))
-
-
-TABLES = {"measured": reliability_table}
+    cold_cache(args.trials)
+    damaged_cache()
+    interruption(args.repeats)
+    temp_folders()
 
 
 if __name__ == "__main__":

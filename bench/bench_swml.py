@@ -124,7 +124,8 @@ def swml_table(saved) -> str:
     return doc_tables.with_provenance(
         saved, "bench_swml", doc_tables.table(HEAD, [_row(int(n), r) for n, r in f["lengths"].items()]),
         doc_tables.table(["500 steps, `run`", "µs/step", "against the EKF"],
-                         [[name, f"{c:.2f}", f"{c / forms['EKF']:.1f}x"] for name, c in forms.items()]),
+                         [[name, f"{c:.2f}", f"{c / forms['EKF']:.1f}x"]
+                          for name, c in sorted(forms.items(), key=lambda item: item[1])]),
         doc_tables.table(["SWML `step` from Python (window 100, an update every 50 steps)", "µs"],
                          [["between updates", f"{f['step_between']:.1f}"],
                           ["at an update", f"{f['step_update']:.0f}"]]))

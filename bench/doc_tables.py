@@ -35,6 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "bench" / "figures"
 _BLOCK = re.compile(r"^<!-- table: (?P<script>bench/\w+\.py) (?P<name>[\w-]+) -->\n(?P<body>.*?)^<!-- /table -->$",
                     re.M | re.S)
+#: What a measurement depends on: a run with changes to these that are not committed says so.
+CODE = ("fmu_models", "estimators", "cosim", "bench", "tests", "pyproject.toml")
 _OPEN = re.compile(r"^<!-- (?:table: .*|/table) -->$", re.M)
 
 
@@ -123,8 +125,7 @@ def with_provenance(saved: Mapping, stem: str, *tables: str) -> str:
 def run_info() -> dict:
     """When, where and on what a benchmark ran: the date, the commit, the machine, the versions."""
     commit = _git("rev-parse", "--short", "HEAD")
-    if commit and _git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/figures", ":!docs",
-                       ":!README.md"):
+    if commit and _git("status", "--porcelain", "--untracked-files=no", "--", *CODE, ":!bench/figures"):
         commit += " with uncommitted changes"        # to the code: the pages and figures do not count
     versions = {}
     for name in ("numpy", "casadi", "fmpy"):
@@ -166,7 +167,7 @@ def write_docs(script_file: str, figures: dict) -> list[Path]:
     (:func:`rewrite_pages`); returns the pages changed."""
     FIGURES.mkdir(exist_ok=True)
     path = FIGURES / f"{Path(script_file).stem}.json"
-    path.write_text(json.dumps({"run": run_info(), "figures": figures}, indent=1, sort_keys=True) + "\n")
+    path.write_text(json.dumps({"run": run_info(), "figures": figures}, indent=1) + "\n")
     print(f"wrote {_name(path)}")
     return rewrite_pages()
 
