@@ -11,7 +11,6 @@ CasADi model (numpy calls), so the comparison is of the filter machinery.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -48,9 +47,7 @@ def per_step(fn, n):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    doc_tables.add_option(ap)
-    options = ap.parse_args()
+    options = doc_tables.parse_options(__doc__)
     sys_ = discretize(get_model("cartpole"), 0.01)
     us, ys = data(sys_)
     x0, P0, Q, R = np.array([0.5, 0, 1.8, 0.5]), np.eye(4), 1e-6 * np.eye(4), 2.5e-3 * np.eye(2)

@@ -4,7 +4,6 @@ Run: python bench/bench_fmu.py [--write-docs]
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import tempfile
@@ -52,9 +51,7 @@ def time_steps(path, version, n=20_000, with_input=True):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    doc_tables.add_option(ap)
-    args = ap.parse_args()
+    args = doc_tables.parse_options(__doc__)
     figures = {}
     with tempfile.TemporaryDirectory() as out:
         os.environ["PENDULUM_COSIM_CACHE"] = out + "/empty-cache"     # the build is timed uncached

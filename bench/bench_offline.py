@@ -14,7 +14,6 @@ Same data and model in one run (medians of 5 repeats):
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -53,9 +52,7 @@ def cartpole_record(cp, N, x0, model=None, q=1e-3, r=1e-3, seed=1):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    doc_tables.add_option(ap)
-    args = ap.parse_args()
+    args = doc_tables.parse_options(__doc__)
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = np.array([0.0, 0.0, np.pi, 0.0])
     N = 100_000

@@ -6,7 +6,6 @@ Run: python bench/bench_swml.py [--write-docs]
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
@@ -86,9 +85,7 @@ def campaign_form(cp, x0) -> dict[str, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    doc_tables.add_option(ap)
-    args = ap.parse_args()
+    args = doc_tables.parse_options(__doc__)
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = [0.5, 0.0, 1.8, 0.5]
     lengths = {}

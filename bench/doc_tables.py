@@ -18,6 +18,7 @@ is what its script makes of the saved figures.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -194,6 +195,13 @@ def rewrite_pages() -> list[Path]:
             changed.append(page)
             print(f"rewrote the tables of {_name(page)}")
     return changed
+
+
+def parse_options(doc: str):
+    """The command line of a benchmark whose only option is ``--write-docs`` (``doc``: its docstring)."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    add_option(parser)
+    return parser.parse_args()
 
 
 def add_option(parser) -> None:
