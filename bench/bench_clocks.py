@@ -1,6 +1,6 @@
 """Benchmark: the master's own time per clock tick, against bare loops making the same FMI calls.
 
-Run: python bench/bench_clocks.py [--ticks N]
+Run: python bench/bench_clocks.py [--ticks N] [--write-docs]
 
 The FMU is the hand-written tests/data/clock_bench (one constant clock ``tick`` every 1 ms
 that clocks the input ``u`` and the output ``y``), built here with the C compiler.
@@ -42,6 +42,9 @@ from cosim.core.master import Cosimulation
 from cosim.fmi.exchange import raw_function
 from cosim.fmi.fmu_component import FMUComponent
 from fmu_models.infra.compiler import find_compiler, run_compiler
+
+sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
+import doc_tables
 
 H, REPEATS = 0.001, 7
 SOURCE = Path(__file__).parents[1] / "tests" / "data" / "clock_bench"
@@ -198,7 +201,10 @@ def medians(fns, *args) -> list[float]:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ticks", type=int, default=5000, help="ticks of each FMU (default 5000, at least 1000)")
-    n = max(ap.parse_args(argv).ticks, 1000)
+    doc_tables.add_option(ap)
+    args = ap.parse_args(argv)
+    n = max(args.ticks, 1000)
+    figures = {"ticks": n + 1, "us_per_tick": {}}
     with tempfile.TemporaryDirectory() as tmp:
         path = build(Path(tmp))
         print(f"ClockBench FMU, {n + 1} ticks of 1 ms per FMU, medians of {REPEATS}")
@@ -211,6 +217,24 @@ def main(argv=None) -> None:
                     print(f"  {name:17s} {v * 1e3:8.2f} ms CPU  {v / ticks * 1e6:6.2f} us/tick")
                 print(f"  master own time per tick over the raw loop: {(m - r) / ticks * 1e6:+.2f} us; "
                       f"master / fmpy = {m / f:.2f}")
+                figures["us_per_tick"][f"{label}, {count}"] = [v / ticks * 1e6 for v in (f, r, m)]
+    if args.write_docs:
+        doc_tables.write_docs(__file__, figures)
+
+
+def clocks_table(saved) -> str:
+    """The performance page's table: CPU time per tick, three ways, and the master's own time."""
+    f = saved["bench_clocks"]["figures"]
+    rows = []
+    for key, (fmpy_us, raw, master) in f["us_per_tick"].items():
+        label, count = key.rsplit(", ", 1)
+        rows.append([f"{label}, {count} FMU{'s connected' if count != '1' else ''}", f"{fmpy_us:.2f} µs",
+                     f"{raw:.2f} µs", f"{master:.2f} µs", f"{master - raw:.2f} µs"])
+    return doc_tables.with_provenance(saved, "bench_clocks", doc_tables.table(
+        ["", "fmpy's methods", "raw ctypes loop", "master", "master's own time"], rows))
+
+
+TABLES = {"clocks": clocks_table}
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Benchmark: microseconds per filter step on the cart-pole, against filterpy.
 
-Run: python bench/bench_estimators.py
+Run: python bench/bench_estimators.py [--write-docs]
 Every filter runs the same data (seed 000 scenario-like truth); each figure is the
 fastest of 7 repeats of 5000 steps (this shared machine's speed varies by up to 50 %
 between runs; the fastest repeat is the least disturbed), each filter warmed up first.
@@ -11,13 +11,18 @@ CasADi model (numpy calls), so the comparison is of the filter machinery.
 """
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from estimators import EKF, IAE, KF, MFIAE, UKF, BatchFilter, discretize
 from fmu_models import get_model
+
+sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
+import doc_tables
 
 N, REPEATS = 5000, 7
 
@@ -42,6 +47,7 @@ def per_step(fn, n):
 
 
 def main():
+    options = doc_tables.parse_options(__doc__)
     sys_ = discretize(get_model("cartpole"), 0.01)
     us, ys = data(sys_)
     x0, P0, Q, R = np.array([0.5, 0, 1.8, 0.5]), np.eye(4), 1e-6 * np.eye(4), 2.5e-3 * np.eye(2)
@@ -134,6 +140,35 @@ def main():
           f"UKF/EKF {ukf / ekf:.2f}, MF-IAE/EKF {results['MF-IAE (lists)'] / ekf:.2f}")
     print(f"EKF step with a scalar u against lists: float {results['EKF (float u)'] / ekf:.2f}x, "
           f"numpy float64 {results['EKF (numpy scalar u)'] / ekf:.2f}x")
+    if options.write_docs:
+        doc_tables.write_docs(__file__, results)
+
+
+def steps_table(saved) -> str:
+    """The performance page's table: µs per step from Python, ours against filterpy's."""
+    r = saved["bench_estimators"]["figures"]
+    ekf, ukf = r["EKF (lists)"], r["UKF (lists)"]
+
+    def row(names, kind):
+        return " / ".join(f"{r[f'{n} ({kind})']:.2f}" for n in names)
+    fp_model = r["filterpy EKF (model via CasADi numpy calls)"]
+    fp_algebra = r["filterpy EKF (algebra only, model precomputed)"]
+    batched = " / ".join(f"{r[f'batched {n} (100 runs), per realisation-step']:.2f}" for n in ("EKF", "UKF", "MF-IAE"))
+    return doc_tables.with_provenance(saved, "bench_estimators", doc_tables.table(
+        ["filter", "µs/step, inputs as lists", "as numpy rows"], [
+            ["KF / EKF / UKF", row(("KF", "EKF", "UKF"), "lists"), row(("KF", "EKF", "UKF"), "arrays")],
+            ["IAE / MF-IAE (adaptation and fuzzy inference compiled in the step)", row(("IAE", "MF-IAE"), "lists"),
+             row(("IAE", "MF-IAE"), "arrays")],
+            ["EKF, the one-element `u` as a float / a numpy scalar",
+             f"{r['EKF (float u)']:.2f} / {r['EKF (numpy scalar u)']:.2f}", ""],
+            ["filterpy EKF, model by CasADi numpy calls", f"{fp_model:.1f} ({fp_model / ekf:.0f}x our EKF)", ""],
+            ["filterpy EKF, its algebra alone (model values precomputed)",
+             f"{fp_algebra:.1f} ({fp_algebra / ekf:.0f}x our EKF)", ""],
+            ["filterpy UKF", f"{r['filterpy UKF']:.0f} ({r['filterpy UKF'] / ukf:.0f}x our UKF)", ""],
+            ["batched EKF / UKF / MF-IAE, 100 realisations, per realisation-step", batched, ""]]))
+
+
+TABLES = {"steps": steps_table}
 
 
 if __name__ == "__main__":

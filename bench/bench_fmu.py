@@ -1,11 +1,14 @@
 """Benchmark: FMU build time and the cost of one doStep (one internal Euler step) through fmpy.
 
-Run: python bench/bench_fmu.py
+Run: python bench/bench_fmu.py [--write-docs]
 """
 from __future__ import annotations
 
+import os
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description
@@ -13,6 +16,9 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
 from fmu_models import build_fmu
+
+sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
+import doc_tables
 
 
 def time_steps(path, version, n=20_000, with_input=True):
@@ -45,7 +51,10 @@ def time_steps(path, version, n=20_000, with_input=True):
 
 
 def main():
+    args = doc_tables.parse_options(__doc__)
+    figures = {}
     with tempfile.TemporaryDirectory() as out:
+        os.environ["PENDULUM_COSIM_CACHE"] = out + "/empty-cache"     # the build is timed uncached
         for version in (2, 3):
             t0 = time.perf_counter()
             path = str(build_fmu("cartpole", out + f"/v{version}", fmi_version=version))
@@ -54,6 +63,23 @@ def main():
             b = np.median([time_steps(path, version, with_input=True) for _ in range(3)])
             print(f"FMI {version}.0 CartPole: build {build_s:.2f} s; doStep + 2 outputs "
                   f"{a * 1e6:.2f} us; with 1 input set each step {b * 1e6:.2f} us")
+            figures[f"fmi{version}"] = {"build_s": build_s, "step_us": a * 1e6, "step_input_us": b * 1e6}
+    if args.write_docs:
+        doc_tables.write_docs(__file__, figures)
+
+
+def fmu_table(saved) -> str:
+    """The performance page's table: the CartPole FMU's build and doStep through fmpy."""
+    f = saved["bench_fmu"]["figures"]
+    rows = [("build (generate, compile, pack; not cached)", "build_s", "{:.2f} s"),
+            ("`doStep` + read 2 outputs", "step_us", "{:.2f} µs"),
+            ("same, setting 1 input each step", "step_input_us", "{:.2f} µs")]
+    return doc_tables.with_provenance(saved, "bench_fmu", doc_tables.table(
+        ["", "FMI 2.0", "FMI 3.0"], [[label, *(form.format(f[v][key]) for v in ("fmi2", "fmi3"))]
+                                    for label, key, form in rows]))
+
+
+TABLES = {"fmu": fmu_table}
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Benchmark: the master's own cost per base step, against what a user would write instead.
 
-Run: python bench/bench_master.py [--long]
+Run: python bench/bench_master.py [--long] [--write-docs]
 
 Same FMU (the cart-pole plant, FMI 2.0 Co-Simulation, 1 ms steps, 5 s = 5000 steps), same
 work per step (set the force, doStep, read the 6 outputs into a record, the EKF's step),
@@ -38,6 +38,9 @@ from cosim.components.sources import Constant, Step
 from cosim.core.master import Cosimulation
 from cosim.fmi.fmu_component import FMUComponent
 from fmu_models import build_fmu, get_model
+
+sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
+import doc_tables
 
 T_END, H, REPEATS = 5.0, 0.001, 7
 N = round(T_END / H)
@@ -178,8 +181,8 @@ def setup_time(n: int) -> tuple[float, float]:
     return built, cs.timings["setup"]
 
 
-def long_run(path, steps: int) -> str:
-    """Peak RSS [MiB] of a fresh process streaming ``steps`` base steps to Parquet."""
+def long_run(path, steps: int) -> tuple[float, float]:
+    """Peak RSS [MiB] of a fresh process streaming ``steps`` base steps to Parquet, and its loop time [s]."""
     code = f"""
 import resource, tempfile, sys
 from cosim.fmi.fmu_component import FMUComponent
@@ -195,13 +198,16 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, cs.timings["loo
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     rss, loop = map(float, out.split())
-    return f"{steps:>9d} steps streamed: peak RSS {rss:6.1f} MiB, loop {loop:6.2f} s ({loop / steps * 1e6:.2f} us/step)"
+    print(f"{steps:>9d} steps streamed: peak RSS {rss:6.1f} MiB, loop {loop:6.2f} s ({loop / steps * 1e6:.2f} us/step)")
+    return rss, loop
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--long", action="store_true", help="also the 1e6-step streamed run (about 1 min)")
+    doc_tables.add_option(parser)
     args = parser.parse_args()
+    figures = {}
     with tempfile.TemporaryDirectory() as out:
         path = str(build_fmu(get_model("cartpole"), out))
         master(path, engine="native")                    # warm-up (compiles the kernel once)
@@ -225,14 +231,53 @@ def main() -> None:
               f"{us['plant alone'][3]:.3f} us (python master: {us['10-FMU chain'][2] / 10:.3f} and "
               f"{us['plant alone'][2]:.3f} us)")
         print("setup of n independent constant sources (constructor + run setup):")
+        figures.update(us_per_step=us, ekf_step_us=step, setup_s={})
         for count in (1_000, 10_000, 100_000):
             built, bound = setup_time(count)
+            figures["setup_s"][str(count)] = built + bound
             print(f"  n = {count:>7d}: {built + bound:7.3f} s  (constructor {built:.3f} s, run setup {bound:.3f} s)")
         if args.long:
             fmu = Path(out, "keep.fmu")
             fmu.write_bytes(Path(path).read_bytes())
-            print(long_run(fmu, 100_000))
-            print(long_run(fmu, 1_000_000))
+            figures["streamed_rss_mib"] = {str(n): long_run(fmu, n)[0] for n in (100_000, 1_000_000)}
+    if args.write_docs:
+        doc_tables.write_docs(__file__, figures)
+
+
+def _us(x: float) -> str:
+    return f"{x:.1f}" if x >= 10 else f"{x:.2f}" if x >= 1 else f"{x:.3f}"
+
+
+def _count(n: str) -> str:
+    return f"{int(n):,}".replace(",", " ")
+
+
+def master_table(saved) -> str:
+    """The performance page's tables: µs per base step, four ways; what the kernel adds; the setup."""
+    f = saved["bench_master"]["figures"]
+    us = f["us_per_step"]
+    ps, pse, chain, alone = us["plant + source"], us["plant + source + EKF"], us["10-FMU chain"], us["plant alone"]
+    parts = [
+        doc_tables.table(["", "fmpy `FMU2Slave` loop", "raw ctypes loop", "master, Python loop",
+                          "master, native kernel"], [[case, *map(_us, us[case])] for case in CASES]),
+        doc_tables.table(["derived from the table", ""], [
+            ["native kernel over the raw ctypes loop, plant + source", f"{ps[3] / ps[1]:.2g}x"],
+            ["what the EKF component adds in the native kernel, per step",
+             f"{pse[3] - ps[3]:.3f} µs (its compiled step alone, in a native `run`: {f['ekf_step_us']:.3f} µs)"],
+            ["10-FMU chain per FMU, native kernel / Python loop",
+             f"{chain[3] / 10:.3f} / {chain[2] / 10:.2f} µs (the plant alone: {alone[3]:.3f} / {alone[2]:.2f} µs)"]]),
+        doc_tables.table(["setup (constructor and run) of independent constant sources",
+                          *map(_count, f["setup_s"])],
+                         [["seconds", *(f"{s:.2g}" for s in f["setup_s"].values())]])]
+    if "streamed_rss_mib" in f:
+        rss = f["streamed_rss_mib"]
+        parts.append(doc_tables.table(["`--long`: plant + source streamed to Parquet",
+                                       *(f"{_count(n)} steps" for n in rss)],
+                                      [["peak RSS", *(f"{v:.1f} MiB" for v in rss.values())]]))
+    return doc_tables.with_provenance(saved, "bench_master", *parts)
+
+
+TABLES = {"master": master_table}
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Benchmark: offline estimation, per step, against what a user would write otherwise.
 
-Run: python bench/bench_offline.py
+Run: python bench/bench_offline.py [--write-docs]
 
 Same data and model in one run (medians of 5 repeats):
 
@@ -14,14 +14,20 @@ Same data and model in one run (medians of 5 repeats):
 """
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from estimators import EKF, KF, MFIAE, UKF, discretize, em_noise, rts_smooth
 from fmu_models import get_model
 
+sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
+import doc_tables
+
 REPEATS = 5
+KEEP = "EKF run, keep='estimates' (x, P only)"
 
 
 def median_time(fn, repeats=REPEATS) -> float:
@@ -46,6 +52,7 @@ def cartpole_record(cp, N, x0, model=None, q=1e-3, r=1e-3, seed=1):
 
 
 def main() -> None:
+    args = doc_tables.parse_options(__doc__)
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = np.array([0.0, 0.0, np.pi, 0.0])
     N = 100_000
@@ -58,7 +65,7 @@ def main() -> None:
     ekf = EKF(cp, x0, 1e-2, 1e-3, 1e-3)
     ekf.run(us[:10], ys[:10])
     per_step("EKF run (one native call)", median_time(lambda: (ekf.reset(x0, 1e-2 * np.eye(4)), ekf.run(us, ys))))
-    per_step("EKF run, keep='estimates' (x, P only)",
+    per_step(KEEP,
              median_time(lambda: (ekf.reset(x0, 1e-2 * np.eye(4)), ekf.run(us, ys, keep="estimates"))))
 
     def steps():
@@ -141,6 +148,32 @@ def main() -> None:
     print(f"  EM iteration ({Nem} steps), pykalman                {t_em_pk * 1e3:8.2f} ms   "
           f"(ours {t_em_pk / t_em:.0f}x faster)")
     print(f"  KF + RTS: ours {t_pk / t_ours:.0f}x faster than pykalman, {t_fp / t_ours:.0f}x faster than filterpy")
+    if args.write_docs:
+        doc_tables.write_docs(__file__, {"us_per_step": dict(rows), "em_ms": t_em * 1e3,
+                                         "em_pykalman_ms": t_em_pk * 1e3})
+
+
+def offline_table(saved) -> str:
+    """The performance page's table: µs per step of runs, smoothing and EM, ours against pykalman and filterpy."""
+    f = saved["bench_offline"]["figures"]
+    r = f["us_per_step"]
+    ours = next(v for k, v in r.items() if k.startswith("ours: KF run + RTS"))
+    pk, fp, em, em_pk = (r["pykalman filter + smooth"], r["filterpy batch_filter + rts_smoother"], f["em_ms"],
+                         f["em_pykalman_ms"])
+    return doc_tables.with_provenance(saved, "bench_offline", doc_tables.table(["", "µs/step"], [
+        ["EKF `run` (one native call, every diagnostic kept)", f"{r['EKF run (one native call)']:.3f}"],
+        ['EKF `run(keep="estimates")`', f"{r[KEEP]:.3f}"],
+        ["EKF `step` called N times from Python (numpy rows)", f"{r['EKF step() x N from Python']:.2f}"],
+        ["extended RTS smoother", f"{r['extended RTS smoother']:.3f}"],
+        ["UKF `run` / MF-IAE `run`", f"{r['UKF run']:.3f} / {r['MF-IAE run']:.2f}"],
+        ["**KF `run` + RTS, ours**", f"**{ours:.3f}**"],
+        ["pykalman `filter` + `smooth`", f"{pk:.1f} ({pk / ours:.0f}x ours)"],
+        ["filterpy `batch_filter` + `rts_smoother`", f"{fp:.1f} ({fp / ours:.0f}x ours)"],
+        ["**EM iteration (2000 steps), ours**", f"**{em:.2f} ms**"],
+        ["pykalman `em` iteration", f"{em_pk:.0f} ms ({em_pk / em:.0f}x ours)"]]))
+
+
+TABLES = {"offline": offline_table}
 
 
 if __name__ == "__main__":

@@ -1,11 +1,11 @@
 """Benchmark and report: what the master does with each Modelica Reference FMU (FMI 2/3,
-CS/ME, Python API and ``pendulum-cosim run``), the cost of crash isolation per doStep, and
+CS/ME/SE, Python API and ``pendulum-cosim run``), the cost of crash isolation per doStep, and
 connected ME FMUs as one system against separate components.
 
-Prints the Markdown tables of the README's co-simulation and performance sections.
+Prints the Markdown tables of the third-party FMUs and performance pages.
 
-Run: python bench/bench_reference_fmus.py [--skip-cli]
-(needs ../shared/reference-fmus or PENDULUM_COSIM_REFERENCE_FMUS)
+Run: python bench/bench_reference_fmus.py [--skip-cli] [--write-docs]
+(needs the Reference FMUs: PENDULUM_COSIM_REFERENCE_FMUS names their folder, with fmi2/ and fmi3/)
 """
 from __future__ import annotations
 
@@ -20,7 +20,9 @@ import numpy as np
 from cosim import Constant, Cosimulation, FMUComponent, MESystem
 
 sys.path.append(str(Path(__file__).parents[1] / "tests"))     # after the packages: tests/cosim is no package
+sys.path.append(str(Path(__file__).parent))                    # bench/doc_tables.py, from any folder
 
+import doc_tables
 from testkit import reference_cases as rc
 
 
@@ -42,10 +44,10 @@ def _verdict(case, outcome, stopped: bool) -> str:
     return f"relative error {rel:.0e}, {r['ratio']:.2f}x {peer}" + note
 
 
-def reference_table(cli: bool) -> None:
-    """One row per FMU and FMI version: what the Co-Simulation and the Model Exchange
-    interface give (API), and whether ``pendulum-cosim run`` gives the same."""
-    rows: dict = {}
+def reference_figures(cli: bool) -> dict:
+    """Each case's verdict (``[model, FMI version, interface, verdict]``, API), and with ``cli``
+    the cases where ``pendulum-cosim run`` does not give the same."""
+    verdicts = []
     bad = []
     with tempfile.TemporaryDirectory() as tmp:
         for k, case in enumerate(rc.cases()):
@@ -60,17 +62,27 @@ def reference_table(cli: bool) -> None:
                     (cdf is not None and np.array_equal(cdf.to_numpy(float), df.to_numpy(float)))
                 if not same:
                     bad.append(case.label)
-            rows.setdefault((case.model, case.version), {})[case.interface] = _verdict(case, outcome, stopped)
-    print("| Reference FMU | FMI | Co-Simulation (vs the published result) | Model Exchange, CVODE rtol 1e-6 "
-          "(vs CVODE at 1e-10; ratio to fmpy's error at 1e-6) |")
-    print("|---|---|---|---|")
-    for (model, version), r in rows.items():
-        me = r.get("me", "-") if "se" not in r else f"Scheduled Execution: {r['se']}"
-        print(f"| {model} | {version}.0 | {r.get('cs', '-')} | {me} |")
-    if cli:
-        n = len(rc.cases())
-        print(f"\nThe CLI (`pendulum-cosim run`, a minimal scenario file) gives the same rows or the same "
-              f"refusal in {n - len(bad)} of {n} cases" + (f"; differs: {bad}" if bad else ""))
+            verdicts.append([case.model, case.version, case.interface, _verdict(case, outcome, stopped)])
+    return {"verdicts": verdicts, "cli_differs": bad if cli else None}
+
+
+def reference_table(saved) -> str:
+    """One row per FMU and FMI version: what the Co-Simulation and the Model Exchange (or
+    Scheduled Execution) interface give from Python, and whether the command line gives the same."""
+    f = saved["bench_reference_fmus"]["figures"]
+    rows: dict = {}
+    for model, version, interface, verdict in f["verdicts"]:
+        rows.setdefault((model, version), {})[interface] = verdict
+    text = doc_tables.table(
+        ["Reference FMU", "FMI", "Co-Simulation (vs the published result)",
+         "Model Exchange, CVODE rtol 1e-6 (vs CVODE at 1e-10; ratio to fmpy's error at 1e-6)"],
+        [[model, f"{version}.0", r.get("cs", "-"), f"Scheduled Execution: {r['se']}" if "se" in r else r.get("me", "-")]
+         for (model, version), r in rows.items()])
+    if f["cli_differs"] is not None:
+        n, bad = len(f["verdicts"]), f["cli_differs"]
+        text += (f"\n\nThe command line (`pendulum-cosim run` with a minimal scenario file) gives the same rows or the "
+                 f"same refusal in {n - len(bad)} of {n} cases" + (f"; not in {', '.join(bad)}" if bad else "") + ".")
+    return doc_tables.with_provenance(saved, "bench_reference_fmus", text)
 
 
 def _per_step(make, stop: float, repeats: int = 5) -> tuple[float, float]:
@@ -88,9 +100,9 @@ def _per_step(make, stop: float, repeats: int = 5) -> tuple[float, float]:
     return min(full), min(one)
 
 
-def isolation_table() -> None:
-    print("| FMU (CS) | round trips per step | in-process per step | isolated per step | isolated start-up |")
-    print("|---|---|---|---|---|")
+def isolation_figures() -> dict:
+    """Per FMU: round trips per step, µs per step in-process and isolated, the isolated start-up [s]."""
+    out = {}
     d = rc.reference_dir()
     for model, inputs in (("Dahlquist", False), ("Feedthrough", True)):
         path = d / "fmi2" / f"{model}.fmu"
@@ -106,12 +118,28 @@ def isolation_table() -> None:
         iso_full, iso_one = _per_step(lambda: make(True), n * 0.01)
         per_plain = (plain_full - plain_one) / (n - 1)
         per_iso = (iso_full - iso_one) / (n - 1)
-        print(f"| {model} | {2 if inputs else 1} | {per_plain * 1e6:.1f} us | {per_iso * 1e6:.0f} us | "
-              f"{iso_one:.2f} s |")
+        out[model] = {"round_trips": 2 if inputs else 1, "in_process_us": per_plain * 1e6,
+                      "isolated_us": per_iso * 1e6, "startup_s": iso_one}
+    return out
 
 
-def system_table() -> None:
-    """VanDerPol driving a first-order lag (the hand-written ME test FMU), against scipy."""
+def _below(us: float) -> str:
+    """A per-step cost derived from two run times: below 1 µs the start-up's jitter over
+    20 000 steps hides it (the difference may even come out negative)."""
+    return f"{us:.1f} µs" if us >= 1 else "under 1 µs"
+
+
+def isolation_table(saved) -> str:
+    f = saved["bench_reference_fmus"]["figures"]["isolation"]
+    return doc_tables.with_provenance(saved, "bench_reference_fmus", doc_tables.table(
+        ["FMU (CS)", "round trips per step", "in-process per step", "isolated per step", "isolated start-up"],
+        [[m, str(r["round_trips"]), _below(r["in_process_us"]), f"{r['isolated_us']:.0f} µs",
+          f"{r['startup_s']:.2f} s"] for m, r in f.items()]))
+
+
+def system_figures() -> list:
+    """VanDerPol driving a first-order lag (the hand-written ME test FMU), against scipy:
+    ``[coupling, communication step [s], lag error, wall [s]]`` per run."""
     from conftest import build_test_fmu
     from scipy.integrate import solve_ivp
 
@@ -120,8 +148,7 @@ def system_table() -> None:
         lag = build_test_fmu("bouncing_me", "BouncingBallME", 2, Path(tmp))
         exact = solve_ivp(lambda t, y: [y[1], (1 - y[0] ** 2) * y[1] - y[0], (y[0] - y[2]) / 0.5], (0, 2.0),
                           [2.0, 0.0, 0.0], method="Radau", rtol=1e-11, atol=1e-13, t_eval=np.arange(0, 2.0001, 0.1))
-        print("| coupling | communication step | lag error vs scipy | wall |")
-        print("|---|---|---|---|")
+        rows = []
         for period in (0.1, 0.01):
             for joint in (False, True):
                 vdp = FMUComponent("vdp", d / "fmi3" / "VanDerPol.fmu", period, interface="me", rtol=1e-8)
@@ -134,21 +161,33 @@ def system_table() -> None:
                 col = df["s.lag.x" if joint else "lag.x"].to_numpy()
                 err = np.abs(col - exact.y[2]).max()
                 label = "one MESystem (one CVODE)" if joint else "separate components (inputs held)"
-                print(f"| {label} | {period} s | {err:.1e} | {wall:.2f} s |")
+                rows.append([label, period, float(err), wall])
+    return rows
+
+
+def system_table(rows: list) -> str:
+    return doc_tables.table(["coupling", "communication step", "lag error vs scipy", "wall"],
+                            [[label, f"{p} s", f"{e:.1e}", f"{w:.2f} s"] for label, p, e, w in rows])
+
+
+TABLES = {"reference": reference_table, "isolation": isolation_table}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--skip-cli", action="store_true")
+    doc_tables.add_option(ap)
     args = ap.parse_args()
     if rc.reference_dir() is None:
-        sys.exit("the Reference FMUs are absent: put them in ../shared/reference-fmus or set "
-                 "PENDULUM_COSIM_REFERENCE_FMUS")
-    reference_table(not args.skip_cli)
-    print()
-    isolation_table()
-    print()
-    system_table()
+        sys.exit("the Reference FMUs are absent: set PENDULUM_COSIM_REFERENCE_FMUS to their folder (with fmi2/ and "
+                 "fmi3/)")
+    figures = {**reference_figures(not args.skip_cli), "isolation": isolation_figures(), "system": system_figures()}
+    saved = {"bench_reference_fmus": {"figures": figures, "run": doc_tables.run_info()}}
+    for name, fn in TABLES.items():
+        print(f"{name}:\n{fn(saved)}\n")
+    print(f"system:\n{system_table(figures['system'])}")
+    if args.write_docs:
+        doc_tables.write_docs(__file__, figures)
 
 
 if __name__ == "__main__":

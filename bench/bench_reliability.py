@@ -1,4 +1,4 @@
-"""Reliability figures (issue 14) for the README: measured, not asserted.
+"""Reliability figures for the reliability page: measured, not asserted.
 
 Run: python bench/bench_reliability.py [--trials 20]
 

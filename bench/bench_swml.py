@@ -1,19 +1,24 @@
-"""Benchmark: the cost of SWML against the EKF it starts as (issue 21 goal: SWML ``run`` at
-most 25x the EKF ``run`` per step), cart-pole, 5 s records (500 steps, the seed 000
-length) and 5000 steps, the fastest of 7 repeats; and the burst of one update.
+"""Benchmark: the cost of SWML against the EKF it starts as, cart-pole, 5 s records (500
+steps, the seed 000 length) and 5000 steps, the fastest of 7 repeats; the campaigns' form;
+and the burst of one update.
 
-Run: python bench/bench_swml.py
+Run: python bench/bench_swml.py [--write-docs]
 """
 from __future__ import annotations
 
 import math
+import sys
 import time
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
 from estimators import EKF, SWML, BatchFilter, discretize
 from fmu_models import get_model
+
+sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
+import doc_tables
 
 
 def record(cp, n, seed=0):
@@ -43,8 +48,9 @@ def rerun(f, x0, us, ys) -> None:
     f.run(us, ys)
 
 
-def one_length(cp, x0, n: int) -> str:
-    """The table row for records of ``n`` steps."""
+def one_length(cp, x0, n: int) -> dict[str, float]:
+    """µs per step for records of ``n`` steps: the EKF's and SWML's ``run``, and batched x100
+    per realisation-step."""
     us, ys = record(cp, n)
     ekf, swml = EKF(cp, x0, 1.0, 1e-3, 10.0), SWML(cp, x0, 1.0, 1e-3, 10.0)
     ekf.run(us, ys), swml.run(us, ys)                         # compile and warm
@@ -52,11 +58,16 @@ def one_length(cp, x0, n: int) -> str:
     Y = np.repeat(ys[None], 100, axis=0)
     be, bs = (best(partial(BatchFilter(f, 100).run, us, Y), 3)
               for f in (EKF(cp, x0, 1.0, 1e-3, 10.0), SWML(cp, x0, 1.0, 1e-3, 10.0)))
-    return (f"| {n} steps | {te / n * 1e6:.2f} | {ts / n * 1e6:.2f} | {ts / te:.1f}x | "
-            f"{be / n / 100 * 1e6:.2f} / {bs / n / 100 * 1e6:.2f} |")
+    return {"ekf": te / n * 1e6, "swml": ts / n * 1e6, "ekf_batched": be / n / 100 * 1e6,
+            "swml_batched": bs / n / 100 * 1e6}
 
 
-def campaign_form(cp, x0) -> None:
+def _row(n: int, r: dict[str, float]) -> list[str]:
+    return [f"{n} steps{' (seed 000)' if n == 500 else ''}", f"{r['ekf']:.2f} µs", f"{r['swml']:.2f} µs",
+            f"{r['swml'] / r['ekf']:.1f}x", f"{r['ekf_batched']:.2f} / {r['swml_batched']:.2f} µs"]
+
+
+def campaign_form(cp, x0) -> dict[str, float]:
     """SWML as the campaigns run it (MAP with the posterior average, an update every step up
     to step 20) against the plain form and the EKF, ``run`` over 500 steps."""
     us, ys = record(cp, 500)
@@ -70,17 +81,18 @@ def campaign_form(cp, x0) -> None:
         cost[name] = best(partial(rerun, f, x0, us, ys)) / 500 * 1e6
     print("\n500 steps, run [us/step]: " + ", ".join(f"{n} {c:.2f} ({c / cost['EKF']:.1f}x the EKF)"
                                                     for n, c in cost.items()))
+    return cost
 
 
 def main() -> None:
+    args = doc_tables.parse_options(__doc__)
     cp = discretize(get_model("cartpole"), 0.01)
     x0 = [0.5, 0.0, 1.8, 0.5]
-    print("| record | EKF run [us/step] | SWML run [us/step] | ratio | "
-          "batched x100, per realisation-step: EKF / SWML |")
-    print("|---|---|---|---|---|")
+    lengths = {}
     for n in (500, 5000):
-        print(one_length(cp, x0, n))
-    campaign_form(cp, x0)
+        lengths[str(n)] = one_length(cp, x0, n)
+        print(" | ".join(_row(n, lengths[str(n)])))
+    forms = campaign_form(cp, x0)
     us, ys = record(cp, 200)
     g = SWML(cp, x0, 1.0, 1e-3, 10.0)
     times = []
@@ -91,8 +103,32 @@ def main() -> None:
     t = np.array(times[1:]) * 1e6
     upd = [k for k in range(1, 200) if (k + 1) % 50 == 0 and k + 1 > 20]
     rest = [k for k in range(21, 199) if k not in upd]
-    print(f"\nSWML step from Python: {np.median(t[np.array(rest) - 1]):.1f} us between updates, "
-          f"{np.median(t[np.array(upd) - 1]):.0f} us at an update (window 100, every 50 steps)")
+    between, update = float(np.median(t[np.array(rest) - 1])), float(np.median(t[np.array(upd) - 1]))
+    print(f"\nSWML step from Python: {between:.1f} us between updates, {update:.0f} us at an update (window 100, "
+          "every 50 steps)")
+    if args.write_docs:
+        doc_tables.write_docs(__file__, {"lengths": lengths, "forms_500": forms, "step_between": between,
+                                         "step_update": update})
+
+
+HEAD = ["record", "EKF `run`", "SWML `run`", "ratio", "batched x100, per realisation-step: EKF / SWML"]
+
+
+def swml_table(saved) -> str:
+    """The performance page's tables: SWML's `run` against the EKF's, its campaign form, its step."""
+    f = saved["bench_swml"]["figures"]
+    forms = f["forms_500"]
+    return doc_tables.with_provenance(
+        saved, "bench_swml", doc_tables.table(HEAD, [_row(int(n), r) for n, r in f["lengths"].items()]),
+        doc_tables.table(["500 steps, `run`", "µs/step", "against the EKF"],
+                         [[name, f"{c:.2f}", f"{c / forms['EKF']:.1f}x"]
+                          for name, c in sorted(forms.items(), key=lambda item: item[1])]),
+        doc_tables.table(["SWML `step` from Python (window 100, an update every 50 steps)", "µs"],
+                         [["between updates", f"{f['step_between']:.1f}"],
+                          ["at an update", f"{f['step_update']:.0f}"]]))
+
+
+TABLES = {"swml": swml_table}
 
 
 if __name__ == "__main__":

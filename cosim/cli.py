@@ -1,7 +1,7 @@
 """Command line: ``pendulum-cosim``.
 
     pendulum-cosim demo [--out DIR]             run the seed 000 scenario, write results and plot
-    pendulum-cosim run SCENARIO.toml --out DIR  run any scenario file (--dry-run: print the schedule)
+    pendulum-cosim run PATH --out DIR           run a scenario file, an FMU or an SSP (--dry-run: the schedule)
     pendulum-cosim scenarios                    list the scenarios shipped with the package
     pendulum-cosim models                       print both plant models and their Jacobians
     pendulum-cosim experiment NAME [--runs N]   reproduce a paper's experiment (seed000, ...)
@@ -16,10 +16,15 @@ what finished as partial results, and exit with status 130.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import sys
 import time
+import tomllib
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -34,13 +39,18 @@ from fmu_models.infra.registry import load_plugin
 from fmu_models.infra.resources import shipped
 from fmu_models.infra.version import VERSION
 
+from .core import crash_guard
 from .core.component import ExportsFMU, StateEstimator
+from .core.master import Cosimulation
 from .core.native import ENGINES
 from .experiments import EXPERIMENTS
 from .fmi.archive import read_description
-from .output import OutputFolder, plot_estimates, save_results
+from .fmi.description import INTERFACES
+from .fmu_run import NAME as FMU_NAME
+from .fmu_run import open_fmu
+from .output import OutputFolder, plot_estimates, plot_signals, save_results
 from .scenario import Scenario
-from .ssp import export_component, export_ssp
+from .ssp import export_component, export_ssp, open_ssp
 
 
 def _scenario_dir() -> Path:
@@ -113,73 +123,194 @@ def _rmse_table(df, estimators_):
     return pd.DataFrame(rows).T
 
 
-def _resolve_scenario(name: str) -> Path:
+def _resolve_target(name: str) -> Path:
+    """The file or folder ``name``, or the shipped scenario of that name."""
     path = Path(name)
     if not path.exists() and (_scenario_dir() / f"{name}.toml").exists():
         path = _scenario_dir() / f"{name}.toml"
     if not path.exists():
-        raise ConfigurationError(f"no scenario file {name!r} (shipped: "
+        raise ConfigurationError(f"no scenario, FMU or SSP file {name!r} (shipped scenarios: "
                                  f"{', '.join(sorted(p.stem for p in _scenario_dir().glob('*.toml')))})")
     return path
+
+
+def _kind_of(path: Path) -> str:
+    """``"fmu"``, ``"ssp"`` or ``"scenario"``: what the file or folder ``path`` holds."""
+    if path.is_dir():
+        if (path / "SystemStructure.ssd").is_file():
+            return "ssp"
+        raise ConfigurationError(f"{path} is a folder without a SystemStructure.ssd (not an unpacked SSP)")
+    if path.suffix.lower() == ".ssd":
+        return "ssp"
+    if zipfile.is_zipfile(path):
+        with zipfile.ZipFile(path) as z:
+            names = set(z.namelist())
+        if "modelDescription.xml" in names:
+            return "fmu"
+        if "SystemStructure.ssd" in names:
+            return "ssp"
+        raise ConfigurationError(f"{path.name} is a zip archive with neither a modelDescription.xml (an FMU) nor a "
+                                 "SystemStructure.ssd (an SSP)")
+    return "scenario"
+
+
+@dataclass
+class _Job:
+    """What ``run`` runs: a scenario, an FMU or an SSP in the master, its times and recording."""
+
+    kind: str
+    title: str
+    cosim: Cosimulation
+    start_time: float
+    stop_time: float
+    options: dict = field(default_factory=dict)     # Cosimulation.run keywords
+    stream: bool = False
+    columns: Callable | None = None                 # the DataFrame's column names from the master's
+    wall: float = 0.0                               # [s] of the run, set by _record
+
+
+#: ``run`` options that only an FMU or an SSP takes (a scenario sets them in its own tables).
+_FILE_OPTIONS = {"stop_time": "--stop-time", "start_time": "--start-time", "step_size": "--step-size",
+                 "start": "--start", "input": "--input", "outputs": "--outputs", "interface": "--interface"}
+
+
+def _given(args, names) -> list[str]:
+    return [_FILE_OPTIONS[n] for n in names if getattr(args, n, None) is not None]
+
+
+def _start_values(items: list[str] | None) -> dict:
+    """``--start NAME=VALUE`` values (a TOML value: a number, true/false, a list)."""
+    out = {}
+    for item in items or []:
+        name, eq, text = item.partition("=")
+        if not eq or not name.strip():
+            raise ConfigurationError(f"--start {item!r}: write NAME=VALUE")
+        try:
+            out[name.strip()] = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise ConfigurationError(f"--start {item!r}: {text.strip()!r} is not a number, true/false or a list") \
+                from None
+    return out
+
+
+def _run(args) -> int:
+    """``run``: a scenario file, an FMU or an SSP (see :func:`_kind_of`)."""
+    path = _resolve_target(args.scenario)
+    kind = _kind_of(path)
+    if kind == "scenario" and _given(args, _FILE_OPTIONS):
+        raise ConfigurationError(f"{', '.join(_given(args, _FILE_OPTIONS))}: for an FMU or SSP run; a scenario file "
+                                 "sets these in its own tables")
+    if kind == "ssp" and _given(args, ("input", "interface")):
+        raise ConfigurationError(f"{', '.join(_given(args, ('input', 'interface')))}: for an FMU run, not an SSP")
+    if not args.dry_run and not args.out:
+        raise ConfigurationError("run needs --out DIR (or --dry-run)")
+    progress = False if args.no_progress else None
+    if kind == "scenario":
+        return _run_scenario(path, Path(args.out or "."), args.overwrite, args.dry_run, args.stream, progress,
+                             args.engine)
+    with contextlib.ExitStack() as stack:
+        job = _fmu_job(path, args) if kind == "fmu" else _ssp_job(path, args, stack)
+        if args.engine is not None:
+            job.cosim.engine = args.engine
+        if args.dry_run:
+            print(f"{kind}: {job.title}\n{job.cosim.describe()}")
+            return 0
+        with OutputFolder(Path(args.out), args.overwrite) as folder:
+            df, paths = _record(job, folder, progress)
+            if df is not None and len(df.columns):
+                plot_signals(df, folder / "outputs.png", job.title)
+                paths.append(folder / "outputs.png")
+            _report(job, df, paths)
+    return 0
+
+
+def _fmu_job(path: Path, args) -> _Job:
+    if args.stream:
+        raise ConfigurationError("--stream: an FMU run records in memory; choose --outputs or a larger --step-size "
+                                 "for a long run, or write a scenario file")
+    exp = open_fmu(path, args.stop_time, start_time=args.start_time, step_size=args.step_size,
+                   start=_start_values(args.start), inputs=args.input, outputs=args.outputs,
+                   interface=args.interface or "auto")
+    return _Job("fmu", path.name, exp.cosim, exp.start_time, exp.stop_time, {"signals": [f"{FMU_NAME}.*"]},
+                columns=lambda c: c.split(".", 1)[1] if c.startswith(f"{FMU_NAME}.") else c)
+
+
+def _ssp_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
+    system = stack.enter_context(open_ssp(path, step_size=args.step_size, start=_start_values(args.start)))
+    stop = args.stop_time if args.stop_time is not None else system.stop_time
+    if stop is None:
+        raise ConfigurationError(f"{path.name}: the SSD has no stop time; give --stop-time")
+    start = args.start_time if args.start_time is not None else system.start_time or 0.0
+    return _Job("ssp", system.name, system.cosim, start, stop, {"signals": args.outputs} if args.outputs else {},
+                bool(args.stream))
 
 
 def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
                   stream: bool | None = None, progress: bool | None = None, engine: str | None = None) -> int:
     """Load and check the scenario, then (only then) take ``out`` and run it (``engine``:
     replaces the scenario's ``[simulation] engine``)."""
-    import tempfile
-
-
-    if dry_run:
-        with tempfile.TemporaryDirectory() as tmp:
-            sc = Scenario.load(path, fmu_dir=Path(tmp) / "fmus")
-            if engine is not None:
-                sc.cosim.engine = engine
-            print(f"scenario: {sc.title or path.name}")
-            print(sc.cosim.describe())
-        return 0
-    with tempfile.TemporaryDirectory() as fmus:
+    with crash_guard.temporary_folder("pendulum_cosim_run_") as fmus:
         t0 = time.perf_counter()
-        sc = Scenario.load(path, fmu_dir=fmus)         # read and checked before --out is touched
+        sc = Scenario.load(path, fmu_dir=Path(fmus) / "fmus")      # read and checked before --out is touched
         if engine is not None:
             sc.cosim.engine = engine
-        with OutputFolder(out, overwrite) as folder:
-            return _run_loaded(sc, path, folder, Path(fmus), t0, stream, progress)
-
-
-def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool | None,
-                progress: bool | None) -> int:
-    """Run a loaded scenario into the held folder ``out``: results, partial results on
-    failure, the FMUs it built, the RMSE table and the plot."""
-    import shutil
-
-
-
-    print(f"scenario: {sc.title or path.name}")
-    stream = bool(sc.recording.get("stream", False)) if stream is None else stream
-    rec = {k: v for k, v in sc.recording.items() if k != "stream"}
-    try:
-        if stream:
-            result = sc.cosim.run_to_parquet(out / "results.parquet", sc.stop_time, sc.start_time,
-                                             progress=progress, **rec)
-            print(f"\n{sc.stop_time:g} s simulated in {time.perf_counter() - t0:.2f} s; "
-                  f"wrote {result} (streamed)")
-            if sc.cosim.clock_ticks is not None:
-                print(f"wrote {_write_ticks(sc, out, 'clock_ticks.csv')}")
+        if dry_run:
+            print(f"scenario: {sc.title or path.name}")
+            print(sc.cosim.describe())
             return 0
-        df = sc.cosim.run(sc.stop_time, sc.start_time, progress=progress, **rec)
+        stream = bool(sc.recording.get("stream", False)) if stream is None else stream
+        job = _Job("scenario", sc.title or path.name, sc.cosim, sc.start_time, sc.stop_time,
+                   {k: v for k, v in sc.recording.items() if k != "stream"}, stream)
+        with OutputFolder(out, overwrite) as folder:
+            df, paths = _record(job, folder, progress, t0)
+            if df is not None:
+                paths += _scenario_extras(sc, df, folder, Path(fmus) / "fmus")
+            _report(job, df, paths, "(including FMU build)")
+    return 0
+
+
+def _record(job: _Job, out: Path, progress: bool | None, t0: float | None = None) -> tuple:
+    """Run ``job`` into the held folder ``out``: the results (streamed, or as a DataFrame),
+    the clock ticks; partial results on failure. Returns the DataFrame (None when streamed)
+    and the paths written."""
+    print(f"{job.kind}: {job.title}")
+    job.wall = -(t0 if t0 is not None else time.perf_counter())
+    try:
+        if job.stream:
+            result = job.cosim.run_to_parquet(out / "results.parquet", job.stop_time, job.start_time,
+                                              progress=progress, **job.options)
+            return None, [result] + _ticks(job, out, "clock_ticks.csv")
+        df = job.cosim.run(job.stop_time, job.start_time, progress=progress, **job.options)
     except (PendulumCosimError, KeyboardInterrupt) as e:
         partial = getattr(e, "results", None) if not isinstance(e, Interrupted) else e.partial
         if partial is not None and hasattr(partial, "to_csv") and len(partial):
-            save_results(partial, out, "results.partial")
+            save_results(_named(job, partial), out, "results.partial")
             print(f"partial results ({len(partial)} rows) written to {out}/results.partial.*", file=sys.stderr)
-        if sc.cosim.clock_ticks is not None:
-            _write_ticks(sc, out, "clock_ticks.partial.csv")
+        _ticks(job, out, "clock_ticks.partial.csv")
         raise
-    wall = time.perf_counter() - t0
-    paths = save_results(df, out)
-    if sc.cosim.clock_ticks is not None:
-        paths.append(_write_ticks(sc, out, "clock_ticks.csv"))
+    finally:
+        job.wall += time.perf_counter()
+    df = _named(job, df)
+    return df, save_results(df, out) + _ticks(job, out, "clock_ticks.csv")
+
+
+def _named(job: _Job, df):
+    if job.columns is not None:
+        df.columns = [job.columns(c) for c in df.columns]
+    return df
+
+
+def _ticks(job: _Job, out: Path, name: str) -> list[Path]:
+    """Every clock activation of the last run (columns time, clock) as ``out/name``, if any."""
+    ticks = job.cosim.clock_ticks
+    return [] if ticks is None else [atomic_write(out / name, lambda p: ticks.to_csv(p, index=False))]
+
+
+def _scenario_extras(sc, df, out: Path, fmus: Path) -> list[Path]:
+    """A scenario run's FMUs (those it built), RMSE table and plot."""
+    import shutil
+
+    paths = []
     for fmu in fmus.rglob("*.fmu"):                 # keep the FMUs the scenario built
         dst = out / "fmus" / fmu.relative_to(fmus)
         dst.parent.mkdir(parents=True, exist_ok=True)
@@ -195,16 +326,17 @@ def _run_loaded(sc, path: Path, out: Path, fmus: Path, t0: float, stream: bool |
         measured = [m or None for m in sc.plot.get("measured", [])] or None
         plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
         paths.append(png)
-    print(f"\n{len(df)} rows x {len(df.columns)} signals, {sc.stop_time:g} s simulated in {wall:.2f} s "
-          "(including FMU build)")
+    return paths
+
+
+def _report(job: _Job, df, paths: list[Path], note: str = "") -> None:
+    span = f"{job.stop_time - job.start_time:g} s simulated in {job.wall:.2f} s"
+    if df is None:
+        print(f"\n{span}; streamed")
+    else:
+        print(f"\n{len(df)} rows x {len(df.columns)} signals, {span}" + (f" {note}" if note else ""))
     for p in paths:
         print(f"wrote {p}")
-    return 0
-
-
-def _write_ticks(sc, out: Path, name: str) -> Path:
-    """Every clock activation of the last run (columns time, clock) as ``out/name``."""
-    return atomic_write(out / name, lambda p: sc.cosim.clock_ticks.to_csv(p, index=False))
 
 
 def _export(args) -> int:
@@ -217,7 +349,10 @@ def _export(args) -> int:
     platforms = parse_platforms(args.platforms)
     if platforms:
         zig_command()                              # a missing extra is named before anything is written
-    path = _resolve_scenario(args.scenario)
+    path = _resolve_target(args.scenario)
+    if _kind_of(path) != "scenario":
+        raise ConfigurationError(f"{path.name}: {args.command} writes a scenario's components; this is an "
+                                 f"{_kind_of(path).upper()}")
     with tempfile.TemporaryDirectory() as fmus:
         sc = Scenario.load(path, fmu_dir=fmus)
         comps = sc.cosim.by_name
@@ -325,8 +460,21 @@ def build_parser() -> argparse.ArgumentParser:
                                        "results table, CSV/Parquet and a truth-vs-estimate plot")
     demo.add_argument("--out", default="out/demo", help="output directory (default out/demo; "
                                                           "replaced on every demo run)")
-    run = sub.add_parser("run", help="run a scenario file (TOML); see `pendulum-cosim scenarios`")
-    run.add_argument("scenario", help="scenario file, or the name of a shipped scenario")
+    _add_run(sub)
+    sub.add_parser("scenarios", help="list the shipped scenario files")
+    models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
+    models.add_argument("--duration", type=_number(float, 0, "the duration", strict=True, high=MAX_MODELS_DURATION),
+                        default=5.0, help=f"simulated time [s] (default 5, at most {MAX_MODELS_DURATION:g}: "
+                                          "the report prints ten rows of it)")
+    _add_experiment(sub)
+    _add_export(sub)
+    return parser
+
+
+def _add_run(sub) -> None:
+    run = sub.add_parser("run", help="run a scenario file (TOML; see `pendulum-cosim scenarios`), an FMU or an SSP "
+                                     "(archive, folder or .ssd)")
+    run.add_argument("scenario", metavar="PATH", help="scenario file, FMU, SSP, or the name of a shipped scenario")
     run.add_argument("--out", help="output directory (required unless --dry-run)")
     run.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     run.add_argument("--dry-run", action="store_true",
@@ -338,12 +486,25 @@ def build_parser() -> argparse.ArgumentParser:
                      help="which loop runs the co-simulation: auto (the native kernel where it can, the "
                           "default unless the scenario's [simulation] engine says otherwise), native "
                           "(refused where the kernel cannot run it) or python")
-    sub.add_parser("scenarios", help="list the shipped scenario files")
-    models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
-    models.add_argument("--duration", type=_number(float, 0, "the duration", strict=True, high=MAX_MODELS_DURATION),
-                        default=5.0, help=f"simulated time [s] (default 5, at most {MAX_MODELS_DURATION:g}: "
-                                          "the report prints ten rows of it)")
+    fmu = run.add_argument_group("an FMU or SSP (a scenario file sets these in its own tables)")
+    fmu.add_argument("--stop-time", type=_number(float, what="--stop-time"), metavar="T",
+                     help="[s] default: the FMU's or SSP's DefaultExperiment (an FMU without one: start + 1 s)")
+    fmu.add_argument("--start-time", type=_number(float, what="--start-time"), metavar="T",
+                     help="[s] default: the DefaultExperiment's, else 0")
+    fmu.add_argument("--step-size", type=_number(float, 0, "--step-size", strict=True), metavar="H",
+                     help="[s] the communication step (Model Exchange: the output grid); an SSP: the step of the "
+                          "FMUs it names none for. Default: the DefaultExperiment's, else a 500th of the span")
+    fmu.add_argument("--start", action="append", metavar="NAME=VALUE",
+                     help="a parameter or start value (repeatable; an SSP: component.variable)")
+    fmu.add_argument("--input", metavar="CSV", help="FMU inputs: a time column [s] and one column per input, named as "
+                                                   "the FMU's inputs")
+    fmu.add_argument("--outputs", nargs="+", metavar="NAME",
+                     help="what is recorded: FMU variables (default its outputs); an SSP: component.port patterns")
+    fmu.add_argument("--interface", choices=[i for i in INTERFACES if i != "auto"],
+                     help="an FMU's interface: cs, me or se (default: Co-Simulation if it has it)")
 
+
+def _add_experiment(sub) -> None:
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
                                             "campaign; writes tables, figures and summary.md")
     exp.add_argument("name", choices=EXPERIMENTS.names(), help="which experiment: " + "; ".join(
@@ -365,6 +526,9 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("--out", help="output directory (default out/NAME)")
     exp.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_export(sub) -> None:
     efmu = sub.add_parser("export-fmu", help="write a scenario's estimators (or other components) as native "
                                              "Co-Simulation FMUs, no Python inside")
     essp = sub.add_parser("export-ssp", help="write a scenario as an SSP (SystemStructure.ssd plus an FMU per "
@@ -383,7 +547,6 @@ def build_parser() -> argparse.ArgumentParser:
     efmu.add_argument("--component", action="append", metavar="NAME",
                       help="component to export (repeatable; default: every estimator)")
     essp.add_argument("--name", help="system name and archive name (default: the scenario file's name)")
-    return parser
 
 
 def _dispatch(args) -> int:
@@ -401,10 +564,7 @@ def _dispatch(args) -> int:
         return 0
     if args.command == "demo":
         return _run_scenario(shipped("cosim", "scenarios", "seed000_cartpole.toml"), Path(args.out), overwrite=True)
-    if not args.dry_run and not args.out:
-        raise ConfigurationError("run needs --out DIR (or --dry-run)")
-    return _run_scenario(_resolve_scenario(args.scenario), Path(args.out or "."), args.overwrite,
-                         args.dry_run, args.stream, False if args.no_progress else None, args.engine)
+    return _run(args)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -20,7 +20,7 @@ import pandas as pd
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.files import atomic_write
 
-__all__ = ["MARKER", "OutputFolder", "plot_estimates", "save_results"]
+__all__ = ["MARKER", "MAX_PANELS", "OutputFolder", "plot_estimates", "plot_signals", "save_results"]
 
 
 def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]:
@@ -246,3 +246,44 @@ def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[st
     if path is not None:
         atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     return fig
+
+
+#: The most signals :func:`plot_signals` draws (one panel each).
+MAX_PANELS = 16
+
+
+def plot_signals(df: pd.DataFrame, path=None, title: str = ""):
+    """One panel per recorded signal (the first :data:`MAX_PANELS`; the title says how many
+    there are).
+
+    Parameters
+    ----------
+    df : DataFrame
+        Results indexed by time [s].
+    path : path, optional
+        Write the figure to this PNG file.
+    title : str
+        Figure title.
+
+    Returns the matplotlib Figure.
+    """
+    from matplotlib.figure import Figure
+
+    if not isinstance(df, pd.DataFrame) or not len(df.columns):
+        raise ConfigurationError("plot_signals takes a DataFrame with at least one column")
+    columns = list(df.columns[:MAX_PANELS])
+    fig = Figure(figsize=(8, 1.6 + 1.4 * len(columns)))
+    axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)
+    for ax, col in zip(axes[:, 0], columns):
+        ax.plot(df.index, df[col].astype(float), lw=1.0)
+        ax.set_ylabel(col, rotation=0, ha="right", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    more = f" (the first {len(columns)} of {len(df.columns)} signals)" if len(df.columns) > len(columns) else ""
+    if title or more:
+        fig.suptitle(title + more)
+    fig.tight_layout()
+    if path is not None:
+        atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    return fig
+

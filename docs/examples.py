@@ -13,8 +13,10 @@ for the blocks after it. The flags:
     the block takes minutes or needs the ``cross`` extra: its test carries the pytest
     marker of that name (outside the default run; ``python -m pytest -m "slow or cross"``);
 ``needs=reference-fmus``
-    the Modelica Reference FMUs (FMI 2.0) are copied into the folder first (their folder
-    is named by ``PENDULUM_COSIM_REFERENCE_FMUS``; the test skips, saying so, without it);
+    the Modelica Reference FMUs are copied into the folder first, those of FMI 2.0 into the
+    folder itself and those of FMI 3.0 into ``fmi3/`` (their folder, holding ``fmi2/`` and
+    ``fmi3/``, is named by ``PENDULUM_COSIM_REFERENCE_FMUS``; without it the test runs the
+    page's blocks before the first block that needs them and skips the rest, saying so);
 ``checkout``
     the block runs in a copy of the repository (the set-up commands) instead of an empty
     folder;
@@ -155,11 +157,11 @@ def runnable(page_blocks: list[Block]) -> list[list[Block]]:
 
 
 def reference_fmus() -> Path | None:
-    """The folder of the FMI 2.0 Reference FMUs (``PENDULUM_COSIM_REFERENCE_FMUS`` names the
-    folder holding ``fmi2/``), or None."""
+    """The folder of the Reference FMUs (``PENDULUM_COSIM_REFERENCE_FMUS``; it holds ``fmi2/``
+    and ``fmi3/``), or None."""
     env = os.environ.get("PENDULUM_COSIM_REFERENCE_FMUS")
     folder = Path(env) if env else ROOT.parent / "shared" / "reference-fmus"
-    return folder / "fmi2" if (folder / "fmi2").is_dir() else None
+    return folder if (folder / "fmi2").is_dir() and (folder / "fmi3").is_dir() else None
 
 
 def copy_checkout(dest: Path) -> Path:
@@ -219,8 +221,10 @@ def run(todo: list[Block], cwd: Path, timeout: float = 1800) -> dict[str, str]:
     try:
         spec.write_text(json.dumps([vars(b) for b in todo]))
         if any(b.flags.get("needs") == "reference-fmus" for b in todo):
-            for fmu in sorted(reference_fmus().glob("*.fmu")):
-                shutil.copy(fmu, cwd / fmu.name)
+            (cwd / "fmi3").mkdir(exist_ok=True)
+            for version, dest in (("fmi2", cwd), ("fmi3", cwd / "fmi3")):
+                for fmu in sorted((reference_fmus() / version).glob("*.fmu")):
+                    shutil.copy(fmu, dest / fmu.name)
         shims = _shims(spec.parent / "bin")
         env = {**os.environ, "MPLBACKEND": "Agg", "PATH": f"{shims}{os.pathsep}{os.environ.get('PATH', '')}",
                "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}

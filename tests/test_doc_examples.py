@@ -114,7 +114,7 @@ CHECKS = {"offline": _offline, "another-tool-loop": _another_tool_loop, "another
 #: seconds each): run with the slow tests; the README's, the tutorial's and the smaller
 #: pages' examples stay in the default run.
 SLOW_PAGES = {"docs/guide/cosimulation.md", "docs/guide/another-tool.md", "docs/guide/extending.md",
-              "docs/guide/reliability.md", "docs/guide/third-party-fmus.md"}
+              "docs/guide/reliability.md", "docs/guide/third-party-fmus.md", "docs/guide/clocks.md"}
 
 def _cases():
     cases = []
@@ -137,15 +137,22 @@ def run_block(todo, cwd: Path) -> dict:
 
 @pytest.mark.parametrize("todo", _cases())
 def test_the_examples_of_a_page_run(todo, tmp_path):
-    if any(b.flags.get("needs") == "reference-fmus" for b in todo) and examples.reference_fmus() is None:
-        pytest.skip("the Modelica Reference FMUs are absent: PENDULUM_COSIM_REFERENCE_FMUS names their folder")
+    """A page's blocks run in order; without the Reference FMUs, those before the first block
+    that needs them run, and the test skips the rest, saying so."""
     if todo[-1].marker == "cross" and not all(importlib.util.find_spec(m) for m in ("ziglang", "lief")):
         pytest.skip("the cross extra (ziglang, lief) is not installed: pip install -e '.[cross]'")
+    needs = [i for i, b in enumerate(todo) if b.flags.get("needs") == "reference-fmus"]
+    todo, left = (todo[:needs[0]], todo[needs[0]:]) if needs and examples.reference_fmus() is None else (todo, [])
+    absent = "the Modelica Reference FMUs are absent: PENDULUM_COSIM_REFERENCE_FMUS names their folder"
+    if not todo:
+        pytest.skip(absent)
     cwd = examples.copy_checkout(tmp_path / "checkout") if any("checkout" in b.flags for b in todo) else tmp_path
     outputs = run_block(todo, cwd)
     for b in todo:
         if b.name in CHECKS:
             CHECKS[b.name](outputs, cwd)
+    if left:
+        pytest.skip(f"{absent}; not run: {[b.name for b in left]}")
 
 
 # ------------------------------------------------------------------ the pages as a whole
@@ -167,7 +174,7 @@ def test_every_check_has_its_example():
 def test_every_page_of_the_guide_shows_runnable_code_or_says_why():
     """The guide's pages that teach an API carry runnable examples."""
     teaching = ["tutorial.md", "guide/models.md", "guide/plant-fmus.md", "guide/estimators.md",
-                "guide/writing-a-filter.md", "guide/offline.md", "guide/cosimulation.md",
+                "guide/writing-a-filter.md", "guide/offline.md", "guide/cosimulation.md", "guide/clocks.md",
                 "guide/third-party-fmus.md", "guide/another-tool.md", "guide/extending.md",
                 "guide/reliability.md", "guide/experiments.md"]
     for page in teaching:

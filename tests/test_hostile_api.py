@@ -460,3 +460,41 @@ def test_api_refuses_with_a_named_error(fn, words, cp, dm, tmp_path):
 
 def test_the_corpus_is_large():
     assert len(TRIES) >= 60
+
+
+def test_a_recording_beyond_the_process_memory_limit_is_refused_by_name():
+    """Under an address-space limit (``ulimit -v``) a run whose recording would not fit is
+    refused before it starts, with what to do, not a bare MemoryError."""
+    import resource
+    import subprocess
+    import sys
+
+    code = ("from cosim import Cosimulation, Constant\n"
+            "Cosimulation([Constant(f'c{i}', 1.0, float(i)) for i in range(15)], {}).run(1e7, progress=False)\n")
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (2500 * 2**20, 2500 * 2**20))
+
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, preexec_fn=limit)
+    assert proc.returncode != 0
+    assert "ResourceError: recording 10000002 rows x 15 signals in memory needs 1.19 GiB" in proc.stderr
+    assert "stream the rows to a Parquet file" in proc.stderr and "MemoryError" not in proc.stderr
+
+
+def test_running_out_of_memory_in_a_run_is_named_and_keeps_the_rows():
+    from cosim import Component, Constant, Cosimulation
+    from fmu_models.errors import ResourceError
+
+    class Hungry(Component):
+        def __init__(self):
+            super().__init__("hungry", 0.1, outputs=["y"])
+
+        def output(self, t, u):
+            if t > 0.45:
+                raise MemoryError("Unable to allocate 8.00 EiB")
+            return np.array([t])
+
+    with pytest.raises(ResourceError, match=r"ran out of memory at t = 0.5 s \(Unable to allocate 8.00 EiB\); "
+                                            "record fewer signals") as e:
+        Cosimulation([Hungry(), Constant("c", 0.1, 1.0)], {}).run(1.0, progress=False)
+    assert len(e.value.results) == 5

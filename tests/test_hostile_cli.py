@@ -332,7 +332,9 @@ SSP_TRIES = [
     ("source-missing", _ssd('<ssd:Component name="a" source="resources/none.fmu"/>'), "none.fmu"),
     ("not-an-fmu-type", _ssd('<ssd:Component name="a" source="x.ssp" type="application/x-ssp-package"/>'),
      "is not an FMU"),
-    ("nested-system", _ssd('<ssd:System name="inner"/>'), "nested systems"),
+    ("nested-system-bad-connection", _ssd('<ssd:System name="inner"><ssd:Connections><ssd:Connection '
+                                          'startElement="x" startConnector="y" endConnector="z"/></ssd:Connections>'
+                                          '</ssd:System>'), "names a connector that inner.x does not declare"),
     ("bad-xml", "<ssd:SystemStructureDescription <<", "not valid XML"),
     ("not-an-ssd", "<html/>", "not an SSP 1.0"),
     ("experiment-text", _ssd("", '<ssd:DefaultExperiment startTime="soon"/>'), "startTime must be a number"),

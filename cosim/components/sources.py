@@ -14,7 +14,7 @@ from fmu_models.errors import ConfigurationError, UnknownNameError
 from fmu_models.export.signal_fmu import SignalSpec, build_signal_fmu
 from fmu_models.infra.checks import finite, positive, positive_int
 
-from ..core.component import Component, ExportedFMU, bind_protocol
+from ..core.component import Component, ExportedFMU, Port, bind_protocol
 from ..core.native import OP_CONST, OP_PRBS, OP_SWITCH, Op
 
 
@@ -243,24 +243,25 @@ class Table(_Source, kind="table"):
     period : float
     data : DataFrame or str
         Table (or CSV path) with column ``time`` [s] and one column per output port.
-    interpolation : {"zoh", "linear"}
-        Between rows: hold the last row (default) or interpolate linearly. Before the
-        first row the first row holds; after the last, the last.
+    interpolation : {"zoh", "linear"} or mapping
+        Between rows: hold the last row (default) or interpolate linearly; one for all
+        columns or one per column (``{column: mode}``, the others hold). Before the first row
+        the first row holds; after the last, the last.
+    types : mapping, optional
+        FMI type of a column's port (default ``"Float64"``); integer and Boolean columns must
+        hold whole numbers (Booleans 0 or 1) and are held between rows.
     """
 
-    def __init__(self, name, period, data, interpolation="zoh"):
-        if isinstance(data, pd.DataFrame):
-            df = data
-        else:
-            try:
-                df = pd.read_csv(data)
-            except (OSError, ValueError, pd.errors.ParserError) as e:
-                raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
-        if "time" not in df.columns:
-            raise ConfigurationError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
+    def __init__(self, name, period, data, interpolation="zoh", types=None):
+        df = self.read(data, name)
         cols = [str(c) for c in df.columns if c != "time"]
-        super().__init__(name, period, outputs=cols)
-        if interpolation not in ("zoh", "linear"):
+        types = dict(types or {})
+        unknown = sorted(set(types) - set(cols))
+        if unknown:
+            raise UnknownNameError(f"{name}: types names {unknown}, not columns; columns: {', '.join(cols)}")
+        super().__init__(name, period, outputs=[Port(c, types.get(c, "Float64")) for c in cols])
+        modes = interpolation if isinstance(interpolation, dict) else dict.fromkeys(cols, interpolation)
+        if any(m not in ("zoh", "linear") for m in modes.values()):
             raise UnknownNameError(f"{name}: interpolation must be 'zoh' or 'linear', got {interpolation!r}")
         try:
             self.t = df["time"].to_numpy(float)
@@ -273,7 +274,28 @@ class Table(_Source, kind="table"):
             raise ConfigurationError(f"{name}: table time must be non-decreasing")
         if not (np.all(np.isfinite(self.v)) and np.all(np.isfinite(self.t))):
             raise ConfigurationError(f"{name}: table contains NaN or inf")
+        exact = [j for j, p in enumerate(self.output_ports) if p.kind != "real"]
+        bad = [cols[j] for j in exact if np.any(self.v[:, j] != np.round(self.v[:, j]))]
+        if bad:
+            raise ConfigurationError(f"{name}: column {bad[0]!r} ({types[bad[0]]}) holds values that are not whole "
+                                     "numbers")
         self.interpolation = interpolation
+        self._linear = np.array([modes.get(c) == "linear" and j not in exact for j, c in enumerate(cols)])
+
+    @staticmethod
+    def read(data, name: str = "table") -> pd.DataFrame:
+        """``data`` (a DataFrame, or a CSV file's path) as a DataFrame with a ``time`` column
+        (a ConfigurationError naming ``name`` if it cannot be read or has none)."""
+        if isinstance(data, pd.DataFrame):
+            df = data
+        else:
+            try:
+                df = pd.read_csv(data)
+            except (OSError, ValueError, pd.errors.ParserError) as e:
+                raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
+        if "time" not in df.columns:
+            raise ConfigurationError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
+        return df
 
     @classmethod
     def from_scenario(cls, name, table, context):
@@ -284,7 +306,8 @@ class Table(_Source, kind="table"):
         return context.construct(cls, name, table)
 
     def _value(self, t):
-        if self.interpolation == "linear":
-            return np.array([np.interp(t, self.t, self.v[:, j]) for j in range(self.v.shape[1])])
         i = max(np.searchsorted(self.t, t + 1e-12, side="right") - 1, 0)
-        return self.v[i].copy()
+        y = self.v[i].copy()
+        for j in np.flatnonzero(self._linear):
+            y[j] = np.interp(t, self.t, self.v[:, j])
+        return y

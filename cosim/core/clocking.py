@@ -41,6 +41,7 @@ run's log as :attr:`~cosim.core.master.Cosimulation.clock_ticks`).
 """
 from __future__ import annotations
 
+import heapq
 import itertools
 import math
 from array import array
@@ -281,21 +282,20 @@ class ClockPlan:
     def _topological(self) -> list[Component]:
         rank = {c.name: i for i, c in enumerate(self.components)}
         succ = {c.name: set() for c in self.components}
-        indeg = {c.name: 0 for c in self.components}
+        indeg = dict.fromkeys(rank, 0)
         for sn, _, dn, _ in self.links:
             if dn not in succ[sn]:
                 succ[sn].add(dn)
                 indeg[dn] += 1
-        ready = sorted((n for n, d in indeg.items() if d == 0), key=rank.get)
+        ready = [rank[n] for n, d in indeg.items() if d == 0]       # a heap: the first in list order first
         out = []
         while ready:
-            n = ready.pop(0)
-            out.append(self.by_name[n])
-            for m in succ[n]:
+            c = self.components[heapq.heappop(ready)]
+            out.append(c)
+            for m in succ[c.name]:
                 indeg[m] -= 1
                 if indeg[m] == 0:
-                    ready.append(m)
-            ready.sort(key=rank.get)
+                    heapq.heappush(ready, rank[m])
         if len(out) < len(self.components):
             cyc = sorted((n for n, d in indeg.items() if d), key=rank.get)
             hops = ", ".join(f"{sn}.{sp} -> {dn}.{dp}" for sn, sp, dn, dp in self.links if sn in cyc and dn in cyc)
@@ -418,19 +418,25 @@ class ClockBoard:
         return self._label_of[key]
 
     def log_functions(self) -> tuple:
-        """``(log_time, log_label)``: the two appends of :meth:`log` without its limit check,
-        for a component's hot path (it checks :meth:`count` once per instant)."""
-        return self._times.append, self._ids.append
+        """``(log_time, log_label, labels)``: the two appends of :meth:`log` without its limit
+        check, and the log's labels (their ``len`` is :meth:`count`), for a component's hot
+        path (it checks the count once per instant, :meth:`check_room` when above the limit)."""
+        return self._times.append, self._ids.append, self._ids
 
     def count(self) -> int:
         """Activations logged so far."""
         return len(self._ids)
 
-    def log(self, time: float, label: int) -> None:
-        """Log one activation of the clock numbered ``label`` at ``time`` [s]."""
-        if len(self._ids) > MAX_TICKS:
+    def check_room(self) -> None:
+        """Refuse (:class:`~fmu_models.errors.ResourceError`) a run that has logged more than
+        :data:`MAX_TICKS` activations."""
+        if self.count() > MAX_TICKS:
             raise ResourceError(f"more than {MAX_TICKS} clock activations in one run: the log would not fit; "
                                 "shorten the run")
+
+    def log(self, time: float, label: int) -> None:
+        """Log one activation of the clock numbered ``label`` at ``time`` [s]."""
+        self.check_room()
         self._times.append(time)
         self._ids.append(label)
 

@@ -20,10 +20,13 @@ Without a C compiler there is no guard (the crash is then only the signal), whic
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
+from fmu_models.infra.files import private_tempdir
 from fmu_models.infra.native_library import compiled_library
 
 __all__ = [
@@ -36,6 +39,7 @@ __all__ = [
     "stream_started",
     "temp_folder_made",
     "temp_folder_removed",
+    "temporary_folder",
 ]
 
 _SOURCE = Path(__file__).with_name("crash_guard.c")
@@ -137,6 +141,18 @@ def temp_folder_removed(folder: str) -> None:
     if folder in _folders:
         _folders.remove(folder)
         _update()
+
+
+@contextlib.contextmanager
+def temporary_folder(prefix: str) -> Iterator[str]:
+    """A private temporary folder (``prefix``), removed at the end of the block and, if an
+    FMU crashes the process inside it, by the salvage."""
+    with private_tempdir(prefix) as folder:
+        temp_folder_made(folder)
+        try:
+            yield folder
+        finally:
+            temp_folder_removed(folder)
 
 
 def _update() -> None:

@@ -117,6 +117,13 @@ static int block_finite(kstate_t *s) {
     return finite_rows(s->buf, s->ncols, s->jb, s->cap) && finite_rows(s->buf, s->ncols, 0, s->j);
 }
 
+/* The FMI get or set of op (FMI 2.0 Real or, with its nValues nbuf >= 0, FMI 3.0 Float64):
+ * its status. */
+static int transfer(op_t *o) {
+    return o->nbuf < 0 ? ((fmi2_xfer_t)o->fn)(o->inst, o->vr, (size_t)o->nvr, o->buf)
+                       : ((fmi3_xfer_t)o->fn)(o->inst, o->vr, (size_t)o->nvr, o->buf, (size_t)o->nbuf);
+}
+
 /* Run op; 0: go on, else the event. */
 static int run_op(kstate_t *s, op_t *o, double t) {
     double *v = s->values;
@@ -125,15 +132,13 @@ static int run_op(kstate_t *s, op_t *o, double t) {
     case OP_PY:
         return EV_PY;
     case OP_GET:
-        st = o->nbuf < 0 ? ((fmi2_xfer_t)o->fn)(o->inst, o->vr, (size_t)o->nvr, o->buf)
-                         : ((fmi3_xfer_t)o->fn)(o->inst, o->vr, (size_t)o->nvr, o->buf, (size_t)o->nbuf);
+        st = transfer(o);
         if (st > 1) { o->status = st; return EV_FAIL; }
         for (int64_t i = 0; i < o->n; i++) v[o->idx[i]] = o->buf[o->off[i]];
         return 0;
     case OP_SET:
         for (int64_t i = 0; i < o->n; i++) o->buf[o->off[i]] = v[o->idx[i]];
-        st = o->nbuf < 0 ? ((fmi2_xfer_t)o->fn)(o->inst, o->vr, (size_t)o->nvr, o->buf)
-                         : ((fmi3_xfer_t)o->fn)(o->inst, o->vr, (size_t)o->nvr, o->buf, (size_t)o->nbuf);
+        st = transfer(o);
         if (st > 1) { o->status = st; return EV_FAIL; }
         return 0;
     case OP_STEP1:
@@ -226,6 +231,16 @@ static int run_op(kstate_t *s, op_t *o, double t) {
     return 0;
 }
 
+/* Run the ops [start, start + len) of the instant t from s->pc on: 0 when all ran, else the
+ * event (s->at: the op it is about; s->pc stays on it, to resume there). */
+static int run_ops(kstate_t *s, int64_t start, int64_t len, double t) {
+    for (; s->pc < len; s->pc++) {
+        int e = run_op(s, s->ops + start + s->pc, t);
+        if (e) { s->at = start + s->pc; return e; }
+    }
+    return 0;
+}
+
 /* Run from the saved state until an event; the state says where to resume. */
 int kernel_run(kstate_t *s) {
     for (;;) {
@@ -240,11 +255,8 @@ int kernel_run(kstate_t *s) {
         int64_t p = s->pattern[s->k % s->L];
         double t = s->t0 + (double)s->k * s->h;
         if (s->phase == 0) {
-            op_t *ops = s->ops + s->out_start[p];
-            for (int64_t len = s->out_len[p]; s->pc < len; s->pc++) {
-                int e = run_op(s, ops + s->pc, t);
-                if (e) { s->at = s->out_start[p] + s->pc; return e; }
-            }
+            int e = run_ops(s, s->out_start[p], s->out_len[p], t);
+            if (e) return e;
             s->phase = 1;
             s->pc = 0;
         }
@@ -271,11 +283,8 @@ int kernel_run(kstate_t *s) {
         }
         if (s->phase == 2) {
             if (s->k == s->n) { s->phase = 3; continue; }
-            op_t *ops = s->ops + s->upd_start[p];
-            for (int64_t len = s->upd_len[p]; s->pc < len; s->pc++) {
-                int e = run_op(s, ops + s->pc, t);
-                if (e) { s->at = s->upd_start[p] + s->pc; return e; }
-            }
+            int e = run_ops(s, s->upd_start[p], s->upd_len[p], t);
+            if (e) return e;
         }
         s->phase = 0;
         s->pc = 0;

@@ -26,11 +26,15 @@ import numpy as np
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError, ResourceError, UnknownNameError
-from fmu_models.infra.memory import MEMORY_FRACTION, available_memory
+from fmu_models.infra.memory import check_fits
 
 from . import crash_guard
 
-__all__ = ["MemorySink", "ParquetSink", "RowWriter", "partial_path", "select_signals"]
+__all__ = ["RECORD_LESS", "MemorySink", "ParquetSink", "RowWriter", "partial_path", "select_signals"]
+
+#: What to do when a recording does not fit in memory.
+RECORD_LESS = ("record fewer signals (signals=...), a longer output_interval, or stream the rows to a Parquet file "
+               "(run_to_parquet; --stream on the command line)")
 
 
 def select_signals(names: Sequence[str], patterns: Sequence[str] | str | None) -> list[int]:
@@ -85,13 +89,8 @@ class MemorySink:
 
     def __init__(self, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
                  every: int = 1, int_columns: dict | None = None):
-        need = n_rows * (len(columns) + 1) * 8
-        avail = available_memory()
-        if need > MEMORY_FRACTION * avail:
-            raise ResourceError(
-                f"recording {n_rows} rows x {len(columns)} signals in memory needs {need / 2**30:.2f} GiB, "
-                f"more than half of the {avail / 2**30:.2f} GiB available; record fewer signals, "
-                "a longer output_interval, or stream to a Parquet file (run_to_parquet / --stream)")
+        check_fits(n_rows * (len(columns) + 1) * 8, f"recording {n_rows} rows x {len(columns)} signals in memory",
+                   RECORD_LESS)
         self.columns = list(columns)
         self.buffer = np.empty((n_rows, len(columns)))
         self.int_positions, self._int_types = _integer_layout(columns, int_columns)
@@ -110,7 +109,8 @@ class MemorySink:
         times = self.t0 + self.step * (self.every * np.arange(self.n))
         if self.last_time is not None and self.n:
             times[-1] = self.last_time
-        df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(times, name="time"), columns=self.columns)
+        df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(times, name="time"), columns=self.columns,
+                          copy=False)          # the buffer's rows as they are: the run is over, nothing writes it
         for k, (pos, type_name) in enumerate(zip(self.int_positions, self._int_types)):
             col = self.ibuffer[: self.n, k]
             df[self.columns[pos]] = col.view(np.uint64) if type_name == "UInt64" else col.copy()

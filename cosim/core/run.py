@@ -35,14 +35,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fmu_models.errors import ConfigurationError, CosimError, Interrupted
+from fmu_models.errors import ConfigurationError, CosimError, Interrupted, ResourceError
 
 from . import crash_guard
 from .algebraic import LoopSolver
 from .component import StopRequest, bind_protocol
 from .native import build_program, load_kernel
 from .native_loop import BLOCK, NativeLoop
-from .recording import MemorySink, ParquetSink, RowWriter
+from .recording import RECORD_LESS, MemorySink, ParquetSink, RowWriter
 
 __all__ = ["Run"]
 
@@ -114,6 +114,11 @@ class Run:
             if e.results is None:
                 e.results = self.abort()
             raise
+        except MemoryError as e:
+            error = ResourceError(f"the run ran out of memory at t = {self.t0 + self.k * self.h:g} s ({e}); "
+                                  f"{RECORD_LESS}")
+            error.results = self.abort()          # the rows so far, as a failed run keeps them
+            raise error from None
         except Exception as e:
             raise self.failure(e) from e
         finally:

@@ -349,8 +349,16 @@ def write_tables(out: Path, tables: dict) -> None:
                      lambda p, frame=frame: frame.to_csv(p, index=False))
 
 
-def write_summary(out: Path, lines: Sequence[str]) -> Path:
-    """``summary.md`` in the folder ``out``: the ``lines``; returns its path."""
+#: The line a summary of an interrupted campaign starts with.
+PARTIAL_NOTE = ["**PARTIAL RESULTS: the campaign was interrupted; only the tasks that finished are in these tables.**",
+                ""]
+
+
+def write_summary(out: Path, lines: Sequence[str], partial: bool = False) -> Path:
+    """``summary.md`` in the folder ``out``: the ``lines`` (the first one a title; with
+    ``partial``, :data:`PARTIAL_NOTE` after it); returns its path."""
+    if partial:
+        lines = [*lines[:2], *PARTIAL_NOTE, *lines[2:]]
     md = out / "summary.md"
     atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
     return md

@@ -730,11 +730,7 @@ def write_report(result: CampaignResult, settings: Settings, out_dir, path: str 
                                 "consistency.csv": cons, "pcrb.csv": bound, "table3.csv": table})
     _figures(eps, examples, settings, out)
     _limit_figures(eps, bound, settings, out)
-    lines = [f"# Seed 000 campaign ({path} path, configuration: {config})", ""]
-    if partial:
-        lines += ["**PARTIAL RESULTS: the campaign was interrupted; only the tasks that finished "
-                  "are in these tables.**", ""]
-    lines += _regime(settings, config, wall)
+    lines = [f"# Seed 000 campaign ({path} path, configuration: {config})", "", *_regime(settings, config, wall)]
     if len(table):
         lines += _table3_section(table, settings)
     if len(cons):
@@ -748,7 +744,7 @@ def write_report(result: CampaignResult, settings: Settings, out_dir, path: str 
               "with their bands, mean-square errors), consistency.csv (per scenario and filter: RMSE, RMSE / PCRB, "
               "the tests), pcrb.csv (the bound per step), table3.csv.", "",
               "Figures: " + ", ".join(sorted(p.name for p in out.glob("figure*.png")))]
-    return common.write_summary(out, lines)
+    return common.write_summary(out, lines, partial)
 
 
 def _regime(settings: Settings, config: str, wall: float) -> list[str]:

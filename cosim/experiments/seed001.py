@@ -228,29 +228,31 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
     fn = fast_task if path == "fast" else master_task
     return common.run_campaign([(fn, dict(case=c, settings=settings)) for c in CASES],
                                lambda res, wall: _result(res, settings, wall), f"seed001 ({path})", backend, n_jobs,
-                               progress, partial=False)
+                               progress)
 
 
 def _result(res: list, s: Settings, wall: float) -> Seed001Result:
-    """The campaign's result from its tasks' (one per case)."""
+    """The campaign's result from its tasks' (one per case; None: a case that did not finish)."""
+    cases = [c for c, r in zip(CASES, res) if r is not None]
+    res = [r for r in res if r is not None]
     times = [tr for tr in REPORT_TIMES if tr <= s.duration]
     rows = [{"case": case, "time": tr, **{f"{n} |x error| [m]": r[n]["pos_err"][:, j].mean() for n in FILTERS}}
-            for case, r in zip(CASES, res) for j, tr in enumerate(times)]
+            for case, r in zip(cases, res) for j, tr in enumerate(times)]
     cons = []
-    for case, r in zip(CASES, res):
+    for case, r in zip(cases, res):
         cons += [{"case": case, "filter": n,
                   **{f"rmse_{x}": float(np.sqrt(np.mean(r[n]["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
                   **common.pcrb_columns(r[n]["rmse"], r["bound"][1:], STATES), **r[n]["tests"]} for n in FILTERS]
         cons.append(common.pcrb_row({"case": case}, r["bound"], s.runs, STATES))
-    return Seed001Result(pd.DataFrame(rows), dict(zip(CASES, res)), wall, pd.DataFrame(cons))
+    return Seed001Result(pd.DataFrame(rows), dict(zip(cases, res)), wall, pd.DataFrame(cons))
 
 
-def write_report(result: Seed001Result, settings: Settings, out_dir, path: str = "fast") -> Path:
+def write_report(result: Seed001Result, settings: Settings, out_dir, path: str = "fast", partial: bool = False) -> Path:
     """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
 
     Parameters
     ----------
-    result, settings, out_dir, path
+    result, settings, out_dir, path, partial
         As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
         (``result``: what :func:`run` returned).
     """
@@ -277,7 +279,7 @@ def write_report(result: Seed001Result, settings: Settings, out_dir, path: str =
              "consistency.csv: the Monte Carlo standard error of each ratio).", "",
              shown.to_markdown(index=False, floatfmt=".4g"), "", *common.consistency_section(cons, ["case"], s, path),
              "Figures: " + ", ".join(sorted(p.name for p in out.glob("*.png")))]
-    return common.write_summary(out, lines)
+    return common.write_summary(out, lines, partial)
 
 
 def _divergence_rows(summary: dict):
@@ -341,7 +343,7 @@ class Seed001(Experiment, register="seed001"):
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
         """:func:`write_report`."""
-        return write_report(result, settings, out_dir, path)
+        return write_report(result, settings, out_dir, path, partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
         """The errors at the report times, and the divergence of each filter."""

@@ -184,14 +184,17 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
     chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
     tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
              for c in CASES for ch in chunks]
-    return common.run_campaign(tasks, _result, f"seed002 ({path})", backend, n_jobs, progress, partial=False)
+    return common.run_campaign(tasks, _result, f"seed002 ({path})", backend, n_jobs, progress)
 
 
 def _result(res: list, wall: float) -> Seed002Result:
-    """The campaign's result from its tasks' (lists of realisations)."""
-    rows = [r for part in res for r in part]
+    """The campaign's result from its tasks' (lists of realisations; None: a task that did not finish)."""
+    rows = [r for part in res if part is not None for r in part]
     traces = {r["case"]: r.pop("_trace") for r in rows if "_trace" in r}
-    return Seed002Result(pd.DataFrame(rows).sort_values(["case", "run"]).reset_index(drop=True), traces, wall)
+    per_run = pd.DataFrame(rows)
+    if len(per_run):
+        per_run = per_run.sort_values(["case", "run"]).reset_index(drop=True)
+    return Seed002Result(per_run, traces, wall)
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
@@ -211,7 +214,7 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) -> Path:
+def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str, partial: bool = False) -> Path:
     """The tables, the figure of the estimates, ``settings.toml`` and ``summary.md`` into
     ``out_dir``; returns ``summary.md``.
 
@@ -219,24 +222,25 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
     ----------
     per_run, traces, wall
         The fields of :class:`Seed002Result`.
-    settings, out_dir, path
+    settings, out_dir, path, partial
         As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
     """
     table = summary_table(per_run)
     out = common.report_folder(out_dir, to_toml(settings, "seed002"),
                                {"per_run.csv": per_run, "ekf_vs_inputs.csv": table})
-    fig, axes = common.new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
-    for c, (case, df) in enumerate(traces.items()):
-        for j, (x, fed) in enumerate(zip(STATES, ("fusion.alpha", "fusion.alpha_dot", "encoder.phi_dot"))):
-            ax = axes[j, c]
-            ax.plot(df.index, df[fed], ".", ms=1.5, color="0.7", label="EKF input")
-            ax.plot(df.index, df[f"plant.{x}"], "k-", lw=1, label="truth")
-            ax.plot(df.index, df[f"ekf.{x}"], "r--", lw=1, label="EKF")
-            common.style_axes(ax, ylabel=x)
-        axes[0, c].set_title(case)
-        axes[0, c].legend(fontsize=7)
-        axes[-1, c].set_xlabel("time [s]")
-    common.save_figure(fig, out / "estimates.png")
+    if traces:                               # an interrupted run may have none
+        fig, axes = common.new_figure(3, len(traces), figsize=(5 * len(traces), 7), sharex=True)
+        for c, (case, df) in enumerate(traces.items()):
+            for j, (x, fed) in enumerate(zip(STATES, ("fusion.alpha", "fusion.alpha_dot", "encoder.phi_dot"))):
+                ax = axes[j, c]
+                ax.plot(df.index, df[fed], ".", ms=1.5, color="0.7", label="EKF input")
+                ax.plot(df.index, df[f"plant.{x}"], "k-", lw=1, label="truth")
+                ax.plot(df.index, df[f"ekf.{x}"], "r--", lw=1, label="EKF")
+                common.style_axes(ax, ylabel=x)
+            axes[0, c].set_title(case)
+            axes[0, c].legend(fontsize=7)
+            axes[-1, c].set_xlabel("time [s]")
+        common.save_figure(fig, out / "estimates.png")
     agg = per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
                                                "alpha amplitude ratio", "max |i| [A]"]].mean()
     return common.write_summary(out, [
@@ -247,7 +251,8 @@ def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str) 
         table.to_markdown(index=False, floatfmt=".4g"), "",
         "## Loop, offset, lag and attenuation (means; balanced = fraction of realisations)", "",
         agg.to_markdown(floatfmt=".4g"), "",
-        f"The gyroscope offset is {settings.gyro_bias} rad/s.", "", "Figure: estimates.png"])
+        f"The gyroscope offset is {settings.gyro_bias} rad/s.", "", "Figure: estimates.png" if traces else ""],
+        partial)
 
 
 class Seed002(Experiment, register="seed002"):
@@ -262,7 +267,7 @@ class Seed002(Experiment, register="seed002"):
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
         """:func:`write_report`."""
-        return write_report(*result, settings, out_dir, path)
+        return write_report(*result, settings, out_dir, path, partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
         """What the EKF adds over its inputs, and the loop."""

@@ -61,7 +61,8 @@ from ..core.clocking import ClockBoard
 from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, StopRequest, port_kind
 from ..core.native import OP_STEP1, OP_STEP2, OP_STEP3, Op, native_ops
 from .archive import Extraction
-from .clock_run import ClockedRun, initialise
+from .clock_run import clocked_run
+from .clock_timing import ClockedRun, initialise
 from .description import FMUDescription
 from .exchange import Exchange
 from .exchange import no_exchange as _nothing
@@ -497,12 +498,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             if integers is None:
                 integers = np.zeros(len(values), dtype=np.int64)
             board = self._board if self._board is not None else ClockBoard(None, values, integers, {})
-            run = self._run = ClockedRun(self, board, values, inputs, outputs, integers)
-            if self.interface == "cs":
-                return run.cs_functions()
-            if self.interface == "me":
-                return run.me_functions(self.integrator)
-            return run.se_functions()
+            run = self._run = clocked_run(self, board, values, inputs, outputs, integers, self.integrator)
+            return run.output, run.update
         inst = self.instance
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)

@@ -2,9 +2,10 @@
 wrappers: the machinery every FMU of the project goes through (plants, estimators,
 signals).
 
-An FMU's C sources are the generic files in ``fmu_models/export/c`` (``core_api.h``,
-``core_common.h``, the wrapper
-``fmi<version>_wrapper.c`` with ``wrapper_modes.h`` and ``wrapper_common.h``, and
+An FMU's C sources are the generic files in ``fmu_models/export/c`` (the headers every FMU
+includes, :data:`SHARED_HEADERS`: the core API ``core_api.h`` and what the cores share,
+``core_common.h``; what the wrappers share, ``wrapper_modes.h``, ``wrapper_common.h`` and
+``wrapper_functions.h``; then the wrapper ``fmi<version>_wrapper.c`` and the core
 ``<core>_core.h/.c``), a ``core.h`` selecting the core, and the files the caller generates
 (``model_config.h``, :mod:`fmu_models.export.config`, and CasADi's code). They are compiled
 into the FMU's shared library and shipped in ``sources/`` so that another platform can
@@ -33,12 +34,15 @@ from ..infra.compiler import find_compiler, run_compiler
 from ..infra.files import atomic_copy, private_tempdir
 from ..infra.resources import shipped_files
 
-__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "find_compiler", "library_suffix", "pack_fmu", "platform_dir"]
+__all__ = ["CORES", "C_DIR", "FMI_VERSIONS", "SHARED_HEADERS", "find_compiler", "library_suffix", "pack_fmu",
+           "platform_dir"]
 
 #: The generic C files shipped with the package (FMI wrappers and the model cores).
 C_DIR = Path(__file__).parent / "c"
 FMI_VERSIONS = (2, 3)
 CORES = ("plant", "filter", "signal")
+#: The headers of ``C_DIR`` every FMU's sources include (whatever its core and FMI version).
+SHARED_HEADERS = ("core_api.h", "core_common.h", "wrapper_modes.h", "wrapper_common.h", "wrapper_functions.h")
 _FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 _PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 
@@ -86,6 +90,36 @@ def _build_description(identifier: str, c_files: list[str]) -> str:
             "</fmiBuildDescription>\n")
 
 
+def _output_folder(out_dir) -> Path:
+    """``out_dir`` as a folder that exists (created if missing)."""
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
+                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
+                                 ) from None
+    return out_dir
+
+
+def _write_sources(src: Path, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
+                   identity: str) -> tuple[str, list[str]]:
+    """Write the FMU's sources into ``src``: the generic files, ``core.h`` and the generated
+    ones; returns the GUID (a hash of ``identity`` and of every source) and the C files to
+    compile."""
+    generic = [*SHARED_HEADERS, f"{core}_core.h", f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
+    for g, path in zip(generic, shipped_files(__package__, "c", generic)):
+        shutil.copy(path, src / g)
+    (src / "core.h").write_text(f'/* Generated: this FMU\'s model core. */\n#include "{core}_core.h"\n')
+    write_generated(src, _PLACEHOLDER)
+    h = hashlib.sha256(identity.encode())
+    for f in sorted(src.iterdir()):
+        h.update(f.read_bytes())
+    guid = "{" + str(uuid.UUID(h.hexdigest()[:32])) + "}"
+    generated = write_generated(src, guid)          # again, now with the final GUID
+    return guid, [f"{core}_core.c", f"fmi{fmi_version}_wrapper.c", *generated]
+
+
 def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
              model_description: Callable[[str, list[str]], str], out_dir, fingerprint: str,
              file_name: str | None = None) -> Path:
@@ -122,42 +156,25 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
     if core not in CORES:
         raise ConfigurationError(f"core must be one of {CORES}, got {core!r}")
     cc = find_compiler()
-    out_dir = Path(out_dir)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
-                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
-                                 ) from None
-    generic = ["core_api.h", "core_common.h", "wrapper_modes.h", "wrapper_common.h", f"{core}_core.h",
-               f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
+    out_dir = _output_folder(out_dir)
     with private_tempdir(f"{identifier}_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"
         src.mkdir()
-        for g, path in zip(generic, shipped_files(__package__, "c", generic)):
-            shutil.copy(path, src / g)
-        (src / "core.h").write_text(f'/* Generated: this FMU\'s model core. */\n#include "{core}_core.h"\n')
-        write_generated(src, _PLACEHOLDER)
-        h = hashlib.sha256(f"{identifier}|{core}|{fmi_version}|{fingerprint}".encode())
-        for f in sorted(src.iterdir()):
-            h.update(f.read_bytes())
-        guid = "{" + str(uuid.UUID(h.hexdigest()[:32])) + "}"
-        generated = write_generated(src, guid)          # again, now with the final GUID
-        c_files = [f"{core}_core.c", f"fmi{fmi_version}_wrapper.c", *generated]
-        bindir = tmp / "binaries" / platform_dir(fmi_version)
-        bindir.mkdir(parents=True)
-        lib = bindir / (identifier + library_suffix())
+        guid, c_files = _write_sources(src, core, fmi_version, write_generated,
+                                       f"{identifier}|{core}|{fmi_version}|{fingerprint}")
+        lib = tmp / "binaries" / platform_dir(fmi_version) / (identifier + library_suffix())
+        lib.parent.mkdir(parents=True)
         _compile_library(cc, src, c_files, lib, identifier)
         if fmi_version == 3:
             (src / "buildDescription.xml").write_text(_build_description(identifier, c_files))
         (tmp / "modelDescription.xml").write_text(model_description(guid, c_files))
-        fmu = out_dir / (file_name or f"{identifier}.fmu")
         partial = tmp / "packed.fmu"
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as z:
             z.write(tmp / "modelDescription.xml", "modelDescription.xml")
-            z.write(lib, f"binaries/{bindir.name}/{lib.name}")
+            z.write(lib, f"binaries/{lib.parent.name}/{lib.name}")
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
+        fmu = out_dir / (file_name or f"{identifier}.fmu")
         atomic_copy(partial, fmu)
     return fmu

@@ -10,9 +10,8 @@ __all__ = ["MEMORY_FRACTION", "available_memory", "check_fits"]
 MEMORY_FRACTION = 0.5
 
 
-def available_memory() -> int:
-    """Bytes of memory available to this process (Linux: MemAvailable; elsewhere a
-    conservative 2 GiB)."""
+def _system_available() -> int:
+    """The machine's available memory (Linux: MemAvailable; elsewhere a conservative 2 GiB)."""
     try:
         with open("/proc/meminfo") as f:
             for line in f:
@@ -21,6 +20,37 @@ def available_memory() -> int:
     except (OSError, ValueError, IndexError):
         pass
     return 2 * 1024**3
+
+
+def _process_limits() -> list[int]:
+    """What the process may still take under its limits: the address-space limit (``ulimit
+    -v``) less what it maps, and a cgroup v2 memory limit less the group's usage."""
+    out = []
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY:
+            with open("/proc/self/statm") as f:
+                mapped = int(f.read().split()[0]) * resource.getpagesize()
+            out.append(max(soft - mapped, 0))
+    except (ImportError, OSError, ValueError, IndexError):
+        pass
+    try:
+        with open("/sys/fs/cgroup/memory.max") as f:
+            limit = f.read().strip()
+        if limit != "max":
+            with open("/sys/fs/cgroup/memory.current") as f:
+                out.append(max(int(limit) - int(f.read()), 0))
+    except (OSError, ValueError):
+        pass
+    return out
+
+
+def available_memory() -> int:
+    """Bytes of memory available to this process: the machine's available memory, or less
+    where the process's own limits (``ulimit -v``, a cgroup's memory limit) leave less."""
+    return min([_system_available(), *_process_limits()])
 
 
 def check_fits(n_bytes: float, what: str, advice: str = "") -> None:

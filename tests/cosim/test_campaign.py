@@ -249,3 +249,24 @@ def test_bad_limit_settings_are_refused_on_the_command_line(tmp_path, capsys, se
         assert main(["experiment", experiment, "--set", setting, "--out", str(tmp_path / "o")]) == 2
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("name, settings", [("seed001", ["--set", "duration=2"]),
+                                            ("seed002", ["--set", "duration=1"])])
+def test_an_interrupted_campaign_writes_a_partial_report(tmp_path, capsys, monkeypatch, name, settings):
+    """Ctrl-C after the first task: the command line writes the finished part as a report that
+    says PARTIAL, and exits 130."""
+    from cosim.cli import main
+    from cosim.experiments import common
+    from fmu_models.errors import Interrupted
+
+    def first_task_only(tasks, **kw):
+        fn, args = tasks[0]
+        raise Interrupted("interrupted after the first task", [fn(**args)] + [None] * (len(tasks) - 1))
+
+    monkeypatch.setattr(common, "run_tasks", first_task_only)
+    assert main(["experiment", name, "--runs", "2", *settings, "--backend", "serial", "--quiet",
+                 "--out", str(tmp_path / "o")]) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "partial results" in err
+    assert "PARTIAL RESULTS" in (tmp_path / "o" / "summary.md").read_text()

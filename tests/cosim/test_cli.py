@@ -43,7 +43,7 @@ def test_run_shipped_wheel_pendulum_scenario_balances(tmp_path, capsys):
 
 def test_bad_scenario_is_reported(tmp_path, capsys):
     assert main(["run", "nope", "--out", str(tmp_path)]) == 2
-    assert "no scenario file 'nope'" in capsys.readouterr().err
+    assert "no scenario, FMU or SSP file 'nope'" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text("[simulation]\nstop_time = 1\n[[component]]\nname = \"a\"\ntype = \"constant\"\n"
                    "period = 0.1\nvalue = 1\n[connections]\n\"a.b\" = \"c.d\"\n")

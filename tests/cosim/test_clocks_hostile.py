@@ -20,7 +20,7 @@ import pytest
 
 from cosim import Constant, Cosimulation, FMUComponent, MESystem, Sine
 from cosim.core.clocking import MAX_TICKS, ClockTicks
-from cosim.fmi.clock_run import ClockedRun
+from cosim.fmi.clock_se import SEClockedRun
 from cosim.ssp import export_ssp
 from fmu_models.errors import (
     ConfigurationError,
@@ -295,14 +295,14 @@ def test_ctrl_c_in_the_clock_update_callback(clock_lab_fmu, monkeypatch, calls):
     """Ctrl-C while the FMU is inside its clockUpdate callback (Python code called from C):
     kept until fmi3ActivateModelPartition returns, then the run stops as for any Ctrl-C
     (Interrupted, rows so far), the instance ended and freed."""
-    original = ClockedRun._intervals
+    original = SEClockedRun._intervals
 
     def interrupted(self, clocks):
-        if self.in_callback and self._se_now is not None and self._se_now > 0.45:
+        if self.in_callback and self.now is not None and self.now > 0.45:
             os.kill(os.getpid(), signal.SIGINT)              # Ctrl-C arrives inside the callback
         return original(self, clocks)
 
-    monkeypatch.setattr(ClockedRun, "_intervals", interrupted)
+    monkeypatch.setattr(SEClockedRun, "_intervals", interrupted)
     sim = sourced(lab(clock_lab_fmu, "se"))
     with pytest.raises(Interrupted, match=r"interrupted at t = 0.5 s") as e:
         sim.run(1.0)

@@ -285,3 +285,28 @@ solver_step = {H_INT}
     np.testing.assert_allclose(df[COLUMNS].to_numpy(float), ref, rtol=0, atol=1e-12)
     ticks = sc.cosim.clock_ticks
     np.testing.assert_allclose(ticks.time[ticks.clock == "controller.mode"].to_numpy(), modes, rtol=0, atol=1e-12)
+
+
+def test_clocked_outputs_carry_their_start_value_until_their_clock_first_ticks(clock_loop_fmus, tmp_path):
+    """The supervisor's level and alarm count declare start values (initial = exact): until its
+    alarm clock first ticks they are those values, not 0; after, what the FMU gives."""
+    import zipfile
+
+    path = tmp_path / "supervisor.fmu"
+    with zipfile.ZipFile(clock_loop_fmus["supervisor"]) as src, zipfile.ZipFile(path, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                for name in (b'"level"', b'"alarms"'):
+                    start = b'initial="exact" start="0.75"' if name == b'"level"' else b'initial="exact" start="3"'
+                    data = data.replace(b"name=" + name, b"name=" + name + b" " + start)
+            dst.writestr(item, data)
+    df = _master({**clock_loop_fmus, "supervisor": path}).run(STOP)
+    plain = _master(clock_loop_fmus).run(STOP)
+    first = df.index[df["supervisor.alarm"] > 0][0]
+    before, after = df.index < first, df.index >= first
+    assert before.sum() >= 3
+    assert (df.loc[before, "supervisor.level"] == 0.75).all() and (df.loc[before, "supervisor.alarms"] == 3).all()
+    assert (plain.loc[before, "supervisor.level"] == 0).all()
+    assert df["supervisor.alarms"].dtype.kind == "i"
+    np.testing.assert_array_equal(df.loc[after, "supervisor.level"], plain.loc[after, "supervisor.level"])

@@ -276,8 +276,9 @@ def test_open_ssp_refuses_bad_archives_and_cleans_up(tmp_path, seed000_ssp):
     with pytest.raises(FMUError, match="points outside the SSP"):
         with open_ssp(evil):
             pass
-    (evil / "SystemStructure.ssd").write_text(text.replace("<ssd:Elements>", "<ssd:Elements><ssd:System name='sub'/>"))
-    with pytest.raises(ConfigurationError, match="nested systems are not supported"):
+    (evil / "SystemStructure.ssd").write_text(text.replace(
+        "<ssd:Elements>", "<ssd:Elements><ssd:SignalDictionaryReference name='bus' dictionary='d'/>"))
+    with pytest.raises(ConfigurationError, match="element 'bus' is a SignalDictionaryReference, which is not read"):
         with open_ssp(evil):
             pass
     (evil / "SystemStructure.ssd").write_text("<oops")

@@ -3,8 +3,10 @@ rebuilt from their own ``sources/`` with AddressSanitizer and UndefinedBehaviorS
 short run per FMU kind and FMI version, the exact call sequences of every class of failure the
 fuzzing found (cases.c), mutants the fuzzer must catch, and the long runs (``slow``)."""
 import fcntl
+import hashlib
 import shutil
 import tempfile
+from pathlib import Path
 
 import pytest
 from fmpy.validation import validate_fmu
@@ -17,11 +19,23 @@ DEFAULT = [("plant", "cartpole"), ("estimator", "ekf"), ("signal", "sensor")]
 OTHERS = [("plant", "iwp"), ("estimator", "mfiae"), ("signal", "prbs")]
 
 
+def _sources_digest() -> str:
+    """A digest of everything a fuzz build is made from (the package's code and C, the fuzz
+    driver): sessions share a build only if they would build the same one."""
+    root = Path(__file__).parents[2]
+    h = hashlib.sha256()
+    for p in sorted([*(root / "fmu_models").rglob("*"), *(root / "estimators").rglob("*.py"),
+                     *(root / "tests" / "data").rglob("*"), root / "tests" / "testkit" / "fuzz_run.py"]):
+        if p.is_file() and "__pycache__" not in p.parts:
+            h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()[:16]
+
+
 @pytest.fixture(scope="session")
 def fuzz_targets(tmp_path_factory):
     """Build on demand, once per session (the test processes share the builds, one building
     while the others wait): target(label, version) -> fuzz_run.Target."""
-    root = tmp_path_factory.getbasetemp().parent / "fuzz-shared"
+    root = tmp_path_factory.getbasetemp().parent / f"fuzz-shared-{_sources_digest()}"
     tmp = root / "tmp"
     tmp.mkdir(parents=True, exist_ok=True)
     cache = {}

@@ -27,6 +27,14 @@ typedef struct {
     int fresh;       /* Scheduled Execution: the outputs are computed and no input was set since */
 } ClockState;
 
+/* The work memory of CasADi-generated functions (the WORK_* sizes of model_config.h): the
+ * members a CoreWork begins with in a core that calls them. */
+#define CASADI_WORK                \
+    const double *arg[WORK_ARG];   \
+    double *res[WORK_RES];         \
+    long long int iw[WORK_IW + 1]; \
+    double w[WORK_W + 1]
+
 /* the core's data types and capabilities */
 #include "core.h"
 

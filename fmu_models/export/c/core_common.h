@@ -2,10 +2,13 @@
  *
  * Parameter domains (the codes of model_config.h's PARAM_DOMAIN), the checked setting of the
  * Real parameters (group P of model_config.h) and the Integer/Enumeration parameters (group
- * IP: IP_MIN, IP_MAX, IP_WIDTH); and, used at file scope, the core API functions that cores
+ * IP: IP_MIN, IP_MAX, IP_WIDTH), the Real variables every core has (its parameters, the time)
+ * and the checks of a step and of an FMU state; the core API's time functions, alike in every
+ * core (CoreData's `time`); and, used at file scope, the core API functions that cores
  * without some capability implement alike:
  *   CORE_NO_MODEL_EXCHANGE("an estimator FMU")   Co-Simulation only: no states, no derivatives
  *   CORE_NO_BOOLEANS                             no Boolean variables
+ * and those a core implements one variable at a time (CORE_GET_REAL_EACH, CORE_SET_REAL_EACH).
  */
 #ifndef CORE_COMMON_H
 #define CORE_COMMON_H
@@ -21,6 +24,9 @@ enum { DOMAIN_REAL = 0, DOMAIN_POSITIVE = 1, DOMAIN_NONNEGATIVE = 2, DOMAIN_UNIT
 #define IN_GROUP(r, base, n) \
     ((unsigned long long)(r) >= (unsigned long long)(base) && \
      (unsigned long long)(r) < (unsigned long long)(base) + (unsigned long long)(n))
+
+double core_time(const CoreData *d) { return d->time; }
+void core_set_time(CoreData *d, double t) { d->time = t; }
 
 /* Sample instants t0 + k period of a sampled core (plant grid, filter, signal). A time within
  * SAMPLE_TOL periods of an instant counts as that instant, so that a master that adds up
@@ -136,6 +142,38 @@ static inline int check_parameters(const double p[], const long long ip[], char 
     return 0;
 }
 
+/* The value *v of a Real variable that is not in the core's own groups: a parameter (group P)
+ * or the time; else 1 with the message in err (no such variable). */
+static inline int get_common_real(const CoreData *d, unsigned r, double *v, char *err) {
+    if (IN_GROUP(r, VR_P, NP)) *v = d->p[r - VR_P];
+    else if (r == VR_TIME) *v = d->time;
+    else {
+        snprintf(err, ERRLEN, "no Real variable has value reference %u", r);
+        return 1;
+    }
+    return 0;
+}
+
+/* Setting a Real variable that is not in the core's own groups: a parameter (group P: only
+ * before the run, before_run == 1); else 1 with the message in err (a calculated variable, or
+ * no such variable). */
+static inline int set_common_real(CoreData *d, unsigned r, double v, int before_run, char *err) {
+    if (IN_GROUP(r, VR_P, NP)) return set_parameter(d->p, (int)(r - VR_P), v, before_run == 1, err);
+    if (r < N_VARS) snprintf(err, ERRLEN, "%s is calculated and cannot be set", VAR_NAMES[r]);
+    else snprintf(err, ERRLEN, "no Real variable has value reference %u", r);
+    return 1;
+}
+
+/* 0 if the clock state of a core's FMU state is consistent, else 1 with the message in err. */
+static inline int check_clock_state(const ClockState *k, char *err) {
+    if (!(k->n >= 0 && (double)k->n <= MAX_INSTANTS) || (k->active != 0 && k->active != 1)
+        || (k->fresh != 0 && k->fresh != 1)) {
+        snprintf(err, ERRLEN, "the FMU state is invalid: clock state %lld, %d, %d", k->n, k->active, k->fresh);
+        return 1;
+    }
+    return 0;
+}
+
 /* The index k of the Integer parameter with value reference vr (-1 with the message in err if
  * there is none of this width: INT_32 or INT_64 in FMI 3.0, INT_NONE in FMI 2.0). */
 static inline int int_parameter(unsigned vr, int width, char *err) {
@@ -186,6 +224,24 @@ static inline int set_int_parameters(long long ip[], const unsigned vr[], size_t
         double P = (PERIOD_EXPR);                                                                       \
         if (at_instant(t, d->t0, P, d->clk.n)) return 1;                                                \
         return (double)d->clk.n < (t - d->t0) / P ? 2 : 0;                                              \
+    }
+
+/* core_get_real / core_set_real, one variable at a time through the core's
+ *   static int get_real(CoreWork *wk, CoreData *d, unsigned r, double *v, char *err);
+ *   static int set_real(CoreData *d, unsigned r, double v, int before_run, char *err);
+ * (0, or 1 with the message in err: the call stops at the first variable refused). */
+#define CORE_GET_REAL_EACH                                                                             \
+    int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) { \
+        for (size_t i = 0; i < n; i++)                                                                  \
+            if (get_real(wk, d, vr[i], &v[i], err)) return 1;                                           \
+        return 0;                                                                                       \
+    }
+#define CORE_SET_REAL_EACH                                                                             \
+    int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run,     \
+                      char *err) {                                                                      \
+        for (size_t i = 0; i < n; i++)                                                                  \
+            if (set_real(d, vr[i], v[i], before_run, err)) return 1;                                    \
+        return 0;                                                                                       \
     }
 
 #define CORE_NO_MODEL_EXCHANGE(WHAT)                                                                   \

@@ -20,9 +20,6 @@ void core_defaults(CoreData *d) {
     for (int j = 0; j < NY; j++) d->valid[j] = 1;
 }
 
-double core_time(const CoreData *d) { return d->time; }
-void core_set_time(CoreData *d, double t) { d->time = t; }
-
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     double stamp[1];
     if (check_parameters(d->p, NULL, err)) return 1;
@@ -74,44 +71,36 @@ static int candidate(CoreWork *wk, CoreData *d, char *err) {
     return 0;
 }
 
-int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
-    const double *state = d->state, *diag = d->diag;
-    for (size_t i = 0; i < n; i++) {
-        unsigned r = vr[i];
-        if (IN(r, VR_OUT, NOUT)) {
-            if (at_instant(d->time, d->t0, PERIOD, d->kc + 1)) {
-                if (candidate(wk, d, err)) return 1;
-                state = d->cand_state;
-                diag = d->cand_diag;
-            }
-            int k = (int)(r - VR_OUT);
-            const double *base = OUT_SRC[k] == OUT_STATE ? state : OUT_SRC[k] == OUT_DIAG ? diag : d->fixed;
-            v[i] = base[OUT_OFF[k]];
-        } else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
-        else if (IN(r, VR_U, NU)) v[i] = d->u[r - VR_U];
-        else if (IN(r, VR_Y, NY)) v[i] = d->y[r - VR_Y];
-        else if (r == VR_TIME) v[i] = d->time;
-        else FAIL("no Real variable has value reference %u", r);
-    }
+static int get_real(CoreWork *wk, CoreData *d, unsigned r, double *v, char *err) {
+    if (IN(r, VR_OUT, NOUT)) {
+        const double *state = d->state, *diag = d->diag;
+        if (at_instant(d->time, d->t0, PERIOD, d->kc + 1)) {   /* the update of this instant */
+            if (candidate(wk, d, err)) return 1;
+            state = d->cand_state;
+            diag = d->cand_diag;
+        }
+        int k = (int)(r - VR_OUT);
+        const double *base = OUT_SRC[k] == OUT_STATE ? state : OUT_SRC[k] == OUT_DIAG ? diag : d->fixed;
+        *v = base[OUT_OFF[k]];
+    } else if (IN(r, VR_U, NU)) *v = d->u[r - VR_U];
+    else if (IN(r, VR_Y, NY)) *v = d->y[r - VR_Y];
+    else return get_common_real(d, r, v, err);
     return 0;
 }
 
-int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
-    for (size_t i = 0; i < n; i++) {
-        unsigned r = vr[i];
-        if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
-        } else if (IN(r, VR_U, NU)) {
-            if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
-            d->u[r - VR_U] = v[i];
-        } else if (IN(r, VR_Y, NY)) {
-            d->y[r - VR_Y] = v[i];               /* NaN: a missing measurement (if the filter says so) */
-            d->cand_ok = 0;
-        } else if (r < N_VARS) FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
-        else FAIL("no Real variable has value reference %u", r);
-    }
+static int set_real(CoreData *d, unsigned r, double v, int before_run, char *err) {
+    if (IN(r, VR_U, NU)) {
+        if (!isfinite(v)) FAIL("%s: value %g is not finite", VAR_NAMES[r], v);
+        d->u[r - VR_U] = v;
+    } else if (IN(r, VR_Y, NY)) {
+        d->y[r - VR_Y] = v;                      /* NaN: a missing measurement (if the filter says so) */
+        d->cand_ok = 0;
+    } else return set_common_real(d, r, v, before_run, err);
     return 0;
 }
+
+CORE_GET_REAL_EACH
+CORE_SET_REAL_EACH
 
 CORE_INT_PARAMETERS(NULL)          /* no Integer variables */
 
@@ -180,9 +169,7 @@ int core_check(const CoreData *d, char *err) {
     if (check_finite(d->u, NU, "u", err) || check_finite(d->u_prev, NU, "u_prev", err)
         || check_finite(d->state, NSTATE, "state", err))
         return 1;
-    if (!(d->clk.n >= 0 && (double)d->clk.n <= MAX_INSTANTS) || (d->clk.active != 0 && d->clk.active != 1)
-        || (d->clk.fresh != 0 && d->clk.fresh != 1))
-        FAIL("the FMU state is invalid: clock state %lld, %d, %d", d->clk.n, d->clk.active, d->clk.fresh);
+    if (check_clock_state(&d->clk, err)) return 1;
 #ifdef CLOCK_VR
     if (d->clk.n > 0 && d->kc != d->clk.n - 1)
         FAIL("the FMU state is invalid: %lld clock activations, committed instant %lld", d->clk.n, d->kc);

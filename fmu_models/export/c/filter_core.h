@@ -66,10 +66,7 @@ typedef struct {
 } CoreData;
 
 typedef struct {
-    const double *arg[WORK_ARG];
-    double *res[WORK_RES];
-    long long int iw[WORK_IW + 1];
-    double w[WORK_W + 1];
+    CASADI_WORK;
     double status;
 } CoreWork;
 

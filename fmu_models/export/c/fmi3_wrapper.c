@@ -29,9 +29,12 @@
  *     the activation due at t, and the clocked variables are got after it (not after a set
  *     without an activation in between, as the standard says).
  * The clock cannot be deactivated, has no fraction form, and its interval and shift cannot be
- * set; fmi3GetIntervalDecimal and fmi3GetShiftDecimal answer the declared ones. */
+ * set; fmi3GetIntervalDecimal and fmi3GetShiftDecimal answer the declared ones.
+ *
+ * This file is the FMI 3.0 API over the parts both wrappers share: wrapper_common.h (the
+ * state machine, errors, FMU states) and wrapper_functions.h (the calls and functions written
+ * once for both versions). */
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -73,32 +76,24 @@ static void logmsg(Instance *c, fmi3Status st, const char *cat, const char *fn, 
 static void *mem_alloc(Instance *c, size_t size) { (void)c; return calloc(1, size); }
 static void mem_free(Instance *c, void *p) { (void)c; free(p); }
 
-#define STATUS fmi3Status
-#define STATUS_OK fmi3OK
-#define STATUS_ERROR fmi3Error
+#define FMI_VERSION 3
 #define IS_CS(c) ((c)->kind != ME)          /* Co-Simulation or Scheduled Execution */
 #define KIND_CODE(c) ((int)(c)->kind)
 #ifdef CLOCK_VR
 #define CS_EXTRA_STATES B(M_EVENT)
 #endif
-#define ERROR_CALLS "fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions and (values for debugging only) the getters"
 #include "wrapper_common.h"
+#define HANDLE fmi3Instance
+#define REAL fmi3Float64
+#include "wrapper_functions.h"
 
-#define ALLOW(fn, cs, me) ALLOW_IN(inst, fn, cs, me)
-
-/* The states of the FMI 3.0 state machine (Co-Simulation | Model Exchange); after an Error
- * the getters answer with values for debugging only (as FMI 2.0's tables and the Terminated
- * state's note say). */
-#define CS_RUN B(M_STEP)
-/* the Initialized states of a Co-Simulation or Scheduled Execution instance (Event Mode and
- * Clock Activation Mode: the clocked form only) */
+/* The Co-Simulation states of the FMI 3.0 state machine besides wrapper_modes.h's; after an
+ * Error the getters answer with values for debugging only (as FMI 2.0's tables and the
+ * Terminated state's note say). The Initialized states of a Co-Simulation or Scheduled
+ * Execution instance (Event Mode and Clock Activation Mode: the clocked form only): */
 #define CS_INITIALIZED (B(M_STEP) | B(M_EVENT) | B(M_ACTIVATION))
-#define ME_RUN (B(M_EVENT) | B(M_CONT))
 #define GET_CS (B(M_INIT) | CS_INITIALIZED | B(M_TERMINATED) | B(M_ERROR))
-#define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED) | B(M_ERROR))
 #define SET_CS (B(M_INSTANTIATED) | B(M_INIT) | CS_INITIALIZED)
-#define SET_FLOAT_ME (B(M_INSTANTIATED) | B(M_INIT) | ME_RUN)
-#define SET_DISCRETE_ME (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT))   /* not in Continuous-Time Mode */
 
 #ifdef CLOCK_VR
 /* 0 if the variables vr[] may be got (set = 0) or set (set = 1) now, else the call is refused:
@@ -128,19 +123,18 @@ static int clock_gate(Instance *c, const char *fn, const fmi3ValueReference vr[]
 }
 #define CLOCK_GATE(fn, vr, n, set) do { if (clock_gate(c, fn, vr, n, set)) return fmi3Error; } while (0)
 /* Scheduled Execution: after a set, no get before the next activation */
-#define AFTER_SET(n) do { if (c->kind == SE && (n)) c->d.clk.fresh = 0; } while (0)
+static fmi3Status after_set(Instance *c, fmi3Status st, size_t n) {
+    if (st == fmi3OK && c->kind == SE && n) c->d.clk.fresh = 0;
+    return st;
+}
+#define AFTER_SET(st, n) after_set(c, st, n)
 #else
 #define CLOCK_GATE(fn, vr, n, set) do { } while (0)
-#define AFTER_SET(n) do { } while (0)
+#define AFTER_SET(st, n) (st)
 #endif
 
 /* ------------------------------------------------------------------ lifecycle */
 const char *fmi3GetVersion(void) { return fmi3Version; }
-
-fmi3Status fmi3SetDebugLogging(fmi3Instance inst, fmi3Boolean on, size_t n, const fmi3String cats[]) {
-    ALLOW("fmi3SetDebugLogging", ANY, ANY);
-    return set_debug_logging(c, "fmi3SetDebugLogging", on != fmi3False, n, cats);
-}
 
 /* A refused instantiation: the message (if logging is on and there is a callback), NULL. */
 static fmi3Instance refuse_instance(fmi3Boolean logging, fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
@@ -224,35 +218,24 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String name, fmi3String token
 #endif
 }
 
-void fmi3FreeInstance(fmi3Instance inst) {
-    Instance *c = (Instance *)inst;
-    if (!c) return;
-    states_free_all(c);
-    free(c);
-}
-
 fmi3Status fmi3EnterInitializationMode(fmi3Instance inst, fmi3Boolean tolDef, fmi3Float64 tol,
                                        fmi3Float64 start, fmi3Boolean stopDef, fmi3Float64 stop) {
     const char *fn = "fmi3EnterInitializationMode";
     ALLOW(fn, B(M_INSTANTIATED), B(M_INSTANTIATED));
-    if (tolDef && !(tol > 0 && isfinite(tol))) return fail(c, fn, "tolerance %g must be finite and > 0", tol);
-    if (!isfinite(start)) return fail(c, fn, "start time %g is not finite", start);
-    if (stopDef && !(stop >= start)) return fail(c, fn, "stop time %g is not a time at or after the start time %g", stop, start);
-    core_set_time(&c->d, start);
+    if (start_experiment(c, fn, tolDef, tol, start, stopDef, stop) != fmi3OK) return fmi3Error;
     c->mode = M_INIT;
     return fmi3OK;
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance inst) {
     ALLOW("fmi3ExitInitializationMode", B(M_INIT), B(M_INIT));
-    BEGIN_CHANGE(c);
-    if (core_exit_init(&c->wk, &c->d, c->err)) return undo(c, "fmi3ExitInitializationMode");
 #ifdef CLOCK_VR
-    c->mode = c->kind == SE ? M_ACTIVATION : M_EVENT;   /* Co-Simulation: eventModeUsed = true */
+    return exit_initialization(c, "fmi3ExitInitializationMode",   /* Co-Simulation: eventModeUsed = true */
+                               c->kind == SE ? M_ACTIVATION : M_EVENT);
 #else
-    c->mode = c->kind == CS ? M_STEP : M_EVENT;   /* Co-Simulation without Event Mode: Step Mode */
+    return exit_initialization(c, "fmi3ExitInitializationMode",   /* Co-Simulation without Event Mode */
+                               c->kind == CS ? M_STEP : M_EVENT);
 #endif
-    return fmi3OK;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance inst) {
@@ -271,80 +254,35 @@ fmi3Status fmi3Terminate(fmi3Instance inst) {
     return fmi3OK;
 }
 
-fmi3Status fmi3Reset(fmi3Instance inst) {
-    ALLOW("fmi3Reset", ANY, ANY);
-    core_defaults(&c->d);
-    c->mode = M_INSTANTIATED;
-    return fmi3OK;
-}
-
 /* ------------------------------------------------------------------ values */
 /* Every variable is a scalar: nValues must equal nValueReferences. */
 #define VALUES(fn, vr, n, v, nv) do { ARRAY(fn, vr, n); ARRAY(fn, v, nv); \
     if ((nv) != (n)) return fail(c, fn, "nValues = %zu differs from nValueReferences = %zu (all variables are scalars)", \
                                  (size_t)(nv), (size_t)(n)); } while (0)
 
-fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv) {
-    ALLOW("fmi3GetFloat64", GET_CS, GET_ME);
-    VALUES("fmi3GetFloat64", vr, n, v, nv);
-    CLOCK_GATE("fmi3GetFloat64", vr, n, 0);
-    return core(c, "fmi3GetFloat64", core_get_real(&c->wk, &c->d, vr, n, v, c->err));
-}
-
-fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
-    ALLOW("fmi3SetFloat64", SET_CS, SET_FLOAT_ME);
-    VALUES("fmi3SetFloat64", vr, n, v, nv);
-    CLOCK_GATE("fmi3SetFloat64", vr, n, 1);
-    BEGIN_CHANGE(c);
-    if (core_set_real(&c->d, vr, n, v, SET_WHEN(c), c->err)) return undo(c, "fmi3SetFloat64");
-    AFTER_SET(n);
-    return fmi3OK;
-}
+/* The getter GET and setter SET of the type T over the shared calls get and set: clocked
+ * variables only while the clock allows. */
+#define VALUE_FUNCTIONS(T, GET, SET, me_mask, get, set)                                                  \
+    fmi3Status GET(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) {       \
+        ALLOW(#GET, GET_CS, GET_ME);                                                                     \
+        VALUES(#GET, vr, n, v, nv);                                                                      \
+        CLOCK_GATE(#GET, vr, n, 0);                                                                      \
+        return get(c, #GET, vr, n, v);                                                                   \
+    }                                                                                                    \
+    fmi3Status SET(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
+        ALLOW(#SET, SET_CS, me_mask);                                                                    \
+        VALUES(#SET, vr, n, v, nv);                                                                      \
+        CLOCK_GATE(#SET, vr, n, 1);                                                                      \
+        return AFTER_SET(set(c, #SET, vr, n, v), n);                                                     \
+    }
 
 /* Integer-valued variables: the core says which width each has (Enumerations use Int64). */
-#define INT_GET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
-    long long tmp; ALLOW(#fn, GET_CS, GET_ME); VALUES(#fn, vr, n, v, nv); CLOCK_GATE(#fn, vr, n, 0); \
-    for (size_t i = 0; i < n; i++) { \
-        if (core_get_int(&c->d, &vr[i], 1, &tmp, width, c->err)) return core(c, #fn, 1); \
-        v[i] = (T)tmp; } \
-    return fmi3OK; }
-#define INT_SET(fn, T, width) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
-    long long tmp; ALLOW(#fn, SET_CS, SET_DISCRETE_ME); VALUES(#fn, vr, n, v, nv); CLOCK_GATE(#fn, vr, n, 1); \
-    BEGIN_CHANGE(c); \
-    for (size_t i = 0; i < n; i++) { \
-        tmp = (long long)v[i]; \
-        if (core_set_int(&c->d, &vr[i], 1, &tmp, width, BEFORE_RUN(c), c->err)) return undo(c, #fn); } \
-    AFTER_SET(n); \
-    return fmi3OK; }
-INT_GET(fmi3GetInt64, fmi3Int64, INT_64)
-INT_SET(fmi3SetInt64, fmi3Int64, INT_64)
-INT_GET(fmi3GetInt32, fmi3Int32, INT_32)
-INT_SET(fmi3SetInt32, fmi3Int32, INT_32)
-
-fmi3Status fmi3GetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Boolean v[], size_t nv) {
-    ALLOW("fmi3GetBoolean", GET_CS, GET_ME);
-    VALUES("fmi3GetBoolean", vr, n, v, nv);
-    CLOCK_GATE("fmi3GetBoolean", vr, n, 0);
-    for (size_t i = 0; i < n; i++) {
-        int tmp;
-        if (core_get_bool(&c->d, &vr[i], 1, &tmp, c->err)) return core(c, "fmi3GetBoolean", 1);
-        v[i] = tmp ? fmi3True : fmi3False;
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Boolean v[], size_t nv) {
-    ALLOW("fmi3SetBoolean", SET_CS, SET_DISCRETE_ME);
-    VALUES("fmi3SetBoolean", vr, n, v, nv);
-    CLOCK_GATE("fmi3SetBoolean", vr, n, 1);
-    BEGIN_CHANGE(c);
-    for (size_t i = 0; i < n; i++) {
-        int tmp = v[i] ? 1 : 0;
-        if (core_set_bool(&c->d, &vr[i], 1, &tmp, BEFORE_RUN(c), c->err)) return undo(c, "fmi3SetBoolean");
-    }
-    AFTER_SET(n);
-    return fmi3OK;
-}
+INT_CALLS(fmi3Int64, INT_64)
+INT_CALLS(fmi3Int32, INT_32)
+VALUE_FUNCTIONS(fmi3Float64, fmi3GetFloat64, fmi3SetFloat64, SET_REAL_ME, get_reals, set_reals)
+VALUE_FUNCTIONS(fmi3Int64, fmi3GetInt64, fmi3SetInt64, SET_DISCRETE_ME, get_fmi3Int64, set_fmi3Int64)
+VALUE_FUNCTIONS(fmi3Int32, fmi3GetInt32, fmi3SetInt32, SET_DISCRETE_ME, get_fmi3Int32, set_fmi3Int32)
+VALUE_FUNCTIONS(fmi3Boolean, fmi3GetBoolean, fmi3SetBoolean, SET_DISCRETE_ME, get_booleans, set_booleans)
 
 /* Types this FMU has no variables of. */
 #define NONE_GET(fn, T) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
@@ -353,7 +291,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance inst, const fmi3ValueReference vr[], size
 #define NONE_SET(fn, T, ME_MASK) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const T v[], size_t nv) { \
     ALLOW(#fn, SET_CS, ME_MASK); VALUES(#fn, vr, n, v, nv); \
     return n ? fail(c, #fn, "no variable of this type has value reference %u", vr[0]) : fmi3OK; }
-NONE_GET(fmi3GetFloat32, fmi3Float32) NONE_SET(fmi3SetFloat32, fmi3Float32, SET_FLOAT_ME)
+NONE_GET(fmi3GetFloat32, fmi3Float32) NONE_SET(fmi3SetFloat32, fmi3Float32, SET_REAL_ME)
 NONE_GET(fmi3GetInt8, fmi3Int8)       NONE_SET(fmi3SetInt8, fmi3Int8, SET_DISCRETE_ME)
 NONE_GET(fmi3GetUInt8, fmi3UInt8)     NONE_SET(fmi3SetUInt8, fmi3UInt8, SET_DISCRETE_ME)
 NONE_GET(fmi3GetInt16, fmi3Int16)     NONE_SET(fmi3SetInt16, fmi3Int16, SET_DISCRETE_ME)
@@ -433,57 +371,20 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance inst, fmi3ValueReference dep
 }
 
 /* ------------------------------------------------------------------ FMU state */
-fmi3Status fmi3GetFMUState(fmi3Instance inst, fmi3FMUState *s) {
-    ALLOW("fmi3GetFMUState", ANY, ANY);
-    return get_fmu_state(c, "fmi3GetFMUState", s);
-}
-
-fmi3Status fmi3SetFMUState(fmi3Instance inst, fmi3FMUState s) {
-    ALLOW("fmi3SetFMUState", ANY, ANY);
-    return set_fmu_state(c, "fmi3SetFMUState", s);
-}
-
-fmi3Status fmi3FreeFMUState(fmi3Instance inst, fmi3FMUState *s) {
-    ALLOW("fmi3FreeFMUState", ANY, ANY);
-    return free_fmu_state(c, "fmi3FreeFMUState", s);
-}
-
-fmi3Status fmi3SerializedFMUStateSize(fmi3Instance inst, fmi3FMUState s, size_t *size) {
-    ALLOW("fmi3SerializedFMUStateSize", ANY, ANY);
-    return fmu_state_size(c, "fmi3SerializedFMUStateSize", s, size);
-}
-
-fmi3Status fmi3SerializeFMUState(fmi3Instance inst, fmi3FMUState s, fmi3Byte out[], size_t size) {
-    ALLOW("fmi3SerializeFMUState", ANY, ANY);
-    return serialize_fmu_state(c, "fmi3SerializeFMUState", s, out, size);
-}
-
-fmi3Status fmi3DeserializeFMUState(fmi3Instance inst, const fmi3Byte in[], size_t size, fmi3FMUState *s) {
-    ALLOW("fmi3DeserializeFMUState", ANY, ANY);
-    return deserialize_fmu_state(c, "fmi3DeserializeFMUState", in, size, s);
-}
+FMU_STATE_FUNCTIONS(fmi3FMUState, fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState, fmi3SerializedFMUStateSize,
+                    fmi3SerializeFMUState, fmi3DeserializeFMUState)
 
 /* ------------------------------------------------------------------ derivatives */
-#define DERIVATIVE_ARGS(fn) do { \
-    if (!CORE_HAS_DERIVATIVES) return fail(c, fn, "not provided by this FMU"); \
-    ARRAY(fn, unk, nU); ARRAY(fn, kn, nK); ARRAY(fn, seed, nSeed); ARRAY(fn, sens, nSens); } while (0)
-
-fmi3Status fmi3GetDirectionalDerivative(fmi3Instance inst, const fmi3ValueReference unk[], size_t nU,
-                                        const fmi3ValueReference kn[], size_t nK, const fmi3Float64 seed[],
-                                        size_t nSeed, fmi3Float64 sens[], size_t nSens) {
-    const char *fn = "fmi3GetDirectionalDerivative";
-    ALLOW(fn, GET_CS, GET_ME);
-    DERIVATIVE_ARGS(fn);
-    if (nSeed != nK || nSens != nU) return fail(c, fn, "nSeed must equal nKnowns and nSensitivity nUnknowns (scalar variables)");
-    return core(c, fn, core_directional(&c->wk, &c->d, unk, nU, kn, nK, seed, sens, c->err));
-}
-
-fmi3Status fmi3GetAdjointDerivative(fmi3Instance inst, const fmi3ValueReference unk[], size_t nU,
-                                    const fmi3ValueReference kn[], size_t nK, const fmi3Float64 seed[],
-                                    size_t nSeed, fmi3Float64 sens[], size_t nSens) {
-    const char *fn = "fmi3GetAdjointDerivative";
-    ALLOW(fn, GET_CS, GET_ME);
-    DERIVATIVE_ARGS(fn);
+/* The directional derivative, or (adjoint) the adjoint one, of scalar variables. */
+static fmi3Status derivative(Instance *c, const char *fn, int adjoint, const fmi3ValueReference unk[], size_t nU,
+                             const fmi3ValueReference kn[], size_t nK, const fmi3Float64 seed[], size_t nSeed,
+                             fmi3Float64 sens[], size_t nSens) {
+    if (!CORE_HAS_DERIVATIVES) return fail(c, fn, "not provided by this FMU");
+    ARRAY(fn, unk, nU); ARRAY(fn, kn, nK); ARRAY(fn, seed, nSeed); ARRAY(fn, sens, nSens);
+    if (!adjoint) {
+        if (nSeed != nK || nSens != nU) return fail(c, fn, "nSeed must equal nKnowns and nSensitivity nUnknowns (scalar variables)");
+        return core(c, fn, core_directional(&c->wk, &c->d, unk, nU, kn, nK, seed, sens, c->err));
+    }
     /* v^T J: accumulate row by row with the directional derivative of each known */
     if (nSeed != nU || nSens != nK) return fail(c, fn, "nSeed must equal nUnknowns and nSensitivity nKnowns (scalar variables)");
     if (nU > 256) return fail(c, fn, "too many unknowns (at most 256)");
@@ -495,6 +396,14 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance inst, const fmi3ValueReference 
     }
     return fmi3OK;
 }
+#define DERIVATIVE_FUNCTION(fn, adjoint)                                                                        \
+    fmi3Status fn(fmi3Instance inst, const fmi3ValueReference unk[], size_t nU, const fmi3ValueReference kn[],  \
+                  size_t nK, const fmi3Float64 seed[], size_t nSeed, fmi3Float64 sens[], size_t nSens) {        \
+        ALLOW(#fn, GET_CS, GET_ME);                                                                             \
+        return derivative(c, #fn, adjoint, unk, nU, kn, nK, seed, nSeed, sens, nSens);                          \
+    }
+DERIVATIVE_FUNCTION(fmi3GetDirectionalDerivative, 0)
+DERIVATIVE_FUNCTION(fmi3GetAdjointDerivative, 1)
 
 /* ------------------------------------------------------------------ configuration, clocks: not used */
 fmi3Status fmi3EnterConfigurationMode(fmi3Instance inst) {
@@ -532,30 +441,26 @@ fmi3Status fmi3GetShiftDecimal(fmi3Instance inst, const fmi3ValueReference vr[],
     for (size_t i = 0; i < n; i++) sh[i] = 0.0;
     return fmi3OK;
 }
-#define NO_FRACTION(fn, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
-    ALLOW(#fn, ANY, ANY); (void)vr; (void)n; \
-    return fail(c, #fn, "the clock sample has no fraction form (supportsFraction = false)"); }
-#define NO_SETTING(fn, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
-    ALLOW(#fn, ANY, ANY); (void)vr; (void)n; \
-    return fail(c, #fn, "the clock sample is constant: its interval and shift cannot be set"); }
-NO_FRACTION(fmi3GetIntervalFraction, fmi3UInt64 cn[], fmi3UInt64 rs[], fmi3IntervalQualifier q[])
-NO_FRACTION(fmi3GetShiftFraction, fmi3UInt64 cn[], fmi3UInt64 rs[])
-NO_SETTING(fmi3SetIntervalDecimal, const fmi3Float64 iv[])
-NO_SETTING(fmi3SetIntervalFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
-NO_SETTING(fmi3SetShiftDecimal, const fmi3Float64 sh[])
-NO_SETTING(fmi3SetShiftFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
+/* why the other clock functions are refused */
+#define NO_FRACTION "the clock sample has no fraction form (supportsFraction = false)"
+#define NO_SETTING "the clock sample is constant: its interval and shift cannot be set"
 #else
-#define NO_CLOCKS(fn, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
-    ALLOW(#fn, ANY, ANY); (void)vr; (void)n; return fail(c, #fn, "this FMU has no clocks"); }
-NO_CLOCKS(fmi3GetIntervalDecimal, fmi3Float64 iv[], fmi3IntervalQualifier q[])
-NO_CLOCKS(fmi3GetIntervalFraction, fmi3UInt64 cn[], fmi3UInt64 rs[], fmi3IntervalQualifier q[])
-NO_CLOCKS(fmi3GetShiftDecimal, fmi3Float64 sh[])
-NO_CLOCKS(fmi3GetShiftFraction, fmi3UInt64 cn[], fmi3UInt64 rs[])
-NO_CLOCKS(fmi3SetIntervalDecimal, const fmi3Float64 iv[])
-NO_CLOCKS(fmi3SetIntervalFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
-NO_CLOCKS(fmi3SetShiftDecimal, const fmi3Float64 sh[])
-NO_CLOCKS(fmi3SetShiftFraction, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
+#define NO_FRACTION "this FMU has no clocks"
+#define NO_SETTING NO_FRACTION
 #endif
+/* A clock function refused in every state, with the reason why. */
+#define REFUSED(fn, why, ...) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, __VA_ARGS__) { \
+    ALLOW(#fn, ANY, ANY); (void)vr; (void)n; return fail(c, #fn, why); }
+#ifndef CLOCK_VR
+REFUSED(fmi3GetIntervalDecimal, NO_FRACTION, fmi3Float64 iv[], fmi3IntervalQualifier q[])
+REFUSED(fmi3GetShiftDecimal, NO_FRACTION, fmi3Float64 sh[])
+#endif
+REFUSED(fmi3GetIntervalFraction, NO_FRACTION, fmi3UInt64 cn[], fmi3UInt64 rs[], fmi3IntervalQualifier q[])
+REFUSED(fmi3GetShiftFraction, NO_FRACTION, fmi3UInt64 cn[], fmi3UInt64 rs[])
+REFUSED(fmi3SetIntervalDecimal, NO_SETTING, const fmi3Float64 iv[])
+REFUSED(fmi3SetIntervalFraction, NO_SETTING, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
+REFUSED(fmi3SetShiftDecimal, NO_SETTING, const fmi3Float64 sh[])
+REFUSED(fmi3SetShiftFraction, NO_SETTING, const fmi3UInt64 cn[], const fmi3UInt64 rs[])
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance inst) {
     ALLOW("fmi3EvaluateDiscreteStates", ANY, ANY);
@@ -580,61 +485,15 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance inst, fmi3Boolean *need, fmi3Bo
 }
 
 /* ------------------------------------------------------------------ Model Exchange */
-#define NSTATES(fn, x, nx) do { ARRAY(fn, x, nx); \
-    if ((nx) != (size_t)CORE_NX) return fail(c, fn, "nx = %zu, this model has %d states", (size_t)(nx), CORE_NX); \
-    } while (0)
-
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance inst) {
-    ALLOW("fmi3EnterContinuousTimeMode", 0, B(M_EVENT));
-    c->mode = M_CONT;
-    return fmi3OK;
-}
-
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance inst, fmi3Boolean noSetPrior, fmi3Boolean *enter, fmi3Boolean *term) {
-    ALLOW("fmi3CompletedIntegratorStep", 0, B(M_CONT)); (void)noSetPrior;
-    NOT_NULL("fmi3CompletedIntegratorStep", enter);
-    NOT_NULL("fmi3CompletedIntegratorStep", term);
-    *enter = fmi3False; *term = fmi3False;
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetTime(fmi3Instance inst, fmi3Float64 t) {
-    ALLOW("fmi3SetTime", 0, B(M_CONT));
-    if (!isfinite(t)) return fail(c, "fmi3SetTime", "time %g is not finite", t);
-    core_set_time(&c->d, t);
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetContinuousStates(fmi3Instance inst, const fmi3Float64 x[], size_t nx) {
-    ALLOW("fmi3SetContinuousStates", 0, B(M_CONT));
-    NSTATES("fmi3SetContinuousStates", x, nx);
-    return core(c, "fmi3SetContinuousStates", core_set_states(&c->d, x, nx, c->err));
-}
-
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance inst, fmi3Float64 dx[], size_t nx) {
-    ALLOW("fmi3GetContinuousStateDerivatives", 0, GET_ME);
-    NSTATES("fmi3GetContinuousStateDerivatives", dx, nx);
-    return core(c, "fmi3GetContinuousStateDerivatives", core_derivatives(&c->wk, &c->d, dx, c->err));
-}
+COMPLETED_INTEGRATOR_STEP(enter, term)
+GET_DERIVATIVES(fmi3GetContinuousStateDerivatives)
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance inst, fmi3Float64 ind[], size_t ni) {
     ALLOW("fmi3GetEventIndicators", 0, GET_ME); (void)ind;
     return ni ? fail(c, "fmi3GetEventIndicators", "nEventIndicators = %zu, this model has none", ni) : fmi3OK;
 }
 
-fmi3Status fmi3GetContinuousStates(fmi3Instance inst, fmi3Float64 x[], size_t nx) {
-    ALLOW("fmi3GetContinuousStates", 0, GET_ME);
-    NSTATES("fmi3GetContinuousStates", x, nx);
-    core_get_states(&c->d, x);
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance inst, fmi3Float64 nom[], size_t nx) {
-    ALLOW("fmi3GetNominalsOfContinuousStates", 0, GET_ME);
-    NSTATES("fmi3GetNominalsOfContinuousStates", nom, nx);
-    for (size_t i = 0; i < nx; i++) nom[i] = 1.0;
-    return fmi3OK;
-}
+GET_NOMINALS(GET_ME)
 
 /* Instantiated and Event Mode (the standard's tables; also the configuration modes). */
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance inst, size_t *n) {
@@ -693,14 +552,9 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
     *last = t + h;
     return fmi3OK;
 #endif
-    BEGIN_CHANGE(c);
-    if (core_do_step(&c->wk, &c->d, t, h, c->err)) {
-        STATUS st = undo(c, fn);
-        *last = core_time(&c->d);
-        return st;
-    }
+    fmi3Status st = do_step(c, fn, t, h);
     *last = core_time(&c->d);
-    return fmi3OK;
+    return st;
 }
 
 #ifdef CLOCK_VR

@@ -38,9 +38,6 @@ static void plant_jacobians(CoreWork *wk, const CoreData *d, double *A, double *
     mdl_jac_h(wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-double core_time(const CoreData *d) { return d->time; }
-void core_set_time(CoreData *d, double t) { d->time = t; }
-
 int core_exit_init(CoreWork *wk, CoreData *d, char *err) {
     (void)wk;
     if (check_parameters(d->p, d->ip, err)) return 1;
@@ -62,41 +59,36 @@ int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, doub
         } else if (IN(r, VR_Y, NY)) {
             if (!have_y) { plant_h(wk, d, y); have_y = 1; }
             v[i] = y[r - VR_Y];
-        } else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
-        else if (r == VR_STEP) v[i] = d->step_size;
+        } else if (r == VR_STEP) v[i] = d->step_size;
         else if (IN(r, VR_X, NX)) v[i] = d->x[r - VR_X];
         else if (IN(r, VR_U, NU)) v[i] = d->u[r - VR_U];
         else if (IN(r, VR_W, NX)) v[i] = d->w[r - VR_W];
-        else if (r == VR_TIME) v[i] = d->time;
-        else FAIL("no Real variable has value reference %u", r);
+        else if (get_common_real(d, r, &v[i], err)) return 1;
     }
     return 0;
 }
 
-int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
-    for (size_t i = 0; i < n; i++) {
-        unsigned r = vr[i];
-        if (!(IN(r, VR_P, NP) || r == VR_STEP || IN(r, VR_X, NX) || IN(r, VR_DX, NX) || IN(r, VR_U, NU)
-              || IN(r, VR_W, NX) || IN(r, VR_Y, NY)))
-            FAIL("no settable Real variable has value reference %u", r);
-        if (!isfinite(v[i])) FAIL("%s: value %g is not finite", VAR_NAMES[r], v[i]);
-        if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
-        } else if (r == VR_STEP) {
-            if (before_run != 1) FAIL("step_size is fixed: set it before leaving initialization mode");
-            if (!(v[i] > 0)) FAIL("step_size = %g must be > 0", v[i]);
-            d->step_size = v[i];
-        } else if (IN(r, VR_X, NX)) {
-            if (!before_run)      /* 2: Continuous-Time Mode, where a state may be set (FMI 2.0.1) */
-                FAIL("start value of state %s can only be set before leaving initialization mode "
-                     "(use the FMU state or SetContinuousStates)", VAR_NAMES[r]);
-            d->x[r - VR_X] = v[i];
-        } else if (IN(r, VR_U, NU)) d->u[r - VR_U] = v[i];
-        else if (IN(r, VR_W, NX)) d->w[r - VR_W] = v[i];
-        else FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
-    }
+static int set_real(CoreData *d, unsigned r, double v, int before_run, char *err) {
+    if (!(IN(r, VR_P, NP) || r == VR_STEP || IN(r, VR_X, NX) || IN(r, VR_DX, NX) || IN(r, VR_U, NU)
+          || IN(r, VR_W, NX) || IN(r, VR_Y, NY)))
+        FAIL("no settable Real variable has value reference %u", r);
+    if (!isfinite(v)) FAIL("%s: value %g is not finite", VAR_NAMES[r], v);
+    if (r == VR_STEP) {
+        if (before_run != 1) FAIL("step_size is fixed: set it before leaving initialization mode");
+        if (!(v > 0)) FAIL("step_size = %g must be > 0", v);
+        d->step_size = v;
+    } else if (IN(r, VR_X, NX)) {
+        if (!before_run)      /* 2: Continuous-Time Mode, where a state may be set (FMI 2.0.1) */
+            FAIL("start value of state %s can only be set before leaving initialization mode "
+                 "(use the FMU state or SetContinuousStates)", VAR_NAMES[r]);
+        d->x[r - VR_X] = v;
+    } else if (IN(r, VR_U, NU)) d->u[r - VR_U] = v;
+    else if (IN(r, VR_W, NX)) d->w[r - VR_W] = v;
+    else return set_common_real(d, r, v, before_run, err);   /* a parameter, or calculated */
     return 0;
 }
+
+CORE_SET_REAL_EACH
 
 /* integrator is an Enumeration (FMI 3.0: Int64 functions), substeps an Int32 (model_config.h IP_WIDTH) */
 CORE_INT_PARAMETERS(d->ip)

@@ -58,10 +58,7 @@ typedef struct {
 
 /* CasADi work memory for the generated functions. */
 typedef struct {
-    const double *arg[WORK_ARG];
-    double *res[WORK_RES];
-    long long int iw[WORK_IW + 1];
-    double w[WORK_W + 1];
+    CASADI_WORK;
 } CoreWork;
 
 #endif

@@ -20,9 +20,6 @@ void core_defaults(CoreData *d) {
     for (int k = 0; k < NIP; k++) d->ip[k] = IP_DEFAULT[k];
 }
 
-double core_time(const CoreData *d) { return d->time; }
-void core_set_time(CoreData *d, double t) { d->time = t; }
-
 #if SIGNAL_KIND == KIND_NOISE || SIGNAL_KIND == KIND_SENSOR
 /* ------------------------------------------------------------------ the noise generator */
 static uint64_t splitmix64_word(uint64_t seed, uint64_t i) {
@@ -135,35 +132,30 @@ static int on_instant(const CoreData *d, int *on, char *err) {
     return 0;
 }
 
-int core_get_real(CoreWork *wk, CoreData *d, const unsigned vr[], size_t n, double v[], char *err) {
+static int get_real(CoreWork *wk, CoreData *d, unsigned r, double *v, char *err) {
     (void)wk;
-    for (size_t i = 0; i < n; i++) {
-        unsigned r = vr[i];
-        if (IN(r, VR_OUT, NCH)) { if (output(d, (int)(r - VR_OUT), &v[i], err)) return 1; }
-        else if (IN(r, VR_P, NP)) v[i] = d->p[r - VR_P];
-        else if (IN(r, VR_IN, NIN)) v[i] = d->in_set[r - VR_IN];
-        else if (r == VR_TIME) v[i] = d->time;
-        else FAIL("no Real variable has value reference %u", r);
+    if (IN(r, VR_OUT, NCH)) return output(d, (int)(r - VR_OUT), v, err);
+    if (IN(r, VR_IN, NIN)) {
+        *v = d->in_set[r - VR_IN];
+        return 0;
     }
-    return 0;
+    return get_common_real(d, r, v, err);
 }
 
-int core_set_real(CoreData *d, const unsigned vr[], size_t n, const double v[], int before_run, char *err) {
-    for (size_t i = 0; i < n; i++) {
-        unsigned r = vr[i];
-        if (IN(r, VR_P, NP)) {
-            if (set_parameter(d->p, (int)(r - VR_P), v[i], before_run == 1, err)) return 1;
-        } else if (IN(r, VR_IN, NIN)) {
-            /* a sensor passes NaN and inf on; between instants the held sample stays */
-            int on = 1;
-            if (before_run != 1 && on_instant(d, &on, err)) return 1;
-            d->in_set[r - VR_IN] = v[i];
-            if (before_run == 1 || on) d->in[r - VR_IN] = v[i];
-        } else if (r < N_VARS) FAIL("%s is calculated and cannot be set", VAR_NAMES[r]);
-        else FAIL("no Real variable has value reference %u", r);
+static int set_real(CoreData *d, unsigned r, double v, int before_run, char *err) {
+    if (IN(r, VR_IN, NIN)) {
+        /* a sensor passes NaN and inf on; between instants the held sample stays */
+        int on = 1;
+        if (before_run != 1 && on_instant(d, &on, err)) return 1;
+        d->in_set[r - VR_IN] = v;
+        if (before_run == 1 || on) d->in[r - VR_IN] = v;
+        return 0;
     }
-    return 0;
+    return set_common_real(d, r, v, before_run, err);
 }
+
+CORE_GET_REAL_EACH
+CORE_SET_REAL_EACH
 
 CORE_INT_PARAMETERS(d->ip)
 
@@ -190,9 +182,7 @@ int core_check(const CoreData *d, char *err) {
     if (!isfinite(d->time) || !isfinite(d->t0) || !isfinite(d->ts))
         FAIL("the FMU state is invalid: its time is not finite");
     if (check_parameters(d->p, d->ip, err)) return 1;
-    if (!(d->clk.n >= 0 && (double)d->clk.n <= MAX_INSTANTS) || (d->clk.active != 0 && d->clk.active != 1)
-        || (d->clk.fresh != 0 && d->clk.fresh != 1))
-        FAIL("the FMU state is invalid: clock state %lld, %d, %d", d->clk.n, d->clk.active, d->clk.fresh);
+    if (check_clock_state(&d->clk, err)) return 1;
 #if SIGNAL_KIND == KIND_PRBS
     if (d->nbits != 0) {
         int order = (int)d->ip[IP_ORDER];

@@ -1,22 +1,22 @@
 /* pendulum-cosim: the state machine, error handling and FMU states the FMI 2.0 and FMI 3.0
  * wrappers share.
  *
- * Include wrapper_modes.h first, then this after defining: the status type STATUS with values
- * STATUS_OK, STATUS_ERROR; the instance type Instance (fields `mode`, `d` and `undo` (CoreData),
- * `cats` (enabled log categories), `char err[ERRLEN]` and the FMU-state registry `states`,
- * `nstates`, `cap_states`); IS_CS(c), true for a Co-Simulation (or Scheduled Execution)
- * instance; ERROR_CALLS, the functions allowed after an error (for the message); optionally
- * KIND_CODE(c) (0 Model Exchange, 1 Co-Simulation, 2 Scheduled Execution; default from
- * IS_CS) and CS_EXTRA_STATES (states a Co-Simulation instance can also be in: Event Mode in
- * the clocked form; default none); and
+ * Include wrapper_modes.h first, then this after defining: FMI_VERSION (2 or 3: FMI(Status) is
+ * then fmi2Status or fmi3Status, FMI_NAME(Reset) "fmi2Reset" or "fmi3Reset"); the instance type
+ * Instance (fields `mode`, `d` and `undo` (CoreData), `cats` (enabled log categories),
+ * `char err[ERRLEN]` and the FMU-state registry `states`, `nstates`, `cap_states`); IS_CS(c),
+ * true for a Co-Simulation (or Scheduled Execution) instance; optionally KIND_CODE(c) (0 Model
+ * Exchange, 1 Co-Simulation, 2 Scheduled Execution; default from IS_CS) and CS_EXTRA_STATES
+ * (states a Co-Simulation instance can also be in: Event Mode in the clocked form; default
+ * none); and
  *   static void logmsg(Instance *c, STATUS st, const char *cat, const char *fn, const char *text);
  *   static void *mem_alloc(Instance *c, size_t size);   (zeroed memory or NULL)
  *   static void mem_free(Instance *c, void *p);
  *
- * Every FMI function starts with ALLOW(fn, cs_mask, me_mask): the states in which the
- * standard allows it on a Co-Simulation and on a Model Exchange instance (0: not part of
- * that interface). Any other call is answered with Error and a message naming the function
- * and the state; every Error leaves the instance in M_ERROR.
+ * Every FMI function names its instance argument `inst` and starts with ALLOW(fn, cs_mask,
+ * me_mask): the states in which the standard allows it on a Co-Simulation and on a Model
+ * Exchange instance (0: not part of that interface). Any other call is answered with Error and
+ * a message naming the function and the state; every Error leaves the instance in M_ERROR.
  */
 #ifndef WRAPPER_COMMON_H
 #define WRAPPER_COMMON_H
@@ -26,6 +26,20 @@
 #include <stdio.h>
 #include <string.h>
 #include "wrapper_modes.h"
+
+#define FMI_PASTE(v, name) fmi##v##name
+#define FMI_EXPAND(v, name) FMI_PASTE(v, name)
+#define FMI(name) FMI_EXPAND(FMI_VERSION, name)
+#define FMI_STRING(v) #v
+#define FMI_NAME_OF(v, name) "fmi" FMI_STRING(v) #name
+#define FMI_NAME(name) FMI_NAME_OF(FMI_VERSION, name)
+
+#define STATUS FMI(Status)
+#define STATUS_OK FMI(OK)
+#define STATUS_ERROR FMI(Error)
+/* the functions allowed after an error (for the message) */
+#define ERROR_CALLS FMI_NAME(FreeInstance) ", " FMI_NAME(Reset) ", " FMI_NAME(SetDebugLogging) \
+    ", the FMU-state functions and (values for debugging only) the getters"
 
 /* Refuse a call: format the message into c->err, log it, enter the error state. */
 static STATUS fail(Instance *c, const char *fn, const char *fmt, ...) {
@@ -79,7 +93,7 @@ static STATUS refuse_state(Instance *c, const char *fn, unsigned mask, unsigned 
     return fail(c, fn, "not allowed in %s (%s instance)", mode_name(c->mode), kind_name(KIND_CODE(c)));
 }
 
-#define ALLOW_IN(handle, fn, cs_mask, me_mask) Instance *c = (Instance *)(handle); \
+#define ALLOW(fn, cs_mask, me_mask) Instance *c = (Instance *)inst; \
     if (!c) return STATUS_ERROR; \
     do { unsigned m_ = IS_CS(c) ? (cs_mask) : (me_mask), o_ = IS_CS(c) ? (me_mask) : (cs_mask); \
          if (!(B(c->mode) & m_)) return refuse_state(c, fn, m_, o_); } while (0)

@@ -27,6 +27,14 @@ static const char *mode_name(Mode m) {
  * continuous states may be set too), 0 else. */
 #define SET_WHEN(c) (BEFORE_RUN(c) ? 1 : (c)->mode == M_CONT ? 2 : 0)
 
+/* The masks both versions' tables share (Co-Simulation's running state, Model Exchange's); the
+ * getters are allowed after an Error with values for debugging only. */
+#define CS_RUN B(M_STEP)
+#define ME_RUN (B(M_EVENT) | B(M_CONT))
+#define GET_ME (B(M_INIT) | ME_RUN | B(M_TERMINATED) | B(M_ERROR))
+#define SET_REAL_ME (B(M_INSTANTIATED) | B(M_INIT) | ME_RUN)
+#define SET_DISCRETE_ME (B(M_INSTANTIATED) | B(M_INIT) | B(M_EVENT))   /* not in Continuous-Time Mode */
+
 /* Log categories of the modelDescription (<LogCategories>): bits of an instance's `cats`. */
 #define CAT_ERROR 1u
 #define CAT_ALL_BITS CAT_ERROR

@@ -6,7 +6,7 @@
  * checks it makes are cheap: clocks set only in Event Mode, clocked variables exchanged only
  * while "tick" is active (Scheduled Execution: after its partition ran), fmi3DoStep only in
  * Step Mode and never over a tick; a violation is an fmi3Error with a message. */
-#include "../clock_common/clock_base.h"
+#include "../common/clock_base.h"
 
 #define TOKEN "{c10c6e4c-0b3e-4a55-9d1e-clockbench01}"
 #define INTERVAL 0.001
@@ -20,33 +20,8 @@ typedef struct {
 } Bench;
 
 static void *create(fmi3String name, fmi3String token, int kind, fmi3InstanceEnvironment env, fmi3LogMessageCallback cb) {
-    Bench *m;
-    if (!token || strcmp(token, TOKEN)) return NULL;
-    m = (Bench *)calloc(1, sizeof(Bench));
-    if (!m) return NULL;
-    strncpy(m->b.name, name ? name : "?", sizeof(m->b.name) - 1);
-    m->b.kind = kind, m->b.env = env, m->b.logger = cb, m->b.state = S_INSTANTIATED;
-    return m;
-}
-fmi3Instance fmi3InstantiateModelExchange(fmi3String n, fmi3String t, fmi3String r, fmi3Boolean v, fmi3Boolean l,
-                                          fmi3InstanceEnvironment e, fmi3LogMessageCallback cb) {
-    (void)n; (void)t; (void)r; (void)v; (void)l; (void)e; (void)cb; return NULL; }
-fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                         fmi3Boolean log, fmi3Boolean evt, fmi3Boolean early,
-                                         const fmi3ValueReference req[], size_t nreq, fmi3InstanceEnvironment env,
-                                         fmi3LogMessageCallback cb, fmi3IntermediateUpdateCallback upd) {
-    Bench *m;
-    (void)res; (void)vis; (void)log; (void)early; (void)req; (void)nreq; (void)upd;
-    m = (Bench *)create(name, token, KIND_CS, env, cb);
-    if (m && !evt) violation(&m->b, "eventModeUsed = false: an FMU with clocks requires it");
-    return m;
-}
-fmi3Instance fmi3InstantiateScheduledExecution(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                               fmi3Boolean log, fmi3InstanceEnvironment env, fmi3LogMessageCallback cb,
-                                               fmi3ClockUpdateCallback cu, fmi3LockPreemptionCallback lk,
-                                               fmi3UnlockPreemptionCallback ul) {
-    (void)res; (void)vis; (void)log; (void)cu; (void)lk; (void)ul;
-    return create(name, token, KIND_SE, env, cb);
+    if (kind == KIND_ME || !token || strcmp(token, TOKEN)) return NULL;    /* no Model Exchange */
+    return new_instance(sizeof(Bench), name, kind, env, cb);
 }
 void fmi3FreeInstance(fmi3Instance i) { free(i); }
 fmi3Status fmi3Reset(fmi3Instance i) { return unsupported(i, "fmi3Reset"); }
@@ -128,7 +103,7 @@ static bool clocked_ok(Bench *m, const char *fn) {
 }
 fmi3Status fmi3GetFloat64(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv) {
     Bench *m = (Bench *)i;
-    if (!m || !usable(&m->b, "fmi3GetFloat64") || nv != n) return fmi3Error;
+    if (!m || !usable(&m->b, "fmi3GetFloat64") || !scalars(&m->b, "fmi3GetFloat64", n, nv)) return fmi3Error;
     for (size_t k = 0; k < n; k++) {
         if (vr[k] == 0) { v[k] = m->b.time; continue; }
         if (!clocked_ok(m, "fmi3GetFloat64")) return fmi3Error;
@@ -140,7 +115,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance i, const fmi3ValueReference vr[], size_t 
 }
 fmi3Status fmi3SetFloat64(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
     Bench *m = (Bench *)i;
-    if (!m || !usable(&m->b, "fmi3SetFloat64") || nv != n) return fmi3Error;
+    if (!m || !usable(&m->b, "fmi3SetFloat64") || !scalars(&m->b, "fmi3SetFloat64", n, nv)) return fmi3Error;
     for (size_t k = 0; k < n; k++) {
         if (vr[k] != VR_U) return violation(&m->b, "fmi3SetFloat64 of %u", vr[k]);
         if (m->b.kind != KIND_SE && !clocked_ok(m, "fmi3SetFloat64")) return fmi3Error;
@@ -150,7 +125,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance i, const fmi3ValueReference vr[], size_t 
 }
 fmi3Status fmi3GetInt32(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Int32 v[], size_t nv) {
     Bench *m = (Bench *)i;
-    if (!m || !usable(&m->b, "fmi3GetInt32") || nv != n) return fmi3Error;
+    if (!m || !usable(&m->b, "fmi3GetInt32") || !scalars(&m->b, "fmi3GetInt32", n, nv)) return fmi3Error;
     for (size_t k = 0; k < n; k++) {
         if (vr[k] != VR_N || !clocked_ok(m, "fmi3GetInt32")) return violation(&m->b, "fmi3GetInt32 of %u", vr[k]);
         v[k] = m->n;
@@ -167,16 +142,7 @@ fmi3Status fmi3Terminate(fmi3Instance i) {
 }
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Float64 iv[], fmi3IntervalQualifier q[]) {
     (void)vr; for (size_t k = 0; k < n; k++) iv[k] = INTERVAL, q[k] = fmi3IntervalUnchanged; (void)i; return fmi3OK; }
-fmi3Status fmi3GetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c[], fmi3UInt64 r[], fmi3IntervalQualifier q[]) {
-    (void)vr; (void)n; (void)c; (void)r; (void)q; return unsupported(i, "fmi3GetIntervalFraction"); }
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const fmi3Float64 iv[]) {
-    (void)vr; (void)n; (void)iv; return unsupported(i, "fmi3SetIntervalDecimal"); }
-fmi3Status fmi3SetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c[], const fmi3UInt64 r[]) {
-    (void)vr; (void)n; (void)c; (void)r; return unsupported(i, "fmi3SetIntervalFraction"); }
-fmi3Status fmi3GetShiftDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Float64 s[]) {
-    (void)vr; (void)n; (void)s; return unsupported(i, "fmi3GetShiftDecimal"); }
-fmi3Status fmi3GetShiftFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c[], fmi3UInt64 r[]) {
-    (void)vr; (void)n; (void)c; (void)r; return unsupported(i, "fmi3GetShiftFraction"); }
+DECIMAL_INTERVAL_STUBS
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance i) { return unsupported(i, "fmi3EnterContinuousTimeMode"); }
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance i, fmi3Boolean a, fmi3Boolean *b, fmi3Boolean *c) {
     (void)a; (void)b; (void)c; return unsupported(i, "fmi3CompletedIntegratorStep"); }

@@ -1,7 +1,7 @@
 /* ClockLab: a hand-written FMI 3.0 test FMU with clocks of every kind, with Model
  * Exchange, Co-Simulation (Event Mode) and Scheduled Execution interfaces; independent of
  * pendulum-cosim's code. It checks the call rules of the FMI 3.0 standard for clocks that
- * it receives (see ../clock_common/clock_base.h for how a violation is reported).
+ * it receives (see ../common/clock_base.h for how a violation is reported).
  *
  * Clocks (value reference, timing):
  *   1 cConst     constant, every 0.1 s (counter form 1/10)       partition: constCount++,
@@ -37,7 +37,8 @@
  * activation or the time event, never after eventHandlingNeeded without Event Mode
  * between; no get after a set in Step Mode without fmi3DoStep between; SE: partitions
  * activated once per time, in priority order, at increasing times. */
-#include "../clock_common/clock_base.h"
+#define WITH_MODEL_EXCHANGE
+#include "../common/clock_base.h"
 
 #define TOKEN "{4b0c9a52-7e1d-4d8e-9c3a-clocklab0001}"
 enum { C_CONST, C_FIXED, C_FIXEDP, C_TUNABLE, C_CHANGING, C_COUNTDOWN, C_TRIGGER, C_OUT, C_ALARM, N_CLOCKS };
@@ -97,13 +98,8 @@ static void *create(fmi3String name, fmi3String token, int kind, fmi3InstanceEnv
                     fmi3LogMessageCallback logger) {
     Lab *m;
     if (!token || strcmp(token, TOKEN)) return NULL;
-    m = (Lab *)calloc(1, sizeof(Lab));
+    m = (Lab *)new_instance(sizeof(Lab), name, kind, env, logger);
     if (!m) return NULL;
-    strncpy(m->b.name, name ? name : "?", sizeof(m->b.name) - 1);
-    m->b.kind = kind;
-    m->b.env = env;
-    m->b.logger = logger;
-    m->b.state = S_INSTANTIATED;
     m->uRate = 1.0;
     m->pFixedInterval = 0.3;
     m->pFixedShift = 0.2;
@@ -119,40 +115,6 @@ static void *create(fmi3String name, fmi3String token, int kind, fmi3InstanceEnv
     m->se_time = -INFINITY;
     m->se_last_priority = -1;
     call_log(&m->b, "Instantiate kind=%d", kind);
-    return m;
-}
-
-fmi3Instance fmi3InstantiateModelExchange(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                          fmi3Boolean log, fmi3InstanceEnvironment env, fmi3LogMessageCallback cb) {
-    (void)res; (void)vis; (void)log;
-    return create(name, token, KIND_ME, env, cb);
-}
-
-fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                         fmi3Boolean log, fmi3Boolean evt, fmi3Boolean early,
-                                         const fmi3ValueReference req[], size_t nreq, fmi3InstanceEnvironment env,
-                                         fmi3LogMessageCallback cb, fmi3IntermediateUpdateCallback upd) {
-    Lab *m;
-    (void)res; (void)vis; (void)log; (void)req; (void)nreq; (void)upd;
-    m = (Lab *)create(name, token, KIND_CS, env, cb);
-    if (!m) return NULL;
-    m->b.event_mode_used = evt;
-    m->b.early_return_allowed = early;
-    call_log(&m->b, "eventModeUsed=%d earlyReturnAllowed=%d", (int)evt, (int)early);
-    if (!evt) violation(&m->b, "fmi3InstantiateCoSimulation with eventModeUsed = false: an FMU with clocks requires it");
-    return m;
-}
-
-fmi3Instance fmi3InstantiateScheduledExecution(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                               fmi3Boolean log, fmi3InstanceEnvironment env, fmi3LogMessageCallback cb,
-                                               fmi3ClockUpdateCallback cu, fmi3LockPreemptionCallback lock,
-                                               fmi3UnlockPreemptionCallback unlock) {
-    Lab *m;
-    (void)res; (void)vis; (void)log; (void)lock; (void)unlock;
-    m = (Lab *)create(name, token, KIND_SE, env, cb);
-    if (!m) return NULL;
-    m->b.clock_update = cu;
-    if (!cu) violation(&m->b, "fmi3InstantiateScheduledExecution without a clockUpdate callback");
     return m;
 }
 
@@ -462,43 +424,70 @@ static bool get_rules(Lab *m, const char *fn) {
     return true;
 }
 
-fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv) {
+/* The instance of a getter (set false) or setter of the values of vr[n] (NULL after refusing
+ * the call): a getter follows the get rules and each variable's clock; a setter checks each
+ * variable's clock as it sets it. */
+static Lab *value_call(fmi3Instance inst, const char *fn, bool set, const fmi3ValueReference vr[], size_t n, size_t nv) {
     Lab *m = (Lab *)inst;
-    if (!m || !get_rules(m, "fmi3GetFloat64")) return fmi3Error;
-    if (nv != n) return violation(&m->b, "fmi3GetFloat64 with nValues %zu for %zu scalars", nv, n);
-    for (size_t i = 0; i < n; i++) {
-        if (!clocked_access(m, vr[i], false, "fmi3GetFloat64")) return fmi3Error;
-        bool se = m->b.kind == KIND_SE, live = m->active[C_CONST] && !se;
-        switch (vr[i]) {
-        case VR_TIME: v[i] = m->b.time; break;
-        case VR_UCONST: v[i] = m->uConst; break;
-        case VR_YCONST: v[i] = se ? m->yConstLast : 2 * m->uConst + m->constCount; break;
-        case VR_TRIGVALUE: v[i] = m->trigValue; break;
-        case VR_TRIGSUM: v[i] = se ? m->trigSumPrev : m->trigSumPrev + m->trigValue; break;
-        case VR_OUTVALUE: v[i] = se ? m->yConstLast : (live ? 2 * m->uConst + m->constCount : m->outValueLast); break;
-        case VR_X: v[i] = m->x; break;
-        case VR_URATE: v[i] = m->uRate; break;
-        case VR_LASTTIME: v[i] = m->lastTime; break;
-        case VR_FIXEDSEEN: v[i] = m->fixedSeen; break;
-        case VR_FIXEDVALUE: v[i] = se ? m->fixedValueLast : (live ? 2 * m->uConst + m->constCount : m->yConstLast) + 1; break;
-        case VR_PFIXEDINTERVAL: v[i] = m->pFixedInterval; break;
-        case VR_PFIXEDSHIFT: v[i] = m->pFixedShift; break;
-        case VR_PCOUNTDOWN: v[i] = m->pCountdown; break;
-        case VR_PTHRESHOLD: v[i] = m->pThreshold; break;
-        case VR_PTIMEEVENT: v[i] = m->pTimeEvent; break;
-        case VR_DERX: v[i] = m->uRate; break;
-        case VR_Z: v[i] = m->pThreshold - m->x; break;
-        case VR_PFAILAT: v[i] = m->pFailAt; break;
-        default: return violation(&m->b, "fmi3GetFloat64 of value reference %u, not a Float64", vr[i]);
-        }
-    }
-    return fmi3OK;
+    if (!m || !(set ? usable(&m->b, fn) : get_rules(m, fn)) || !scalars(&m->b, fn, n, nv)) return NULL;
+    for (size_t i = 0; i < n && !set; i++)
+        if (!clocked_access(m, vr[i], false, fn)) return NULL;
+    return m;
 }
 
+/* The Float64 variable vr into *v; false if there is none. */
+static bool float64_of(Lab *m, fmi3ValueReference vr, fmi3Float64 *v) {
+    bool se = m->b.kind == KIND_SE, live = m->active[C_CONST] && !se;
+    switch (vr) {
+    case VR_TIME: *v = m->b.time; break;
+    case VR_UCONST: *v = m->uConst; break;
+    case VR_YCONST: *v = se ? m->yConstLast : 2 * m->uConst + m->constCount; break;
+    case VR_TRIGVALUE: *v = m->trigValue; break;
+    case VR_TRIGSUM: *v = se ? m->trigSumPrev : m->trigSumPrev + m->trigValue; break;
+    case VR_OUTVALUE: *v = se ? m->yConstLast : (live ? 2 * m->uConst + m->constCount : m->outValueLast); break;
+    case VR_X: *v = m->x; break;
+    case VR_URATE: *v = m->uRate; break;
+    case VR_LASTTIME: *v = m->lastTime; break;
+    case VR_FIXEDSEEN: *v = m->fixedSeen; break;
+    case VR_FIXEDVALUE: *v = se ? m->fixedValueLast : (live ? 2 * m->uConst + m->constCount : m->yConstLast) + 1; break;
+    case VR_PFIXEDINTERVAL: *v = m->pFixedInterval; break;
+    case VR_PFIXEDSHIFT: *v = m->pFixedShift; break;
+    case VR_PCOUNTDOWN: *v = m->pCountdown; break;
+    case VR_PTHRESHOLD: *v = m->pThreshold; break;
+    case VR_PTIMEEVENT: *v = m->pTimeEvent; break;
+    case VR_DERX: *v = m->uRate; break;
+    case VR_Z: *v = m->pThreshold - m->x; break;
+    case VR_PFAILAT: *v = m->pFailAt; break;
+    default: return false;
+    }
+    return true;
+}
+
+/* The Int32 variable vr into *v; false if there is none. */
+static bool int32_of(Lab *m, fmi3ValueReference vr, fmi3Int32 *v) {
+    const int32_t *counts[] = {&m->constCount, &m->fixedCount, &m->fixedPCount, &m->tunableCount, &m->changingCount,
+                               &m->countdownCount};      /* VR_CONSTCOUNT .. VR_COUNTDOWNCOUNT */
+    if (vr >= VR_CONSTCOUNT && vr <= VR_COUNTDOWNCOUNT) *v = *counts[vr - VR_CONSTCOUNT];
+    else if (vr == VR_TRIGCOUNT) *v = m->trigCount;
+    else if (vr == VR_ALARMCOUNT) *v = m->alarmCount;
+    else if (vr == VR_VIOLATIONS) *v = m->b.violations;
+    else if (vr == VR_TIMEEVENTS) *v = m->timeEvents;
+    else if (vr == VR_UMODE || vr == VR_MODESEEN) *v = m->uMode;
+    else return false;
+    return true;
+}
+
+#define GETTER(fn, T, value_of, what) fmi3Status fn(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, T v[], size_t nv) { \
+    Lab *m = value_call(inst, #fn, false, vr, n, nv);                                                            \
+    for (size_t i = 0; m && i < n; i++)                                                                          \
+        if (!value_of(m, vr[i], &v[i])) return violation(&m->b, #fn " of value reference %u, not " what, vr[i]); \
+    return m ? fmi3OK : fmi3Error; }
+GETTER(fmi3GetFloat64, fmi3Float64, float64_of, "a Float64")
+GETTER(fmi3GetInt32, fmi3Int32, int32_of, "an Int32")
+
 fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
-    Lab *m = (Lab *)inst;
-    if (!m || !usable(&m->b, "fmi3SetFloat64")) return fmi3Error;
-    if (nv != n) return violation(&m->b, "fmi3SetFloat64 with nValues %zu for %zu scalars", nv, n);
+    Lab *m = value_call(inst, "fmi3SetFloat64", true, vr, n, nv);
+    if (!m) return fmi3Error;
     for (size_t i = 0; i < n; i++) {
         bool param = (vr[i] >= VR_PFIXEDINTERVAL && vr[i] <= VR_PTIMEEVENT) || vr[i] == VR_PFAILAT;
         if (param && m->b.state != S_INSTANTIATED && m->b.state != S_INIT)
@@ -526,34 +515,9 @@ fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
     return fmi3OK;
 }
 
-fmi3Status fmi3GetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Int32 v[], size_t nv) {
-    Lab *m = (Lab *)inst;
-    if (!m || !get_rules(m, "fmi3GetInt32")) return fmi3Error;
-    if (nv != n) return violation(&m->b, "fmi3GetInt32 with nValues %zu for %zu scalars", nv, n);
-    for (size_t i = 0; i < n; i++) {
-        if (!clocked_access(m, vr[i], false, "fmi3GetInt32")) return fmi3Error;
-        switch (vr[i]) {
-        case VR_CONSTCOUNT: v[i] = m->constCount; break;
-        case VR_FIXEDCOUNT: v[i] = m->fixedCount; break;
-        case VR_FIXEDPCOUNT: v[i] = m->fixedPCount; break;
-        case VR_TUNABLECOUNT: v[i] = m->tunableCount; break;
-        case VR_CHANGINGCOUNT: v[i] = m->changingCount; break;
-        case VR_COUNTDOWNCOUNT: v[i] = m->countdownCount; break;
-        case VR_TRIGCOUNT: v[i] = m->trigCount; break;
-        case VR_ALARMCOUNT: v[i] = m->alarmCount; break;
-        case VR_VIOLATIONS: v[i] = m->b.violations; break;
-        case VR_TIMEEVENTS: v[i] = m->timeEvents; break;
-        case VR_UMODE: case VR_MODESEEN: v[i] = m->uMode; break;
-        default: return violation(&m->b, "fmi3GetInt32 of value reference %u, not an Int32", vr[i]);
-        }
-    }
-    return fmi3OK;
-}
-
 fmi3Status fmi3SetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Int32 v[], size_t nv) {
-    Lab *m = (Lab *)inst;
-    if (!m || !usable(&m->b, "fmi3SetInt32")) return fmi3Error;
-    if (nv != n) return violation(&m->b, "fmi3SetInt32 with nValues %zu for %zu scalars", nv, n);
+    Lab *m = value_call(inst, "fmi3SetInt32", true, vr, n, nv);
+    if (!m) return fmi3Error;
     for (size_t i = 0; i < n; i++) {
         if (vr[i] != VR_UMODE) return violation(&m->b, "fmi3SetInt32 of value reference %u, not an Int32 input", vr[i]);
         if (m->b.state != S_INSTANTIATED && m->b.state != S_INIT && m->b.state != S_EVENT && m->b.state != S_ACTIVATION)
@@ -644,25 +608,26 @@ static fmi3Status leave_event_mode(Lab *m, const char *fn) {
     return fmi3OK;
 }
 
-fmi3Status fmi3EnterStepMode(fmi3Instance inst) {
+/* Event Mode left for the state `to` by fn, which only an instance of interface `kind` may call
+ * (`wrong`: the violation of another). */
+static fmi3Status leave_to(fmi3Instance inst, const char *fn, int kind, const char *wrong, int to) {
     Lab *m = (Lab *)inst;
-    if (!m || m->b.kind != KIND_CS) return m ? violation(&m->b, "fmi3EnterStepMode in Model Exchange") : fmi3Error;
-    if (!in_states(&m->b, "fmi3EnterStepMode", M(S_EVENT))) return fmi3Error;
-    call_log(&m->b, "EnterStepMode t=%.17g", m->b.time);
-    if (leave_event_mode(m, "fmi3EnterStepMode") != fmi3OK) return fmi3Error;
-    m->b.state = S_STEP;
+    if (!m || m->b.kind != kind) return m ? violation(&m->b, "%s", wrong) : fmi3Error;
+    if (!in_states(&m->b, fn, M(S_EVENT))) return fmi3Error;
+    call_log(&m->b, "%s t=%.17g", fn + strlen("fmi3"), m->b.time);
+    if (leave_event_mode(m, fn) != fmi3OK) return fmi3Error;
+    m->b.state = to;
     m->set_since_step = false;
     return fmi3OK;
 }
 
+fmi3Status fmi3EnterStepMode(fmi3Instance inst) {
+    return leave_to(inst, "fmi3EnterStepMode", KIND_CS, "fmi3EnterStepMode in Model Exchange", S_STEP);
+}
+
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance inst) {
-    Lab *m = (Lab *)inst;
-    if (!m || m->b.kind != KIND_ME) return m ? violation(&m->b, "fmi3EnterContinuousTimeMode outside Model Exchange") : fmi3Error;
-    if (!in_states(&m->b, "fmi3EnterContinuousTimeMode", M(S_EVENT))) return fmi3Error;
-    call_log(&m->b, "EnterContinuousTimeMode t=%.17g", m->b.time);
-    if (leave_event_mode(m, "fmi3EnterContinuousTimeMode") != fmi3OK) return fmi3Error;
-    m->b.state = S_CONT;
-    return fmi3OK;
+    return leave_to(inst, "fmi3EnterContinuousTimeMode", KIND_ME, "fmi3EnterContinuousTimeMode outside Model Exchange",
+                    S_CONT);
 }
 
 /* ---------------------------------------------------------------- Co-Simulation */
@@ -710,56 +675,12 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
 }
 
 /* ---------------------------------------------------------------- Model Exchange */
-fmi3Status fmi3SetTime(fmi3Instance inst, fmi3Float64 t) {
-    Lab *m = (Lab *)inst;
-    if (!m || !in_states(&m->b, "fmi3SetTime", M(S_CONT) | M(S_EVENT))) return fmi3Error;
-    m->b.time = t;
-    return fmi3OK;
-}
-fmi3Status fmi3SetContinuousStates(fmi3Instance inst, const fmi3Float64 x[], size_t n) {
-    Lab *m = (Lab *)inst;
-    if (!m || !in_states(&m->b, "fmi3SetContinuousStates", M(S_CONT) | M(S_EVENT))) return fmi3Error;
-    if (n != 1) return violation(&m->b, "fmi3SetContinuousStates with %zu states (1)", n);
-    m->x = x[0];
-    return fmi3OK;
-}
-fmi3Status fmi3GetContinuousStates(fmi3Instance inst, fmi3Float64 x[], size_t n) {
-    Lab *m = (Lab *)inst;
-    if (!m || !usable(&m->b, "fmi3GetContinuousStates")) return fmi3Error;
-    if (n != 1) return violation(&m->b, "fmi3GetContinuousStates with %zu states (1)", n);
-    x[0] = m->x;
-    return fmi3OK;
-}
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance inst, fmi3Float64 d[], size_t n) {
-    Lab *m = (Lab *)inst;
-    if (!m || !usable(&m->b, "fmi3GetContinuousStateDerivatives")) return fmi3Error;
-    if (n != 1) return violation(&m->b, "fmi3GetContinuousStateDerivatives with %zu states (1)", n);
-    d[0] = m->uRate;
-    return fmi3OK;
-}
-fmi3Status fmi3GetEventIndicators(fmi3Instance inst, fmi3Float64 z[], size_t n) {
-    Lab *m = (Lab *)inst;
-    if (!m || !usable(&m->b, "fmi3GetEventIndicators")) return fmi3Error;
-    if (n != 1) return violation(&m->b, "fmi3GetEventIndicators with %zu indicators (1)", n);
-    z[0] = m->pThreshold - m->x;
-    return fmi3OK;
-}
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance inst, fmi3Float64 x[], size_t n) {
-    Lab *m = (Lab *)inst;
-    if (!m || !usable(&m->b, "fmi3GetNominalsOfContinuousStates")) return fmi3Error;
-    for (size_t i = 0; i < n; i++) x[i] = 1.0;
-    return fmi3OK;
-}
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance inst, size_t *n) { (void)inst; *n = 1; return fmi3OK; }
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance inst, size_t *n) { (void)inst; *n = 1; return fmi3OK; }
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance inst, fmi3Boolean nsp, fmi3Boolean *enter, fmi3Boolean *term) {
-    Lab *m = (Lab *)inst;
-    (void)nsp;
-    if (!m || !in_states(&m->b, "fmi3CompletedIntegratorStep", M(S_CONT))) return fmi3Error;
-    *enter = false;
-    *term = false;
-    return fmi3OK;
-}
+static size_t n_states(Base *b) { (void)b; return 1; }
+static size_t n_indicators(Base *b) { (void)b; return 1; }
+static void get_states(Base *b, double x[]) { x[0] = ((Lab *)b)->x; }
+static void set_states(Base *b, const double x[]) { ((Lab *)b)->x = x[0]; }
+static void derivatives(Base *b, double dx[]) { dx[0] = ((Lab *)b)->uRate; }
+static void indicators(Base *b, double z[]) { z[0] = ((Lab *)b)->pThreshold - ((Lab *)b)->x; }
 
 /* ---------------------------------------------------------------- Scheduled Execution */
 fmi3Status fmi3ActivateModelPartition(fmi3Instance inst, fmi3ValueReference vr, fmi3Float64 t) {

@@ -11,12 +11,13 @@
  *             (clocked; no derivative term at the first sample); the triggered clock "mode" takes "level" (clocked), flips the sign
  *             of ref, and counts in "modes" (clocked); "ref" is not clocked.
  *
- * Each checks the clock call rules it receives as ../clock_common/clock_base.h says:
+ * Each checks the clock call rules it receives as ../common/clock_base.h says:
  * clocks set only in Event Mode, "sample" exactly every 0.01 s (never early, late or
  * skipped, never stepped over), clocked variables exchanged only while their clock is
  * active, the output clock read before fmi3UpdateDiscreteStates, no clock left active when
  * Event Mode is left, fmi3DoStep only in Step Mode at the FMU's time. */
-#include "../clock_common/clock_base.h"
+#define WITH_MODEL_EXCHANGE
+#include "../common/clock_base.h"
 
 enum { PLANT, SUPERVISOR, CONTROLLER };
 static const char *TOKENS[] = {"{7a1e0c44-clockloop-plant-0001}", "{7a1e0c44-clockloop-supervisor-0001}",
@@ -45,11 +46,9 @@ static void *create(fmi3String name, fmi3String token, int kind, fmi3InstanceEnv
     for (int r = 0; r < 3; r++)
         if (token && !strcmp(token, TOKENS[r])) role = r;
     if (role < 0) return NULL;
-    if ((role == CONTROLLER) != (kind == KIND_CS)) return NULL;      /* plant, supervisor: ME only */
-    m = (Loop *)calloc(1, sizeof(Loop));
+    if (kind == KIND_SE || (role == CONTROLLER) != (kind == KIND_CS)) return NULL;   /* plant, supervisor: ME only */
+    m = (Loop *)new_instance(sizeof(Loop), name, kind, env, logger);
     if (!m) return NULL;
-    strncpy(m->b.name, name ? name : "?", sizeof(m->b.name) - 1);
-    m->b.kind = kind, m->b.env = env, m->b.logger = logger, m->b.state = S_INSTANTIATED;
     m->role = role;
     m->k = 4.0, m->c = 0.4, m->mass = 1.0, m->p = 1.0;
     m->sLimit = 0.05;
@@ -58,30 +57,6 @@ static void *create(fmi3String name, fmi3String token, int kind, fmi3InstanceEnv
     return m;
 }
 
-fmi3Instance fmi3InstantiateModelExchange(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                          fmi3Boolean log, fmi3InstanceEnvironment env, fmi3LogMessageCallback cb) {
-    (void)res; (void)vis; (void)log;
-    return create(name, token, KIND_ME, env, cb);
-}
-fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                         fmi3Boolean log, fmi3Boolean evt, fmi3Boolean early,
-                                         const fmi3ValueReference req[], size_t nreq, fmi3InstanceEnvironment env,
-                                         fmi3LogMessageCallback cb, fmi3IntermediateUpdateCallback upd) {
-    Loop *m;
-    (void)res; (void)vis; (void)log; (void)req; (void)nreq; (void)upd;
-    m = (Loop *)create(name, token, KIND_CS, env, cb);
-    if (!m) return NULL;
-    m->b.event_mode_used = evt, m->b.early_return_allowed = early;
-    if (!evt) violation(&m->b, "fmi3InstantiateCoSimulation with eventModeUsed = false: an FMU with clocks requires it");
-    return m;
-}
-fmi3Instance fmi3InstantiateScheduledExecution(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
-                                               fmi3Boolean log, fmi3InstanceEnvironment env, fmi3LogMessageCallback cb,
-                                               fmi3ClockUpdateCallback cu, fmi3LockPreemptionCallback lock,
-                                               fmi3UnlockPreemptionCallback unlock) {
-    (void)name; (void)token; (void)res; (void)vis; (void)log; (void)env; (void)cb; (void)cu; (void)lock; (void)unlock;
-    return NULL;
-}
 void fmi3FreeInstance(fmi3Instance inst) {
     Loop *m = (Loop *)inst;
     if (!m) return;
@@ -151,16 +126,7 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance inst, const fmi3ValueReference vr
     }
     return fmi3OK;
 }
-fmi3Status fmi3GetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c[], fmi3UInt64 r[], fmi3IntervalQualifier q[]) {
-    (void)vr; (void)n; (void)c; (void)r; (void)q; return unsupported(i, "fmi3GetIntervalFraction"); }
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const fmi3Float64 iv[]) {
-    (void)vr; (void)n; (void)iv; return unsupported(i, "fmi3SetIntervalDecimal"); }
-fmi3Status fmi3SetIntervalFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c[], const fmi3UInt64 r[]) {
-    (void)vr; (void)n; (void)c; (void)r; return unsupported(i, "fmi3SetIntervalFraction"); }
-fmi3Status fmi3GetShiftDecimal(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3Float64 s[]) {
-    (void)vr; (void)n; (void)s; return unsupported(i, "fmi3GetShiftDecimal"); }
-fmi3Status fmi3GetShiftFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, fmi3UInt64 c[], fmi3UInt64 r[]) {
-    (void)vr; (void)n; (void)c; (void)r; return unsupported(i, "fmi3GetShiftFraction"); }
+DECIMAL_INTERVAL_STUBS
 
 /* ---------------------------------------------------------------- variables
  * plant:      1 p (out)  2 v (out)  3 u (in, continuous)  4 k  5 c  6 mass (parameters)  7/8 der(p)/der(v)
@@ -180,7 +146,7 @@ static bool clock_ok(Loop *m, fmi3ValueReference vr, const char *fn) {
 
 fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Float64 v[], size_t nv) {
     Loop *m = (Loop *)inst;
-    if (!m || !usable(&m->b, "fmi3GetFloat64") || nv != n) return m ? (nv != n ? violation(&m->b, "nValues") : fmi3Error) : fmi3Error;
+    if (!m || !usable(&m->b, "fmi3GetFloat64") || !scalars(&m->b, "fmi3GetFloat64", n, nv)) return fmi3Error;
     if (m->role == CONTROLLER && m->b.state == S_STEP && m->set_since_step)
         return violation(&m->b, "fmi3GetFloat64 after a set in Step Mode without fmi3DoStep between");
     for (size_t i = 0; i < n; i++) {
@@ -219,7 +185,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
 fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, const fmi3Float64 v[], size_t nv) {
     Loop *m = (Loop *)inst;
     if (!m || !usable(&m->b, "fmi3SetFloat64")) return fmi3Error;
-    if (nv != n) return violation(&m->b, "fmi3SetFloat64 with nValues %zu for %zu scalars", nv, n);
+    if (!scalars(&m->b, "fmi3SetFloat64", n, nv)) return fmi3Error;
     for (size_t i = 0; i < n; i++) {
         int key = m->role * 100 + (int)vr[i];
         bool param = key == PLANT * 100 + 4 || key == PLANT * 100 + 5 || key == PLANT * 100 + 6 ||
@@ -253,7 +219,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance inst, const fmi3ValueReference vr[], size
 fmi3Status fmi3GetInt32(fmi3Instance inst, const fmi3ValueReference vr[], size_t n, fmi3Int32 v[], size_t nv) {
     Loop *m = (Loop *)inst;
     if (!m || !usable(&m->b, "fmi3GetInt32")) return fmi3Error;
-    if (nv != n) return violation(&m->b, "fmi3GetInt32 with nValues %zu for %zu scalars", nv, n);
+    if (!scalars(&m->b, "fmi3GetInt32", n, nv)) return fmi3Error;
     for (size_t i = 0; i < n; i++) {
         if (!clock_ok(m, vr[i], "fmi3GetInt32")) return fmi3Error;
         if (m->role == SUPERVISOR && vr[i] == 14) v[i] = m->alarms;
@@ -338,57 +304,27 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
 }
 
 /* ---------------------------------------------------------------- Model Exchange */
-static int nx(Loop *m) { return m->role == PLANT ? 2 : m->role == SUPERVISOR ? 1 : 0; }
-fmi3Status fmi3SetTime(fmi3Instance inst, fmi3Float64 t) {
-    Loop *m = (Loop *)inst;
-    if (!m || !in_states(&m->b, "fmi3SetTime", M(S_CONT) | M(S_EVENT))) return fmi3Error;
-    m->b.time = t;
-    return fmi3OK;
-}
-fmi3Status fmi3SetContinuousStates(fmi3Instance inst, const fmi3Float64 x[], size_t n) {
-    Loop *m = (Loop *)inst;
-    if (!m || !in_states(&m->b, "fmi3SetContinuousStates", M(S_CONT) | M(S_EVENT))) return fmi3Error;
-    if ((int)n != nx(m)) return violation(&m->b, "fmi3SetContinuousStates with %zu states", n);
-    if (m->role == PLANT) m->p = x[0], m->v = x[1];
-    else m->s = x[0];
-    return fmi3OK;
-}
-fmi3Status fmi3GetContinuousStates(fmi3Instance inst, fmi3Float64 x[], size_t n) {
-    Loop *m = (Loop *)inst;
-    if (!m || !usable(&m->b, "fmi3GetContinuousStates")) return fmi3Error;
-    if ((int)n != nx(m)) return violation(&m->b, "fmi3GetContinuousStates with %zu states", n);
+static size_t n_states(Base *b) { Loop *m = (Loop *)b; return m->role == PLANT ? 2 : m->role == SUPERVISOR ? 1 : 0; }
+static size_t n_indicators(Base *b) { return ((Loop *)b)->role == SUPERVISOR; }
+static void get_states(Base *b, double x[]) {
+    Loop *m = (Loop *)b;
     if (m->role == PLANT) x[0] = m->p, x[1] = m->v;
     else x[0] = m->s;
-    return fmi3OK;
 }
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance inst, fmi3Float64 d[], size_t n) {
-    Loop *m = (Loop *)inst;
-    if (!m || !usable(&m->b, "fmi3GetContinuousStateDerivatives")) return fmi3Error;
-    if ((int)n != nx(m)) return violation(&m->b, "fmi3GetContinuousStateDerivatives with %zu states", n);
-    if (m->role == PLANT) d[0] = m->v, d[1] = (m->u - m->c * m->v - m->k * m->p) / m->mass;
-    else d[0] = m->pin * m->pin;
-    return fmi3OK;
+static void set_states(Base *b, const double x[]) {
+    Loop *m = (Loop *)b;
+    if (m->role == PLANT) m->p = x[0], m->v = x[1];
+    else m->s = x[0];
 }
-fmi3Status fmi3GetEventIndicators(fmi3Instance inst, fmi3Float64 z[], size_t n) {
-    Loop *m = (Loop *)inst;
-    if (!m || !usable(&m->b, "fmi3GetEventIndicators")) return fmi3Error;
-    if (m->role == SUPERVISOR) {
-        if (n != 1) return violation(&m->b, "fmi3GetEventIndicators with %zu indicators", n);
-        z[0] = m->sLimit - m->s;
-    } else if (n) {
-        return violation(&m->b, "fmi3GetEventIndicators with %zu indicators", n);
-    }
-    return fmi3OK;
+static void derivatives(Base *b, double dx[]) {
+    Loop *m = (Loop *)b;
+    if (m->role == PLANT) dx[0] = m->v, dx[1] = (m->u - m->c * m->v - m->k * m->p) / m->mass;
+    else dx[0] = m->pin * m->pin;
 }
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance inst, fmi3Float64 x[], size_t n) {
-    (void)inst;
-    for (size_t i = 0; i < n; i++) x[i] = 1.0;
-    return fmi3OK;
+static void indicators(Base *b, double z[]) {
+    Loop *m = (Loop *)b;
+    if (m->role == SUPERVISOR) z[0] = m->sLimit - m->s;
 }
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance inst, size_t *n) { *n = ((Loop *)inst)->role == SUPERVISOR; return fmi3OK; }
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance inst, size_t *n) { *n = (size_t)nx((Loop *)inst); return fmi3OK; }
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance inst, fmi3Boolean nsp, fmi3Boolean *enter, fmi3Boolean *term) {
-    (void)inst; (void)nsp; *enter = false; *term = false; return fmi3OK; }
 
 fmi3Status fmi3ActivateModelPartition(fmi3Instance inst, fmi3ValueReference vr, fmi3Float64 t) {
     (void)vr; (void)t; return unsupported(inst, "fmi3ActivateModelPartition"); }

@@ -73,6 +73,19 @@ static void c_free(void *h) {
     if (V == 2) F2(fmi2FreeInstance)(h); else F3(fmi3FreeInstance)(h);
 }
 
+/* fn, a function of the instance alone, called on h: the answer want (see c_expect; logging on) */
+static void c_alone(void *h, const char *fn, int want, const char *word) {
+    c_begin(fn);
+    c_expect(call_alone(fn, h), want, 1, word);
+}
+
+/* the same on a new initialised instance (cs: Co-Simulation, else Model Exchange), freed after */
+static void c_alone_new(int cs, const char *fn, int want, const char *word) {
+    void *h = c_new(cs, 1, 1, 0.0);
+    c_alone(h, fn, want, word);
+    c_free(h);
+}
+
 static int c_do_step(void *h, double t, double dt) {
     fmi3Boolean a, b, c;
     fmi3Float64 last;
@@ -95,8 +108,7 @@ static void case_nonfinite_time(void) {
     for (int i = 0; i < 3; i++) {
         void *h = c_new(1, 1, 1, 0.0);
         c_expect(c_do_step(h, ts[i], 0.01), 3, 1, "not finite");
-        c_begin(V == 2 ? "fmi2Reset" : "fmi3Reset");
-        c_expect(V == 2 ? (int)F2(fmi2Reset)(h) : (int)F3(fmi3Reset)(h), 0, 1, NULL);
+        c_alone(h, VFN(Reset), 0, NULL);
         c_free(h);
     }
     for (int i = 0; i < 5; i++) {
@@ -204,8 +216,7 @@ static void case_event_mode_used(void) {
     if (h) c_free(h);
     h = c_new(1, 1, 1, 0.0);
     c_expect(c_do_step(h, 0, 0.01), 0, 1, NULL);
-    c_begin("fmi3EnterEventMode");
-    c_expect((int)F3(fmi3EnterEventMode)(h), 3, 1, "Co-Simulation");
+    c_alone(h, "fmi3EnterEventMode", 3, "Co-Simulation");
     c_free(h);
 }
 
@@ -227,15 +238,13 @@ static void case_after_error(void) {
     c_expect(V == 2 ? (int)F2(fmi2GetReal)(h, ovr, 1, v) : (int)F3(fmi3GetFloat64)(h, ovr, 1, v, 1), 0, 1, NULL);
     c_begin(V == 2 ? "fmi2SetReal" : "fmi3SetFloat64");
     c_expect(V == 2 ? (int)F2(fmi2SetReal)(h, NULL, 0, NULL) : (int)F3(fmi3SetFloat64)(h, NULL, 0, NULL, 0), 3, 1, "Error");
-    c_begin(V == 2 ? "fmi2Terminate" : "fmi3Terminate");
-    c_expect(V == 2 ? (int)F2(fmi2Terminate)(h) : (int)F3(fmi3Terminate)(h), 3, 1, "Error");
+    c_alone(h, VFN(Terminate), 3, "Error");
     c_begin(V == 2 ? "fmi2SetFMUstate" : "fmi3SetFMUState");
     c_expect(V == 2 ? (int)F2(fmi2SetFMUstate)(h, s) : (int)F3(fmi3SetFMUState)(h, s), 0, 1, NULL);
     c_expect(c_do_step(h, 0, 0.01), 0, 1, NULL);
     c_begin(V == 2 ? "fmi2SetReal" : "fmi3SetFloat64");
     c_expect(V == 2 ? (int)F2(fmi2SetReal)(h, vr, 1, v) : (int)F3(fmi3SetFloat64)(h, vr, 1, v, 1), 3, 1, NULL);
-    c_begin(V == 2 ? "fmi2Reset" : "fmi3Reset");
-    c_expect(V == 2 ? (int)F2(fmi2Reset)(h) : (int)F3(fmi3Reset)(h), 0, 1, NULL);
+    c_alone(h, VFN(Reset), 0, NULL);
     c_begin(V == 2 ? "fmi2FreeFMUstate" : "fmi3FreeFMUState");
     c_expect(V == 2 ? (int)F2(fmi2FreeFMUstate)(h, &s) : (int)F3(fmi3FreeFMUState)(h, &s), 0, 1, NULL);
     c_free(h);
@@ -259,8 +268,7 @@ static void case_forbidden_states(void) {
     c_free(h);
     /* a setter with no values in Terminated */
     h = c_new(1, 1, 1, 0.0);
-    c_begin(V == 2 ? "fmi2Terminate" : "fmi3Terminate");
-    c_expect(V == 2 ? (int)F2(fmi2Terminate)(h) : (int)F3(fmi3Terminate)(h), 0, 1, NULL);
+    c_alone(h, VFN(Terminate), 0, NULL);
     c_begin(V == 2 ? "fmi2SetReal" : "fmi3SetFloat64");
     c_expect(V == 2 ? (int)F2(fmi2SetReal)(h, NULL, 0, NULL) : (int)F3(fmi3SetFloat64)(h, NULL, 0, NULL, 0), 3, 1, "Terminated");
     c_free(h);
@@ -285,14 +293,8 @@ static void case_forbidden_states(void) {
         c_free(h);
     }
     if (V == 3) {   /* fmi3EnterStepMode in Step Mode, fmi3EvaluateDiscreteStates, fmi3GetNumberOfEventIndicators */
-        h = c_new(1, 1, 1, 0.0);
-        c_begin("fmi3EnterStepMode");
-        c_expect((int)F3(fmi3EnterStepMode)(h), 3, 1, "Step Mode");
-        c_free(h);
-        h = c_new(1, 1, 1, 0.0);
-        c_begin("fmi3EvaluateDiscreteStates");
-        c_expect((int)F3(fmi3EvaluateDiscreteStates)(h), 3, 1, NULL);
-        c_free(h);
+        c_alone_new(1, "fmi3EnterStepMode", 3, "Step Mode");
+        c_alone_new(1, "fmi3EvaluateDiscreteStates", 3, NULL);
     }
     if (HAS_ME) {
         /* Model Exchange: SetTime in Event Mode, the numbers in Continuous-Time Mode, EnterEventMode in Event Mode */
@@ -305,13 +307,9 @@ static void case_forbidden_states(void) {
         c_expect(c_do_step(h, 0, 0.01), 3, 1, "Co-Simulation");
         c_free(h);
         if (V == 3) {
+            c_alone_new(0, "fmi3EnterEventMode", 3, "Event Mode");
             h = c_new(0, 1, 1, 0.0);
-            c_begin("fmi3EnterEventMode");
-            c_expect((int)F3(fmi3EnterEventMode)(h), 3, 1, "Event Mode");
-            c_free(h);
-            h = c_new(0, 1, 1, 0.0);
-            c_begin("fmi3EnterContinuousTimeMode");
-            c_expect((int)F3(fmi3EnterContinuousTimeMode)(h), 0, 1, NULL);
+            c_alone(h, "fmi3EnterContinuousTimeMode", 0, NULL);
             c_begin("fmi3GetNumberOfContinuousStates");
             c_expect((int)F3(fmi3GetNumberOfContinuousStates)(h, &n), 3, 1, "Continuous-Time Mode");
             c_free(h);
@@ -328,8 +326,7 @@ static void case_forbidden_states(void) {
         unsigned kvr[1] = {in->vr};
         double seed[1] = {1};
         h = c_new(1, 1, 1, 0.0);
-        c_begin(V == 2 ? "fmi2Terminate" : "fmi3Terminate");
-        c_expect(V == 2 ? (int)F2(fmi2Terminate)(h) : (int)F3(fmi3Terminate)(h), 0, 1, NULL);
+        c_alone(h, VFN(Terminate), 0, NULL);
         c_begin(V == 2 ? "fmi2GetDirectionalDerivative" : "fmi3GetDirectionalDerivative");
         c_expect(V == 2 ? (int)F2(fmi2GetDirectionalDerivative)(h, ovr, 1, kvr, 1, seed, v)
                         : (int)F3(fmi3GetDirectionalDerivative)(h, ovr, 1, kvr, 1, seed, 1, v, 1), 0, 1, NULL);

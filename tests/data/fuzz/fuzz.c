@@ -60,12 +60,20 @@
 extern void __sanitizer_set_death_callback(void (*)(void)) __attribute__((weak));
 
 /* ------------------------------------------------------------------ the state tables
+ * One table for both versions (a function's name says its version).
+ *
  * FMI 2.0: the tables of sections 3.2.3 (Model Exchange) and 4.2.4 (Co-Simulation), for the
  * states these FMUs reach (no asynchronous doStep: no stepInProgress, stepFailed or
  * stepCanceled; stepComplete is S). Column X is the tables' "error" state: the getters
  * (note 7: values for debugging only), the FMU-state functions, fmi2Reset, fmi2FreeInstance
- * and fmi2SetDebugLogging. */
-static const Row FMI2_TABLE[] = {
+ * and fmi2SetDebugLogging.
+ *
+ * FMI 3.0: the allowed function calls of each state (sections 2.3.1 to 2.3.9, 3.2.1, 4.2.1),
+ * for an FMU without Event Mode in Co-Simulation, clocks, structural parameters, intermediate
+ * update and evaluateDiscreteStates (all Error: the empty rows). After an Error (X) the
+ * simulation must not go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state
+ * functions (a saved state may be restored) and the getters (values for debugging only). */
+static const Row STATE_TABLE[] = {
     {"fmi2SetDebugLogging", "INSTX", "INECTX"},
     {"fmi2SetupExperiment", "I", "I"},
     {"fmi2EnterInitializationMode", "I", "I"},
@@ -106,14 +114,6 @@ static const Row FMI2_TABLE[] = {
     {"fmi2GetIntegerStatus", "", "-"},
     {"fmi2GetBooleanStatus", "", "-"},
     {"fmi2GetStringStatus", "", "-"},
-    {NULL, NULL, NULL}};
-
-/* FMI 3.0: the allowed function calls of each state (sections 2.3.1 to 2.3.9, 3.2.1, 4.2.1),
- * for an FMU without Event Mode in Co-Simulation, clocks, structural parameters, intermediate
- * update and evaluateDiscreteStates (all Error: the empty rows). After an Error (X) the
- * simulation must not go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state
- * functions (a saved state may be restored) and the getters (values for debugging only). */
-static const Row FMI3_TABLE[] = {
     {"fmi3SetDebugLogging", "INSTX", "INECTX"},
     {"fmi3EnterInitializationMode", "I", "I"},
     {"fmi3ExitInitializationMode", "N", "N"},
@@ -328,7 +328,7 @@ static void *flaky_alloc(size_t n, size_t size) { return chance(&ALLOC_RNG, 0.2)
 
 /* ------------------------------------------------------------------ the model */
 static const Row *row_of(const char *fn) {
-    const Row *t = V == 2 ? FMI2_TABLE : FMI3_TABLE;
+    const Row *t = STATE_TABLE;
     if (CLOCKED)
         for (const Row *c = CLOCK_ROWS; c->name; c++)
             if (!strcmp(c->name, fn)) return c;
@@ -351,6 +351,17 @@ static void *sym(const char *name) {
 }
 #define F2(name) ((name##TYPE *)sym(#name))
 #define F3(name) ((name##TYPE *)sym(#name))
+/* the name of this version's function: VFN(Reset) is "fmi2Reset" or "fmi3Reset" */
+#define VFN(name) (V == 2 ? "fmi2" #name : "fmi3" #name)
+
+/* fn, a function of the instance alone (fmi2Status fn(fmi2Component), fmi3Status
+ * fn(fmi3Instance): the type of fmiXReset), called on h: its status. */
+static int call_alone(const char *fn, void *h) {
+    return V == 2 ? (int)((fmi2ResetTYPE *)sym(fn))(h) : (int)((fmi3ResetTYPE *)sym(fn))(h);
+}
+
+#define H(in) ((in)->h)
+#define STATE_EXP(in, fn, args_exp) (allowed(in, fn) ? (args_exp) : EXP_ERR)
 
 static struct itimerval TIMER;
 
@@ -400,6 +411,17 @@ static void check(Inst *in, int exp, int status, const char *args) {
     if (status == 3 && logged_expected && !LOG_NAMED)
         violation("Error without a log message naming the function (log: %s)", LOG_COUNT ? LOG_LAST : "none");
     if (in && status == 3) in->st = S_ERR;
+}
+
+/* A call of fn, a function of the instance alone, on `in`, checked: the answer args_exp where
+ * the state allows the call, Error elsewhere (args: for the trace); its status. */
+static int plain(Inst *in, const char *fn, int args_exp, const char *args) {
+    int st;
+    begin(fn, in);
+    st = call_alone(fn, H(in));
+    end();
+    check(in, STATE_EXP(in, fn, args_exp), st, args);
+    return st;
 }
 
 /* ------------------------------------------------------------------ variables */
@@ -672,9 +694,6 @@ static void op_free(Inst *in) {
  * arguments, though the state may be wrong: the model decides) and checks the answer. */
 typedef void (*Op)(Rng *, Inst *, int);
 
-#define H(in) ((in)->h)
-#define STATE_EXP(in, fn, args_exp) (allowed(in, fn) ? (args_exp) : EXP_ERR)
-
 static void op_set_debug_logging(Rng *r, Inst *in, int bad) {
     const char *fn = V == 2 ? "fmi2SetDebugLogging" : "fmi3SetDebugLogging";
     const char *cats[2] = {"logStatusError", "logAll"};
@@ -726,50 +745,26 @@ static void op_setup_experiment(Rng *r, Inst *in, int bad) {
 }
 
 static void op_enter_init(Rng *r, Inst *in, int bad) {
-    int st;
-    (void)bad;
     if (V == 3) { op_setup_experiment(r, in, bad); return; }
-    begin("fmi2EnterInitializationMode", in);
-    st = (int)F2(fmi2EnterInitializationMode)(H(in));
-    end();
-    check(in, STATE_EXP(in, "fmi2EnterInitializationMode", EXP_OK), st, "");
-    if (st == 0) in->st = S_INIT;
+    if (plain(in, "fmi2EnterInitializationMode", EXP_OK, "") == 0) in->st = S_INIT;
 }
 
 static void op_exit_init(Rng *r, Inst *in, int bad) {
-    const char *fn = V == 2 ? "fmi2ExitInitializationMode" : "fmi3ExitInitializationMode";
-    int st;
     (void)r; (void)bad;
-    begin(fn, in);
-    st = V == 2 ? (int)F2(fmi2ExitInitializationMode)(H(in)) : (int)F3(fmi3ExitInitializationMode)(H(in));
-    end();
-    check(in, STATE_EXP(in, fn, EXP_OK), st, "");
-    if (st == 0) {
+    if (plain(in, VFN(ExitInitializationMode), EXP_OK, "") == 0) {
         in->st = in->cs == 2 ? S_ACT : in->cs && !CLOCKED ? S_STEP : S_EVENT;
         clock_reset(in);
     }
 }
 
 static void op_terminate(Rng *r, Inst *in, int bad) {
-    const char *fn = V == 2 ? "fmi2Terminate" : "fmi3Terminate";
-    int st;
     (void)r; (void)bad;
-    begin(fn, in);
-    st = V == 2 ? (int)F2(fmi2Terminate)(H(in)) : (int)F3(fmi3Terminate)(H(in));
-    end();
-    check(in, STATE_EXP(in, fn, EXP_OK), st, "");
-    if (st == 0) in->st = S_TERM;
+    if (plain(in, VFN(Terminate), EXP_OK, "") == 0) in->st = S_TERM;
 }
 
 static void op_reset(Rng *r, Inst *in, int bad) {
-    const char *fn = V == 2 ? "fmi2Reset" : "fmi3Reset";
-    int st;
     (void)r; (void)bad;
-    begin(fn, in);
-    st = V == 2 ? (int)F2(fmi2Reset)(H(in)) : (int)F3(fmi3Reset)(H(in));
-    end();
-    check(in, STATE_EXP(in, fn, EXP_OK), st, "");
-    if (st == 0) { in->st = S_INST; in->dirty = 0; in->time = 0; clock_reset(in); }
+    if (plain(in, VFN(Reset), EXP_OK, "") == 0) { in->st = S_INST; in->dirty = 0; in->time = 0; clock_reset(in); }
 }
 
 /* Getters and setters. t: the variable type the function takes (R, I, L, B; 0: a type this
@@ -1090,6 +1085,16 @@ static void op_deserialize(Rng *r, Inst *in, int bad) {
 }
 
 /* ------------------------------------------------------------------ derivatives */
+/* A Real variable of causality caus or with the flag (up to 50 tries); if none is found, its
+ * value reference or 0, and *exp EXP_ANY. */
+static unsigned some_real(Rng *r, char caus, char flag, int *exp) {
+    int tries = 0;
+    const Var *v;
+    do v = some_var(r, 'R'); while (v && !(v->caus == caus || v->flag == flag) && ++tries < 50);
+    if (!v || !(v->caus == caus || v->flag == flag)) *exp = EXP_ANY;
+    return v ? v->vr : 0;
+}
+
 static void op_directional(Rng *r, Inst *in, int bad) {
     int adj = V == 3 && chance(r, 0.4);
     const char *fn = V == 2 ? "fmi2GetDirectionalDerivative" : adj ? "fmi3GetAdjointDerivative" : "fmi3GetDirectionalDerivative";
@@ -1099,20 +1104,8 @@ static void op_directional(Rng *r, Inst *in, int bad) {
     int exp = HAS_DD ? EXP_OK : EXP_ERR, st, k = bad ? pick(r, 4) : -1;
     const unsigned *U = unk, *K = kn;
     char args[100];
-    for (size_t i = 0; i < nU; i++) {
-        int tries = 0;
-        const Var *v;
-        do v = some_var(r, 'R'); while (v && !(v->caus == 'o' || v->flag == 'D') && ++tries < 50);
-        unk[i] = v ? v->vr : 0;
-        if (!v || !(v->caus == 'o' || v->flag == 'D')) exp = EXP_ANY;
-    }
-    for (size_t i = 0; i < nK; i++) {
-        int tries = 0;
-        const Var *v;
-        do v = some_var(r, 'R'); while (v && !(v->caus == 'i' || v->flag == 'S') && ++tries < 50);
-        kn[i] = v ? v->vr : 0;
-        if (!v || !(v->caus == 'i' || v->flag == 'S')) exp = EXP_ANY;
-    }
+    for (size_t i = 0; i < nU; i++) unk[i] = some_real(r, 'o', 'D', &exp);     /* outputs, derivatives */
+    for (size_t i = 0; i < nK; i++) kn[i] = some_real(r, 'i', 'S', &exp);      /* inputs, states */
     if (!HAS_DD) exp = EXP_ERR;
     if (k == 0) { unk[0] = unknown_vr(r); exp = EXP_ERR; }
     else if (k == 1) { U = NULL; exp = EXP_ERR; }
@@ -1136,52 +1129,32 @@ static void op_enter_event(Rng *r, Inst *in, int bad);
 static void op_update_discrete(Rng *r, Inst *in, int bad);
 
 static void op_me_mode(Rng *r, Inst *in, int bad) {
-    int k = pick(r, 4), st, exp;
+    int k = pick(r, 4), st;
     const char *fn;
     char args[60] = "";
+    fmi2EventInfo e;
+    fmi2Boolean b2[2] = {0, 0};
+    fmi3Boolean b[5] = {0};
+    fmi3Float64 next = 0;
     if (CLOCKED && k < 2) { (k ? op_update_discrete : op_enter_event)(r, in, bad); return; }   /* the clock's rules */
-    if (V == 2) {
-        fmi2EventInfo e;
-        if (k == 0) {
-            fn = "fmi2EnterEventMode"; begin(fn, in); st = (int)F2(fmi2EnterEventMode)(H(in)); end();
-            check(in, STATE_EXP(in, fn, EXP_OK), st, args); if (st == 0) in->st = S_EVENT;
-        } else if (k == 1) {
-            fn = "fmi2NewDiscreteStates"; exp = bad ? EXP_ERR : EXP_OK;
-            snprintf(args, sizeof args, "%s", bad ? "eventInfo=NULL" : "");
-            begin(fn, in); st = (int)F2(fmi2NewDiscreteStates)(H(in), bad ? NULL : &e); end();
-            check(in, STATE_EXP(in, fn, exp), st, args);
-            if (st == 0 && (e.newDiscreteStatesNeeded || e.terminateSimulation)) violation("event info asks for more");
-        } else if (k == 2) {
-            fn = "fmi2EnterContinuousTimeMode"; begin(fn, in); st = (int)F2(fmi2EnterContinuousTimeMode)(H(in)); end();
-            check(in, STATE_EXP(in, fn, EXP_OK), st, args); if (st == 0) in->st = S_CONT;
-        } else {
-            fmi2Boolean a = 0, b = 0;
-            fn = "fmi2CompletedIntegratorStep"; exp = bad ? EXP_ERR : EXP_OK;
-            snprintf(args, sizeof args, "%s", bad ? "enterEventMode=NULL" : "");
-            begin(fn, in); st = (int)F2(fmi2CompletedIntegratorStep)(H(in), fmi2True, bad ? NULL : &a, &b); end();
-            check(in, STATE_EXP(in, fn, exp), st, args);
-        }
-    } else {
-        fmi3Boolean b[5] = {0};
-        fmi3Float64 next = 0;
-        if (k == 0) {
-            fn = "fmi3EnterEventMode"; begin(fn, in); st = (int)F3(fmi3EnterEventMode)(H(in)); end();
-            check(in, STATE_EXP(in, fn, EXP_OK), st, args); if (st == 0) in->st = S_EVENT;
-        } else if (k == 1) {
-            fn = "fmi3UpdateDiscreteStates"; exp = bad ? EXP_ERR : EXP_OK;
-            snprintf(args, sizeof args, "%s", bad ? "nextEventTime=NULL" : "");
-            begin(fn, in); st = (int)F3(fmi3UpdateDiscreteStates)(H(in), &b[0], &b[1], &b[2], &b[3], &b[4], bad ? NULL : &next); end();
-            check(in, STATE_EXP(in, fn, exp), st, args);
-        } else if (k == 2) {
-            fn = "fmi3EnterContinuousTimeMode"; begin(fn, in); st = (int)F3(fmi3EnterContinuousTimeMode)(H(in)); end();
-            check(in, STATE_EXP(in, fn, EXP_OK), st, args); if (st == 0) in->st = S_CONT;
-        } else {
-            fn = "fmi3CompletedIntegratorStep"; exp = bad ? EXP_ERR : EXP_OK;
-            snprintf(args, sizeof args, "%s", bad ? "terminateSimulation=NULL" : "");
-            begin(fn, in); st = (int)F3(fmi3CompletedIntegratorStep)(H(in), fmi3True, &b[0], bad ? NULL : &b[1]); end();
-            check(in, STATE_EXP(in, fn, exp), st, args);
-        }
+    if (k == 0 || k == 2) {                                   /* Event Mode, Continuous-Time Mode */
+        if (plain(in, k ? VFN(EnterContinuousTimeMode) : VFN(EnterEventMode), EXP_OK, args) == 0)
+            in->st = k ? S_CONT : S_EVENT;
+        return;
     }
+    /* the end of an event (its discrete states) or of an integrator step: a NULL output when bad */
+    fn = k == 1 ? (V == 2 ? "fmi2NewDiscreteStates" : "fmi3UpdateDiscreteStates") : VFN(CompletedIntegratorStep);
+    snprintf(args, sizeof args, "%s", !bad ? "" : k == 1 ? (V == 2 ? "eventInfo=NULL" : "nextEventTime=NULL")
+                                      : V == 2 ? "enterEventMode=NULL" : "terminateSimulation=NULL");
+    begin(fn, in);
+    if (V == 2 && k == 1) st = (int)F2(fmi2NewDiscreteStates)(H(in), bad ? NULL : &e);
+    else if (V == 2) st = (int)F2(fmi2CompletedIntegratorStep)(H(in), fmi2True, bad ? NULL : &b2[0], &b2[1]);
+    else if (k == 1) st = (int)F3(fmi3UpdateDiscreteStates)(H(in), &b[0], &b[1], &b[2], &b[3], &b[4], bad ? NULL : &next);
+    else st = (int)F3(fmi3CompletedIntegratorStep)(H(in), fmi3True, &b[0], bad ? NULL : &b[1]);
+    end();
+    check(in, STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK), st, args);
+    if (V == 2 && k == 1 && st == 0 && (e.newDiscreteStatesNeeded || e.terminateSimulation))
+        violation("event info asks for more");
 }
 
 static void op_set_time(Rng *r, Inst *in, int bad) {
@@ -1316,22 +1289,17 @@ static void op_cs_misc(Rng *r, Inst *in, int bad) {
     char args[40];
     snprintf(args, sizeof args, "n=%d", bad);
     if (V == 2) {
-        if (k == 0) {
+        if (k < 2) {                      /* the input and output derivatives: n of them when bad */
             fmi2Integer order[1] = {1};
             fmi2Real v[1] = {0};
-            fn = "fmi2SetRealInputDerivatives";
-            begin(fn, in); st = (int)F2(fmi2SetRealInputDerivatives)(H(in), vr, (size_t)bad, order, v); end();
-            check(in, STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK), st, args);
-        } else if (k == 1) {
-            fmi2Integer order[1] = {1};
-            fmi2Real v[1] = {0};
-            fn = "fmi2GetRealOutputDerivatives";
-            begin(fn, in); st = (int)F2(fmi2GetRealOutputDerivatives)(H(in), vr, (size_t)bad, order, v); end();
+            fn = k ? "fmi2GetRealOutputDerivatives" : "fmi2SetRealInputDerivatives";
+            begin(fn, in);
+            st = k ? (int)F2(fmi2GetRealOutputDerivatives)(H(in), vr, (size_t)bad, order, v)
+                   : (int)F2(fmi2SetRealInputDerivatives)(H(in), vr, (size_t)bad, order, v);
+            end();
             check(in, STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK), st, args);
         } else if (k == 2) {
-            fn = "fmi2CancelStep";
-            begin(fn, in); st = (int)F2(fmi2CancelStep)(H(in)); end();
-            check(in, STATE_EXP(in, fn, EXP_OK), st, "");
+            plain(in, "fmi2CancelStep", EXP_OK, "");
         } else {
             static const char *names[] = {"fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
                                           "fmi2GetBooleanStatus", "fmi2GetStringStatus"};
@@ -1359,10 +1327,7 @@ static void op_cs_misc(Rng *r, Inst *in, int bad) {
             begin(fn, in); st = (int)F3(fmi3GetOutputDerivatives)(H(in), vr, (size_t)bad, order, v, (size_t)bad); end();
             check(in, STATE_EXP(in, fn, bad ? EXP_ERR : EXP_OK), st, args);
         } else if (k == 1) {
-            fn = "fmi3EnterStepMode";
-            begin(fn, in); st = (int)F3(fmi3EnterStepMode)(H(in)); end();
-            check(in, STATE_EXP(in, fn, EXP_OK), st, "");
-            if (st == 0) in->st = S_STEP;
+            if (plain(in, "fmi3EnterStepMode", EXP_OK, "") == 0) in->st = S_STEP;
         } else if (k == 2) {
             fmi3Clock cl[1] = {0};
             fn = chance(r, 0.5) ? "fmi3GetClock" : "fmi3SetClock";
@@ -1381,11 +1346,9 @@ static void op_cs_misc(Rng *r, Inst *in, int bad) {
             size_t nd;
             fn = names[w];
             begin(fn, in);
-            if (w == 0) st = (int)F3(fmi3EnterConfigurationMode)(H(in));
-            else if (w == 1) st = (int)F3(fmi3ExitConfigurationMode)(H(in));
+            if (w == 0 || w == 1 || w == 4) st = call_alone(fn, H(in));
             else if (w == 2) st = (int)F3(fmi3GetIntervalDecimal)(H(in), vr, 1, iv, q);
             else if (w == 3) st = (int)F3(fmi3SetShiftDecimal)(H(in), vr, 1, iv);
-            else if (w == 4) st = (int)F3(fmi3EvaluateDiscreteStates)(H(in));
             else if (w == 5) st = (int)F3(fmi3GetNumberOfVariableDependencies)(H(in), vr[0], &nd);
             else st = (int)F3(fmi3ActivateModelPartition)(H(in), vr[0], in->time);
             end();
@@ -1447,25 +1410,14 @@ static void op_update_discrete(Rng *r, Inst *in, int bad) {
 }
 
 static void op_enter_step(Rng *r, Inst *in, int bad) {
-    const char *fn = "fmi3EnterStepMode";
-    int st, exp = STATE_EXP(in, fn, clock_exp(in, !in->clk.active));
     (void)r; (void)bad;
-    begin(fn, in);
-    st = (int)F3(fmi3EnterStepMode)(H(in));
-    end();
-    check(in, exp, st, in->clk.active ? "clock active" : "");
-    if (st == 0) in->st = S_STEP;
+    if (plain(in, "fmi3EnterStepMode", clock_exp(in, !in->clk.active), in->clk.active ? "clock active" : "") == 0)
+        in->st = S_STEP;
 }
 
 static void op_enter_event(Rng *r, Inst *in, int bad) {
-    const char *fn = "fmi3EnterEventMode";
-    int st, exp = STATE_EXP(in, fn, EXP_OK);
     (void)r; (void)bad;
-    begin(fn, in);
-    st = (int)F3(fmi3EnterEventMode)(H(in));
-    end();
-    check(in, exp, st, "");
-    if (st == 0) in->st = S_EVENT;
+    if (plain(in, "fmi3EnterEventMode", EXP_OK, "") == 0) in->st = S_EVENT;
 }
 
 static void op_activate(Rng *r, Inst *in, int bad) {

@@ -1,0 +1,201 @@
+"""Event Mode with clocks, as Model Exchange (:mod:`cosim.fmi.clock_me`) and Co-Simulation
+with Event Mode (:mod:`cosim.fmi.clock_cs`) share it (FMI 3.0 §2.3.5 State: Event Mode;
+the clock functions §2.2.8.4 Clocks specific API).
+
+At an instant where clocks tick: Event Mode (``fmi3EnterEventMode``, or the Event Mode
+after initialisation), ``fmi3SetClock`` of the ticking input clocks, their clocked inputs
+set (those the outputs depend on directly; the others in the update, before the state
+changes), their clocked outputs read, ``fmi3GetClock`` of the output (and local) clocks and
+the outputs they clock read. In the update, the event iteration: ``fmi3UpdateDiscreteStates``
+until no more is needed (``fmi3GetClock`` again in every further super-dense instant), then
+the intervals of every countdown clock (in every Event Mode) and of changing and tunable
+clocks that ticked; a clock due again at once (interval 0) or an activation that arrived
+meanwhile ticks in the same Event Mode.
+"""
+from __future__ import annotations
+
+import ctypes
+
+from fmu_models.errors import FMUError
+
+from ..core.clocking import ClockBoard
+from .clock_ports import Plan
+from .clock_timing import ClockedRun
+
+__all__ = ["MAX_SUPERDENSE", "EventModeRun"]
+
+#: Most super-dense instants of one Event Mode.
+MAX_SUPERDENSE = 1000
+
+
+class EventModeRun(ClockedRun):
+    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run (see the
+    module documentation).
+
+    Parameters
+    ----------
+    comp, board, values, inputs, outputs, integers
+        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
+    """
+
+    __slots__ = ("_enter_event_mode", "_set_clock", "_uds_any", "_uds_args", "_uds_bytes", "_uds_flags", "_uds_next",
+                 "_update_discrete_states", "active", "in_event", "pending_event", "ticked")
+    #: Whether the outputs without clock are read again before an activation between
+    #: instants is sent (Model Exchange; in Co-Simulation they are the step's left limits).
+    read_unclocked_between = False
+
+    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
+        super().__init__(comp, board, values, inputs, outputs, integers)
+        self._set_clock = self._fn("fmi3SetClock")
+        self._enter_event_mode = self._fn("fmi3EnterEventMode")
+        self._update_discrete_states = self._fn("fmi3UpdateDiscreteStates")
+        ub = self._uds_bytes = (ctypes.c_uint8 * 8)()        # the five flags side by side
+        self._uds_flags = [ctypes.c_bool.from_buffer(ub, i) for i in range(5)]
+        self._uds_any = ctypes.c_uint64.from_buffer(ub)       # any of them set
+        self._uds_next = ctypes.c_double(0.0)
+        self._uds_args = (self.c, *[ctypes.byref(ub, i) for i in range(5)], ctypes.byref(self._uds_next))
+        self.in_event = True                         # in Event Mode after initialisation
+        self.active: set[int] = set()                # input clocks active in the current super-dense instant
+        self.ticked: set[int] = set()                # clocks that ticked in the current Event Mode
+        self.pending_event = False                   # the FMU asked for Event Mode at the next instant
+
+    def _event_mode(self, t: float) -> None:
+        """In Event Mode at ``t`` [s]: ``fmi3EnterEventMode`` unless already there."""
+        if not self.in_event:
+            st = self._enter_event_mode(self.c)
+            if st > 1:
+                self._fail(f"EnterEventMode(t = {t:g} s)", st)
+            self.in_event = True
+
+    # ------------------------------------------------------------------ at an instant
+    def _instant_event(self, t: float, plan: Plan | None) -> bool:
+        """Event Mode at instant ``t`` if anything happens there (the clocks of ``plan``, due
+        or received, a pending event, Event Mode not left yet): the inputs without clock the
+        outputs depend on set, the clocks activated (:meth:`_activate`); whether it did."""
+        ks = (list(plan.vrs) if plan is not None else []) + self._due_at(t)
+        got, snap = self._received_at(t)
+        if not (ks or got or self.pending_event or self.in_event):
+            return False
+        self._event_mode(t)
+        self.pending_event = False
+        self.free_in.ft()
+        if got:
+            self._keep_base()
+            self._overlay(snap)
+        self._activate(t, ks + got, True, snap)
+        return True
+
+    def _activate(self, t: float, ks: list[int], direct: bool, snap: dict | None) -> None:
+        """Activate the input clocks ``ks`` at ``t``: ``fmi3SetClock`` (§2.3.5), their clocked
+        inputs set (``direct``, at an instant: those outputs depend on, the outputs read into
+        the signals; else all, into the own buffers), their outputs read, the output clocks."""
+        if not direct:
+            self._use_own()
+        if ks:
+            plan = self.plan(ks)
+            st = self._set_clock(*plan.args)
+            if st > 1:
+                self._fail(f"SetClock({plan.names}, t = {t:g} s)", st)
+            for lab in plan.labels:
+                self.log_t(t)
+                self.log_id(lab)
+            for s in (plan.set_ft if direct else plan.set_all):
+                s()
+            self.active.update(ks)
+            self.ticked.update(ks)
+            for g in (plan.get_d if direct else plan.get):
+                g()
+        self._read_output_clocks(t, snap, not direct)
+
+    def _read_output_clocks(self, t: float, snap: dict | None, fresh: bool) -> None:
+        """``fmi3GetClock`` of the output (and local) clocks; each active one counted, logged,
+        the outputs it clocks read, its activation sent (``fresh``: between instants or after
+        the outputs of the instant, sent at once; else with the instant's outputs)."""
+        n = len(self.out_clocks)
+        if not n:
+            return
+        st = self._get_clock(self.c, self._out_vr, self._n_out, self._out_val)
+        if st > 1:
+            self._fail(f"GetClock(t = {t:g} s)", st)
+        active = [i for i in range(n) if self._out_val[i]]
+        if fresh:
+            self._use_own()
+        self.ticked.update(self.out_clocks[i].vr for i in active)
+        if self._clocks_ticked(t, active, snap, not fresh) and fresh:
+            self._publish(False, self.read_unclocked_between)
+
+    def _again(self) -> None:
+        """The outputs computed again at the same instant (a split evaluation or a loop)."""
+        if self.in_event:
+            self._fill(self.in_ft)
+            vrs = set(self.active)
+            plan = self.periodic_at(self.done_n)
+            if plan is not None:
+                vrs.update(plan.vrs)
+            self.free_in.ft()
+            for vr in vrs:
+                self.clock_in[vr].ft()
+                g = self.get_kd[vr]
+                if g is not None:
+                    g()
+
+    # ------------------------------------------------------------------ between instants
+    def _intra(self, t: float) -> None:
+        """Between instants, in Event Mode at ``t``: the activations due."""
+        ks = self._due_at(t)
+        got, snap = self._received_at(t)
+        self._overlay(snap)
+        if self.fmu_next is not None and abs(self.fmu_next - t) <= self.tol:
+            self.fmu_next = None
+        self._activate(t, ks + got, False, snap)
+
+    # ------------------------------------------------------------------ the event iteration
+    def _set_rest(self) -> None:
+        """In the update, before the state changes: the clocked inputs of the active clocks
+        no output depends on directly, and every input without clock."""
+        for vr in list(self.active):
+            self.clock_in[vr].rest()
+        self.free_in.all()
+
+    def _finish(self, t: float) -> bool:
+        """The rest of an Event Mode at ``t``: the event iteration (``fmi3UpdateDiscreteStates``
+        until ``discreteStatesNeedUpdate`` is false, §2.3.5), the intervals, activations due at
+        once; returns whether the FMU asks to terminate."""
+        f = self._uds_flags
+        uds, args = self._update_discrete_states, self._uds_args
+        for _ in range(MAX_SUPERDENSE):
+            st = uds(*args)
+            if st > 1:
+                self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
+            self.active.clear()
+            if f[1].value:
+                return True
+            if f[0].value:
+                self._read_output_clocks(t, None, True)
+                continue
+            if self.countdown or self.ticked:
+                self._read_intervals(t)
+            ks = self._due_at(t)
+            got, snap = self._received_at(t)
+            if ks or got:
+                if got:
+                    self._overlay(snap)
+                self._activate(t, ks + got, False, snap)
+                continue
+            self.fmu_next = float(self._uds_next.value) if f[4].value else None
+            self.ticked.clear()
+            return False
+        raise FMUError(f"{self.name}: the event iteration at t = {t:g} s did not end in {MAX_SUPERDENSE} "
+                       "super-dense instants")
+
+    def _read_intervals(self, t: float) -> None:
+        """``fmi3GetInterval*`` after the event iteration (§2.3.5): every countdown clock, and
+        the changing (and tunable without ``intervalDecimal``) input clocks that ticked."""
+        want = list(self.countdown)
+        for vr in self.ticked:
+            k = self.model.by_vr[vr]
+            if k.causality == "input" and self.interval_read(k):
+                want.append(k)
+        for k, v, q in self._intervals(want):
+            self._apply_interval(k, v, q, t, k.vr in self.ticked)
+            self.ticked.discard(k.vr)

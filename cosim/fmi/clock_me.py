@@ -1,0 +1,142 @@
+"""A clocked Model Exchange FMU in a run: its output and update functions, in the FMI 3.0
+call sequence (§3.2 State Machine for Model Exchange: Event Mode §2.3.5, shared with
+Co-Simulation in :mod:`cosim.fmi.clock_event`, and Continuous-Time Mode §3.2.1).
+
+The integrator (:class:`~cosim.fmi.model_exchange.MEIntegrator`) steps the FMU in
+Continuous-Time Mode; the activations between instants (a clock, the FMU's
+``nextEventTime``) are its time events. Every Event Mode it enters (state, time and step
+events) goes through this run, which activates the clocks due there, reads the output
+clocks and ends with the event iteration and ``fmi3EnterContinuousTimeMode``; an event the
+integrator finds at the end of a step waits for that instant's Event Mode. At an instant
+without clocks, inputs without clock are set in Continuous-Time Mode, a discrete one that
+changes in an Event Mode of its own.
+"""
+from __future__ import annotations
+
+from ..core.clocking import ClockBoard
+from .clock_event import EventModeRun
+from .model_exchange import FMUModel, MEIntegrator
+
+__all__ = ["MEClockedRun"]
+
+
+class _ClockedModel(FMUModel):
+    """The FMU as the integrator sees it, its events going through the clocks' run."""
+
+    def __init__(self, instance, run: MEClockedRun):
+        super().__init__(instance)
+        self.run = run
+
+    def event(self, t, set_inputs=None):
+        return self.run._event(t, set_inputs)
+
+    def initial_event(self, t):
+        return self.run._event(t, self.run._pending_inputs)
+
+
+class MEClockedRun(EventModeRun):
+    """One run of a clocked Model Exchange FMU (see the module documentation).
+
+    Parameters
+    ----------
+    comp, board, values, inputs, outputs, integers
+        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
+    integrator : MEIntegrator
+        The component's integrator, whose events come here.
+    """
+
+    __slots__ = ("_pending_inputs", "inputs_changed", "me", "set_cont", "set_cont_ft", "set_disc", "set_disc_ft",
+                 "started", "window_end")
+    read_unclocked_between = True
+
+    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers, integrator: MEIntegrator):
+        super().__init__(comp, board, values, inputs, outputs, integers)
+        disc = self.discrete(self.unclocked_in)
+        cont = [i for i in self.unclocked_in if i not in disc]
+        self.set_cont, self.set_disc = self._setter(cont, changes=True), self._setter(disc, changes=True)
+        self.set_cont_ft = self._setter([i for i in cont if i in self._ft], changes=True)
+        self.set_disc_ft = self._setter([i for i in disc if i in self._ft], changes=True)
+        self.me = integrator
+        integrator.model = _ClockedModel(self.inst, self)
+        self._pending_inputs = None                  # the inputs of the first Event Mode
+        self.started = False
+        self.window_end = self.t0                    # the end of the current step [s]
+        self.inputs_changed = False                  # an input without clock changed in Continuous-Time Mode
+
+    def output(self, t: float) -> None:
+        """The outputs at instant ``t`` [s]: Event Mode where clocks tick or an event is pending
+        (§2.3.5), else the inputs without clock the outputs depend on set (in Continuous-Time
+        Mode, §3.2.1; a discrete one that changes in an Event Mode of its own)."""
+        n = self.instant(t)
+        if n == self.done_n:
+            self._again()
+            return
+        self.done_n = n
+        self._sync()
+        self._fill(self.in_ft)
+        if not self._instant_event(t, self.periodic_at(n)):
+            self.inputs_changed |= bool(self.set_cont_ft())
+            if self.set_disc_ft.differs():
+                self.me.at_event(t, self.set_disc_ft)
+                self._sync()
+        if self.get_ud is not None:
+            self.get_ud()
+        self._publish(True)
+
+    def _again(self) -> None:
+        super()._again()
+        if self.get_ud is not None:
+            self.get_ud()
+
+    def update(self, t: float) -> None:
+        """The update from instant ``t`` [s]: the instant's Event Mode ended (or the inputs
+        set), the integrator to the next instant through the activations on the way."""
+        self._fill()
+        self.window_end = t + self.P
+        if not self.started:
+            self._pending_inputs = self._set_rest
+            self.started = True
+            self.me.start(t)
+        elif self.in_event:
+            self.me.at_event(t, self._set_rest)
+        else:
+            self.inputs_changed |= bool(self.set_cont())
+            if self.set_disc.differs():
+                self.me.at_event(t, self.set_disc)
+        self.board.check_room()
+        self._keep_base()
+        self.me.next_event = self._next_event(t)
+        self.me.advance(t, self.P, self.inputs_changed)
+        self.inputs_changed = False
+
+    def _next_event(self, t: float) -> float | None:
+        """The integrator's next time event after ``t`` [s]: the next activation in this step
+        or the FMU's ``nextEventTime``."""
+        p = self._next_point(t, self.window_end)
+        f = self.fmu_next
+        if f is not None and f <= t + self.tol:
+            f = None
+        return p if f is None else (f if p is None else min(p, f))
+
+    def _event(self, t: float, set_inputs) -> tuple[bool, float | None]:
+        """An Event Mode of the FMU at ``t`` (entered here unless already in it), the inputs
+        set by ``set_inputs``, ended with ``fmi3EnterContinuousTimeMode`` (§3.2): ``(terminate,
+        next time event)``. An event the integrator finds at the end of the step (within
+        rounding) waits for that instant's Event Mode."""
+        if not self.in_event and set_inputs is None and abs(t - self.window_end) <= self.tol:
+            self.pending_event = True
+            return False, None
+        if not self.in_event:
+            self._event_mode(t)
+            if set_inputs is not None:
+                set_inputs()
+            self._intra(t)
+        elif set_inputs is not None:
+            set_inputs()
+        if self._finish(t):
+            return True, None
+        st = self._fn("fmi3EnterContinuousTimeMode")(self.c)
+        if st > 1:
+            self._fail(f"EnterContinuousTimeMode(t = {t:g} s)", st)
+        self.in_event = False
+        return False, self._next_event(t)

@@ -1,0 +1,356 @@
+"""The timing of a clocked FMI 3.0 FMU's clocks (the call sequences are in
+:mod:`cosim.fmi.clock_run`, the master's side in :mod:`cosim.core.clocking`).
+
+**Initialization Mode** (:func:`initialise`; FMI 3.0 §2.3.3, the functions §2.2.8.4 Clocks
+specific API). Fixed and tunable clocks that declare ``intervalDecimal`` get their interval
+with ``fmi3SetIntervalDecimal`` (``fmi3SetIntervalFraction`` in their counter form), the
+declared one or the component's ``clock_intervals``; those that do not are asked
+``fmi3GetInterval*`` and ``fmi3GetShift*`` (multiples of the component's period); changing
+and countdown clocks are asked their first interval.
+
+**A run** (:class:`ClockedRun`). Periodic clocks tick at instants, their activations
+computed once per run as a pattern over their common period. An aperiodic clock ticks when
+its last ``fmi3IntervalChanged`` interval says (relative to the Event Mode or Clock Update
+Mode that read it), a triggered clock when its source sends; between instants too.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+from collections.abc import Mapping
+from fractions import Fraction
+
+from fmu_models.errors import ConfigurationError, FMUError
+
+from ..core.clocking import ClockBoard, fraction_gcd, time_fraction
+from .clock_ports import ClockPorts, Plan
+from .clocks import CHANGED, NOT_YET_KNOWN, QUALIFIERS, FMIClock, FMIClocks
+
+__all__ = ["MAX_PATTERN", "ClockSchedule", "ClockedRun", "initialise"]
+
+#: Longest pattern of periodic activations computed ahead (in instants).
+MAX_PATTERN = 10_000
+_D, _I, _U32, _U64, _SIZE = ctypes.c_double, ctypes.c_int, ctypes.c_uint32, ctypes.c_uint64, ctypes.c_size_t
+
+
+def checked_interval(v: float, k: FMIClock, owner: str, periodic: bool) -> float:
+    """An interval [s] ``fmi3GetInterval*`` returned for clock ``k`` of component ``owner``,
+    refused unless finite and >= 0 (> 0 if ``periodic``)."""
+    if not math.isfinite(v) or v < 0 or (periodic and v <= 0):
+        raise FMUError(f"{owner}: fmi3GetInterval of clock {k.name!r} returned {v!r}; an interval must be finite and "
+                       f"{'> 0' if periodic else '>= 0'}")
+    return v
+
+
+class ClockSchedule:
+    """A run's timing of one FMU's clocks, from its initialisation on.
+
+    Parameters
+    ----------
+    model : FMIClocks
+        The FMU's clocks.
+    t0 : float
+        The start time [s].
+    period : float
+        The component's period [s].
+    overrides : mapping of str to Fraction
+        Intervals [s] the component sets (``clock_intervals``).
+
+    Attributes
+    ----------
+    periodic : list of [FMIClock, int, int]
+        Each periodic clock, its interval and its first activation in instants.
+    next_at : dict of int to float
+        The pending activation time [s] of each aperiodic clock that has one.
+    """
+
+    def __init__(self, model: FMIClocks, t0: float, period: float, overrides: Mapping[str, Fraction]):
+        self.t0, self.period = t0, period
+        self.tol = 1e-9 * period
+        self.periodic: list[list] = []
+        self.next_at: dict[int, float] = {}
+        self.overrides = dict(overrides)
+        self.model = model
+
+    def add_periodic(self, k: FMIClock, interval: Fraction, shift: Fraction, owner: str) -> None:
+        """Add periodic clock ``k`` of component ``owner``, its ``interval`` and ``shift`` [s]
+        multiples of the period."""
+        p = time_fraction(self.period)
+        ratio, first = interval / p, shift / p
+        for what, r, v in (("interval", ratio, interval), ("shift", first, shift)):
+            if r.denominator != 1:
+                g = fraction_gcd(p, interval, shift)
+                raise ConfigurationError(
+                    f"{owner}: clock {k.name!r} ({k.variability}) has the {what} {float(v):g} s (from the FMU at "
+                    f"initialisation), not a multiple of {owner}'s period {float(p):g} s; a period of {float(g):g} s "
+                    "would honour it")
+        if ratio <= 0:
+            raise FMUError(f"{owner}: clock {k.name!r} has the interval {float(interval):g} s; it must be > 0")
+        self.periodic.append([k, int(ratio), int(first)])
+
+
+# ---------------------------------------------------------------------- Initialization Mode
+def initialise(comp, inst, t0: float) -> ClockSchedule:
+    """In Initialization Mode: the clock intervals set or asked as the standard says (see
+    the module documentation); returns the run's schedule.
+
+    Parameters
+    ----------
+    comp : FMUComponent
+        The component (its clocks, period and ``clock_intervals``).
+    inst : FMUInstance
+        Its instance, in Initialization Mode.
+    t0 : float
+        The start time [s].
+    """
+    model: FMIClocks = comp.clock_model
+    sched = ClockSchedule(model, t0, comp.period, comp.clock_overrides)
+    c = ctypes.c_void_p(inst.handle)
+
+    def call(name: str, k: FMIClock, *args) -> None:
+        st = inst.raw(name)(c, (_U32 * 1)(k.vr), _SIZE(1), *args)
+        if st > 1:
+            inst.fail(f"{name[4:]}", st)
+
+    for k in model.clocks:
+        if k.causality != "input":
+            continue
+        if k.variability == "constant":
+            sched.add_periodic(k, k.interval, k.shift, comp.name)
+        elif k.importer_sets_interval:
+            sched.add_periodic(k, _set_interval(call, k, sched.overrides.get(k.name, k.interval), comp.name),
+                               k.shift, comp.name)
+        elif k.periodic:                                  # fixed/tunable without intervalDecimal: ask
+            sched.add_periodic(k, *_ask_periodic(call, k, comp.name), comp.name)
+        elif k.aperiodic:
+            interval, q = _get_interval(call, k)
+            if k.supports_fraction:
+                interval = interval[0] / interval[1] if interval[1] else float("nan")
+            if q not in QUALIFIERS:
+                raise FMUError(f"{comp.name}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
+            if k.variability == "changing" and q == NOT_YET_KNOWN:
+                raise FMUError(f"{comp.name}: fmi3GetInterval of changing clock {k.name!r} returned "
+                               "fmi3IntervalNotYetKnown, which only countdown clocks may return")
+            if q == CHANGED:
+                sched.next_at[k.vr] = t0 + checked_interval(interval, k, comp.name, False)
+    return sched
+
+
+def _set_interval(call, k: FMIClock, interval: Fraction, owner: str) -> Fraction:
+    """``fmi3SetInterval*`` of clock ``k``: ``interval`` [s] (in the counter form: a whole
+    number of its resolution)."""
+    if k.supports_fraction and k.counter is not None:
+        counter = interval * k.resolution
+        if counter.denominator != 1:
+            raise ConfigurationError(f"{owner}: the interval {float(interval):g} s of clock {k.name!r} is "
+                                     f"not a whole number of its resolution 1/{k.resolution} s")
+        call("fmi3SetIntervalFraction", k, (_U64 * 1)(counter.numerator), (_U64 * 1)(k.resolution))
+    else:
+        call("fmi3SetIntervalDecimal", k, (_D * 1)(float(interval)))
+    return interval
+
+
+def _get_interval(call, k: FMIClock) -> tuple:
+    """``fmi3GetInterval*`` of clock ``k``: ``((counter, resolution) or interval [s],
+    qualifier)``."""
+    q = (_I * 1)()
+    if k.supports_fraction:
+        cnt, res = (_U64 * 1)(), (_U64 * 1)()
+        call("fmi3GetIntervalFraction", k, cnt, res, q)
+        return (cnt[0], res[0]), q[0]
+    iv = (_D * 1)()
+    call("fmi3GetIntervalDecimal", k, iv, q)
+    return iv[0], q[0]
+
+
+def _ask_periodic(call, k: FMIClock, owner: str) -> tuple[Fraction, Fraction]:
+    """The interval and shift [s] of periodic clock ``k`` as the FMU gives them."""
+    interval, q = _get_interval(call, k)
+    if k.supports_fraction:
+        if not interval[1]:
+            raise FMUError(f"{owner}: fmi3GetIntervalFraction of clock {k.name!r} returned resolution 0")
+        interval = Fraction(*interval)
+        sc, sr = (_U64 * 1)(), (_U64 * 1)()
+        call("fmi3GetShiftFraction", k, sc, sr)
+        shift = Fraction(sc[0], sr[0]) if sr[0] else Fraction(0)
+    else:
+        interval = time_fraction(checked_interval(interval, k, owner, True))
+        sh = (_D * 1)()
+        call("fmi3GetShiftDecimal", k, sh)
+        if not math.isfinite(sh[0]) or sh[0] < 0:
+            raise FMUError(f"{owner}: fmi3GetShiftDecimal of clock {k.name!r} returned {sh[0]!r}")
+        shift = time_fraction(sh[0])
+    if q == NOT_YET_KNOWN:
+        raise FMUError(f"{owner}: fmi3GetInterval of {k.variability} clock {k.name!r} returned "
+                       "fmi3IntervalNotYetKnown, which only countdown clocks may return")
+    return interval, shift
+
+
+# ---------------------------------------------------------------------- a run
+class ClockedRun(ClockPorts):
+    """One run of a clocked FMU: its ports and its clocks' timing (see the module
+    documentation); each interface's run (:func:`~cosim.fmi.clock_run.clocked_run`) adds
+    the call sequence as the methods ``output(t)`` and ``update(t)``.
+
+    Parameters
+    ----------
+    comp, board, values, inputs, outputs, integers
+        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
+    """
+
+    __slots__ = ("P", "_interval_calls", "countdown", "done_n", "first", "fmu_next", "inbox", "inv", "next_at",
+                 "plan_len", "plans", "sched", "t0", "tol")
+    #: Whether the periodic clocks due at one instant are activated in priority order.
+    by_priority = False
+
+    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
+        super().__init__(comp, board, values, inputs, outputs, integers)
+        self.sched: ClockSchedule = comp._clock_schedule
+        self.next_at = self.sched.next_at
+        self.P, self.t0, self.tol = comp.period, self.sched.t0, self.sched.tol
+        self.inv = 1.0 / self.P
+        self.inbox = board.inbox(self.name)
+        self.countdown = [k for k in self.model.clocks if k.variability == "countdown" and k.causality == "input"]
+        self.fmu_next: float | None = None           # the FMU's nextEventTime
+        self.done_n = -1                             # the instant whose outputs were computed
+        self._interval_calls: dict = {}
+        self._patterns()
+
+    # ------------------------------------------------------------------ periodic clocks
+    def _patterns(self) -> None:
+        """The periodic clocks' activations at each instant, as plans over their common
+        period (``self.plans[n % len]`` for instants from ``self.first`` on)."""
+        periodic = self.sched.periodic
+        length = 1
+        for _, every, _ in periodic:
+            length = length * every // math.gcd(length, every)
+            if length > MAX_PATTERN:
+                break
+        first = max((f for _, _, f in periodic), default=0)
+        if length > MAX_PATTERN or first > MAX_PATTERN:
+            self.plans, self.plan_len, self.first = None, 1, 0
+            return
+        plans: list = [None] * length
+        for n in range(first, first + length):
+            plans[n % length] = self._plan_at(n)
+        self.plans, self.plan_len, self.first = plans, length, first
+
+    def _plan_at(self, n: int) -> Plan | None:
+        """The plan of the periodic clocks due at instant ``n`` (None: none)."""
+        due = [k for k, every, first in self.sched.periodic if n >= first and (n - first) % every == 0]
+        if self.by_priority:
+            due.sort(key=lambda k: self.priority[k.vr])
+        return self.plan([k.vr for k in due]) if due else None
+
+    def periodic_at(self, n: int) -> Plan | None:
+        """The periodic plan of instant ``n``."""
+        if self.plans is not None and n >= self.first:
+            return self.plans[n % self.plan_len]
+        return self._plan_at(n)
+
+    def instant(self, t: float) -> int:
+        """The component's instant number of ``t`` [s]."""
+        return round((t - self.t0) / self.P)
+
+    # ------------------------------------------------------------------ aperiodic and triggered clocks
+    def _due_at(self, t: float) -> list[int]:
+        """Aperiodic clocks due at ``t`` (removed from the pending)."""
+        nxt = self.next_at
+        if not nxt:
+            return []
+        tol, due = self.tol, []
+        for vr, tn in list(nxt.items()):
+            if abs(tn - t) <= tol:
+                due.append(vr)
+                del nxt[vr]
+            elif tn < t - tol:
+                raise FMUError(f"{self.name}: clock {self.model.by_vr[vr].name!r} was due at {tn:g} s, before "
+                               f"t = {t:g} s")
+        return due
+
+    def _received_at(self, t: float) -> tuple[list[int], dict | None]:
+        """The triggered clocks activated at ``t`` by their sources, and the snapshot of the
+        sources' outputs (merged)."""
+        box = self.inbox
+        if not box:
+            return [], None
+        tol = self.tol
+        ks, snap, keep = [], None, []
+        for entry in box:
+            te, port, s = entry
+            if abs(te - t) <= tol:
+                ks.append(self.port_clock[port])
+                snap = dict(s) if snap is None else {**snap, **s}
+            elif te < t - tol:
+                raise FMUError(f"{self.name}: activation of {port!r} at {te:g} s arrived after the component "
+                               f"passed it (t = {t:g} s)")
+            else:
+                keep.append(entry)
+        if ks:
+            box[:] = keep
+        return ks, snap
+
+    def _next_point(self, after: float, before: float) -> float | None:
+        """The earliest pending activation strictly between ``after`` and ``before`` [s]."""
+        tol = self.tol
+        times = [*self.next_at.values(), *(te for te, _, _ in self.inbox)]
+        if self.fmu_next is not None:
+            times.append(self.fmu_next)
+        return min((x for x in times if after + tol < x < before - tol), default=None)
+
+    # ------------------------------------------------------------------ intervals
+    def _intervals(self, clocks: list[FMIClock]) -> list[tuple[FMIClock, float, int]]:
+        """``fmi3GetInterval*`` of ``clocks`` (the fraction form where supported):
+        ``(clock, interval [s], qualifier)`` each."""
+        if not clocks:
+            return []
+        key = tuple(k.vr for k in clocks)
+        call = self._interval_calls.get(key)
+        n = len(clocks)
+        if call is None:
+            vrs = (_U32 * n)(*key)
+            q = (_I * n)()
+            if all(k.supports_fraction for k in clocks):
+                cnt, res = (_U64 * n)(), (_U64 * n)()
+                fn, args = self._fn("fmi3GetIntervalFraction"), (self.c, vrs, _SIZE(n), cnt, res, q)
+                label = "GetIntervalFraction"
+
+                def read():
+                    return [(cnt[i] / res[i]) if res[i] else float("inf") for i in range(n)]
+            else:
+                vals = (_D * n)()
+                fn, args = self._fn("fmi3GetIntervalDecimal"), (self.c, vrs, _SIZE(n), vals, q)
+                label = "GetIntervalDecimal"
+
+                def read():
+                    return [vals[i] for i in range(n)]
+            call = self._interval_calls[key] = (fn, args, label, read, q)
+        fn, args, label, read, q = call
+        st = fn(*args)
+        if st > 1:
+            self._fail(f"{label}({', '.join(k.name for k in clocks)})", st)
+        return [(k, v, int(q[i])) for i, (k, v) in enumerate(zip(clocks, read()))]
+
+    def _apply_interval(self, k: FMIClock, v: float, q: int, t: float, ticked: bool) -> None:
+        """Clock ``k``'s interval ``v`` [s] (qualifier ``q``) read at ``t`` (``ticked``: it was
+        active there): its next activation, or (tunable) its pattern from now on."""
+        if q not in QUALIFIERS:
+            raise FMUError(f"{self.name}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
+        if k.variability == "changing" and ticked and q != CHANGED:
+            raise FMUError(f"{self.name}: changing clock {k.name!r} ticked at t = {t:g} s but fmi3GetInterval "
+                           f"returned {QUALIFIERS[q]}; the standard requires its next interval (changed)")
+        if q != CHANGED:
+            return
+        if k.variability in ("countdown", "changing"):
+            self.next_at[k.vr] = t + checked_interval(v, k, self.name, False)
+            return
+        iv = checked_interval(v, k, self.name, True)          # tunable without intervalDecimal: from now on
+        ratio = iv / self.P
+        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+            raise FMUError(f"{self.name}: tunable clock {k.name!r} changed its interval to {iv:g} s at "
+                           f"t = {t:g} s, not a multiple of the period {self.P:g} s")
+        for entry in self.sched.periodic:
+            if entry[0].vr == k.vr:
+                entry[1] = round(ratio)
+                entry[2] = self.instant(t) + round(ratio)
+        self._patterns()

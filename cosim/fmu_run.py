@@ -1,0 +1,153 @@
+"""One FMU file run on its own, as fmpy's ``simulate_fmu`` runs it: its default experiment,
+start values by name, inputs from a table, the outputs chosen by name (:func:`open_fmu`,
+:func:`run_fmu`; ``pendulum-cosim run Model.fmu`` on the command line).
+
+The FMU is a :class:`~cosim.fmi.fmu_component.FMUComponent` in the master, stepped with the
+communication step (Co-Simulation) or integrated between the points of the output grid
+(Model Exchange). Defaults, as fmpy takes them: the start and stop time of the FMU's
+``DefaultExperiment`` (else 0 and start + 1 s), its ``stepSize`` (else a 500th of the span)
+and, in Model Exchange, its ``tolerance`` (else 1e-5). Inputs come from a table (a CSV file
+or DataFrame with a ``time`` column [s] and one column per input, named as the FMU's
+inputs): continuous real inputs interpolated linearly between rows, the others held, as
+fmpy does.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.infra.checks import finite, positive
+
+from .components.sources import Table
+from .core.component import PORT_TYPES
+from .core.master import Cosimulation
+from .fmi.archive import read_description
+from .fmi.fmu_component import FMUComponent
+
+__all__ = ["FMUExperiment", "open_fmu", "run_fmu"]
+
+#: The component name of the FMU (its signals are ``fmu.<variable>`` in the master).
+NAME = "fmu"
+
+
+@dataclass
+class FMUExperiment:
+    """An FMU ready to run (:func:`open_fmu`).
+
+    Attributes
+    ----------
+    cosim : Cosimulation
+        The FMU (component ``fmu``) and its input table (component ``input``), if any.
+    start_time, stop_time : float
+        [s]
+    step_size : float
+        The communication step (Model Exchange: the output grid) [s].
+    """
+
+    cosim: Cosimulation
+    start_time: float
+    stop_time: float
+    step_size: float
+
+    def run(self, **kw) -> pd.DataFrame:
+        """Run and return the FMU's recorded outputs, one column per variable (its own name);
+        keywords go to :meth:`cosim.core.master.Cosimulation.run`."""
+        kw.setdefault("signals", [f"{NAME}.*"])
+        df = self.cosim.run(self.stop_time, self.start_time, **kw)
+        df.columns = [c.split(".", 1)[1] if c.startswith(f"{NAME}.") else c for c in df.columns]
+        return df
+
+
+def _times(md, start_time, stop_time, step_size) -> tuple[float, float, float]:
+    exp = md.defaultExperiment
+
+    def default(attribute: str):
+        return getattr(exp, attribute, None) if exp is not None else None
+
+    t0 = finite(start_time if start_time is not None else default("startTime") or 0.0, "start_time [s]")
+    t1 = finite(stop_time if stop_time is not None else default("stopTime") or t0 + 1.0, "stop_time [s]")
+    if t1 <= t0:
+        raise ConfigurationError(f"stop_time {t1:g} s must be after start_time {t0:g} s")
+    h = step_size if step_size is not None else default("stepSize") or (t1 - t0) / 500
+    return t0, t1, positive(h, "step_size [s]")
+
+
+def _input_table(md, inputs, step: float) -> Table:
+    """The input table as a source whose columns are typed and interpolated as fmpy does."""
+    df = Table.read(inputs, "input")
+    variables = {v.name: v for v in md.modelVariables if v.causality == "input"}
+    columns = [str(c) for c in df.columns if c != "time"]
+    unknown = [c for c in columns if c not in variables]
+    if unknown:
+        raise UnknownNameError(f"input column {unknown[0]!r} is not an input of the FMU; its inputs: "
+                               f"{', '.join(variables) or '(none)'}")
+    types = {c: variables[c].type for c in columns if PORT_TYPES.get(variables[c].type) != "real"}
+    linear = {c: "linear" for c in columns
+              if c not in types and variables[c].variability not in ("discrete", "tunable")}
+    return Table("input", step, df, interpolation=linear, types=types)
+
+
+def open_fmu(path, stop_time: float | None = None, *, start_time: float | None = None,
+             step_size: float | None = None, start: Mapping | None = None, inputs=None,
+             outputs: Sequence[str] | None = None, interface: str = "auto", rtol: float | None = None,
+             isolate: bool = False) -> FMUExperiment:
+    """The FMU at ``path`` ready to run (see the module documentation).
+
+    Parameters
+    ----------
+    path : str or Path
+        An FMU file (FMI 2.0 or 3.0).
+    stop_time, start_time : float, optional
+        [s] Default: the FMU's ``DefaultExperiment``, else 0 and start + 1 s.
+    step_size : float, optional
+        [s] The communication step (Model Exchange: the output grid). Default: the
+        ``DefaultExperiment`` stepSize, else a 500th of the span.
+    start : mapping, optional
+        Parameter and start values by variable name (lists for arrays).
+    inputs : str, Path or DataFrame, optional
+        The input table (a ``time`` column [s], one column per input).
+    outputs : sequence of str, optional
+        The variables recorded (outputs, or locals); default every output.
+    interface : {"auto", "cs", "me", "se"}
+        As :class:`~cosim.fmi.fmu_component.FMUComponent` takes it.
+    rtol : float, optional
+        Model Exchange: CVODE's relative tolerance (default the ``DefaultExperiment``
+        tolerance, else 1e-5).
+    isolate : bool
+        Run the FMU in a process of its own (a crash of its code is a named error).
+    """
+    path = Path(path)
+    md = read_description(path)
+    t0, t1, h = _times(md, start_time, stop_time, step_size)
+    exp = md.defaultExperiment
+    tol = rtol if rtol is not None else float(exp.tolerance) if exp is not None and exp.tolerance else 1e-5
+    table = _input_table(md, inputs, h) if inputs is not None else None
+    fmu = FMUComponent(NAME, path, h, inputs=table.output_names if table is not None else None,
+                       outputs=None if outputs is None else list(outputs), start=dict(start or {}),
+                       interface=interface, rtol=tol, isolate=isolate)
+    parts = [fmu] + ([table] if table is not None else [])
+    wiring = {f"{NAME}.{c}": f"input.{c}" for c in (table.output_names if table is not None else [])}
+    return FMUExperiment(Cosimulation(parts, wiring), t0, t1, h)
+
+
+def run_fmu(path, stop_time: float | None = None, **options) -> pd.DataFrame:
+    """Run the FMU at ``path`` and return its outputs (a DataFrame indexed by ``time`` [s],
+    one column per recorded variable). The options are those of :func:`open_fmu`; also
+    ``output_interval`` [s] (a multiple of the step) and ``progress``.
+
+    Parameters
+    ----------
+    path : str or Path
+    stop_time : float, optional
+        [s]
+    **options
+        Keywords of :func:`open_fmu` and of :meth:`FMUExperiment.run`.
+    """
+    run_keys = {"output_interval", "progress"}
+    run_kw = {k: options.pop(k) for k in list(options) if k in run_keys}
+    run_kw.setdefault("progress", False)
+    return open_fmu(path, stop_time, **options).run(**run_kw)

@@ -1,0 +1,267 @@
+"""A co-simulation written as an SSP (System Structure and Parameterization 1.0).
+
+:func:`export_ssp` writes a scenario whose every component is an FMU or can be written as
+one (:meth:`cosim.core.component.ExportsFMU.export_fmu`: FMUs, estimators, sources, process
+noise and sensors) as
+
+* ``SystemStructure.ssd``: one ``Component`` per component (``source`` =
+  ``resources/<name>.fmu``) with a connector per port, the connections, one system-level
+  ``ParameterBinding`` holding every parameter and start value as ``<component>.<variable>``,
+  the start and stop time as ``DefaultExperiment``, and each component's sample period in
+  an annotation (``type="org.pendulum-cosim"``), since SSP 1.0 has no place for it; and the
+  communication step (the greatest common divisor of the periods) in OMSimulator's
+  vendor annotation on the System (``type="org.openmodelica"``, ``oms:FixedStepMaster``),
+  which OMSimulator reads instead of its default 1 ms step;
+* ``resources/<name>.fmu``: the FMUs;
+* ``<name>.ssp``: the same two as one archive (what most tools open).
+
+Noise components draw from the counter generator in their FMUs (:mod:`cosim.components.noise`):
+give them ``generator = "counter"`` for the scenario to draw the same noise in the
+project's master; otherwise the export says so in its notes.
+
+Importers differ in how they order the FMUs within a step. fmpy's ``simulate_ssp``
+(FMI 2.0 only) steps every FMU with the connector values of the previous step (Jacobi)
+and starts every connector at 0, so over its first step the plant sees 0 for the force
+and the noise; after that a plant driven by sources gets the same inputs as in the
+project's master.
+"""
+from __future__ import annotations
+
+import inspect
+import os
+import tempfile
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fmu_models.errors import ConfigurationError, FMUError
+from fmu_models.export.clocked import check_clocked
+from fmu_models.export.description import xml_attrs
+from fmu_models.export.platforms import add_platforms
+from fmu_models.infra.version import VERSION
+
+from ..core.component import PORT_TYPES, ExportedFMU, ExportsFMU
+from ..core.master import Cosimulation
+from ..core.schedule import base_step
+from ..fmi.archive import read_description
+from .schema import NS
+
+__all__ = ["ANNOTATION", "OMS_ANNOTATION", "SSPExport", "export_component", "export_ssp"]
+
+#: Annotation type of the project's additions to the SSD (the components' periods).
+ANNOTATION = "org.pendulum-cosim"
+PC_NS = "https://github.com/pendulum-cosim/ssp"
+#: OMSimulator's vendor annotation (its schema oms.xsd) holding the master's step size.
+OMS_ANNOTATION = "org.openmodelica"
+OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
+_SSP_TYPES = {"real": "Real", "integer": "Integer", "boolean": "Boolean"}
+
+
+@dataclass
+class SSPExport:
+    """What :func:`export_ssp` wrote.
+
+    Attributes
+    ----------
+    ssd : Path
+        ``SystemStructure.ssd``.
+    archive : Path
+        The ``.ssp`` file.
+    fmus : dict of str to Path
+        Each component's FMU.
+    notes : list of str
+        Where the SSP differs from the scenario (e.g. the noise generator).
+    """
+
+    ssd: Path
+    archive: Path
+    fmus: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+
+def _value_xml(kind: str, value) -> str:
+    if kind == "boolean":
+        return f'<ssv:Boolean value="{"true" if value else "false"}"/>'
+    if kind == "integer":
+        return f'<ssv:Integer value="{int(value)}"/>'
+    return f'<ssv:Real value="{float(value)!r}"/>'
+
+
+def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descriptions: dict, connections: dict,
+              start_time: float, stop_time: float | None, description: str, step_size: float) -> str:
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
+             f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{PC_NS}" version="1.0"{xml_attrs(name=name)}'
+             f'{xml_attrs(generationTool=f"pendulum-cosim {VERSION}")}>',
+             f"  <ssd:System{xml_attrs(name=name, description=description or None)}>"]
+    params = []
+    for c in components:
+        variables = {v.name: v for v in descriptions[c.name].modelVariables}
+        for key, value in exported[c.name].parameters.items():
+            params.append((f"{c.name}.{key}", PORT_TYPES[variables[key].type], value))
+    if params:
+        lines += ["    <ssd:ParameterBindings>", "      <ssd:ParameterBinding>", "        <ssd:ParameterValues>",
+                  '          <ssv:ParameterSet version="1.0" name="parameters">', "            <ssv:Parameters>"]
+        lines += [f"              <ssv:Parameter{xml_attrs(name=n)}>{_value_xml(k, v)}</ssv:Parameter>"
+                  for n, k, v in params]
+        lines += ["            </ssv:Parameters>", "          </ssv:ParameterSet>", "        </ssd:ParameterValues>",
+                  "      </ssd:ParameterBinding>", "    </ssd:ParameterBindings>"]
+    lines.append("    <ssd:Elements>")
+    for c in components:
+        variables = {v.name: v for v in descriptions[c.name].modelVariables}
+        lines.append(f'      <ssd:Component{xml_attrs(name=c.name, type="application/x-fmu-sharedlibrary")}'
+                     f'{xml_attrs(source=f"resources/{c.name}.fmu")}>')
+        conns = [(p, "input") for p in c.input_names if p in variables]
+        conns += [(p, "output") for p in c.output_names if p in variables]
+        if conns:
+            lines.append("        <ssd:Connectors>")
+            lines += [f"          <ssd:Connector{xml_attrs(name=p, kind=k)}>"
+                      f"<ssc:{_SSP_TYPES[PORT_TYPES[variables[p].type]]}/></ssd:Connector>" for p, k in conns]
+            lines.append("        </ssd:Connectors>")
+        lines += ["        <ssd:Annotations>",
+                  f'          <ssc:Annotation type="{ANNOTATION}"><pc:Timing{xml_attrs(period=repr(c.period))}/>'
+                  "</ssc:Annotation>",
+                  "        </ssd:Annotations>", "      </ssd:Component>"]
+    lines.append("    </ssd:Elements>")
+    if connections:
+        lines.append("    <ssd:Connections>")
+        for (dc, dp), (sc, sp) in connections.items():
+            lines.append(f"      <ssd:Connection{xml_attrs(startElement=sc, startConnector=sp, endElement=dc)}"
+                         f"{xml_attrs(endConnector=dp)}/>")
+        lines.append("    </ssd:Connections>")
+    lines += ["    <ssd:Annotations>",
+              f'      <ssc:Annotation type="{OMS_ANNOTATION}">',
+              f'        <oms:Annotations xmlns:oms="{OMS_NS}">',
+              "          <oms:SimulationInformation>",
+              f"            <oms:FixedStepMaster{xml_attrs(description='oms-ma', stepSize=repr(float(step_size)))}"
+              f"{xml_attrs(relativeTolerance='1e-4')}/>",
+              "          </oms:SimulationInformation>",
+              "        </oms:Annotations>",
+              "      </ssc:Annotation>",
+              "    </ssd:Annotations>"]
+    lines += ["  </ssd:System>",
+              f"  <ssd:DefaultExperiment{xml_attrs(startTime=repr(float(start_time)))}"
+              f"{xml_attrs(stopTime=None if stop_time is None else repr(float(stop_time)))}/>",
+              "</ssd:SystemStructureDescription>"]
+    return "\n".join(lines) + "\n"
+
+
+def export_component(c, folder: Path, fmi_version: int, clocked: bool) -> ExportedFMU:
+    """The component ``c`` as an FMU in ``folder`` (:meth:`~cosim.core.component.ExportsFMU.export_fmu`
+    in FMI ``fmi_version``); ``clocked``: its clocked form if its ``export_fmu`` takes the
+    option, else its unclocked form with a note saying so."""
+    if not clocked:
+        return c.export_fmu(folder, fmi_version)
+    if "clocked" not in inspect.signature(c.export_fmu).parameters:
+        e = c.export_fmu(folder, fmi_version)
+        note = f"{c.name}: {type(c).__name__} has no clocked form; written unclocked"
+        return ExportedFMU(e.path, e.parameters, "; ".join(n for n in (e.note, note) if n))
+    return c.export_fmu(folder, fmi_version, clocked=True)
+
+
+def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
+               stop_time: float | None = None, platforms: Sequence[str] = (), clocked: bool = False) -> SSPExport:
+    """Write a scenario (or a co-simulation) as an SSP into ``out_dir``.
+
+    Parameters
+    ----------
+    system : Scenario or Cosimulation
+        What to export (a :class:`cosim.scenario.Scenario` brings its start and stop
+        time and title).
+    out_dir : path
+        Folder for ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if
+        missing; those files are replaced, nothing else is touched).
+    fmi_version : {2, 3}
+        FMI version of the FMUs the export builds (FMU files of ``fmu`` components are
+        copied as they are). fmpy simulates SSPs of FMI 2.0 FMUs only.
+    name : str, optional
+        System name and archive name (default ``system``).
+    stop_time : float, optional
+        The ``DefaultExperiment`` stop time (default the scenario's).
+    platforms : sequence of str, optional
+        Platforms to cross-compile every FMU for besides this one
+        (:func:`fmu_models.export.platforms.add_platforms`; needs the ``cross`` extra).
+    clocked : bool
+        Write the estimators and signal FMUs in their clocked form (FMI 3.0 only,
+        :mod:`fmu_models.export.clocked`): each has an input clock ``sample`` at its sample
+        period, which an FMI 3.0 importer schedules from the FMU itself (no clock connection
+        in the SSD); components without a clocked form are written unclocked (a note says so).
+
+    Raises
+    ------
+    ConfigurationError
+        Components without an FMU form (all named at once), a connection to a port the
+        exported FMU lacks, or ``clocked`` with FMI 2.0.
+    """
+    check_clocked(clocked, fmi_version, "the SSP")
+    cosim = system if isinstance(system, Cosimulation) else system.cosim
+    stop = stop_time if stop_time is not None else getattr(system, "stop_time", None)
+    name = name or "system"
+    if not name.replace("-", "_").isidentifier():
+        raise ConfigurationError(f"SSP name {name!r} must be letters, digits, '_' or '-'")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out_dir, prefix=".ssp-") as tmp:
+        tmp = Path(tmp)
+        resources = tmp / "resources"
+        resources.mkdir()
+        exported = _export_all(cosim.components, resources, fmi_version, clocked)
+        notes = [e.note for e in exported.values() if e.note]
+        for n, e in exported.items():
+            if platforms:
+                try:
+                    notes += add_platforms(e.path, platforms)
+                except FMUError as err:
+                    raise FMUError(f"component {n!r}: {err}") from None
+        descriptions = {n: read_description(e.path) for n, e in exported.items()}
+        _check_connections(cosim.connections, descriptions)
+        step = float(base_step({c.name: c.period for c in cosim.components})[0])
+        text = _ssd_text(name, cosim.components, exported, descriptions, cosim.connections,
+                         getattr(system, "start_time", 0.0), stop, getattr(system, "title", ""), step)
+        _move_into(out_dir, tmp, text, name, [c.name for c in cosim.components])
+    return SSPExport(out_dir / "SystemStructure.ssd", out_dir / f"{name}.ssp",
+                     {c.name: out_dir / "resources" / f"{c.name}.fmu" for c in cosim.components}, notes)
+
+
+def _export_all(components, resources: Path, fmi_version: int, clocked: bool) -> dict[str, ExportedFMU]:
+    """Every component as an FMU in ``resources``; those that cannot be are all named at once."""
+    exported, refused = {}, []
+    for c in components:
+        if not isinstance(c, ExportsFMU):
+            refused.append(f"component {c.name!r} ({type(c).__name__}) has no FMU form")
+            continue
+        try:
+            exported[c.name] = export_component(c, resources, fmi_version, clocked)
+        except ConfigurationError as e:
+            refused.append(str(e))
+    if refused:
+        raise ConfigurationError("cannot export as an SSP: " + "; ".join(refused))
+    return exported
+
+
+def _check_connections(connections: dict, descriptions: dict) -> None:
+    """Every connection's ends are variables of the exported FMUs."""
+    for (dc, dp), (sc, sp) in connections.items():
+        for comp, port, kind in ((sc, sp, "output"), (dc, dp, "input")):
+            have = {v.name for v in descriptions[comp].modelVariables if v.causality == kind}
+            if port not in have:
+                raise ConfigurationError(f"cannot export as an SSP: the FMU of {comp!r} has no {kind} {port!r} "
+                                         f"(connection {sc}.{sp} -> {dc}.{dp}); its {kind}s: "
+                                         f"{', '.join(sorted(have))}")
+
+
+def _move_into(out_dir: Path, tmp: Path, ssd_text: str, name: str, components: list[str]) -> None:
+    """The SSD, the archive and the FMUs written in ``tmp``, moved into ``out_dir`` (replacing
+    those files only)."""
+    (tmp / "SystemStructure.ssd").write_text(ssd_text, encoding="utf-8")
+    archive = tmp / f"{name}.ssp"
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
+        z.write(tmp / "SystemStructure.ssd", "SystemStructure.ssd")
+        for c in components:
+            z.write(tmp / "resources" / f"{c}.fmu", f"resources/{c}.fmu")
+    (out_dir / "resources").mkdir(exist_ok=True)
+    for c in components:
+        os.replace(tmp / "resources" / f"{c}.fmu", out_dir / "resources" / f"{c}.fmu")
+    os.replace(tmp / "SystemStructure.ssd", out_dir / "SystemStructure.ssd")
+    os.replace(archive, out_dir / f"{name}.ssp")
