@@ -175,6 +175,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         The last 200 log messages of the FMU (status, text).
     integrator : MEIntegrator or None
         The Model Exchange integrator of the current run.
+    unit_nominals : bool
+        Model Exchange: the FMU's nominals call returned Error when its integrator started,
+        so its states' nominal values are 1 (:mod:`cosim.fmi.model_exchange`).
     arguments : dict
         The constructor's arguments but ``isolate`` (what the isolating child process
         builds its own copy of the component from).
@@ -222,8 +225,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
         self._remote = None
-        #: Model Exchange: the FMU's nominals call returned Error, its states' nominal values
-        #: are 1 (see :mod:`cosim.fmi.model_exchange`).
         self.unit_nominals = False
 
     def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,

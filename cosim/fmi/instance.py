@@ -182,6 +182,8 @@ class FMUInstance:
                 os.chdir(cwd)
         fmu = self.fmu
         if not fmu.component:
+            self._forget_log()
+            unload_library(fmu)
             what = {"cs": "Slave", "me": "Model"}[interface] if self.version == 1 else ""
             raise FMUError(f"{owner}: {self.prefix}Instantiate{what} returned no instance" + self._last(" (", ")"))
         self.dll, self.handle = (_Symbols(fmu.dll, ident) if self.version == 1 else fmu.dll), fmu.component

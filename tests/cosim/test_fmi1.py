@@ -1,6 +1,7 @@
 """FMI 1.0 FMUs through the master: every FMI 1.0 Reference FMU (Co-Simulation equal to
 fmpy's own run, Model Exchange within twice fmpy's own error against fmpy at rtol 1e-10),
-through the Python API and a scenario file, on both engines and isolated; and a
+through the Python API (FMUComponent and run_fmu) and a scenario file, on both engines and
+isolated; and a
 hand-written FMI 1.0 FMU (tests/data/call_rules1, Co-Simulation and Model Exchange in one
 library) that logs every call the FMI 1.0 call sequences forbid, fails, returns Pending or
 crashes on request. Every bad try is a named error, with no traceback and nothing left
@@ -23,6 +24,7 @@ from testkit import reference_cases as rc
 from testkit.processes import processes_mentioning
 
 from cosim import Constant, Cosimulation, FMUComponent, MESystem
+from cosim.fmu_run import run_fmu
 from fmu_models.errors import ConfigurationError, CosimError, FMUError
 
 CLI = [sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())"]
@@ -74,6 +76,31 @@ def test_cli(case: rc.Case, tmp_path):
     assert list(df.columns) == list(api.columns)
     np.testing.assert_array_equal(df.to_numpy(float), api.to_numpy(float))
     assert _leftovers() == []
+
+
+@needs_reference
+@pytest.mark.parametrize("case", CASES, ids=[c.label for c in CASES])
+def test_run_fmu_equals_fmpy(case: rc.Case):
+    """The FMU file run on its own (its default experiment, a 500th of it the step) as fmpy's
+    ``simulate_fmu`` runs it: Co-Simulation within 1e-12, Model Exchange within twice
+    fmpy's own error against fmpy at rtol 1e-10."""
+    from fmpy import simulate_fmu
+
+    df = run_fmu(rc.fmu_path(case))
+    kw = dict(output_interval=float(df.index[1] - df.index[0]), output=list(df.columns))
+    if case.interface == "me":
+        kw.update(fmi_type="ModelExchange", record_events=False)
+    theirs = simulate_fmu(str(rc.fmu_path(case)), **kw)
+    assert len(theirs) == len(df)
+    np.testing.assert_allclose(df.index.to_numpy(), theirs["time"], rtol=0, atol=1e-9 * abs(theirs["time"][-1]))
+    exact = simulate_fmu(str(rc.fmu_path(case)), relative_tolerance=1e-10, **kw) if case.interface == "me" else None
+    for c in df.columns:
+        ours, ref = df[c].to_numpy(float), theirs[c].astype(float)
+        if exact is None:
+            np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-12, err_msg=c)
+        else:
+            e = exact[c].astype(float)
+            assert np.max(np.abs(ours - e)) <= 2 * np.max(np.abs(ref - e)) + 1e-12 * (1 + np.max(np.abs(e))), c
 
 
 @needs_reference
