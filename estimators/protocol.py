@@ -56,7 +56,7 @@ import casadi as ca
 import numpy as np
 
 from fmu_models.errors import ConfigurationError
-from fmu_models.variables import DOMAINS
+from fmu_models.variables import check_declaration
 
 from .discrete import DiscreteModel
 from .linalg import CSE, log_det, status_flag, symmetric, upper_entries, used_measurement
@@ -104,10 +104,7 @@ class Parameter:
     of: tuple[str, ...] = ()
 
     def __post_init__(self):
-        if not self.name.isidentifier():
-            raise ConfigurationError(f"parameter name {self.name!r} must be an identifier")
-        if self.domain not in DOMAINS:
-            raise ConfigurationError(f"parameter {self.name}: domain {self.domain!r} not in {DOMAINS}")
+        check_declaration("parameter", self.name, self.domain)
         value = np.atleast_1d(np.asarray(self.value, dtype=float)).ravel()
         object.__setattr__(self, "value", value)
         labels = tuple(self.labels) or ((self.name,) if value.size == 1 else
@@ -144,20 +141,10 @@ class Update(NamedTuple):
     accepted: ca.SX
 
 
-class StepResult(NamedTuple):
-    """The step so far, as ``adapt_expr`` sees it: the prior, the :class:`Update` and
-    ``logdet_S``."""
-
-    x_prior: ca.SX
-    P_prior: ca.SX
-    x: ca.SX
-    P: ca.SX
-    innovation: ca.SX
-    S: ca.SX
-    K: ca.SX
-    nis: ca.SX
-    accepted: ca.SX
-    logdet_S: ca.SX
+StepResult = NamedTuple("StepResult", [(f, ca.SX) for f in ("x_prior", "P_prior", *Update._fields, "logdet_S")])
+StepResult.__doc__ = """The step so far, as ``adapt_expr`` sees it: the prior ``x_prior`` (nx, 1) and
+``P_prior`` (nx, nx), the fields of the :class:`Update` (``x``, ``P``, ``innovation``, ``S``,
+``K``, ``nis``, ``accepted``) and ``logdet_S``."""
 
 
 @dataclass
