@@ -522,11 +522,42 @@ class KalmanBase:
     def native_fold(self):
         """The fused step folded over trajectories in native code
         (``estimators._fold.NativeFold``), compiled and cached on the model: what
-        :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
+        :meth:`fold_record` runs (:meth:`run`, :meth:`BatchFilter.run <estimators.BatchFilter.run>`),
+        and, one step at a time, :class:`~estimators.BatchFilter`."""
 
         return self.system.compiled("fold", self.cache_key, self.backend,
                                     lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend,
                                                        library=self._step_library))
+
+    def fold_record(self, state: dict, us, ys, masks, params: dict, drop=()) -> tuple[dict, dict, dict]:
+        """Fold the fused step over the records of ``runs`` realisations in one native call
+        (:meth:`native_fold`).
+
+        Parameters
+        ----------
+        state : dict of str to ndarray
+            The initial state arrays, shape (runs, nnz) each.
+        us, ys, masks : ndarray
+            The records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny); contiguous.
+        params : dict of str to ndarray
+            The step's fixed inputs, shape (runs, nnz) each.
+        drop : collection of str
+            Outputs not kept (their views are scratch rows).
+
+        Returns
+        -------
+        (stored, views, last)
+            The outputs and the arrays the fold wrote (:meth:`NativeFold.outputs
+            <estimators._fold.NativeFold.outputs>`; the extra state, whose history is not kept,
+            left out) and the state after the last step by name, shape (runs, nnz) each.
+        """
+        runs, N = ys.shape[:2]
+        fold = self.native_fold()
+        cycled = [f"{k}_new" for k in self.extra_state_names]     # no one reads their history
+        outs, views = fold.outputs(runs, N, state, drop, cycled)
+        fold(runs, N, {"u": us, "y": ys, "mask": masks, **params}, state, views, cycled)
+        last = {name: outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1] for name in state}
+        return {n: a for n, a in outs.items() if n not in cycled}, views, last
 
     def check_record(self, us, ys, masks=None):
         """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
@@ -616,43 +647,43 @@ class KalmanBase:
             out = self._rt.outputs
             y0_ll = log_likelihood(out["nis"], out["logdet_S"], [self._used_channels(self._y, self._mask).sum()],
                                    out["accepted"] != 0)
-        if not self.supports_batch:
-            result = self._run_by_steps(us, ys, masks)
-            result.log_likelihood += y0_ll
-            return result
-        N = len(ys)
-        rt = self._rt
-        state = {k: v[None] for k, v in self.state_arrays().items()}
+        result = self._run_native(us, ys, masks, keep) if self.supports_batch else self._run_by_steps(us, ys, masks)
+        result.log_likelihood += y0_ll
+        return result
+
+    def _run_native(self, us, ys, masks, keep: str) -> FilterRun:
+        """:meth:`run` of checked arrays in one native call; the filter is left at the last step."""
         init = self._initial_for_run
-        fold = self.native_fold()
-        cycled = [f"{k}_new" for k in self.extra_state_names]     # no one reads their history
-        outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else (), cycled)
-        args = {"u": us[None], "y": ys[None], "mask": masks[None],
-                **{k: v[None] for k, v in self.parameter_arrays().items()}}
-        fold(1, N, args, state, views, cycled)
+        state = {k: v[None] for k, v in self.state_arrays().items()}
+        params = {k: v[None] for k, v in self.parameter_arrays().items()}
+        outs, views, last = self.fold_record(state, us[None], ys[None], masks[None], params,
+                                             DROPPABLE if keep == "estimates" else ())
         status = outs["status"][0, :, 0]
         if status.any():
-            k = int(np.flatnonzero(status)[0])
-            rt.status[0] = status[k]
-            self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
-            k_saved, self.k = self.k, self.k + k
-            try:
-                self._explain(f"run index {k}")
-            finally:
-                self.k = k_saved
-                self._mask[:] = 1.0
+            self._explain_run(int(np.flatnonzero(status)[0]), status, us, ys, masks)
         cat = {name: a[0] for name, a in outs.items()}
         result = self._make_run(cat, us, ys, masks, init)
-        result.log_likelihood += y0_ll
+        rt = self._rt
         for name in rt.pairs:                      # the filter now stands at the last step
-            rt.now(name)[:] = cat[f"{name}_new"][(N - 1) % 2 if f"{name}_new" in cycled else -1]
+            rt.now(name)[:] = last[name][0]
         for name in rt.outputs:
             if name != "status":
                 rt.outputs[name][:] = cat[name][-1] if name in cat else views[name][0, -1]
-        self.k += N
-        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()
-                        if name not in cycled})
+        self.k += len(ys)
+        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()})
         return result
+
+    def _explain_run(self, k: int, status: np.ndarray, us, ys, masks) -> None:
+        """Raise the error of a native run whose step ``k`` failed with ``status[k]`` (as
+        :meth:`step` would there; the filter's state is unchanged)."""
+        self._rt.status[0] = status[k]
+        self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
+        k_saved, self.k = self.k, self.k + k
+        try:
+            self._explain(f"run index {k}")
+        finally:
+            self.k = k_saved
+            self._mask[:] = 1.0
 
     def _make_run(self, cat: dict, us, ys, masks, init: dict) -> FilterRun:
         """A FilterRun from per-step outputs ``cat`` (row ``k``: step k's output, flat in

@@ -19,19 +19,18 @@ from ._compiled import compile_functions
 from .base import KalmanBase
 from .linalg import BAD_INPUT
 from .runs import BatchRun
-from .runtime import BoundStep
+from .runtime import BoundStep, StepArrays
 
 __all__ = ["BatchFilter", "BatchRun"]
 
 ON_FAILURE = ("raise", "mark")
 
 
-class FoldedStep:
+class FoldedStep(StepArrays):
     """One step of ``runs`` realisations through a filter's native fold (the step's own
     compiled library, whatever the number of runs), with the interface of
-    :class:`~estimators.runtime.BoundStep`: the state in two copies (``pairs``; the step
-    reads the current one and writes the other, :meth:`commit` swaps them), ``inputs``
-    and ``outputs`` as flat run-major arrays.
+    :class:`~estimators.runtime.BoundStep`: the arrays of :class:`~estimators.runtime.StepArrays`,
+    flat run-major.
 
     Parameters
     ----------
@@ -47,13 +46,8 @@ class FoldedStep:
 
     def __init__(self, fold, runs: int, state, shared):
         step = fold.step
-        self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in fold.names_in
-                      if k in state}
-        self.inputs = {k: (shared[k] if k in shared else np.zeros(runs * step.nnz_in(k))) for k in fold.names_in
-                       if k not in self.pairs}
-        self.outputs = {n: np.zeros(runs * step.nnz_out(n)) for n in fold.names_out if not n.endswith("_new")}
-        self.status = self.outputs["status"]
-        self.cell = [0]
+        super().__init__(fold.names_in, fold.names_out,
+                         lambda k, out: runs * (step.nnz_out(k) if out else step.nnz_in(k)), state, shared)
         args = {k: v.reshape(runs, -1) for k, v in self.inputs.items()}
 
         def bound(c: int):
@@ -63,25 +57,12 @@ class FoldedStep:
             return fold.bind(runs, 1, args, init, outs)
         self._calls = (bound(0), bound(1))
 
-    @property
-    def cur(self) -> int:
-        """Which copy of the state is current (0 or 1)."""
-        return self.cell[0]
-
-    def now(self, name: str) -> np.ndarray:
-        """The current copy of state array ``name`` (a view)."""
-        return self.pairs[name][self.cell[0]]
-
     def trigger(self) -> float:
         """Step every realisation from the current state into the other copy; returns the
         first status (the per-run statuses are in ``outputs["status"]``)."""
         if self._calls[self.cell[0]]():
             raise NumericalError("batched step: the compiled step failed to evaluate")
         return self.status[0]
-
-    def commit(self) -> None:
-        """Make the state the last :meth:`trigger` wrote the current one."""
-        self.cell[0] ^= 1
 
 
 class BatchFilter:
@@ -192,9 +173,7 @@ class BatchFilter:
             self.failed |= bad
         elif status.any():
             run = int(np.flatnonzero(status)[0])
-            what = "u or y contains NaN or inf" if status[run] == BAD_INPUT else "the estimate became non-finite"
-            raise (InputError if status[run] == BAD_INPUT else NumericalError)(
-                f"batched {self.template.name}: {what} in realisation {run} at step {self.k}; state unchanged")
+            self._refuse(status[run], run, f"step {self.k}")
         rt.commit()
         self.k += 1
         return self.x
@@ -217,7 +196,39 @@ class BatchFilter:
             left at the last step. A realisation that fails is marked in ``failed`` (with
             ``on_failure="mark"``) or raises, naming it and the step.
         """
-        R, nx, ny, nu = self.n, self.nx, self.ny, self.nu
+        R, nx, ny = self.n, self.nx, self.ny
+        us, ys, masks = self._record(us, ys, masks)
+        N = ys.shape[1]
+        t = self.template
+        state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
+        outs, _, last = t.fold_record(state, us, ys, masks, {k: v.reshape(R, -1) for k, v in self._params.items()})
+        status = outs["status"][:, :, 0]
+        bad = status != 0
+        if bad.any() and self.on_failure == "raise":
+            run, k = map(int, np.argwhere(bad)[0])
+            self._refuse(status[run, k], run, f"index {k}")
+        self.failed |= bad.any(axis=1)
+
+        def diag(name, n, fixed):
+            if name in outs:
+                return outs[name].reshape(R, N + 1, n, n).diagonal(axis1=2, axis2=3)
+            return np.repeat(fixed.reshape(R, n, n).diagonal(axis1=1, axis2=2)[:, None], N + 1, axis=1)
+
+        out = BatchRun(
+            x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
+            nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
+            Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
+            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
+            innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny))
+        for name, value in last.items():
+            self._rt.now(name)[:] = value.ravel()
+        self.k += N
+        return out
+
+    def _record(self, us, ys, masks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The records of :meth:`run` as contiguous float arrays (n_runs, N, nu), (n_runs, N, ny),
+        (n_runs, N, ny), or InputError naming the problem."""
+        R, ny, nu = self.n, self.ny, self.nu
         ys = np.ascontiguousarray(checks.float_array(ys, "ys"))
         if ys.ndim != 3 or ys.shape[0] != R or ys.shape[2] != ny:
             raise InputError(f"ys must have shape ({R}, N, {ny}), got {ys.shape}")
@@ -232,34 +243,12 @@ class BatchFilter:
             raise InputError("us contains NaN or inf")
         masks = (np.ones((R, N, ny)) if masks is None else
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
-        t = self.template
-        fold = t.native_fold()
-        state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
-        cycled = [f"{k}_new" for k in t.extra_state_names]         # no one reads their history
-        outs, views = fold.outputs(R, N, state, cycle=cycled)
-        args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
-        fold(R, N, args, state, views, cycled)
-        status = outs["status"][:, :, 0]
-        bad = status != 0
-        if bad.any() and self.on_failure == "raise":
-            run, k = map(int, np.argwhere(bad)[0])
-            what = "u or y contains NaN or inf" if status[run, k] == BAD_INPUT else "the estimate became non-finite"
-            raise (InputError if status[run, k] == BAD_INPUT else NumericalError)(
-                f"batched {t.name}: {what} in realisation {run} at index {k}; state unchanged")
-        self.failed |= bad.any(axis=1)
+        return us, ys, masks
 
-        def diag(name, n, fixed):
-            if name in outs:
-                return outs[name].reshape(R, N + 1, n, n).diagonal(axis1=2, axis2=3)
-            return np.repeat(fixed.reshape(R, n, n).diagonal(axis1=1, axis2=2)[:, None], N + 1, axis=1)
-
-        out = BatchRun(
-            x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
-            nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
-            Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
-            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
-            innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny))
-        for name in state:
-            self._rt.now(name)[:] = outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1].ravel()
-        self.k += N
-        return out
+    def _refuse(self, status: float, run: int, where: str) -> None:
+        """Raise the error of realisation ``run`` whose step ``where`` (``"step 3"``) ended with
+        ``status``."""
+        bad_input = status == BAD_INPUT
+        what = "u or y contains NaN or inf" if bad_input else "the estimate became non-finite"
+        raise (InputError if bad_input else NumericalError)(
+            f"batched {self.template.name}: {what} in realisation {run} at {where}; state unchanged")
