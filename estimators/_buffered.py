@@ -36,14 +36,6 @@ class BufferedFunction:
                 raise ValueError(f"{fn.name()}: bad array bound to output {fn.name_out(i)}")
             self.buffer.set_res(i, memoryview(r))
 
-    def out(self, name: str) -> np.ndarray:
-        """The flat array bound to output ``name``."""
-        return self.res[self.fn.index_out(name)]
-
-    def arg(self, name: str) -> np.ndarray:
-        """The flat array bound to input ``name``."""
-        return self.args[self.fn.index_in(name)]
-
 
 def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """2-D view (column-major, shares memory) of a flat CasADi matrix array.

@@ -123,7 +123,8 @@ class BoundStep(StepArrays):
 
 
 class VectorInput:
-    """Writes a vector of ``n`` numbers into ``buffer`` (see the module documentation).
+    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into ``buffer`` (see the
+    module documentation).
 
     Parameters
     ----------
@@ -131,13 +132,10 @@ class VectorInput:
         The float buffer (length ``n``).
     owner, what : str
         For messages: the filter's name and the input's (``"u"``, ``"y"``, ``"mask"``).
-    allow_scalar : bool
-        Accept a bare number when ``n == 1``.
     """
 
-    def __init__(self, buffer: np.ndarray, owner: str, what: str, allow_scalar: bool = True):
-        self.buffer, self.owner, self.what = buffer, owner, what
-        self.n, self.allow_scalar = len(buffer), allow_scalar
+    def __init__(self, buffer: np.ndarray, owner: str, what: str):
+        self.buffer, self.owner, self.what, self.n = buffer, owner, what, len(buffer)
         self._entries = range(self.n)
 
     def __call__(self, value) -> None:
@@ -157,7 +155,7 @@ class VectorInput:
         n, what, owner = self.n, self.what, self.owner
         a = float_array(value, f"{owner}: {what}")
         if a.ndim == 0:
-            if not (self.allow_scalar and n == 1):
+            if n != 1:
                 raise InputError(f"{owner}: {what} must have shape ({n},), got the scalar {value!r}")
             a = a.reshape(1)
         if a.shape != (n,):
