@@ -28,7 +28,7 @@ from collections.abc import Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, InputError, TypeMismatchError, UnknownNameError
+from fmu_models.errors import ConfigurationError, InputError, UnknownNameError
 from fmu_models.infra import checks
 from fmu_models.infra.memory import check_fits
 from fmu_models.infra.registry import Registry
@@ -36,7 +36,7 @@ from fmu_models.infra.registry import Registry
 from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
 from ._fold import NativeFold, compile_with_fold
-from .discrete import DiscreteModel
+from .discrete import DiscreteModel, checked_model
 from .history import NoiseHistory
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
 from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
@@ -129,19 +129,17 @@ class KalmanBase:
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, gate: float | None = None,
                  nan_is_missing: bool = True, backend: str = "compiled"):
-        if not isinstance(system, DiscreteModel):
-            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
-        self.system = system
+        self.system = checked_model(system)
         n, p = system.nx, system.ny
         self.gate = np.inf if gate is None else checks.positive(gate, "gate")
         self.nan_is_missing = bool(nan_is_missing)
         noise = {"Q": checks.covariance(Q, n, "Q").ravel(order="F"),
                  "R": checks.covariance(R, p, "R").ravel(order="F")}
+        self._start = (checks.vector(x0, n, "x0", ConfigurationError), checks.covariance(P0, n, "P0"))
         extra = {k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}
         params = list(self.step_parameters())
-        state = {"x": checks.vector(x0, n, "x0", ConfigurationError),
-                 "P": checks.covariance(P0, n, "P0").ravel(order="F"),
-                 **(noise if self.adapts_noise else {}), **extra}
+        state = {"x": self._start[0], "P": self._start[1].ravel(order="F"), **(noise if self.adapts_noise else {}),
+                 **extra}
         # fixed inputs of the step, shared with the bound step: changed in place (set_noise)
         self._fixed = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
                        **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in params}}
@@ -192,7 +190,8 @@ class KalmanBase:
         return (cls.__module__, cls.__qualname__, *self.config_key())
 
     def extra_state(self) -> dict:
-        """Initial values of the filter's extra state arrays, by name (default none)."""
+        """Initial values of the filter's extra state arrays, by name (default none); the
+        state it starts from, ``(x0, P0)``, is ``self._start``."""
         return {}
 
     @property
@@ -368,10 +367,10 @@ class KalmanBase:
         n = self.system.nx
         x = self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError)
         P = self.P if P0 is None else checks.covariance(P0, n, "P0")
-        init = self.extra_state()
+        self._start = (x, P)
         rt = self._rt
         values = {"x": x, "P": P.ravel(order="F"),
-                  **{k: np.array(v, float).ravel(order="F") for k, v in init.items()}}
+                  **{k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}}
         for name in rt.pairs:
             rt.set_state(name, values.get(name, rt.now(name).copy()))
         rt.cur, self.k = 0, 0

@@ -51,7 +51,7 @@ from fmu_models.infra.memory import check_fits
 
 from ._buffered import BufferedFunction
 from ._compiled import compile_functions
-from .discrete import DiscreteModel
+from .discrete import DiscreteModel, checked_model
 
 __all__ = ["PCRB", "posterior_crb", "rmse_ratio"]
 
@@ -96,13 +96,6 @@ class PCRB:
     def __len__(self) -> int:
         """Number of steps ``N``."""
         return len(self.P) - 1
-
-
-def _model(system) -> DiscreteModel:
-    if not isinstance(system, DiscreteModel):
-        raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize), got "
-                                f"{type(system).__name__}")
-    return system
 
 
 def _trajectories(X, nx: int) -> np.ndarray:
@@ -291,7 +284,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     ResourceError
         The work arrays would not fit in memory.
     """
-    s = _model(system)
+    s = checked_model(system)
     X = _trajectories(X, s.nx)
     runs, N = X.shape[0], X.shape[1] - 1
     us = _inputs(us, runs, N, s.nu)

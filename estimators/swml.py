@@ -68,11 +68,11 @@ import math
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, TypeMismatchError
+from fmu_models.errors import ConfigurationError
 from fmu_models.infra import checks
 
 from .adaptive import AdaptationRecord, bound_parameters, bounds_around
-from .discrete import DiscreteModel
+from .discrete import DiscreteModel, checked_model
 from .ekf import EKF
 from .linalg import BAD_RESULT, OK, finite_flag, log_det, mask_measurement
 from .protocol import Parameter, StepContext, StepResult
@@ -154,9 +154,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                  keep_r_nats: float = 2.0, max_fall: float = 2.0, q_bounds=None, r_bounds=None,
                  prior_sd: float | None = None, posterior_average: bool = False,
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
-        if not isinstance(system, DiscreteModel):
-
-            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
+        system = checked_model(system)
         q0, r0 = _scalar_variance(Q, system.nx, "Q"), _scalar_variance(R, system.ny, "R")
         self.window = checks.positive_int(window, "window")
         if self.window > MAX_WINDOW:
@@ -187,8 +185,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         self._prior_centre = (q0, r0)
         self.q_bounds = bounds_around(np.array([q0]), q_bounds, "q_bounds")
         self.r_bounds = bounds_around(np.array([r0]), r_bounds, "r_bounds")
-        self._start = (checks.vector(x0, system.nx, "x0", ConfigurationError),
-                       checks.covariance(P0, system.nx, "P0"))
         super().__init__(system, x0, P0, q0, r0, gate, nan_is_missing, backend)
         self._init_adaptation_record()
 
@@ -217,23 +213,15 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         return {"wu": np.zeros(s.nu * W), "wy": np.zeros(s.ny * W), "wv": np.zeros(s.ny * W), "wa": np.zeros(W),
                 "snap_x": np.tile(x0, n_snap), "snap_P": np.tile(P0.ravel(order="F"), n_snap),
                 "x_init": x0.copy(), "P_init": P0.ravel(order="F").copy(), "count": np.zeros(1),
-                **({"sigma": self._prior_points()} if self.posterior_average else {})}
+                **({"sigma": np.array(self._prior_points(*map(math.log, self._prior_centre)))}
+                   if self.posterior_average else {})}
 
-    def _prior_points(self) -> np.ndarray:
-        """The four outer unscented points of the prior of ``(ln q, ln r)`` (centred at the
-        initial q and r), flat ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights
-        (centre first: 1/3, 1/6, 1/6, 1/6, 1/6)."""
-        lq, lr = (math.log(v) for v in self._prior_centre)
+    def _prior_points(self, lq, lr):
+        """The four outer unscented points of the prior of ``(ln q, ln r)`` centred at ``(lq,
+        lr)`` (floats or SX), ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights (centre
+        first: 1/3, 1/6, 1/6, 1/6, 1/6)."""
         d = math.sqrt(3.0) * self.prior_sd
-        return np.array([lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS])
-
-    def reset(self, x0=None, P0=None) -> None:
-        """As :meth:`KalmanBase.reset <estimators.base.KalmanBase.reset>`; the window empties
-        and starts from the new state."""
-        n = self.system.nx
-        self._start = (self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError),
-                       self.P if P0 is None else checks.covariance(P0, n, "P0"))
-        super().reset(*self._start)
+        return [lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS]
 
     def fmu_noise_parameters(self) -> list[Parameter]:
         """``q0`` and ``r0``: the initial ``Q = q0 I``, ``R = r0 I``."""
@@ -252,8 +240,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         P = ca.reshape(ca.diag(p["P0"]), -1, 1)
         out.update(snap_x=ca.repmat(p["x0"], n_snap, 1), snap_P=ca.repmat(P, n_snap, 1), x_init=p["x0"], P_init=P)
         if self.posterior_average:
-            lq, lr, d = ca.log(p["q0"]), ca.log(p["r0"]), math.sqrt(3.0) * self.prior_sd
-            out["sigma"] = ca.vertcat(lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS)
+            out["sigma"] = ca.vertcat(*self._prior_points(ca.log(p["q0"]), ca.log(p["r0"])))
         return out
 
     # ------------------------------------------------------------------ the step
