@@ -33,15 +33,13 @@ from fmu_models.infra import checks
 from fmu_models.infra.memory import check_fits
 from fmu_models.infra.registry import Registry
 
-from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
 from ._fold import NativeFold, compile_with_fold
 from .discrete import DiscreteModel, checked_model
-from .history import NoiseHistory
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
 from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
-from .runs import FilterRun
-from .runtime import BoundStep, VectorInput, explain_status, lean_step
+from .runs import FilterRun, NoiseHistory
+from .runtime import BoundStep, BufferedFunction, VectorInput, explain_status, lean_step, matrix
 
 __all__ = ["DIAGNOSTICS", "FILTERS", "KEEP", "FilterRun", "KalmanBase", "Parameter", "StepContext", "StepResult",
            "Update"]
@@ -193,12 +191,6 @@ class KalmanBase:
         """Initial values of the filter's extra state arrays, by name (default none); the
         state it starts from, ``(x0, P0)``, is ``self._start``."""
         return {}
-
-    @property
-    def extra_state_names(self) -> list[str]:
-        """Names of the extra state arrays (:meth:`extra_state`): state nobody reads the
-        history of, so a native run keeps only its last value."""
-        return list(self._extra_names)
 
     def wrap_step(self, step: ca.Function) -> ca.Function:
         """The Function every form of the filter runs, from the fused ``step`` built from the
@@ -552,7 +544,7 @@ class KalmanBase:
         """
         runs, N = ys.shape[:2]
         fold = self.native_fold()
-        cycled = [f"{k}_new" for k in self.extra_state_names]     # no one reads their history
+        cycled = [f"{k}_new" for k in self._extra_names]     # no one reads their history
         outs, views = fold.outputs(runs, N, state, drop, cycled)
         fold(runs, N, {"u": us, "y": ys, "mask": masks, **params}, state, views, cycled)
         last = {name: outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1] for name in state}

@@ -19,7 +19,7 @@ from ._compiled import compile_functions
 from .base import KalmanBase
 from .linalg import BAD_INPUT
 from .runs import BatchRun
-from .runtime import BoundStep, StepArrays
+from .runtime import BoundStep, StepArrays, broadcast_inputs
 
 __all__ = ["BatchFilter", "BatchRun"]
 
@@ -120,9 +120,6 @@ class BatchFilter:
             (step,), _ = s.compiled("batch", (*template.cache_key, self.n), template.backend,
                                     lambda: compile_functions([step_fn.map(self.n, "serial")], template.backend))
             self._rt = BoundStep(step, state, self._params)
-        self._pairs = self._rt.pairs
-        self._inputs = self._rt.inputs
-        self._out = self._rt.outputs
         self.k = 0
         self.failed = np.zeros(self.n, dtype=bool)
 
@@ -136,19 +133,20 @@ class BatchFilter:
     R = property(lambda self: self._cov("R", self.ny), doc="Measurement noise covariances, (n_runs, ny, ny).")
 
     def _cov(self, key: str, n: int) -> np.ndarray:
-        flat = self._rt.now(key) if key in self._pairs else self._params[key]
+        flat = self._rt.now(key) if key in self._rt.pairs else self._params[key]
         return flat.reshape(self.n, n, n).transpose(0, 2, 1).copy()
-    nis = property(lambda self: self._out["nis"].copy())
-    innovation = property(lambda self: self._out["innov"].reshape(self.n, self.ny).copy())
+    nis = property(lambda self: self._rt.outputs["nis"].copy())
+    innovation = property(lambda self: self._rt.outputs["innov"].reshape(self.n, self.ny).copy())
 
     def _inputs_for(self, u, y, mask):
+        ins = self._rt.inputs
         try:
-            self._inputs["u"].reshape(self.n, self.nu)[:] = u
+            ins["u"].reshape(self.n, self.nu)[:] = u
             y = checks.float_array(y, "y")
             if y.shape != (self.n, self.ny):
                 raise ValueError
-            self._inputs["y"][:] = y.ravel()
-            self._inputs["mask"][:] = 1.0 if mask is None else np.broadcast_to(
+            ins["y"][:] = y.ravel()
+            ins["mask"][:] = 1.0 if mask is None else np.broadcast_to(
                 checks.float_array(mask, "mask"), (self.n, self.ny)).ravel()
         except ValueError:
             raise InputError(f"u must broadcast to ({self.n}, {self.nu}) and y have shape "
@@ -164,10 +162,10 @@ class BatchFilter:
         self._inputs_for(u, y, mask)
         rt = self._rt
         rt.trigger()
-        status = self._out["status"]
+        status = rt.status
         if status.any() and self.on_failure == "mark":
             bad = status != 0
-            for pair in self._pairs.values():     # failed runs keep their previous state
+            for pair in rt.pairs.values():     # failed runs keep their previous state
                 old, new = pair[rt.cur], pair[1 - rt.cur]
                 new.reshape(self.n, -1)[bad] = old.reshape(self.n, -1)[bad]
             self.failed |= bad
@@ -200,7 +198,7 @@ class BatchFilter:
         us, ys, masks = self._record(us, ys, masks)
         N = ys.shape[1]
         t = self.template
-        state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
+        state = {k: self._rt.now(k).reshape(R, -1) for k in self._rt.pairs}
         outs, _, last = t.fold_record(state, us, ys, masks, {k: v.reshape(R, -1) for k, v in self._params.items()})
         status = outs["status"][:, :, 0]
         bad = status != 0
@@ -233,14 +231,7 @@ class BatchFilter:
         if ys.ndim != 3 or ys.shape[0] != R or ys.shape[2] != ny:
             raise InputError(f"ys must have shape ({R}, N, {ny}), got {ys.shape}")
         N = ys.shape[1]
-        us = checks.float_array(us, "us")
-        try:
-            us = np.ascontiguousarray(np.broadcast_to(us.reshape(-1, N, nu) if us.ndim == 3
-                                                      else us.reshape(1, N, nu), (R, N, nu)))
-        except ValueError:
-            raise InputError(f"us must have shape (N, {nu}) or ({R}, N, {nu}), got {us.shape}") from None
-        if not np.isfinite(us).all():
-            raise InputError("us contains NaN or inf")
+        us = np.ascontiguousarray(broadcast_inputs(us, R, N, nu))
         masks = (np.ones((R, N, ny)) if masks is None else
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         return us, ys, masks

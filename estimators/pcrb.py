@@ -49,9 +49,9 @@ from fmu_models.errors import InputError, NumericalError, TypeMismatchError
 from fmu_models.infra import checks
 from fmu_models.infra.memory import check_fits
 
-from ._buffered import BufferedFunction
 from ._compiled import compile_functions
 from .discrete import DiscreteModel, checked_model
+from .runtime import BufferedFunction, broadcast_inputs
 
 __all__ = ["PCRB", "posterior_crb", "rmse_ratio"]
 
@@ -112,17 +112,6 @@ def _trajectories(X, nx: int) -> np.ndarray:
         raise InputError(f"true trajectories X contain NaN or inf ({int(bad.sum())} entries; first: realisation "
                          f"{r}, step {k}, state {i})")
     return np.ascontiguousarray(X)
-
-
-def _inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
-    us = checks.float_array(us, "inputs us")
-    try:
-        us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
-    except ValueError:
-        raise InputError(f"inputs us must have shape ({N}, {nu}) or ({runs}, {N}, {nu}), got {us.shape}") from None
-    if not np.isfinite(us).all():
-        raise InputError("inputs us contain NaN or inf")
-    return us
 
 
 def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
@@ -287,7 +276,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     s = checked_model(system)
     X = _trajectories(X, s.nx)
     runs, N = X.shape[0], X.shape[1] - 1
-    us = _inputs(us, runs, N, s.nu)
+    us = broadcast_inputs(us, runs, N, s.nu)
     Q, R = checks.covariance(Q, s.nx, "PCRB: Q"), checks.covariance(R, s.ny, "PCRB: R")
     P0 = None if P0 is None else checks.covariance(P0, s.nx, "PCRB: P0 (None for a known initial state)")
     return _Recursion(s, X, us, Q, R, P0, _valid_channels(masks, ys, runs, N, s.ny)).bound()

@@ -1,6 +1,9 @@
 """The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and
 the errors of a failed step.
 
+:class:`BufferedFunction` is a CasADi Function bound once to numpy arrays, then evaluated
+with no argument conversion.
+
 :class:`BoundStep` binds a fused step (one filter, or one mapped over realisations) to
 flat float arrays once (:class:`StepArrays`): the state in two copies (the step reads one
 and writes the other; :meth:`StepArrays.commit` makes the written copy current, so a failed
@@ -24,10 +27,57 @@ import numpy as np
 from fmu_models.errors import InputError, NumericalError
 from fmu_models.infra.checks import float_array
 
-from ._buffered import BufferedFunction
 from .linalg import BAD_INPUT, BAD_RESULT
 
-__all__ = ["BoundStep", "StepArrays", "VectorInput", "explain_status", "lean_step"]
+__all__ = ["BoundStep", "BufferedFunction", "StepArrays", "VectorInput", "broadcast_inputs", "explain_status",
+           "lean_step", "matrix"]
+
+
+class BufferedFunction:
+    """Evaluate ``fn`` on preset arrays: ``trigger()`` costs about a microsecond.
+
+    Every input and output is a flat float array in CasADi's column-major layout;
+    :func:`matrix` gives a 2-D (Fortran-ordered) view of one. Arrays passed in
+    ``bind_args``/``bind_res`` are shared, not copied: several functions can read and
+    write the same arrays.
+    """
+
+    def __init__(self, fn: ca.Function, bind_args: dict[int, np.ndarray] | None = None,
+                 bind_res: dict[int, np.ndarray] | None = None):
+        for i in range(fn.n_in()):
+            if not fn.sparsity_in(i).is_dense():
+                raise ValueError(f"{fn.name()}: input {fn.name_in(i)} must be dense")
+        for i in range(fn.n_out()):
+            if not fn.sparsity_out(i).is_dense():
+                raise ValueError(f"{fn.name()}: output {fn.name_out(i)} must be dense")
+        self.fn = fn
+        self.buffer, self.trigger = fn.buffer()
+        bind_args, bind_res = bind_args or {}, bind_res or {}
+        self.args = [bind_args.get(i, np.zeros(fn.nnz_in(i))) for i in range(fn.n_in())]
+        self.res = [bind_res.get(i, np.zeros(fn.nnz_out(i))) for i in range(fn.n_out())]
+        for i, a in enumerate(self.args):
+            if a.shape != (fn.nnz_in(i),) or a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"{fn.name()}: bad array bound to input {fn.name_in(i)}")
+            self.buffer.set_arg(i, memoryview(a))
+        for i, r in enumerate(self.res):
+            if r.shape != (fn.nnz_out(i),) or r.dtype != np.float64 or not r.flags.c_contiguous:
+                raise ValueError(f"{fn.name()}: bad array bound to output {fn.name_out(i)}")
+            self.buffer.set_res(i, memoryview(r))
+
+
+def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """2-D view (column-major, shares memory) of a flat CasADi matrix array.
+
+    Parameters
+    ----------
+    flat
+        The flat array (CasADi's column-major layout).
+    rows
+        Rows of the matrix.
+    cols
+        Columns of the matrix.
+    """
+    return flat.reshape((rows, cols), order="F")
 
 
 class StepArrays:
@@ -246,6 +296,28 @@ def _lean_source(nu: int, ny: int, after: bool) -> str:
                       "    count[0] += 1",
                       *(["    after()"] if after else []),
                       "    return copies[c]()"])
+
+
+def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
+    """The inputs ``us`` of ``runs`` records of ``N`` steps, shared (shape (N, nu)) or one
+    sequence each (shape (runs, N, nu)), as a (runs, N, nu) float array (a broadcast view),
+    or InputError naming the problem (a wrong shape, NaN or inf).
+
+    Parameters
+    ----------
+    us : array_like
+        The inputs.
+    runs, N, nu : int
+        Records, steps and inputs per step.
+    """
+    us = float_array(us, "inputs us")
+    try:
+        us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
+    except ValueError:
+        raise InputError(f"inputs us must have shape ({N}, {nu}) or ({runs}, {N}, {nu}), got {us.shape}") from None
+    if not np.isfinite(us).all():
+        raise InputError("inputs us contain NaN or inf")
+    return us
 
 
 def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarray, mask: np.ndarray,
