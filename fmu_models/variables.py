@@ -47,6 +47,11 @@ class Variable:
     def __post_init__(self):
         check_declaration("variable", self.name, self.domain)
 
+    def measured(self, description: str) -> Variable:
+        """The output measuring this variable: ``y_<name>``, in its unit, described by
+        ``description``."""
+        return Variable(f"y_{self.name}", self.unit, description)
+
     def check(self, value: float) -> float:
         """Return ``value`` as float if it lies in this variable's domain, else raise
         :class:`~fmu_models.errors.ConfigurationError` (TypeMismatchError for a non-number)."""
