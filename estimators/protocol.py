@@ -195,10 +195,6 @@ class StepContext:
         self.outputs[name] = ca.SX(expr)
 
 
-def _symbol(name: str, shape) -> ca.SX:
-    return ca.SX.sym(name, *shape)
-
-
 def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parameter]) -> ca.Function:
     """The fused step Function of ``filt`` from its hooks (see the module documentation).
 
@@ -217,14 +213,13 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     params
         Its step parameters (``step_parameters()``).
     """
-    s = filt.system
+    s, sym = filt.system, ca.SX.sym
     n, m, p = s.nx, s.nu, s.ny
-    x, P = _symbol("x", (n, 1)), _symbol("P", (n, n))
-    Q, R = _symbol("Q", (n, n)), _symbol("R", (p, p))
-    u, y, mask = _symbol("u", (m, 1)), _symbol("y", (p, 1)), _symbol("mask", (p, 1))
-    gate, nan_missing = _symbol("gate", (1, 1)), _symbol("nan_missing", (1, 1))
-    extra = {k: _symbol(k, (np.size(v), 1)) for k, v in extra_state.items()}
-    psym = {q.name: _symbol(q.name, (q.size, 1)) for q in params}
+    x, P, Q, R = sym("x", n, 1), sym("P", n, n), sym("Q", n, n), sym("R", p, p)
+    u, y, mask = sym("u", m, 1), sym("y", p, 1), sym("mask", p, 1)
+    gate, nan_missing = sym("gate", 1, 1), sym("nan_missing", 1, 1)
+    extra = {k: sym(k, np.size(v), 1) for k, v in extra_state.items()}
+    psym = {q.name: sym(q.name, q.size, 1) for q in params}
     valid, y_used = used_measurement(y, mask, nan_missing)
     ctx = StepContext(s, x, symmetric(P), symmetric(Q), symmetric(R), u, y_used, valid, gate, dict(extra), psym)
     xp, Pp = filt.predict_expr(ctx)
