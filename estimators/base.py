@@ -719,9 +719,7 @@ class KalmanBase:
 
     @property
     def _initial_for_run(self) -> dict:
-        nx, ny = self.system.nx, self.system.ny
-        return {"x": self._now("x").copy(), "P": matrix(self._now("P"), nx, nx).copy(),
-                "Q": matrix(self._now("Q"), nx, nx).copy(), "R": matrix(self._now("R"), ny, ny).copy()}
+        return {"x": self.x, "P": self.P, "Q": self.Q, "R": self.R}
 
     def _run_by_steps(self, us, ys, masks) -> FilterRun:
         """``run`` for a filter whose adaptation is not all in the fused step (a loop of
