@@ -538,9 +538,9 @@ class KalmanBase:
         Returns
         -------
         (stored, views, last)
-            The outputs and the arrays the fold wrote (:meth:`NativeFold.outputs
-            <estimators._fold.NativeFold.outputs>`; the extra state, whose history is not kept,
-            left out) and the state after the last step by name, shape (runs, nnz) each.
+            The outputs and the arrays the fold wrote (``estimators._fold.NativeFold.outputs``;
+            the extra state, whose history is not kept, left out) and the state after the last
+            step by name, shape (runs, nnz) each.
         """
         runs, N = ys.shape[:2]
         fold = self.native_fold()

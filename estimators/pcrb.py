@@ -332,13 +332,13 @@ class _Recursion:
 
     def _steps(self, k0: int, Fbar: np.ndarray, Zv: np.ndarray | None, Zy: np.ndarray) -> None:
         """The bound at steps ``k0 + 1 .. k0 + n`` from that at ``k0`` (``n = len(Fbar)``)."""
-        B, n = self.B, len(Fbar)
+        B, Q, n = self.B, self.Q, len(Fbar)
         with np.errstate(over="ignore", invalid="ignore"):          # a non-finite bound is refused below
             for j in range(n):
                 k = k0 + j
                 try:
                     Bk = B[k] if Zv is None else _joseph(B[k], Zv[j])
-                    P_pred = Fbar[j] @ Bk @ Fbar[j].T + self.Q
+                    P_pred = Fbar[j] @ Bk @ Fbar[j].T + Q
                     B[k + 1] = _joseph(0.5 * (P_pred + P_pred.T), Zy[j])
                 except (np.linalg.LinAlgError, ValueError):
                     raise NumericalError(f"PCRB: the bound became non-finite at step {k + 1} (an ill-posed model "
