@@ -552,7 +552,8 @@ class KalmanBase:
 
     def check_record(self, us, ys, masks=None):
         """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
-        (N, ny), or :class:`InputError` / :class:`TypeMismatchError` naming the problem."""
+        (N, ny), or :class:`InputError` / :class:`~fmu_models.errors.TypeMismatchError` naming the
+        problem."""
 
         nu, ny = self.system.nu, self.system.ny
         us = checks.float_array(us, "us")
