@@ -34,16 +34,9 @@ from cosim.experiments.common import batch_run
 from estimators import posterior_crb
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_swml import best
 from testkit.pcrb_oracle import pcrb_literal
-
-
-def best(fn, repeats=5):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def truth(runs=100):
@@ -58,10 +51,10 @@ def bound_costs() -> None:
     system = seed000._system(s.T)
     us = u[:-1, None]
     posterior_crb(system, X, us, q, r)                                       # warm (CasADi map built once)
-    t_pcrb = best(lambda: posterior_crb(system, X, us, q, r))
+    t_pcrb = best(lambda: posterior_crb(system, X, us, q, r), 5)
     make = seed000.make_filters(system, s, q, r)["EKF true Q,R"]
     batch_run(make, X, Y, u[:, None])                                       # warm (compiled once)
-    t_ekf = best(lambda: batch_run(make, X, Y, u[:, None]))
+    t_ekf = best(lambda: batch_run(make, X, Y, u[:, None]), 5)
     H = system.H(X[0, 0])
     n_lit = 50                                                              # the printed recursion is slow
     t_lit = best(lambda: pcrb_literal(system.F, lambda x: H, X[:, :n_lit + 1], us, q * np.eye(4), r * np.eye(2),
@@ -71,7 +64,7 @@ def bound_costs() -> None:
     print(f"  baseline: the printed recursion, per-point Jacobians (timed over {n_lit} steps, scaled): "
           f"{t_lit * 1e3:7.1f} ms")
     out = batch_run(make, X, Y, u[:, None])
-    t_tests = best(lambda: metrics.consistency(out.nees, out.nis, 4, 2, 0.95, out.innovation, out.S, 5))
+    t_tests = best(lambda: metrics.consistency(out.nees, out.nis, 4, 2, 0.95, out.innovation, out.S, 5), 5)
     print(f"consistency tests of one filter (NEES, NIS, whiteness at 5 lags): {t_tests * 1e3:7.1f} ms")
 
 

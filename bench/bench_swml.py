@@ -33,6 +33,7 @@ def record(cp, n, seed=0):
 
 
 def best(fn, repeats=7):
+    """The fastest of ``repeats`` calls of ``fn`` [s]."""
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()

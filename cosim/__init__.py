@@ -30,6 +30,7 @@ from .components import (
     PRBS,
     Accelerometer,
     Constant,
+    Conversion,
     Encoder,
     EstimatorComponent,
     Gyroscope,
@@ -55,8 +56,9 @@ from .core import (
     StateEstimator,
 )
 from .fmi import FMUComponent, MESystem
+from .fmu_run import open_fmu, run_fmu
 from .scenario import Scenario, ScenarioContext
-from .ssp import export_ssp, open_ssp
+from .ssp import export_ssp, open_ssp, run_ssp
 
 __all__ = [
     "CLOCK",
@@ -68,6 +70,7 @@ __all__ = [
     "Component",
     "ConfigurationError",
     "Constant",
+    "Conversion",
     "CosimError",
     "Cosimulation",
     "Encoder",
@@ -100,5 +103,8 @@ __all__ = [
     "UnknownNameError",
     "__version__",
     "export_ssp",
+    "open_fmu",
     "open_ssp",
+    "run_fmu",
+    "run_ssp",
 ]

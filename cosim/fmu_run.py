@@ -1,6 +1,7 @@
 """One FMU file run on its own, as fmpy's ``simulate_fmu`` runs it: its default experiment,
-start values by name, inputs from a table, the outputs chosen by name (:func:`open_fmu`,
-:func:`run_fmu`; ``pendulum-cosim run Model.fmu`` on the command line).
+start values by name, inputs from a table, the outputs chosen by name
+(:func:`~cosim.fmu_run.open_fmu`, :func:`~cosim.fmu_run.run_fmu`; ``pendulum-cosim run Model.fmu`` on
+the command line).
 
 The FMU is a :class:`~cosim.fmi.fmu_component.FMUComponent` in the master, stepped with the
 communication step (Co-Simulation) or integrated between the points of the output grid

@@ -32,36 +32,11 @@ from .smoother import rts_smooth
 from .swml import SWML
 from .ukf import UKF
 
-__all__ = [
-    "EKF",
-    "FILTERS",
-    "IAE",
-    "KF",
-    "MFIAE",
-    "SWML",
-    "UKF",
-    "BatchFilter",
-    "BatchRun",
-    "DiscreteModel",
-    "EMResult",
-    "FilterRun",
-    "KalmanBase",
-    "MamdaniFuzzy",
-    "Parameter",
-    "Smoothed",
-    "StepContext",
-    "StepResult",
-    "Update",
-    "__version__",
-    "augment_rate_bias",
-    "discretize",
-    "em_noise",
-    "export_fmu",
-    "linear_model",
-    "rts_smooth",
-]
-__all__ += ["PCRB", "BandTest", "WhitenessTest", "chi2_band", "nees_test", "nis_test", "posterior_crb", "rmse_ratio",
-            "whiteness_test"]
+__all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "PCRB", "SWML", "UKF", "BandTest", "BatchFilter", "BatchRun",
+           "DiscreteModel", "EMResult", "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed",
+           "StepContext", "StepResult", "Update", "WhitenessTest", "__version__", "augment_rate_bias", "chi2_band",
+           "discretize", "em_noise", "export_fmu", "linear_model", "nees_test", "nis_test", "posterior_crb",
+           "rmse_ratio", "rts_smooth", "whiteness_test"]
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None, clocked: bool = False):

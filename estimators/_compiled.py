@@ -100,36 +100,39 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     """
     if backend not in BACKENDS:
         raise UnknownNameError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    vm = (fns, "vm", None) if return_library else (fns, "vm")
-    if backend == "vm":
-        return vm
-    try:
-        cc = find_compiler()
-    except CompilerNotFoundError as e:
-        warnings.warn(f"{_VM}: {e}", stacklevel=2)
-        return vm
-    directory = writable_cache(_VM)
-    if directory is None:
-        return vm
+    lib = None
+    if backend == "compiled":
+        try:
+            cc = find_compiler()
+        except CompilerNotFoundError as e:
+            warnings.warn(f"{_VM}: {e}", stacklevel=2)
+            cc = None
+        directory = None if cc is None else writable_cache(_VM)
+        lib = None if directory is None else _library(fns, extra_code, cc, directory)
+    out = fns if lib is None else [ca.external(f.name(), str(lib)) for f in fns]
+    used = "vm" if lib is None else "compiled"
+    return (out, used, lib) if return_library else (out, used)
+
+
+def _library(fns: list[ca.Function], extra_code: str, cc: str, directory: Path) -> Path | None:
+    """The shared library of ``fns`` and ``extra_code`` in the cache ``directory``, built by
+    ``cc`` if it is not there yet; None (with a warning) if the cache cannot be written or a
+    compiler found on the PATH fails (the user's own ``$CC`` failing raises BuildError)."""
     cg = ca.CodeGenerator("fns.c")
     for f in fns:
         cg.add(f)
     code = cg.dump() + extra_code        # in memory: CasADi ignores failed file writes
     key = "\n".join([code, ca.__version__, " ".join(_FLAGS + _STDS), _cpu_identity()])
     lib = directory / f"fns_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
-    names = [f.name() for f in fns]
     try:
-        cached_file(lib, _compile(code, cc), lambda p: _check_loads(p, names))
+        return cached_file(lib, _compile(code, cc), lambda p: _check_loads(p, [f.name() for f in fns]))
     except OSError as e:             # the disk filled up, the folder vanished, ...
         warnings.warn(f"the compiled-code cache {directory} cannot be written ({e.strerror or e}); {_VM}",
-                      stacklevel=2)
-        return vm
+                      stacklevel=3)
     except BuildError as e:          # a broken compiler ($CC=/bin/false, a missing libm, ...)
         if os.environ.get("CC"):     # the user's own choice is not replaced behind their back
             raise BuildError(f"the C compiler named by $CC ({os.environ['CC']}) failed to compile the filter "
                              f"functions: {' '.join(str(e).split())}; fix CC or unset it, or choose "
                              "backend='vm' (CasADi's virtual machine: same numbers, slower)") from None
-        warnings.warn(f"{_VM}: the C compiler {cc} failed: {' '.join(str(e).split())}", stacklevel=2)
-        return vm
-    out = [ca.external(n, str(lib)) for n in names]
-    return (out, "compiled", lib) if return_library else (out, "compiled")
+        warnings.warn(f"{_VM}: the C compiler {cc} failed: {' '.join(str(e).split())}", stacklevel=3)
+    return None

@@ -20,10 +20,10 @@ import numpy as np
 from fmu_models.errors import ConfigurationError
 from fmu_models.infra.checks import float_array, positive_int
 
-from ._buffered import matrix
 from .discrete import DiscreteModel
 from .ekf import EKF
 from .protocol import Parameter, StepContext, StepResult
+from .runtime import matrix
 
 __all__ = ["AdaptationRecord", "WindowedAdaptiveEKF", "bound_parameters", "bounds_around"]
 

@@ -28,20 +28,18 @@ from collections.abc import Mapping
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, InputError, TypeMismatchError, UnknownNameError
+from fmu_models.errors import ConfigurationError, InputError, UnknownNameError
 from fmu_models.infra import checks
 from fmu_models.infra.memory import check_fits
 from fmu_models.infra.registry import Registry
 
-from ._buffered import BufferedFunction, matrix
 from ._compiled import compile_functions
 from ._fold import NativeFold, compile_with_fold
-from .discrete import DiscreteModel
-from .history import NoiseHistory
+from .discrete import DiscreteModel, checked_model
 from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
 from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
-from .runs import FilterRun
-from .runtime import BoundStep, VectorInput, explain_status, lean_step
+from .runs import FilterRun, NoiseHistory
+from .runtime import BoundStep, BufferedFunction, VectorInput, explain_status, lean_step, matrix
 
 __all__ = ["DIAGNOSTICS", "FILTERS", "KEEP", "FilterRun", "KalmanBase", "Parameter", "StepContext", "StepResult",
            "Update"]
@@ -129,19 +127,17 @@ class KalmanBase:
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, gate: float | None = None,
                  nan_is_missing: bool = True, backend: str = "compiled"):
-        if not isinstance(system, DiscreteModel):
-            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
-        self.system = system
+        self.system = checked_model(system)
         n, p = system.nx, system.ny
         self.gate = np.inf if gate is None else checks.positive(gate, "gate")
         self.nan_is_missing = bool(nan_is_missing)
         noise = {"Q": checks.covariance(Q, n, "Q").ravel(order="F"),
                  "R": checks.covariance(R, p, "R").ravel(order="F")}
+        self._start = (checks.vector(x0, n, "x0", ConfigurationError), checks.covariance(P0, n, "P0"))
         extra = {k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}
         params = list(self.step_parameters())
-        state = {"x": checks.vector(x0, n, "x0", ConfigurationError),
-                 "P": checks.covariance(P0, n, "P0").ravel(order="F"),
-                 **(noise if self.adapts_noise else {}), **extra}
+        state = {"x": self._start[0], "P": self._start[1].ravel(order="F"), **(noise if self.adapts_noise else {}),
+                 **extra}
         # fixed inputs of the step, shared with the bound step: changed in place (set_noise)
         self._fixed = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
                        **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in params}}
@@ -192,14 +188,9 @@ class KalmanBase:
         return (cls.__module__, cls.__qualname__, *self.config_key())
 
     def extra_state(self) -> dict:
-        """Initial values of the filter's extra state arrays, by name (default none)."""
+        """Initial values of the filter's extra state arrays, by name (default none); the
+        state it starts from, ``(x0, P0)``, is ``self._start``."""
         return {}
-
-    @property
-    def extra_state_names(self) -> list[str]:
-        """Names of the extra state arrays (:meth:`extra_state`): state nobody reads the
-        history of, so a native run keeps only its last value."""
-        return list(self._extra_names)
 
     def wrap_step(self, step: ca.Function) -> ca.Function:
         """The Function every form of the filter runs, from the fused ``step`` built from the
@@ -368,10 +359,10 @@ class KalmanBase:
         n = self.system.nx
         x = self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError)
         P = self.P if P0 is None else checks.covariance(P0, n, "P0")
-        init = self.extra_state()
+        self._start = (x, P)
         rt = self._rt
         values = {"x": x, "P": P.ravel(order="F"),
-                  **{k: np.array(v, float).ravel(order="F") for k, v in init.items()}}
+                  **{k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}}
         for name in rt.pairs:
             rt.set_state(name, values.get(name, rt.now(name).copy()))
         rt.cur, self.k = 0, 0
@@ -522,15 +513,47 @@ class KalmanBase:
     def native_fold(self):
         """The fused step folded over trajectories in native code
         (``estimators._fold.NativeFold``), compiled and cached on the model: what
-        :meth:`run` and :meth:`BatchFilter.run <estimators.BatchFilter.run>` call."""
+        :meth:`fold_record` runs (:meth:`run`, :meth:`BatchFilter.run <estimators.BatchFilter.run>`),
+        and, one step at a time, :class:`~estimators.BatchFilter`."""
 
         return self.system.compiled("fold", self.cache_key, self.backend,
                                     lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend,
                                                        library=self._step_library))
 
+    def fold_record(self, state: dict, us, ys, masks, params: dict, drop=()) -> tuple[dict, dict, dict]:
+        """Fold the fused step over the records of ``runs`` realisations in one native call
+        (:meth:`native_fold`).
+
+        Parameters
+        ----------
+        state : dict of str to ndarray
+            The initial state arrays, shape (runs, nnz) each.
+        us, ys, masks : ndarray
+            The records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny); contiguous.
+        params : dict of str to ndarray
+            The step's fixed inputs, shape (runs, nnz) each.
+        drop : collection of str
+            Outputs not kept (their views are scratch rows).
+
+        Returns
+        -------
+        (stored, views, last)
+            The outputs and the arrays the fold wrote (``estimators._fold.NativeFold.outputs``;
+            the extra state, whose history is not kept, left out) and the state after the last
+            step by name, shape (runs, nnz) each.
+        """
+        runs, N = ys.shape[:2]
+        fold = self.native_fold()
+        cycled = [f"{k}_new" for k in self._extra_names]     # no one reads their history
+        outs, views = fold.outputs(runs, N, state, drop, cycled)
+        fold(runs, N, {"u": us, "y": ys, "mask": masks, **params}, state, views, cycled)
+        last = {name: outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1] for name in state}
+        return {n: a for n, a in outs.items() if n not in cycled}, views, last
+
     def check_record(self, us, ys, masks=None):
         """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
-        (N, ny), or :class:`InputError` / :class:`TypeMismatchError` naming the problem."""
+        (N, ny), or :class:`InputError` / :class:`~fmu_models.errors.TypeMismatchError` naming the
+        problem."""
 
         nu, ny = self.system.nu, self.system.ny
         us = checks.float_array(us, "us")
@@ -616,43 +639,43 @@ class KalmanBase:
             out = self._rt.outputs
             y0_ll = log_likelihood(out["nis"], out["logdet_S"], [self._used_channels(self._y, self._mask).sum()],
                                    out["accepted"] != 0)
-        if not self.supports_batch:
-            result = self._run_by_steps(us, ys, masks)
-            result.log_likelihood += y0_ll
-            return result
-        N = len(ys)
-        rt = self._rt
-        state = {k: v[None] for k, v in self.state_arrays().items()}
+        result = self._run_native(us, ys, masks, keep) if self.supports_batch else self._run_by_steps(us, ys, masks)
+        result.log_likelihood += y0_ll
+        return result
+
+    def _run_native(self, us, ys, masks, keep: str) -> FilterRun:
+        """:meth:`run` of checked arrays in one native call; the filter is left at the last step."""
         init = self._initial_for_run
-        fold = self.native_fold()
-        cycled = [f"{k}_new" for k in self.extra_state_names]     # no one reads their history
-        outs, views = fold.outputs(1, N, state, DROPPABLE if keep == "estimates" else (), cycled)
-        args = {"u": us[None], "y": ys[None], "mask": masks[None],
-                **{k: v[None] for k, v in self.parameter_arrays().items()}}
-        fold(1, N, args, state, views, cycled)
+        state = {k: v[None] for k, v in self.state_arrays().items()}
+        params = {k: v[None] for k, v in self.parameter_arrays().items()}
+        outs, views, last = self.fold_record(state, us[None], ys[None], masks[None], params,
+                                             DROPPABLE if keep == "estimates" else ())
         status = outs["status"][0, :, 0]
         if status.any():
-            k = int(np.flatnonzero(status)[0])
-            rt.status[0] = status[k]
-            self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
-            k_saved, self.k = self.k, self.k + k
-            try:
-                self._explain(f"run index {k}")
-            finally:
-                self.k = k_saved
-                self._mask[:] = 1.0
+            self._explain_run(int(np.flatnonzero(status)[0]), status, us, ys, masks)
         cat = {name: a[0] for name, a in outs.items()}
         result = self._make_run(cat, us, ys, masks, init)
-        result.log_likelihood += y0_ll
+        rt = self._rt
         for name in rt.pairs:                      # the filter now stands at the last step
-            rt.now(name)[:] = cat[f"{name}_new"][(N - 1) % 2 if f"{name}_new" in cycled else -1]
+            rt.now(name)[:] = last[name][0]
         for name in rt.outputs:
             if name != "status":
                 rt.outputs[name][:] = cat[name][-1] if name in cat else views[name][0, -1]
-        self.k += N
-        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()
-                        if name not in cycled})
+        self.k += len(ys)
+        self.after_run({name: (v[1:] if name.endswith("_new") else v) for name, v in cat.items()})
         return result
+
+    def _explain_run(self, k: int, status: np.ndarray, us, ys, masks) -> None:
+        """Raise the error of a native run whose step ``k`` failed with ``status[k]`` (as
+        :meth:`step` would there; the filter's state is unchanged)."""
+        self._rt.status[0] = status[k]
+        self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
+        k_saved, self.k = self.k, self.k + k
+        try:
+            self._explain(f"run index {k}")
+        finally:
+            self.k = k_saved
+            self._mask[:] = 1.0
 
     def _make_run(self, cat: dict, us, ys, masks, init: dict) -> FilterRun:
         """A FilterRun from per-step outputs ``cat`` (row ``k``: step k's output, flat in
@@ -697,9 +720,7 @@ class KalmanBase:
 
     @property
     def _initial_for_run(self) -> dict:
-        nx, ny = self.system.nx, self.system.ny
-        return {"x": self._now("x").copy(), "P": matrix(self._now("P"), nx, nx).copy(),
-                "Q": matrix(self._now("Q"), nx, nx).copy(), "R": matrix(self._now("R"), ny, ny).copy()}
+        return {"x": self.x, "P": self.P, "Q": self.Q, "R": self.R}
 
     def _run_by_steps(self, us, ys, masks) -> FilterRun:
         """``run`` for a filter whose adaptation is not all in the fused step (a loop of

@@ -19,19 +19,18 @@ from ._compiled import compile_functions
 from .base import KalmanBase
 from .linalg import BAD_INPUT
 from .runs import BatchRun
-from .runtime import BoundStep
+from .runtime import BoundStep, StepArrays, broadcast_inputs
 
 __all__ = ["BatchFilter", "BatchRun"]
 
 ON_FAILURE = ("raise", "mark")
 
 
-class FoldedStep:
+class FoldedStep(StepArrays):
     """One step of ``runs`` realisations through a filter's native fold (the step's own
     compiled library, whatever the number of runs), with the interface of
-    :class:`~estimators.runtime.BoundStep`: the state in two copies (``pairs``; the step
-    reads the current one and writes the other, :meth:`commit` swaps them), ``inputs``
-    and ``outputs`` as flat run-major arrays.
+    :class:`~estimators.runtime.BoundStep`: the arrays of :class:`~estimators.runtime.StepArrays`,
+    flat run-major.
 
     Parameters
     ----------
@@ -47,13 +46,8 @@ class FoldedStep:
 
     def __init__(self, fold, runs: int, state, shared):
         step = fold.step
-        self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in fold.names_in
-                      if k in state}
-        self.inputs = {k: (shared[k] if k in shared else np.zeros(runs * step.nnz_in(k))) for k in fold.names_in
-                       if k not in self.pairs}
-        self.outputs = {n: np.zeros(runs * step.nnz_out(n)) for n in fold.names_out if not n.endswith("_new")}
-        self.status = self.outputs["status"]
-        self.cell = [0]
+        super().__init__(fold.names_in, fold.names_out,
+                         lambda k, out: runs * (step.nnz_out(k) if out else step.nnz_in(k)), state, shared)
         args = {k: v.reshape(runs, -1) for k, v in self.inputs.items()}
 
         def bound(c: int):
@@ -63,25 +57,12 @@ class FoldedStep:
             return fold.bind(runs, 1, args, init, outs)
         self._calls = (bound(0), bound(1))
 
-    @property
-    def cur(self) -> int:
-        """Which copy of the state is current (0 or 1)."""
-        return self.cell[0]
-
-    def now(self, name: str) -> np.ndarray:
-        """The current copy of state array ``name`` (a view)."""
-        return self.pairs[name][self.cell[0]]
-
     def trigger(self) -> float:
         """Step every realisation from the current state into the other copy; returns the
         first status (the per-run statuses are in ``outputs["status"]``)."""
         if self._calls[self.cell[0]]():
             raise NumericalError("batched step: the compiled step failed to evaluate")
         return self.status[0]
-
-    def commit(self) -> None:
-        """Make the state the last :meth:`trigger` wrote the current one."""
-        self.cell[0] ^= 1
 
 
 class BatchFilter:
@@ -139,9 +120,6 @@ class BatchFilter:
             (step,), _ = s.compiled("batch", (*template.cache_key, self.n), template.backend,
                                     lambda: compile_functions([step_fn.map(self.n, "serial")], template.backend))
             self._rt = BoundStep(step, state, self._params)
-        self._pairs = self._rt.pairs
-        self._inputs = self._rt.inputs
-        self._out = self._rt.outputs
         self.k = 0
         self.failed = np.zeros(self.n, dtype=bool)
 
@@ -155,19 +133,20 @@ class BatchFilter:
     R = property(lambda self: self._cov("R", self.ny), doc="Measurement noise covariances, (n_runs, ny, ny).")
 
     def _cov(self, key: str, n: int) -> np.ndarray:
-        flat = self._rt.now(key) if key in self._pairs else self._params[key]
+        flat = self._rt.now(key) if key in self._rt.pairs else self._params[key]
         return flat.reshape(self.n, n, n).transpose(0, 2, 1).copy()
-    nis = property(lambda self: self._out["nis"].copy())
-    innovation = property(lambda self: self._out["innov"].reshape(self.n, self.ny).copy())
+    nis = property(lambda self: self._rt.outputs["nis"].copy())
+    innovation = property(lambda self: self._rt.outputs["innov"].reshape(self.n, self.ny).copy())
 
     def _inputs_for(self, u, y, mask):
+        ins = self._rt.inputs
         try:
-            self._inputs["u"].reshape(self.n, self.nu)[:] = u
+            ins["u"].reshape(self.n, self.nu)[:] = u
             y = checks.float_array(y, "y")
             if y.shape != (self.n, self.ny):
                 raise ValueError
-            self._inputs["y"][:] = y.ravel()
-            self._inputs["mask"][:] = 1.0 if mask is None else np.broadcast_to(
+            ins["y"][:] = y.ravel()
+            ins["mask"][:] = 1.0 if mask is None else np.broadcast_to(
                 checks.float_array(mask, "mask"), (self.n, self.ny)).ravel()
         except ValueError:
             raise InputError(f"u must broadcast to ({self.n}, {self.nu}) and y have shape "
@@ -183,18 +162,16 @@ class BatchFilter:
         self._inputs_for(u, y, mask)
         rt = self._rt
         rt.trigger()
-        status = self._out["status"]
+        status = rt.status
         if status.any() and self.on_failure == "mark":
             bad = status != 0
-            for pair in self._pairs.values():     # failed runs keep their previous state
+            for pair in rt.pairs.values():     # failed runs keep their previous state
                 old, new = pair[rt.cur], pair[1 - rt.cur]
                 new.reshape(self.n, -1)[bad] = old.reshape(self.n, -1)[bad]
             self.failed |= bad
         elif status.any():
             run = int(np.flatnonzero(status)[0])
-            what = "u or y contains NaN or inf" if status[run] == BAD_INPUT else "the estimate became non-finite"
-            raise (InputError if status[run] == BAD_INPUT else NumericalError)(
-                f"batched {self.template.name}: {what} in realisation {run} at step {self.k}; state unchanged")
+            self._refuse(status[run], run, f"step {self.k}")
         rt.commit()
         self.k += 1
         return self.x
@@ -217,35 +194,17 @@ class BatchFilter:
             left at the last step. A realisation that fails is marked in ``failed`` (with
             ``on_failure="mark"``) or raises, naming it and the step.
         """
-        R, nx, ny, nu = self.n, self.nx, self.ny, self.nu
-        ys = np.ascontiguousarray(checks.float_array(ys, "ys"))
-        if ys.ndim != 3 or ys.shape[0] != R or ys.shape[2] != ny:
-            raise InputError(f"ys must have shape ({R}, N, {ny}), got {ys.shape}")
+        R, nx, ny = self.n, self.nx, self.ny
+        us, ys, masks = self._record(us, ys, masks)
         N = ys.shape[1]
-        us = checks.float_array(us, "us")
-        try:
-            us = np.ascontiguousarray(np.broadcast_to(us.reshape(-1, N, nu) if us.ndim == 3
-                                                      else us.reshape(1, N, nu), (R, N, nu)))
-        except ValueError:
-            raise InputError(f"us must have shape (N, {nu}) or ({R}, N, {nu}), got {us.shape}") from None
-        if not np.isfinite(us).all():
-            raise InputError("us contains NaN or inf")
-        masks = (np.ones((R, N, ny)) if masks is None else
-                 np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         t = self.template
-        fold = t.native_fold()
-        state = {k: self._rt.now(k).reshape(R, -1) for k in self._pairs}
-        cycled = [f"{k}_new" for k in t.extra_state_names]         # no one reads their history
-        outs, views = fold.outputs(R, N, state, cycle=cycled)
-        args = {"u": us, "y": ys, "mask": masks, **{k: v.reshape(R, -1) for k, v in self._params.items()}}
-        fold(R, N, args, state, views, cycled)
+        state = {k: self._rt.now(k).reshape(R, -1) for k in self._rt.pairs}
+        outs, _, last = t.fold_record(state, us, ys, masks, {k: v.reshape(R, -1) for k, v in self._params.items()})
         status = outs["status"][:, :, 0]
         bad = status != 0
         if bad.any() and self.on_failure == "raise":
             run, k = map(int, np.argwhere(bad)[0])
-            what = "u or y contains NaN or inf" if status[run, k] == BAD_INPUT else "the estimate became non-finite"
-            raise (InputError if status[run, k] == BAD_INPUT else NumericalError)(
-                f"batched {t.name}: {what} in realisation {run} at index {k}; state unchanged")
+            self._refuse(status[run, k], run, f"index {k}")
         self.failed |= bad.any(axis=1)
 
         def diag(name, n, fixed):
@@ -259,7 +218,28 @@ class BatchFilter:
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
             failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
             innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny))
-        for name in state:
-            self._rt.now(name)[:] = outs[f"{name}_new"][:, (N - 1) % 2 if f"{name}_new" in cycled else -1].ravel()
+        for name, value in last.items():
+            self._rt.now(name)[:] = value.ravel()
         self.k += N
         return out
+
+    def _record(self, us, ys, masks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The records of :meth:`run` as contiguous float arrays (n_runs, N, nu), (n_runs, N, ny),
+        (n_runs, N, ny), or InputError naming the problem."""
+        R, ny, nu = self.n, self.ny, self.nu
+        ys = np.ascontiguousarray(checks.float_array(ys, "ys"))
+        if ys.ndim != 3 or ys.shape[0] != R or ys.shape[2] != ny:
+            raise InputError(f"ys must have shape ({R}, N, {ny}), got {ys.shape}")
+        N = ys.shape[1]
+        us = np.ascontiguousarray(broadcast_inputs(us, R, N, nu))
+        masks = (np.ones((R, N, ny)) if masks is None else
+                 np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
+        return us, ys, masks
+
+    def _refuse(self, status: float, run: int, where: str) -> None:
+        """Raise the error of realisation ``run`` whose step ``where`` (``"step 3"``) ended with
+        ``status``."""
+        bad_input = status == BAD_INPUT
+        what = "u or y contains NaN or inf" if bad_input else "the estimate became non-finite"
+        raise (InputError if bad_input else NumericalError)(
+            f"batched {self.template.name}: {what} in realisation {run} at {where}; state unchanged")

@@ -268,6 +268,30 @@ def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.9
     WhitenessTest
         The autocorrelations, the bands, the share of steps inside and the verdict.
     """
+    e, ok, lags = _normalised(innovations, S, valid, lags)
+    N, K, ny = e.shape
+    c = _confidence(confidence)
+    z = float(norm.ppf(1 - (1 - c) / 2))
+    acf, strict, share = np.empty((ny, len(lags))), np.empty((ny, len(lags))), np.empty((ny, len(lags)))
+    per_step = np.full((ny, len(lags), K), np.nan)
+    counts = []
+    pairs_of = None if ok.all() else ok
+    for i, lag in enumerate(lags):
+        acf[:, i], rk, share[:, i], strict[:, i], n_k = _at_lag(e, pairs_of, lag, z)
+        per_step[:, i, :K - lag] = rk.T
+        counts.append(n_k[n_k > 0])
+    if not np.isfinite(acf).any():
+        raise InputError("no channel has a valid pair of innovations at the lags tested")
+    # the per-step band at the average number of runs with a valid pair (N without missing data)
+    band = z / np.sqrt(float(np.mean(np.concatenate(counts))))
+    white = bool(np.all(np.abs(acf[np.isfinite(acf)]) <= band))
+    return WhitenessTest(c, N, lags, acf, per_step, band, strict, share, white)
+
+
+def _normalised(innovations, S, valid, lags) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arguments of :func:`whiteness_test` checked: the innovations divided by their
+    standard deviations (0 in missing channels), the valid channels (runs, steps, ny) and the
+    lags."""
     nu = checks.float_array(innovations, "innovations")
     if nu.ndim != 3 or min(nu.shape) < 1:
         raise InputError(f"innovations must have shape (runs, steps, ny) with none empty, got {nu.shape}")
@@ -293,37 +317,26 @@ def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.9
     if not len(lags) or lags.max() >= K:
         raise ConfigurationError(f"lags must be a non-empty list of integers in 1..{K - 1} (the record has {K} "
                                  f"steps), got {lags.tolist()}")
-    c = _confidence(confidence)
-    z = float(norm.ppf(1 - (1 - c) / 2))
-    e = np.where(ok, nu / np.sqrt(np.where(ok, var, 1.0)), 0.0)
-    acf = np.empty((ny, len(lags)))
-    strict = np.empty((ny, len(lags)))
-    per_step = np.full((ny, len(lags), K), np.nan)
-    share = np.empty((ny, len(lags)))
-    counts = []
-    all_valid = bool(ok.all())
-    for i, lag in enumerate(lags):
-        if all_valid:
-            a, b = e[:, :-lag], e[:, lag:]
-            n_k = np.full((K - lag, ny), N)
-        else:
-            pairs = ok[:, :-lag] & ok[:, lag:]              # (N, K - lag, ny)
-            a, b = e[:, :-lag] * pairs, e[:, lag:] * pairs
-            n_k = pairs.sum(axis=0)                          # valid pairs at each step
-        num, da, db = (np.einsum("rkj,rkj->kj", x, y) for x, y in ((a, b), (a, a), (b, b)))   # (K - lag, ny)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            rk = np.where(n_k > 0, num / np.sqrt(da * db), np.nan)
-            acf[:, i] = num.sum(axis=0) / np.sqrt(da.sum(axis=0) * db.sum(axis=0))
-            inside = np.abs(rk) <= z / np.sqrt(n_k)
-        defined = np.isfinite(rk)
-        strict[:, i] = z / np.sqrt(np.maximum(n_k.sum(axis=0), 1))
-        per_step[:, i, :K - lag] = rk.T
-        share[:, i] = np.where(defined.any(axis=0), (inside & defined).sum(axis=0) / np.maximum(defined.sum(axis=0), 1),
-                               np.nan)
-        counts.append(n_k[n_k > 0])
-    if not np.isfinite(acf).any():
-        raise InputError("no channel has a valid pair of innovations at the lags tested")
-    # the per-step band at the average number of runs with a valid pair (N without missing data)
-    band = z / np.sqrt(float(np.mean(np.concatenate(counts))))
-    white = bool(np.all(np.abs(acf[np.isfinite(acf)]) <= band))
-    return WhitenessTest(c, N, lags, acf, per_step, band, strict, share, white)
+    return np.where(ok, nu / np.sqrt(np.where(ok, var, 1.0)), 0.0), ok, lags
+
+
+def _at_lag(e: np.ndarray, ok: np.ndarray | None, lag: int, z: float) -> tuple:
+    """The statistics of the normalised innovations ``e`` (runs, K, ny) at ``lag`` (``ok``: the
+    valid channels, None if all are): the pooled autocorrelation (ny,), ``rho(k, k + lag)``
+    (K - lag, ny), the share of steps inside ``+-z / sqrt(n_k)`` (ny,), the half-width of the
+    strict band (ny,) and the number of valid pairs ``n_k`` at each step (K - lag, ny)."""
+    if ok is None:
+        a, b = e[:, :-lag], e[:, lag:]
+        n_k = np.full((e.shape[1] - lag, e.shape[2]), e.shape[0])
+    else:
+        pairs = ok[:, :-lag] & ok[:, lag:]              # (N, K - lag, ny)
+        a, b = e[:, :-lag] * pairs, e[:, lag:] * pairs
+        n_k = pairs.sum(axis=0)                          # valid pairs at each step
+    num, da, db = (np.einsum("rkj,rkj->kj", x, y) for x, y in ((a, b), (a, a), (b, b)))   # (K - lag, ny)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rk = np.where(n_k > 0, num / np.sqrt(da * db), np.nan)
+        acf = num.sum(axis=0) / np.sqrt(da.sum(axis=0) * db.sum(axis=0))
+        inside = np.abs(rk) <= z / np.sqrt(n_k)
+    defined = np.isfinite(rk)
+    share = np.where(defined.any(axis=0), (inside & defined).sum(axis=0) / np.maximum(defined.sum(axis=0), 1), np.nan)
+    return acf, rk, share, z / np.sqrt(np.maximum(n_k.sum(axis=0), 1)), n_k

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, UnknownNameError
+from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra import checks
 from fmu_models.plant import PlantModel, check_method
 
@@ -117,6 +117,21 @@ class DiscreteModel:
         h = y0 + ca.mtimes(H0, x - x_op)
         return DiscreteModel(x, u, f, h, self.dt, self.state_names, self.input_names,
                              self.output_names, f"{self.description}, linearised")
+
+
+def checked_model(system) -> DiscreteModel:
+    """``system`` if it is a :class:`DiscreteModel`, else TypeMismatchError saying how to make
+    one (:func:`discretize`).
+
+    Parameters
+    ----------
+    system
+        What was given as the model.
+    """
+    if not isinstance(system, DiscreteModel):
+        raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize), got "
+                                f"{type(system).__name__}")
+    return system
 
 
 def discretize(model: PlantModel, dt: float, method: str = "euler", substeps: int = 1) -> DiscreteModel:

@@ -113,6 +113,24 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
     TypeMismatchError
         An adaptive filter (its Q and R are not fixed parameters).
     """
+    learn, n_iter, tol, floor = _settings(filt, n_iter, tol, learn, structure, floor)
+    us, ys, masks = filt.check_record(us, ys, masks)
+    em = _EM(filt, us, ys, masks, y0, learn, structure, floor)
+    ll, converged, it = [], False, 0
+    for it in range(n_iter + 1):
+        ll.append(em.expectation())
+        if it and abs(ll[-1] - ll[-2]) <= tol * abs(ll[-1]):
+            converged = True
+            break
+        if it == n_iter:
+            break
+        em.maximisation()
+    em.install()
+    return EMResult(Q=em.Q, R=em.R, x0=em.x0, P0=em.P0, log_likelihood=ll, iterations=it, converged=converged)
+
+
+def _settings(filt, n_iter, tol, learn, structure, floor) -> tuple:
+    """The settings of :func:`em_noise` checked: ``(learn, n_iter, tol, floor)``."""
     if not isinstance(filt, KalmanBase):
         raise TypeMismatchError(f"em_noise needs a filter, got {type(filt).__name__}")
     if filt.adapts_noise or not filt.supports_batch:
@@ -122,51 +140,69 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
     learn = tuple(learn)
     if not learn or not set(learn) <= set(LEARNABLE):
         raise ConfigurationError(f"learn must name some of {LEARNABLE}, got {learn!r}")
-    n_iter = checks.positive_int(n_iter, "n_iter")
-    tol = checks.positive(tol, "tol")
-    floor = checks.positive(floor, "floor")
-    us, ys, masks = filt.check_record(us, ys, masks)
-    x0, P0, Q, R = filt.x, filt.P, filt.Q, filt.R
-    trans, meas = _terms(filt)
-    N, nx, ny = len(ys), filt.system.nx, filt.system.ny
-    y_all = ys if y0 is None else np.vstack([checks.vector(y0, ny, "y0"), ys])
-    m_all = masks if y0 is None else np.vstack([np.ones(ny), masks])
-    m_all = np.ascontiguousarray(m_all * ~np.isnan(y_all))
-    y_all = np.ascontiguousarray(np.nan_to_num(y_all))
-    ll, converged, it = [], False, 0
-    for it in range(n_iter + 1):
-        filt.set_noise(Q, R)
-        filt.reset(x0, P0)
-        run = filt.run(us, ys, masks, y0)
-        ll.append(run.log_likelihood)
-        if it and abs(ll[-1] - ll[-2]) <= tol * abs(ll[-1]):
-            converged = True
-            break
-        if it == n_iter:
-            break
-        sm = rts_smooth(filt, run)
+    return (learn, checks.positive_int(n_iter, "n_iter"), checks.positive(tol, "tol"),
+            checks.positive(floor, "floor"))
+
+
+class _EM:
+    """An EM run of :func:`em_noise`: the record (with ``y0``, if given, as its first
+    measurement), the current ``x0, P0, Q, R`` (the filter's at the start) and the last
+    filter pass."""
+
+    def __init__(self, filt: KalmanBase, us, ys, masks, y0, learn: tuple, structure: str, floor: float):
+        self.filt, self.us, self.ys, self.masks, self.y0 = filt, us, ys, masks, y0
+        self.learn, self.structure, self.floor = learn, structure, floor
+        self.x0, self.P0, self.Q, self.R = filt.x, filt.P, filt.Q, filt.R
+        self.trans, self.meas = _terms(filt)
+        ny = filt.system.ny
+        y_all = ys if y0 is None else np.vstack([checks.vector(y0, ny, "y0"), ys])
+        m_all = masks if y0 is None else np.vstack([np.ones(ny), masks])
+        self.m_all = np.ascontiguousarray(m_all * ~np.isnan(y_all))
+        self.y_all = np.ascontiguousarray(np.nan_to_num(y_all))
+
+    def install(self) -> None:
+        """Give the filter the current parameters, at the start of the record."""
+        self.filt.set_noise(self.Q, self.R)
+        self.filt.reset(self.x0, self.P0)
+
+    def expectation(self) -> float:
+        """The E-step: the filter's pass with the current parameters; its log-likelihood."""
+        self.install()
+        self.run = self.filt.run(self.us, self.ys, self.masks, self.y0)
+        return self.run.log_likelihood
+
+    def maximisation(self) -> None:
+        """The M-step from the smoothed pass (see the module documentation)."""
+        sm = rts_smooth(self.filt, self.run)
+        N = len(self.ys)
         xs = np.ascontiguousarray(sm.x)
         Ps = np.ascontiguousarray(sm.P.transpose(0, 2, 1)).reshape(N + 1, -1)     # column-major rows
         lag = np.ascontiguousarray(sm.P_lag.transpose(0, 2, 1)).reshape(N, -1)
-        if "Q" in learn:
-            qt = np.empty((1, N, nx * nx))
-            trans(1, N, {"xs": xs[:-1][None], "xs1": xs[1:][None], "Ps": Ps[:-1][None], "Ps1": Ps[1:][None],
-                         "Plag": lag[None], "u": us[None]}, {}, {"q": qt})
-            Q = _project(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, structure, floor)
-        if "R" in learn:
-            first = 0 if y0 is not None else 1
-            K = len(y_all)
-            rt, ct = np.empty((1, K, ny * ny)), np.empty((1, K, ny * ny))
-            meas(1, K, {"xs": xs[first:][None], "Ps": Ps[first:][None], "y": y_all[None], "mask": m_all[None]},
-                 {}, {"r": rt, "count": ct})
-            counts = ct[0].sum(axis=0).reshape(ny, ny, order="F")
-            total = rt[0].sum(axis=0).reshape(ny, ny, order="F")
-            R_new = np.where(counts > 0, total / np.maximum(counts, 1), R)
-            R = _project(R_new, structure, floor)
-        if "x0" in learn:
-            x0 = sm.x[0].copy()
-        if "P0" in learn:
-            P0 = _project(sm.P[0], "full" if structure == "full" else structure, floor)
-    filt.set_noise(Q, R)
-    filt.reset(x0, P0)
-    return EMResult(Q=Q, R=R, x0=x0, P0=P0, log_likelihood=ll, iterations=it, converged=converged)
+        if "Q" in self.learn:
+            self.Q = self._process_noise(xs, Ps, lag)
+        if "R" in self.learn:
+            self.R = self._measurement_noise(xs, Ps)
+        if "x0" in self.learn:
+            self.x0 = sm.x[0].copy()
+        if "P0" in self.learn:
+            self.P0 = _project(sm.P[0], self.structure, self.floor)
+
+    def _process_noise(self, xs, Ps, lag) -> np.ndarray:
+        """The M-step's Q from the smoothed states ``xs`` (N + 1, nx), covariances ``Ps`` and
+        lag-one covariances ``lag`` (column-major rows)."""
+        N, nx = len(self.ys), self.filt.system.nx
+        qt = np.empty((1, N, nx * nx))
+        self.trans(1, N, {"xs": xs[:-1][None], "xs1": xs[1:][None], "Ps": Ps[:-1][None], "Ps1": Ps[1:][None],
+                          "Plag": lag[None], "u": self.us[None]}, {}, {"q": qt})
+        return _project(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, self.structure, self.floor)
+
+    def _measurement_noise(self, xs, Ps) -> np.ndarray:
+        """The M-step's R (entries over the valid channels; the others keep their value)."""
+        ny, K = self.filt.system.ny, len(self.y_all)
+        first = 0 if self.y0 is not None else 1
+        rt, ct = np.empty((1, K, ny * ny)), np.empty((1, K, ny * ny))
+        self.meas(1, K, {"xs": xs[first:][None], "Ps": Ps[first:][None], "y": self.y_all[None],
+                         "mask": self.m_all[None]}, {}, {"r": rt, "count": ct})
+        counts = ct[0].sum(axis=0).reshape(ny, ny, order="F")
+        total = rt[0].sum(axis=0).reshape(ny, ny, order="F")
+        return _project(np.where(counts > 0, total / np.maximum(counts, 1), self.R), self.structure, self.floor)

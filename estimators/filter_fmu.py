@@ -54,6 +54,7 @@ See ``c/filter_core.h``.
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -137,119 +138,10 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
     name = name or "".join(ch for ch in f"{filt.name.replace('-', '')}{model}" if ch.isalnum())
     if not name.isidentifier() or not name.isascii():
         raise ConfigurationError(f"FMU name {name!r} must be an ASCII identifier")
-    rows = _flat_parameters(filt)
-    psym = ca.SX.sym("p", len(rows))
-    by_param: dict[str, list] = {}
-    for k, r in enumerate(rows):
-        by_param.setdefault(r[4], []).append(psym[k])
-    p = {n: ca.vertcat(*entries) for n, entries in by_param.items()}
-    initial = filt.fmu_initial(p)
-    step = filt.step_function()
-    names_in = [step.name_in(i) for i in range(step.n_in())]
-    names_out = [step.name_out(i) for i in range(step.n_out())]
-    state_names = list(filt.state_arrays())
-    fixed_names = [n for n in names_in if n not in state_names and n not in _FED]
-    missing = [n for n in state_names + fixed_names if n not in initial]
-    if missing:
-        raise ConfigurationError(f"{filt.name}: fmu_initial gives no value for {missing}")
-    # buffers: state (the filter's state arrays), fixed (the step's fixed inputs), diag
-    off, st_off, fx_off, dg_off = 0, {}, {}, {}
-    for n in state_names:
-        st_off[n], off = off, off + step.nnz_in(n)
-    nstate, off = off, 0
-    for n in fixed_names:
-        fx_off[n], off = off, off + step.nnz_in(n)
-    nfixed, off = off, 0
-    for n in names_out:
-        if not n.endswith("_new") and n != "status":
-            dg_off[n], off = off, off + step.nnz_out(n)
-    ndiag = off
-    init_out = []
-    for n in state_names + fixed_names:
-        expr = ca.SX(initial[n])
-        if expr.numel() != step.nnz_in(n):
-            raise ConfigurationError(f"{filt.name}: fmu_initial gives {expr.numel()} values for {n!r}, the step "
-                                     f"takes {step.nnz_in(n)}")
-        init_out.append(ca.densify(ca.reshape(expr, step.size_in(n))))
-    # the gate may be inf (no gate); everything else must be finite
-    bad = 1 - finite_flag([e for e, n in zip(init_out, state_names + fixed_names) if n != "gate"])
-    init = ca.Function("flt_init", [psym], init_out + [bad])
-    run_step = renamed(step, "flt_step")
-    src = {"u": (1, 0), "y": (2, 0), "mask": (3, 0)}
-    step_src = [(0, st_off[n]) if n in st_off else src.get(n, (4, fx_off.get(n, 0))) for n in names_in]
-    step_dst = [(0, st_off[n[:-4]]) if n.endswith("_new") else (2, 0) if n == "status" else (1, dg_off[n])
-                for n in names_out]
-    v = VariableList()
-    for label, value, domain, descr, _, _ in rows:
-        v.add(name=label, type="Real", causality="parameter", variability="fixed", initial="exact", start=value,
-              unit=None, description=descr, group="P", domain=domain)
-    for n in s.input_names:
-        v.add(name=n, type="Real", causality="input", variability="discrete", initial=None, start=0.0, unit=None,
-              description=f"input {n}, held over the prediction that starts now", group="U")
-    for n in s.output_names:
-        v.add(name=n, type="Real", causality="input", variability="discrete", initial=None, start=0.0, unit=None,
-              description=f"measurement {n} (NaN: missing)", group="Y")
-    nx, ny = s.nx, s.ny
-    outs = [(n, 0, st_off["x"] + i, f"estimate of {n}") for i, n in enumerate(s.state_names)]
-    outs += [(f"P_{n}", 0, st_off["P"] + i * (nx + 1), f"variance of the estimate of {n}")
-             for i, n in enumerate(s.state_names)]
-    outs += [(f"innov_{n}", 1, dg_off["innov"] + j, f"innovation of {n}") for j, n in enumerate(s.output_names)]
-    outs += [("nis", 1, dg_off["nis"], "normalised innovation squared")]
-    if "Q" in st_off:
-        outs += [(f"Q_{n}", 0, st_off["Q"] + i * (nx + 1), f"adapted process variance of {n}")
-                 for i, n in enumerate(s.state_names)]
-        outs += [(f"R_{n}", 0, st_off["R"] + j * (ny + 1), f"adapted measurement variance of {n}")
-                 for j, n in enumerate(s.output_names)]
-    for oname, _, _, descr in outs:
-        v.add(name=oname, type="Real", causality="output", variability="discrete", initial="calculated", start=None,
-              unit=None, description=descr, group="OUT")
-    for n in s.output_names:
-        v.add(name=f"valid_{n}", type="Boolean", causality="input", variability="discrete", initial=None, start=True,
-              unit=None, description=f"measurement {n} is valid (false: its update is skipped)", group="VALID")
-    v.add(name="time", type="Real", causality="independent", variability="continuous", initial=None, start=None,
-          unit="s", description="simulation time", group="TIME")
-    if clocked:
-        v = clock_variables(v, ("U", "Y", "OUT", "VALID"), s.dt,
-                            f"the filter's sample instants (every {s.dt:g} s from the start time)")
-    names = [x.name for x in v.variables]
-    if len(set(names)) != len(names):
-        dup = sorted({x for x in names if names.count(x) > 1})
-        raise ConfigurationError(f"{filt.name}: FMU variable names collide: {dup} (rename the model's variables "
-                                 "or the filter's parameters)")
-    less, first = [], {}
-    for k, r in enumerate(rows):
-        first.setdefault(r[4], k)
-    for prm in filt.fmu_parameters():
-        if prm.increasing:
-            k0 = first[prm.name]
-            less += [(k0 + i, k0 + i + 1) for i in range(prm.size - 1)]
-    work = work_sizes([init, run_step], minimum_res=init.n_out())
-
-    def generate(folder: Path, guid: str) -> list[str]:
-        cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
-        cg.add(init)
-        cg.add(run_step)
-        cg.generate(str(folder) + "/")
-        header = config_header(
-            v, name, guid, "estimators.filter_fmu", groups=("U", "Y", "OUT", "VALID", "TIME"), work=work,
-            defines=[("NSTATE", max(nstate, 1)), ("NFIXED", max(nfixed, 1)), ("NDIAG", max(ndiag, 1)),
-                     ("PERIOD", repr(s.dt)), ("N_LESS", len(less)),
-                     ("INIT_NOUT", len(state_names) + len(fixed_names)), ("STEP_NIN", len(names_in)),
-                     ("STEP_NOUT", len(names_out))] + clock_defines(v, s.dt),
-            tables=[c_array("int", "LESS_LO", [a for a, _ in less]), c_array("int", "LESS_HI", [b for _, b in less]),
-                    c_array("int", "INIT_DST", [0] * len(state_names) + [1] * len(fixed_names)),
-                    c_array("int", "INIT_OFF", [st_off[n] for n in state_names] + [fx_off[n] for n in fixed_names]),
-                    c_array("int", "STEP_SRC", [a for a, _ in step_src]),
-                    c_array("int", "STEP_OFF", [b for _, b in step_src]),
-                    c_array("int", "STEP_DST", [a for a, _ in step_dst]),
-                    c_array("int", "STEP_ROFF", [b for _, b in step_dst]),
-                    c_array("int", "OUT_SRC", [o[1] for o in outs]), c_array("int", "OUT_OFF", [o[2] for o in outs])])
-        (folder / "model_config.h").write_text(header)
-        return ["model_funcs.c"]
-
+    core = _FilterCore(filt)
+    v = core.variables(clocked)
     y_idx = v.indices(["Y", "VALID"]) + v.indices(["CLOCK"])
-    p_idx = v.indices(["P"])
-    out_idx = v.indices(["OUT"])
+    p_idx, out_idx = v.indices(["P"]), v.indices(["OUT"])
 
     def xml(guid: str, c_files: list[str]) -> str:
         d = Description(model_name=name, identifier=name, guid=guid,
@@ -261,6 +153,148 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
                         variable_step=True, default_step=s.dt, source_files=c_files, clocked=clocked)
         return fmi2(d) if fmi_version == 2 else fmi3(d)
 
-    return pack_fmu(name, "filter", fmi_version, generate, xml, out_dir,
-                    fingerprint=f"{filt.cache_key}|{rows}|{s.dt}|{names_in}|{names_out}|{clocked}",
+    return pack_fmu(name, "filter", fmi_version, partial(core.write_sources, v, name), xml, out_dir,
+                    fingerprint=f"{filt.cache_key}|{core.rows}|{s.dt}|{core.names_in}|{core.names_out}|{clocked}",
                     file_name=file_name)
+
+
+def _offsets(names: list[str], size) -> tuple[dict[str, int], int]:
+    """Where each array ``names[i]`` of ``size(name)`` entries starts in one flat buffer, and
+    the buffer's size."""
+    offsets, total = {}, 0
+    for n in names:
+        offsets[n], total = total, total + size(n)
+    return offsets, total
+
+
+class _FilterCore:
+    """What the filter core (``c/filter_core.h``) is told about the filter ``filt``: its
+    parameters (``rows``), three flat buffers (the state arrays, the step's fixed inputs, the
+    diagnostics) with each array's offset, the Functions ``flt_init`` (the parameters to the
+    initial buffers) and ``flt_step``, where each argument of the step comes from and each
+    result goes, and the FMU's outputs."""
+
+    def __init__(self, filt):
+        self.filt, self.rows = filt, _flat_parameters(filt)
+        step = filt.step_function()
+        self.names_in = [step.name_in(i) for i in range(step.n_in())]
+        self.names_out = [step.name_out(i) for i in range(step.n_out())]
+        self.state_names = list(filt.state_arrays())
+        self.fixed_names = [n for n in self.names_in if n not in self.state_names and n not in _FED]
+        self.init = self._init_function(step)
+        self.step = renamed(step, "flt_step")
+        st_off, self.nstate = _offsets(self.state_names, step.nnz_in)
+        fx_off, self.nfixed = _offsets(self.fixed_names, step.nnz_in)
+        dg_off, self.ndiag = _offsets([n for n in self.names_out if not n.endswith("_new") and n != "status"],
+                                      step.nnz_out)
+        self.init_off = [st_off[n] for n in self.state_names] + [fx_off[n] for n in self.fixed_names]
+        src = {"u": (1, 0), "y": (2, 0), "mask": (3, 0)}
+        self.step_src = [(0, st_off[n]) if n in st_off else src.get(n, (4, fx_off.get(n, 0))) for n in self.names_in]
+        self.step_dst = [(0, st_off[n[:-4]]) if n.endswith("_new") else (2, 0) if n == "status" else (1, dg_off[n])
+                         for n in self.names_out]
+        self.outs = _outputs(filt.system, st_off, dg_off)
+        self.less = self._ordered_pairs()
+
+    def _init_function(self, step):
+        """``flt_init``: the FMU parameters to the initial state arrays and fixed inputs, and a
+        flag (1: one is not finite; the gate may be inf, no gate)."""
+        filt, rows = self.filt, self.rows
+        psym = ca.SX.sym("p", len(rows))
+        by_param: dict[str, list] = {}
+        for k, r in enumerate(rows):
+            by_param.setdefault(r[4], []).append(psym[k])
+        initial = filt.fmu_initial({n: ca.vertcat(*entries) for n, entries in by_param.items()})
+        names = self.state_names + self.fixed_names
+        missing = [n for n in names if n not in initial]
+        if missing:
+            raise ConfigurationError(f"{filt.name}: fmu_initial gives no value for {missing}")
+        init_out = []
+        for n in names:
+            expr = ca.SX(initial[n])
+            if expr.numel() != step.nnz_in(n):
+                raise ConfigurationError(f"{filt.name}: fmu_initial gives {expr.numel()} values for {n!r}, the step "
+                                         f"takes {step.nnz_in(n)}")
+            init_out.append(ca.densify(ca.reshape(expr, step.size_in(n))))
+        bad = 1 - finite_flag([e for e, n in zip(init_out, names) if n != "gate"])
+        return ca.Function("flt_init", [psym], init_out + [bad])
+
+    def variables(self, clocked: bool) -> VariableList:
+        """The FMU's variables (see the module documentation)."""
+        s = self.filt.system
+        v = VariableList()
+        for label, value, domain, descr, _, _ in self.rows:
+            v.parameter(label, value, descr, domain=domain)
+        for n in s.input_names:
+            v.input(n, 0.0, f"input {n}, held over the prediction that starts now", "U", variability="discrete")
+        for n in s.output_names:
+            v.input(n, 0.0, f"measurement {n} (NaN: missing)", "Y", variability="discrete")
+        for oname, _, _, descr in self.outs:
+            v.output(oname, descr, "OUT", variability="discrete")
+        for n in s.output_names:
+            v.input(f"valid_{n}", True, f"measurement {n} is valid (false: its update is skipped)", "VALID",
+                    type="Boolean", variability="discrete")
+        v.time()
+        if clocked:
+            v = clock_variables(v, ("U", "Y", "OUT", "VALID"), s.dt,
+                                f"the filter's sample instants (every {s.dt:g} s from the start time)")
+        names = [x.name for x in v.variables]
+        if len(set(names)) != len(names):
+            dup = sorted({x for x in names if names.count(x) > 1})
+            raise ConfigurationError(f"{self.filt.name}: FMU variable names collide: {dup} (rename the model's "
+                                     "variables or the filter's parameters)")
+        return v
+
+    def _ordered_pairs(self) -> list[tuple[int, int]]:
+        """The parameter pairs ``(lo, hi)`` (indices) that must increase."""
+        less, first = [], {}
+        for k, r in enumerate(self.rows):
+            first.setdefault(r[4], k)
+        for prm in self.filt.fmu_parameters():
+            if prm.increasing:
+                k0 = first[prm.name]
+                less += [(k0 + i, k0 + i + 1) for i in range(prm.size - 1)]
+        return less
+
+    def write_sources(self, v: VariableList, name: str, folder: Path, guid: str) -> list[str]:
+        """The generated code of ``flt_init`` and ``flt_step`` and ``model_config.h`` for the
+        FMU ``name`` with variables ``v``."""
+        cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
+        cg.add(self.init)
+        cg.add(self.step)
+        cg.generate(str(folder) + "/")
+        less, n_init, dt = self.less, len(self.init_off), self.filt.system.dt
+        header = config_header(
+            v, name, guid, "estimators.filter_fmu", groups=("U", "Y", "OUT", "VALID", "TIME"),
+            work=work_sizes([self.init, self.step], minimum_res=self.init.n_out()),
+            defines=[("NSTATE", max(self.nstate, 1)), ("NFIXED", max(self.nfixed, 1)), ("NDIAG", max(self.ndiag, 1)),
+                     ("PERIOD", repr(dt)), ("N_LESS", len(less)), ("INIT_NOUT", n_init),
+                     ("STEP_NIN", len(self.names_in)), ("STEP_NOUT", len(self.names_out))] + clock_defines(v, dt),
+            tables=[c_array("int", "LESS_LO", [a for a, _ in less]), c_array("int", "LESS_HI", [b for _, b in less]),
+                    c_array("int", "INIT_DST", [0] * len(self.state_names) + [1] * len(self.fixed_names)),
+                    c_array("int", "INIT_OFF", self.init_off),
+                    c_array("int", "STEP_SRC", [a for a, _ in self.step_src]),
+                    c_array("int", "STEP_OFF", [b for _, b in self.step_src]),
+                    c_array("int", "STEP_DST", [a for a, _ in self.step_dst]),
+                    c_array("int", "STEP_ROFF", [b for _, b in self.step_dst]),
+                    c_array("int", "OUT_SRC", [o[1] for o in self.outs]),
+                    c_array("int", "OUT_OFF", [o[2] for o in self.outs])])
+        (folder / "model_config.h").write_text(header)
+        return ["model_funcs.c"]
+
+
+def _outputs(s, st_off: dict[str, int], dg_off: dict[str, int]) -> list[tuple[str, int, int, str]]:
+    """The FMU's outputs ``(name, buffer (0: state, 1: diagnostics), offset, description)`` of
+    a filter on the model ``s``: the estimate, the diagonal of P, the innovation, the NIS and,
+    for a filter that adapts Q and R, their diagonals."""
+    nx, ny = s.nx, s.ny
+    outs = [(n, 0, st_off["x"] + i, f"estimate of {n}") for i, n in enumerate(s.state_names)]
+    outs += [(f"P_{n}", 0, st_off["P"] + i * (nx + 1), f"variance of the estimate of {n}")
+             for i, n in enumerate(s.state_names)]
+    outs += [(f"innov_{n}", 1, dg_off["innov"] + j, f"innovation of {n}") for j, n in enumerate(s.output_names)]
+    outs += [("nis", 1, dg_off["nis"], "normalised innovation squared")]
+    if "Q" in st_off:
+        outs += [(f"Q_{n}", 0, st_off["Q"] + i * (nx + 1), f"adapted process variance of {n}")
+                 for i, n in enumerate(s.state_names)]
+        outs += [(f"R_{n}", 0, st_off["R"] + j * (ny + 1), f"adapted measurement variance of {n}")
+                 for j, n in enumerate(s.output_names)]
+    return outs

@@ -1,10 +1,12 @@
 """Linear Kalman filter on the model linearised about an operating point (seed 001's KF)."""
 from __future__ import annotations
 
-from fmu_models.errors import ConfigurationError, TypeMismatchError
+import numpy as np
+
+from fmu_models.errors import ConfigurationError
 from fmu_models.infra.checks import vector
 
-from .discrete import DiscreteModel
+from .discrete import DiscreteModel, checked_model
 from .ekf import EKF
 
 __all__ = ["KF"]
@@ -34,12 +36,7 @@ class KF(EKF, register="KF"):
 
     def __init__(self, system: DiscreteModel, x0, P0, Q, R, x_op=None, u_op=None,
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
-        import numpy as np
-
-
-        if not isinstance(system, DiscreteModel):
-
-            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
+        system = checked_model(system)
         x_op = np.zeros(system.nx) if x_op is None else vector(x_op, system.nx, "x_op", ConfigurationError)
         u_op = np.zeros(system.nu) if u_op is None else vector(u_op, system.nu, "u_op", ConfigurationError)
         self.nonlinear_system = system

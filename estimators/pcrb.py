@@ -49,9 +49,9 @@ from fmu_models.errors import InputError, NumericalError, TypeMismatchError
 from fmu_models.infra import checks
 from fmu_models.infra.memory import check_fits
 
-from ._buffered import BufferedFunction
 from ._compiled import compile_functions
-from .discrete import DiscreteModel
+from .discrete import DiscreteModel, checked_model
+from .runtime import BufferedFunction, broadcast_inputs
 
 __all__ = ["PCRB", "posterior_crb", "rmse_ratio"]
 
@@ -98,13 +98,6 @@ class PCRB:
         return len(self.P) - 1
 
 
-def _model(system) -> DiscreteModel:
-    if not isinstance(system, DiscreteModel):
-        raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize), got "
-                                f"{type(system).__name__}")
-    return system
-
-
 def _trajectories(X, nx: int) -> np.ndarray:
     X = checks.float_array(X, "true trajectories X")
     if X.ndim != 3 or X.shape[2] != nx:
@@ -119,17 +112,6 @@ def _trajectories(X, nx: int) -> np.ndarray:
         raise InputError(f"true trajectories X contain NaN or inf ({int(bad.sum())} entries; first: realisation "
                          f"{r}, step {k}, state {i})")
     return np.ascontiguousarray(X)
-
-
-def _inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
-    us = checks.float_array(us, "inputs us")
-    try:
-        us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
-    except ValueError:
-        raise InputError(f"inputs us must have shape ({N}, {nu}) or ({runs}, {N}, {nu}), got {us.shape}") from None
-    if not np.isfinite(us).all():
-        raise InputError("inputs us contain NaN or inf")
-    return us
 
 
 def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
@@ -291,57 +273,79 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     ResourceError
         The work arrays would not fit in memory.
     """
-    s = _model(system)
-    nx, nu, ny = s.nx, s.nu, s.ny
-    X = _trajectories(X, nx)
+    s = checked_model(system)
+    X = _trajectories(X, s.nx)
     runs, N = X.shape[0], X.shape[1] - 1
-    us = _inputs(us, runs, N, nu)
-    Q = checks.covariance(Q, nx, "PCRB: Q")
-    R = checks.covariance(R, ny, "PCRB: R")
-    if P0 is not None:
-        P0 = checks.covariance(P0, nx, "PCRB: P0 (None for a known initial state)")
-    valid = _valid_channels(masks, ys, runs, N, ny)
-    chunk = min(N, PCRB_CHUNK)
-    check_fits(8.0 * (runs * chunk * (4 * nx * nx + 3 * ny * nx) + (N + 1) * 4 * nx * nx
-                      + (0 if valid is None else runs * N * ny * ny)),
-               f"the PCRB over {runs} realisations x {N} steps", "fewer realisations")
-    W = _measurement_weights(R, valid, runs, N)
-    Rinv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(R, lower=True), np.eye(ny))
-    Rinv = 0.5 * (Rinv + Rinv.T)
-    Lq = scipy.linalg.cholesky(Q, lower=True)
+    us = broadcast_inputs(us, runs, N, s.nu)
+    Q, R = checks.covariance(Q, s.nx, "PCRB: Q"), checks.covariance(R, s.ny, "PCRB: R")
+    P0 = None if P0 is None else checks.covariance(P0, s.nx, "PCRB: P0 (None for a known initial state)")
+    return _Recursion(s, X, us, Q, R, P0, _valid_channels(masks, ys, runs, N, s.ny)).bound()
 
-    bound = np.empty((N + 1, nx, nx))
-    bound[0] = np.zeros((nx, nx)) if P0 is None else P0
-    for k0 in range(0, N, chunk):
-        n = min(chunk, N - k0)
-        F, H = _jacobians(s)(X[:, k0:k0 + n], us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
+
+class _Recursion:
+    """The recursion of :func:`posterior_crb` in covariance form (see the module
+    documentation) over checked arguments, :data:`PCRB_CHUNK` steps at a time: the
+    Jacobians of a chunk in one call, then its steps."""
+
+    def __init__(self, system: DiscreteModel, X: np.ndarray, us: np.ndarray, Q: np.ndarray, R: np.ndarray,
+                 P0: np.ndarray | None, valid: np.ndarray | None):
+        self.system, self.X, self.us, self.Q, self.P0 = system, X, us, Q, P0
+        nx, ny = system.nx, system.ny
+        runs, N = X.shape[0], X.shape[1] - 1
+        self.chunk = min(N, PCRB_CHUNK)
+        check_fits(8.0 * (runs * self.chunk * (4 * nx * nx + 3 * ny * nx) + (N + 1) * 4 * nx * nx
+                          + (0 if valid is None else runs * N * ny * ny)),
+                   f"the PCRB over {runs} realisations x {N} steps", "fewer realisations")
+        self.W = _measurement_weights(R, valid, runs, N)
+        Rinv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(R, lower=True), np.eye(ny))
+        self.Rinv = 0.5 * (Rinv + Rinv.T)
+        self.Lq = scipy.linalg.cholesky(Q, lower=True)
+        self.B = np.empty((N + 1, nx, nx))
+        self.B[0] = np.zeros((nx, nx)) if P0 is None else P0
+
+    def bound(self) -> PCRB:
+        """The bound along every step."""
+        N = len(self.B) - 1
+        for k0 in range(0, N, self.chunk):
+            n = min(self.chunk, N - k0)
+            self._steps(k0, *self._information(k0, n))
+        return PCRB(self.B, self.X.shape[0], list(self.system.state_names), self.P0 is None)
+
+    def _information(self, k0: int, n: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """For the ``n`` steps from ``k0``: the mean Jacobian ``F_bar`` (n, nx, nx), the roots
+        ``Z`` of the spread ``V`` (None for one realisation) and of ``E[H^T R^-1 H]``."""
+        X, runs = self.X, self.X.shape[0]
+        nx, ny = self.system.nx, self.system.ny
+        F, H = _jacobians(self.system)(X[:, k0:k0 + n], self.us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
         F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
         if not (np.isfinite(F).all() and np.isfinite(H).all()):
             r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])
             raise NumericalError(f"PCRB: a Jacobian of the model is not finite along realisation {r} at step {k0 + k}")
         Fbar = F.mean(axis=0)                                                    # (n, nx, nx)
         # D = Lq^-1 (F - F_bar): V = E[D^T D], the spread of the Jacobians over the realisations
-        D = scipy.linalg.solve_triangular(Lq, (F - Fbar).transpose(2, 0, 1, 3).reshape(nx, -1), lower=True)
+        D = scipy.linalg.solve_triangular(self.Lq, (F - Fbar).transpose(2, 0, 1, 3).reshape(nx, -1), lower=True)
         Dk = D.reshape(nx, runs, n, nx).transpose(2, 0, 1, 3).reshape(n, nx * runs, nx)    # (k, (j, r), i)
         Zv = _root(np.swapaxes(Dk, 1, 2) @ Dk / runs) if runs > 1 else None
-        WH = (Rinv @ H) if W is None else W[:, k0:k0 + n] @ H                              # (r, k, ny, nx)
+        WH = (self.Rinv @ H) if self.W is None else self.W[:, k0:k0 + n] @ H               # (r, k, ny, nx)
         Hk, WHk = (a.transpose(1, 0, 2, 3).reshape(n, runs * ny, nx) for a in (H, WH))
-        Iy = np.swapaxes(Hk, 1, 2) @ WHk / runs
-        Zy = _root(Iy)
+        return Fbar, Zv, _root(np.swapaxes(Hk, 1, 2) @ WHk / runs)
+
+    def _steps(self, k0: int, Fbar: np.ndarray, Zv: np.ndarray | None, Zy: np.ndarray) -> None:
+        """The bound at steps ``k0 + 1 .. k0 + n`` from that at ``k0`` (``n = len(Fbar)``)."""
+        B, Q, n = self.B, self.Q, len(Fbar)
         with np.errstate(over="ignore", invalid="ignore"):          # a non-finite bound is refused below
             for j in range(n):
                 k = k0 + j
                 try:
-                    Bk = bound[k] if Zv is None else _joseph(bound[k], Zv[j])
+                    Bk = B[k] if Zv is None else _joseph(B[k], Zv[j])
                     P_pred = Fbar[j] @ Bk @ Fbar[j].T + Q
-                    bound[k + 1] = _joseph(0.5 * (P_pred + P_pred.T), Zy[j])
+                    B[k + 1] = _joseph(0.5 * (P_pred + P_pred.T), Zy[j])
                 except (np.linalg.LinAlgError, ValueError):
                     raise NumericalError(f"PCRB: the bound became non-finite at step {k + 1} (an ill-posed model "
                                          "or noise)") from None
-        if not np.isfinite(bound[k0 + 1:k0 + n + 1]).all():
-            k = k0 + 1 + int(np.argwhere(~np.isfinite(bound[k0 + 1:k0 + n + 1]).all(axis=(1, 2)))[0, 0])
+        if not np.isfinite(B[k0 + 1:k0 + n + 1]).all():
+            k = k0 + 1 + int(np.argwhere(~np.isfinite(B[k0 + 1:k0 + n + 1]).all(axis=(1, 2)))[0, 0])
             raise NumericalError(f"PCRB: the bound became non-finite at step {k} (an ill-posed model or noise)")
-    return PCRB(bound, runs, list(s.state_names), P0 is None)
 
 
 def rmse_ratio(err, bound: PCRB, steps=None) -> np.ndarray:

@@ -56,7 +56,7 @@ import casadi as ca
 import numpy as np
 
 from fmu_models.errors import ConfigurationError
-from fmu_models.variables import DOMAINS
+from fmu_models.variables import check_declaration
 
 from .discrete import DiscreteModel
 from .linalg import CSE, log_det, status_flag, symmetric, upper_entries, used_measurement
@@ -104,10 +104,7 @@ class Parameter:
     of: tuple[str, ...] = ()
 
     def __post_init__(self):
-        if not self.name.isidentifier():
-            raise ConfigurationError(f"parameter name {self.name!r} must be an identifier")
-        if self.domain not in DOMAINS:
-            raise ConfigurationError(f"parameter {self.name}: domain {self.domain!r} not in {DOMAINS}")
+        check_declaration("parameter", self.name, self.domain)
         value = np.atleast_1d(np.asarray(self.value, dtype=float)).ravel()
         object.__setattr__(self, "value", value)
         labels = tuple(self.labels) or ((self.name,) if value.size == 1 else
@@ -144,20 +141,10 @@ class Update(NamedTuple):
     accepted: ca.SX
 
 
-class StepResult(NamedTuple):
-    """The step so far, as ``adapt_expr`` sees it: the prior, the :class:`Update` and
-    ``logdet_S``."""
-
-    x_prior: ca.SX
-    P_prior: ca.SX
-    x: ca.SX
-    P: ca.SX
-    innovation: ca.SX
-    S: ca.SX
-    K: ca.SX
-    nis: ca.SX
-    accepted: ca.SX
-    logdet_S: ca.SX
+StepResult = NamedTuple("StepResult", [(f, ca.SX) for f in ("x_prior", "P_prior", *Update._fields, "logdet_S")])
+StepResult.__doc__ = """The step so far, as ``adapt_expr`` sees it: the prior ``x_prior`` (nx, 1) and
+``P_prior`` (nx, nx), the fields of the :class:`Update` (``x``, ``P``, ``innovation``, ``S``,
+``K``, ``nis``, ``accepted``) and ``logdet_S``."""
 
 
 @dataclass
@@ -208,10 +195,6 @@ class StepContext:
         self.outputs[name] = ca.SX(expr)
 
 
-def _symbol(name: str, shape) -> ca.SX:
-    return ca.SX.sym(name, *shape)
-
-
 def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parameter]) -> ca.Function:
     """The fused step Function of ``filt`` from its hooks (see the module documentation).
 
@@ -230,14 +213,13 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     params
         Its step parameters (``step_parameters()``).
     """
-    s = filt.system
+    s, sym = filt.system, ca.SX.sym
     n, m, p = s.nx, s.nu, s.ny
-    x, P = _symbol("x", (n, 1)), _symbol("P", (n, n))
-    Q, R = _symbol("Q", (n, n)), _symbol("R", (p, p))
-    u, y, mask = _symbol("u", (m, 1)), _symbol("y", (p, 1)), _symbol("mask", (p, 1))
-    gate, nan_missing = _symbol("gate", (1, 1)), _symbol("nan_missing", (1, 1))
-    extra = {k: _symbol(k, (np.size(v), 1)) for k, v in extra_state.items()}
-    psym = {q.name: _symbol(q.name, (q.size, 1)) for q in params}
+    x, P, Q, R = sym("x", n, 1), sym("P", n, n), sym("Q", n, n), sym("R", p, p)
+    u, y, mask = sym("u", m, 1), sym("y", p, 1), sym("mask", p, 1)
+    gate, nan_missing = sym("gate", 1, 1), sym("nan_missing", 1, 1)
+    extra = {k: sym(k, np.size(v), 1) for k, v in extra_state.items()}
+    psym = {q.name: sym(q.name, q.size, 1) for q in params}
     valid, y_used = used_measurement(y, mask, nan_missing)
     ctx = StepContext(s, x, symmetric(P), symmetric(Q), symmetric(R), u, y_used, valid, gate, dict(extra), psym)
     xp, Pp = filt.predict_expr(ctx)

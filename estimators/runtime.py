@@ -1,10 +1,14 @@
 """The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and
 the errors of a failed step.
 
+:class:`BufferedFunction` is a CasADi Function bound once to numpy arrays, then evaluated
+with no argument conversion.
+
 :class:`BoundStep` binds a fused step (one filter, or one mapped over realisations) to
-flat float arrays once: the state in two copies (the step reads one and writes the other;
-:meth:`BoundStep.commit` makes the written copy current, so a failed step leaves the state
-as it was), the inputs, the diagnostics and the status. Evaluating it is one native call.
+flat float arrays once (:class:`StepArrays`): the state in two copies (the step reads one
+and writes the other; :meth:`StepArrays.commit` makes the written copy current, so a failed
+step leaves the state as it was), the inputs, the diagnostics and the status. Evaluating it
+is one native call.
 
 :class:`VectorInput` puts a user's vector into an input buffer. The good path costs a
 length check and one assignment per entry (a list, a tuple or a float array of the right
@@ -23,20 +27,72 @@ import numpy as np
 from fmu_models.errors import InputError, NumericalError
 from fmu_models.infra.checks import float_array
 
-from ._buffered import BufferedFunction
 from .linalg import BAD_INPUT, BAD_RESULT
 
-__all__ = ["BoundStep", "VectorInput", "explain_status", "lean_step"]
+__all__ = ["BoundStep", "BufferedFunction", "StepArrays", "VectorInput", "broadcast_inputs", "explain_status",
+           "lean_step", "matrix"]
 
 
-class BoundStep:
-    """A step Function bound to arrays (see the module documentation).
+class BufferedFunction:
+    """Evaluate ``fn`` on preset arrays: ``trigger()`` costs about a microsecond.
+
+    Every input and output is a flat float array in CasADi's column-major layout;
+    :func:`matrix` gives a 2-D (Fortran-ordered) view of one. Arrays passed in
+    ``bind_args``/``bind_res`` are shared, not copied: several functions can read and
+    write the same arrays.
+    """
+
+    def __init__(self, fn: ca.Function, bind_args: dict[int, np.ndarray] | None = None,
+                 bind_res: dict[int, np.ndarray] | None = None):
+        for i in range(fn.n_in()):
+            if not fn.sparsity_in(i).is_dense():
+                raise ValueError(f"{fn.name()}: input {fn.name_in(i)} must be dense")
+        for i in range(fn.n_out()):
+            if not fn.sparsity_out(i).is_dense():
+                raise ValueError(f"{fn.name()}: output {fn.name_out(i)} must be dense")
+        self.fn = fn
+        self.buffer, self.trigger = fn.buffer()
+        bind_args, bind_res = bind_args or {}, bind_res or {}
+        self.args = [bind_args.get(i, np.zeros(fn.nnz_in(i))) for i in range(fn.n_in())]
+        self.res = [bind_res.get(i, np.zeros(fn.nnz_out(i))) for i in range(fn.n_out())]
+        for i, a in enumerate(self.args):
+            if a.shape != (fn.nnz_in(i),) or a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"{fn.name()}: bad array bound to input {fn.name_in(i)}")
+            self.buffer.set_arg(i, memoryview(a))
+        for i, r in enumerate(self.res):
+            if r.shape != (fn.nnz_out(i),) or r.dtype != np.float64 or not r.flags.c_contiguous:
+                raise ValueError(f"{fn.name()}: bad array bound to output {fn.name_out(i)}")
+            self.buffer.set_res(i, memoryview(r))
+
+
+def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """2-D view (column-major, shares memory) of a flat CasADi matrix array.
 
     Parameters
     ----------
-    fn : casadi.Function
-        The step: its inputs named ``s`` with an output ``s_new`` are state, carried from
-        evaluation to evaluation.
+    flat
+        The flat array (CasADi's column-major layout).
+    rows
+        Rows of the matrix.
+    cols
+        Columns of the matrix.
+    """
+    return flat.reshape((rows, cols), order="F")
+
+
+class StepArrays:
+    """The flat arrays a step reads and writes: the state in two copies (``pairs``; the step
+    reads the current one and writes the other, :meth:`commit` makes that current), the
+    other inputs and the outputs (see the module documentation).
+
+    Parameters
+    ----------
+    names_in, names_out : sequence of str
+        The step's input and output names; an input ``s`` with an output ``s_new`` is state,
+        carried from evaluation to evaluation.
+    size : callable
+        ``size(name, output) -> int``: the entries of the array of input (``output`` False)
+        or output ``name``.
     state : mapping of str to ndarray
         Initial values of the state inputs (flat, column-major), copied.
     shared : mapping of str to ndarray
@@ -51,26 +107,15 @@ class BoundStep:
         The array bound to every output that is not state (diagnostics, ``status``).
     """
 
-    def __init__(self, fn: ca.Function, state: Mapping[str, np.ndarray], shared: Mapping[str, np.ndarray]):
-        names_in = [fn.name_in(i) for i in range(fn.n_in())]
+    def __init__(self, names_in, names_out, size: Callable[[str, bool], int], state: Mapping[str, np.ndarray],
+                 shared: Mapping[str, np.ndarray]):
         self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in names_in if k in state}
-        self.inputs = {k: (shared[k] if k in shared else np.zeros(fn.nnz_in(k))) for k in names_in
+        self.inputs = {k: (shared[k] if k in shared else np.zeros(size(k, False))) for k in names_in
                        if k not in self.pairs}
-        self.outputs = {fn.name_out(j): np.zeros(fn.nnz_out(j)) for j in range(fn.n_out())
-                        if not fn.name_out(j).endswith("_new")}
+        self.outputs = {n: np.zeros(size(n, True)) for n in names_out if not n.endswith("_new")}
+        self.status = self.outputs["status"]
         #: which copy of the state is current, in a cell the lean step shares
         self.cell = [0]
-        self._steps = tuple(self._bind(fn, i) for i in (0, 1))
-        #: the two evaluations (from copy 0, from copy 1), for callers that inline trigger()
-        self.triggers = tuple(s.trigger for s in self._steps)
-        self.status = self.outputs["status"]
-
-    def _bind(self, fn: ca.Function, i: int) -> BufferedFunction:
-        args = {j: self.pairs[n][i] if n in self.pairs else self.inputs[n]
-                for j, n in enumerate(fn.name_in(k) for k in range(fn.n_in()))}
-        res = {j: self.pairs[n[:-4]][1 - i] if n.endswith("_new") else self.outputs[n]
-               for j, n in enumerate(fn.name_out(k) for k in range(fn.n_out()))}
-        return BufferedFunction(fn, args, res)
 
     @property
     def cur(self) -> int:
@@ -85,15 +130,9 @@ class BoundStep:
         """The current copy of state array ``name`` (a view: writing it changes the state)."""
         return self.pairs[name][self.cell[0]]
 
-    def trigger(self) -> float:
-        """Evaluate the step from the current state into the other copy; returns the status
-        (0: fine; the state is then committed only by :meth:`commit`)."""
-        self._steps[self.cur].trigger()
-        return self.status[0]
-
     def commit(self) -> None:
-        """Make the state the last :meth:`trigger` wrote the current one."""
-        self.cur ^= 1
+        """Make the state the last evaluation wrote the current one."""
+        self.cell[0] ^= 1
 
     def set_state(self, name: str, value) -> None:
         """Set both copies of state array ``name``."""
@@ -101,8 +140,41 @@ class BoundStep:
             a[:] = value
 
 
+class BoundStep(StepArrays):
+    """A step Function bound to arrays (see the module documentation and :class:`StepArrays`).
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        The step: its inputs named ``s`` with an output ``s_new`` are state, carried from
+        evaluation to evaluation.
+    state, shared : mapping of str to ndarray
+        As :class:`StepArrays`.
+    """
+
+    def __init__(self, fn: ca.Function, state: Mapping[str, np.ndarray], shared: Mapping[str, np.ndarray]):
+        names_in = [fn.name_in(i) for i in range(fn.n_in())]
+        names_out = [fn.name_out(j) for j in range(fn.n_out())]
+        super().__init__(names_in, names_out, lambda k, out: fn.nnz_out(k) if out else fn.nnz_in(k), state, shared)
+        self._steps = tuple(self._bind(fn, names_in, names_out, i) for i in (0, 1))
+        #: the two evaluations (from copy 0, from copy 1), for callers that inline trigger()
+        self.triggers = tuple(s.trigger for s in self._steps)
+
+    def _bind(self, fn: ca.Function, names_in, names_out, i: int) -> BufferedFunction:
+        args = {j: self.pairs[n][i] if n in self.pairs else self.inputs[n] for j, n in enumerate(names_in)}
+        res = {j: self.pairs[n[:-4]][1 - i] if n.endswith("_new") else self.outputs[n] for j, n in enumerate(names_out)}
+        return BufferedFunction(fn, args, res)
+
+    def trigger(self) -> float:
+        """Evaluate the step from the current state into the other copy; returns the status
+        (0: fine; the state is then committed only by :meth:`commit`)."""
+        self._steps[self.cur].trigger()
+        return self.status[0]
+
+
 class VectorInput:
-    """Writes a vector of ``n`` numbers into ``buffer`` (see the module documentation).
+    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into ``buffer`` (see the
+    module documentation).
 
     Parameters
     ----------
@@ -110,13 +182,10 @@ class VectorInput:
         The float buffer (length ``n``).
     owner, what : str
         For messages: the filter's name and the input's (``"u"``, ``"y"``, ``"mask"``).
-    allow_scalar : bool
-        Accept a bare number when ``n == 1``.
     """
 
-    def __init__(self, buffer: np.ndarray, owner: str, what: str, allow_scalar: bool = True):
-        self.buffer, self.owner, self.what = buffer, owner, what
-        self.n, self.allow_scalar = len(buffer), allow_scalar
+    def __init__(self, buffer: np.ndarray, owner: str, what: str):
+        self.buffer, self.owner, self.what, self.n = buffer, owner, what, len(buffer)
         self._entries = range(self.n)
 
     def __call__(self, value) -> None:
@@ -136,7 +205,7 @@ class VectorInput:
         n, what, owner = self.n, self.what, self.owner
         a = float_array(value, f"{owner}: {what}")
         if a.ndim == 0:
-            if not (self.allow_scalar and n == 1):
+            if n != 1:
                 raise InputError(f"{owner}: {what} must have shape ({n},), got the scalar {value!r}")
             a = a.reshape(1)
         if a.shape != (n,):
@@ -172,9 +241,6 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
     (NaN or inf: then ``explain`` does); other calls (``y=None``, a mask) go to
     ``general(u, y, mask)``, which leaves the mask buffer all ones again.
 
-    ``count`` is a one-element list holding the step count, ``after`` the runtime hook to
-    call after a step (or None).
-
     Parameters
     ----------
     rt
@@ -192,41 +258,66 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
     after
         The runtime hook after a step, or None.
     """
-    nu, ny = fill_u.n, fill_y.n
+    scope = dict(general=general, ndarray=np.ndarray, SCALARS=_SCALARS, ub=memoryview(fill_u.buffer),
+                 yb=memoryview(fill_y.buffer), SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked,
+                 cell=rt.cell, triggers=rt.triggers, status=memoryview(rt.status), explain=explain, count=count,
+                 after=after, copies=tuple(x.copy for x in rt.pairs["x"]))
+    exec(_lean_source(fill_u.n, fill_y.n, after is not None), scope)   # from integers only, as dataclasses does
+    return scope["step"]
+
+
+def _lean_source(nu: int, ny: int, after: bool) -> str:
+    """The source of the lean ``step`` for ``nu`` inputs and ``ny`` measurements (``after``:
+    it calls the runtime hook); the names it uses are those of :func:`lean_step`'s scope."""
     us, ys = [f"u{i}" for i in range(nu)], [f"y{j}" for j in range(ny)]
     # memoryviews: an entry that is not a number (a string, None, a sequence) is a TypeError,
     # and reading the status gives a float, both cheaper than through numpy; an array is
     # unpacked through tolist() (unpacking it directly makes numpy scalars)
-    src = ["def step(u, y, mask=None):",
-           "    if mask is not None or y is None:",
-           "        return general(u, y, mask)",
-           "    try:",
-           "        if u.__class__ is ndarray:",
-           "            u = u.tolist()",
-           "        if y.__class__ is ndarray:",
-           "            y = y.tolist()",
-           *_unpack("u", us), *_unpack("y", ys),
-           *[f"        ub[{i}] = {v}" for i, v in enumerate(us)],
-           *[f"        yb[{j}] = {v}" for j, v in enumerate(ys)],
-           "    except SLOW:",
-           "        slow_u(u)",
-           "        slow_y(y)",
-           "    c = cell[0]",
-           "    triggers[c]()",
-           "    if status[0]:",
-           "        explain('step')",
-           "    c ^= 1",
-           "    cell[0] = c",
-           "    count[0] += 1",
-           *(["    after()"] if after is not None else []),
-           "    return copies[c]()"]
-    scope = dict(general=general, ndarray=np.ndarray, SCALARS=_SCALARS, ub=memoryview(fill_u.buffer),
-                 yb=memoryview(fill_y.buffer),
-                 SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked, cell=rt.cell, triggers=rt.triggers,
-                 status=memoryview(rt.status), explain=explain, count=count, after=after,
-                 copies=tuple(x.copy for x in rt.pairs["x"]))
-    exec("\n".join(src), scope)             # generated from integers only, as dataclasses does
-    return scope["step"]
+    return "\n".join(["def step(u, y, mask=None):",
+                      "    if mask is not None or y is None:",
+                      "        return general(u, y, mask)",
+                      "    try:",
+                      "        if u.__class__ is ndarray:",
+                      "            u = u.tolist()",
+                      "        if y.__class__ is ndarray:",
+                      "            y = y.tolist()",
+                      *_unpack("u", us), *_unpack("y", ys),
+                      *[f"        ub[{i}] = {v}" for i, v in enumerate(us)],
+                      *[f"        yb[{j}] = {v}" for j, v in enumerate(ys)],
+                      "    except SLOW:",
+                      "        slow_u(u)",
+                      "        slow_y(y)",
+                      "    c = cell[0]",
+                      "    triggers[c]()",
+                      "    if status[0]:",
+                      "        explain('step')",
+                      "    c ^= 1",
+                      "    cell[0] = c",
+                      "    count[0] += 1",
+                      *(["    after()"] if after else []),
+                      "    return copies[c]()"])
+
+
+def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
+    """The inputs ``us`` of ``runs`` records of ``N`` steps, shared (shape (N, nu)) or one
+    sequence each (shape (runs, N, nu)), as a (runs, N, nu) float array (a broadcast view),
+    or InputError naming the problem (a wrong shape, NaN or inf).
+
+    Parameters
+    ----------
+    us : array_like
+        The inputs.
+    runs, N, nu : int
+        Records, steps and inputs per step.
+    """
+    us = float_array(us, "inputs us")
+    try:
+        us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
+    except ValueError:
+        raise InputError(f"inputs us must have shape ({N}, {nu}) or ({runs}, {N}, {nu}), got {us.shape}") from None
+    if not np.isfinite(us).all():
+        raise InputError("inputs us contain NaN or inf")
+    return us
 
 
 def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarray, mask: np.ndarray,

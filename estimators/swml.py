@@ -68,11 +68,11 @@ import math
 import casadi as ca
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, TypeMismatchError
+from fmu_models.errors import ConfigurationError
 from fmu_models.infra import checks
 
 from .adaptive import AdaptationRecord, bound_parameters, bounds_around
-from .discrete import DiscreteModel
+from .discrete import DiscreteModel, checked_model
 from .ekf import EKF
 from .linalg import BAD_RESULT, OK, finite_flag, log_det, mask_measurement
 from .protocol import Parameter, StepContext, StepResult
@@ -154,9 +154,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                  keep_r_nats: float = 2.0, max_fall: float = 2.0, q_bounds=None, r_bounds=None,
                  prior_sd: float | None = None, posterior_average: bool = False,
                  gate: float | None = None, nan_is_missing: bool = True, backend: str = "compiled"):
-        if not isinstance(system, DiscreteModel):
-
-            raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize)")
+        system = checked_model(system)
         q0, r0 = _scalar_variance(Q, system.nx, "Q"), _scalar_variance(R, system.ny, "R")
         self.window = checks.positive_int(window, "window")
         if self.window > MAX_WINDOW:
@@ -187,8 +185,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         self._prior_centre = (q0, r0)
         self.q_bounds = bounds_around(np.array([q0]), q_bounds, "q_bounds")
         self.r_bounds = bounds_around(np.array([r0]), r_bounds, "r_bounds")
-        self._start = (checks.vector(x0, system.nx, "x0", ConfigurationError),
-                       checks.covariance(P0, system.nx, "P0"))
         super().__init__(system, x0, P0, q0, r0, gate, nan_is_missing, backend)
         self._init_adaptation_record()
 
@@ -217,23 +213,15 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         return {"wu": np.zeros(s.nu * W), "wy": np.zeros(s.ny * W), "wv": np.zeros(s.ny * W), "wa": np.zeros(W),
                 "snap_x": np.tile(x0, n_snap), "snap_P": np.tile(P0.ravel(order="F"), n_snap),
                 "x_init": x0.copy(), "P_init": P0.ravel(order="F").copy(), "count": np.zeros(1),
-                **({"sigma": self._prior_points()} if self.posterior_average else {})}
+                **({"sigma": np.array(self._prior_points(*map(math.log, self._prior_centre)))}
+                   if self.posterior_average else {})}
 
-    def _prior_points(self) -> np.ndarray:
-        """The four outer unscented points of the prior of ``(ln q, ln r)`` (centred at the
-        initial q and r), flat ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights
-        (centre first: 1/3, 1/6, 1/6, 1/6, 1/6)."""
-        lq, lr = (math.log(v) for v in self._prior_centre)
+    def _prior_points(self, lq, lr):
+        """The four outer unscented points of the prior of ``(ln q, ln r)`` centred at ``(lq,
+        lr)`` (floats or SX), ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights (centre
+        first: 1/3, 1/6, 1/6, 1/6, 1/6)."""
         d = math.sqrt(3.0) * self.prior_sd
-        return np.array([lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS])
-
-    def reset(self, x0=None, P0=None) -> None:
-        """As :meth:`KalmanBase.reset <estimators.base.KalmanBase.reset>`; the window empties
-        and starts from the new state."""
-        n = self.system.nx
-        self._start = (self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError),
-                       self.P if P0 is None else checks.covariance(P0, n, "P0"))
-        super().reset(*self._start)
+        return [lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS]
 
     def fmu_noise_parameters(self) -> list[Parameter]:
         """``q0`` and ``r0``: the initial ``Q = q0 I``, ``R = r0 I``."""
@@ -252,8 +240,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         P = ca.reshape(ca.diag(p["P0"]), -1, 1)
         out.update(snap_x=ca.repmat(p["x0"], n_snap, 1), snap_P=ca.repmat(P, n_snap, 1), x_init=p["x0"], P_init=P)
         if self.posterior_average:
-            lq, lr, d = ca.log(p["q0"]), ca.log(p["r0"]), math.sqrt(3.0) * self.prior_sd
-            out["sigma"] = ca.vertcat(lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS)
+            out["sigma"] = ca.vertcat(*self._prior_points(ca.log(p["q0"]), ca.log(p["r0"])))
         return out
 
     # ------------------------------------------------------------------ the step
@@ -281,16 +268,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     def _window_step(self):
         """One EKF step of a window re-run at ``theta``: ``(x, P, ll, u, y, valid, active,
         lq, lr, gate) -> (x', P', ll')`` (an inactive slot changes nothing)."""
-        s = self.system
-        x, P, ll = ca.SX.sym("x", s.nx), ca.SX.sym("P", s.nx, s.nx), ca.SX.sym("ll")
-        u, y, v, a = ca.SX.sym("u", s.nu), ca.SX.sym("y", s.ny), ca.SX.sym("v", s.ny), ca.SX.sym("a")
-        lq, lr, gate = ca.SX.sym("lq"), ca.SX.sym("lr"), ca.SX.sym("gate")
-        ctx = StepContext(s, x, P, ca.exp(lq) * ca.SX.eye(s.nx), ca.exp(lr) * ca.SX.eye(s.ny), u, y, v, gate)
-        xp, Pp = self.predict_expr(ctx)
-        upd = self.update_expr(ctx, xp, Pp)
-        gain = -0.5 * (log_det(upd.S) + upd.nis) * upd.accepted
-        return ca.Function("swml_window_step", [x, P, ll, u, y, v, a, lq, lr, gate],
-                           [ca.if_else(a, upd.x, x), ca.if_else(a, upd.P, P), ll + a * gain])
+        return _RerunStep(self).function("swml_window_step")
 
     def als_step(self):
         """One step of the window re-run at the current ``theta`` that also accumulates the
@@ -305,26 +283,19 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         ``N_j = (I-KH) Pi H^T - r K``, ``L_j = (I-KH) F_j N_{j-1}``. Products of complete,
         accepted measurement vectors enter the least squares.
         """
-        s = self.system
-        n, p = s.nx, s.ny
-        x, P, ll = ca.SX.sym("x", n), ca.SX.sym("P", n, n), ca.SX.sym("ll")
+        n, p = self.system.nx, self.system.ny
+        st = _RerunStep(self)
         c = ca.SX.sym("c", 3 * n * n + 6 * n * p + 2 * p + 2 + 5)
-        u, y, v, a = ca.SX.sym("u", s.nu), ca.SX.sym("y", p), ca.SX.sym("v", p), ca.SX.sym("a")
-        lq, lr, gate = ca.SX.sym("lq"), ca.SX.sym("lr"), ca.SX.sym("gate")
-        q, r = ca.exp(lq), ca.exp(lr)
         parts, o = [], 0
         for shape in [(n, n)] * 3 + [(n, p)] * 6 + [(p, 1)] * 2 + [(1, 1)] * 2 + [(5, 1)]:
             size = shape[0] * shape[1]
             parts.append(ca.reshape(c[o:o + size], *shape))
             o += size
-        G, Nc, L = parts[0:3], parts[3:6], parts[6:9]
-        e1, e2, f1, f2, sums = parts[9], parts[10], parts[11], parts[12], parts[13]
-        ctx = StepContext(s, x, P, q * ca.SX.eye(n), r * ca.SX.eye(p), u, y, v, gate)
-        _, F = self.transition(x, u)
-        xp, Pp = self.predict_expr(ctx)
-        upd = self.update_expr(ctx, xp, Pp)
-        _, H = self.measurement(xp)
-        _, _, Mv = mask_measurement(v, ca.SX.eye(p), ca.SX.zeros(p))
+        G, Nc, L, (e1, e2, f1, f2, sums) = parts[0:3], parts[3:6], parts[6:9], parts[9:]
+        _, F = self.transition(st.x, st.u)
+        upd = st.upd
+        _, H = self.measurement(st.xp)
+        _, _, Mv = mask_measurement(st.v, ca.SX.eye(p), ca.SX.zeros(p))
         Hm, Ka = ca.mtimes(Mv, H), upd.accepted * upd.K
         e = upd.innovation
         Inx = ca.SX.eye(n)
@@ -333,7 +304,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         HF = ca.mtimes(H, F)
         E1 = [ca.mtimes(HF, Nc[i]) for i in range(3)]
         E2 = [ca.mtimes(HF, L[i]) for i in range(3)]
-        full = a * upd.accepted * ca.mmin(v)
+        full = st.a * upd.accepted * ca.mmin(st.v)
         acc = [sums[i] for i in range(5)]
         for E, obs, w in ((E0, ca.mtimes(e, e.T), full), (E1, ca.mtimes(e, e1.T), full * f1),
                           (E2, ca.mtimes(e, e2.T), full * f2)):
@@ -350,176 +321,14 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         L_new = [ca.mtimes([IKH, F, Nc[i]]) for i in range(3)]
         new = ca.vertcat(*[ca.reshape(m, -1, 1) for m in (*G_new, *N_new, *L_new)], e, e1, full, f1,
                          ca.vertcat(*acc))
-        gain = -0.5 * (log_det(upd.S) + upd.nis) * upd.accepted
-        return ca.Function("swml_als_step", [x, P, ll, c, u, y, v, a, lq, lr, gate],
-                           [ca.if_else(a, upd.x, x), ca.if_else(a, upd.P, P), ll + a * gain,
-                            ca.if_else(a, new, c)])
+        return st.function("swml_als_step", c, new)
 
     def _branch(self, slots: int | None):
         """The update over the last ``slots`` window slots from the initial state (the
         early updates), or, with ``slots=None``, over the whole window from the oldest
         stored state: an MX Function ``(x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate,
-        qb, rb) -> (x, P, Q, R, adapted)``."""
-        s, W = self.system, self.window
-        n, p = s.nx, s.ny
-        MX = ca.MX
-        x, P, Q, R = MX.sym("x", n), MX.sym("P", n, n), MX.sym("Q", n, n), MX.sym("R", p, p)
-        wu, wy, wv, wa = MX.sym("wu", s.nu * W), MX.sym("wy", p * W), MX.sym("wv", p * W), MX.sym("wa", W)
-        sx, sP, xi, Pi = MX.sym("sx", n), MX.sym("sP", n * n), MX.sym("xi", n), MX.sym("Pi", n * n)
-        gate, qb, rb, pc, sg = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2), MX.sym("pc", 2), MX.sym("sg", 13)
-        ins = [x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate, qb, rb, pc, sg]
-        if slots == 0:                                     # no update
-            return ca.Function("swml_none", ins, [x, P, Q, R, MX(0), sg])
-        N = W if slots is None else slots
-        cols = slice(W - N, W)
-        U, Y = ca.reshape(wu, s.nu, W)[:, cols], ca.reshape(wy, p, W)[:, cols]
-        V, A = ca.reshape(wv, p, W)[:, cols], ca.reshape(wa, 1, W)[:, cols]
-        x_s, P_s = (sx, ca.reshape(sP, n, n)) if slots is None else (xi, ca.reshape(Pi, n, n))
-        rep = lambda z: ca.repmat(z, 1, N)                   # noqa: E731
-        lfold = self._window_step().mapaccum("swml_ll", N, [0, 1, 2], [0, 1, 2])
-
-        sd = self.prior_sd
-        mq, mr = ca.log(pc[0]), ca.log(pc[1])
-
-        def objective(ll, lq, lr):
-            """The window's log-likelihood, with a prior plus its log-density (MAP)."""
-            return ll if sd is None else ll - 0.5 * ((lq - mq) ** 2 + (lr - mr) ** 2) / sd ** 2
-
-        def run(lq, lr):
-            xs, Ps, lls = lfold(x_s, P_s, 0, U, Y, V, A, rep(lq), rep(lr), rep(gate))
-            return objective(lls[-1], lq, lr), xs[:, -1], Ps[:, -n:]
-
-        q0, r0 = Q[0, 0], R[0, 0]
-        lq0, lr0 = ca.log(q0), ca.log(r0)
-        als = self.als_step()
-        # G = P at the window start (its constant part), nothing else yet
-        c_init = ca.vertcat(MX.zeros(2 * n * n), ca.reshape(P_s, -1, 1), MX.zeros(als.size1_in(3) - 3 * n * n))
-        afold = als.mapaccum("swml_als", N, [0, 1, 2, 3], [0, 1, 2, 3])
-        xs0, Ps0, lls0, cs = afold(x_s, P_s, 0, c_init, U, Y, V, A, rep(lq0), rep(lr0), rep(gate))
-        l0, end0 = objective(lls0[-1], lq0, lr0), (xs0[:, -1], Ps0[:, -n:])
-        sums = cs[-5:, -1]
-        a11, a12, a22, b1, b2 = (sums[i] for i in range(5))
-        det = a11 * a22 - a12 * a12
-        ok = det > 1e-300
-        qa = ca.if_else(ok, (a22 * b1 - a12 * b2) / ca.if_else(ok, det, 1), q0)
-        ra = ca.if_else(ok, (a11 * b2 - a12 * b1) / ca.if_else(ok, det, 1), r0)
-
-        lo_q, hi_q = ca.log(ca.fmax(qb[0], q0 / self.max_fall)), ca.log(qb[1])
-        lo_r, hi_r = ca.log(ca.fmax(rb[0], r0 / self.max_fall)), ca.log(rb[1])
-
-        def clamp(lq, lr):
-            return ca.fmin(ca.fmax(lq, lo_q), hi_q), ca.fmin(ca.fmax(lr, lo_r), hi_r)
-
-        tiny = 1e-300                                       # "negative parts floored" at the lower bounds
-        lqa, lra = clamp(ca.log(ca.fmax(qa, tiny)), ca.log(ca.fmax(ra, tiny)))
-        eva = run(lqa, lra)
-        la, endA = eva[0], eva[1:]
-
-        keep = self.keep_r_nats
-        use_a = ca.logic_and(ca.logic_and(finite_flag([la]), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
-        lqs, lrs = ca.if_else(use_a, lqa, lq0), ca.if_else(use_a, lra, lr0)
-        ls = ca.if_else(use_a, la, l0)
-        h = self.fd_step
-        pts = [(lqs + h, lrs), (lqs - h, lrs), (lqs, lrs + h), (lqs, lrs - h), (lqs + h, lrs + h)]
-        evals = [run(*pt) for pt in pts]
-        lpq, lmq, lpr, lmr, lpp = (ev[0] for ev in evals)
-        g = ca.vertcat((lpq - lmq) / (2 * h), (lpr - lmr) / (2 * h))
-        H11, H22 = (lpq - 2 * ls + lmq) / h ** 2, (lpr - 2 * ls + lmr) / h ** 2
-        H12 = (lpp - lpq - lpr + ls) / h ** 2
-        detH = H11 * H22 - H12 * H12
-        negdef = ca.logic_and(H11 < 0, detH > 0)
-        newton = ca.vertcat(-(H22 * g[0] - H12 * g[1]), -(-H12 * g[0] + H11 * g[1])) / ca.if_else(negdef, detH, 1)
-        uphill = h * g / ca.fmax(ca.norm_2(g), 1e-300)
-        step = ca.if_else(negdef, newton, uphill)
-        cap = math.log(self.max_factor)
-        step = ca.fmin(ca.fmax(step, -cap), cap)
-        lqn, lrn = clamp(lqs + step[0], lrs + step[1])
-        evn = run(lqn, lrn)
-        cands = [((lqa, lra), la, endA), *[(pt, ev[0], ev[1:]) for pt, ev in zip(pts, evals)],
-                 ((lqn, lrn), evn[0], evn[1:])]
-        best_l, best_t, best_x, best_P = l0, (lq0, lr0), end0[0], end0[1]
-
-        def inside(lq, lr):
-            return ca.logic_and(ca.logic_and(lq >= lo_q - 1e-12, lq <= hi_q + 1e-12),
-                                ca.logic_and(lr >= lo_r - 1e-12, lr <= hi_r + 1e-12))
-
-        # first the best point that keeps r; a point lowering r must beat it by keep_r_nats
-        for lowers in (False, True):
-            bar = best_l + keep if lowers else None
-            for (lq, lr), lval, (xe, Pe) in cands:
-                kind = lr < lr0 if lowers else lr >= lr0
-                ok = ca.logic_and(ca.logic_and(inside(lq, lr), finite_flag([lval])), kind)
-                take = ca.logic_and(ok, lval > (ca.fmax(best_l, bar) if lowers else best_l))
-                best_l = ca.if_else(take, lval, best_l)
-                best_t = (ca.if_else(take, lq, best_t[0]), ca.if_else(take, lr, best_t[1]))
-                best_x, best_P = ca.if_else(take, xe, best_x), ca.if_else(take, Pe, best_P)
-        # the gain of lowering r at the chosen q: kept only if it is worth keep_r_nats there too
-        evk = run(best_t[0], ca.fmax(lr0, best_t[1]))
-        back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite_flag([evk[0]])), evk[0] > best_l - keep)
-        best_t = (best_t[0], ca.if_else(back, lr0, best_t[1]))
-        best_x, best_P = ca.if_else(back, evk[1], best_x), ca.if_else(back, evk[2], best_P)
-        best_l = ca.if_else(back, evk[0], best_l)
-        sigma = sg
-        if self.posterior_average:
-            best_x, best_P, sigma = self._posterior_average(run, best_t, best_l, best_x, best_P, (H11, H12, H22),
-                                                            qb, rb)
-        ok_end = finite_flag([best_x, best_P])
-        x_new, P_new = ca.if_else(ok_end, best_x, x), ca.if_else(ok_end, best_P, P)
-        Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), q0) * MX.eye(n)
-        R_new = ca.if_else(ok_end, ca.exp(best_t[1]), r0) * MX.eye(p)
-        name = "swml_window" if slots is None else "swml_early"
-        return ca.Function(name, ins, [x_new, P_new, Q_new, R_new, MX(1), ca.if_else(ok_end, sigma, sg)])
-
-    def _posterior_average(self, run, theta, l_best, x_best, P_best, hess, qb, rb):
-        """The window's end state and covariance averaged over the Laplace approximation of
-        the posterior of ``theta = (ln q, ln r)``: precision ``Lambda = -H`` (the finite-difference
-        Hessian of the log-posterior; where it is not positive definite, its diagonal, each
-        entry at least the prior's precision ``1 / prior_sd^2``), centred at the kept point;
-        five unscented points (the centre with weight 1/3, ``theta +- sqrt(3) L e_i`` with
-        weight 1/6, ``L L^T = Lambda^-1``; clipped to the bounds), each a window re-run; the
-        weights renormalised without an outer point whose run is not finite or whose window
-        log-posterior ``l_i`` is more than ``DROP_NATS`` below the kept point's (a diverged
-        re-run; the Gaussian approximation puts it 3/2 below); the
-        mixture's mean ``x = sum w_i x_i`` and covariance ``P = sum w_i (P_i + d_i d_i^T)``,
-        ``d_i = x_i - x``. If the mixture is not finite, the kept point's alone. Returns the
-        state, covariance and the points and weights (13)."""
-        H11, H12, H22 = hess
-        a, b, d = -H11, -H12, -H22
-        pd = ca.logic_and(a > 0, a * d - b * b > 0)
-        floor = 1.0 / self.prior_sd ** 2
-        a, b, d = ca.if_else(pd, a, ca.fmax(a, floor)), ca.if_else(pd, b, 0), ca.if_else(pd, d, ca.fmax(d, floor))
-        det = a * d - b * b
-        s11, s12, s22 = d / det, -b / det, a / det                    # Lambda^-1
-        l11 = ca.sqrt(s11)
-        l21 = s12 / l11
-        l22 = ca.sqrt(ca.fmax(s22 - l21 * l21, 0))
-        c = math.sqrt(3.0)
-        lo_q, hi_q, lo_r, hi_r = ca.log(qb[0]), ca.log(qb[1]), ca.log(rb[0]), ca.log(rb[1])
-        pts = []
-        for sign in (1.0, -1.0):
-            for dq, dr in ((l11, l21), (0, l22)):
-                pts.append((ca.fmin(ca.fmax(theta[0] + sign * c * dq, lo_q), hi_q),
-                            ca.fmin(ca.fmax(theta[1] + sign * c * dr, lo_r), hi_r)))
-        ends, raw = [(x_best, P_best)], [ca.MX(UT_WEIGHTS[0])]
-        for pt, w0 in zip(pts, UT_WEIGHTS[1:]):
-            li, xe, Pe = run(*pt)
-            fine = finite_flag([li, xe, Pe])
-            ends.append((ca.if_else(fine, xe, x_best), ca.if_else(fine, Pe, P_best)))
-            raw.append(ca.if_else(ca.logic_and(fine, li > l_best - DROP_NATS), w0, 0))
-        total = sum(raw)
-        w = [wi / total for wi in raw]
-        xm, Pm = self._mixture(ends, w)
-        ok = finite_flag([xm, Pm])
-        return (ca.if_else(ok, xm, x_best), ca.if_else(ok, Pm, P_best),
-                ca.vertcat(*[v for pt in pts for v in pt], *[ca.if_else(ok, wi, w0) for wi, w0 in zip(w, UT_WEIGHTS)]))
-
-    @staticmethod
-    def _mixture(ends, w):
-        """Mean and covariance of the mixture of ``[(x_c, P_c), (x_1, P_1), ..., (x_4, P_4)]``
-        with weights ``w``."""
-        xm = sum(wi * xe for wi, (xe, _) in zip(w, ends))
-        Pm = sum(wi * (Pe + ca.mtimes(xe - xm, (xe - xm).T)) for wi, (xe, Pe) in zip(w, ends))
-        return xm, 0.5 * (Pm + Pm.T)
+        qb, rb, pc, sg) -> (x, P, Q, R, adapted, sg)`` (:class:`_WindowUpdate`)."""
+        return _WindowUpdate(self, slots).function()
 
     def wrap_step(self, step: ca.Function) -> ca.Function:
         """The EKF step (with the window bookkeeping of :meth:`adapt_expr`), then the update
@@ -546,7 +355,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             xc, Pc = ca.reshape(out["x_new"], n, 1), ca.reshape(out["P_new"], n, n)
             ends = [(xc, Pc)] + [tuple(ws(by["x"], ca.reshape(by["P"], n, n), 0, uk, yk, vk, 1, sg[2 * i],
                                           sg[2 * i + 1], by["gate"])[:2]) for i in range(4)]
-            xm, Pm = self._mixture(ends, [sg[8 + i] for i in range(5)])
+            xm, Pm = _mixture(ends, [sg[8 + i] for i in range(5)])
             ok = finite_flag([xm, Pm])
             out["x_new"] = ca.reshape(ca.if_else(ok, xm, xc), out["x_new"].shape)
             out["P_new"] = ca.reshape(ca.if_else(ok, Pm, Pc), out["P_new"].shape)
@@ -561,3 +370,245 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                                    ca.if_else(finite_flag([out["x_new"], out["P_new"]]), OK, BAD_RESULT))
         return ca.Function("step", ins, [out[nm] for nm in names_out], [step.name_in(i) for i in range(step.n_in())],
                            names_out)
+
+
+def _mixture(ends, w):
+    """Mean and covariance of the mixture of ``[(x_c, P_c), (x_1, P_1), ..., (x_4, P_4)]``
+    with weights ``w``."""
+    xm = sum(wi * xe for wi, (xe, _) in zip(w, ends))
+    Pm = sum(wi * (Pe + ca.mtimes(xe - xm, (xe - xm).T)) for wi, (xe, Pe) in zip(w, ends))
+    return xm, 0.5 * (Pm + Pm.T)
+
+
+class _RerunStep:
+    """One EKF step of a window re-run at ``theta = (ln q, ln r)`` (SX): the symbols ``x``,
+    ``P``, ``ll`` (the log-likelihood so far), the slot's ``u``, ``y``, ``v`` (the valid
+    channels) and ``a`` (1: the slot holds a step), ``lq``, ``lr`` and ``gate``, and the EKF
+    step of :class:`SWML` from them (``xp``, ``Pp``: the prior; ``upd``: the update)."""
+
+    def __init__(self, filt: SWML):
+        s, sym = filt.system, ca.SX.sym
+        self.x, self.P, self.ll = sym("x", s.nx), sym("P", s.nx, s.nx), sym("ll")
+        self.u, self.y, self.v, self.a = sym("u", s.nu), sym("y", s.ny), sym("v", s.ny), sym("a")
+        self.lq, self.lr, self.gate = sym("lq"), sym("lr"), sym("gate")
+        ctx = StepContext(s, self.x, self.P, ca.exp(self.lq) * ca.SX.eye(s.nx), ca.exp(self.lr) * ca.SX.eye(s.ny),
+                          self.u, self.y, self.v, self.gate)
+        self.xp, self.Pp = filt.predict_expr(ctx)
+        self.upd = filt.update_expr(ctx, self.xp, self.Pp)
+
+    def function(self, name: str, c: ca.SX | None = None, c_new: ca.SX | None = None) -> ca.Function:
+        """``(x, P, ll[, c], u, y, v, a, lq, lr, gate) -> (x', P', ll'[, c'])``: the step, and a
+        carried column ``c`` that becomes ``c_new``; an inactive slot changes nothing."""
+        upd, a = self.upd, self.a
+        gain = -0.5 * (log_det(upd.S) + upd.nis) * upd.accepted
+        carried = [] if c is None else [c]
+        return ca.Function(name, [self.x, self.P, self.ll, *carried, self.u, self.y, self.v, a, self.lq, self.lr,
+                                  self.gate],
+                           [ca.if_else(a, upd.x, self.x), ca.if_else(a, upd.P, self.P), self.ll + a * gain,
+                            *[ca.if_else(a, c_new, c) for c in carried]])
+
+
+class _WindowUpdate:
+    """The update of :class:`SWML` at an update time as an MX Function (see the module
+    documentation, steps 1-5) over the last ``slots`` window slots from the initial state (the
+    early updates) or, with ``slots=None``, over the whole window from the oldest stored state
+    (``slots=0``: no update). Holds the inputs, the window's re-run at any ``theta = (ln q,
+    ln r)`` (:meth:`run`) and the bounds of ``theta``."""
+
+    def __init__(self, filt: SWML, slots: int | None):
+        s, W = filt.system, filt.window
+        n, p = s.nx, s.ny
+        MX = ca.MX
+        self.filt, self.slots, self.n, self.p = filt, slots, n, p
+        self.x, self.P, self.Q, self.R = MX.sym("x", n), MX.sym("P", n, n), MX.sym("Q", n, n), MX.sym("R", p, p)
+        self.window = MX.sym("wu", s.nu * W), MX.sym("wy", p * W), MX.sym("wv", p * W), MX.sym("wa", W)
+        self.stored = MX.sym("sx", n), MX.sym("sP", n * n), MX.sym("xi", n), MX.sym("Pi", n * n)
+        self.gate, self.qb, self.rb, self.pc = MX.sym("gate"), MX.sym("qb", 2), MX.sym("rb", 2), MX.sym("pc", 2)
+        self.sg = MX.sym("sg", 13)
+        self.inputs = [self.x, self.P, self.Q, self.R, *self.window, *self.stored, self.gate, self.qb, self.rb,
+                       self.pc, self.sg]
+
+    def function(self) -> ca.Function:
+        """``(x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate, qb, rb, pc, sg) -> (x, P, Q, R,
+        adapted, sg)``."""
+        MX, n, p = ca.MX, self.n, self.p
+        if self.slots == 0:                                     # no update
+            return ca.Function("swml_none", self.inputs, [self.x, self.P, self.Q, self.R, MX(0), self.sg])
+        self._slice_window()
+        l0, end0, theta_als = self._als()
+        lo_q, hi_q = ca.log(ca.fmax(self.qb[0], self.q0 / self.filt.max_fall)), ca.log(self.qb[1])
+        lo_r, hi_r = ca.log(ca.fmax(self.rb[0], self.r0 / self.filt.max_fall)), ca.log(self.rb[1])
+        self.bounds = lo_q, hi_q, lo_r, hi_r
+        cands, hess = self._candidates(l0, theta_als)
+        best_l, best_t, best_x, best_P = self._best(cands, l0, end0)
+        sigma = self.sg
+        if self.filt.posterior_average:
+            best_x, best_P, sigma = self._posterior_average(best_t, best_l, best_x, best_P, hess)
+        ok_end = finite_flag([best_x, best_P])
+        x_new, P_new = ca.if_else(ok_end, best_x, self.x), ca.if_else(ok_end, best_P, self.P)
+        Q_new = ca.if_else(ok_end, ca.exp(best_t[0]), self.q0) * MX.eye(n)
+        R_new = ca.if_else(ok_end, ca.exp(best_t[1]), self.r0) * MX.eye(p)
+        name = "swml_window" if self.slots is None else "swml_early"
+        return ca.Function(name, self.inputs, [x_new, P_new, Q_new, R_new, MX(1), ca.if_else(ok_end, sigma, self.sg)])
+
+    def _slice_window(self) -> None:
+        """The window's slots the update runs over, its start and the current ``theta``."""
+        s, W, n, p = self.filt.system, self.filt.window, self.n, self.p
+        wu, wy, wv, wa = self.window
+        sx, sP, xi, Pi = self.stored
+        N = self.N = W if self.slots is None else self.slots
+        cols = slice(W - N, W)
+        self.U, self.Y = ca.reshape(wu, s.nu, W)[:, cols], ca.reshape(wy, p, W)[:, cols]
+        self.V, self.A = ca.reshape(wv, p, W)[:, cols], ca.reshape(wa, 1, W)[:, cols]
+        self.start = (sx, ca.reshape(sP, n, n)) if self.slots is None else (xi, ca.reshape(Pi, n, n))
+        self.lfold = self.filt._window_step().mapaccum("swml_ll", N, [0, 1, 2], [0, 1, 2])
+        self.prior = ca.log(self.pc[0]), ca.log(self.pc[1])
+        self.q0, self.r0 = self.Q[0, 0], self.R[0, 0]
+        self.lq0, self.lr0 = ca.log(self.q0), ca.log(self.r0)
+
+    def _rep(self, z):
+        return ca.repmat(z, 1, self.N)
+
+    def objective(self, ll, lq, lr):
+        """The window's log-likelihood, with a prior plus its log-density (MAP)."""
+        sd = self.filt.prior_sd
+        mq, mr = self.prior
+        return ll if sd is None else ll - 0.5 * ((lq - mq) ** 2 + (lr - mr) ** 2) / sd ** 2
+
+    def run(self, lq, lr):
+        """The window re-run at ``theta = (lq, lr)``: ``(objective, x at its end, P at its end)``."""
+        xs, Ps, lls = self.lfold(*self.start, 0, self.U, self.Y, self.V, self.A, self._rep(lq), self._rep(lr),
+                                 self._rep(self.gate))
+        return self.objective(lls[-1], lq, lr), xs[:, -1], Ps[:, -self.n:]
+
+    def clamp(self, lq, lr):
+        """``theta`` within its bounds."""
+        lo_q, hi_q, lo_r, hi_r = self.bounds
+        return ca.fmin(ca.fmax(lq, lo_q), hi_q), ca.fmin(ca.fmax(lr, lo_r), hi_r)
+
+    def inside(self, lq, lr):
+        """1 if ``theta`` lies within its bounds (to 1e-12)."""
+        lo_q, hi_q, lo_r, hi_r = self.bounds
+        return ca.logic_and(ca.logic_and(lq >= lo_q - 1e-12, lq <= hi_q + 1e-12),
+                            ca.logic_and(lr >= lo_r - 1e-12, lr <= hi_r + 1e-12))
+
+    def _als(self):
+        """The window re-run at the current ``theta`` with the ALS sums (step 2): its objective,
+        its end ``(x, P)`` and the ALS solution ``(q, r)`` (the current one where the normal
+        equations are singular)."""
+        n, q0, r0, lq0, lr0 = self.n, self.q0, self.r0, self.lq0, self.lr0
+        als = self.filt.als_step()
+        # G = P at the window start (its constant part), nothing else yet
+        c_init = ca.vertcat(ca.MX.zeros(2 * n * n), ca.reshape(self.start[1], -1, 1),
+                            ca.MX.zeros(als.size1_in(3) - 3 * n * n))
+        afold = als.mapaccum("swml_als", self.N, [0, 1, 2, 3], [0, 1, 2, 3])
+        xs0, Ps0, lls0, cs = afold(*self.start, 0, c_init, self.U, self.Y, self.V, self.A, self._rep(lq0),
+                                   self._rep(lr0), self._rep(self.gate))
+        l0, end0 = self.objective(lls0[-1], lq0, lr0), (xs0[:, -1], Ps0[:, -n:])
+        sums = cs[-5:, -1]
+        a11, a12, a22, b1, b2 = (sums[i] for i in range(5))
+        det = a11 * a22 - a12 * a12
+        ok = det > 1e-300
+        qa = ca.if_else(ok, (a22 * b1 - a12 * b2) / ca.if_else(ok, det, 1), q0)
+        ra = ca.if_else(ok, (a11 * b2 - a12 * b1) / ca.if_else(ok, det, 1), r0)
+        return l0, end0, (qa, ra)
+
+    def _candidates(self, l0, theta_als):
+        """The points evaluated (step 3) as ``((lq, lr), objective, (x, P) at the window's
+        end)``: the ALS point (floored, within the bounds), the finite-difference points
+        around the start (the ALS point if kept, else the current one) and the Newton step's;
+        and the finite-difference Hessian ``(H11, H12, H22)``."""
+        tiny = 1e-300                                       # "negative parts floored" at the lower bounds
+        lqa, lra = self.clamp(ca.log(ca.fmax(theta_als[0], tiny)), ca.log(ca.fmax(theta_als[1], tiny)))
+        eva = self.run(lqa, lra)
+        la, endA = eva[0], eva[1:]
+        keep, lq0, lr0 = self.filt.keep_r_nats, self.lq0, self.lr0
+        use_a = ca.logic_and(ca.logic_and(finite_flag([la]), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
+        lqs, lrs = ca.if_else(use_a, lqa, lq0), ca.if_else(use_a, lra, lr0)
+        ls = ca.if_else(use_a, la, l0)
+        h = self.filt.fd_step
+        pts = [(lqs + h, lrs), (lqs - h, lrs), (lqs, lrs + h), (lqs, lrs - h), (lqs + h, lrs + h)]
+        evals = [self.run(*pt) for pt in pts]
+        lpq, lmq, lpr, lmr, lpp = (ev[0] for ev in evals)
+        g = ca.vertcat((lpq - lmq) / (2 * h), (lpr - lmr) / (2 * h))
+        H11, H22 = (lpq - 2 * ls + lmq) / h ** 2, (lpr - 2 * ls + lmr) / h ** 2
+        H12 = (lpp - lpq - lpr + ls) / h ** 2
+        detH = H11 * H22 - H12 * H12
+        negdef = ca.logic_and(H11 < 0, detH > 0)
+        newton = ca.vertcat(-(H22 * g[0] - H12 * g[1]), -(-H12 * g[0] + H11 * g[1])) / ca.if_else(negdef, detH, 1)
+        uphill = h * g / ca.fmax(ca.norm_2(g), 1e-300)
+        step = ca.if_else(negdef, newton, uphill)
+        cap = math.log(self.filt.max_factor)
+        step = ca.fmin(ca.fmax(step, -cap), cap)
+        lqn, lrn = self.clamp(lqs + step[0], lrs + step[1])
+        evn = self.run(lqn, lrn)
+        cands = [((lqa, lra), la, endA), *[(pt, ev[0], ev[1:]) for pt, ev in zip(pts, evals)],
+                 ((lqn, lrn), evn[0], evn[1:])]
+        return cands, (H11, H12, H22)
+
+    def _best(self, cands, l0, end0):
+        """The point kept (steps 3-4): of the candidates ``cands`` and the current point
+        (objective ``l0``, end ``end0``), the best one that keeps r, or one lowering r that
+        beats it by ``keep_r_nats`` (also at the chosen q); ``(objective, theta, x, P)``."""
+        keep, lr0 = self.filt.keep_r_nats, self.lr0
+        best_l, best_t, best_x, best_P = l0, (self.lq0, lr0), end0[0], end0[1]
+        # first the best point that keeps r; a point lowering r must beat it by keep_r_nats
+        for lowers in (False, True):
+            bar = best_l + keep if lowers else None
+            for (lq, lr), lval, (xe, Pe) in cands:
+                kind = lr < lr0 if lowers else lr >= lr0
+                ok = ca.logic_and(ca.logic_and(self.inside(lq, lr), finite_flag([lval])), kind)
+                take = ca.logic_and(ok, lval > (ca.fmax(best_l, bar) if lowers else best_l))
+                best_l = ca.if_else(take, lval, best_l)
+                best_t = (ca.if_else(take, lq, best_t[0]), ca.if_else(take, lr, best_t[1]))
+                best_x, best_P = ca.if_else(take, xe, best_x), ca.if_else(take, Pe, best_P)
+        # the gain of lowering r at the chosen q: kept only if it is worth keep_r_nats there too
+        evk = self.run(best_t[0], ca.fmax(lr0, best_t[1]))
+        back = ca.logic_and(ca.logic_and(best_t[1] < lr0, finite_flag([evk[0]])), evk[0] > best_l - keep)
+        best_t = (best_t[0], ca.if_else(back, lr0, best_t[1]))
+        best_x, best_P = ca.if_else(back, evk[1], best_x), ca.if_else(back, evk[2], best_P)
+        return ca.if_else(back, evk[0], best_l), best_t, best_x, best_P
+
+    def _posterior_average(self, theta, l_best, x_best, P_best, hess):
+        """The window's end state and covariance averaged over the Laplace approximation of
+        the posterior of ``theta = (ln q, ln r)``: precision ``Lambda = -H`` (the finite-difference
+        Hessian of the log-posterior; where it is not positive definite, its diagonal, each
+        entry at least the prior's precision ``1 / prior_sd^2``), centred at the kept point;
+        five unscented points (the centre with weight 1/3, ``theta +- sqrt(3) L e_i`` with
+        weight 1/6, ``L L^T = Lambda^-1``; clipped to the bounds), each a window re-run; the
+        weights renormalised without an outer point whose run is not finite or whose window
+        log-posterior ``l_i`` is more than ``DROP_NATS`` below the kept point's (a diverged
+        re-run; the Gaussian approximation puts it 3/2 below); the
+        mixture's mean ``x = sum w_i x_i`` and covariance ``P = sum w_i (P_i + d_i d_i^T)``,
+        ``d_i = x_i - x``. If the mixture is not finite, the kept point's alone. Returns the
+        state, covariance and the points and weights (13)."""
+        H11, H12, H22 = hess
+        a, b, d = -H11, -H12, -H22
+        pd = ca.logic_and(a > 0, a * d - b * b > 0)
+        floor = 1.0 / self.filt.prior_sd ** 2
+        a, b, d = ca.if_else(pd, a, ca.fmax(a, floor)), ca.if_else(pd, b, 0), ca.if_else(pd, d, ca.fmax(d, floor))
+        det = a * d - b * b
+        s11, s12, s22 = d / det, -b / det, a / det                    # Lambda^-1
+        l11 = ca.sqrt(s11)
+        l21 = s12 / l11
+        l22 = ca.sqrt(ca.fmax(s22 - l21 * l21, 0))
+        c = math.sqrt(3.0)
+        qb, rb = self.qb, self.rb
+        lo_q, hi_q, lo_r, hi_r = ca.log(qb[0]), ca.log(qb[1]), ca.log(rb[0]), ca.log(rb[1])
+        pts = []
+        for sign in (1.0, -1.0):
+            for dq, dr in ((l11, l21), (0, l22)):
+                pts.append((ca.fmin(ca.fmax(theta[0] + sign * c * dq, lo_q), hi_q),
+                            ca.fmin(ca.fmax(theta[1] + sign * c * dr, lo_r), hi_r)))
+        ends, raw = [(x_best, P_best)], [ca.MX(UT_WEIGHTS[0])]
+        for pt, w0 in zip(pts, UT_WEIGHTS[1:]):
+            li, xe, Pe = self.run(*pt)
+            fine = finite_flag([li, xe, Pe])
+            ends.append((ca.if_else(fine, xe, x_best), ca.if_else(fine, Pe, P_best)))
+            raw.append(ca.if_else(ca.logic_and(fine, li > l_best - DROP_NATS), w0, 0))
+        total = sum(raw)
+        w = [wi / total for wi in raw]
+        xm, Pm = _mixture(ends, w)
+        ok = finite_flag([xm, Pm])
+        return (ca.if_else(ok, xm, x_best), ca.if_else(ok, Pm, P_best),
+                ca.vertcat(*[v for pt in pts for v in pt], *[ca.if_else(ok, wi, w0) for wi, w0 in zip(w, UT_WEIGHTS)]))

@@ -18,20 +18,8 @@ from .infra.version import VERSION as __version__
 from .plant import METHODS, PlantModel
 from .variables import Variable
 
-__all__ = [
-           "METHODS",
-           "MODELS",
-           "PlantModel",
-           "Variable",
-           "__version__",
-           "build_fmu",
-           "build_fmus",
-           "errors",
-           "get_model",
-           "load_plugin",
-           "model_names",
-           "register_model",
-]
+__all__ = ["METHODS", "MODELS", "PlantModel", "Variable", "__version__", "build_fmu", "build_fmus", "errors",
+           "get_model", "load_plugin", "model_names", "register_model"]
 
 
 from . import cartpole, iwp  # noqa: F401 - the built-in models register themselves

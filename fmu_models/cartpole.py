@@ -29,10 +29,8 @@ STATES = (
     Variable("theta_dot", "rad/s", "pole angular rate (x4)", 0.5),
 )
 INPUTS = (Variable("F", "N", "horizontal force on the cart", 0.0),)
-OUTPUTS = (
-    Variable("y_x", "m", "measured cart position (noise-free h(x), eq 23)"),
-    Variable("y_theta", "rad", "measured pole angle (noise-free h(x), eq 23)"),
-)
+OUTPUTS = (STATES[0].measured("measured cart position (noise-free h(x), eq 23)"),
+           STATES[2].measured("measured pole angle (noise-free h(x), eq 23)"))
 PARAMETERS = (
     Variable("mc", "kg", "cart mass (Table 1)", 0.94, "positive"),
     Variable("mp", "kg", "pole mass (Table 1)", 0.23, "positive"),

@@ -38,11 +38,8 @@ STATES = (
     Variable("phi_dot", "rad/s", "wheel speed relative to the body", 0.0),
 )
 INPUTS = (Variable("i", "A", "motor current", 0.0),)
-OUTPUTS = (
-    Variable("y_alpha", "rad", "measured pendulum angle (C = I)"),
-    Variable("y_alpha_dot", "rad/s", "measured pendulum rate (C = I)"),
-    Variable("y_phi_dot", "rad/s", "measured wheel speed (C = I)"),
-)
+OUTPUTS = tuple(v.measured(f"measured {what} (C = I)")
+                for v, what in zip(STATES, ("pendulum angle", "pendulum rate", "wheel speed"), strict=True))
 PARAMETERS = (
     Variable("Iw", "kg.m2", "wheel inertia about its axis (I_k)", 0.57e-3, "positive"),
     Variable("Ib", "kg.m2", "body inertia about the pivot", 3.34e-3, "positive"),

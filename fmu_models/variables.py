@@ -10,6 +10,16 @@ from .errors import ConfigurationError, TypeMismatchError
 DOMAINS = ("real", "positive", "nonnegative", "unit", "sign")
 
 
+def check_declaration(kind: str, name: str, domain: str) -> None:
+    """Refuse (:class:`~fmu_models.errors.ConfigurationError`) a declared ``kind`` of thing
+    (``"variable"``, ``"parameter"``) whose ``name`` is not a legal identifier or whose
+    ``domain`` is not one of :data:`DOMAINS`."""
+    if not name.isidentifier():
+        raise ConfigurationError(f"{kind} name {name!r} is not a legal identifier")
+    if domain not in DOMAINS:
+        raise ConfigurationError(f"{kind} {name!r}: domain {domain!r} not in {DOMAINS}")
+
+
 @dataclass(frozen=True)
 class Variable:
     """One named scalar of a plant model.
@@ -35,10 +45,12 @@ class Variable:
     domain: str = "real"
 
     def __post_init__(self):
-        if not self.name.isidentifier():
-            raise ConfigurationError(f"variable name {self.name!r} is not a legal identifier")
-        if self.domain not in DOMAINS:
-            raise ConfigurationError(f"variable {self.name!r}: domain {self.domain!r} not in {DOMAINS}")
+        check_declaration("variable", self.name, self.domain)
+
+    def measured(self, description: str) -> Variable:
+        """The output measuring this variable: ``y_<name>``, in its unit, described by
+        ``description``."""
+        return Variable(f"y_{self.name}", self.unit, description)
 
     def check(self, value: float) -> float:
         """Return ``value`` as float if it lies in this variable's domain, else raise

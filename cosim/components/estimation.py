@@ -147,38 +147,39 @@ class EstimatorComponent(Component, kind="estimator"):
             return f"{type(f).__name__} runs Python code in its step"
         return None
 
-    def _native_ops(self, values, u_at, y_at, outputs: slice, u_prev, cur):
-        """The kernel's operations (output: the compiled step, then the summary; update: keep
-        the inputs), or None. The step is the very function :meth:`step` evaluates, called
-        through its symbol in the filter's compiled library, on the same arrays."""
-        if self.native_reason() is not None:
-            return None
+    def _compiled_step(self):
+        """The filter's compiled step as the kernel calls it: ``(library, symbol, iw, w,
+        argument and result pointer arrays per bound step)``, kept while the filter is the
+        same (a restored filter keeps its pointers); None where the library cannot be read."""
         f = self.filter
-        rt = f._rt
-        bound = rt._steps
         cached = getattr(self, "_compiled", None)
-        if cached is None or cached[0] is not f:          # the same filter (restored): the same pointers
+        if cached is None or cached[0] is not f:
+            bound = f._rt._steps
             fn = bound[0].fn
             try:
                 lib = ctypes.CDLL(str(f._step_library))
                 sym = ctypes.cast(getattr(lib, fn.name()), ctypes.c_void_p).value
             except (OSError, AttributeError):
                 return None
-            iw = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64)
-            w = np.zeros(max(fn.sz_w(), 1))
-            ptrs = []
-            for b in bound:
-                arg = (ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args])
-                res = (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])
-                ptrs.append((arg, res))
+            iw, w = np.zeros(max(fn.sz_iw(), 1), dtype=np.int64), np.zeros(max(fn.sz_w(), 1))
+            ptrs = [((ctypes.c_void_p * max(fn.sz_arg(), 1))(*[a.ctypes.data for a in b.args]),
+                     (ctypes.c_void_p * max(fn.sz_res(), 1))(*[r.ctypes.data for r in b.res])) for b in bound]
             self._compiled = cached = (f, lib, sym, iw, w, ptrs)
-        _, lib, sym, iw, w, ptrs = cached
-        n = self._nx
+        return cached[1:]
+
+    def _native_ops(self, values, u_at, y_at, outputs: slice, u_prev, cur):
+        """The kernel's operations (output: the compiled step, the adaptive filters' hook, then
+        the summary; update: keep the inputs), or None. The step is the very function
+        :meth:`step` evaluates, called through its symbol in the filter's compiled library, on
+        the same arrays."""
+        if self.native_reason() is not None or (compiled := self._compiled_step()) is None:
+            return None
+        f, (lib, sym, iw, w, ptrs) = self.filter, compiled
+        rt, n = f._rt, self._nx
         upper = np.triu_indices(n, 1) if self.covariance == "full" else (np.zeros(0, int),) * 2
         upi, upj = (np.ascontiguousarray(a, np.int64) for a in upper)
         idx = np.arange(len(values))
-        uidx = np.ascontiguousarray(idx[u_at], np.int64)
-        yidx = np.ascontiguousarray(idx[y_at], np.int64)
+        uidx, yidx = (np.ascontiguousarray(idx[at], np.int64) for at in (u_at, y_at))
         xs, Ps = rt.pairs["x"], rt.pairs["P"]
         cell, count = rt.cell, f._count
 
@@ -199,34 +200,39 @@ class EstimatorComponent(Component, kind="estimator"):
                       P=(Ps[0].ctypes.data, Ps[1].ctypes.data), nis=rt.outputs["nis"].ctypes.data,
                       out=values[outputs].ctypes.data, uidx=uidx.ctypes.data, upi=upi.ctypes.data,
                       upj=upj.ctypes.data)
-        keep = (lib, iw, w, ptrs, upi, upj, uidx, yidx, u_prev, cur, bound)
+        keep = (lib, iw, w, ptrs, upi, upj, uidx, yidx, u_prev, cur, rt._steps)
         ops = [Op(OP_FILTER, fields, keep, fail, sync_in, sync_out)]
         if getattr(f, "_after", False):           # the filter's after_step, from Python
-            flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
-            after = f.after_step
-
-            def hook() -> None:
-                sync_out()
-                after()
-                sync_in()
-            records = getattr(f, "records_only", None)
-            if flag is not None and callable(records) and records() and "Q" in rt.pairs and "R" in rt.pairs:
-                history = f.history       # the kernel writes the rows _record writes, Python when they are full
-                Qs, Rs = rt.pairs["Q"], rt.pairs["R"]
-
-                def rebind(op) -> None:
-                    op.out, op.n = history.rows.ctypes.data, len(history.rows)
-
-                ops.append(Op(OP_RECORD, dict(cur=cur.ctypes.data, buf=flag.ctypes.data, out=history.rows.ctypes.data,
-                                              n=len(history.rows), iw=history.count.ctypes.data, nx=n,
-                                              ny=len(yidx), x=(Qs[0].ctypes.data, Qs[1].ctypes.data),
-                                              P=(Rs[0].ctypes.data, Rs[1].ctypes.data)),
-                              (cur, flag, history, Qs, Rs), hook=hook, rebind=rebind))
-            else:
-                ops.append(Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data),
-                              (cur, flag), hook=hook))
+            ops.append(self._after_op(cur, len(yidx), sync_in, sync_out))
         ops.append(Op(OP_SUMMARY, dict(fields), keep))
         return ops, [Op(OP_HOLD, dict(fields), keep)]
+
+    def _after_op(self, cur, ny: int, sync_in, sync_out) -> Op:
+        """The kernel's operation after an adaptive filter's step: its ``after_step`` from
+        Python, or, for a filter that only records its Q and R, their rows written by the
+        kernel (Python takes over when the rows are full)."""
+        f = self.filter
+        rt = f._rt
+        flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
+        after = f.after_step
+
+        def hook() -> None:
+            sync_out()
+            after()
+            sync_in()
+        records = getattr(f, "records_only", None)
+        if flag is None or not callable(records) or not records() or "Q" not in rt.pairs or "R" not in rt.pairs:
+            return Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data), (cur, flag),
+                      hook=hook)
+        history, Qs, Rs = f.history, rt.pairs["Q"], rt.pairs["R"]
+
+        def rebind(op) -> None:
+            op.out, op.n = history.rows.ctypes.data, len(history.rows)
+
+        return Op(OP_RECORD, dict(cur=cur.ctypes.data, buf=flag.ctypes.data, out=history.rows.ctypes.data,
+                                  n=len(history.rows), iw=history.count.ctypes.data, nx=self._nx, ny=ny,
+                                  x=(Qs[0].ctypes.data, Qs[1].ctypes.data), P=(Rs[0].ctypes.data, Rs[1].ctypes.data)),
+                  (cur, flag, history, Qs, Rs), hook=hook, rebind=rebind)
 
     def reset(self, t0):
         super().reset(t0)

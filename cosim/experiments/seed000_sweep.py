@@ -204,7 +204,7 @@ def why_not_consistent(table: pd.DataFrame, name: str = "SWML") -> list[str]:
     return lines
 
 
-#: The report's maps: (title, metric, aggregate over the scenarios, number format, filters).
+#: The maps of the report, each (title, metric, aggregate over the scenarios, number format, filters).
 GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 factor, columns: R0 factor)",
           "pcrb_ratio_max", "max", ".3f", (*FILTERS, TRUE_EKF)),
          ("eta / eta of the EKF given the true Q and R, mean over scenarios", "eta_over_true_ekf", "mean", ".2f",

@@ -207,13 +207,7 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         resources = tmp / "resources"
         resources.mkdir()
         exported = _export_all(cosim.components, resources, fmi_version, clocked)
-        notes = [e.note for e in exported.values() if e.note]
-        for n, e in exported.items():
-            if platforms:
-                try:
-                    notes += add_platforms(e.path, platforms)
-                except FMUError as err:
-                    raise FMUError(f"component {n!r}: {err}") from None
+        notes = [e.note for e in exported.values() if e.note] + _platforms(exported, platforms)
         descriptions = {n: read_description(e.path) for n, e in exported.items()}
         _check_connections(cosim.connections, descriptions)
         step = float(base_step({c.name: c.period for c in cosim.components})[0])
@@ -238,6 +232,17 @@ def _export_all(components, resources: Path, fmi_version: int, clocked: bool) ->
     if refused:
         raise ConfigurationError("cannot export as an SSP: " + "; ".join(refused))
     return exported
+
+
+def _platforms(exported: dict[str, ExportedFMU], platforms: Sequence[str]) -> list[str]:
+    """Every exported FMU's binaries for ``platforms`` besides this one; the notes."""
+    notes = []
+    for n, e in exported.items() if platforms else ():
+        try:
+            notes += add_platforms(e.path, platforms)
+        except FMUError as err:
+            raise FMUError(f"component {n!r}: {err}") from None
+    return notes
 
 
 def _check_connections(connections: dict, descriptions: dict) -> None:

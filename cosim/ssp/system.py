@@ -5,7 +5,7 @@ the way), and the parameter bindings of every level resolved to component variab
 
 Names: a component is named by its path of SSD element names, each made an identifier
 (characters other than letters, digits and ``_`` become ``_``) and joined by ``_``
-(``Drive Train`` in ``Vehicle`` becomes ``Vehicle_Drive_Train``); :attr:`FlatSystem.names` maps
+(``Drive Train`` in ``Vehicle`` becomes ``Vehicle_Drive_Train``); ``FlatSystem.names`` maps
 each SSD path (``Vehicle.Drive Train``) to its name. Connector names are the FMU variable
 names, spaces and dots included.
 

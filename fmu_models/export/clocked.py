@@ -68,9 +68,8 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
     out = VariableList()
     for v in variables.variables:
         out.variables.append(dataclasses.replace(v, clocks=(vr,), variability="discrete") if v.group in groups else v)
-    out.add(name=CLOCK_NAME, type="Clock", causality="input", variability="discrete", initial=None, start=None,
-            unit=None, description=description, group="CLOCK",
-            clock=dict(intervalVariability="constant", intervalDecimal=repr(float(period)), priority=0))
+    out.add(name=CLOCK_NAME, type="Clock", causality="input", variability="discrete", description=description,
+            group="CLOCK", clock=dict(intervalVariability="constant", intervalDecimal=repr(float(period)), priority=0))
     return out
 
 

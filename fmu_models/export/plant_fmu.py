@@ -41,39 +41,29 @@ def plant_variables(model: PlantModel) -> VariableList:
     """The FMU variables of ``model`` (see the module documentation)."""
     v = VariableList()
     for p, val in zip(model.parameters, model.p):
-        v.add(name=p.name, type="Real", causality="parameter", variability="fixed", initial="exact",
-              start=float(val), unit=p.unit, description=p.description, group="P", domain=p.domain)
-    v.add(name="step_size", type="Real", causality="parameter", variability="fixed", initial="exact",
-          start=DEFAULT_STEP_SIZE, unit="s", group="STEP", domain="positive",
-          description="internal integration step is step_size/substeps; a communication step that is not a "
-                      "multiple of it ends with a partial step")
+        v.parameter(p.name, float(val), p.description, unit=p.unit, domain=p.domain)
+    v.parameter("step_size", DEFAULT_STEP_SIZE, "internal integration step is step_size/substeps; a communication "
+                "step that is not a multiple of it ends with a partial step", "STEP", unit="s", domain="positive")
     first_state = len(v.variables) + 1
     for s in model.states:
         v.add(name=s.name, type="Real", causality="output", variability="continuous", initial="exact",
               start=float(s.start), unit=s.unit, description=s.description + " (continuous state)", group="X")
     for i, s in enumerate(model.states):
         v.add(name=f"der({s.name})", type="Real", causality="local", variability="continuous",
-              initial="calculated", start=None, unit=derivative_unit(s.unit),
-              description=f"time derivative of {s.name}", derivative_of=first_state + i, group="DX")
+              initial="calculated", unit=derivative_unit(s.unit), description=f"time derivative of {s.name}",
+              derivative_of=first_state + i, group="DX")
     for u in model.inputs:
-        v.add(name=u.name, type="Real", causality="input", variability="continuous", initial=None,
-              start=float(u.start), unit=u.unit, description=u.description, group="U")
+        v.input(u.name, float(u.start), u.description, "U", unit=u.unit)
     for s in model.states:
-        v.add(name=f"w_{s.name}", type="Real", causality="input", variability="continuous", initial=None,
-              start=0.0, unit=s.unit, group="W",
-              description=f"process noise added to {s.name} at the end of each Co-Simulation step (seed 000 "
-                          "eq 12); not used in Model Exchange")
+        v.input(f"w_{s.name}", 0.0, f"process noise added to {s.name} at the end of each Co-Simulation step (seed "
+                "000 eq 12); not used in Model Exchange", "W", unit=s.unit)
     for y in model.outputs:
-        v.add(name=y.name, type="Real", causality="output", variability="continuous", initial="calculated",
-              start=None, unit=y.unit, description=y.description, group="Y")
-    v.add(name="integrator", type="Enumeration", causality="parameter", variability="fixed", initial="exact",
-          start=1, unit=None, description="Co-Simulation integrator: 1 = euler (seed 000 truth map), 2 = rk4",
-          group="IP", declared_type="Integrator", min=1, max=2)
-    v.add(name="substeps", type="Integer", causality="parameter", variability="fixed", initial="exact",
-          start=1, unit=None, description="internal steps per step_size (both integrators)", group="IP",
-          min=1, max=1_000_000)
-    v.add(name="time", type="Real", causality="independent", variability="continuous", initial=None,
-          start=None, unit="s", description="simulation time", group="TIME")
+        v.output(y.name, y.description, "Y", unit=y.unit)
+    v.parameter("integrator", 1, "Co-Simulation integrator: 1 = euler (seed 000 truth map), 2 = rk4", "IP",
+                type="Enumeration", declared_type="Integrator", min=1, max=2)
+    v.parameter("substeps", 1, "internal steps per step_size (both integrators)", "IP", type="Integer", min=1,
+                max=1_000_000)
+    v.time()
     return v
 
 

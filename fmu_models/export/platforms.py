@@ -340,58 +340,16 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
 
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)
-    where = fmu.name
     try:
         z = zipfile.ZipFile(fmu)
     except (OSError, zipfile.BadZipFile) as e:
         raise FMUError(f"{fmu}: not a readable FMU ({e})") from None
-    notes: list[str] = []
     with z, private_tempdir("pendulum_cosim_platforms_") as tmp:
-        tmp = Path(tmp)
-        try:
-            md = ET.fromstring(z.read("modelDescription.xml"))
-        except (KeyError, ET.ParseError) as e:
-            raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
-        fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
-        identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
-        if not identifiers:
-            raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
-        c_files = _source_files(z, md, fmi_version, where)
-        src = tmp / "sources"
-        src.mkdir()
-        for name in z.namelist():
-            if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
-                (src / name[len("sources/"):]).write_bytes(z.read(name))
-        present = set(z.namelist())
-        jobs = []                                   # (platform, identifier, targets), to build
-        for plat in platforms:
-            targets = _TARGETS[plat]
-            folders = {t.fmi2 if fmi_version == 2 else t.fmi3 for t in targets}
-            if None in folders:
-                notes.append(f"{where}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
-                             "(--fmi-version 3) for it")
-                continue
-            jobs += [(plat, ident, targets) for ident in identifiers
-                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in present for f in folders)]
-        builds = [(ident, t, tmp / f"{ident}-{t.zig}{t.suffix}") for _, ident, targets in jobs for t in targets]
-        if builds:
-            zig_command()                           # the missing extra named before anything starts
-            _compile_all(builds, src, c_files)
-        added: dict[str, Path] = {}
-        for plat, ident, targets in jobs:
-            built = [(t, tmp / f"{ident}-{t.zig}{t.suffix}") for t in targets]
-            archs = None
-            if fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
-                lib = tmp / f"{ident}-universal{targets[0].suffix}"
-                _universal([(b, t.arch) for t, b in built], lib)
-                built, archs = [(targets[0], lib)], [t.arch for t in targets]
-            for t, lib in built:
-                check = check_binary(lib, fmi_version, t.fmt, archs or [t.arch])
-                if check.problems:
-                    raise FMUError(f"the {plat} binary of {where} fails its check: " + "; ".join(check.problems))
-                added[f"binaries/{t.fmi2 if fmi_version == 2 else t.fmi3}/{ident}{t.suffix}"] = lib
+        build = _CrossBuild(z, fmu.name, Path(tmp))
+        notes, jobs = build.jobs(platforms)
+        added = build.binaries(jobs)
         if added:
-            out = tmp / "with-platforms.fmu"
+            out = Path(tmp) / "with-platforms.fmu"
             with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as o:
                 for info in z.infolist():
                     if info.filename not in added:
@@ -400,3 +358,67 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
                     o.write(lib, name)
             atomic_copy(out, fmu)
     return notes
+
+
+class _CrossBuild:
+    """The binaries for other platforms of the FMU ``z`` (``where`` names it in messages),
+    built in the folder ``tmp`` from its C sources (extracted to ``tmp/sources``)."""
+
+    def __init__(self, z: zipfile.ZipFile, where: str, tmp: Path):
+        self.where, self.tmp = where, tmp
+        try:
+            md = ET.fromstring(z.read("modelDescription.xml"))
+        except (KeyError, ET.ParseError) as e:
+            raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
+        self.fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
+        self.identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
+        if not self.identifiers:
+            raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
+        self.c_files = _source_files(z, md, self.fmi_version, where)
+        self.src = tmp / "sources"
+        self.src.mkdir()
+        for name in z.namelist():
+            if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
+                (self.src / name[len("sources/"):]).write_bytes(z.read(name))
+        self.present = set(z.namelist())
+
+    def _folder(self, t: _Target) -> str | None:
+        return t.fmi2 if self.fmi_version == 2 else t.fmi3
+
+    def jobs(self, platforms: Sequence[str]) -> tuple[list[str], list[tuple]]:
+        """Notes on the ``platforms`` left out, and ``(platform, identifier, targets)`` of each
+        binary the FMU lacks."""
+        notes, jobs = [], []
+        for plat in platforms:
+            targets = _TARGETS[plat]
+            folders = {self._folder(t) for t in targets}
+            if None in folders:
+                notes.append(f"{self.where}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
+                             "(--fmi-version 3) for it")
+                continue
+            jobs += [(plat, ident, targets) for ident in self.identifiers
+                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in self.present for f in folders)]
+        return notes, jobs
+
+    def binaries(self, jobs: list[tuple]) -> dict[str, Path]:
+        """The binaries of ``jobs`` compiled (in parallel) and checked, by their path in the FMU
+        (one universal file for FMI 2.0's darwin64)."""
+        tmp = self.tmp
+        builds = [(ident, t, tmp / f"{ident}-{t.zig}{t.suffix}") for _, ident, targets in jobs for t in targets]
+        if builds:
+            zig_command()                           # the missing extra named before anything starts
+            _compile_all(builds, self.src, self.c_files)
+        added: dict[str, Path] = {}
+        for plat, ident, targets in jobs:
+            built = [(t, tmp / f"{ident}-{t.zig}{t.suffix}") for t in targets]
+            archs = None
+            if self.fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
+                lib = tmp / f"{ident}-universal{targets[0].suffix}"
+                _universal([(b, t.arch) for t, b in built], lib)
+                built, archs = [(targets[0], lib)], [t.arch for t in targets]
+            for t, lib in built:
+                check = check_binary(lib, self.fmi_version, t.fmt, archs or [t.arch])
+                if check.problems:
+                    raise FMUError(f"the {plat} binary of {self.where} fails its check: " + "; ".join(check.problems))
+                added[f"binaries/{self._folder(t)}/{ident}{t.suffix}"] = lib
+        return added

@@ -58,10 +58,10 @@ class FmuVariable:
     type: str
     causality: str
     variability: str
-    initial: str | None
-    start: float | int | bool | None
-    unit: str | None
-    description: str
+    initial: str | None = None
+    start: float | int | bool | None = None
+    unit: str | None = None
+    description: str = ""
     group: str = ""
     domain: str = "real"
     derivative_of: int | None = None
@@ -75,9 +75,10 @@ class FmuVariable:
 class VariableList:
     """Variables added in value-reference order (``vr`` = position), grouped.
 
-    Use :meth:`add` with the :class:`FmuVariable` fields except ``vr``; then
-    ``variables`` is the list, :meth:`group` the variables of a group and
-    :meth:`first` the value reference of a group's first variable.
+    Use :meth:`add` with the :class:`FmuVariable` fields except ``vr`` (or :meth:`parameter`,
+    :meth:`input`, :meth:`output`, :meth:`time` for the common kinds); then ``variables`` is
+    the list, :meth:`group` the variables of a group and :meth:`first` the value reference
+    of a group's first variable.
     """
 
     def __init__(self):
@@ -88,6 +89,32 @@ class VariableList:
         v = FmuVariable(vr=len(self.variables), **fields)
         self.variables.append(v)
         return v
+
+    def parameter(self, name: str, start, description: str, group: str = "P", **fields) -> FmuVariable:
+        """Append the fixed parameter ``name`` of exact ``start`` value, ``description``, in
+        ``group``; ``fields``: more :class:`FmuVariable` fields (``type``, default Real,
+        ``domain``, ``unit``, ``min``, ``max``)."""
+        return self.add(**{"type": "Real", **fields}, name=name, causality="parameter", variability="fixed",
+                        initial="exact", start=start, description=description, group=group)
+
+    def input(self, name: str, start, description: str, group: str, **fields) -> FmuVariable:
+        """Append the input ``name`` with ``start`` value, ``description``, in ``group``;
+        ``fields``: more :class:`FmuVariable` fields (``type``, default Real; ``variability``,
+        default continuous; ``unit``)."""
+        return self.add(**{"type": "Real", "variability": "continuous", **fields}, name=name, causality="input",
+                        start=start, description=description, group=group)
+
+    def output(self, name: str, description: str, group: str, **fields) -> FmuVariable:
+        """Append the calculated Real output ``name`` with ``description`` in ``group``;
+        ``fields``: more :class:`FmuVariable` fields (``variability``, default continuous;
+        ``unit``)."""
+        return self.add(**{"variability": "continuous", **fields}, name=name, type="Real", causality="output",
+                        initial="calculated", description=description, group=group)
+
+    def time(self, unit: str | None = "s") -> FmuVariable:
+        """Append the independent variable ``time`` in ``unit`` (group ``TIME``)."""
+        return self.add(name="time", type="Real", causality="independent", variability="continuous", unit=unit,
+                        description="simulation time", group="TIME")
 
     def group(self, name: str) -> list[FmuVariable]:
         """The variables of group ``name``, in order."""

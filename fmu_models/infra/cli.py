@@ -50,9 +50,15 @@ def one_line(error: BaseException) -> str:
     return " ".join(str(error).split()) or type(error).__name__
 
 
-def _interrupted(e: BaseException) -> bool:
-    return isinstance(e, KeyboardInterrupt) or (isinstance(e, SystemError) and isinstance(
-        e.__cause__ or e.__context__, KeyboardInterrupt))
+def _failure(e: BaseException, interrupted: str) -> tuple[str | None, int]:
+    """The line printed for the failure ``e`` and the exit status (None: not one the command
+    line reports, it goes on)."""
+    if isinstance(e, (KeyboardInterrupt, SystemError)):      # a native extension may wrap Ctrl-C
+        wrapped = isinstance(e, KeyboardInterrupt) or isinstance(e.__cause__ or e.__context__, KeyboardInterrupt)
+        return (interrupted if wrapped else None), EXIT_INTERRUPTED
+    if isinstance(e, Interrupted):
+        return f"interrupted: {one_line(e)}", EXIT_INTERRUPTED
+    return f"error: {one_line(e)}", EXIT_ERROR
 
 
 def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callable[[], None] | None = None,
@@ -76,30 +82,15 @@ def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callab
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning
             return command()
-    except (KeyboardInterrupt, SystemError) as e:
-        if not _interrupted(e) or debug:
+    except (KeyboardInterrupt, SystemError, *KNOWN_ERRORS) as e:
+        line, status = _failure(e, interrupted)
+        if line is None or debug:
             raise
-        _run(cleanup)
-        print(interrupted, file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except Interrupted as e:
-        if debug:
-            raise
-        _run(cleanup)
-        print(f"interrupted: {one_line(e)}", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except KNOWN_ERRORS as e:
-        if debug:
-            raise
-        _run(cleanup)
-        print(f"error: {one_line(e)}", file=sys.stderr)
-        return EXIT_ERROR
+        if cleanup is not None:
+            cleanup()
+        print(line, file=sys.stderr)
+        return status
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"warning: {one_line(message)}", file=sys.stderr if file is None else file)
-
-
-def _run(cleanup: Callable[[], None] | None) -> None:
-    if cleanup is not None:
-        cleanup()

@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import shutil
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -18,102 +19,16 @@ from cosim.ssp import open_ssp, run_ssp
 from fmu_models import build_fmu, get_model
 from fmu_models.errors import ConfigurationError, FMUError
 
-NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
-      'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
-      'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
-      'xmlns:ssm="http://ssp-standard.org/SSP1/SystemStructureParameterMapping"')
-
-SSV = f"""<?xml version="1.0" encoding="UTF-8"?>
-<ssv:ParameterSet {NS} version="1.0" name="cart">
-  <ssv:Parameters>
-    <ssv:Parameter name="cart mass"><ssv:Real value="1250" unit="g"/></ssv:Parameter>
-    <ssv:Parameter name="pole length"><ssv:Real value="40" unit="cm"/></ssv:Parameter>
-    <ssv:Parameter name="x"><ssv:Real value="0.25"/></ssv:Parameter>
-    <ssv:Parameter name="not a variable"><ssv:Real value="1"/></ssv:Parameter>
-  </ssv:Parameters>
-  <ssv:Units>
-    <ssc:Unit name="g"><ssc:BaseUnit kg="1" factor="0.001"/></ssc:Unit>
-    <ssc:Unit name="cm"><ssc:BaseUnit m="1" factor="0.01"/></ssc:Unit>
-  </ssv:Units>
-</ssv:ParameterSet>
-"""
-# the mapping renames two parameters; the pole length's entry also scales it (and, as
-# suppressUnitConversion says, without converting its unit first): l = 0.5 * 40 * 0.02
-SSM = f"""<?xml version="1.0" encoding="UTF-8"?>
-<ssm:ParameterMapping {NS} version="1.0">
-  <ssm:MappingEntry source="Cart Pole.cart mass" target="Cart Pole.mc"/>
-  <ssm:MappingEntry source="Cart Pole.pole length" target="Cart Pole.l" suppressUnitConversion="true">
-    <ssc:LinearTransformation factor="0.02" offset="-0.4"/>
-  </ssm:MappingEntry>
-</ssm:ParameterMapping>
-"""
+RIG = Path(__file__).parents[1] / "data" / "ssp_rig"
+SSV = (RIG / "cart.ssv").read_text()
+#: the mapping renames two parameters; the pole length's entry also scales it (and, as
+#: suppressUnitConversion says, without converting its unit first): l = 0.02 * 40 - 0.4
+SSM = (RIG / "cart.ssm").read_text()
 
 
 def _ssd(transform: str = '<ssc:LinearTransformation factor="2" offset="0.1"/>') -> str:
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription {NS} version="1.0" name="Test Rig">
-  <ssd:System name="Test Rig">
-    <ssd:Connectors>
-      <ssd:Connector name="cart.x" kind="output"><ssc:Real unit="m"/></ssd:Connector>
-    </ssd:Connectors>
-    <ssd:ParameterBindings>
-      <ssd:ParameterBinding source="resources/cart.ssv" prefix="Cart Pole.">
-        <ssd:ParameterMapping source="resources/cart.ssm"/>
-      </ssd:ParameterBinding>
-      <ssd:ParameterBinding>
-        <ssd:ParameterValues>
-          <ssv:ParameterSet version="1.0" name="drive">
-            <ssv:Parameters>
-              <ssv:Parameter name="Drive Unit.Force Source.after"><ssv:Real value="0.25"/></ssv:Parameter>
-            </ssv:Parameters>
-          </ssv:ParameterSet>
-        </ssd:ParameterValues>
-      </ssd:ParameterBinding>
-    </ssd:ParameterBindings>
-    <ssd:Elements>
-      <ssd:System name="Drive Unit">
-        <ssd:Connectors>
-          <ssd:Connector name="force.out" kind="output"><ssc:Real unit="kN"/></ssd:Connector>
-        </ssd:Connectors>
-        <ssd:Elements>
-          <ssd:Component name="Force Source" source="resources/drive.fmu">
-            <ssd:Connectors><ssd:Connector name="out" kind="output"><ssc:Real unit="kN"/></ssd:Connector>
-            </ssd:Connectors>
-            <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
-              <ssv:ParameterSet version="1.0" name="own"><ssv:Parameters>
-                <ssv:Parameter name="after"><ssv:Real value="99"/></ssv:Parameter>
-                <ssv:Parameter name="before"><ssv:Real value="-0.0005"/></ssv:Parameter>
-              </ssv:Parameters></ssv:ParameterSet>
-            </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
-          </ssd:Component>
-        </ssd:Elements>
-        <ssd:Connections>
-          <ssd:Connection startElement="Force Source" startConnector="out" endConnector="force.out"/>
-        </ssd:Connections>
-      </ssd:System>
-      <ssd:Component name="Cart Pole" source="resources/plant.fmu">
-        <ssd:Connectors>
-          <ssd:Connector name="F" kind="input"><ssc:Real unit="N"/></ssd:Connector>
-          <ssd:Connector name="x" kind="output"/>
-          <ssd:Connector name="theta" kind="output"/>
-        </ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="Drive Unit" startConnector="force.out" endElement="Cart Pole" endConnector="F">
-        {transform}
-      </ssd:Connection>
-      <ssd:Connection startElement="Cart Pole" startConnector="x" endConnector="cart.x"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:Units>
-    <ssc:Unit name="kN"><ssc:BaseUnit kg="1" m="1" s="-2" factor="1000"/></ssc:Unit>
-    <ssc:Unit name="N"><ssc:BaseUnit kg="1" m="1" s="-2"/></ssc:Unit>
-    <ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>
-  </ssd:Units>
-  <ssd:DefaultExperiment startTime="0" stopTime="2"/>
-</ssd:SystemStructureDescription>
-"""
+    """The rig's SSD (tests/data/ssp_rig) with ``transform`` on the force's connection."""
+    return (RIG / "SystemStructure.ssd").read_text().replace("TRANSFORM", transform)
 
 
 @pytest.fixture(scope="module")
