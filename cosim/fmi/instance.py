@@ -374,7 +374,7 @@ class FMUInstance:
         ``canRunAsynchronuously`` may not return Pending: its step is cancelled and refused."""
         if not self.asynchronous:
             self._cancel_step()
-            raise FMUError(f"{self.owner}: fmi{what} returned pending, but {self.file} does not declare "
+            raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.file} does not declare "
                            "canRunAsynchronuously (FMI 1.0): the step was cancelled (fmiCancelStep)")
         get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
         try:
