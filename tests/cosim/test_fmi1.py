@@ -172,12 +172,7 @@ def fmu1(tmp_path_factory) -> dict[str, Path]:
 def call_log(tmp_path, monkeypatch):
     path = tmp_path / "calls.log"
     monkeypatch.setenv("CALL_RULES_LOG", str(path))
-
-    def read() -> list[str]:
-        calls = [line.split(" ", 1)[1] for line in path.read_text().splitlines()] if path.exists() else []
-        assert not [c for c in calls if "ILLEGAL" in c], calls
-        return calls
-    return read
+    return lambda: handwritten.logged_calls(path)
 
 
 def _run(fmu, stop=0.05, **parameters):
@@ -284,17 +279,6 @@ def test_second_run_instantiates_afresh_on_the_kept_library(fmu1, call_log):
     assert calls.count("fmiInstantiateSlave") == 3 and calls.count("fmiFreeSlaveInstance") == 3
 
 
-def test_the_cli_names_the_failing_call(fmu1, call_log, tmp_path):
-    sc = tmp_path / "s.toml"
-    sc.write_text(f'[simulation]\nstop_time = 0.05\n[[component]]\nname = "cr"\ntype = "fmu"\n'
-                  f'path = "{fmu1["cs"]}"\nperiod = 0.01\nparameters = {{ fail_step = 3, fail_status = 3 }}\n')
-    proc = subprocess.run([*CLI, "run", str(sc), "--out", str(tmp_path / "out"), "--no-progress"],
-                          capture_output=True, text=True, timeout=120)
-    assert proc.returncode != 0 and "Traceback" not in proc.stderr
-    assert "fmiDoStep(t = 0.02 s, h = 0.01 s) returned error" in proc.stderr
-    call_log()
-
-
 # ---------------------------------------------------------------------------- Model Exchange
 def _me(fmu, stop=1.0, **parameters):
     return Cosimulation([FMUComponent("me", fmu, 0.1, rtol=1e-8, parameters=parameters or None)], {}).run(stop)
@@ -375,16 +359,23 @@ def test_broken_fmi1_fmus_are_named_errors(bad_fmi1, name, message, call_log):
     call_log()
 
 
-def test_a_broken_fmi1_fmu_in_a_scenario_is_one_line(bad_fmi1, tmp_path):
+@pytest.mark.parametrize(("fmu", "table", "message"), [
+    ("other_guid", "", "fmiInstantiateSlave returned no instance"),
+    ("cs", "parameters = { fail_step = 3, fail_status = 3 }", "fmiDoStep(t = 0.02 s, h = 0.01 s) returned error")])
+def test_the_command_line_says_it_in_one_line(fmu1, bad_fmi1, call_log, tmp_path, fmu, table, message):
+    """A scenario file's FMI 1.0 FMU that cannot start, or fails in the run: one line, exit
+    status 2, no traceback, nothing left behind."""
     sc = tmp_path / "s.toml"
-    sc.write_text(f'[simulation]\nstop_time = 0.05\n[[component]]\nname = "bad"\ntype = "fmu"\n'
-                  f'path = "{bad_fmi1 / "other_guid.fmu"}"\nperiod = 0.01\n')
+    path = fmu1.get(fmu) or bad_fmi1 / f"{fmu}.fmu"
+    sc.write_text(f'[simulation]\nstop_time = 0.05\n[[component]]\nname = "cr"\ntype = "fmu"\n'
+                  f'path = "{path}"\nperiod = 0.01\n{table}\n')
     proc = subprocess.run([*CLI, "run", str(sc), "--out", str(tmp_path / "out"), "--no-progress"],
                           capture_output=True, text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp_path)})
     errors = [x for x in proc.stderr.splitlines() if x.startswith("error:")]
-    assert proc.returncode == 2 and len(errors) == 1 and "fmiInstantiateSlave returned no instance" in errors[0]
+    assert proc.returncode == 2 and len(errors) == 1 and message in errors[0], proc.stderr
     assert "Traceback" not in proc.stderr
     assert not list(tmp_path.glob("pendulum_cosim_*"))
+    call_log()
 
 
 # ---------------------------------------------------------------------------- crashes

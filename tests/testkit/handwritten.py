@@ -36,3 +36,11 @@ def build(folder: str, identifier: str, version: int, out: Path, description: st
         z.write(src / description, "modelDescription.xml")
         z.write(binaries / f"{identifier}.so", f"binaries/{plat}/{identifier}.so")
     return fmu
+
+
+def logged_calls(path: Path) -> list[str]:
+    """The calls a hand-written FMU logged to ``path`` (lines "<instance> <function>"), the
+    instance names dropped; asserts that none was one the standard forbids (ILLEGAL)."""
+    calls = [line.split(" ", 1)[1] for line in path.read_text().splitlines()] if path.exists() else []
+    assert not [c for c in calls if "ILLEGAL" in c], calls
+    return calls
