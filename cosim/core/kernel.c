@@ -17,8 +17,9 @@
 #include <stdint.h>
 #include <string.h>
 
-typedef int (*fmi2_xfer_t)(void *, const unsigned int *, size_t, double *);
+typedef int (*fmi2_xfer_t)(void *, const unsigned int *, size_t, double *);   /* FMI 1.0's too */
 typedef int (*fmi3_xfer_t)(void *, const unsigned int *, size_t, double *, size_t);
+typedef int (*fmi1_step_t)(void *, double, double, char);
 typedef int (*fmi2_step_t)(void *, double, double, int);
 typedef int (*fmi3_step_t)(void *, double, double, bool, bool *, bool *, bool *, double *);
 typedef int (*casadi_fn_t)(const double **, double **, long long *, double *, int);
@@ -37,7 +38,8 @@ enum {
     OP_SUMMARY = 10, /* a filter's outputs: estimate, covariance entries, NIS */
     OP_NOISE = 11,   /* a noise stream's row of the instant (a new instant: the next row); flag: a sensor */
     OP_PRBS = 12,    /* values[slot] = b + (bits[floor(t / a + 1e-9) mod n] ? c : -c) */
-    OP_RECORD = 13   /* after a filter's step that adapted (flag buf[0]): a row of its noise history */
+    OP_RECORD = 13,  /* after a filter's step that adapted (flag buf[0]): a row of its noise history */
+    OP_STEP1 = 14    /* FMI 1.0 fmiDoStep(t, h, newStep = fmiTrue) */
 };
 
 enum {
@@ -137,6 +139,10 @@ static int run_op(kstate_t *s, op_t *o, double t) {
     case OP_SET:
         for (int64_t i = 0; i < o->n; i++) o->buf[o->off[i]] = v[o->idx[i]];
         st = transfer(o);
+        if (st > 1) { o->status = st; return EV_FAIL; }
+        return 0;
+    case OP_STEP1:
+        st = ((fmi1_step_t)o->fn)(o->inst, t, o->a, 1);
         if (st > 1) { o->status = st; return EV_FAIL; }
         return 0;
     case OP_STEP2:

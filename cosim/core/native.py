@@ -5,7 +5,7 @@ kept in the compiled-code cache (:mod:`fmu_models.infra.cache`), interprets a pr
 master prepares from the bound components: per pattern of due components, the operations
 of every component's output and update calls. A call that can run natively says so with
 a ``native`` attribute: a list of :class:`Op` (FMUs' get/set of Real or Float64
-variables and ``doStep`` through the function pointers of the loaded library, the
+variables and ``doStep`` (FMI 1.0, 2.0, 3.0) through the function pointers of the loaded library, the
 compiled step of a filter, a constant or step source); any other call (a Python
 component, Model Exchange, an isolated FMU, integer ports, an algebraic loop being
 iterated) is an operation that returns to Python, which calls it and resumes the kernel,
@@ -32,7 +32,7 @@ __all__ = ["ENGINES", "KState", "Op", "OpStruct", "load_kernel", "native_ops"]
 ENGINES = ("auto", "native", "python")
 
 (OP_PY, OP_GET, OP_SET, OP_STEP2, OP_STEP3, OP_CONST, OP_SWITCH, OP_FILTER, OP_HOLD, OP_HOOK, OP_SUMMARY, OP_NOISE,
- OP_PRBS, OP_RECORD) = range(14)
+ OP_PRBS, OP_RECORD, OP_STEP1) = range(15)
 EV_DONE, EV_PY, EV_FAIL, EV_FLUSH, EV_NONFINITE, EV_CHUNK, EV_HOOK, EV_REFILL = range(8)
 
 _P = ctypes.c_void_p

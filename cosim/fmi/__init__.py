@@ -1,4 +1,4 @@
-"""FMU importing: an FMI 2.0 or 3.0 FMU as a co-simulation component (:mod:`.fmu_component`),
+"""FMU importing: an FMI 1.0, 2.0 or 3.0 FMU as a co-simulation component (:mod:`.fmu_component`),
 connected Model Exchange FMUs as one system (:mod:`.me_system`), Model Exchange integration
 (:mod:`.model_exchange`), a crash-isolated FMU in a process of its own (:mod:`.isolated`),
 typed value exchange with its C functions (:mod:`.exchange`), what an FMU declares

@@ -4,6 +4,13 @@ variables, the clocks, the ``ModelStructure``), and a component's choices checke
 it: the interface, the clock intervals, the parameter and start values, the ports (an array
 variable is one port per element, its size from the structural parameters:
 :mod:`cosim.fmi.ports`) and their direct dependencies.
+
+An FMI 1.0 FMU has one interface (Co-Simulation if its model description has an
+``Implementation``, else Model Exchange) and one ``modelIdentifier``; its variables read as
+fmpy reads them (causality ``internal`` is ``local``; ``variability="parameter"`` is a
+parameter); it declares no direct dependencies (every output depends on every input). A
+``negatedAlias`` variable (its value the negation of its value reference's) is no port and
+cannot be set: the refusal names its variable.
 """
 from __future__ import annotations
 
@@ -36,7 +43,7 @@ class FMUDescription:
     Parameters
     ----------
     path : str or Path
-        The ``.fmu`` file (FMI 2.0 or 3.0).
+        The ``.fmu`` file (FMI 1.0, 2.0 or 3.0).
     owner : str
         The component's name (in messages).
 
@@ -45,7 +52,7 @@ class FMUDescription:
     path : Path
     md : fmpy ModelDescription
     version : int
-        2 or 3.
+        1, 2 or 3.
     interfaces : dict
         The FMU's interfaces (fmpy's) by key, in the order ``"cs"``, ``"me"``, ``"se"``; only
         those it has.
@@ -56,21 +63,41 @@ class FMUDescription:
     dependencies : dict
         The ``ModelStructure``: the name of each output and derivative -> the variables it
         depends on directly (None: on every input).
+    asynchronous : bool
+        FMI 1.0 Co-Simulation: the FMU declares ``canRunAsynchronuously`` (its ``fmiDoStep``
+        may return Pending).
+    negated : frozenset of str
+        FMI 1.0: the names of the ``negatedAlias`` variables.
     """
 
     def __init__(self, path, owner: str):
         self.path, self.owner = Path(path), owner
         archive = read_archive(self.path)
         md = self.md = archive.md
-        self.version = 3 if str(md.fmiVersion).startswith("3") else 2
+        self.version = {"1": 1, "3": 3}.get(str(md.fmiVersion)[:1], 2)
         found = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}
         self.interfaces = {k: v for k, v in found.items() if v is not None}
+        for key, interface in self.interfaces.items():
+            if not interface.modelIdentifier:
+                raise FMUError(f"{owner}: {self.path.name} declares no modelIdentifier for its {_WORDS[key]} interface "
+                               f"(FMI {self.version}.0)")
         self.variables = {v.name: v for v in md.modelVariables}
         self._members = archive.members
         clocked = self.version == 3 and any(v.type == "Clock" for v in md.modelVariables)
         self.clocks = FMIClocks(md, archive.root, owner) if clocked else None
         self.dependencies = {u.variable.name: u.dependencies for u in (*md.outputs, *getattr(md, "derivatives", []))
                              if u.variable is not None}
+        root = archive.root if self.version == 1 else None
+        self.negated = frozenset(el.get("name") for el in root.iter("ScalarVariable")
+                                 if el.get("alias") == "negatedAlias") if root is not None else frozenset()
+        capabilities = root.find("Implementation/*/Capabilities") if root is not None else None
+        self.asynchronous = capabilities is not None and capabilities.get("canRunAsynchronuously") in ("true", "1")
+
+    @property
+    def prefix(self) -> str:
+        """The prefix of the FMI functions' names in messages: ``fmi`` (FMI 1.0, where the
+        library's symbols are ``<modelIdentifier>_fmi...``), ``fmi2`` or ``fmi3``."""
+        return "fmi" if self.version == 1 else f"fmi{self.version}"
 
     # ------------------------------------------------------------------ the interface
     def choose_interface(self, interface: str) -> str:
@@ -113,8 +140,8 @@ class FMUDescription:
     def check_binary(self, interface: str) -> None:
         """Refuse an FMU without a binary of ``interface`` ("cs", "me" or "se") for this
         platform, naming the platforms it has (and saying so if it ships its sources)."""
-        want = (f"binaries/{platform_dir(self.version)}/{self.interfaces[interface].modelIdentifier}"
-                f"{library_suffix()}")
+        platform = platform_dir(3 if self.version == 3 else 2)      # FMI 1.0 names platforms as 2.0 does
+        want = f"binaries/{platform}/{self.interfaces[interface].modelIdentifier}{library_suffix()}"
         names = self._members
         if want not in names:
             have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
@@ -122,6 +149,13 @@ class FMUDescription:
                     "compile_platform_binary)." if any(n.startswith("sources/") for n in names) else "")
             raise FMUError(f"{self.owner}: {self.path.name} has no binary for this platform ({want}); it has "
                            f"binaries for: {', '.join(have) or 'none'}.{hint}")
+
+    def _refuse_negated(self, name: str, what: str) -> None:
+        """Refuse the FMI 1.0 ``negatedAlias`` variable ``name`` as ``what``."""
+        if name in self.negated:
+            raise ConfigurationError(f"{self.owner}: {name!r} cannot be {what}: it is an FMI 1.0 negated alias (its "
+                                     "value is the negation of the variable with its value reference); use that "
+                                     "variable instead")
 
     # ------------------------------------------------------------------ values
     def settings(self, parameters: Mapping, start: Mapping) -> tuple[dict, dict[str, int]]:
@@ -141,6 +175,7 @@ class FMUDescription:
                 if v is None:
                     raise UnknownNameError(f"{owner}: FMU {self.md.modelName} has no variable {key!r} (for {kind}); "
                                            f"valid names: {', '.join(self.variables)}")
+                self._refuse_negated(key, f"a {kind} value")
                 if v.type not in PORT_TYPES:
                     raise TypeMismatchError(f"{owner}: {key!r} is of type {v.type}; only numeric and Boolean "
                                             "variables can be set")
@@ -185,7 +220,8 @@ class FMUDescription:
         (:func:`~cosim.fmi.ports.element_ports`)."""
         owner, clocks = self.owner, self.clocks
         causalities = ("input",) if direction == "input" else ("output", "local")
-        available = {p.name: p for p in element_ports.values() if p.variable.causality in causalities}
+        available = {p.name: p for p in element_ports.values()
+                     if p.variable.causality in causalities and p.variable.name not in self.negated}
         if chosen is None:
             chosen = [n for n, p in available.items() if p.variable.causality == causalities[0]
                       and p.type in PORT_TYPES]
@@ -197,6 +233,7 @@ class FMUDescription:
         for p in chosen:
             names = [p] if p in available else [n for n, e in available.items() if e.variable.name == p and n != p]
             if not names:
+                self._refuse_negated(p, f"a {direction}")
                 raise UnknownNameError(f"{owner}: {p!r} is not an FMU {direction}; valid {direction}s: "
                                        f"{', '.join(available)}")
             for n in names:

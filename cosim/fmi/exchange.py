@@ -2,7 +2,10 @@
 
 An :class:`Exchange` moves the values of a list of element ports (:mod:`cosim.fmi.ports`)
 between the master's signal arrays and the FMU, one FMI call per variable type:
-``fmi2GetReal``/``fmi2GetInteger``/``fmi2GetBoolean`` in FMI 2.0, ``fmi3GetFloat64``,
+``fmiGetReal``/``fmiGetInteger``/``fmiGetBoolean`` in FMI 1.0 (``fmiBoolean`` a char;
+the library's symbols prefixed with the ``modelIdentifier``, see
+:class:`~cosim.fmi.instance.FMUInstance`), ``fmi2GetReal``/``fmi2GetInteger``/``fmi2GetBoolean``
+in FMI 2.0, ``fmi3GetFloat64``,
 ``fmi3GetFloat32``, ``fmi3GetInt8`` ... ``fmi3GetUInt64`` and ``fmi3GetBoolean`` in FMI
 3.0 (Enumerations use the Integer/Int64 functions), with the value count of array
 variables. The functions are fresh pointers from the library without ``argtypes``
@@ -31,6 +34,8 @@ from .ports import ElementPort, integer_range
 __all__ = ["Exchange", "raw_function"]
 
 # FMI type name -> (ctypes element type, FMI function suffix)
+_FMI1 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
+         "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int8, "Boolean")}
 _FMI2 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
          "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int, "Boolean")}
 _FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
@@ -90,8 +95,9 @@ class Exchange:
         The FMU's library.
     instance : int
         The instance pointer.
-    version : {2, 3}
-        FMI version.
+    version : {1, 2, 3}
+        FMI version (1: ``dll`` resolves the names ``fmi1GetReal`` ... to the library's
+        symbols).
     ports : sequence of ElementPort
         In the order of the index given to :meth:`bind`.
     direction : {"get", "set"}
@@ -112,7 +118,7 @@ class Exchange:
 
     def __init__(self, dll, instance, version: int, ports: Sequence[ElementPort], direction: str,
                  fail: Callable[[str, int], None], owner: str = "", sources: Sequence[tuple[str, str]] | None = None):
-        table = _FMI2 if version == 2 else _FMI3
+        table = {1: _FMI1, 2: _FMI2}.get(version, _FMI3)
         by_suffix: dict[str, tuple] = {}
         for pos, p in enumerate(ports):
             if p.type not in table:
@@ -135,7 +141,7 @@ class Exchange:
                        and all(g.identity for _, _, g in self.groups))
 
     def _args(self, g: _Group, buf):
-        if self.version == 2:
+        if self.version < 3:
             return (self.inst, g.vr, g.n_vr, buf)
         return (self.inst, g.vr, g.n_vr, buf, g.n)
 
@@ -192,7 +198,7 @@ class Exchange:
         else:
             idx, off = np.ascontiguousarray(where, np.int64), np.ascontiguousarray(g.offsets, np.int64)
         fields = dict(fn=ctypes.cast(fn, ctypes.c_void_p).value, inst=self.inst.value, vr=ctypes.addressof(g.vr),
-                      nvr=g.n_vr.value, nbuf=-1 if self.version == 2 else g.n.value, buf=buf, n=len(idx),
+                      nvr=g.n_vr.value, nbuf=-1 if self.version < 3 else g.n.value, buf=buf, n=len(idx),
                       idx=idx.ctypes.data, off=off.ctypes.data)
         return Op(OP_GET if self.direction == "get" else OP_SET, fields, (g, idx, off, values),
                   lambda op, t: fail(label, op.status))

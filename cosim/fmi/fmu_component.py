@@ -1,4 +1,4 @@
-"""An FMI 2.0 or 3.0 FMU (Co-Simulation or Model Exchange) as a co-simulation component.
+"""An FMI 1.0, 2.0 or 3.0 FMU (Co-Simulation or Model Exchange) as a co-simulation component.
 
 Timing (see :mod:`cosim.core.component`): at an instant ``t`` the component's outputs are the
 FMU's outputs at ``t``. With ``feedthrough="model"`` (default) the inputs the
@@ -28,6 +28,15 @@ the master's side in :mod:`cosim.core.clocking`). With ``isolate=True`` the FMU
 runs in a process of its own (:mod:`cosim.fmi.isolated`): a crash of its code ends the run
 with an error naming the FMU, the call and the signal, not the process.
 
+An FMI 1.0 FMU has one interface and runs by the FMI 1.0 call sequences
+(:mod:`cosim.fmi.instance`): ``fmiInstantiateSlave``, the parameters and start values,
+``fmiInitializeSlave``, ``fmiDoStep`` per step (in the native kernel, like FMI 2.0 and 3.0,
+unless it declares ``canRunAsynchronuously``: then its Pending steps are waited for in
+Python); Model Exchange ``fmiInstantiateModel``, ``fmiSetTime``, the parameters and start
+values, ``fmiInitialize``, then the integrator with ``fmiEventUpdate`` at events
+(:mod:`cosim.fmi.model_exchange`). Its ports are Real, Integer, Enumeration and Boolean
+(FMI 1.0 has no arrays and no structural parameters).
+
 FMU log messages go to the Python logger ``cosim.fmu`` (warnings and errors always;
 everything with ``logging=True``), and the last ones are kept in
 ``FMUComponent.messages`` and quoted in errors.
@@ -50,7 +59,7 @@ from fmu_models.infra.files import atomic_copy, private_tempdir
 
 from ..core.clocking import ClockBoard
 from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, StopRequest, port_kind
-from ..core.native import OP_STEP2, OP_STEP3, Op, native_ops
+from ..core.native import OP_STEP1, OP_STEP2, OP_STEP3, Op, native_ops
 from .archive import Extraction
 from .clock_run import clocked_run
 from .clock_timing import ClockedRun, initialise
@@ -59,7 +68,7 @@ from .exchange import Exchange
 from .exchange import no_exchange as _nothing
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
-from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs
+from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
 from .ports import element_ports, parse_start
 
 __all__ = ["FEEDTHROUGH_MODES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError", "HeldInputs"]
@@ -110,7 +119,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     name : str
         Component name.
     path : str or Path
-        The ``.fmu`` file (FMI 2.0 or 3.0).
+        The ``.fmu`` file (FMI 1.0, 2.0 or 3.0).
     period : float
         Communication step [s].
     inputs : sequence of str, optional
@@ -157,7 +166,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         What the FMU declares (:mod:`cosim.fmi.description`), read once.
     md : fmpy ModelDescription
     version : int
-        2 or 3.
+        1, 2 or 3.
     interface : str
         ``"cs"``, ``"me"`` or ``"se"``, as resolved.
     clock_model : FMIClocks or None
@@ -166,6 +175,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         The last 200 log messages of the FMU (status, text).
     integrator : MEIntegrator or None
         The Model Exchange integrator of the current run.
+    unit_nominals : bool
+        Model Exchange: the FMU's nominals call returned Error when its integrator started,
+        so its states' nominal values are 1 (:mod:`cosim.fmi.model_exchange`).
     arguments : dict
         The constructor's arguments but ``isolate`` (what the isolating child process
         builds its own copy of the component from).
@@ -213,6 +225,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
         self._remote = None
+        self.unit_nominals = False
 
     def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,
                  logging: bool, isolate: bool) -> None:
@@ -305,8 +318,11 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             held = "" if self.interface == "se" else f"; inputs held over [t, t + {self.period:g}]"
             return (f"FMI 3.0 {kind}, {n_in} input and {n_out} output/local clock(s): clocked outputs at their "
                     f"clocks' activations, held in between{held}")
-        kind = ("Co-Simulation doStep" if self.interface == "cs"
-                else f"Model Exchange, {self.solver} solver (step {self.solver_step:g} s)")
+        if self.interface == "cs":
+            kind = "Co-Simulation doStep"
+        else:
+            step = self.solver_step if self.solver_step is not None or self.solver == "cvode" else self.period
+            kind = f"Model Exchange, {self.solver} solver ({'variable step' if step is None else f'step {step:g} s'})"
         lim = " (left limits: feedthrough='none')" if self.feedthrough_mode == "none" else ""
         return f"FMI {self.version}.0 {kind}: outputs at t{lim}; inputs held over [t, t + {self.period:g}]"
 
@@ -399,15 +415,31 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return
         self.instantiate(t0)
         if self.interface == "me":
-            self.integrator = MEIntegrator(FMUModel(self.instance), self.solver, self.solver_step, self.rtol)
-            if self.clock_model is None:        # a clocked FMU's first Event Mode ends in its first update
-                self.integrator.start(t0)
+            self._start_integrator(t0)
+
+    def _start_integrator(self, t0: float) -> None:
+        """Model Exchange: the integrator of the new instance, started at ``t0`` [s] (a
+        clocked FMU's first Event Mode ends in its first update); an FMU whose nominals call
+        returned Error there runs on a new instance with nominals of 1
+        (:func:`~cosim.fmi.model_exchange.unit_nominals_instead`)."""
+        model = FMUModel(self.instance, self.unit_nominals)
+        self.integrator = MEIntegrator(model, self.solver, self.solver_step, self.rtol)
+        if self.clock_model is not None:
+            return
+        try:
+            self.integrator.start(t0)
+        except FMUError:
+            if not unit_nominals_instead([model], [self]):
+                raise
+            self.instantiate(t0)
+            self._start_integrator(t0)
 
     def instantiate(self, t0: float) -> FMUInstance:
         """A new instance of the FMU (closing any previous one), initialised at ``t0``
         [s] with the structural parameters (in Configuration Mode), parameters and start
         values; left after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the
-        integrator not started: what :class:`~cosim.fmi.me_system.MESystem` builds on)."""
+        integrator not started: what :class:`~cosim.fmi.me_system.MESystem` builds on; FMI
+        1.0: after ``fmiInitializeSlave`` or ``fmiInitialize``)."""
         self.close()
         options = {}
         if self.clock_model is not None:
@@ -423,8 +455,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self.messages = inst.messages
         fmu = inst.fmu
         try:
-            if self.version == 2:
-                inst.call("SetupExperiment", fmu.setupExperiment, None, t0)
+            inst.setup(t0)
             structural = {k: v for k, v in self.settings.items()
                           if self.description.variables[k].causality == "structuralParameter"}
             if structural:
@@ -435,13 +466,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             for key, val in self.settings.items():
                 if key not in structural:
                     self._set_setting(key, val)
-            if self.version == 2:
-                inst.call("EnterInitializationMode", fmu.enterInitializationMode)
-            else:
-                inst.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
+            inst.enter_initialization(t0)
             if self.clock_model is not None:
                 self._clock_schedule = initialise(self, inst, t0)
-            inst.call("ExitInitializationMode", fmu.exitInitializationMode)
+            inst.exit_initialization()
             inst.initialized = True
         except (TypeError, ValueError, OverflowError) as e:
             raise ConfigurationError(f"{self.name}: bad parameter or start value: {e}") from None
@@ -453,7 +481,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         fmu, vr = inst.fmu, [v.valueReference]
         items = list(value) if isinstance(value, list) else [value]
         kind = PORT_TYPES[v.type]
-        if self.version == 2:
+        if self.version < 3:
             suffix = {"boolean": "Boolean", "integer": "Integer", "real": "Real"}[kind]
         else:
             suffix = "Int64" if v.type == "Enumeration" else v.type
@@ -531,6 +559,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return {"me": "Model Exchange", "se": "Scheduled Execution"}[self.interface]
         if self.clock_model is not None:
             return "clocked"
+        if self.description.asynchronous:
+            return "FMI 1.0 asynchronous doStep (canRunAsynchronuously: a Pending step is waited for)"
         ports = [self.element_ports[n] for n in (*self.connected_inputs, *self.output_names)]
         other = sorted({p.type for p in ports if p.type not in ("Real", "Float64")})
         if other:
@@ -541,6 +571,16 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         inst, h, name = self.instance, self.period, self.name
         do_step, D = inst.raw(f"fmi{self.version}DoStep"), ctypes.c_double
         c, Dh = ctypes.c_void_p(inst.handle), ctypes.c_double(h)
+        if self.version == 1:
+            new_step = ctypes.c_char(1)
+
+            def update_fn(t: float) -> None:
+                set_all()
+                st = do_step(c, D(t), Dh, new_step)
+                if st > 1:
+                    inst.step_failed(st, t, h)
+            return self._native_update(update_fn, set_all, OP_STEP1, do_step,
+                                       lambda op, t: inst.step_failed(op.status, t, h))
         if self.version == 2:
             def failed2(st: int, t: float) -> None:
                 if st == 2:

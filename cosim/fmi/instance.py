@@ -1,5 +1,5 @@
-"""One FMU instance and the rules of its life (FMI 2.0 and 3.0): created, initialised, its
-failures remembered, ended as the standard allows.
+"""One FMU instance and the rules of its life (FMI 1.0, 2.0 and 3.0): created, initialised,
+its failures remembered, ended as the standard allows.
 
 :class:`FMUInstance` loads the FMU's library (through fmpy, restoring the working directory
 it changes), instantiates it with a logger that keeps the last messages, and tracks the
@@ -9,6 +9,17 @@ worst status any call returned. The standard's rules for the end are kept on eve
 abandoned, its memory with it); otherwise ``Terminate`` (if initialised) and
 ``FreeInstance``. A failure raises :class:`~fmu_models.errors.FMUError` naming the
 component, the call, the status and the FMU's last messages.
+
+FMI 1.0 has the same rules under its own names (``fmiInstantiateSlave`` /
+``fmiInstantiateModel``, ``fmiInitializeSlave`` / ``fmiInitialize``, ``fmiTerminateSlave`` /
+``fmiTerminate``, ``fmiFreeSlaveInstance`` / ``fmiFreeModelInstance``), its library's
+symbols prefixed with the ``modelIdentifier`` (``<modelIdentifier>_fmiDoStep``): the
+instance's :attr:`FMUInstance.dll` resolves fmpy's names for them (``fmi1DoStep``). A
+Co-Simulation ``fmiDoStep`` that returns *Pending* (an FMU that declares
+``canRunAsynchronuously``) is waited for with ``fmiGetStatus(fmiDoStepStatus)`` (Ctrl-C
+cancels it: ``fmiCancelStep``, after which only ``fmiFreeSlaveInstance`` follows); a
+*Discard* is an error naming ``fmiGetRealStatus(fmiLastSuccessfulTime)`` (FMI 1.0 has no
+stop request).
 
 Stop requests are not failures (:class:`~cosim.core.component.StopRequest`): an FMI 2.0
 ``DoStep`` returning *Discard* is asked ``fmi2GetBooleanStatus(fmi2Terminated)`` and
@@ -21,6 +32,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import time
 from collections import deque
 
 from fmu_models.errors import FMUError
@@ -34,27 +46,42 @@ LOGGER = logging.getLogger("cosim.fmu")
 _LEVELS = {0: logging.INFO, 1: logging.WARNING, 2: logging.WARNING, 3: logging.ERROR, 4: logging.CRITICAL}
 #: FMI status codes by name.
 STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
-_ERROR, _FATAL = 3, 4
-#: FMI 2.0 loggers by instance key (the componentEnvironment each instance is given): one C
-#: proxy formats an FMU's printf-style message with its arguments (fmpy's addLoggerProxy,
-#: which holds a single callback), and this table sends it to the instance that logged it.
-_FMI2_LOGS: dict[int, object] = {}
-_FMI2_CALLBACK: list = []                  # the one ctypes callback behind the proxy, kept alive
-_FMI2_KEYS = iter(range(1, 2**62))
+_ERROR, _FATAL, _PENDING = 3, 4, 5
+#: FMI 1.0 and 2.0 loggers by instance key: one C proxy formats an FMU's printf-style
+#: message with its arguments (fmpy's addLoggerProxy, which holds a single callback), and
+#: this table sends it to the instance that logged it: an FMI 2.0 instance by the
+#: componentEnvironment it is given (an int), an FMI 1.0 one (whose logger gets no
+#: environment) by its instance name (bytes; of two live instances of one name, the newer).
+_LOGS: dict[int | bytes, object] = {}
+_CALLBACK: list = []                  # the one ctypes callback behind the proxy, kept alive
+_KEYS = iter(range(1, 2**62))
 
 
-def _fmi2_logger():
-    """The ctypes logger every FMI 2.0 instance shares (created once)."""
-    if not _FMI2_CALLBACK:
+def _shared_logger():
+    """The ctypes logger every FMI 1.0 and 2.0 instance shares (created once)."""
+    if not _CALLBACK:
         from fmpy import fmi2
 
         def dispatch(env, inst, status, category, message):
-            log = _FMI2_LOGS.get(env or 0)
+            log = _LOGS.get(env or 0) or _LOGS.get(inst)
             if log is not None:
                 log(status, message)
 
-        _FMI2_CALLBACK.append(fmi2.fmi2CallbackLoggerTYPE(dispatch))
-    return _FMI2_CALLBACK[0]
+        _CALLBACK.append(fmi2.fmi2CallbackLoggerTYPE(dispatch))
+    return _CALLBACK[0]
+
+
+class _Symbols:
+    """An FMI 1.0 library's functions by the names fmpy gives them: ``fmi1DoStep`` is the
+    library's ``<modelIdentifier>_fmiDoStep``."""
+
+    def __init__(self, dll, identifier: str):
+        self._dll, self._prefix = dll, f"{identifier}_fmi"
+
+    def __getattr__(self, name: str):
+        if not name.startswith("fmi1"):
+            raise AttributeError(name)
+        return getattr(self._dll, self._prefix + name[4:])
 
 
 def unload_library(fmu) -> None:
@@ -79,6 +106,7 @@ class FMUInstance:
     directory : str
         Where the FMU is unpacked.
     interface : {"cs", "me", "se"}
+        The interface (FMI 1.0: the FMU's one).
     logging_on : bool
         Ask the FMU for debug messages and log them at INFO level (warnings and errors are
         always logged, on the ``cosim.fmu`` logger).
@@ -98,11 +126,19 @@ class FMUInstance:
     Attributes
     ----------
     md : fmpy ModelDescription
-    fmu : fmpy FMU2Slave, FMU2Model, FMU3Slave, FMU3Model or FMU3ScheduledExecution
+    fmu : fmpy FMU1Slave, FMU1Model, FMU2Slave, FMU2Model, FMU3Slave, FMU3Model or FMU3ScheduledExecution
     dll : ctypes.CDLL
+        The library (FMI 1.0: its functions by fmpy's names, ``fmi1DoStep`` for
+        ``<modelIdentifier>_fmiDoStep``).
     handle : int
         The instance pointer.
-    version : {2, 3}
+    version : {1, 2, 3}
+    prefix : str
+        The FMI functions' prefix in messages (``fmi``, ``fmi2``, ``fmi3``).
+    asynchronous : bool
+        FMI 1.0 Co-Simulation: the FMU declares ``canRunAsynchronuously``.
+    initial_events : tuple of (bool, float or None)
+        FMI 1.0 Model Exchange: what ``fmiInitialize`` said (terminate, the next time event).
     worst : int
         The worst status a call returned (0 ok ... 4 fatal).
     initialized : bool
@@ -114,7 +150,9 @@ class FMUInstance:
     def __init__(self, owner: str, description, directory: str, interface: str, logging_on: bool = False, *,
                  event_mode: bool = False, early_return: bool = False, clock_update=None, library=None):
         self.owner, self.md, self.interface = owner, description.md, interface
-        self.version = description.version
+        self.version, self.prefix, self.asynchronous = description.version, description.prefix, description.asynchronous
+        self.file = description.path.name
+        self.initial_events: tuple[bool, float | None] = (False, None)
         self.messages: deque = deque(maxlen=200)
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
         self._guard_entry = -1
@@ -122,16 +160,18 @@ class FMUInstance:
         #: Free only the instance at the end, not the library (its owner reuses or frees it).
         self.keep_library = False
         self.fmu = None
-        ident = description.interfaces[interface].modelIdentifier
+        ident = self._identifier = description.interfaces[interface].modelIdentifier
         args = dict(guid=self.md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
         cwd = os.getcwd()
         try:
-            if self.version == 2:
+            if self.version == 1:
+                self._instantiate1(args, library)
+            elif self.version == 2:
                 self._instantiate2(args, library)
             else:
                 self._instantiate3(args, directory, event_mode, early_return, clock_update, library)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
-            _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
+            self._forget_log()
             if getattr(self.fmu, "dll", None) is not None:      # a reused library too: not again
                 unload_library(self.fmu)
             else:
@@ -142,13 +182,34 @@ class FMUInstance:
                 os.chdir(cwd)
         fmu = self.fmu
         if not fmu.component:
-            raise FMUError(f"{owner}: fmi{self.version}Instantiate returned no instance" + self._last(" (", ")"))
-        self.dll, self.handle = fmu.dll, fmu.component
+            self._forget_log()
+            unload_library(fmu)
+            what = {"cs": "Slave", "me": "Model"}[interface] if self.version == 1 else ""
+            raise FMUError(f"{owner}: {self.prefix}Instantiate{what} returned no instance" + self._last(" (", ")"))
+        self.dll, self.handle = (_Symbols(fmu.dll, ident) if self.version == 1 else fmu.dll), fmu.component
         if self.logging_on:
             try:
-                fmu.setDebugLogging(True, [])
+                fmu.setDebugLogging(*((True,) if self.version == 1 else (True, [])))
             except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
                 LOGGER.debug("%s: setDebugLogging refused", owner)
+
+    def _instantiate1(self, args: dict, library) -> None:
+        """FMI 1.0: load (or reuse) the library and instantiate the slave or the model with
+        the shared logger (its messages found by the instance name) and no ``stepFinished``
+        (a Pending ``fmiDoStep`` is asked with ``fmiGetStatus``)."""
+        from fmpy import fmi1
+        from fmpy.logging import addLoggerProxy
+
+        fmu = self._guarded(library or (fmi1.FMU1Slave if self.interface == "cs" else fmi1.FMU1Model)(**args))
+        self._log_key = self.owner.encode()
+        _LOGS[self._log_key] = self._logger = self._log
+        cb = fmi1.fmi1CallbackFunctions()
+        cb.logger = _shared_logger()
+        cb.allocateMemory = fmi1.fmi1CallbackAllocateMemoryTYPE(fmi1.calloc)
+        cb.freeMemory = fmi1.fmi1CallbackFreeMemoryTYPE(fmi1.free)
+        addLoggerProxy(ctypes.byref(cb))     # printf-style messages formatted with their arguments
+        self._callbacks = cb
+        fmu.instantiate(functions=cb, loggingOn=self.logging_on)
 
     def _instantiate2(self, args: dict, library) -> None:
         """FMI 2.0: load (or reuse) the library and instantiate with the shared logger."""
@@ -157,10 +218,10 @@ class FMUInstance:
         from fmpy.logging import addLoggerProxy
 
         fmu = self._guarded(library or (fmi2.FMU2Slave if self.interface == "cs" else fmi2.FMU2Model)(**args))
-        self._log_key = next(_FMI2_KEYS)
-        _FMI2_LOGS[self._log_key] = self._log
+        self._log_key = next(_KEYS)
+        _LOGS[self._log_key] = self._logger = self._log
         cb = fmi2.fmi2CallbackFunctions()
-        cb.logger = _fmi2_logger()
+        cb.logger = _shared_logger()
         cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
         cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
         cb.componentEnvironment = self._log_key
@@ -192,7 +253,8 @@ class FMUInstance:
     def _guarded(self, fmu):
         """``fmu`` (its library just loaded), registered with the crash guard: a fatal signal in
         its code names this component (:mod:`cosim.core.crash_guard`)."""
-        version = getattr(fmu.dll, f"fmi{self.version}GetVersion", None)
+        name = f"{self._identifier}_fmiGetVersion" if self.version == 1 else f"fmi{self.version}GetVersion"
+        version = getattr(fmu.dll, name, None)
         address = ctypes.cast(version, ctypes.c_void_p).value if version is not None else None
         self._guard_entry = crash_guard.register_library(address, self.owner)
         fmu.pendulum_guard_entry = self._guard_entry       # forgotten when its library is unloaded
@@ -231,11 +293,11 @@ class FMUInstance:
 
     def fail(self, what: str, status: int):
         """Remember ``status`` and raise the FMUError of the call ``what`` (the FMI function's
-        name without its ``fmi2``/``fmi3`` prefix, e.g. ``"DoStep(t = 1 s, h = 0.1 s)"``)."""
+        name without its ``fmi``/``fmi2``/``fmi3`` prefix, e.g. ``"DoStep(t = 1 s, h = 0.1 s)"``)."""
         status = int(status)
         self.worst = max(self.worst, status)
         label = STATUS.get(status, f"status {status}")
-        raise FMUError(f"{self.owner}: fmi{self.version}{what} returned {label}: "
+        raise FMUError(f"{self.owner}: {self.prefix}{what} returned {label}: "
                        + (self._last() or "no message from the FMU"))
 
     def call(self, what: str, fn, *args):
@@ -255,6 +317,84 @@ class FMUInstance:
     def raw(self, name: str):
         """A fresh pointer to the FMI function ``name`` (no argtypes; see :func:`raw_function`)."""
         return raw_function(self.dll, name)
+
+    # ------------------------------------------------------------------ initialisation
+    def setup(self, t0: float) -> None:
+        """Before the parameters and start values are set: FMI 2.0 ``SetupExperiment`` at
+        ``t0`` [s] (no tolerance, no stop time), FMI 1.0 Model Exchange ``fmiSetTime(t0)``."""
+        if self.version == 2:
+            self.call("SetupExperiment", self.fmu.setupExperiment, None, t0)
+        elif self.version == 1 and self.interface == "me":
+            self.call("SetTime", self.fmu.setTime, t0)
+
+    def enter_initialization(self, t0: float) -> None:
+        """After the parameters and start values: ``EnterInitializationMode`` (FMI 3.0 at
+        ``t0`` [s]); FMI 1.0, which has no Initialization Mode, initialises at once:
+        ``fmiInitializeSlave(t0, no stop time)`` or ``fmiInitialize`` (no tolerance control;
+        its event information kept in :attr:`initial_events`)."""
+        fmu = self.fmu
+        if self.version == 3:
+            self.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
+        elif self.version == 2:
+            self.call("EnterInitializationMode", fmu.enterInitializationMode)
+        elif self.interface == "cs":        # fmpy's wrapper reads the status as a string: the raw call
+            st = self.raw("fmi1InitializeSlave")(ctypes.c_void_p(self.handle), ctypes.c_double(t0), ctypes.c_char(0),
+                                                 ctypes.c_double(0.0))
+            if st > 1:
+                self.fail(f"InitializeSlave(t = {t0:g} s)", st)
+        else:
+            _, _, _, terminate, defined, nxt = self.call("Initialize", fmu.initialize)
+            self.initial_events = (bool(terminate), float(nxt) if defined else None)
+
+    def exit_initialization(self) -> None:
+        """``ExitInitializationMode`` (nothing to do in FMI 1.0)."""
+        if self.version > 1:
+            self.call("ExitInitializationMode", self.fmu.exitInitializationMode)
+
+    # ------------------------------------------------------------------ FMI 1.0 steps
+    def step_failed(self, status: int, t: float, h: float) -> None:
+        """After an FMI 1.0 ``fmiDoStep(t, h)`` [s] returned ``status`` (above Warning):
+        Pending waited for (:meth:`_await_step`; returns if the step then ended well), else
+        the FMUError, a Discard naming the FMU's ``fmiLastSuccessfulTime``."""
+        what = f"DoStep(t = {t:g} s, h = {h:g} s)"
+        if status == _PENDING:
+            status = self._await_step(what)
+            if status <= 1:
+                return
+        if status == 2:
+            last = ctypes.c_double(float("nan"))
+            st = self.raw("fmi1GetRealStatus")(ctypes.c_void_p(self.handle), 2, ctypes.byref(last))   # LastSuccessful
+            known = f"; it computed up to t = {last.value:g} s (fmiLastSuccessfulTime)" if st <= 1 else ""
+            what = f"DoStep(t = {t:g} s, h = {h:g} s{known}; FMI 1.0 has no stop request)"
+        self.fail(what, status)
+
+    def _await_step(self, what: str) -> int:
+        """A Pending ``fmiDoStep``: ``fmiGetStatus(fmiDoStepStatus)`` until it is no longer
+        Pending (its status returned); Ctrl-C cancels the step. An FMU that does not declare
+        ``canRunAsynchronuously`` may not return Pending: its step is cancelled and refused."""
+        if not self.asynchronous:
+            self._cancel_step()
+            raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.file} does not declare "
+                           "canRunAsynchronuously (FMI 1.0): the step was cancelled (fmiCancelStep)")
+        get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
+        try:
+            while True:
+                st = get_status(c, 0, ctypes.byref(value))          # fmiDoStepStatus
+                if st > 1:
+                    self.fail("GetStatus(fmiDoStepStatus)", st)
+                if value.value != _PENDING:
+                    return value.value
+                time.sleep(delay)
+                delay = min(2 * delay, 0.05)
+        except KeyboardInterrupt:
+            self._cancel_step()
+            raise
+
+    def _cancel_step(self) -> None:
+        """``fmiCancelStep``: after it, only ``fmiResetSlave`` or ``fmiFreeSlaveInstance`` may
+        follow (the instance counts as failed)."""
+        self.worst = max(self.worst, _ERROR)
+        self.raw("fmi1CancelStep")(ctypes.c_void_p(self.handle))
 
     # ------------------------------------------------------------------ stop requests
     def discard_reason(self) -> float | None:
@@ -282,7 +422,13 @@ class FMUInstance:
         try:
             self._end()
         finally:
-            _FMI2_LOGS.pop(getattr(self, "_log_key", 0), None)
+            self._forget_log()
+
+    def _forget_log(self) -> None:
+        """No more messages to this instance (an FMI 1.0 name now used by a newer one stays)."""
+        key = getattr(self, "_log_key", 0)
+        if _LOGS.get(key) is getattr(self, "_logger", None):
+            _LOGS.pop(key, None)
 
     def _end(self) -> None:
         if self.worst >= _FATAL:
@@ -295,15 +441,11 @@ class FMUInstance:
                 LOGGER.debug("%s: terminate refused", self.owner)
         try:
             if self.keep_library:       # fmpy's freeInstance would unload the library too
-                (self.fmu.fmi2FreeInstance if self.version == 2 else self.fmu.fmi3FreeInstance)(self.fmu.component)
+                free = {1: "fmi1FreeSlaveInstance", 2: "fmi2FreeInstance", 3: "fmi3FreeInstance"}[self.version]
+                getattr(self.fmu, free)(self.fmu.component)
             else:
                 self.fmu.freeInstance()
         except Exception:  # noqa: BLE001
             LOGGER.debug("%s: freeInstance failed", self.owner)
         if not self.keep_library:
             crash_guard.forget_library(self._guard_entry)
-
-
-def c_bool_type(version: int):
-    """The ctypes type of an FMI Boolean out-argument (``fmi2Boolean`` is an int)."""
-    return ctypes.c_bool if version == 3 else ctypes.c_int

@@ -97,10 +97,11 @@ class RemoteFMU:
         self.feedthrough = bool(component.feedthrough)
         self._stale = False                  # the outputs the last update returned are not current
         self.n_in, self.n_out = len(component.connected_inputs), len(component.output_names)
-        v = component.version
-        self._step_calls = (f"setting the inputs or fmi{v}DoStep" if component.interface == "cs" else
-                            f"setting the inputs or integrating (fmi{v}GetDerivatives, events, ...)")
-        self._output_calls = f"setting the feed-through inputs or getting the outputs (fmi{v}Set*/Get*)"
+        p = component.description.prefix
+        self._step_calls = (f"setting the inputs or {p}DoStep" if component.interface == "cs" else
+                            f"setting the inputs or integrating ({p}GetDerivatives, events, ...)")
+        self._output_calls = f"setting the feed-through inputs or getting the outputs ({p}Set*/Get*)"
+        init = "fmiInitialize" if component.version == 1 else "ExitInitializationMode"
         setup = {"arguments": component.arguments, "directory": component.unpacked,
                  "inputs": list(component.connected_inputs), "sources": component.input_sources, "t0": float(t0)}
         self.proc = subprocess.Popen([sys.executable, "-m", "cosim.fmi.isolated_child"], stdin=subprocess.PIPE,
@@ -110,7 +111,7 @@ class RemoteFMU:
         self.outputs = np.zeros(self.n_out)
         self.int_outputs = np.zeros(self.n_out, dtype=np.int64)
         payload = pickle.dumps(setup)
-        self._call(f"instantiation or initialisation (fmi{v}Instantiate .. ExitInitializationMode)", t0,
+        self._call(f"instantiation or initialisation ({p}Instantiate .. {init})", t0,
                    HEAD.pack(b"R", t0) + struct.pack("<I", len(payload)) + payload)
 
     # ------------------------------------------------------------------ the pipe

@@ -33,7 +33,7 @@ from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, U
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
 from .exchange import Exchange, no_exchange
 from .fmu_component import FMUComponent, HeldInputs
-from .model_exchange import ContinuousModel, FMUModel, MEIntegrator, check_solver, held_inputs
+from .model_exchange import ContinuousModel, FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
 
 __all__ = ["MESystem"]
 
@@ -46,7 +46,7 @@ class _Coupled(ContinuousModel):
     module documentation): states and indicators concatenated in member order, the
     internal connections propagated before derivatives, indicators and outputs."""
 
-    def __init__(self, name: str, models: list[FMUModel], propagate, enter_ct):
+    def __init__(self, name: str, models: list[FMUModel], propagate):
         self.name, self.models = name, models
         self.nx, self.nz = sum(m.nx for m in models), sum(m.nz for m in models)
         self.needs_completed_step = any(m.needs_completed_step for m in models)
@@ -56,7 +56,7 @@ class _Coupled(ContinuousModel):
             zs.append(slice(j, j + m.nz))
             i, j = i + m.nx, j + m.nz
         self._x, self._z = xs, zs
-        self._propagate, self._enter_ct = propagate, enter_ct
+        self._propagate = propagate
         self.dirty = True
 
     def refresh(self) -> None:
@@ -103,7 +103,7 @@ class _Coupled(ContinuousModel):
 
     def event(self, t, set_inputs=None):
         for m in self.models:
-            m.inst.call("EnterEventMode", m.inst.fmu.enterEventMode)
+            m.enter_event_mode()
         if set_inputs is not None:
             set_inputs()
         return self._iterate(t)
@@ -133,7 +133,8 @@ class _Coupled(ContinuousModel):
                     who = ", ".join(self.models[k].name for k in sorted(stopped))
                     self.stop_reason = f"member {who} requested termination in its event update"
                     return True, None
-                self._enter_ct()
+                for m in self.models:
+                    m.enter_continuous_time_mode()
                 return False, (min(nxt) if nxt else None)
         raise FMUError(f"{self.name}: the joint event iteration at t = {t:g} s did not settle in "
                        f"{MAX_EVENT_ROUNDS} rounds (the members' discrete values keep changing each other)")
@@ -313,7 +314,12 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             m.instantiate(t0)
         self._model = self._coupled()
         self.integrator = MEIntegrator(self._model, self.solver, self.solver_step, self.rtol)
-        self.integrator.start(t0)
+        try:
+            self.integrator.start(t0)
+        except FMUError:
+            if not unit_nominals_instead(self._model.models, self.order):      # else: on new instances
+                raise
+            self.reset(t0)
 
     def _coupled(self) -> _Coupled:
         """The members' FMUModels and the propagation of the connections over a buffer of
@@ -361,11 +367,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                         get()
             return changed
 
-        def enter_ct() -> None:
-            for m in self.order:
-                m.instance.call("EnterContinuousTimeMode", m.instance.fmu.enterContinuousTimeMode)
-
-        return _Coupled(self.name, [FMUModel(m.instance) for m in self.order], propagate, enter_ct)
+        return _Coupled(self.name, [FMUModel(m.instance, m.unit_nominals) for m in self.order], propagate)
 
     def bind(self, values, inputs, outputs, integers=None):
         """Output and update closures (see :class:`~cosim.core.component.FastBinding`):

@@ -22,12 +22,28 @@ exactly; state events (CVODE's roots of the event indicators) and step events
 Mode, the event iteration (``NewDiscreteStates``/``UpdateDiscreteStates`` until no more is
 needed), Continuous-Time Mode, the states read again (they may jump), the solver
 reinitialised. Discrete-time inputs change only in Event Mode (:meth:`MEIntegrator.at_event`).
+
+The states' nominal values (CVODE's absolute tolerances) come from
+``GetNominalsOfContinuousStates``. Some exporters leave that helper unimplemented and return
+Error; after an Error the FMI rules allow only ``FreeInstance`` (or ``Reset``) on that
+instance (FMI 2.0 section 2.1.3, FMI 3.0 section 2.2.3, no exception for this function), so
+an FMU whose nominals call returns Error when its integrator starts is not continued: the
+component frees it, warns (logger ``cosim.fmu``, naming the FMU), instantiates it afresh and
+integrates with nominal values of 1, the value the standard asks of an FMU without nominal
+information, never calling that function again (:func:`unit_nominals_instead`). An Error
+later in the run (the call worked at the start) ends the run as any Error does.
 A model that asks to terminate ends the run at that time
 (:class:`~cosim.core.component.StopRequest`).
+
+FMI 1.0 has no Event Mode and no Continuous-Time Mode: its event iteration is
+``fmiEventUpdate`` until ``iterationConverged`` (discrete inputs set just before it),
+``fmiCompletedIntegratorStep`` follows every integrator step (FMI 1.0 has no flag to skip
+it), and what ``fmiInitialize`` said about events starts the run.
 """
 from __future__ import annotations
 
 import ctypes
+import logging
 import math
 from collections.abc import Callable
 
@@ -38,10 +54,12 @@ from fmu_models.infra.checks import positive
 
 from ..core.component import StopRequest
 
-__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs"]
+__all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs",
+           "unit_nominals_instead"]
 
 #: The Model Exchange solvers (see the module documentation).
 SOLVERS = ("cvode", "euler", "rk4")
+LOGGER = logging.getLogger("cosim.fmu")
 _DP = ctypes.POINTER(ctypes.c_double)
 
 
@@ -122,24 +140,33 @@ class ContinuousModel:
 
 
 class FMUModel(ContinuousModel):
-    """One Model Exchange FMU instance (after ``ExitInitializationMode``) as a
-    :class:`ContinuousModel`: its states, derivatives, indicators and nominals are calls of
-    the FMU's raw FMI functions, bound when it is made.
+    """One Model Exchange FMU instance (after ``ExitInitializationMode``; FMI 1.0: after
+    ``fmiInitialize``) as a :class:`ContinuousModel`: its states, derivatives, indicators and
+    nominals are calls of the FMU's raw FMI functions, bound when it is made.
 
     Parameters
     ----------
     instance : FMUInstance
         The instance (:mod:`cosim.fmi.instance`).
+    unit_nominals : bool
+        The states' nominal values are 1, the FMU is not asked (see the module
+        documentation).
+
+    Attributes
+    ----------
+    nominals_refused : bool
+        ``GetNominalsOfContinuousStates`` returned Error.
     """
 
-    def __init__(self, instance):
+    def __init__(self, instance, unit_nominals: bool = False):
         md = instance.md
-        self.inst, self.name = instance, instance.owner
-        self.v3 = instance.version == 3
+        self.inst, self.name, self.version = instance, instance.owner, instance.version
+        self.nominals_refused = False
         self.nx = int(md.numberOfContinuousStates)
         self.nz = int(md.numberOfEventIndicators)
-        self.needs_completed_step = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
-        p = "fmi3" if self.v3 else "fmi2"
+        self.needs_completed_step = self.version == 1 or bool(getattr(md.modelExchange, "needsCompletedIntegratorStep",
+                                                                      True))
+        p = f"fmi{self.version}"
         c, fail = ctypes.c_void_p(instance.handle), instance.fail
 
         def check(st, what):
@@ -153,44 +180,78 @@ class FMUModel(ContinuousModel):
 
         self.get_states = vector("GetContinuousStates", self.nx, "GetContinuousStates")
         self.set_states = vector("SetContinuousStates", self.nx, "SetContinuousStates")
-        self.derivatives = vector("GetContinuousStateDerivatives" if self.v3 else "GetDerivatives", self.nx,
+        self.derivatives = vector("GetContinuousStateDerivatives" if self.version == 3 else "GetDerivatives", self.nx,
                                   "GetDerivatives")
         self.indicators = vector("GetEventIndicators", self.nz, "GetEventIndicators")
-        self.nominals = vector("GetNominalsOfContinuousStates", self.nx, "GetNominalsOfContinuousStates")
+        nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
+        get_nominals, n = instance.raw(f"{p}{nominals}"), ctypes.c_size_t(self.nx)
+
+        def ask_nominals(x: np.ndarray) -> None:
+            st = get_nominals(c, x.ctypes.data_as(_DP), n) if self.nx else 0
+            if st > 1:
+                self.nominals_refused = st == 3         # Error
+                fail(nominals, st)
+        if not unit_nominals:                           # else ContinuousModel's: 1 for every state
+            self.nominals = ask_nominals
         set_time, completed = instance.raw(f"{p}SetTime"), instance.raw(f"{p}CompletedIntegratorStep")
         self.set_time = lambda t: check(set_time(c, ctypes.c_double(t)), "SetTime")
-        flag = ctypes.c_bool if self.v3 else ctypes.c_int
+        flag = {1: ctypes.c_int8, 2: ctypes.c_int}.get(self.version, ctypes.c_bool)       # fmiBoolean is a char
         self._enter, self._term = flag(0), flag(0)
-        args = (c, 1, ctypes.byref(self._enter), ctypes.byref(self._term))
+        args = ((c, ctypes.byref(self._enter)) if self.version == 1 else       # FMI 1.0: callEventUpdate only
+                (c, 1, ctypes.byref(self._enter), ctypes.byref(self._term)))
         self._completed = lambda: check(completed(*args), "CompletedIntegratorStep")
 
     def completed_step(self):
-        """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)``."""
+        """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)`` (FMI 1.0:
+        ``callEventUpdate``; it never terminates here)."""
         self._completed()
         return bool(self._enter.value), bool(self._term.value)
 
+    def enter_event_mode(self) -> None:
+        """``EnterEventMode`` (FMI 1.0 has none)."""
+        if self.version > 1:
+            self.inst.call("EnterEventMode", self.inst.fmu.enterEventMode)
+
+    def enter_continuous_time_mode(self) -> None:
+        """``EnterContinuousTimeMode`` (FMI 1.0 has none)."""
+        if self.version > 1:
+            self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
+
     def event(self, t, set_inputs=None):
         """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
-        self.inst.call("EnterEventMode", self.inst.fmu.enterEventMode)
+        self.enter_event_mode()
         if set_inputs is not None:
             set_inputs()
-        return self.initial_event(t)
+        return self._settle(t)
 
     def initial_event(self, t):
-        """The event iteration after initialisation, then Continuous-Time Mode."""
+        """The event iteration after initialisation, then Continuous-Time Mode; FMI 1.0:
+        what ``fmiInitialize`` said (its initial event iteration is its own)."""
+        if self.version == 1:
+            return self.inst.initial_events
+        return self._settle(t)
+
+    def _settle(self, t: float) -> tuple[bool, float | None]:
+        """The event iteration, then Continuous-Time Mode unless the model terminates."""
         terminate, nxt = self.iterate(t)
         if not terminate:
-            self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
+            self.enter_continuous_time_mode()
         return terminate, nxt
 
     def iterate(self, t: float) -> tuple[bool, float | None]:
         """In Event Mode: update the discrete states until no more update is needed
-        (at most 1000 rounds); returns ``(terminate, next event time or None)``."""
+        (at most 1000 rounds; FMI 1.0: ``fmiEventUpdate`` until ``iterationConverged``);
+        returns ``(terminate, next event time or None)``."""
         fmu, inst = self.inst.fmu, self.inst
-        update = fmu.updateDiscreteStates if self.v3 else fmu.newDiscreteStates
-        name = "UpdateDiscreteStates" if self.v3 else "NewDiscreteStates"
+        name = {1: "EventUpdate", 2: "NewDiscreteStates", 3: "UpdateDiscreteStates"}[self.version]
+        update = getattr(fmu, name[0].lower() + name[1:])
         for _ in range(1000):
-            need, term, _nominals, _values, defined, nxt = inst.call(name, update)
+            info = inst.call(name, update)
+            if self.version == 1:       # (converged, stateValueReferencesChanged, stateValuesChanged, ...)
+                info = (not info[0], *info[3:])
+            else:
+                info = (info[0], info[1], *info[4:])
+            need, term, defined, nxt = info
             if term:
                 return True, None
             if not need:
@@ -201,7 +262,8 @@ class FMUModel(ContinuousModel):
 class _Callbacks:
     """The functions fmpy's CVODE binding calls, for a :class:`ContinuousModel`; an exception
     inside one (a failing FMU call) is kept and raised after CVODE returns (a ctypes
-    callback cannot raise)."""
+    callback cannot raise), and no model call follows it (after an Error only FreeInstance
+    may)."""
 
     def __init__(self, model: ContinuousModel):
         self.m = model
@@ -211,6 +273,8 @@ class _Callbacks:
         self.z = np.zeros(max(model.nz, 1))
 
     def _guard(self, fn):
+        if self.pending is not None:
+            return -1
         try:
             fn()
             return 0
@@ -223,6 +287,8 @@ class _Callbacks:
         ctypes.memmove(ptr, self.x.ctypes.data, 8 * n)
 
     def set_x(self, ptr, n):
+        if self.pending is not None:        # fmpy sets the states after a failed CVode call too
+            return
         ctypes.memmove(self.x.ctypes.data, ptr, 8 * n)
         self.m.set_states(self.x)
 
@@ -249,8 +315,12 @@ class _NoInput:
 
 
 def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
-    """fmpy's CVodeSolver for ``model``, with its callbacks guarded (see :class:`_Callbacks`)."""
-    from fmpy.sundials import NV_DATA_S, CVodeSolver
+    """fmpy's CVodeSolver for ``model``, with its callbacks guarded (see :class:`_Callbacks`),
+    a destructor that cannot fail (fmpy's reads ``cvode_mem``, which a constructor that
+    failed on a model call never set: "Exception ignored in ..." on stderr) and SUNDIALS'
+    error messages kept for the FMUError instead of printed on stderr."""
+    from fmpy.sundials import NV_DATA_S, CVodeSolver, SUNContext_PushErrHandler
+    from fmpy.sundials.libraries import sundials_core
 
     cb = _Callbacks(model)
 
@@ -273,9 +343,20 @@ def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
                 cb.get_z(gout, self.nz)
             return cb._guard(run)
 
-    solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
-                     get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
-                     startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+        def __del__(self):
+            if "cvode_mem" in vars(self):       # made: freed (a constructor that failed before made none)
+                super().__del__()
+
+    try:
+        solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
+                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
+                         startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+    except FMUError:
+        raise
+    except Exception as e:  # noqa: BLE001 - fmpy's binding raises a plain Exception when a CVODE call fails
+        raise FMUError(f"{model.name}: CVODE could not be set up at t = {t0:g} s: {e}") from None
+    sundials_core.SUNContext_ClearErrHandlers(solver.sunctx)         # only fmpy's handler, which keeps them
+    SUNContext_PushErrHandler(solver.sunctx, solver.ehfun_, None)
     return solver, cb
 
 
@@ -436,6 +517,23 @@ class MEIntegrator:
                 self._after_event(t_next, terminate, nxt)
             t = t_next
         self.t = t_end
+
+
+def unit_nominals_instead(models: list[FMUModel], components: list) -> bool:
+    """After an integrator failed to start: each of ``models`` whose nominals call returned
+    Error (see the module documentation) gets, in its component (``components``, in the same
+    order), ``unit_nominals = True``, with a warning naming the FMU. Returns whether there
+    was one (the caller then instantiates afresh and starts again)."""
+    refused = False
+    for model, comp in zip(models, components):
+        if model.nominals_refused:
+            refused = comp.unit_nominals = True
+            call = ("fmiGetNominalContinuousStates" if comp.version == 1 else
+                    f"fmi{comp.version}GetNominalsOfContinuousStates")
+            LOGGER.warning("%s: %s returned Error from %s when the integrator started; the FMI rules allow only "
+                           "FreeInstance after an Error, so that instance was freed and a new one integrates with "
+                           "nominal values of 1 for its states", comp.name, comp.path.name, call)
+    return refused
 
 
 def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthrough: tuple[list, list],

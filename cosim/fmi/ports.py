@@ -22,8 +22,8 @@ from fmu_models.errors import ConfigurationError, TypeMismatchError
 __all__ = ["INTEGER_RANGES", "ElementPort", "array_shape", "check_integer", "element_ports", "integer_range",
            "parse_start"]
 
-#: The value range of every FMI integer type (FMI 2.0's Integer and Enumeration are 32-bit;
-#: FMI 3.0's Enumeration is 64-bit).
+#: The value range of every FMI integer type (FMI 1.0's and 2.0's Integer and Enumeration are
+#: 32-bit; FMI 3.0's Enumeration is 64-bit).
 INTEGER_RANGES = {
     "Int8": (-2**7, 2**7 - 1), "UInt8": (0, 2**8 - 1), "Int16": (-2**15, 2**15 - 1), "UInt16": (0, 2**16 - 1),
     "Int32": (-2**31, 2**31 - 1), "UInt32": (0, 2**32 - 1), "Int64": (-2**63, 2**63 - 1), "UInt64": (0, 2**64 - 1),
@@ -35,7 +35,7 @@ def integer_range(type_name: str, version: int) -> tuple[int, int]:
     """The value range of the FMI ``type_name`` (an integer, Enumeration or Boolean type) in FMI
     ``version``."""
     if type_name == "Enumeration":
-        return INTEGER_RANGES["Int32" if version == 2 else "Int64"]
+        return INTEGER_RANGES["Int32" if version < 3 else "Int64"]
     return INTEGER_RANGES[type_name]
 
 

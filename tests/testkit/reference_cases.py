@@ -4,7 +4,8 @@ the README's table).
 
 Located as ``../shared/reference-fmus`` from the project root or by the environment
 variable ``PENDULUM_COSIM_REFERENCE_FMUS``. Every case runs one Reference FMU (FMI 2.0 or
-3.0, Co-Simulation, Model Exchange or Scheduled Execution, whichever interfaces it has) over
+3.0 (:func:`cases`), or FMI 1.0 (:func:`fmi1_cases`: one FMU per interface, in ``fmi1/cs``
+and ``fmi1/me``); Co-Simulation, Model Exchange or Scheduled Execution, whichever interfaces it has) over
 its default experiment through the master, from Python or from the command line with a
 minimal scenario file, and compares it: Co-Simulation with the result the Reference-FMUs
 project publishes, Model Exchange with fmpy's CVODE at relative tolerance 1e-10 (the
@@ -12,7 +13,8 @@ reference) and with fmpy's CVODE at the master's own tolerance (the error ours m
 most twice fmpy's), Scheduled Execution (``Clocks``) with the tick table in a comment of
 its modelDescription.xml: the importer ticks its triggered input clocks at the table's
 times (a ``clock_ticks`` source), and every clock's activations and tick counters must be
-the table's.
+the table's. FMI 1.0 Co-Simulation is compared with fmpy's own Co-Simulation run (the
+project publishes no FMI 1.0 results; these FMUs are an older release's).
 """
 from __future__ import annotations
 
@@ -34,11 +36,22 @@ ROOT = Path(__file__).parents[2]
 RTOL = 1e-6          # the master's ME tolerance in these cases (and fmpy's, compared)
 
 
+def _root() -> Path:
+    env = os.environ.get("PENDULUM_COSIM_REFERENCE_FMUS")
+    return Path(env) if env else ROOT.parent / "shared" / "reference-fmus"
+
+
 def reference_dir() -> Path | None:
     """The Reference FMUs' folder, or None if it is absent."""
-    env = os.environ.get("PENDULUM_COSIM_REFERENCE_FMUS")
-    d = Path(env) if env else ROOT.parent / "shared" / "reference-fmus"
+    d = _root()
     return d if (d / "fmi2").is_dir() and (d / "fmi3").is_dir() else None
+
+
+def fmi1_dir() -> Path | None:
+    """The FMI 1.0 Reference FMUs' folder (``fmi1/`` with ``cs/`` and ``me/``), or None if
+    it is absent."""
+    d = _root() / "fmi1"
+    return d if (d / "cs").is_dir() and (d / "me").is_dir() else None
 
 
 @dataclass(frozen=True)
@@ -141,6 +154,18 @@ def cases() -> list[Case]:
     return out
 
 
+def fmi1_cases() -> list[Case]:
+    """Every FMI 1.0 case: each Reference FMU of ``fmi1/cs`` and ``fmi1/me`` (an FMI 1.0 FMU
+    has one interface), over its model's default experiment."""
+    d = fmi1_dir()
+    out = []
+    for interface in ("cs", "me"):
+        for model in sorted(p.stem for p in (d / interface).glob("*.fmu")) if d else []:
+            period, start, stop = EXPERIMENTS.get(model, (0.1, 0.0, 1.0))
+            out.append(Case(model, 1, interface, period, start, stop))
+    return out
+
+
 def _triggered_sources(case: Case) -> dict[str, list[float]]:
     """Scheduled Execution: each triggered input clock's activation times from the table
     (the importer is their source)."""
@@ -153,6 +178,8 @@ def _triggered_sources(case: Case) -> dict[str, list[float]]:
 
 
 def fmu_path(case: Case) -> Path:
+    if case.version == 1:
+        return fmi1_dir() / case.interface / f"{case.model}.fmu"
     return reference_dir() / f"fmi{case.version}" / f"{case.model}.fmu"
 
 
@@ -281,12 +308,13 @@ def _scipy(case: Case, times: np.ndarray, rtol: float, atol: float) -> pd.DataFr
     return pd.DataFrame(outputs(sol.y), index=pd.Index(sol.t, name="time"))
 
 
-def _fmpy(case: Case, outputs: list[str], rtol: float) -> pd.DataFrame:
-    """fmpy's Model Exchange result (CVODE at ``rtol``), arrays split into elements, one
-    row per time (the post-event one where fmpy records an event twice)."""
+def _fmpy(case: Case, outputs: list[str], rtol: float | None, fmi_type: str = "ModelExchange") -> pd.DataFrame:
+    """fmpy's Model Exchange result (CVODE at ``rtol``; or its Co-Simulation result with
+    ``fmi_type="CoSimulation"``), arrays split into elements, one row per time (the
+    post-event one where fmpy records an event twice)."""
     from fmpy import simulate_fmu
 
-    res = simulate_fmu(str(fmu_path(case)), fmi_type="ModelExchange", start_time=case.start, stop_time=case.stop,
+    res = simulate_fmu(str(fmu_path(case)), fmi_type=fmi_type, start_time=case.start, stop_time=case.stop,
                        output_interval=case.period, relative_tolerance=rtol, output=outputs)
     cols = {}
     for name in res.dtype.names:
@@ -320,6 +348,11 @@ def compare(case: Case, df: pd.DataFrame) -> dict:
     instead."""
     if case.interface == "se":
         return _compare_ticks(case, df)
+    if case.interface == "cs" and case.version == 1:
+        ref = _fmpy(case, list(df.columns), None, "CoSimulation")
+        ours, theirs = _aligned(df, ref, list(df.columns))
+        return {"error": float(np.max(np.abs(ours - theirs), initial=0.0)), "rows": len(ours),
+                "missing": len(ref) - len(ours), "reference": "fmpy's Co-Simulation run", "not_compared": []}
     if case.interface == "cs":
         pub = _published(case.model)
         if pub is None:

@@ -1,6 +1,6 @@
-/* Shared by the hand-written FMI 2.0 Co-Simulation test FMUs that log their calls and the call
- * rules they receive (tests/data/call_rules, tests/data/chaos); independent of
- * pendulum-cosim's code.
+/* Shared by the hand-written FMI 2.0 test FMUs that log their calls and the call rules they
+ * receive (Co-Simulation: tests/data/call_rules, tests/data/chaos; Model Exchange, which makes
+ * its own instances: tests/data/me_faults); independent of pendulum-cosim's code.
  *
  * Include after defining CALL_LOG (the environment variable naming the call log), GUID and the
  * instance type Model (fields `char name[64]`, `int state`, one of the states below, and
