@@ -50,7 +50,7 @@ def reference_figures(cli: bool) -> dict:
     verdicts = []
     bad = []
     with tempfile.TemporaryDirectory() as tmp:
-        for k, case in enumerate(rc.cases()):
+        for k, case in enumerate(rc.cases() + rc.fmi1_cases()):
             try:
                 df = rc.run_api(case)
                 outcome, stopped = rc.compare(case, df), bool(df.attrs.get("stopped"))

@@ -139,7 +139,8 @@ def _kind_of(path: Path) -> str:
     if path.is_dir():
         if (path / "SystemStructure.ssd").is_file():
             return "ssp"
-        raise ConfigurationError(f"{path} is a folder without a SystemStructure.ssd (not an unpacked SSP)")
+        raise ConfigurationError(f"{path} is a folder, not a scenario file, an FMU or an SSP (an unpacked SSP holds "
+                                 "a SystemStructure.ssd)")
     if path.suffix.lower() == ".ssd":
         return "ssp"
     if zipfile.is_zipfile(path):

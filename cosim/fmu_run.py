@@ -101,7 +101,7 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
     Parameters
     ----------
     path : str or Path
-        An FMU file (FMI 2.0 or 3.0).
+        An FMU file (FMI 1.0, 2.0 or 3.0).
     stop_time, start_time : float, optional
         [s] Default: the FMU's ``DefaultExperiment``, else 0 and start + 1 s.
     step_size : float, optional
