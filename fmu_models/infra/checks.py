@@ -70,8 +70,8 @@ def covariance(value, n: int, what: str, allow_scalar: bool = True,
     """
     a = float_array(value, what)
     if a.ndim == 0 and allow_scalar:
-        a = float(a) * np.eye(n)
-    elif a.ndim == 1 and a.shape == (n,):
+        a = np.full(n, float(a))       # the diagonal: no inf * 0 off it
+    if a.ndim == 1 and a.shape == (n,):
         a = np.diag(a)
     if a.shape != (n, n):
         raise error(f"{what} must be a ({n}, {n}) matrix, a length-{n} diagonal or a scalar; "
@@ -79,9 +79,11 @@ def covariance(value, n: int, what: str, allow_scalar: bool = True,
     if not np.isfinite(a).all():
         raise error(f"{what} contains NaN or inf")
     scale = max(float(np.abs(a).max()), 1e-300)
-    if np.abs(a - a.T).max() > 1e-9 * scale:
+    with np.errstate(over="ignore"):   # a difference past the float range is inf: not symmetric
+        asymmetry = np.abs(a - a.T).max()
+    if asymmetry > 1e-9 * scale:
         raise error(f"{what} is not symmetric")
-    a = 0.5 * (a + a.T)
+    a = 0.5 * a + 0.5 * a.T            # halves first: huge finite entries stay finite
     try:
         np.linalg.cholesky(a)
     except np.linalg.LinAlgError:
