@@ -236,7 +236,10 @@ class _Stderr:
             time.sleep(0.05)
 
     def rest(self) -> str:
+        """The whole stderr, once the process has ended; closes its pipes."""
         self._thread.join(timeout=60)
+        self.proc.stdout.close()
+        self.proc.stderr.close()
         return self.text
 
 
@@ -304,7 +307,7 @@ def test_two_runs_into_one_output_folder(tmp_path):
     out = tmp_path / "out"
     procs = [subprocess.Popen([*CLI, "run", "seed000_cartpole", "--out", str(out), "--no-progress"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
-    results = [(p.wait(timeout=300), p.stderr.read()) for p in procs]
+    results = [(p.wait(timeout=300), p.communicate()[1]) for p in procs]
     codes = sorted(c for c, _ in results)
     assert codes == [0, 2], results
     err = next(e for c, e in results if c == 2)
