@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from testkit.fmu_helpers import Instance
 from testkit.processes import processes_mentioning
+from testkit.scenario_files import component, write_scenario
 
 from cosim.cli import main
 from cosim.components.sources import Constant
@@ -273,24 +274,10 @@ def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
 def test_interrupting_a_run_writes_partial_results_not_finished_ones(tmp_path):
-    sc = scenario(tmp_path, """
-        [simulation]
-        stop_time = 1e5
-        [[component]]
-        name = "plant"
-        type = "fmu"
-        model = "cartpole"
-        period = 0.001
-        [[component]]
-        name = "f"
-        type = "constant"
-        period = 0.001
-        value = 0.0
-        [connections]
-        "plant.F" = "f.out"
-        [recording]
-        output_interval = 0.1           # the native kernel records ~1e7 base steps a second
-    """)
+    sc = write_scenario(tmp_path / "s.toml", 1e5, [component("fmu", "plant", 0.001, model="cartpole"),
+                                                   component("constant", "f", 0.001, value=0.0)],
+                        {"plant.F": "f.out"},
+                        recording={"output_interval": 0.1})    # the native kernel records ~1e7 base steps a second
     out = tmp_path / "out"
     proc = subprocess.Popen([*CLI, "run", str(sc), "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -364,22 +351,8 @@ def test_a_state_restored_right_after_instantiation_steps_on(fmu_builds, version
 
 
 def test_two_fmi_versions_of_one_model_in_one_scenario(tmp_path, capsys):
-    sc = scenario(tmp_path, """
-        [simulation]
-        stop_time = 0.1
-        [[component]]
-        name = "p2"
-        type = "fmu"
-        model = "cartpole"
-        fmi_version = 2
-        period = 0.01
-        [[component]]
-        name = "p3"
-        type = "fmu"
-        model = "cartpole"
-        fmi_version = 3
-        period = 0.01
-    """)
+    sc = write_scenario(tmp_path / "s.toml", 0.1, [component("fmu", f"p{v}", 0.01, model="cartpole", fmi_version=v)
+                                                   for v in (2, 3)])
     status, _ = cli(capsys, "run", str(sc), "--out", str(tmp_path / "out"))
     assert status == 0
     import pandas as pd
