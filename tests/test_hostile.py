@@ -260,6 +260,8 @@ def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp
         proc.wait(timeout=60)
     except subprocess.TimeoutExpired:
         proc.kill()
+        proc.wait()
+        err.rest()                  # its pipes closed: no ResourceWarning in whichever test comes next
         raise
     err = err.rest()
     assert proc.returncode == 130, err
