@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from testkit.fmu_helpers import Instance
 from testkit.processes import processes_mentioning
+from testkit.scenario_files import component, write_scenario
 
 from cosim.cli import main
 from cosim.components.sources import Constant
@@ -236,7 +237,10 @@ class _Stderr:
             time.sleep(0.05)
 
     def rest(self) -> str:
+        """The whole stderr, once the process has ended; closes its pipes."""
         self._thread.join(timeout=60)
+        self.proc.stdout.close()
+        self.proc.stderr.close()
         return self.text
 
 
@@ -256,6 +260,8 @@ def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp
         proc.wait(timeout=60)
     except subprocess.TimeoutExpired:
         proc.kill()
+        proc.wait()
+        err.rest()                  # its pipes closed: no ResourceWarning in whichever test comes next
         raise
     err = err.rest()
     assert proc.returncode == 130, err
@@ -263,30 +269,17 @@ def test_interrupting_a_campaign_saves_partial_results_and_ends_every_worker(tmp
     summary = out / "summary.md"
     assert summary.exists() and "PARTIAL" in summary.read_text().upper()
     time.sleep(0.5)
-    assert processes_mentioning(str(out)) == []   # no worker left behind
+    # no worker left behind: none with the command's arguments, none started by spawn (its own command line)
+    assert processes_mentioning(str(out)) == [] and processes_mentioning("spawn_main") == []
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
 def test_interrupting_a_run_writes_partial_results_not_finished_ones(tmp_path):
-    sc = scenario(tmp_path, """
-        [simulation]
-        stop_time = 1e5
-        [[component]]
-        name = "plant"
-        type = "fmu"
-        model = "cartpole"
-        period = 0.001
-        [[component]]
-        name = "f"
-        type = "constant"
-        period = 0.001
-        value = 0.0
-        [connections]
-        "plant.F" = "f.out"
-        [recording]
-        output_interval = 0.1           # the native kernel records ~1e7 base steps a second
-    """)
+    sc = write_scenario(tmp_path / "s.toml", 1e5, [component("fmu", "plant", 0.001, model="cartpole"),
+                                                   component("constant", "f", 0.001, value=0.0)],
+                        {"plant.F": "f.out"},
+                        recording={"output_interval": 0.1})    # the native kernel records ~1e7 base steps a second
     out = tmp_path / "out"
     proc = subprocess.Popen([*CLI, "run", str(sc), "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -304,7 +297,7 @@ def test_two_runs_into_one_output_folder(tmp_path):
     out = tmp_path / "out"
     procs = [subprocess.Popen([*CLI, "run", "seed000_cartpole", "--out", str(out), "--no-progress"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
-    results = [(p.wait(timeout=300), p.stderr.read()) for p in procs]
+    results = [(p.wait(timeout=300), p.communicate()[1]) for p in procs]
     codes = sorted(c for c, _ in results)
     assert codes == [0, 2], results
     err = next(e for c, e in results if c == 2)
@@ -360,22 +353,8 @@ def test_a_state_restored_right_after_instantiation_steps_on(fmu_builds, version
 
 
 def test_two_fmi_versions_of_one_model_in_one_scenario(tmp_path, capsys):
-    sc = scenario(tmp_path, """
-        [simulation]
-        stop_time = 0.1
-        [[component]]
-        name = "p2"
-        type = "fmu"
-        model = "cartpole"
-        fmi_version = 2
-        period = 0.01
-        [[component]]
-        name = "p3"
-        type = "fmu"
-        model = "cartpole"
-        fmi_version = 3
-        period = 0.01
-    """)
+    sc = write_scenario(tmp_path / "s.toml", 0.1, [component("fmu", f"p{v}", 0.01, model="cartpole", fmi_version=v)
+                                                   for v in (2, 3)])
     status, _ = cli(capsys, "run", str(sc), "--out", str(tmp_path / "out"))
     assert status == 0
     import pandas as pd

@@ -15,6 +15,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from testkit.scenario_files import component, write_scenario
 
 from cosim.cli import main
 from fmu_models.__main__ import main as fmu_main
@@ -65,16 +66,7 @@ def test_without_the_cross_extra_the_error_says_what_to_install(capsys, tmp_path
 
 @needs_cross
 def test_an_ssp_with_a_third_party_fmu_without_sources_is_refused_by_name(capsys, tmp_path, spring_damper_fmu):
-    scen = tmp_path / "spring.toml"
-    scen.write_text(f'''
-[simulation]
-stop_time = 0.1
-[[component]]
-name = "body"
-type = "fmu"
-path = "{spring_damper_fmu}"
-period = 0.01
-''')
+    scen = write_scenario(tmp_path / "spring.toml", 0.1, [component("fmu", "body", 0.01, path=spring_damper_fmu)])
     before = hashlib.sha256(Path(spring_damper_fmu).read_bytes()).hexdigest()
     out = tmp_path / "ssp"
     line = one_error(capsys, main(["export-ssp", str(scen), "--out", str(out), "--platforms", "win64"]),

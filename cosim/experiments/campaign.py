@@ -5,11 +5,16 @@ a picklable ``(function, kwargs)``. Random streams are derived per (task, realis
 with :func:`realisation_seeds`, never from a shared generator, so results do not depend
 on the order, the partition into tasks or the backend.
 
+The local worker processes are started by ``spawn`` on every platform: a fresh interpreter
+each, never a ``fork`` of the caller, whose threads (numpy's, tqdm's, a user's) a forked
+child would inherit in whatever state they were. A worker imports the package once when it
+starts; the tasks carry everything else.
+
 Interruption: Ctrl-C (and SIGTERM, which the command line turns into the same) stops a
-campaign at once: the worker processes ignore SIGINT, are terminated by the parent, and
-die with it if it is killed (Linux: ``PR_SET_PDEATHSIG``); :func:`run_tasks` then raises
-:class:`~fmu_models.errors.Interrupted` whose ``partial`` is the list of results with
-``None`` for the tasks that did not finish.
+campaign at once: the worker processes ignore SIGINT from their start, are terminated by
+the parent, and die with it if it is killed (Linux: ``PR_SET_PDEATHSIG``); :func:`run_tasks`
+then raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` is the list of results
+with ``None`` for the tasks that did not finish.
 """
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Sequence
+from multiprocessing import resource_tracker
 
 import numpy as np
 
@@ -46,6 +52,24 @@ def _worker_init() -> None:
 
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+
+
+@contextlib.contextmanager
+def _sigint_blocked():
+    """SIGINT blocked in this thread for the duration: a process started meanwhile begins
+    with it blocked (a signal mask survives exec, a handler does not), so a Ctrl-C while a
+    worker still imports the package prints no traceback of the worker's. The caller loses
+    no Ctrl-C: its other threads take it, or this one once unblocked. (Multiprocessing starts
+    its resource tracker so.)"""
+    if not hasattr(signal, "pthread_sigmask"):      # Windows: no signal masks, no SIGINT to hold
+        yield
+        return
+    resource_tracker.ensure_running()               # its first start unblocks SIGINT: before, not during
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _indexed(item):
@@ -114,18 +138,21 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
 
 def _run_processes(tasks, results, n_jobs, bar) -> None:
     workers = min(n_jobs or os.cpu_count() or 1, len(tasks))
-    method = "fork" if sys.platform.startswith("linux") else "spawn"
-    pool = multiprocessing.get_context(method).Pool(workers, initializer=_worker_init)
+    pool = None
     try:
+        with _sigint_blocked():     # a Ctrl-C it held back raises as it ends, the pool there to terminate
+            pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init)
         for i, res in pool.imap_unordered(_indexed, list(enumerate(tasks))):
             results[i] = res
             bar.update()
         pool.close()
     except BaseException:
-        pool.terminate()            # kill the workers at once (Ctrl-C, SIGTERM, a task's error)
+        if pool is not None:
+            pool.terminate()        # kill the workers at once (Ctrl-C, SIGTERM, a task's error)
         raise
     finally:
-        pool.join()
+        if pool is not None:
+            pool.join()
 
 
 def _run_dask(tasks, results, n_jobs, bar) -> None:

@@ -22,6 +22,17 @@ def _describe(value) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def _number(value, what: str, kind: str) -> float:
+    """``value`` as a float; :class:`TypeMismatchError` saying ``what`` must be ``kind`` if it
+    is a bool or not a number."""
+    if isinstance(value, bool):
+        raise TypeMismatchError(f"{what} must be {kind}, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeMismatchError(f"{what} must be {kind}, got {_describe(value)}") from None
+
+
 def float_array(value, what: str) -> np.ndarray:
     """``value`` as a float ndarray; :class:`TypeMismatchError` naming ``what`` if it is
     ``None``, a string, or anything else that is not numbers."""
@@ -70,8 +81,8 @@ def covariance(value, n: int, what: str, allow_scalar: bool = True,
     """
     a = float_array(value, what)
     if a.ndim == 0 and allow_scalar:
-        a = float(a) * np.eye(n)
-    elif a.ndim == 1 and a.shape == (n,):
+        a = np.full(n, float(a))       # the diagonal: no inf * 0 off it
+    if a.ndim == 1 and a.shape == (n,):
         a = np.diag(a)
     if a.shape != (n, n):
         raise error(f"{what} must be a ({n}, {n}) matrix, a length-{n} diagonal or a scalar; "
@@ -79,9 +90,11 @@ def covariance(value, n: int, what: str, allow_scalar: bool = True,
     if not np.isfinite(a).all():
         raise error(f"{what} contains NaN or inf")
     scale = max(float(np.abs(a).max()), 1e-300)
-    if np.abs(a - a.T).max() > 1e-9 * scale:
+    with np.errstate(over="ignore"):   # a difference past the float range is inf: not symmetric
+        asymmetry = np.abs(a - a.T).max()
+    if asymmetry > 1e-9 * scale:
         raise error(f"{what} is not symmetric")
-    a = 0.5 * (a + a.T)
+    a = 0.5 * a + 0.5 * a.T            # halves first: huge finite entries stay finite
     try:
         np.linalg.cholesky(a)
     except np.linalg.LinAlgError:
@@ -92,12 +105,7 @@ def covariance(value, n: int, what: str, allow_scalar: bool = True,
 
 def finite(value, what: str, error: type[Exception] = ConfigurationError) -> float:
     """``value`` as a finite float, else ``error`` naming ``what``."""
-    if isinstance(value, bool):
-        raise TypeMismatchError(f"{what} must be a number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeMismatchError(f"{what} must be a number, got {_describe(value)}") from None
+    v = _number(value, what, "a number")
     if not math.isfinite(v):
         raise error(f"{what} must be finite, got {value!r}")
     return v
@@ -115,12 +123,7 @@ def positive_int(value, what: str, error: type[Exception] = ConfigurationError,
                  minimum: int = 1) -> int:
     """``value`` as an int ``>= minimum`` (integral floats such as 3.0 accepted); else
     ``error`` (default :class:`ConfigurationError`) naming ``what``."""
-    if isinstance(value, bool):
-        raise TypeMismatchError(f"{what} must be an integer, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeMismatchError(f"{what} must be an integer, got {_describe(value)}") from None
+    v = _number(value, what, "an integer")
     if not (math.isfinite(v) and v == int(v) and v >= minimum):
         raise error(f"{what} must be an integer >= {minimum}, got {value!r}")
     return int(v)

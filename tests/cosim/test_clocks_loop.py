@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Model, FMU3Slave
+from testkit.scenario_files import component, write_scenario
 
 from cosim import Cosimulation, FMUComponent
 
@@ -246,40 +247,12 @@ def test_the_scenario_file_gives_the_reference_loop(clock_loop_fmus, tmp_path):
     hand-written reference loop."""
     from cosim import Scenario
 
-    (tmp_path / "loop.toml").write_text(f"""
-[simulation]
-stop_time = {STOP}
-
-[[component]]
-name = "controller"
-type = "fmu"
-path = "{clock_loop_fmus['controller']}"
-period = {H}
-
-[[component]]
-name = "supervisor"
-type = "fmu"
-path = "{clock_loop_fmus['supervisor']}"
-period = {H}
-solver = "euler"
-solver_step = {H_INT}
-
-[[component]]
-name = "plant"
-type = "fmu"
-path = "{clock_loop_fmus['plant']}"
-period = {H}
-solver = "euler"
-solver_step = {H_INT}
-
-[connections]
-"plant.u" = "controller.u"
-"controller.y" = "plant.p"
-"supervisor.p" = "plant.p"
-"controller.mode" = "supervisor.alarm"
-"controller.level" = "supervisor.level"
-""")
-    sc = Scenario.load(tmp_path / "loop.toml")
+    sc = Scenario.load(write_scenario(tmp_path / "loop.toml", STOP, [
+        component("fmu", "controller", H, path=clock_loop_fmus["controller"]),
+        component("fmu", "supervisor", H, path=clock_loop_fmus["supervisor"], solver="euler", solver_step=H_INT),
+        component("fmu", "plant", H, path=clock_loop_fmus["plant"], solver="euler", solver_step=H_INT)],
+        {"plant.u": "controller.u", "controller.y": "plant.p", "supervisor.p": "plant.p",
+         "controller.mode": "supervisor.alarm", "controller.level": "supervisor.level"}))
     df = sc.run()
     ref, _, modes, _ = reference_loop(clock_loop_fmus)
     np.testing.assert_allclose(df[COLUMNS].to_numpy(float), ref, rtol=0, atol=1e-12)

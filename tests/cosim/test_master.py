@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from testkit.scenario_files import component, write_scenario
 
 from cosim.components.estimation import EstimatorComponent
 from cosim.components.sensors import Sensor
@@ -133,30 +134,11 @@ def spring_damper_reference(n, h, force, m=1.0, k=4.0, c=0.4):
 
 
 def test_third_party_fmu_runs_from_a_scenario_file(spring_damper_fmu, tmp_path):
-    scen = tmp_path / "spring.toml"
-    scen.write_text(f'''
-[simulation]
-stop_time = 2.0
-[[component]]
-name = "body"
-type = "fmu"
-path = "{spring_damper_fmu}"
-period = 0.01
-parameters = {{ k = 4.0 }}
-[[component]]
-name = "push"
-type = "constant"
-period = 0.05
-value = 0.3
-[[component]]
-name = "sensor"
-type = "sensor"
-period = 0.01
-signals = ["pos"]
-[connections]
-"body.force" = "push.out"
-"sensor.pos" = "body.pos"
-''')
+    scen = write_scenario(tmp_path / "spring.toml", 2.0,
+                          [component("fmu", "body", 0.01, path=spring_damper_fmu, parameters={"k": 4.0}),
+                           component("constant", "push", 0.05, value=0.3),
+                           component("sensor", "sensor", 0.01, signals=["pos"])],
+                          {"body.force": "push.out", "sensor.pos": "body.pos"})
     df = Scenario.load(scen, fmu_dir=tmp_path / "fmus").run()
     ref = spring_damper_reference(200, 0.01, 0.3)
     np.testing.assert_allclose(df[["body.pos", "body.vel"]].to_numpy(), ref, atol=1e-12)

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from testkit.scenario_files import component, write_scenario
 
 import cosim.core.component as protocol
 from cosim.components.control import LQRController
@@ -195,25 +196,9 @@ def test_typed_fmi3_ports_pass_at_the_same_instant(typed_fmu):
 
 
 def test_a_model_exchange_only_fmu_runs_from_a_scenario_file(bouncing_me_fmu, tmp_path):
-    scen = tmp_path / "ball.toml"
-    scen.write_text(f'''
-[simulation]
-stop_time = 1.0
-[[component]]
-name = "ball"
-type = "fmu"
-path = "{bouncing_me_fmu}"
-period = 0.01
-solver = "cvode"
-rtol = 1e-9
-[[component]]
-name = "push"
-type = "constant"
-period = 0.01
-value = 1.0
-[connections]
-"ball.u" = "push.out"
-''')
+    scen = write_scenario(tmp_path / "ball.toml", 1.0,
+                          [component("fmu", "ball", 0.01, path=bouncing_me_fmu, solver="cvode", rtol=1e-9),
+                           component("constant", "push", 0.01, value=1.0)], {"ball.u": "push.out"})
     df = Scenario.load(scen).run()
     g, h0, e = 9.81, 1.0, 0.7
     t1 = math.sqrt(2 * h0 / g)                                   # first bounce, state event
@@ -346,83 +331,23 @@ def test_every_shipped_component_type_is_usable_from_a_scenario_file(tmp_path):
 
     s = seed002.Settings()
     sa, sg = realisation_seeds(s.seed, 0, 0)
-    (tmp_path / "loop.toml").write_text(f"""
-        [simulation]
-        stop_time = 2.0
-        [[component]]
-        name = "plant"
-        type = "plant_model"
-        model = "iwp"
-        period = {s.T}
-        method = "rk4"
-        substeps = {s.substeps}
-        start = {{ alpha = {s.alpha0} }}
-        outputs = ["alpha", "alpha_dot", "phi_dot", "der(alpha_dot)"]
-        feedthrough = "none"
-        [[component]]
-        name = "acc"
-        type = "accelerometer"
-        period = {s.T}
-        r = {s.r_acc}
-        noise_std = {s.acc_std}
-        seed = {sa}
-        [[component]]
-        name = "gyro"
-        type = "gyroscope"
-        period = {s.T}
-        noise_std = {s.gyro_std}
-        bias = {s.gyro_bias}
-        seed = {sg}
-        [[component]]
-        name = "encoder"
-        type = "encoder"
-        period = {s.T}
-        counts_per_rev = {s.counts_per_rev}
-        [[component]]
-        name = "fusion"
-        type = "tilt_fusion"
-        period = {s.T}
-        q_angle = {s.fusion_q_angle}
-        q_bias = {s.fusion_q_bias}
-        r_tilt = {s.fusion_r}
-        [[component]]
-        name = "ekf"
-        type = "estimator"
-        filter = "EKF"
-        model = "iwp"
-        bias_on = "y_alpha_dot"
-        period = {s.T}
-        x0 = [0.0, 0.0, 0.0, 0.0]
-        P0 = {s.P0}
-        Q = 0.01
-        R = 0.01
-        [[component]]
-        name = "lqr"
-        type = "lqr"
-        model = "iwp"
-        period = {s.T}
-        Q = {list(s.lqr_q)}
-        R = [[{s.lqr_r}]]
-        u_limits = [{-s.i_max}, {s.i_max}]
-        [connections]
-        "plant.i" = "lqr.i"
-        "acc.alpha" = "plant.alpha"
-        "acc.alpha_dot" = "plant.alpha_dot"
-        "acc.alpha_ddot" = "plant.der(alpha_dot)"
-        "gyro.alpha_dot" = "plant.alpha_dot"
-        "encoder.phi_dot" = "plant.phi_dot"
-        "fusion.a_t" = "acc.a_t"
-        "fusion.a_r" = "acc.a_r"
-        "fusion.omega" = "gyro.omega"
-        "ekf.i" = "lqr.i"
-        "ekf.y_alpha" = "fusion.alpha"
-        "ekf.y_alpha_dot" = "fusion.alpha_dot"
-        "ekf.y_phi_dot" = "encoder.phi_dot"
-        "lqr.alpha" = "ekf.alpha"
-        "lqr.alpha_dot" = "ekf.alpha_dot"
-        "lqr.phi_dot" = "ekf.phi_dot"
-    """.replace("\n        ", "\n"))
-    sc = Scenario.load(tmp_path / "loop.toml")
+    sc = Scenario.load(write_scenario(tmp_path / "loop.toml", 2.0, [
+        component("plant_model", "plant", s.T, model="iwp", method="rk4", substeps=s.substeps,
+                  start={"alpha": s.alpha0}, outputs=["alpha", "alpha_dot", "phi_dot", "der(alpha_dot)"],
+                  feedthrough="none"),
+        component("accelerometer", "acc", s.T, r=s.r_acc, noise_std=s.acc_std, seed=sa),
+        component("gyroscope", "gyro", s.T, noise_std=s.gyro_std, bias=s.gyro_bias, seed=sg),
+        component("encoder", "encoder", s.T, counts_per_rev=s.counts_per_rev),
+        component("tilt_fusion", "fusion", s.T, q_angle=s.fusion_q_angle, q_bias=s.fusion_q_bias, r_tilt=s.fusion_r),
+        component("estimator", "ekf", s.T, filter="EKF", model="iwp", bias_on="y_alpha_dot", x0=[0.0] * 4, P0=s.P0,
+                  Q=0.01, R=0.01),
+        component("lqr", "lqr", s.T, model="iwp", Q=list(s.lqr_q), R=[[s.lqr_r]], u_limits=[-s.i_max, s.i_max])],
+        {"plant.i": "lqr.i", "acc.alpha": "plant.alpha", "acc.alpha_dot": "plant.alpha_dot",
+         "acc.alpha_ddot": "plant.der(alpha_dot)", "gyro.alpha_dot": "plant.alpha_dot",
+         "encoder.phi_dot": "plant.phi_dot", "fusion.a_t": "acc.a_t", "fusion.a_r": "acc.a_r",
+         "fusion.omega": "gyro.omega", "ekf.i": "lqr.i", "ekf.y_alpha": "fusion.alpha",
+         "ekf.y_alpha_dot": "fusion.alpha_dot", "ekf.y_phi_dot": "encoder.phi_dot", "lqr.alpha": "ekf.alpha",
+         "lqr.alpha_dot": "ekf.alpha_dot", "lqr.phi_dot": "ekf.phi_dot"}))
     kinds = {type(c).kind for c in sc.cosim.components}
     assert kinds == {"plant_model", "accelerometer", "gyroscope", "encoder", "tilt_fusion", "estimator", "lqr"}
     assert kinds <= set(COMPONENTS.names())

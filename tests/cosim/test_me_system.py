@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
 from testkit import reference_cases as rc
+from testkit.scenario_files import component, write_scenario
 
 from cosim import Cosimulation, FMUComponent, MESystem, Sine
 from fmu_models.errors import ConfigurationError, UnknownNameError
@@ -113,25 +114,9 @@ def test_refusals_name_the_problem(bouncing_me_fmu):
 
 @needs_reference
 def test_from_a_scenario_file(bouncing_me_fmu, tmp_path):
-    sc = tmp_path / "s.toml"
-    sc.write_text(f"""[simulation]
-stop_time = 1.0
-
-[[component]]
-name = "sys"
-type = "me_system"
-period = 0.1
-rtol = 1e-8
-connections = {{ "lag.u" = "vdp.x0" }}
-
-[[component.members]]
-name = "vdp"
-path = "{ref('VanDerPol')}"
-
-[[component.members]]
-name = "lag"
-path = "{bouncing_me_fmu}"
-""")
+    sc = write_scenario(tmp_path / "s.toml", 1.0, [
+        component("me_system", "sys", 0.1, rtol=1e-8, connections={"lag.u": "vdp.x0"},
+                  members=[{"name": "vdp", "path": ref("VanDerPol")}, {"name": "lag", "path": bouncing_me_fmu}])])
     proc = subprocess.run([*CLI, "run", str(sc), "--out", str(tmp_path / "out"), "--no-progress"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr

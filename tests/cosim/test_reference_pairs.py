@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from testkit import reference_cases as rc
+from testkit.scenario_files import component, write_scenario
 
 from cosim import Cosimulation, FMUComponent
 from fmu_models.errors import ConfigurationError, CosimError, PendulumCosimError
@@ -101,27 +102,11 @@ def test_arrays_connect_by_element():
 
 def test_a_pair_from_a_scenario_file(tmp_path):
     """The CLI with two Reference FMUs and an exact UInt64 connection."""
-    sc = tmp_path / "s.toml"
-    sc.write_text(f"""[simulation]
-stop_time = 0.3
-
-[[component]]
-name = "a"
-type = "fmu"
-path = "{fmu('Feedthrough')}"
-period = 0.1
-start = {{ UInt64_input = {2**64 - 1} }}
-
-[[component]]
-name = "b"
-type = "fmu"
-path = "{fmu('Feedthrough')}"
-period = 0.1
-
-[connections]
-"b.UInt64_input" = "a.UInt64_output"
-"b.Int32_input" = "a.Int32_output"
-""")
+    feedthrough = fmu("Feedthrough")
+    sc = write_scenario(tmp_path / "s.toml", 0.3,
+                        [component("fmu", "a", 0.1, path=feedthrough, start={"UInt64_input": 2**64 - 1}),
+                         component("fmu", "b", 0.1, path=feedthrough)],
+                        {"b.UInt64_input": "a.UInt64_output", "b.Int32_input": "a.Int32_output"})
     proc = subprocess.run([*CLI, "run", str(sc), "--out", str(tmp_path / "out"), "--no-progress"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
