@@ -19,10 +19,27 @@ or inf in the block that ended), ``EV_FAIL`` (a native operation failed: its own
 raises the error the Python path raises) or a component's stop request. Whichever way it
 ends, also by an exception, the run's position and the state the kernel keeps for Python
 objects (a filter's current state copy and step count) are first handed back to them.
+
+**Parallel stepping** (:class:`Stepping`, the master's ``threads`` option). In an update
+phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other, so the
+runs of them between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`)
+may step on threads of a pool made once per run. FMUs that share a loaded library, and
+FMUs that declare ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their
+serial order. The first block of :data:`BLOCK` base steps runs serially and times each FMU
+update; its costs assign the FMUs to the threads (the costliest first, each to the least
+loaded thread). With ``threads="auto"`` the run then goes on serially unless the predicted
+gain (the serial time of those updates less that of the busiest thread) is at least
+:data:`MIN_GAIN` per base step; if it is, the next chunk runs in parallel, timed, and
+parallel stepping is kept only if it took at most :data:`KEEP_RATIO` of the serial time.
+An integer ``threads`` steps on that many threads (at most one per group of FMUs) after
+the first block. Each FMU's calls are the serial run's, in the same order, so the results
+are the same bit for bit; a failure is the first in the serial order, and if it is a stop
+request the updates the other threads already made are not made again.
 """
 from __future__ import annotations
 
 import ctypes
+import os
 import time
 
 import numpy as np
@@ -31,9 +48,10 @@ from fmu_models.errors import CosimError
 
 from . import crash_guard
 from .component import StopRequest
-from .native import EV_CHUNK, EV_DONE, EV_FAIL, EV_FLUSH, EV_HOOK, EV_NONFINITE, EV_PY, EV_REFILL, KState
+from .native import (EV_CHUNK, EV_DONE, EV_FAIL, EV_FLUSH, EV_HOOK, EV_NONFINITE, EV_PY, EV_REFILL, OP_STEP2, OP_STEP3,
+                     KState)
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "NativeLoop"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MIN_GAIN", "NativeLoop", "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -42,6 +60,190 @@ BLOCK = 64
 CHUNK = 64 * BLOCK
 #: Wall time [s] the native kernel aims at between two returns to Python.
 CHUNK_SECONDS = 0.02
+#: ``threads="auto"``: the least gain [s per base step] the measured FMU update costs must
+#: predict for parallel stepping to be tried (a thread's wake-up costs some µs).
+MIN_GAIN = 20e-6
+#: ``threads="auto"``: parallel stepping is kept if it took at most this fraction of the
+#: serial time of the same updates.
+KEEP_RATIO = 0.9
+
+
+class _DlInfo(ctypes.Structure):
+    _fields_ = [("fname", ctypes.c_char_p), ("base", ctypes.c_void_p), ("sname", ctypes.c_char_p),
+                ("saddr", ctypes.c_void_p)]
+
+
+def _library_base(address: int) -> int:
+    """The load address of the library holding the function at ``address`` (itself if unknown)."""
+    info = _DlInfo()
+    try:
+        found = ctypes.CDLL(None).dladdr(ctypes.c_void_p(address), ctypes.byref(info))
+    except (OSError, AttributeError):
+        found = 0
+    return info.base if found and info.base else address
+
+
+def _seconds(value: float) -> str:
+    """A duration [s] in words (µs or ms)."""
+    return f"{value * 1e3:.3g} ms" if value >= 1e-3 else f"{value * 1e6:.3g} µs"
+
+
+def _once_per_process(component) -> bool:
+    """Whether the FMU of ``component`` declares ``canBeInstantiatedOnlyOncePerProcess``."""
+    cs = getattr(getattr(component, "md", None), "coSimulation", None)
+    return bool(getattr(cs, "canBeInstantiatedOnlyOncePerProcess", False))
+
+
+class Stepping:
+    """Which thread steps each FMU update of a run (see the module documentation).
+
+    Parameters
+    ----------
+    run : cosim.core.run.Run
+        The run, with its native program and kernel.
+    kst : KState
+        The kernel's state (its ``lane``, ``seg``, ``fail_at``, ``cost``, ``timing`` and
+        ``pool`` are set here).
+
+    Attributes
+    ----------
+    text : str
+        The decision in words (the master's ``stepping``).
+    """
+
+    def __init__(self, run, kst: KState) -> None:
+        self.run, self.kst, self.program = run, kst, run.program
+        self.threads = run.cosim.threads
+        self.runs = self.program.parallel_runs() if self.threads != 1 else []
+        self.groups = self._groups()
+        wanted = len(os.sched_getaffinity(0)) if self.threads == "auto" else self.threads
+        self.n = min(wanted, len(self.groups))
+        self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
+        self.cost = np.zeros(len(self.program.ops))
+        self.pool, self.serial_time, self.thread_of = None, 0.0, {}
+        if self.n >= 2:
+            self.state, self.text = "calibrate", "serial (the first block timed the FMU updates)"
+            self._lanes({call: g for g, (_, calls) in enumerate(self.groups) for call in calls})
+        else:
+            self.state = "serial"
+            self.text = "serial: " + ("threads=1" if self.threads == 1 else
+                                      "fewer than two FMUs that may step at once" if len(self.groups) < 2 else
+                                      "one thread")
+            self._lanes({})
+        kst.timing = self.state == "calibrate"
+        kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
+
+    def _groups(self) -> list[tuple[set, list]]:
+        """The FMU update calls of the parallel runs, in groups that never step at once (a
+        library they share, or ``canBeInstantiatedOnlyOncePerProcess``): ``(keys, calls)``."""
+        program, owner, by_name = self.program, self.run.owner, self.run.cosim.by_name
+        groups: list[tuple[set, list]] = []
+        for run in self.runs:
+            for call, first, end, fmu in run:
+                if not fmu or any(call in calls for _, calls in groups):
+                    continue
+                step = next(program.ops[q] for q in range(first, end) if program.ops[q].kind in (OP_STEP2, OP_STEP3))
+                keys = {("library", _library_base(step.fn))}
+                if _once_per_process(by_name.get(owner.get(call))):
+                    keys.add(("once",))
+                merged = [g for g in groups if g[0] & keys]
+                joined = (keys.union(*(k for k, _ in merged)), [c for _, cs in merged for c in cs] + [call])
+                at = groups.index(merged[0]) if merged else len(groups)
+                groups = [g for g in groups if g not in merged]
+                groups.insert(at, joined)
+        return groups
+
+    def _lanes(self, thread_of: dict) -> None:
+        """Point the kernel at the segments for ``thread_of`` (the thread of each FMU update)."""
+        self.lane, self.seg = self.program.lanes(self.runs, thread_of)
+        self.kst.lane, self.kst.seg = self.lane.ctypes.data, self.seg.ctypes.data
+
+    def names(self, calls) -> str:
+        """The components of ``calls``, in words."""
+        return ", ".join(self.run.owner.get(c, "?") for c in calls)
+
+    def _assign(self) -> tuple[dict, list[float], list[list]]:
+        """The costliest group first, each to the least loaded thread (the calling thread
+        also makes the filters' held inputs): the thread of each call, each thread's load
+        [s] and calls."""
+        cost = self.cost
+        span = {call: (first, end) for run in self.runs for call, first, end, _ in run}
+        costs = [sum(cost[slice(*span[c])].sum() for c in calls) for _, calls in self.groups]
+        loads = [sum(cost[first:end].sum() for run in self.runs for _, first, end, fmu in run if not fmu)]
+        loads += [0.0] * (self.n - 1)
+        members: list[list] = [[] for _ in range(self.n)]
+        thread_of = {}
+        for g in sorted(range(len(self.groups)), key=lambda g: -costs[g]):
+            me = loads.index(min(loads))
+            loads[me] += costs[g]
+            members[me] += self.groups[g][1]
+            thread_of.update(dict.fromkeys(self.groups[g][1], me))
+        return thread_of, loads, members
+
+    def chunk(self, steps: int) -> None:
+        """A chunk of ``steps`` base steps done: calibrate, try, keep or leave parallel stepping."""
+        kst = self.kst
+        per_step = kst.seg_time / max(steps, 1)
+        kst.seg_time = 0.0
+        if self.state == "calibrate":
+            self.serial_time = per_step
+            self.thread_of, loads, members = self._assign()
+            gain = per_step - max(loads) / max(steps, 1)
+            if self.threads == "auto" and gain < MIN_GAIN:
+                self._serial(f"serial: the FMU updates that may step at once took {_seconds(per_step)} per base "
+                             f"step; threads would gain {_seconds(gain)}, less than {_seconds(MIN_GAIN)}")
+                return
+            pool = self.run.kernel.kernel_pool_start(self.n)
+            if not pool:
+                self._serial(f"serial: {self.n} threads could not be started")
+                return
+            self.pool = kst.pool = pool
+            self._lanes(self.thread_of)
+            self.state = "trial" if self.threads == "auto" else "parallel"
+            kst.timing = self.state == "trial"
+            self.text = (f"{self.n} threads: " + "; ".join(f"[{self.names(m)}]" for m in members)
+                         + f" (serially {_seconds(per_step)} per base step)")
+        elif self.state == "trial":
+            if per_step > KEEP_RATIO * self.serial_time:
+                self._serial(f"serial: in parallel the FMU updates took {_seconds(per_step)} per base step, "
+                             f"serially {_seconds(self.serial_time)}")
+                return
+            self.state, kst.timing = "parallel", 0
+            self.text += f"; in parallel {_seconds(per_step)}"
+
+    def _serial(self, why: str) -> None:
+        """Go on serially, for the reason ``why``."""
+        self.stop()
+        self.state, self.text, self.kst.timing = "serial", why, 0
+
+    def stop(self) -> None:
+        """End the pool's threads (the kernel runs serially after it)."""
+        pool, self.pool = self.pool, None
+        self.kst.pool = None
+        if pool:
+            self.run.kernel.kernel_pool_stop(pool)
+
+    def ran_ahead(self, at: int) -> dict:
+        """After the operation ``at`` failed in a parallel segment: the update calls the other
+        threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
+        failed operation's ``fail``)."""
+        starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
+        if self.state not in ("trial", "parallel") or not starts:
+            return {}
+        program, made, failed = self.program, {}, {}
+        for q in range(starts[0], starts[0] + int(self.seg[starts[0]])):
+            call, last = program.calls[q], int(self.fail_at[self.lane[q]])
+            made[call] = made.get(call, True) and (last < 0 or q <= last)
+            if q == last:
+                failed[call] = q
+        out = {}
+        for call, done in made.items():
+            if call in failed:
+                q = failed[call]
+                out[call] = lambda t, q=q: program.meta[q].fail(program.ops[q], t)
+            elif done:
+                out[call] = lambda t: None
+        return out
 
 
 class NativeLoop:
@@ -64,6 +266,7 @@ class NativeLoop:
         self.kst = KState(t0=run.t0, h=run.h, n=run.n, m=run.m, L=len(run.schedule), cap=rec.cap, block=BLOCK,
                           ncols=rec.buffer.shape[1], nint=rec.ibuffer.shape[1], nsig=len(run.values), kstop=BLOCK,
                           ops=ctypes.addressof(program.ops), **{k: a.ctypes.data for k, a in arrays.items()})
+        self.stepping = Stepping(run, self.kst)
         self.done, self.chunk, self.since = 0, BLOCK, 0.0      # steps shown by the bar; the chunk's length, start
 
     def loop(self) -> None:
@@ -100,6 +303,8 @@ class NativeLoop:
                 else:
                     break
         finally:
+            self.stepping.stop()
+            run.cosim.stepping = self.stepping.text
             run.k, run.j, run.jb, run.k0 = kst.k, kst.j, kst.jb, kst.k0
             for sync in program.syncs_out:
                 sync()
@@ -121,6 +326,7 @@ class NativeLoop:
         """A chunk done: the bar moves, and the next chunk's length aims at :data:`CHUNK_SECONDS`."""
         kst = self.kst
         self.run.bar.update(kst.k - self.done)
+        self.stepping.chunk(kst.k - self.done)
         now = time.perf_counter()
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
@@ -141,6 +347,7 @@ class NativeLoop:
         run.failing, run.phase = program.calls[at], "update" if program.updates[at] else "output"
         if event == EV_FAIL:
             op = program.ops[at]
+            run.ran_ahead = self.stepping.ran_ahead(at)
             try:
                 program.meta[at].fail(op, run.t0 + run.k * run.h)
                 raise CosimError(f"native call of {run.owner.get(run.failing, '?')} failed with status {op.status}")
