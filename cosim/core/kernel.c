@@ -29,6 +29,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#if defined(__linux__)
+#include <sys/prctl.h>
+#endif
 
 typedef int (*fmi2_xfer_t)(void *, const unsigned int *, size_t, double *);   /* FMI 1.0's too */
 typedef int (*fmi3_xfer_t)(void *, const unsigned int *, size_t, double *, size_t);
@@ -327,6 +330,9 @@ static void *worker(void *arg) {
     pool_t *p = ((worker_arg_t *)arg)->p;
     int64_t me = ((worker_arg_t *)arg)->me;
     free(arg);
+#if defined(__linux__)
+    prctl(PR_SET_NAME, "cosim-step");        /* seen in top, a debugger, /proc */
+#endif
     sigset_t all;                 /* asynchronous signals (Ctrl-C) go to the caller's thread */
     sigfillset(&all);
     int synchronous[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGTRAP, SIGSYS};

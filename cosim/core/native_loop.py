@@ -48,8 +48,19 @@ from fmu_models.errors import CosimError
 
 from . import crash_guard
 from .component import StopRequest
-from .native import (EV_CHUNK, EV_DONE, EV_FAIL, EV_FLUSH, EV_HOOK, EV_NONFINITE, EV_PY, EV_REFILL, OP_STEP2, OP_STEP3,
-                     KState)
+from .native import (
+    EV_CHUNK,
+    EV_DONE,
+    EV_FAIL,
+    EV_FLUSH,
+    EV_HOOK,
+    EV_NONFINITE,
+    EV_PY,
+    EV_REFILL,
+    OP_STEP2,
+    OP_STEP3,
+    KState,
+)
 
 __all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MIN_GAIN", "NativeLoop", "Stepping"]
 
@@ -129,6 +140,7 @@ class Stepping:
             self.text = "serial: " + ("threads=1" if self.threads == 1 else
                                       "fewer than two FMUs that may step at once" if len(self.groups) < 2 else
                                       "one thread")
+            self.runs = []
             self._lanes({})
         kst.timing = self.state == "calibrate"
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
