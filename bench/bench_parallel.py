@@ -35,7 +35,7 @@ from cosim.core.master import Cosimulation
 from cosim.fmi.fmu_component import FMUComponent
 
 sys.path.append(str(Path(__file__).parents[1] / "tests"))     # the test FMUs' builder (tests/testkit)
-from testkit import handwritten  # noqa: E402 - after the path
+from testkit import handwritten  # after the path
 
 H = 0.01
 MODES = (1, 2, "auto")
