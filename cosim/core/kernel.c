@@ -315,15 +315,21 @@ static void wake(pool_t *p, pthread_cond_t *cv, int *idle) {
     pthread_mutex_unlock(&p->mu);
 }
 
-/* Thread me's ops of the published segment, in their order, up to its first failure. */
+/* Thread me's ops of the published segment, in their order, up to its first failure
+ * (each timed while timing). */
 static void run_lane(pool_t *p, int64_t me) {
     kstate_t *s = p->s;
     s->fail_at[me] = -1;
-    for (int64_t i = p->first; i < p->first + p->count; i++)
-        if (s->lane[i] == me && run_op(s, s->ops + i, p->t)) {
+    for (int64_t i = p->first; i < p->first + p->count; i++) {
+        if (s->lane[i] != me) continue;
+        double c0 = s->timing ? now() : 0.0;
+        int e = run_op(s, s->ops + i, p->t);
+        if (s->timing) s->cost[i] += now() - c0;
+        if (e) {
             s->fail_at[me] = i;
             return;
         }
+    }
 }
 
 static void *worker(void *arg) {

@@ -25,14 +25,15 @@ phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other
 runs of them between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`)
 may step on threads of a pool made once per run. FMUs that share a loaded library, and
 FMUs that declare ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their
-serial order. The first block of :data:`BLOCK` base steps runs serially and times each FMU
-update; its costs assign the FMUs to the threads (the costliest first, each to the least
-loaded thread). With ``threads="auto"`` the run then goes on serially unless the predicted
-gain (the serial time of those updates less that of the busiest thread) is at least
-:data:`MIN_GAIN` per base step; if it is, the next chunk runs in parallel, timed, and
-parallel stepping is kept only if it took at most :data:`KEEP_RATIO` of the serial time.
-An integer ``threads`` steps on that many threads (at most one per group of FMUs) after
-the first block. Each FMU's calls are the serial run's, in the same order, so the results
+serial order. Each FMU update of the first block of :data:`BLOCK` base steps is timed, and
+the costs assign the FMUs to the threads (the costliest first, each to the least loaded
+thread). With ``threads="auto"`` that block runs serially, and the run goes on serially
+unless the predicted gain (the serial time of those updates less that of the busiest
+thread) is at least :data:`MIN_GAIN` per base step; if it is, the next chunk runs in
+parallel, timed, and parallel stepping is kept only if it took at most :data:`KEEP_RATIO`
+of the serial time. An integer ``threads`` steps on that many threads (at most one per
+group of FMUs) from the start, the groups taken in turn until the first block's costs
+assign them. Each FMU's calls are the serial run's, in the same order, so the results
 are the same bit for bit; a failure is the first in the serial order, and if it is a stop
 request the updates the other threads already made are not made again.
 """
@@ -131,19 +132,23 @@ class Stepping:
         self.n = min(wanted, len(self.groups))
         self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
         self.cost = np.zeros(len(self.program.ops))
-        self.pool, self.serial_time, self.thread_of = None, 0.0, {}
-        if self.n >= 2:
-            self.state, self.text = "calibrate", "serial (the first block timed the FMU updates)"
-            self._lanes({call: g for g, (_, calls) in enumerate(self.groups) for call in calls})
-        else:
-            self.state = "serial"
+        self.pool, self.serial_time = None, 0.0
+        kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
+        if self.n < 2:
+            self.state, self.runs = "serial", []
             self.text = "serial: " + ("threads=1" if self.threads == 1 else
                                       "fewer than two FMUs that may step at once" if len(self.groups) < 2 else
                                       "one thread")
-            self.runs = []
             self._lanes({})
-        kst.timing = self.state == "calibrate"
-        kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
+        elif self.threads == "auto":
+            self.state, self.text = "calibrate", "serial (the first block timed the FMU updates)"
+            self._lanes({call: g for g, (_, calls) in enumerate(self.groups) for call in calls})
+        else:
+            self.state = "balance"                  # the groups in turn, until their costs are measured
+            members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
+                       for me in range(self.n)]
+            self._parallel({c: me for me, calls in enumerate(members) for c in calls}, members)
+        kst.timing = self.state != "serial"
 
     def _groups(self) -> list[tuple[set, list]]:
         """The FMU update calls of the parallel runs, in groups that never step at once (a
@@ -192,36 +197,46 @@ class Stepping:
             thread_of.update(dict.fromkeys(self.groups[g][1], me))
         return thread_of, loads, members
 
-    def chunk(self, steps: int) -> None:
-        """A chunk of ``steps`` base steps done: calibrate, try, keep or leave parallel stepping."""
-        kst = self.kst
-        per_step = kst.seg_time / max(steps, 1)
-        kst.seg_time = 0.0
-        if self.state == "calibrate":
-            self.serial_time = per_step
-            self.thread_of, loads, members = self._assign()
-            gain = per_step - max(loads) / max(steps, 1)
-            if self.threads == "auto" and gain < MIN_GAIN:
-                self._serial(f"serial: the FMU updates that may step at once took {_seconds(per_step)} per base "
-                             f"step; threads would gain {_seconds(gain)}, less than {_seconds(MIN_GAIN)}")
-                return
+    def _parallel(self, thread_of: dict, members: list) -> bool:
+        """Step on the pool's threads (started if need be) by ``thread_of``, the calls of each
+        thread being ``members``; False if the threads could not be started."""
+        if self.pool is None:
             pool = self.run.kernel.kernel_pool_start(self.n)
             if not pool:
                 self._serial(f"serial: {self.n} threads could not be started")
-                return
-            self.pool = kst.pool = pool
-            self._lanes(self.thread_of)
-            self.state = "trial" if self.threads == "auto" else "parallel"
-            kst.timing = self.state == "trial"
-            self.text = (f"{self.n} threads: " + "; ".join(f"[{self.names(m)}]" for m in members)
-                         + f" (serially {_seconds(per_step)} per base step)")
-        elif self.state == "trial":
+                return False
+            self.pool = self.kst.pool = pool
+        self._lanes(thread_of)
+        self.text = f"{self.n} threads: " + "; ".join(f"[{self.names(m)}]" for m in members)
+        return True
+
+    def chunk(self, steps: int) -> None:
+        """A chunk of ``steps`` base steps done: calibrate, balance, try, keep or leave
+        parallel stepping (see the module documentation)."""
+        kst = self.kst
+        per_step = kst.seg_time / max(steps, 1)
+        kst.seg_time = 0.0
+        if self.state == "trial":
             if per_step > KEEP_RATIO * self.serial_time:
                 self._serial(f"serial: in parallel the FMU updates took {_seconds(per_step)} per base step, "
                              f"serially {_seconds(self.serial_time)}")
                 return
             self.state, kst.timing = "parallel", 0
             self.text += f"; in parallel {_seconds(per_step)}"
+        if self.state not in ("calibrate", "balance"):
+            return
+        thread_of, loads, members = self._assign()
+        self.cost[:] = 0.0
+        gain = per_step - max(loads) / max(steps, 1)
+        if self.state == "calibrate" and gain < MIN_GAIN:
+            self._serial(f"serial: the FMU updates that may step at once took {_seconds(per_step)} per base "
+                         f"step; threads would gain {_seconds(gain)}, less than {_seconds(MIN_GAIN)}")
+        elif self._parallel(thread_of, members):
+            self.serial_time = per_step
+            self.state = "trial" if self.state == "calibrate" else "parallel"
+            kst.timing = self.state == "trial"
+            if self.state == "trial":
+                self.text += f" (serially {_seconds(per_step)} per base step)"
 
     def _serial(self, why: str) -> None:
         """Go on serially, for the reason ``why``."""

@@ -16,7 +16,7 @@
 #include "fmi2Functions.h"
 
 #define GUID "{9d3e4b8a-2c61-4f0e-b7a5-31f6c2d8e9a4}"
-#define SUBSTEPS_PER_US 40.0
+#define SUBSTEPS_PER_US 60.0
 enum { VR_U, VR_WORK_US, VR_X, VR_BEGAN, VR_ENDED, N_REAL };
 enum { VR_FAIL_STEP, VR_FAIL_STATUS, VR_CRASH_STEP, N_INT };
 typedef struct { double r[N_REAL], v, t; int p[N_INT], steps, terminated; } Model;
