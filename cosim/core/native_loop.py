@@ -128,7 +128,8 @@ class Stepping:
         self.threads = run.cosim.threads
         self.runs = self.program.parallel_runs() if self.threads != 1 else []
         self.groups = self._groups()
-        wanted = len(os.sched_getaffinity(0)) if self.threads == "auto" else self.threads
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        wanted = cores if self.threads == "auto" else self.threads
         self.n = min(wanted, len(self.groups))
         self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
         self.cost = np.zeros(len(self.program.ops))

@@ -167,6 +167,7 @@ def test_a_failure_on_any_thread_is_named_as_the_serial_run_names_it(work, faili
     (serial, parallel), cs = both(make)
     assert_same(serial, parallel)
     assert serial[1] == failing[0] and "fmi2DoStep" in serial[0] and "t = 1.99 s" in serial[0]
+    assert f"doStep 200 of {failing[0]} failed as asked" in serial[0]       # logged from its thread
     assert cs.stepping.startswith("2 threads: [a]; [b]")
 
 

@@ -7,7 +7,8 @@
  * work_us, u and h only). Outputs: x, and the CLOCK_MONOTONIC times [s] at which the last
  * doStep began and ended (to see which steps overlapped). Parameters choose a failure:
  * doStep number "fail_step" (1-based, 0 never) returns "fail_status" (1 warning, 2 discard
- * with fmi2Terminated true, 3 error, 4 fatal); doStep number "crash_step" dereferences NULL. */
+ * with fmi2Terminated true, 3 error, 4 fatal), saying so through the logger first; doStep
+ * number "crash_step" dereferences NULL. */
 #define _POSIX_C_SOURCE 199309L
 #include <math.h>
 #include <stdlib.h>
@@ -19,7 +20,12 @@
 #define SUBSTEPS_PER_US 60.0
 enum { VR_U, VR_WORK_US, VR_X, VR_BEGAN, VR_ENDED, N_REAL };
 enum { VR_FAIL_STEP, VR_FAIL_STATUS, VR_CRASH_STEP, N_INT };
-typedef struct { double r[N_REAL], v, t; int p[N_INT], steps, terminated; } Model;
+typedef struct {
+    double r[N_REAL], v, t;
+    int p[N_INT], steps, terminated;
+    fmi2CallbackFunctions cb;
+    char name[64];
+} Model;
 
 static double now(void) {
     struct timespec ts;
@@ -37,6 +43,8 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     if (type != fmi2CoSimulation || !guid || strcmp(guid, GUID)) return NULL;
     m = (Model *)calloc(1, sizeof(Model));
     if (!m) return NULL;
+    if (cb) m->cb = *cb;
+    strncpy(m->name, name ? name : "?", sizeof m->name - 1);
     m->r[VR_WORK_US] = 100.0;
     m->r[VR_X] = 0.5;
     m->p[VR_FAIL_STATUS] = 3;
@@ -73,6 +81,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean nsp) 
     m->steps++;
     if (m->steps == m->p[VR_CRASH_STEP]) { volatile int *null = NULL; *null = 1; }
     if (m->steps == m->p[VR_FAIL_STEP]) {
+        if (m->cb.logger)
+            m->cb.logger(m->cb.componentEnvironment, m->name, (fmi2Status)m->p[VR_FAIL_STATUS], "logStatusError",
+                         "doStep %d of %s failed as asked (fail_step)", m->steps, m->name);
         m->terminated = m->p[VR_FAIL_STATUS] == fmi2Discard;
         return (fmi2Status)m->p[VR_FAIL_STATUS];
     }
