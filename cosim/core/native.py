@@ -114,8 +114,10 @@ def native_ops(fn) -> list[Op] | None:
     return getattr(fn, "native", None)
 
 
-#: An FMU's update on a worker thread: its inputs set, its doStep; beside them, a filter's held input.
-_STEPS, _WORKER_KINDS, _BESIDE = {OP_STEP2, OP_STEP3}, {OP_SET, OP_STEP2, OP_STEP3}, {OP_HOLD}
+#: The doStep operations (FMI 1.0, 2.0, 3.0).
+STEP_KINDS = (OP_STEP1, OP_STEP2, OP_STEP3)
+# an FMU's update on a worker thread: its inputs set, its doStep; beside them, a filter's held input
+_WORKER_KINDS, _BESIDE = {OP_SET, *STEP_KINDS}, {OP_HOLD}
 _SOURCE = Path(__file__).with_name("kernel.c")
 #: No fused multiply-add: the kernel's arithmetic must be Python's, operation for operation.
 _FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pthread", "-ffp-contract=off", "-fno-fast-math")
@@ -193,7 +195,7 @@ class Program:
                 while j < start + length and self.calls[j] is self.calls[i]:
                     j += 1
                 kinds = {self.ops[q].kind for q in range(i, j)}
-                fmu = bool(kinds & _STEPS) and kinds <= _WORKER_KINDS
+                fmu = bool(kinds & set(STEP_KINDS)) and kinds <= _WORKER_KINDS
                 if fmu or kinds <= _BESIDE:
                     run.append((self.calls[i], i, j, fmu))
                 else:

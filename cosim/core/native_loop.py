@@ -58,8 +58,7 @@ from .native import (
     EV_NONFINITE,
     EV_PY,
     EV_REFILL,
-    OP_STEP2,
-    OP_STEP3,
+    STEP_KINDS,
     KState,
 )
 
@@ -160,7 +159,7 @@ class Stepping:
             for call, first, end, fmu in run:
                 if not fmu or any(call in calls for _, calls in groups):
                     continue
-                step = next(program.ops[q] for q in range(first, end) if program.ops[q].kind in (OP_STEP2, OP_STEP3))
+                step = next(program.ops[q] for q in range(first, end) if program.ops[q].kind in STEP_KINDS)
                 keys = {("library", _library_base(step.fn))}
                 if _once_per_process(by_name.get(owner.get(call))):
                     keys.add(("once",))
