@@ -138,7 +138,7 @@ class Stepping:
             self.state, self.runs = "serial", []
             self.text = "serial: " + ("threads=1" if self.threads == 1 else
                                       "fewer than two FMUs that may step at once" if len(self.groups) < 2 else
-                                      "one thread")
+                                      "one core")
             self._lanes({})
         elif self.threads == "auto":
             self.state, self.text = "calibrate", "serial (the first block timed the FMU updates)"
@@ -175,7 +175,7 @@ class Stepping:
         self.lane, self.seg = self.program.lanes(self.runs, thread_of)
         self.kst.lane, self.kst.seg = self.lane.ctypes.data, self.seg.ctypes.data
 
-    def names(self, calls) -> str:
+    def _names(self, calls) -> str:
         """The components of ``calls``, in words."""
         return ", ".join(self.run.owner.get(c, "?") for c in calls)
 
@@ -207,7 +207,7 @@ class Stepping:
                 return False
             self.pool = self.kst.pool = pool
         self._lanes(thread_of)
-        self.text = f"{self.n} threads: " + "; ".join(f"[{self.names(m)}]" for m in members)
+        self.text = f"{self.n} threads: " + "; ".join(f"[{self._names(m)}]" for m in members)
         return True
 
     def chunk(self, steps: int) -> None:
@@ -255,7 +255,7 @@ class Stepping:
         threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
         failed operation's ``fail``)."""
         starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
-        if self.state not in ("trial", "parallel") or not starts:
+        if self.state in ("serial", "calibrate") or not starts:          # the segment ran serially
             return {}
         program, made, failed = self.program, {}, {}
         for q in range(starts[0], starts[0] + int(self.seg[starts[0]])):

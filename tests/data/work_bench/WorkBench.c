@@ -6,8 +6,9 @@
  * of CPU on a current x86-64 core, and the same numbers on every run (the output depends on
  * work_us, u and h only). Outputs: x, and the CLOCK_MONOTONIC times [s] at which the last
  * doStep began and ended (to see which steps overlapped). Parameters choose a failure:
- * doStep number "fail_step" (1-based, 0 never) returns "fail_status" (1 warning, 2 discard
- * with fmi2Terminated true, 3 error, 4 fatal), saying so through the logger first; doStep
+ * doStep number "fail_step" (1-based, 0 never) returns "fail_status" (3 error and 4 fatal
+ * without making the step; 1 warning, and 2 discard with fmi2Terminated true and the step's
+ * end as fmi2LastSuccessfulTime, after making it), saying so through the logger first; doStep
  * number "crash_step" dereferences NULL. */
 #define _POSIX_C_SOURCE 199309L
 #include <math.h>
@@ -80,13 +81,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean nsp) 
     m->r[VR_BEGAN] = now();
     m->steps++;
     if (m->steps == m->p[VR_CRASH_STEP]) { volatile int *null = NULL; *null = 1; }
-    if (m->steps == m->p[VR_FAIL_STEP]) {
-        if (m->cb.logger)
-            m->cb.logger(m->cb.componentEnvironment, m->name, (fmi2Status)m->p[VR_FAIL_STATUS], "logStatusError",
-                         "doStep %d of %s failed as asked (fail_step)", m->steps, m->name);
-        m->terminated = m->p[VR_FAIL_STATUS] == fmi2Discard;
+    if (m->steps == m->p[VR_FAIL_STEP] && m->cb.logger)
+        m->cb.logger(m->cb.componentEnvironment, m->name, (fmi2Status)m->p[VR_FAIL_STATUS], "logStatusError",
+                     "doStep %d of %s failed as asked (fail_step)", m->steps, m->name);
+    if (m->steps == m->p[VR_FAIL_STEP] && m->p[VR_FAIL_STATUS] >= fmi2Error)
         return (fmi2Status)m->p[VR_FAIL_STATUS];
-    }
     if (n < 1) n = 1;
     dt = h / (double)n;
     for (long i = 0; i < n; i++) {
@@ -97,7 +96,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean nsp) 
     m->v = v;
     m->t = t + h;
     m->r[VR_ENDED] = now();
-    return fmi2OK;
+    if (m->steps != m->p[VR_FAIL_STEP]) return fmi2OK;
+    m->terminated = m->p[VR_FAIL_STATUS] == fmi2Discard;  /* the step made, then the end asked */
+    return (fmi2Status)m->p[VR_FAIL_STATUS];
 }
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *v) {
     if (s != fmi2Terminated) return fmi2Discard;
