@@ -16,9 +16,9 @@ interleaved:
   chose (its rule: :mod:`cosim.core.native_loop`).
 
 Parallel stepping pays only with a free core: the load average is printed before and
-after (measure when it is below the number of cores less one or two). Times are wall
-times (medians of the repeats), the first block of 64 base steps (timed serially in
-every mode) included.
+after (and the CPUs' idle share is the better guide: the load average trails). Times are
+wall times (medians of the repeats), the first block of 64 base steps (timed on the
+threads, where ``"auto"`` decides) included.
 """
 from __future__ import annotations
 

@@ -125,8 +125,8 @@ typedef struct {
     const int64_t *lane;  /* per op: its thread in a parallel segment, -1 outside one */
     const int64_t *seg;   /* per op: the ops of the parallel segment that begins there, else 0 */
     int64_t *fail_at;     /* per thread: its failing op in the last segment, -1 none */
-    double *cost;         /* per op: seconds spent in it serially (while timing) */
-    double seg_time;      /* seconds spent in the ops of segments, or in the segments run in parallel */
+    double *cost;         /* per op: CPU seconds spent in it in segments (while timing) */
+    double seg_time;      /* wall seconds spent in segments (while timing) */
     int64_t timing;       /* measure cost and seg_time */
 } kstate_t;
 
@@ -257,11 +257,15 @@ static int run_op(kstate_t *s, op_t *o, double t) {
     return 0;
 }
 
-static double now(void) {
+/* Seconds on the clock `which` (CLOCK_MONOTONIC: wall time; CLOCK_THREAD_CPUTIME_ID: this
+ * thread's CPU time, which another process's load does not inflate). */
+static double seconds(clockid_t which) {
     struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
+    clock_gettime(which, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
+
+static double now(void) { return seconds(CLOCK_MONOTONIC); }
 
 /* ---------------------------------------------------------------- the thread pool */
 #define MAX_THREADS 64
@@ -316,15 +320,15 @@ static void wake(pool_t *p, pthread_cond_t *cv, int *idle) {
 }
 
 /* Thread me's ops of the published segment, in their order, up to its first failure
- * (each timed while timing). */
+ * (while timing, each op's CPU time added to its cost). */
 static void run_lane(pool_t *p, int64_t me) {
     kstate_t *s = p->s;
     s->fail_at[me] = -1;
     for (int64_t i = p->first; i < p->first + p->count; i++) {
         if (s->lane[i] != me) continue;
-        double c0 = s->timing ? now() : 0.0;
+        double c0 = s->timing ? seconds(CLOCK_THREAD_CPUTIME_ID) : 0.0;
         int e = run_op(s, s->ops + i, p->t);
-        if (s->timing) s->cost[i] += now() - c0;
+        if (s->timing) s->cost[i] += seconds(CLOCK_THREAD_CPUTIME_ID) - c0;
         if (e) {
             s->fail_at[me] = i;
             return;
@@ -431,7 +435,7 @@ static int64_t run_segment(kstate_t *s, int64_t first, int64_t count, double t) 
 
 /* Run the ops [start, start + len) of the instant t from s->pc on: 0 when all ran, else the
  * event (s->at: the op it is about; s->pc stays on it, to resume there). With a pool, a
- * parallel segment runs on its threads; while timing, the ops of segments are timed. */
+ * parallel segment runs on its threads (while timing, its wall time added to seg_time). */
 static int run_ops(kstate_t *s, int64_t start, int64_t len, double t) {
     while (s->pc < len) {
         int64_t i = start + s->pc;
@@ -447,16 +451,7 @@ static int run_ops(kstate_t *s, int64_t start, int64_t len, double t) {
             s->pc += s->seg[i];
             continue;
         }
-        int e;
-        if (s->timing && s->lane[i] >= 0) {
-            double c0 = now();
-            e = run_op(s, s->ops + i, t);
-            double dt = now() - c0;
-            s->cost[i] += dt;
-            s->seg_time += dt;
-        } else {
-            e = run_op(s, s->ops + i, t);
-        }
+        int e = run_op(s, s->ops + i, t);
         if (e) { s->at = i; return e; }
         s->pc++;
     }

@@ -25,17 +25,16 @@ phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other
 runs of them between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`)
 may step on threads of a pool made once per run. FMUs that share a loaded library, and
 FMUs that declare ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their
-serial order. Each FMU update of the first block of :data:`BLOCK` base steps is timed, and
-the costs assign the FMUs to the threads (the costliest first, each to the least loaded
-thread). With ``threads="auto"`` that block runs serially, and the run goes on serially
-unless the predicted gain (the serial time of those updates less that of the busiest
-thread) is at least :data:`MIN_GAIN` per base step; if it is, the next chunk runs in
-parallel, timed, and parallel stepping is kept only if it took at most :data:`KEEP_RATIO`
-of the serial time. An integer ``threads`` steps on that many threads (at most one per
-group of FMUs) from the start, the groups taken in turn until the first block's costs
-assign them. Each FMU's calls are the serial run's, in the same order, so the results
-are the same bit for bit; a failure is the first in the serial order, and if it is a stop
-request the updates the other threads already made are not made again.
+serial order. The first block of :data:`BLOCK` base steps runs on the threads, the groups of
+FMUs taken in turn, each FMU update's CPU time and each segment's wall time measured; the
+CPU times then assign the groups to the threads (the costliest first, each to the least
+loaded thread). With ``threads="auto"`` the run goes on serially unless that block gained
+at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
+time (the sum of the updates' CPU times: what they cost one after the other, whatever load
+other processes put on the machine). An integer ``threads`` keeps that many threads (at
+most one per group of FMUs). Each FMU's calls are the serial run's, in the same order, so
+the results are the same bit for bit; a failure is the first in the serial order, and if it
+is a stop request the updates the other threads already made are not made again.
 """
 from __future__ import annotations
 
@@ -71,11 +70,11 @@ BLOCK = 64
 CHUNK = 64 * BLOCK
 #: Wall time [s] the native kernel aims at between two returns to Python.
 CHUNK_SECONDS = 0.02
-#: ``threads="auto"``: the least gain [s per base step] the measured FMU update costs must
-#: predict for parallel stepping to be tried (a thread's wake-up costs some µs).
+#: ``threads="auto"``: the least gain [s per base step] parallel stepping must have measured
+#: in the first block to be kept (a sleeping thread's wake-up costs tens of µs).
 MIN_GAIN = 20e-6
-#: ``threads="auto"``: parallel stepping is kept if it took at most this fraction of the
-#: serial time of the same updates.
+#: ``threads="auto"``: parallel stepping is kept if the first block took at most this
+#: fraction of the serial time of the same updates.
 KEEP_RATIO = 0.9
 
 
@@ -132,7 +131,7 @@ class Stepping:
         self.n = min(wanted, len(self.groups))
         self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
         self.cost = np.zeros(len(self.program.ops))
-        self.pool, self.serial_time = None, 0.0
+        self.pool = None
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
         if self.n < 2:
             self.state, self.runs = "serial", []
@@ -140,9 +139,6 @@ class Stepping:
                                       "fewer than two FMUs that may step at once" if len(self.groups) < 2 else
                                       "one core")
             self._lanes({})
-        elif self.threads == "auto":
-            self.state, self.text = "calibrate", "serial (the first block timed the FMU updates)"
-            self._lanes({call: g for g, (_, calls) in enumerate(self.groups) for call in calls})
         else:
             self.state = "balance"                  # the groups in turn, until their costs are measured
             members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
@@ -211,32 +207,19 @@ class Stepping:
         return True
 
     def chunk(self, steps: int) -> None:
-        """A chunk of ``steps`` base steps done: calibrate, balance, try, keep or leave
-        parallel stepping (see the module documentation)."""
+        """A chunk of ``steps`` base steps done: after the first, balance the threads, keep
+        them or go on serially (see the module documentation)."""
         kst = self.kst
-        per_step = kst.seg_time / max(steps, 1)
-        kst.seg_time = 0.0
-        if self.state == "trial":
-            if per_step > KEEP_RATIO * self.serial_time:
-                self._serial(f"serial: in parallel the FMU updates took {_seconds(per_step)} per base step, "
-                             f"serially {_seconds(self.serial_time)}")
-                return
-            self.state, kst.timing = "parallel", 0
-            self.text += f"; in parallel {_seconds(per_step)}"
-        if self.state not in ("calibrate", "balance"):
+        if self.state != "balance":
             return
-        thread_of, loads, members = self._assign()
-        self.cost[:] = 0.0
-        gain = per_step - max(loads) / max(steps, 1)
-        if self.state == "calibrate" and gain < MIN_GAIN:
-            self._serial(f"serial: the FMU updates that may step at once took {_seconds(per_step)} per base "
-                         f"step; threads would gain {_seconds(gain)}, less than {_seconds(MIN_GAIN)}")
+        serial, parallel = self.cost.sum() / max(steps, 1), kst.seg_time / max(steps, 1)
+        thread_of, _, members = self._assign()
+        measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)} of CPU time"
+        if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
+            self._serial(f"serial: the FMU updates that may step at once took {measured}")
         elif self._parallel(thread_of, members):
-            self.serial_time = per_step
-            self.state = "trial" if self.state == "calibrate" else "parallel"
-            kst.timing = self.state == "trial"
-            if self.state == "trial":
-                self.text += f" (serially {_seconds(per_step)} per base step)"
+            self.state, kst.timing = "parallel", 0
+            self.text += f" (the first block: {measured})"
 
     def _serial(self, why: str) -> None:
         """Go on serially, for the reason ``why``."""
@@ -255,7 +238,7 @@ class Stepping:
         threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
         failed operation's ``fail``)."""
         starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
-        if self.state in ("serial", "calibrate") or not starts:          # the segment ran serially
+        if self.state == "serial" or not starts:          # the segment ran serially
             return {}
         program, made, failed = self.program, {}, {}
         for q in range(starts[0], starts[0] + int(self.seg[starts[0]])):
