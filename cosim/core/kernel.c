@@ -17,7 +17,11 @@
  * (kernel_pool_start) runs its lanes of each segment when the caller publishes it; each
  * thread makes its ops in their serial order and stops at its first failure, and the caller
  * reports the first failure in the serial order. Threads wait by spinning for SPIN_SECONDS,
- * then on a condition variable.
+ * then on a condition variable. Measured on a 2-core virtual machine, a hand-over costs
+ * some 40 us when the other thread sleeps on a condition variable and under 1 us while it
+ * spins; a futex instead of the condition variable would only cheapen the sleeping case,
+ * which comes after SPIN_SECONDS of waiting, i.e. when the threads' loads differ by more
+ * than that anyway (and a condition variable is portable).
  */
 #define _XOPEN_SOURCE 700
 #include <math.h>
