@@ -31,10 +31,13 @@ CPU times then assign the groups to the threads (the costliest first, each to th
 loaded thread). With ``threads="auto"`` the run goes on serially unless that block gained
 at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
 time (the sum of the updates' CPU times: what they cost one after the other, whatever load
-other processes put on the machine). An integer ``threads`` keeps that many threads (at
-most one per group of FMUs). Each FMU's calls are the serial run's, in the same order, so
-the results are the same bit for bit; a failure is the first in the serial order, and if it
-is a stop request the updates the other threads already made are not made again.
+other processes put on the machine); one block is measured again on the threads after
+:data:`RECHECK` base steps, then after twice as many each time, so that a run that began
+while other processes took the cores takes the threads once they are free, and the
+reverse. An integer ``threads`` keeps that many threads (at most one per group of FMUs).
+Each FMU's calls are the serial run's, in the same order, so the results are the same bit
+for bit; a failure is the first in the serial order, and if it is a stop request the
+updates the other threads already made are not made again.
 """
 from __future__ import annotations
 
@@ -61,7 +64,7 @@ from .native import (
     KState,
 )
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MIN_GAIN", "NativeLoop", "Stepping"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MIN_GAIN", "RECHECK", "NativeLoop", "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -76,6 +79,8 @@ MIN_GAIN = 20e-6
 #: ``threads="auto"``: parallel stepping is kept if the first block took at most this
 #: fraction of the serial time of the same updates.
 KEEP_RATIO = 0.9
+#: ``threads="auto"``: base steps after a measured block until the next (twice as many after each).
+RECHECK = 16 * BLOCK
 
 
 class _DlInfo(ctypes.Structure):
@@ -131,7 +136,7 @@ class Stepping:
         self.n = min(wanted, len(self.groups))
         self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
         self.cost = np.zeros(len(self.program.ops))
-        self.pool = None
+        self.pool, self.on_threads, self.next_check, self.wait = None, False, 0, RECHECK
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
         if self.n < 2:
             self.state, self.runs = "serial", []
@@ -140,10 +145,11 @@ class Stepping:
                                       "one core")
             self._lanes({})
         else:
-            self.state = "balance"                  # the groups in turn, until their costs are measured
-            members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
-                       for me in range(self.n)]
-            self._parallel({c: me for me, calls in enumerate(members) for c in calls}, members)
+            self.state = "measure"                  # the groups in turn, until their costs are measured
+            self.members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
+                            for me in range(self.n)]
+            self.thread_of = {c: me for me, calls in enumerate(self.members) for c in calls}
+            self._parallel(self.thread_of, self.members)
         kst.timing = self.state != "serial"
 
     def _groups(self) -> list[tuple[set, list]]:
@@ -195,35 +201,48 @@ class Stepping:
 
     def _parallel(self, thread_of: dict, members: list) -> bool:
         """Step on the pool's threads (started if need be) by ``thread_of``, the calls of each
-        thread being ``members``; False if the threads could not be started."""
+        thread being ``members``; False (and serially) if the threads could not be started."""
         if self.pool is None:
-            pool = self.run.kernel.kernel_pool_start(self.n)
-            if not pool:
+            self.pool = self.run.kernel.kernel_pool_start(self.n) or None
+            if self.pool is None:
                 self._serial(f"serial: {self.n} threads could not be started")
                 return False
-            self.pool = self.kst.pool = pool
+        self.kst.pool, self.on_threads = self.pool, True
         self._lanes(thread_of)
         self.text = f"{self.n} threads: " + "; ".join(f"[{self._names(m)}]" for m in members)
         return True
 
-    def chunk(self, steps: int) -> None:
-        """A chunk of ``steps`` base steps done: after the first, balance the threads, keep
-        them or go on serially (see the module documentation)."""
+    def chunk(self, steps: int) -> bool:
+        """A chunk of ``steps`` base steps done: after a measured one, balance the threads,
+        keep them or go on serially; with ``threads="auto"``, measure again when it is time
+        (see the module documentation). Returns whether the next chunk is measured (then one
+        block long)."""
         kst = self.kst
-        if self.state != "balance":
-            return
-        serial, parallel = self.cost.sum() / max(steps, 1), kst.seg_time / max(steps, 1)
-        thread_of, _, members = self._assign()
+        if self.state == "measure":
+            self._decide(steps)
+            self.next_check, self.wait = kst.k + self.wait, 2 * self.wait
+        elif self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check:
+            if self._parallel(self.thread_of, self.members):
+                self.state, kst.timing, kst.seg_time = "measure", 1, 0.0
+                self.cost[:] = 0.0
+                return True
+        return False
+
+    def _decide(self, steps: int) -> None:
+        """The measured chunk of ``steps`` base steps done: the threads balanced by its CPU
+        times, and kept or (``threads="auto"``) left for the serial loop."""
+        serial, parallel = self.cost.sum() / max(steps, 1), self.kst.seg_time / max(steps, 1)
+        self.thread_of, _, self.members = self._assign()
         measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)} of CPU time"
         if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
             self._serial(f"serial: the FMU updates that may step at once took {measured}")
-        elif self._parallel(thread_of, members):
-            self.state, kst.timing = "parallel", 0
-            self.text += f" (the first block: {measured})"
+        elif self._parallel(self.thread_of, self.members):
+            self.state, self.kst.timing = "parallel", 0
+            self.text += f" (measured: {measured})"
 
     def _serial(self, why: str) -> None:
-        """Go on serially, for the reason ``why``."""
-        self.stop()
+        """Go on serially (the threads kept, asleep, for a later measurement), for the reason ``why``."""
+        self.kst.pool, self.on_threads = None, False
         self.state, self.text, self.kst.timing = "serial", why, 0
 
     def stop(self) -> None:
@@ -238,7 +257,7 @@ class Stepping:
         threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
         failed operation's ``fail``)."""
         starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
-        if self.state == "serial" or not starts:          # the segment ran serially
+        if not self.on_threads or not starts:          # the segment ran serially
             return {}
         program, made, failed = self.program, {}, {}
         for q in range(starts[0], starts[0] + int(self.seg[starts[0]])):
@@ -336,11 +355,11 @@ class NativeLoop:
         """A chunk done: the bar moves, and the next chunk's length aims at :data:`CHUNK_SECONDS`."""
         kst = self.kst
         self.run.bar.update(kst.k - self.done)
-        self.stepping.chunk(kst.k - self.done)
+        measure = self.stepping.chunk(kst.k - self.done)
         now = time.perf_counter()
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-        self.done, self.since, kst.kstop = kst.k, now, kst.k + self.chunk
+        self.done, self.since, kst.kstop = kst.k, now, kst.k + (BLOCK if measure else self.chunk)
 
     def _end(self, event: int) -> None:
         """The end of the loop, by ``event`` (the position handed back): the bar's last steps,

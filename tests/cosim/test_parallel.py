@@ -149,11 +149,34 @@ def test_auto_tries_threads_and_keeps_them_by_the_measured_times(work, monkeypat
     monkeypatch.setattr(native_loop, "KEEP_RATIO", 1e9)
     (serial, parallel), cs = both(make, stop=5.0)
     assert_same(serial, parallel)
-    assert cs.stepping.startswith("2 threads: [") and " (the first block: on 2 threads " in cs.stepping
+    assert cs.stepping.startswith("2 threads: [") and " (measured: on 2 threads " in cs.stepping
     monkeypatch.setattr(native_loop, "KEEP_RATIO", 0.0)
     assert cs.run(5.0, progress=False).drop(columns=["a.began", "a.ended", "b.began", "b.ended"]).equals(
         serial.drop(columns=["a.began", "a.ended", "b.began", "b.ended"]))
     assert cs.stepping.startswith("serial: the FMU updates that may step at once took on 2 threads")
+
+
+def test_auto_measures_again_and_takes_the_threads_when_they_pay(work, monkeypatch):
+    """The first block says serial; a later measurement, once threads pay (here: once the
+    rule is changed by a component at t = 12 s), takes them, the bits unchanged."""
+    class Flip(Component):
+        def __init__(self):
+            super().__init__("flip", 0.01, outputs=["y"])
+
+        def output(self, t, u):
+            if t >= 12.0:
+                native_loop.KEEP_RATIO, native_loop.MIN_GAIN = 1e9, -1.0
+            return np.array([0.0])
+
+    def make(threads):
+        return Cosimulation([wb(work, "a"), wb(work, "b"), Flip()], {"b.u": "a.x"},
+                            threads="auto" if threads > 1 else 1)
+
+    monkeypatch.setattr(native_loop, "KEEP_RATIO", 0.0)
+    monkeypatch.setattr(native_loop, "RECHECK", 2 * native_loop.BLOCK)
+    (serial, parallel), cs = both(make, stop=30.0)
+    assert_same(serial, parallel)
+    assert cs.stepping.startswith("2 threads: [") and " (measured: on 2 threads " in cs.stepping
 
 
 @pytest.mark.parametrize("failing", [("a",), ("b",), ("a", "b")])
