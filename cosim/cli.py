@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_models import get_model, model_names
-from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
+from fmu_models.errors import ConfigurationError, FMUError, Interrupted, PendulumCosimError
 from fmu_models.export.clocked import check_clocked
 from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
 from fmu_models.infra.cli import run_command
@@ -143,6 +143,8 @@ def _kind_of(path: Path) -> str:
                                  "a SystemStructure.ssd)")
     if path.suffix.lower() == ".ssd":
         return "ssp"
+    if path.suffix.lower() in (".fmu", ".ssp") and not zipfile.is_zipfile(path):
+        raise FMUError(f"{path.name} is not an {path.suffix[1:].upper()}: not a zip archive")
     if zipfile.is_zipfile(path):
         with zipfile.ZipFile(path) as z:
             names = set(z.namelist())
