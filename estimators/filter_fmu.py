@@ -124,7 +124,8 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         Not a filter, or a filter whose adaptation is not all in its step (an IAE with
         ``form="full"``).
     ConfigurationError
-        A non-diagonal P, Q or R, a bad name, or parameters the FMU cannot hold;
+        A non-diagonal P, Q or R, a bad name, parameters the FMU cannot hold, or a model
+        whose map calls compiled code outside the filter (an FMU's process model);
         ``clocked=True`` with ``fmi_version=2`` (FMI 2.0 has no clocks).
     """
     check_clocked(clocked, fmi_version, "the filter FMU")
@@ -134,6 +135,9 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         raise TypeMismatchError(f"{filt.name} adapts part of its state in numpy and cannot be exported"
                                 + ("; use form='diagonal' or 'scalar'" if hasattr(filt, "form") else ""))
     s = filt.system
+    if not s.exportable:
+        raise ConfigurationError(f"{filt.name} runs on {s!r}, whose map calls compiled code outside the filter (an "
+                                 "FMU's): its step cannot be packed into an FMU of its own")
     model = s.description.split(" ")[0].capitalize() or "Model"
     name = name or "".join(ch for ch in f"{filt.name.replace('-', '')}{model}" if ch.isalnum())
     if not name.isidentifier() or not name.isascii():

@@ -292,9 +292,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             parts.append(ca.reshape(c[o:o + size], *shape))
             o += size
         G, Nc, L, (e1, e2, f1, f2, sums) = parts[0:3], parts[3:6], parts[6:9], parts[9:]
-        _, F = self.transition(st.x, st.u)
+        _, F = self.system.transition(st.x, st.u)
         upd = st.upd
-        _, H = self.measurement(st.xp)
+        _, H = self.system.measurement(st.xp)
         _, _, Mv = mask_measurement(st.v, ca.SX.eye(p), ca.SX.zeros(p))
         Hm, Ka = ca.mtimes(Mv, H), upd.accepted * upd.K
         e = upd.innovation
