@@ -414,7 +414,7 @@ class KalmanBase:
         compiled code of the model caused (an FMU's failure) is its error."""
         failure = self.system.take_failure()
         if failure is not None and self._rt.status[0] == BAD_RESULT:
-            raise type(failure)(f"{self.name}: {failure} (at step {self.k}, {what}); filter state unchanged")
+            raise type(failure)(f"{self.name}: {failure}, at step {self.k} ({what}); filter state unchanged")
         explain_status(self._rt.status[0], self.name, self.k, self._u, self._y, self._mask, self.nan_is_missing,
                        what)
 

@@ -97,14 +97,14 @@ class _Description:
     outputs: dict
 
 
-def _flag(xml: bytes, name: str) -> bool:
-    """The boolean attribute ``name`` of the ``ModelExchange`` element (fmpy does not read
-    every FMI 3.0 capability flag)."""
+def _flag(xml: bytes, *names: str) -> bool:
+    """Whether one of the boolean attributes ``names`` of the ``ModelExchange`` element is true
+    (fmpy reads FMI 3.0's ``providesDirectionalDerivatives`` under its FMI 2.0 name only)."""
     from lxml import etree
 
     root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True))
     me = root.find("ModelExchange")
-    return me is not None and me.get(name, "false") == "true"
+    return me is not None and any(me.get(name, "false") == "true" for name in names)
 
 
 def _read(path: Path) -> tuple[_Description, bytes]:
@@ -130,10 +130,12 @@ def _read(path: Path) -> tuple[_Description, bytes]:
         raise FMUError(f"{path.name} has no Model Exchange interface (only "
                        f"{'Co-Simulation' if md.coSimulation else 'other interfaces'}): a process model integrates "
                        "the FMU's right-hand side, which only Model Exchange gives")
-    flags = ("providesDirectionalDerivative", "canGetAndSetFMUstate") if version == 2 else \
-        ("providesDirectionalDerivatives", "canGetAndSetFMUState")
+    # FMI 3.0 spells it providesDirectionalDerivatives; its FMI 2.0 spelling is read too, since
+    # some FMI 3.0 FMUs carry it (their derivatives are checked against differences anyway)
+    directional = _flag(xml, "providesDirectionalDerivative", *(("providesDirectionalDerivatives",) * (version == 3)))
     states = [d.variable.derivative for d in md.derivatives]
-    return _Description(md, version, me.modelIdentifier, _flag(xml, flags[0]), _flag(xml, flags[1]),
+    return _Description(md, version, me.modelIdentifier, directional,
+                        _flag(xml, "canGetAndSetFMUstate" if version == 2 else "canGetAndSetFMUState"),
                         bool(me.needsCompletedIntegratorStep), {v.name: v for v in md.modelVariables},
                         states, [d.variable for d in md.derivatives],
                         {o.variable.name: o.dependencies for o in md.outputs}), data
@@ -244,8 +246,8 @@ class FMUProcessModel(DiscreteModel):
     tolerance : float, optional
         Largest relative error of one period's integration, estimated at the FMU's start values
         by step doubling (relative to ``max(|x|, nominal)``); default the FMU's
-        ``DefaultExperiment`` tolerance, else 1e-4. A larger error is refused, naming the
-        substeps that would meet it.
+        ``DefaultExperiment`` tolerance, else none (only a diverging integration is refused). A
+        larger error is refused, naming the substeps that would meet it.
     jacobian_check : float
         With directional derivatives: largest relative difference to the FMU's own central
         differences of the map's Jacobians at its start values (default 1e-5); a larger one is
@@ -302,8 +304,8 @@ class FMUProcessModel(DiscreteModel):
         super().__init__(x, u, self._ext["f"](x, u), self._ext["h"](x), dt, [v.name for v in states],
                          [v.name for v in ins], meas,
                          f"{self.path.name} (FMI {d.version}.0 Model Exchange, {method}, {substeps} substep(s))")
-        tol = tolerance if tolerance is not None else (getattr(d.md.defaultExperiment, "tolerance", None) or 1e-4)
-        self._check_accuracy(checks.positive(tol, "tolerance"))
+        tol = tolerance if tolerance is not None else getattr(d.md.defaultExperiment, "tolerance", None)
+        self._check_accuracy(None if tol is None else checks.positive(tol, "tolerance"))
         if directional:
             self._check_directional(checks.positive(jacobian_check, "jacobian_check"))
 
@@ -421,21 +423,23 @@ class FMUProcessModel(DiscreteModel):
             raise self.take_failure() or FMUError(f"{self.path.name}: one period from the start values failed")
         return out
 
-    def _check_accuracy(self, tol: float) -> None:
-        """Step doubling at the start values: refuse an integration error above ``tol``."""
+    def _check_accuracy(self, tol: float | None) -> None:
+        """Step doubling at the start values: refuse an integration that diverges, or whose
+        error is above ``tol`` (None: any finite error)."""
         n, x, u = self.substeps, self.start, self._u_start
         coarse, fine = self._advance(x, u, n), self._advance(x, u, 2 * n)
         scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._config_array("nominal_x"))
         order = 4 if self.method == "rk4" else 1
         err = np.abs(coarse - fine) / scale * (2**order / (2**order - 1))
         i = int(np.argmax(err))
-        if not err[i] <= tol:
+        if not (np.isfinite(err[i]) and (tol is None or err[i] <= tol)):
             need = int(np.ceil(n * (err[i] / tol) ** (1 / order))) if np.isfinite(err[i]) else None
             raise ConfigurationError(
-                f"{self.path.name}: {self.method} with {n} substep(s) of {self.dt / n:g} s errs by {err[i]:.3g} "
-                f"(relative) on {self.state_names[i]} over one period from the start values, above the tolerance "
-                f"{tol:g}: " + (f"use about {need} substeps" if need else "the integration diverges; use many more "
-                                "substeps, a shorter period or another integrator"))
+                f"{self.path.name}: {self.method} with {n} substep(s) of {self.dt / n:g} s "
+                + (f"errs by {err[i]:.3g} (relative) on {self.state_names[i]} over one period from the start values, "
+                   f"above the tolerance {tol:g}: use about {need} substeps" if need else
+                   f"diverges on {self.state_names[i]} over one period from the start values: use many more "
+                   "substeps, a shorter period or another integrator"))
 
     def _config_array(self, name: str) -> np.ndarray:
         return self._rt.keep[0][name]

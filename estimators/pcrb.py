@@ -184,14 +184,14 @@ class _Jacobians:
         """``F`` at (``xs``, ``us``) and ``H`` at ``xn``: ``m`` points (..., nx), (..., nu),
         (..., nx) -> (m, nx, nx), (m, ny, nx)."""
         nx, ny, b = self.nx, self.ny, JACOBIAN_BLOCK
-        pts = [np.ascontiguousarray(a).reshape(-1, a.shape[-1]) for a in (xs, us, xn)]
-        m = len(pts[0])
+        m = int(np.prod(np.shape(xs)[:-1]))
+        pts = [np.ascontiguousarray(a).reshape(m, a.shape[-1]) for a in (xs, us, xn)]   # nu may be 0
         F, H = np.empty((m, nx, nx)), np.empty((m, ny, nx))
         args, res = self.fn.args, self.fn.res
         for i0 in range(0, m, b):
             i1 = min(i0 + b, m)
             for a, p in zip(args, pts):
-                blk = a.reshape(b, -1)              # point-major = CasADi's column-major (dim, b)
+                blk = a.reshape(b, a.size // b)     # point-major = CasADi's column-major (dim, b)
                 blk[:i1 - i0] = p[i0:i1]
                 blk[i1 - i0:] = p[i1 - 1]           # pad the last block with a valid point
             self.fn.trigger()

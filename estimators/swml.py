@@ -251,7 +251,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         n, n_snap = s.nx, W // M
 
         def push(flat, rows, value):
-            ring = ca.reshape(flat, rows, -1)
+            ring = ca.reshape(flat, rows, flat.numel() // rows if rows else W)     # a model may have no input
             return ca.horzcat(ring[:, 1:], value) if ring.shape[1] > 1 else value
 
         st, count = ctx.state, ctx.state["count"]

@@ -217,7 +217,7 @@ static int derivatives(double *dx, const double *x, double t) {
         if (!isfinite(dx[i])) {
             fp_vector(xs, sizeof xs, x, C.c.nx);
             if (!C.message[0]) C.numerical = 1;
-            fp_fail("the derivative of state %s is %g at t = %.17g s, x = [%s]", C.c.x_names[i], dx[i], t, xs);
+            fp_fail("the derivative of state %s is %g at t = %.15g s, x = [%s]", C.c.x_names[i], dx[i], t, xs);
             return 1;
         }
     return 0;
@@ -255,7 +255,7 @@ static int completed_step(double t) {
     }
     if (fp_status(st, C.c.version == 2 ? "fmi2CompletedIntegratorStep" : "fmi3CompletedIntegratorStep")) return 1;
     if (enter || terminate) {
-        fp_fail("the FMU %s at t = %.17g s, inside a sample period (a step event): the discretisation would "
+        fp_fail("the FMU %s at t = %.15g s, inside a sample period (a step event): the discretisation would "
                 "step over it", terminate ? "asked to terminate" : "asked for Event Mode", t);
         return 1;
     }
@@ -313,7 +313,7 @@ static int event_iteration(void) {
         return 1;
     }
     if (defined && isfinite(next)) {
-        fp_fail("the FMU schedules a time event at t = %.17g s: its dynamics change at given times, which a "
+        fp_fail("the FMU schedules a time event at t = %.15g s: its dynamics change at given times, which a "
                 "discretisation x[k+1] = f(x[k], u[k]) over fixed sample periods would step over", next);
         return 1;
     }
@@ -447,8 +447,8 @@ static int crossed(double t) {
     int64_t i;
     for (i = 0; i < C.c.nz; i++)
         if ((C.z0[i] > 0) != (C.z1[i] > 0)) {
-            fp_fail("event indicator %lld changes sign inside a sample period (a state event, before t = %.17g s): "
-                    "the discretisation would step over it", (long long)i, t);
+            fp_fail("event indicator %lld (of %lld) changes sign inside a sample period (a state event, before t = "
+                    "%.15g s): the discretisation would step over it", (long long)i + 1, (long long)C.c.nz, t);
             return 1;
         }
     return 0;
