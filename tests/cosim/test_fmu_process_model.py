@@ -145,3 +145,28 @@ def test_the_reference_vanderpol_in_the_master(tmp_path):
     for state, bound in (("x0", 0.1), ("x1", 0.2)):     # the sensor's noise: 0.1 on x0
         err = (res[f"ekf.{state}"] - res[f"plant.{state}"]).to_numpy()[10:]
         assert np.sqrt(np.mean(err ** 2)) < bound
+
+
+def test_the_campaigns_building_blocks_take_an_fmu_model(cartpole_fmu):
+    """Truth and measurements from the FMU's process model (its own map) equal the plant's,
+    and the batched filters on it give the CasADi model's estimates."""
+    from cosim.experiments.common import batch_run, seed_pairs, simulate_truth
+    from estimators import EKF, FMUProcessModel, discretize
+    from fmu_models import get_model
+
+    plant = get_model("cartpole")
+    model = FMUProcessModel(cartpole_fmu, 0.01, plant.output_names, plant.input_names, method="euler")
+
+    class Settings:
+        runs, seed = 3, 5
+    seeds = seed_pairs(Settings, 0)
+    us = np.full((101, 1), 0.5)
+    x0 = [0.5, 0.0, 1.8, 0.5]
+    X, Y = simulate_truth(plant, x0, us, 0.01, 0.2, ["x", "theta"], [0.3, 0.3], seeds)
+    Xf, Yf = simulate_truth(model, x0, us, 0.01, 0.2, plant.output_names, [0.3, 0.3], seeds)
+    np.testing.assert_allclose(Xf, X, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(Yf, Y, rtol=0, atol=1e-12)
+    a = batch_run(lambda: EKF(model, x0, 1.0, 0.2, 0.1), X, Y, us)
+    b = batch_run(lambda: EKF(discretize(plant, 0.01), x0, 1.0, 0.2, 0.1), X, Y, us)
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.nees, b.nees, rtol=1e-7)
