@@ -15,8 +15,9 @@ says which; it is in :meth:`~FMUProcessModel.describe` and in every run's metada
 Native speed: the map, the measurement and their Jacobians are compiled C
 (``estimators/c/fmu_process.c``, compiled once per model and cached) that calls the FMU's own
 functions; the model's CasADi expressions call it (CasADi's external functions), so a
-filter's compiled step calls the FMU with no Python in between, in :meth:`step`, in a whole
-:meth:`~estimators.base.KalmanBase.run`, batched, and in the co-simulation master's kernel.
+filter's compiled step calls the FMU with no Python in between, in
+:meth:`~estimators.base.KalmanBase.step`, in a whole :meth:`~estimators.base.KalmanBase.run`,
+batched, and in the co-simulation master's kernel.
 
 The FMU is driven through the standard's Model Exchange calls only, and each evaluation
 starts from the same FMU state (restored with ``SetFMUState`` where the FMU can save it; else
@@ -61,7 +62,7 @@ from .discrete import DiscreteModel
 
 __all__ = ["JACOBIANS", "FMUProcessModel"]
 
-#: How the Jacobians are computed: ``"auto"`` (the FMU's directional derivatives if it provides
+#: The sources of the Jacobians, ``"auto"`` (the FMU's directional derivatives if it provides
 #: them, else central differences), ``"directional"`` (refused without them) or ``"fd"``.
 JACOBIANS = ("auto", "directional", "fd")
 _FLOAT = ("Real", "Float64")
@@ -263,7 +264,7 @@ class FMUProcessModel(DiscreteModel):
         The FMU's start values of the states.
     """
 
-    #: The filters' steps call this model's compiled code: they cannot be packed into FMUs.
+    #: The filters' steps call this model's compiled code, so they cannot be packed into FMUs.
     exportable = False
 
     def __init__(self, path, dt: float, measurements: Sequence[str], inputs: Sequence[str] = (),
