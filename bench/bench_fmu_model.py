@@ -22,7 +22,6 @@ from __future__ import annotations
 import ctypes
 import sys
 import tempfile
-import time
 import zipfile
 from pathlib import Path
 
@@ -33,19 +32,11 @@ from fmu_models import build_fmu, get_model
 
 sys.path.append(str(Path(__file__).parent))          # bench/doc_tables.py, from any folder
 import doc_tables
+from bench_estimators import per_step
 
-N, REPEATS, DT = 2000, 7, 0.01
+N, DT = 2000, 0.01
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 X0, P0, Q, R = [0.5, 0.0, 1.8, 0.5], 1.0, 0.2, 0.1
-
-
-def per_step(fn, n):
-    times = []
-    for _ in range(REPEATS):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) / n * 1e6)
-    return float(np.min(times))          # the least disturbed repeat: this machine's speed varies
 
 
 def data(model, n=N, seed=0):

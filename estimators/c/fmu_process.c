@@ -80,7 +80,7 @@ typedef struct {
     double *w;                             /* work arrays, see fp_alloc */
     double *xin, *uin, *xo, *yo;           /* an evaluation's inputs and results */
     double *xc, *xs, *up, *k[4], *dk[4], *T, *Ts, *J, *Ju, *z0, *z1, *fp, *fm, *y, *un;
-    casadi_int sp[8][3];                   /* dense sparsities: x, u, y, F, G, H, and spares */
+    casadi_int sp[6][3];                   /* dense sparsities: x, u, y, F, G, H */
     fmi2CallbackFunctions cb;
     struct {                               /* FMI 2.0 */
         fmi2InstantiateTYPE *instantiate;
@@ -381,33 +381,47 @@ static int fp_begin(void) {
 }
 
 /* ------------------------------------------------------------------ the discrete map */
-/* The right-hand side at (t, x) into k, and with J != NULL its Jacobian in x (nx x nx,
- * column-major), with Ju != NULL also in u (nx x nu): directional derivatives or central
- * differences of the derivatives (steps cbrt(eps) max(|x_j|, nominal_j)). */
-static int rhs(double t, const double *x, const double *u, double *k, double *J, double *Ju) {
-    int64_t n = C.c.nx, m = C.c.nu, j, i;
-    const double eps = cbrt(DBL_EPSILON);
-    if (set_time(t) || set_states(x) || derivatives(k, x, t)) return 1;
-    if (!J) return 0;
+/* The values of the unknowns (the derivatives, or outputs) at the state set last. */
+static int values(const uint32_t *unknowns, int64_t n, const double *x, double t, double *out) {
+    return unknowns == C.c.vr_dx ? derivatives(out, x, t) : get_reals(unknowns, n, out);
+}
+
+/* The columns d unknowns / d x_j (n each, column-major into J) at the state x and time t:
+ * directional derivatives, or central differences with steps cbrt(eps) max(|x_j|, nominal_j). */
+static int state_jacobian(const uint32_t *unknowns, int64_t n, const double *x, double t, double *J) {
+    int64_t i, j;
     if (C.c.directional) {
-        for (j = 0; j < n; j++)
-            if (directional(C.c.vr_dx, n, C.c.vr_x[j], J + j * n)) return 1;
-        for (j = 0; Ju && j < m; j++)
-            if (directional(C.c.vr_dx, n, C.c.vr_u[j], Ju + j * n)) return 1;
+        for (j = 0; j < C.c.nx; j++)
+            if (directional(unknowns, n, C.c.vr_x[j], J + j * n)) return 1;
         return 0;
     }
-    memcpy(C.xs, x, sizeof(double) * (size_t)n);
-    for (j = 0; j < n; j++) {
-        double step = eps * fmax(fabs(x[j]), C.c.nominal_x[j]), hi = x[j] + step, lo = x[j] - step;
+    memcpy(C.xs, x, sizeof(double) * (size_t)C.c.nx);
+    for (j = 0; j < C.c.nx; j++) {
+        double step = cbrt(DBL_EPSILON) * fmax(fabs(x[j]), C.c.nominal_x[j]), hi = x[j] + step, lo = x[j] - step;
         C.xs[j] = hi;
-        if (set_states(C.xs) || derivatives(C.fp, C.xs, t)) return 1;
+        if (set_states(C.xs) || values(unknowns, n, C.xs, t, C.un)) return 1;
         C.xs[j] = lo;
-        if (set_states(C.xs) || derivatives(C.fm, C.xs, t)) return 1;
+        if (set_states(C.xs) || values(unknowns, n, C.xs, t, C.fm)) return 1;
         C.xs[j] = x[j];
-        for (i = 0; i < n; i++) J[i + j * n] = (C.fp[i] - C.fm[i]) / (hi - lo);
+        for (i = 0; i < n; i++) J[i + j * n] = (C.un[i] - C.fm[i]) / (hi - lo);
     }
-    for (j = 0; Ju && j < m; j++) {
-        double step = eps * fmax(fabs(u[j]), C.c.nominal_u[j]), hi = u[j] + step, lo = u[j] - step;
+    return 0;
+}
+
+/* The right-hand side at (t, x) into k, and with J != NULL its Jacobian in x (nx x nx,
+ * column-major), with Ju != NULL also in u (nx x nu): directional derivatives or central
+ * differences of the derivatives (steps cbrt(eps) max(|u_j|, nominal_j) for the inputs). */
+static int rhs(double t, const double *x, const double *u, double *k, double *J, double *Ju) {
+    int64_t n = C.c.nx, j, i;
+    if (set_time(t) || set_states(x) || derivatives(k, x, t)) return 1;
+    if (!J) return 0;
+    if (state_jacobian(C.c.vr_dx, n, x, t, J)) return 1;
+    for (j = 0; Ju && j < C.c.nu; j++) {
+        double step = cbrt(DBL_EPSILON) * fmax(fabs(u[j]), C.c.nominal_u[j]), hi = u[j] + step, lo = u[j] - step;
+        if (C.c.directional) {
+            if (directional(C.c.vr_dx, n, C.c.vr_u[j], Ju + j * n)) return 1;
+            continue;
+        }
         if (set_states(x) || set_reals(C.c.vr_u + j, 1, &hi, "") || derivatives(C.fp, x, t)
             || set_reals(C.c.vr_u + j, 1, &lo, "") || derivatives(C.fm, x, t) || set_reals(C.c.vr_u + j, 1, u + j, ""))
             return 1;
@@ -488,29 +502,6 @@ static int advance(const double *x, const double *u, int64_t substeps, double *x
     return 0;
 }
 
-/* The measured outputs' Jacobian columns (no outputs x nx, column-major) into C.fp: directional
- * derivatives or central differences; the FMU stands at (t0, x). */
-static int output_jacobian(const double *x, int64_t no) {
-    int64_t n = C.c.nx, i, j;
-    const double eps = cbrt(DBL_EPSILON);
-    if (C.c.directional) {
-        for (j = 0; j < n; j++)
-            if (directional(C.c.vr_y, no, C.c.vr_x[j], C.fp + j * no)) return 1;
-        return 0;
-    }
-    memcpy(C.xs, x, sizeof(double) * (size_t)n);
-    for (j = 0; j < n; j++) {
-        double step = eps * fmax(fabs(x[j]), C.c.nominal_x[j]), hi = x[j] + step, lo = x[j] - step;
-        C.xs[j] = hi;
-        if (set_states(C.xs) || get_reals(C.c.vr_y, no, C.un)) return 1;
-        C.xs[j] = lo;
-        if (set_states(C.xs) || get_reals(C.c.vr_y, no, C.fm)) return 1;
-        C.xs[j] = x[j];
-        for (i = 0; i < no; i++) C.fp[i + j * no] = (C.un[i] - C.fm[i]) / (hi - lo);
-    }
-    return 0;
-}
-
 /* y = h(x) (ny) and with H != NULL its Jacobian (ny x nx, column-major): a measured state is
  * itself, a measured output is read at t0 with the inputs at their start values. */
 static int measure(const double *x, double *y, double *H) {
@@ -518,7 +509,7 @@ static int measure(const double *x, double *y, double *H) {
     char xs[512];
     for (i = 0; i < p; i++) no += C.c.y_state[i] < 0;
     if (no && (fp_begin() || set_reals(C.c.vr_u, C.c.nu, C.c.u_start, "") || set_time(C.c.t0) || set_states(x)
-               || get_reals(C.c.vr_y, no, C.y) || (H && output_jacobian(x, no))))
+               || get_reals(C.c.vr_y, no, C.y) || (H && state_jacobian(C.c.vr_y, no, x, C.c.t0, C.fp))))
         return 1;
     for (i = 0; i < p; i++) {
         int64_t s = C.c.y_state[i];
