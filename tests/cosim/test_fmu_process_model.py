@@ -170,3 +170,55 @@ def test_the_campaigns_building_blocks_take_an_fmu_model(cartpole_fmu):
     b = batch_run(lambda: EKF(discretize(plant, 0.01), x0, 1.0, 0.2, 0.1), X, Y, us)
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(a.nees, b.nees, rtol=1e-7)
+
+
+HOSTILE = """
+[simulation]
+stop_time = 2.0
+
+[[component]]
+name = "meas"
+type = "step"
+period = 0.05
+t_step = 0.5
+before = 0.5
+after = 2.0
+
+[[component]]
+name = "ekf"
+type = "estimator"
+filter = "EKF"
+model = "{fmu}"
+measurements = ["y"]
+model_parameters = {{ mode = {mode}, limit = 0.8 }}
+period = 0.05
+x0 = [0.5, 0.0]
+P0 = 0.01
+Q = 1e-4
+R = 1e-3
+
+[connections]
+"ekf.y" = "meas.out"
+"""
+
+
+@pytest.mark.parametrize("mode,words", [(1, "the derivative of state x1 is nan"),
+                                        (2, "fmi3GetContinuousStateDerivatives returned Error"),
+                                        (6, "asked for Event Mode")], ids=["nan", "error", "step-event"])
+def test_a_hostile_fmu_model_in_a_run_is_one_line(capsys, tmp_path, mode, words):
+    """The command line names the FMU's failure in one line, no traceback."""
+    from testkit import handwritten
+
+    from cosim.cli import main
+
+    try:
+        fmu = handwritten.build("hostile_me", "HostileME", 3, tmp_path / "fmu")
+    except handwritten.NotBuildable as e:
+        pytest.skip(str(e))
+    scenario = tmp_path / "hostile.toml"
+    scenario.write_text(HOSTILE.format(fmu=fmu, mode=float(mode)))
+    status = main(["run", str(scenario), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and words in lines[0] and "filter state unchanged" in lines[0], err
