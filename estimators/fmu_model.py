@@ -282,7 +282,7 @@ class FMUProcessModel(DiscreteModel):
         if not states:
             raise ConfigurationError(f"{self.path.name} has no continuous states: nothing for a filter to estimate")
         ins = [self._input(d, n) for n in _names(inputs, "inputs")]
-        meas = [self._measurement(d, n, ins) for n in _names(measurements, "measurements")]
+        meas = [self._measurement(d, n) for n in _names(measurements, "measurements")]
         if not meas:
             raise ConfigurationError(f"{self.path.name}: name at least one measurement (an output or a state)")
         pars = self._parameters(d, parameters)
@@ -306,7 +306,7 @@ class FMUProcessModel(DiscreteModel):
                          [v.name for v in ins], meas,
                          f"{self.path.name} (FMI {d.version}.0 Model Exchange, {method}, {substeps} substep(s))")
         tol = tolerance if tolerance is not None else getattr(d.md.defaultExperiment, "tolerance", None)
-        self._check_accuracy(None if tol is None else checks.positive(tol, "tolerance"))
+        self._check_accuracy(None if tol in (None, "") else checks.positive(tol, "tolerance"))
         if directional:
             self._check_directional(checks.positive(jacobian_check, "jacobian_check"))
 
@@ -321,7 +321,7 @@ class FMUProcessModel(DiscreteModel):
                                      "Event Mode, which the process model does not enter; a continuous input only")
         return v
 
-    def _measurement(self, d: _Description, name: str, inputs: list) -> str:
+    def _measurement(self, d: _Description, name: str) -> str:
         v = _check_float(d, name, "measurement", self.path)
         if any(s.name == name for s in d.states):
             return name
