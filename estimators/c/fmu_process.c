@@ -360,6 +360,7 @@ static int fp_start3(void) {
 /* The instance in Continuous-Time Mode at t0, restored to its saved state: made (again) if
  * there is none; refused after Fatal. */
 static int fp_begin(void) {
+    C.log[0] = 0;                           /* what the FMU logs from here belongs to this evaluation */
     if (C.dead) {
         fp_fail("the FMU returned Fatal earlier: it cannot be evaluated again in this process");
         return 1;
@@ -642,10 +643,15 @@ static int allocate(void) {
     return 0;
 }
 
-/* Load the FMU's library, make and initialise an instance: 0, or 1 with the message. */
+/* Load the FMU's library, make and initialise an instance: 0, or 1 with the message (a
+ * context opened before, whose opening failed, starts afresh). */
 EXPORT int FP(open)(const fp_config *config) {
     int failed;
     lock();
+    fp_end();
+    free(C.w);
+    memset((void *)&C, 0, sizeof C);
+    C.lock = 1;                             /* still held */
     C.c = *config;
     failed = allocate();
     if (!failed) {
