@@ -214,6 +214,13 @@ def _source() -> str:
     return shipped("estimators", "c", "fmu_process.c").read_text()
 
 
+def _platform(version: int) -> str:
+    """The folder of this platform's binary in an FMU of FMI ``version``."""
+    import fmpy
+
+    return fmpy.platform if version == 2 else fmpy.platform_tuple
+
+
 def _headers() -> str:
     import fmpy
 
@@ -364,8 +371,9 @@ class FMUProcessModel(DiscreteModel):
         lib = ctypes.CDLL(lib._name, mode=ctypes.RTLD_GLOBAL)   # the filters' compiled steps call it by name
         folder = tempfile.mkdtemp(prefix="pendulum_cosim_fmumodel_")
         try:
-            with zipfile.ZipFile(self.path) as z:
-                z.extractall(folder)               # zipfile strips absolute and ".." member paths
+            with zipfile.ZipFile(self.path) as z:  # its binary for this platform and its resources only
+                z.extractall(folder, [n for n in z.namelist() if n.startswith((f"binaries/{_platform(d.version)}/",
+                                                                                "resources/"))])
         except (OSError, zipfile.BadZipFile) as e:
             shutil.rmtree(folder, ignore_errors=True)
             raise FMUError(f"cannot unpack {self.path.name}: {e}") from None
@@ -386,8 +394,7 @@ class FMUProcessModel(DiscreteModel):
         import fmpy
 
         version, md = d.version, d.md
-        plat = fmpy.platform if version == 2 else fmpy.platform_tuple
-        library = Path(folder, "binaries", plat, d.identifier + fmpy.sharedLibraryExtension)
+        library = Path(folder, "binaries", _platform(version), d.identifier + fmpy.sharedLibraryExtension)
         resources = Path(folder, "resources")
         names = [s.name for s in states]
         y_state = np.array([names.index(m) if m in names else -1 for m in meas], np.int64)

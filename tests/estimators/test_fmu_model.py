@@ -346,3 +346,13 @@ def test_without_a_saved_state_an_error_frees_the_instance(hostile, tmp_path, ca
         ekf.run(us, ys)
     np.testing.assert_allclose(ekf.step(us[0], ys[0]), EKF(hostile_model(hostile, 0), [0.5, 0.0], 0.01, 1e-4,
                                                                              1e-3).step(us[0], ys[0]), atol=1e-15)
+
+
+def test_the_virtual_machine_calls_the_same_compiled_model(cartpole_fmus, record):
+    """Without compiling the filter's step (CasADi's virtual machine), the model's own compiled
+    code is called all the same: the same numbers."""
+    us, ys = record
+    fmu, _ = cartpole_models(cartpole_fmus[3])
+    a, b = EKF(fmu, **KW, backend="vm"), EKF(fmu, **KW)
+    assert a.backend == "vm"
+    np.testing.assert_array_equal(a.run(us[:50], ys[:50]).x, b.run(us[:50], ys[:50]).x)
