@@ -480,7 +480,9 @@ def test_an_interrupted_fmu_run_keeps_its_rows_and_leaves_nothing_behind(tmp_pat
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     out = tmp_path / "out"
-    proc = subprocess.Popen([*CLI, "run", str(plant_fmu), "--stop-time", "1e5", "--out", str(out), "--no-progress"],
+    (tmp_path / "u.csv").write_text("time,F\n0,0\n1,1\n")          # a Python input: about 3 us a step
+    proc = subprocess.Popen([*CLI, "run", str(plant_fmu), "--stop-time", "1e4", "--input", str(tmp_path / "u.csv"),
+                             "--outputs", "x", "--out", str(out), "--no-progress"],
                             env={**os.environ, "TMPDIR": str(tmp)}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     t0 = time.monotonic()
@@ -492,5 +494,5 @@ def test_an_interrupted_fmu_run_keeps_its_rows_and_leaves_nothing_behind(tmp_pat
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "interrupted at t = " in err
     partial = pd.read_csv(out / "results.partial.csv", index_col="time")
-    assert len(partial) > 1 and list(partial.columns)[:2] == ["x", "x_dot"]
+    assert len(partial) > 1 and list(partial.columns) == ["x"]
     assert list(tmp.iterdir()) == []
