@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_models import get_model, model_names
-from fmu_models.errors import ConfigurationError, Interrupted, PendulumCosimError
+from fmu_models.errors import ConfigurationError, FMUError, Interrupted, PendulumCosimError
 from fmu_models.export.clocked import check_clocked
 from fmu_models.export.platforms import add_platforms, parse_platforms, zig_command
 from fmu_models.infra.cli import run_command
@@ -154,6 +154,8 @@ def _kind_of(path: Path) -> str:
                                  "a SystemStructure.ssd)")
     if path.suffix.lower() == ".ssd":
         return "ssp"
+    if path.suffix.lower() in (".fmu", ".ssp") and not zipfile.is_zipfile(path):
+        raise FMUError(f"{path.name} is not an {path.suffix[1:].upper()}: not a zip archive")
     if zipfile.is_zipfile(path):
         with zipfile.ZipFile(path) as z:
             names = set(z.namelist())
@@ -441,6 +443,15 @@ def _experiment(args) -> int:
 
     exp = EXPERIMENTS.get(args.name)()
     exp.check_path(args.path)
+    if args.scheduler is not None:
+        if args.backend != "dask":
+            raise ConfigurationError("--scheduler names a dask cluster's scheduler: it goes with --backend dask")
+        try:
+            import dask
+        except ImportError:
+            raise ConfigurationError("--backend dask needs dask: pip install 'pendulum-cosim[dask]'") from None
+
+        dask.config.set({"scheduler-address": args.scheduler})
     config = args.config or exp.default_config
     settings = exp.settings(config, args.settings, args.set, args.runs, args.seed)
     common = dict(path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
@@ -542,6 +553,9 @@ def _add_experiment(sub) -> None:
                           "through the co-simulation master with the plant FMU (same numbers)")
     exp.add_argument("--backend", choices=("processes", "serial", "dask"), default="processes",
                      help="parallel backend (dask needs the 'dask' extra)")
+    exp.add_argument("--scheduler", metavar="ADDRESS",
+                     help="with --backend dask: the scheduler of a running dask cluster (e.g. tcp://host:8786; "
+                          "default: dask's configuration, else a local cluster)")
     exp.add_argument("--jobs", type=_positive_int, help="worker processes (default: all cores)")
     exp.add_argument("--seed", type=_nonneg_int, help="seed of all random streams")
     exp.add_argument("--out", help="output directory (default out/NAME)")

@@ -28,8 +28,8 @@ Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
     name = "ekf"
     type = "estimator"
     filter = "EKF"                  # any registered filter: KF, EKF, UKF, IAE, MFIAE, ...
-    model = "cartpole"
-    period = 0.01
+    model = "cartpole"              # or a Model Exchange FMU: model = "plant.fmu" with
+    period = 0.01                   # measurements = ["y_x", ...], inputs = ["F"] (see below)
     x0 = [0.5, 0, 1.8, 0.5]
     P0 = 1.0
     Q = 0.2
@@ -76,6 +76,7 @@ import inspect
 from collections.abc import Callable
 from pathlib import Path
 
+from estimators.fmu_model import FMUProcessModel
 from fmu_models import get_model
 from fmu_models.errors import ConfigurationError, PendulumCosimError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import finite
@@ -168,6 +169,20 @@ class ScenarioContext:
             raise ConfigurationError(f"{where} needs the key{'s' if len(missing) > 1 else ''} "
                                      f"{', '.join(map(repr, missing))}")
         return dict(table)
+
+    def fmu_process_model(self, path, period: float, table: dict, where: str):
+        """The process model of the Model Exchange FMU at ``path`` (relative to the scenario
+        file) with the sample period ``period`` [s] (:class:`estimators.FMUProcessModel`), from
+        the keys of ``table`` it takes out: ``measurements`` (required: FMU outputs or states),
+        ``inputs``, ``model_parameters`` (the FMU's parameters by name), ``method`` (default
+        ``"rk4"``), ``substeps``, ``jacobian``, ``tolerance``; ``where`` names the component
+        in messages."""
+        if "measurements" not in table:
+            raise ConfigurationError(f"{where}: a model from an FMU needs the key 'measurements' (the FMU outputs or "
+                                     "states the filter measures)")
+        keys = {k: table.pop(k) for k in ("inputs", "method", "substeps", "jacobian", "tolerance") if k in table}
+        return FMUProcessModel(self.path(path, f"{where}: model"), period, table.pop("measurements"),
+                               parameters=table.pop("model_parameters", None), **keys)
 
     def construct_with_model(self, cls: type, name: str, table: dict) -> Component:
         """:meth:`construct` with the table's ``model`` (a registered model's name) and

@@ -5,7 +5,9 @@ Every filter has the interface of :class:`~estimators.base.KalmanBase`:
 code) and the attributes ``x, P, Q, R, innovation, S, K, nis``. Offline:
 :func:`rts_smooth` (RTS smoothing of a run) and :func:`em_noise` (EM learning of Q, R).
 A new filter implements the hooks of :mod:`estimators.protocol` in one file and registers
-itself by name (:data:`FILTERS`).
+itself by name (:data:`FILTERS`). Every filter runs on a process model: a
+:class:`DiscreteModel` of a plant (:func:`discretize`) or of a Model Exchange FMU
+(:class:`FMUProcessModel`), through the protocol of :mod:`estimators.discrete`.
 
 >>> from fmu_models import get_model
 >>> from estimators import EKF, discretize
@@ -21,6 +23,7 @@ from .discrete import DiscreteModel, augment_rate_bias, discretize, linear_model
 from .ekf import EKF
 from .em import em_noise
 from .filter_fmu import export_filter_fmu
+from .fmu_model import FMUProcessModel
 from .fuzzy import MamdaniFuzzy
 from .iae import IAE
 from .kf import KF
@@ -33,10 +36,10 @@ from .swml import SWML
 from .ukf import UKF
 
 __all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "PCRB", "SWML", "UKF", "BandTest", "BatchFilter", "BatchRun",
-           "DiscreteModel", "EMResult", "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter", "Smoothed",
-           "StepContext", "StepResult", "Update", "WhitenessTest", "__version__", "augment_rate_bias", "chi2_band",
-           "discretize", "em_noise", "export_fmu", "linear_model", "nees_test", "nis_test", "posterior_crb",
-           "rmse_ratio", "rts_smooth", "whiteness_test"]
+           "DiscreteModel", "EMResult", "FMUProcessModel", "FilterRun", "KalmanBase", "MamdaniFuzzy", "Parameter",
+           "Smoothed", "StepContext", "StepResult", "Update", "WhitenessTest", "__version__", "augment_rate_bias",
+           "chi2_band", "discretize", "em_noise", "export_fmu", "linear_model", "nees_test", "nis_test",
+           "posterior_crb", "rmse_ratio", "rts_smooth", "whiteness_test"]
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None, clocked: bool = False):

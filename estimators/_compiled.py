@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import sys
 import warnings
 from pathlib import Path
 
@@ -29,7 +30,10 @@ BACKENDS = ("compiled", "vm")
 # libm calls (25 % faster fuzzy inference). C99 if gnu89 is refused. -march=native: the
 # libraries are built for the machine that runs them (10 % faster); the CPU's identity is
 # part of the cache key, so a cache shared between different CPUs never mixes them.
-_FLAGS = ("-O3", "-march=native", "-shared", "-fPIC")
+# A step on an FMU's process model calls that model's library (loaded with its symbols global
+# before the step's): macOS links a shared library with undefined symbols only when told.
+_FLAGS = ("-O3", "-march=native", "-shared", "-fPIC") + (("-Wl,-undefined,dynamic_lookup",)
+                                                         if sys.platform == "darwin" else ())
 _STDS = ("-std=gnu89", "-std=gnu99")
 _VM = "running filters in CasADi's virtual machine (same numbers, slower)"
 

@@ -36,7 +36,7 @@ from fmu_models.infra.registry import Registry
 from ._compiled import compile_functions
 from ._fold import NativeFold, compile_with_fold
 from .discrete import DiscreteModel, checked_model
-from .linalg import CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
+from .linalg import BAD_RESULT, CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
 from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
 from .runs import FilterRun, NoiseHistory
 from .runtime import BoundStep, BufferedFunction, VectorInput, explain_status, lean_step, matrix
@@ -227,8 +227,7 @@ class KalmanBase:
     def smoother_cross_covariance(self, x: ca.SX, P: ca.SX, u: ca.SX) -> ca.SX:
         """The RTS smoother's ``D_k = Cov(x_k, x_{k+1} | y_1..k)`` at the filtered ``(x, P)``
         and input ``u`` (SX): ``P F^T`` with the model's exact Jacobian (EKF-type filters)."""
-        s = self.system
-        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x, u))
+        _, F = self.system.transition(x, u)
         return ca.mtimes(P, F.T)
 
     def fmu_noise_parameters(self) -> list[Parameter]:
@@ -411,7 +410,11 @@ class KalmanBase:
 
     # ================================================================ stepping
     def _explain(self, what: str) -> None:
-        """Raise the error of a failed step (the state is unchanged)."""
+        """Raise the error of a failed step (the state is unchanged): a non-finite result that
+        compiled code of the model caused (an FMU's failure) is its error."""
+        failure = self.system.take_failure()
+        if failure is not None and self._rt.status[0] == BAD_RESULT:
+            raise type(failure)(f"{self.name}: {failure}, at step {self.k} ({what}); filter state unchanged")
         explain_status(self._rt.status[0], self.name, self.k, self._u, self._y, self._mask, self.nan_is_missing,
                        what)
 
@@ -716,7 +719,7 @@ class KalmanBase:
             K=mats("K", nx, ny) if kept else None, nis=nis,
             accepted=acc, mask=used & acc[:, None], us=us, Q=Qd, R=Rd, log_likelihood=loglik,
             state_names=list(s.state_names), output_names=list(s.output_names), filter_name=self.name,
-            model=s.identity)
+            model=s.identity, jacobians=s.jacobians)
 
     @property
     def _initial_for_run(self) -> dict:

@@ -163,6 +163,7 @@ class BatchFilter:
         rt = self._rt
         rt.trigger()
         status = rt.status
+        failure = self.template.system.take_failure() if status.any() else None
         if status.any() and self.on_failure == "mark":
             bad = status != 0
             for pair in rt.pairs.values():     # failed runs keep their previous state
@@ -171,7 +172,7 @@ class BatchFilter:
             self.failed |= bad
         elif status.any():
             run = int(np.flatnonzero(status)[0])
-            self._refuse(status[run], run, f"step {self.k}")
+            self._refuse(status[run], run, f"step {self.k}", failure)
         rt.commit()
         self.k += 1
         return self.x
@@ -202,9 +203,10 @@ class BatchFilter:
         outs, _, last = t.fold_record(state, us, ys, masks, {k: v.reshape(R, -1) for k, v in self._params.items()})
         status = outs["status"][:, :, 0]
         bad = status != 0
+        failure = t.system.take_failure() if bad.any() else None
         if bad.any() and self.on_failure == "raise":
             run, k = map(int, np.argwhere(bad)[0])
-            self._refuse(status[run, k], run, f"index {k}")
+            self._refuse(status[run, k], run, f"index {k}", failure)
         self.failed |= bad.any(axis=1)
 
         def diag(name, n, fixed):
@@ -217,7 +219,7 @@ class BatchFilter:
             nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
             failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
-            innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny))
+            innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny), jacobians=t.system.jacobians)
         for name, value in last.items():
             self._rt.now(name)[:] = value.ravel()
         self.k += N
@@ -236,10 +238,13 @@ class BatchFilter:
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         return us, ys, masks
 
-    def _refuse(self, status: float, run: int, where: str) -> None:
+    def _refuse(self, status: float, run: int, where: str, failure: Exception | None) -> None:
         """Raise the error of realisation ``run`` whose step ``where`` (``"step 3"``) ended with
-        ``status``."""
+        ``status`` (``failure``: the model's, which made a result non-finite, or None)."""
         bad_input = status == BAD_INPUT
+        if failure is not None and not bad_input:
+            raise type(failure)(f"batched {self.template.name}: realisation {run} at {where}: {failure}; state "
+                                "unchanged")
         what = "u or y contains NaN or inf" if bad_input else "the estimate became non-finite"
         raise (InputError if bad_input else NumericalError)(
             f"batched {self.template.name}: {what} in realisation {run} at {where}; state unchanged")

@@ -2,7 +2,26 @@
 
 A :class:`DiscreteModel` is ``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` with every model
 parameter replaced by its value, so that a filter can fuse prediction, Jacobians and
-update into one CasADi Function. Build one from a plant with :func:`discretize`.
+update into one CasADi Function. Build one from a plant with :func:`discretize`, or from a
+Model Exchange FMU with :class:`~estimators.FMUProcessModel`.
+
+The process-model protocol (what every filter, the smoother, EM and the PCRB use of a model;
+:class:`DiscreteModel` implements it from CasADi expressions, :class:`~estimators.FMUProcessModel`
+from an FMU):
+
+* the sizes and names ``nx``, ``nu``, ``ny``, ``state_names``, ``input_names``,
+  ``output_names``, the period ``dt``, ``description`` and :attr:`~DiscreteModel.identity`;
+* the symbols ``x``, ``u`` and the expressions ``fx``, ``hx`` in them (SX; they may call
+  compiled code, as the FMU's model does);
+* :meth:`~DiscreteModel.transition` and :meth:`~DiscreteModel.measurement`: the map and the
+  measurement with their Jacobians at given symbols, what the filters' steps are built from;
+* the numerical :meth:`~DiscreteModel.f`, :meth:`~DiscreteModel.h`, :meth:`~DiscreteModel.F`,
+  :meth:`~DiscreteModel.G`, :meth:`~DiscreteModel.H` and :meth:`~DiscreteModel.linearized`;
+* :meth:`~DiscreteModel.compiled`, the cache of the compiled code built on it;
+* :attr:`~DiscreteModel.jacobians` (how the Jacobians are computed, for the results'
+  metadata), :meth:`~DiscreteModel.describe`, :attr:`~DiscreteModel.exportable` (its filters
+  can become FMUs) and :meth:`~DiscreteModel.take_failure` (the error of compiled code the
+  expressions call, which made a result non-finite).
 """
 from __future__ import annotations
 
@@ -34,6 +53,11 @@ class DiscreteModel:
     ----------
     nx, nu, ny : int
     """
+
+    #: How the Jacobians are computed (in the results' metadata).
+    jacobians = "exact: CasADi's automatic differentiation of the model's expressions"
+    #: A filter on this model can be exported as an FMU (its step is self-contained C code).
+    exportable = True
 
     def __init__(self, x: ca.SX, u: ca.SX, f: ca.SX, h: ca.SX, dt: float,
                  state_names: Sequence[str], input_names: Sequence[str],
@@ -77,6 +101,39 @@ class DiscreteModel:
         if k not in self._compiled:
             self._compiled[k] = build()
         return self._compiled[k]
+
+    def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """``(f(x, u), F)`` with ``F = df/dx`` exact, at the symbols ``x`` (nx, 1) and ``u``
+        (nu, 1): what the filters' steps are built from.
+
+        Parameters
+        ----------
+        x : casadi.SX, shape (nx, 1)
+        u : casadi.SX, shape (nu, 1)
+        """
+        xu, sym = ca.vertcat(x, u), ca.vertcat(self.x, self.u)
+        return ca.substitute(self.fx, sym, xu), ca.substitute(ca.jacobian(self.fx, self.x), sym, xu)
+
+    def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """``(h(x), H)`` with ``H = dh/dx`` exact, at the symbol ``x`` (nx, 1).
+
+        Parameters
+        ----------
+        x : casadi.SX, shape (nx, 1)
+        """
+        return ca.substitute(self.hx, self.x, x), ca.substitute(ca.jacobian(self.hx, self.x), self.x, x)
+
+    def take_failure(self) -> Exception | None:
+        """The first failure of compiled code the expressions call since the last call, as the
+        error to raise (taking it clears it), or None: always None for CasADi expressions."""
+        return None
+
+    def describe(self) -> str:
+        """What the model is and how its Jacobians are computed, in a few lines."""
+        return "\n".join([self.description or "DiscreteModel", f"state ({self.nx}): {', '.join(self.state_names)}",
+                          f"inputs ({self.nu}): {', '.join(self.input_names) or 'none'}",
+                          f"measurements ({self.ny}): {', '.join(self.output_names)}", f"period {self.dt:g} s",
+                          f"Jacobians: {self.jacobians}"])
 
     def __repr__(self):
         return (f"DiscreteModel({self.description!r}, dt={self.dt}, states={self.state_names}, "
@@ -129,8 +186,8 @@ def checked_model(system) -> DiscreteModel:
         What was given as the model.
     """
     if not isinstance(system, DiscreteModel):
-        raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize), got "
-                                f"{type(system).__name__}")
+        raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize, or "
+                                f"estimators.FMUProcessModel from an FMU), got {type(system).__name__}")
     return system
 
 

@@ -13,35 +13,23 @@ __all__ = ["EKF"]
 class EKF(KalmanBase, register="EKF"):
     """Extended Kalman filter.
 
-    Prediction ``x^- = f(x, u)``, ``P^- = F P F^T + Q`` with ``F = df/dx`` exact (CasADi
-    AD); update with ``H = dh/dx`` at ``x^-`` over the valid measurement channels, gain by
-    a linear solve and the Joseph form. Parameters ``system, x0, P0, Q, R, gate,
-    nan_is_missing, backend`` and the attributes are those of
-    :class:`~estimators.base.KalmanBase`.
+    Prediction ``x^- = f(x, u)``, ``P^- = F P F^T + Q`` with ``F = df/dx`` exact (the
+    model's :meth:`~estimators.DiscreteModel.transition`); update with ``H = dh/dx`` at
+    ``x^-`` over the valid measurement channels, gain by a linear solve and the Joseph form.
+    Parameters ``system, x0, P0, Q, R, gate, nan_is_missing, backend`` and the attributes
+    are those of :class:`~estimators.base.KalmanBase`.
     """
 
     name = "EKF"
 
-    def transition(self, x, u) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)`` with ``F = df/dx`` at ``(x, u)`` (exact, CasADi AD)."""
-        s = self.system
-        xu = ca.vertcat(x, u)
-        return (ca.substitute(s.fx, ca.vertcat(s.x, s.u), xu),
-                ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), xu))
-
-    def measurement(self, x) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)`` with ``H = dh/dx`` at ``x``."""
-        s = self.system
-        return ca.substitute(s.hx, s.x, x), ca.substitute(ca.jacobian(s.hx, s.x), s.x, x)
-
     def predict_expr(self, ctx: StepContext):
         """``x^- = f(x, u)``, ``P^- = F P F^T + Q`` (seed 002 eqs 10-11)."""
-        xp, F = self.transition(ctx.x, ctx.u)
+        xp, F = self.system.transition(ctx.x, ctx.u)
         return xp, symmetric(ca.mtimes([F, ctx.P, F.T]) + ctx.Q)
 
     def update_expr(self, ctx: StepContext, x_prior, P_prior) -> Update:
         """Gain, Joseph-form update of the valid channels (seed 002 eqs 12-16)."""
-        yp, H = self.measurement(x_prior)
+        yp, H = self.system.measurement(x_prior)
         S, innov, M = mask_measurement(ctx.valid, ca.mtimes([H, P_prior, H.T]) + ctx.R, ctx.y - yp)
         Hm, Rm = ca.mtimes(M, H), ca.mtimes([M, ctx.R, M])
         xu, Pu, K, nis, acc = joseph_update(x_prior, P_prior, innov, Hm, S, Rm, ctx.gate)

@@ -61,16 +61,15 @@ def _terms(filt: KalmanBase):
         n, p = s.nx, s.ny
         x0, x1, u = ca.SX.sym("xs", n), ca.SX.sym("xs1", n), ca.SX.sym("u", s.nu)
         P0, P1, L = ca.SX.sym("Ps", n, n), ca.SX.sym("Ps1", n, n), ca.SX.sym("Plag", n, n)
-        f = ca.substitute(s.fx, ca.vertcat(s.x, s.u), ca.vertcat(x0, u))
-        F = ca.substitute(ca.jacobian(s.fx, s.x), ca.vertcat(s.x, s.u), ca.vertcat(x0, u))
+        f, F = s.transition(x0, u)
         e = x1 - f
         FL = ca.mtimes(F, L.T)
         q_term = ca.mtimes(e, e.T) + ca.mtimes([F, P0, F.T]) + P1 - FL.T - FL
         trans = ca.Function("emq", [x0, x1, P0, P1, L, u], [ca.densify(q_term)],
                             ["xs", "xs1", "Ps", "Ps1", "Plag", "u"], ["q"])
         y, m = ca.SX.sym("y", p), ca.SX.sym("mask", p)
-        r = m * (y - ca.substitute(s.hx, s.x, x0))
-        H = ca.substitute(ca.jacobian(s.hx, s.x), s.x, x0)
+        hx, H = s.measurement(x0)
+        r = m * (y - hx)
         M = ca.mtimes(m, m.T)
         r_term = M * (ca.mtimes(r, r.T) + ca.mtimes([H, P0, H.T]))
         meas = ca.Function("emr", [x0, P0, y, m], [ca.densify(r_term), ca.densify(M)],

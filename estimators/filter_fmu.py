@@ -98,6 +98,20 @@ def filter_parameters(filt) -> dict[str, float]:
     return {r[0]: r[1] for r in _flat_parameters(filt)}
 
 
+def _check_exportable(filt) -> None:
+    """Refuse what cannot become a filter FMU: not a filter (TypeMismatchError), a filter
+    whose adaptation is not all in its step (TypeMismatchError), a model whose map calls
+    compiled code outside the filter, an FMU's (ConfigurationError)."""
+    if not _is_filter(filt):
+        raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
+    if not filt.supports_batch:
+        raise TypeMismatchError(f"{filt.name} adapts part of its state in numpy and cannot be exported"
+                                + ("; use form='diagonal' or 'scalar'" if hasattr(filt, "form") else ""))
+    if not filt.system.exportable:
+        raise ConfigurationError(f"{filt.name} runs on {filt.system!r}, whose map calls compiled code outside the "
+                                 "filter (an FMU's): its step cannot be packed into an FMU of its own")
+
+
 def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None = None,
                       file_name: str | None = None, clocked: bool = False) -> Path:
     """Export ``filt`` (any filter of :mod:`estimators`, on any model) as a Co-Simulation FMU;
@@ -124,15 +138,12 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
         Not a filter, or a filter whose adaptation is not all in its step (an IAE with
         ``form="full"``).
     ConfigurationError
-        A non-diagonal P, Q or R, a bad name, or parameters the FMU cannot hold;
+        A non-diagonal P, Q or R, a bad name, parameters the FMU cannot hold, or a model
+        whose map calls compiled code outside the filter (an FMU's process model);
         ``clocked=True`` with ``fmi_version=2`` (FMI 2.0 has no clocks).
     """
     check_clocked(clocked, fmi_version, "the filter FMU")
-    if not _is_filter(filt):
-        raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
-    if not filt.supports_batch:
-        raise TypeMismatchError(f"{filt.name} adapts part of its state in numpy and cannot be exported"
-                                + ("; use form='diagonal' or 'scalar'" if hasattr(filt, "form") else ""))
+    _check_exportable(filt)
     s = filt.system
     model = s.description.split(" ")[0].capitalize() or "Model"
     name = name or "".join(ch for ch in f"{filt.name.replace('-', '')}{model}" if ch.isalnum())

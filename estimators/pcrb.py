@@ -76,12 +76,15 @@ class PCRB:
         The model's state names.
     known_initial_state : bool
         True if the bound assumed ``x_0`` known exactly (``P[0] = 0``).
+    jacobians : str
+        How the model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
     """
 
     P: np.ndarray
     runs: int
     state_names: list = field(default_factory=list)
     known_initial_state: bool = False
+    jacobians: str = ""
 
     @property
     def mse(self) -> np.ndarray:
@@ -181,14 +184,14 @@ class _Jacobians:
         """``F`` at (``xs``, ``us``) and ``H`` at ``xn``: ``m`` points (..., nx), (..., nu),
         (..., nx) -> (m, nx, nx), (m, ny, nx)."""
         nx, ny, b = self.nx, self.ny, JACOBIAN_BLOCK
-        pts = [np.ascontiguousarray(a).reshape(-1, a.shape[-1]) for a in (xs, us, xn)]
-        m = len(pts[0])
+        m = int(np.prod(np.shape(xs)[:-1]))
+        pts = [np.ascontiguousarray(a).reshape(m, a.shape[-1]) for a in (xs, us, xn)]   # nu may be 0
         F, H = np.empty((m, nx, nx)), np.empty((m, ny, nx))
         args, res = self.fn.args, self.fn.res
         for i0 in range(0, m, b):
             i1 = min(i0 + b, m)
             for a, p in zip(args, pts):
-                blk = a.reshape(b, -1)              # point-major = CasADi's column-major (dim, b)
+                blk = a.reshape(b, a.size // b)     # point-major = CasADi's column-major (dim, b)
                 blk[:i1 - i0] = p[i0:i1]
                 blk[i1 - i0:] = p[i1 - 1]           # pad the last block with a valid point
             self.fn.trigger()
@@ -309,7 +312,7 @@ class _Recursion:
         for k0 in range(0, N, self.chunk):
             n = min(self.chunk, N - k0)
             self._steps(k0, *self._information(k0, n))
-        return PCRB(self.B, self.X.shape[0], list(self.system.state_names), self.P0 is None)
+        return PCRB(self.B, self.X.shape[0], list(self.system.state_names), self.P0 is None, self.system.jacobians)
 
     def _information(self, k0: int, n: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """For the ``n`` steps from ``k0``: the mean Jacobian ``F_bar`` (n, nx, nx), the roots
@@ -320,7 +323,10 @@ class _Recursion:
         F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
         if not (np.isfinite(F).all() and np.isfinite(H).all()):
             r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])
-            raise NumericalError(f"PCRB: a Jacobian of the model is not finite along realisation {r} at step {k0 + k}")
+            failure = self.system.take_failure()
+            raise (NumericalError if failure is None else type(failure))(
+                f"PCRB: a Jacobian of the model is not finite along realisation {r} at step {k0 + k}"
+                + ("" if failure is None else f": {failure}"))
         Fbar = F.mean(axis=0)                                                    # (n, nx, nx)
         # D = Lq^-1 (F - F_bar): V = E[D^T D], the spread of the Jacobians over the realisations
         D = scipy.linalg.solve_triangular(self.Lq, (F - Fbar).transpose(2, 0, 1, 3).reshape(nx, -1), lower=True)

@@ -53,6 +53,8 @@ class FilterRun:
         The filter that produced the run (its ``name``).
     model : str
         The :attr:`~estimators.DiscreteModel.identity` of the model it ran on.
+    jacobians : str
+        How that model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
     """
 
     x: np.ndarray
@@ -73,6 +75,7 @@ class FilterRun:
     output_names: list = field(default_factory=list)
     filter_name: str = ""
     model: str = ""
+    jacobians: str = ""
 
     def __len__(self) -> int:
         """Number of steps ``N``."""
@@ -114,6 +117,8 @@ class BatchRun:
         Innovations (0 in missing channels), for whiteness tests.
     S : ndarray, shape (R, N, ny, ny), or None
         Their predicted covariances (1 on the diagonal of missing channels).
+    jacobians : str
+        How the model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
     """
 
     x: np.ndarray
@@ -127,6 +132,7 @@ class BatchRun:
     output_names: list = field(default_factory=list)
     innovation: np.ndarray | None = None
     S: np.ndarray | None = None
+    jacobians: str = ""
 
 
 @dataclass

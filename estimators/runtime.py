@@ -221,7 +221,10 @@ _SCALARS = frozenset({float, np.float64})
 
 def _unpack(name: str, entries: list[str]) -> list[str]:
     """Lines of the lean step unpacking ``name`` into ``entries``; a one-element input also
-    takes a bare float (``ekf.step(U[k], Y[k])`` with a 1-D ``U``) at the cost of a list."""
+    takes a bare float (``ekf.step(U[k], Y[k])`` with a 1-D ``U``) at the cost of a list; a
+    model without inputs takes an empty sequence."""
+    if not entries:
+        return [f"        if len({name}):", "            raise ValueError"]
     if len(entries) == 1:
         return [f"        if {name}.__class__ in SCALARS:",
                 f"            {entries[0]} = {name}",

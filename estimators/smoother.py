@@ -110,6 +110,9 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
                 "Plag": lag[::-1][None]}
         _fold(filt)(1, N, args, {"xs": xs[N][None], "Ps": Ps[N][None]}, outs)
     if not (np.isfinite(xs).all() and np.isfinite(Ps).all()):
+        failure = filt.system.take_failure()
+        if failure is not None:
+            raise type(failure)(f"{filt.name}: the smoothed estimate became non-finite: {failure}")
         raise NumericalError(f"{filt.name}: the smoothed estimate became non-finite (singular predicted "
                              "covariance?)")
 

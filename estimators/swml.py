@@ -251,7 +251,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         n, n_snap = s.nx, W // M
 
         def push(flat, rows, value):
-            ring = ca.reshape(flat, rows, -1)
+            ring = ca.reshape(flat, rows, flat.numel() // rows if rows else W)     # a model may have no input
             return ca.horzcat(ring[:, 1:], value) if ring.shape[1] > 1 else value
 
         st, count = ctx.state, ctx.state["count"]
@@ -292,9 +292,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             parts.append(ca.reshape(c[o:o + size], *shape))
             o += size
         G, Nc, L, (e1, e2, f1, f2, sums) = parts[0:3], parts[3:6], parts[6:9], parts[9:]
-        _, F = self.transition(st.x, st.u)
+        _, F = self.system.transition(st.x, st.u)
         upd = st.upd
-        _, H = self.measurement(st.xp)
+        _, H = self.system.measurement(st.xp)
         _, _, Mv = mask_measurement(st.v, ca.SX.eye(p), ca.SX.zeros(p))
         Hm, Ka = ca.mtimes(Mv, H), upd.accepted * upd.K
         e = upd.innovation

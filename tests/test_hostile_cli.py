@@ -17,6 +17,7 @@ import time
 import zipfile
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from testkit.processes import processes_mentioning
 
@@ -401,3 +402,97 @@ def test_an_interrupted_build_leaves_nothing_behind(tmp_path, sig):
 def test_the_corpus_is_large():
     n = len(OUT_TRIES) + len(SCENARIO_TRIES) + len(SET_TRIES) + len(SSP_TRIES)
     assert n >= 80
+
+
+# ------------------------------------------------------------------ an FMU or an SSP as the run
+@pytest.fixture(scope="module")
+def plant_fmu(tmp_path_factory):
+    from fmu_models import build_fmu
+
+    return build_fmu("cartpole", tmp_path_factory.mktemp("plant"))
+
+
+FILE_RUN_TRIES = [
+    ("not-a-zip", lambda d, f: (d / "m.fmu").write_bytes(b"\x00garbage") and [d / "m.fmu"],
+     "m.fmu is not an FMU: not a zip archive"),
+    ("empty-zip", lambda d, f: _zip(d / "m.fmu", {}) and [d / "m.fmu"], "neither a modelDescription.xml"),
+    ("bad-description", lambda d, f: _zip(d / "m.fmu", {"modelDescription.xml": b"<fmi"}) and [d / "m.fmu"],
+     "m.fmu"),
+    ("no-binary", lambda d, f: _zip(d / "m.fmu", {"modelDescription.xml": _member(f, "modelDescription.xml")})
+     and [d / "m.fmu"], "m.fmu"),
+    ("unknown-start", lambda d, f: [f, "--start", "nope=1"], "has no variable 'nope'"),
+    ("start-not-a-number", lambda d, f: [f, "--start", "mc=heavy"], "is not a number, true/false or a list"),
+    ("start-out-of-range", lambda d, f: [f, "--start", "mc=-1", "--stop-time", "0.1"], "mc"),
+    ("stop-before-start", lambda d, f: [f, "--start-time", "2", "--stop-time", "1"], "must be after start_time"),
+    ("step-not-a-multiple", lambda d, f: [f, "--stop-time", "1", "--step-size", "0.3"], "whole number of base steps"),
+    ("step-zero", lambda d, f: [f, "--step-size", "0"], "--step-size must be > 0"),
+    ("stop-inf", lambda d, f: [f, "--stop-time", "inf"], "--stop-time must be finite"),
+    ("unknown-output", lambda d, f: [f, "--outputs", "nope"], "'nope' is not an FMU output"),
+    ("input-missing", lambda d, f: [f, "--input", d / "none.csv"], "cannot read the table"),
+    ("input-binary", lambda d, f: (d / "u.csv").write_bytes(b"\xff\xfe\x00\x01") and [f, "--input", d / "u.csv"],
+     "input"),
+    ("input-no-time", lambda d, f: (d / "u.csv").write_text("F\n1\n") and [f, "--input", d / "u.csv"],
+     "needs a 'time' column"),
+    ("input-unknown-column", lambda d, f: (d / "u.csv").write_text("time,G\n0,1\n") and [f, "--input", d / "u.csv"],
+     "input column 'G' is not an input of the FMU"),
+    ("input-nan", lambda d, f: (d / "u.csv").write_text("time,F\n0,nan\n") and [f, "--input", d / "u.csv"],
+     "NaN or inf"),
+    ("input-backwards", lambda d, f: (d / "u.csv").write_text("time,F\n1,0\n0,1\n") and [f, "--input", d / "u.csv"],
+     "non-decreasing"),
+    ("interface-missing", lambda d, f: [f, "--interface", "se"], "no Scheduled Execution interface"),
+    ("stream", lambda d, f: [f, "--stream"], "--stream: an FMU run records in memory"),
+    ("ssp-folder-empty", lambda d, f: (d / "s").mkdir() or [d / "s"], "is a folder, not a scenario file"),
+    ("ssp-input-option", lambda d, f: _zip(d / "s.ssp", {"SystemStructure.ssd": b"<x/>"}) and
+     [d / "s.ssp", "--input", "u.csv"], "--input: for an FMU run, not an SSP"),
+    ("ssd-garbage", lambda d, f: (d / "s.ssd").write_text("<oops") and [d / "s.ssd"], "not valid XML"),
+    ("scenario-with-fmu-options", lambda d, f: ["seed000_cartpole", "--start", "x=1"], "--start: for an FMU or SSP"),
+]
+
+
+def _zip(path: Path, members: dict) -> bool:
+    with zipfile.ZipFile(path, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return True
+
+
+def _member(fmu: Path, name: str) -> bytes:
+    with zipfile.ZipFile(fmu) as z:
+        return z.read(name)
+
+
+@pytest.mark.parametrize("label, make, words", FILE_RUN_TRIES, ids=[t[0] for t in FILE_RUN_TRIES])
+def test_hostile_fmu_and_ssp_runs_are_named_errors(capsys, tmp_path, plant_fmu, label, make, words):
+    """Each try: one line naming the problem, exit 2, no traceback, no --out folder left."""
+    args = make(tmp_path, plant_fmu)
+    before = set(Path(tempfile.gettempdir()).glob("pendulum_cosim_*"))
+    try:
+        status, err = run_cli(capsys, "run", *args, "--out", tmp_path / "out", "--no-progress")
+    except SystemExit as e:                   # refused by the argument parser: its usage and one error line
+        status, err = e.code, capsys.readouterr().err
+    assert status == 2 and words in err and "Traceback" not in err, err
+    assert not (tmp_path / "out").exists()
+    assert set(Path(tempfile.gettempdir()).glob("pendulum_cosim_*")) == before
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process checks use /proc")
+def test_an_interrupted_fmu_run_keeps_its_rows_and_leaves_nothing_behind(tmp_path, plant_fmu):
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    out = tmp_path / "out"
+    (tmp_path / "u.csv").write_text("time,F\n0,0\n1,1\n")          # a Python input: about 3 us a step
+    proc = subprocess.Popen([*CLI, "run", str(plant_fmu), "--stop-time", "1e4", "--input", str(tmp_path / "u.csv"),
+                             "--outputs", "x", "--out", str(out), "--no-progress"],
+                            env={**os.environ, "TMPDIR": str(tmp)}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    t0 = time.monotonic()
+    while not list(tmp.glob("pendulum_cosim_fmu_*")) and proc.poll() is None and time.monotonic() - t0 < 60:
+        time.sleep(0.01)
+    time.sleep(0.5)                                  # into the run
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "interrupted at t = " in err
+    partial = pd.read_csv(out / "results.partial.csv", index_col="time")
+    assert len(partial) > 1 and list(partial.columns) == ["x"]
+    assert list(tmp.iterdir()) == []

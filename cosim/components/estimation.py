@@ -75,8 +75,10 @@ class EstimatorComponent(Component, kind="estimator"):
     @classmethod
     def from_scenario(cls, name, table, context):
         """The keys ``filter`` (a registered filter, :data:`estimators.FILTERS`), ``model``
-        (with ``model_parameters``), ``period``, optional ``method`` and ``substeps`` of the
-        discretisation, ``bias_on`` (augment the state with the offset of this output),
+        (a registered model, with ``model_parameters``, optional ``method`` and ``substeps``
+        of the discretisation; or the path of a Model Exchange FMU, ``model =
+        "plant.fmu"``, with the keys of :meth:`~cosim.scenario.ScenarioContext.fmu_process_model`),
+        ``period``, ``bias_on`` (augment the state with the offset of this output),
         ``covariance``; every other key is an argument of the filter's constructor, checked
         against its signature."""
         import estimators
@@ -86,9 +88,13 @@ class EstimatorComponent(Component, kind="estimator"):
             if key not in t:
                 raise ConfigurationError(f"component {name!r} (estimator) needs the key {key!r}")
         filt = estimators.FILTERS.get(t.pop("filter"))
-        model = context.model(t.pop("model"), t.pop("model_parameters", None))
         period = positive(t.pop("period"), f"component {name!r}: period [s]")
-        system = estimators.discretize(model, period, t.pop("method", "euler"), t.pop("substeps", 1))
+        model = t.pop("model")
+        if isinstance(model, str) and model.lower().endswith(".fmu"):
+            system = context.fmu_process_model(model, period, t, f"component {name!r} (estimator)")
+        else:
+            model = context.model(model, t.pop("model_parameters", None))
+            system = estimators.discretize(model, period, t.pop("method", "euler"), t.pop("substeps", 1))
         bias = t.pop("bias_on", None)
         if bias is not None:
             system = estimators.augment_rate_bias(system, bias)

@@ -29,7 +29,7 @@ from multiprocessing import resource_tracker
 
 import numpy as np
 
-from fmu_models.errors import Interrupted, UnknownNameError
+from fmu_models.errors import ConfigurationError, Interrupted, UnknownNameError
 
 __all__ = ["BACKENDS", "realisation_seeds", "run_tasks"]
 
@@ -99,8 +99,10 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
         Module-level functions (picklable) and their keyword arguments.
     backend : {"processes", "serial", "dask"}
         Local worker processes (``n_jobs``, default: the machine's cores), one process,
-        or a dask.distributed cluster (the current client, or a local one; needs the
-        ``dask`` extra).
+        or a dask.distributed cluster (the scheduler that dask's configuration names as
+        ``scheduler-address``, else the current client, else a local one; needs the
+        ``dask`` extra). The tasks share no file with the caller: a cluster's workers need
+        no folder in common with it.
     n_jobs : int, optional
         Worker processes for ``"processes"`` and a local dask cluster.
     progress : bool
@@ -155,19 +157,36 @@ def _run_processes(tasks, results, n_jobs, bar) -> None:
             pool.join()
 
 
+def _dask_client(client_type, get_client, n_jobs):
+    """``(client, own)``: a client of the scheduler that dask's configuration names
+    (``scheduler-address``: ``DASK_SCHEDULER_ADDRESS``, a dask config file, or ``--scheduler``
+    on the command line), else the current client, else a new local cluster (``own``: close
+    the client after the campaign; a cluster started apart from it is left running)."""
+    import dask
+
+    address = dask.config.get("scheduler-address", None)
+    if address:
+        try:
+            with _quiet("distributed"):
+                return client_type(address, timeout="20s"), True
+        except (OSError, TimeoutError, ValueError) as e:
+            raise ConfigurationError(f"cannot reach the dask scheduler at {address!r}: {e}") from None
+    try:
+        return get_client(), False
+    except ValueError:
+        with _quiet("distributed"):
+            # silence_logs: the workers' own loggers (a cancelled task is a WARNING there)
+            return client_type(processes=True, n_workers=n_jobs, dashboard_address=None,
+                               silence_logs=logging.ERROR), True
+
+
 def _run_dask(tasks, results, n_jobs, bar) -> None:
     try:
         from dask.distributed import Client, get_client
         from dask.distributed import as_completed as dask_completed
     except ImportError:
         raise ImportError("the dask backend needs dask.distributed: pip install 'pendulum-cosim[dask]'") from None
-    try:
-        client, own = get_client(), False
-    except ValueError:
-        with _quiet("distributed"):
-            # silence_logs: the workers' own loggers (a cancelled task is a WARNING there)
-            client, own = Client(processes=True, n_workers=n_jobs, dashboard_address=None,
-                                 silence_logs=logging.ERROR), True
+    client, own = _dask_client(Client, get_client, n_jobs)
     futures = [client.submit(fn, **kw, pure=False) for fn, kw in tasks]
     index = {f.key: i for i, f in enumerate(futures)}
     try:

@@ -9,9 +9,10 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import NamedTuple
 
+import casadi as ca
 import numpy as np
 
-from estimators import BatchFilter
+from estimators import BatchFilter, DiscreteModel
 from fmu_models import build_fmu
 from fmu_models.errors import Interrupted
 from fmu_models.infra.files import atomic_write
@@ -80,13 +81,15 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
                    substeps=1):
     """Truth ``X`` (runs, N+1, nx) and measurements ``Y`` (runs, N+1, ny) for inputs ``us``
     (N+1, nu), drawing exactly the numbers the ProcessNoise and Sensor components draw in
-    the master path (same seeds, same order). ``Y`` uses the model's measurement if
-    ``measured`` equals its measured states, else it picks the named states.
+    the master path (same seeds, same order). ``Y`` picks the named states; for a process
+    model whose outputs ``measured`` names, its measurement.
 
     Parameters
     ----------
     model, T, q, measured, r_std
-        As :func:`noise_components`.
+        As :func:`noise_components`; ``model`` a plant model, or a process model
+        (:class:`~estimators.DiscreteModel`, an FMU's too: its own map and period, ``method``
+        and ``substeps`` unused).
     x0
         Initial state.
     us
@@ -104,12 +107,16 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
                   for sw, _ in seeds])
     V = np.stack([sensor.noise_std * np.random.default_rng(sv).standard_normal((N + 1, len(measured)))
                   for _, sv in seeds])
-    step = model.sym.step(method, substeps).map(R)
+    process = isinstance(model, DiscreteModel)
+    step = (ca.Function("f", [model.x, model.u], [model.fx]) if process else model.sym.step(method, substeps)).map(R)
     X = np.empty((R, N + 1, model.nx))
     X[:, 0] = x0
     for k in range(N):
         X[:, k + 1] = np.asarray(step(X[:, k].T, np.repeat(us[k][:, None], R, axis=1),
-                                      model.p, T)).T + W[:, k]
+                                      *(() if process else (model.p, T)))).T + W[:, k]
+    if process and list(measured) == model.output_names:
+        h = ca.Function("h", [model.x], [model.hx]).map(R * (N + 1))
+        return X, np.asarray(h(X.reshape(-1, model.nx).T)).T.reshape(R, N + 1, -1) + V
     idx = [model.state_names.index(m) for m in measured]
     return X, X[:, :, idx] + V
 

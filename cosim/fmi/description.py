@@ -95,8 +95,8 @@ class FMUDescription:
 
     @property
     def prefix(self) -> str:
-        """The prefix of the FMI functions' names in messages: ``fmi`` (FMI 1.0, where the
-        library's symbols are ``<modelIdentifier>_fmi...``), ``fmi2`` or ``fmi3``."""
+        """``fmi`` (FMI 1.0, where the library's symbols are ``<modelIdentifier>_fmi...``),
+        ``fmi2`` or ``fmi3``, the prefix of the FMI functions' names in messages."""
         return "fmi" if self.version == 1 else f"fmi{self.version}"
 
     # ------------------------------------------------------------------ the interface

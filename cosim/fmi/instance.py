@@ -14,7 +14,7 @@ FMI 1.0 has the same rules under its own names (``fmiInstantiateSlave`` /
 ``fmiInstantiateModel``, ``fmiInitializeSlave`` / ``fmiInitialize``, ``fmiTerminateSlave`` /
 ``fmiTerminate``, ``fmiFreeSlaveInstance`` / ``fmiFreeModelInstance``), its library's
 symbols prefixed with the ``modelIdentifier`` (``<modelIdentifier>_fmiDoStep``): the
-instance's :attr:`FMUInstance.dll` resolves fmpy's names for them (``fmi1DoStep``). A
+instance's ``FMUInstance.dll`` resolves fmpy's names for them (``fmi1DoStep``). A
 Co-Simulation ``fmiDoStep`` that returns *Pending* (an FMU that declares
 ``canRunAsynchronuously``) is waited for with ``fmiGetStatus(fmiDoStepStatus)`` (Ctrl-C
 cancels it: ``fmiCancelStep``, after which only ``fmiFreeSlaveInstance`` follows); a
@@ -331,7 +331,7 @@ class FMUInstance:
         """After the parameters and start values: ``EnterInitializationMode`` (FMI 3.0 at
         ``t0`` [s]); FMI 1.0, which has no Initialization Mode, initialises at once:
         ``fmiInitializeSlave(t0, no stop time)`` or ``fmiInitialize`` (no tolerance control;
-        its event information kept in :attr:`initial_events`)."""
+        its event information kept in ``initial_events``)."""
         fmu = self.fmu
         if self.version == 3:
             self.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
@@ -354,7 +354,7 @@ class FMUInstance:
     # ------------------------------------------------------------------ FMI 1.0 steps
     def step_failed(self, status: int, t: float, h: float) -> None:
         """After an FMI 1.0 ``fmiDoStep(t, h)`` [s] returned ``status`` (above Warning):
-        Pending waited for (:meth:`_await_step`; returns if the step then ended well), else
+        Pending waited for (returns if the step then ended well), else
         the FMUError, a Discard naming the FMU's ``fmiLastSuccessfulTime``."""
         what = f"DoStep(t = {t:g} s, h = {h:g} s)"
         if status == _PENDING:

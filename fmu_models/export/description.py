@@ -197,7 +197,7 @@ def fmi2(d: Description) -> str:
 def fmi3(d: Description) -> str:
     """The FMI 3.0 model description (dependencies are value references, index - 1)."""
     caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUState="true", canSerializeFMUState="true",
-                providesDirectionalDerivative="true" if d.directional else "false",
+                providesDirectionalDerivatives="true" if d.directional else "false",
                 providesAdjointDerivatives="true" if d.directional else "false")
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            "<fmiModelDescription" + xml_attrs(fmiVersion="3.0", modelName=d.model_name, instantiationToken=d.guid,
@@ -210,7 +210,7 @@ def fmi3(d: Description) -> str:
                 hasEventMode="true" if d.clocked else "false", providesIntermediateUpdate="false")
     out.append(f"  <CoSimulation{cs}/>")
     if d.clocked:
-        se = {k: v for k, v in caps.items() if k != "providesDirectionalDerivative"}
+        se = {k: v for k, v in caps.items() if k != "providesDirectionalDerivatives"}
         out.append(f"  <ScheduledExecution{xml_attrs(**se)}/>")
     out += _units(d.variables)
     if d.enumerations:

@@ -212,3 +212,27 @@ def test_wrong_instantiation_token_is_refused(fmu_builds, version):
     with pytest.raises(Exception, match="[Ff]ailed to instantiate"):
         fmu.instantiate()
     fmu.freeLibrary()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("kind", ["cs", "me"])
+def test_a_state_restored_after_an_error_brings_back_its_own_rules(fmu_builds, version, kind):
+    """An FMU state is saved only before an Error (no GetFMUState after one): restoring a state
+    saved in Instantiated gives Instantiated's rules, where the derivative functions are refused
+    (not the error state's, where getters answer for debugging)."""
+    inst = Instance(fmu_builds["cartpole", version], kind=kind)
+    try:
+        saved = inst.get_state()                      # in Instantiated
+        with pytest.raises(FMICallException):
+            inst.set("mc", -1.0)                      # an Error: the error state
+        with pytest.raises(FMICallException):
+            inst.get_state()                          # nothing is saved after an Error
+        assert any("GetFMU" in m and "not allowed after a call returned Error" in m for _, m in inst.messages)
+        inst.set_state(saved)                         # back to Instantiated and its rules
+        x = inst.vr["x"]
+        with pytest.raises(FMICallException):
+            inst.directional([x], [x], [1.0])
+        assert any("not allowed in Instantiated" in m for _, m in inst.messages), inst.messages
+        inst.free_state(saved)
+    finally:
+        inst.free()

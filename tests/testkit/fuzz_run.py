@@ -150,15 +150,18 @@ def build_target(fmu: str | Path, folder: str | Path, mutate: dict | None = None
     vars_file = work / "variables.txt"
     _write_if_changed(vars_file, variable_table(md).encode())
     cs = md.coSimulation is not None
-    iface = md.coSimulation or md.modelExchange
+    with zipfile.ZipFile(fmu) as z:
+        root = ElementTree.fromstring(z.read("modelDescription.xml"))
+    iface = root.find("CoSimulation" if cs else "ModelExchange")
+    # fmpy reads FMI 3.0's providesDirectionalDerivatives under its FMI 2.0 name, and no intervalDecimal
+    directional = iface.get("providesDirectionalDerivatives" if version == 3 else "providesDirectionalDerivative")
     clock = None
-    if version == 3 and any(v.type == "Clock" for v in md.modelVariables):   # fmpy reads no intervalDecimal
-        with zipfile.ZipFile(fmu) as z:
-            k = ElementTree.fromstring(z.read("modelDescription.xml")).find("ModelVariables/Clock")
+    if version == 3 and any(v.type == "Clock" for v in md.modelVariables):
+        k = root.find("ModelVariables/Clock")
         clock = (int(k.get("valueReference")), float(k.get("intervalDecimal")))
     return Target(fmu, version, lib, build_driver(folder), vars_file,
                   md.guid if version == 2 else md.instantiationToken, cs, md.modelExchange is not None,
-                  bool(iface.providesDirectionalDerivative), clock)
+                  directional == "true", clock)
 
 
 def command(t: Target, seed: int, first: int, count: int, calls: int = 60, timeout: float = 10.0,

@@ -6,8 +6,8 @@
  * the standard does not allow and any bad value is answered with fmi2Error and a message
  * through the logger callback (which may be NULL). After an Error the instance is in the
  * tables' error state: fmi2FreeInstance, fmi2Reset, fmi2SetDebugLogging, the FMU-state
- * functions (fmi2SetFMUstate restores a saved state) and, for debugging, the getters are
- * accepted, nothing else. Errors are always logged; loggingOn switches the debug messages.
+ * functions but fmi2GetFMUstate (fmi2SetFMUstate restores a state saved before the error, with
+ * that state's rules) and, for debugging, the getters are accepted, nothing else. Errors are always logged; loggingOn switches the debug messages.
  *
  * This file is the FMI 2.0 API over the parts both wrappers share: wrapper_common.h (the
  * state machine, errors, FMU states) and wrapper_functions.h (the calls and functions written

@@ -6,9 +6,9 @@
  * function calls of each state, sections 2.3, 3.2 and 4.2 of the standard) for its interface
  * type; any other call, any NULL argument the standard does not allow, any bad value and any
  * function this FMU does not support is answered with fmi3Error. After an Error the simulation
- * cannot go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions
- * (fmi3SetFMUState restores a saved state) and, for debugging, the getters are accepted,
- * nothing else. The log callback is called only for the enabled categories: none when the
+ * cannot go on: fmi3FreeInstance, fmi3Reset, fmi3SetDebugLogging, the FMU-state functions but
+ * fmi3GetFMUState (fmi3SetFMUState restores a state saved before the error, with that state's
+ * rules) and, for debugging, the getters are accepted, nothing else. The log callback is called only for the enabled categories: none when the
  * instance was created with loggingOn = false (errors included), as the standard says.
  *
  * Unclocked form: the Co-Simulation interface has no Event Mode (hasEventMode = false):

@@ -39,7 +39,7 @@
 #define STATUS_ERROR FMI(Error)
 /* the functions allowed after an error (for the message) */
 #define ERROR_CALLS FMI_NAME(FreeInstance) ", " FMI_NAME(Reset) ", " FMI_NAME(SetDebugLogging) \
-    ", the FMU-state functions and (values for debugging only) the getters"
+    ", the FMU-state functions but the one that saves a state, and (values for debugging only) the getters"
 
 /* Refuse a call: format the message into c->err, log it, enter the error state. */
 static STATUS fail(Instance *c, const char *fn, const char *fmt, ...) {
@@ -187,9 +187,11 @@ static SavedState *own_state(Instance *c, const char *fn, const void *s) {
 
 /* 0 if s can be restored into c (message in c->err otherwise). */
 static int check_state(const Instance *c, const SavedState *s, char *err) {
-    /* a state saved after an Error restores the error state */
+    /* no state is saved after an Error (FMI 2.0 2.1.3: a state got "in non-erroneous state";
+     * FMI 3.0 2.2.4: after fmi3Error only fmi3SetFMUState, fmi3Reset or fmi3FreeInstance), so
+     * restoring one restores the rules of the state it was saved in */
     int code = KIND_CODE(c);
-    unsigned common = B(M_INSTANTIATED) | B(M_INIT) | B(M_TERMINATED) | B(M_ERROR);
+    unsigned common = B(M_INSTANTIATED) | B(M_INIT) | B(M_TERMINATED);
     unsigned allowed = code == 2 ? common | B(M_ACTIVATION)
                      : code == 1 ? common | B(M_STEP) | CS_EXTRA_STATES : common | B(M_EVENT) | B(M_CONT);
     if (s->magic != STATE_MAGIC || s->size != sizeof(SavedState)) {

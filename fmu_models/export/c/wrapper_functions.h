@@ -179,8 +179,8 @@ STATUS FMI(GetContinuousStates)(HANDLE inst, REAL x[], size_t nx) {
 
 /* The FMU-state functions under the version's names (STATE: the FMU-state type). */
 #define FMU_STATE_FUNCTIONS(STATE, GET, SET, FREE, SIZE, SERIALIZE, DESERIALIZE)               \
-    STATUS GET(HANDLE inst, STATE *s) {                                                        \
-        ALLOW(#GET, ANY, ANY);                                                                 \
+    STATUS GET(HANDLE inst, STATE *s) {                    /* not after an Error (check_state) */ \
+        ALLOW(#GET, LIVE, LIVE);                                                               \
         return get_fmu_state(c, #GET, s);                                                      \
     }                                                                                          \
     STATUS SET(HANDLE inst, STATE s) {                                                         \
