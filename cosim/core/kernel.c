@@ -129,7 +129,7 @@ typedef struct {
     const int64_t *lane;  /* per op: its thread in a parallel segment, -1 outside one */
     const int64_t *seg;   /* per op: the ops of the parallel segment that begins there, else 0 */
     int64_t *fail_at;     /* per thread: its failing op in the last segment, -1 none */
-    double *cost;         /* per op: CPU seconds spent in it in segments (while timing) */
+    double *cost;         /* per op: wall seconds spent in it in segments (while timing) */
     double seg_time;      /* wall seconds spent in segments (while timing) */
     int64_t timing;       /* measure cost and seg_time */
 } kstate_t;
@@ -261,15 +261,14 @@ static int run_op(kstate_t *s, op_t *o, double t) {
     return 0;
 }
 
-/* Seconds on the clock `which` (CLOCK_MONOTONIC: wall time; CLOCK_THREAD_CPUTIME_ID: this
- * thread's CPU time, which another process's load does not inflate). */
-static double seconds(clockid_t which) {
+/* Wall seconds (CLOCK_MONOTONIC). The op timing uses it too: read from the vDSO it costs
+ * some 25 ns, where a thread's CPU clock (CLOCK_THREAD_CPUTIME_ID) is a system call of some
+ * 550 ns (measured on a 2-core virtual machine), which swamped the cost of cheap FMU steps. */
+static double now(void) {
     struct timespec ts;
-    clock_gettime(which, &ts);
+    clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
-
-static double now(void) { return seconds(CLOCK_MONOTONIC); }
 
 /* ---------------------------------------------------------------- the thread pool */
 #define MAX_THREADS 64
@@ -324,15 +323,15 @@ static void wake(pool_t *p, pthread_cond_t *cv, int *idle) {
 }
 
 /* Thread me's ops of the published segment, in their order, up to its first failure
- * (while timing, each op's CPU time added to its cost). */
+ * (while timing, each op's wall time added to its cost). */
 static void run_lane(pool_t *p, int64_t me) {
     kstate_t *s = p->s;
     s->fail_at[me] = -1;
     for (int64_t i = p->first; i < p->first + p->count; i++) {
         if (s->lane[i] != me) continue;
-        double c0 = s->timing ? seconds(CLOCK_THREAD_CPUTIME_ID) : 0.0;
+        double c0 = s->timing ? now() : 0.0;
         int e = run_op(s, s->ops + i, p->t);
-        if (s->timing) s->cost[i] += seconds(CLOCK_THREAD_CPUTIME_ID) - c0;
+        if (s->timing) s->cost[i] += now() - c0;
         if (e) {
             s->fail_at[me] = i;
             return;

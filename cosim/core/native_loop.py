@@ -25,16 +25,16 @@ phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other
 runs of them between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`)
 may step on threads of a pool made once per run. FMUs that share a loaded library, and
 FMUs that declare ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their
-serial order. The first block of :data:`BLOCK` base steps runs on the threads, the groups of
-FMUs taken in turn, each FMU update's CPU time and each segment's wall time measured; the
-CPU times then assign the groups to the threads (the costliest first, each to the least
-loaded thread). With ``threads="auto"`` the run goes on serially unless that block gained
+serial order. The first base steps run on the threads, the groups of FMUs taken in turn,
+each FMU update's time and each segment's wall time measured, until the measured chunks
+last :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at least); the updates'
+times then assign the groups to the threads (the costliest first, each to the least loaded
+thread). With ``threads="auto"`` the run goes on serially unless the measured steps gained
 at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
-time (the sum of the updates' CPU times: what they cost one after the other, whatever load
-other processes put on the machine); one block is measured again on the threads after
-:data:`RECHECK` base steps, then after twice as many each time, so that a run that began
-while other processes took the cores takes the threads once they are free, and the
-reverse. An integer ``threads`` keeps that many threads (at most one per group of FMUs).
+time (the sum of the updates' times: what they cost one after the other); the threads are
+measured again in the same way after :data:`RECHECK` base steps, then after twice as many
+each time, so that a run that began while other processes took the cores takes the threads
+once they are free, and the reverse. An integer ``threads`` keeps that many threads (at most one per group of FMUs).
 Each FMU's calls are the serial run's, in the same order, so the results are the same bit
 for bit; a failure is the first in the serial order, and if it is a stop request the
 updates the other threads already made are not made again.
@@ -64,7 +64,8 @@ from .native import (
     KState,
 )
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MIN_GAIN", "RECHECK", "NativeLoop", "Stepping"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MEASURE_SECONDS", "MIN_GAIN", "RECHECK", "NativeLoop",
+           "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -74,11 +75,14 @@ CHUNK = 64 * BLOCK
 #: Wall time [s] the native kernel aims at between two returns to Python.
 CHUNK_SECONDS = 0.02
 #: ``threads="auto"``: the least gain [s per base step] parallel stepping must have measured
-#: in the first block to be kept (a sleeping thread's wake-up costs tens of µs).
-MIN_GAIN = 20e-6
-#: ``threads="auto"``: parallel stepping is kept if the first block took at most this
+#: to be kept (below it, the gain is within the timing's own noise).
+MIN_GAIN = 0.2e-6
+#: ``threads="auto"``: parallel stepping is kept if the measured steps took at most this
 #: fraction of the serial time of the same updates.
 KEEP_RATIO = 0.9
+#: Wall time [s] the threads are measured for before they are kept or left (at least one
+#: block): long enough that a preemption or a page fault does not decide it.
+MEASURE_SECONDS = 0.01
 #: ``threads="auto"``: base steps after a measured block until the next (twice as many after each).
 RECHECK = 16 * BLOCK
 
@@ -137,6 +141,7 @@ class Stepping:
         self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
         self.cost = np.zeros(len(self.program.ops))
         self.pool, self.on_threads, self.next_check, self.wait = None, False, 0, RECHECK
+        self.measured = (0, 0.0)                   # base steps measured, their wall time [s]
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
         if self.n < 2:
             self.state, self.runs = "serial", []
@@ -212,28 +217,31 @@ class Stepping:
         self.text = f"{self.n} threads: " + "; ".join(f"[{self._names(m)}]" for m in members)
         return True
 
-    def chunk(self, steps: int) -> bool:
-        """A chunk of ``steps`` base steps done: after a measured one, balance the threads,
-        keep them or go on serially; with ``threads="auto"``, measure again when it is time
-        (see the module documentation). Returns whether the next chunk is measured (then one
-        block long)."""
+    def chunk(self, steps: int, seconds: float) -> None:
+        """A chunk of ``steps`` base steps done in ``seconds`` [s]: once the measured chunks
+        last :data:`MEASURE_SECONDS`, balance the threads, keep them or go on serially; with
+        ``threads="auto"``, measure again when it is time (see the module documentation)."""
         kst = self.kst
         if self.state == "measure":
+            steps, seconds = self.measured[0] + steps, self.measured[1] + seconds
+            self.measured = (steps, seconds)
+            if seconds < MEASURE_SECONDS and kst.k < self.run.n:
+                return
             self._decide(steps)
             self.next_check, self.wait = kst.k + self.wait, 2 * self.wait
         elif self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check:
+            decided = self.text
             if self._parallel(self.thread_of, self.members):
-                self.state, kst.timing, kst.seg_time = "measure", 1, 0.0
+                self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
+                self.state, kst.timing, kst.seg_time, self.measured = "measure", 1, 0.0, (0, 0.0)
                 self.cost[:] = 0.0
-                return True
-        return False
 
     def _decide(self, steps: int) -> None:
-        """The measured chunk of ``steps`` base steps done: the threads balanced by its CPU
-        times, and kept or (``threads="auto"``) left for the serial loop."""
+        """The measured chunks of ``steps`` base steps done: the threads balanced by the
+        updates' measured times, and kept or (``threads="auto"``) left for the serial loop."""
         serial, parallel = self.cost.sum() / max(steps, 1), self.kst.seg_time / max(steps, 1)
         self.thread_of, _, self.members = self._assign()
-        measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)} of CPU time"
+        measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)}"
         if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
             self._serial(f"serial: the FMU updates that may step at once took {measured}")
         elif self._parallel(self.thread_of, self.members):
@@ -355,11 +363,11 @@ class NativeLoop:
         """A chunk done: the bar moves, and the next chunk's length aims at :data:`CHUNK_SECONDS`."""
         kst = self.kst
         self.run.bar.update(kst.k - self.done)
-        measure = self.stepping.chunk(kst.k - self.done)
         now = time.perf_counter()
+        self.stepping.chunk(kst.k - self.done, now - self.since)
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-        self.done, self.since, kst.kstop = kst.k, now, kst.k + (BLOCK if measure else self.chunk)
+        self.done, self.since, kst.kstop = kst.k, now, kst.k + self.chunk
 
     def _end(self, event: int) -> None:
         """The end of the loop, by ``event`` (the position handed back): the bar's last steps,

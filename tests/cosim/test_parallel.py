@@ -128,11 +128,13 @@ def test_multi_rate_fmus_a_filter_and_a_python_component_give_the_same_bits(work
 
 
 def test_auto_stays_serial_where_threads_cannot_pay(work):
-    cs = Cosimulation([wb(work, "a", work_us=1.0), wb(work, "b", work_us=1.0)], {"b.u": "a.x"})
+    """Beside an FMU of 30 µs a step, one of no work: the threads can save no more than its
+    step (well under MIN_GAIN) and add a hand-over, whatever the machine's load."""
+    cs = Cosimulation([wb(work, "a", work_us=30.0), wb(work, "b", work_us=0.0)], {"b.u": "a.x"})
     serial = cs.run(2.0, progress=False, signals=["*.x"])
     assert cs.threads == "auto"
     assert cs.stepping.startswith("serial: the FMU updates that may step at once took on 2 threads "), cs.stepping
-    assert "per base step, serially " in cs.stepping and cs.stepping.endswith(" of CPU time")
+    assert "per base step, serially " in cs.stepping
     cs.threads = 1
     assert cs.run(2.0, progress=False, signals=["*.x"]).equals(serial)
     assert cs.stepping == "serial: threads=1"
