@@ -15,8 +15,9 @@ noise and the sensor), run for N communication steps of 10 ms:
   its CSV file; its loop time is the one it reports ("simulated T s in X s"), beside the
   wall time of its process (which also loads the SSP).
 
-The ratios master / Ecos compare like with like (nothing recorded; every signal
-recorded), of the loop times, medians of the repeats, interleaved, all in this run. Ecos is installed here in a virtual environment of its own, in the user cache
+The ratios master / Ecos compare like with like (nothing recorded; every signal recorded),
+of the loop times, medians of the repeats, interleaved, all in this run. Ecos is installed
+here in a virtual environment of its own, in the user cache
 (``$XDG_CACHE_HOME/pendulum-cosim/bench-ecos``), with pip; its library needs the system's
 TBB runtime (Debian: ``apt-get install libtbb12``, which this script does not do). Where
 either is missing, the script says so and stops. The master runs with its default
