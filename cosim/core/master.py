@@ -103,8 +103,9 @@ class Cosimulation:
     threads : "auto" or int
         Threads that step the FMUs of an update phase at once in the native kernel (see
         :mod:`cosim.core.native_loop`): ``"auto"`` (default) steps in parallel, on up to one
-        thread per core, only where the FMU steps measured in the run's first block cost
-        enough to pay for the threads; an integer N steps on up to N threads; 1 serially.
+        thread per core, only where the FMU steps measured on the threads at the start of
+        the run (and again now and then) took at most 0.9 of their serial time; an integer
+        N steps on up to N threads; 1 serially.
         FMUs sharing a library, or declaring ``canBeInstantiatedOnlyOncePerProcess``, never
         step at once. The results are the same bit for bit; :attr:`stepping` says what the
         last run did.
