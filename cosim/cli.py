@@ -81,6 +81,17 @@ def _number(kind, low=None, what="value", strict=False, high=None):
 
 
 _positive_int = _number(int, 1, "the number")
+
+
+def _threads(text: str) -> int | str:
+    """``--threads``: auto, or a whole number of threads (its range checked by the master)."""
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--threads must be auto or a whole number, got {text!r}") from None
+
 _nonneg_int = _number(int, 0, "the seed")
 _positive_float = _number(float, 0, "the duration", strict=True)
 
@@ -210,11 +221,13 @@ def _run(args) -> int:
     progress = False if args.no_progress else None
     if kind == "scenario":
         return _run_scenario(path, Path(args.out or "."), args.overwrite, args.dry_run, args.stream, progress,
-                             args.engine)
+                             args.engine, args.threads)
     with contextlib.ExitStack() as stack:
         job = _fmu_job(path, args) if kind == "fmu" else _ssp_job(path, args, stack)
         if args.engine is not None:
             job.cosim.engine = args.engine
+        if args.threads is not None:
+            job.cosim.threads = args.threads
         if args.dry_run:
             print(f"{kind}: {job.title}\n{job.cosim.describe()}")
             return 0
@@ -249,14 +262,17 @@ def _ssp_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
 
 
 def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
-                  stream: bool | None = None, progress: bool | None = None, engine: str | None = None) -> int:
-    """Load and check the scenario, then (only then) take ``out`` and run it (``engine``:
-    replaces the scenario's ``[simulation] engine``)."""
+                  stream: bool | None = None, progress: bool | None = None, engine: str | None = None,
+                  threads: int | str | None = None) -> int:
+    """Load and check the scenario, then (only then) take ``out`` and run it (``engine`` and
+    ``threads``: replace the scenario's ``[simulation] engine`` and ``threads``)."""
     with crash_guard.temporary_folder("pendulum_cosim_run_") as fmus:
         t0 = time.perf_counter()
         sc = Scenario.load(path, fmu_dir=Path(fmus) / "fmus")      # read and checked before --out is touched
         if engine is not None:
             sc.cosim.engine = engine
+        if threads is not None:
+            sc.cosim.threads = threads
         if dry_run:
             print(f"scenario: {sc.title or path.name}")
             print(sc.cosim.describe())
@@ -498,6 +514,10 @@ def _add_run(sub) -> None:
                      help="which loop runs the co-simulation: auto (the native kernel where it can, the "
                           "default unless the scenario's [simulation] engine says otherwise), native "
                           "(refused where the kernel cannot run it) or python")
+    run.add_argument("--threads", type=_threads, metavar="N",
+                     help="threads that step the FMUs at once in the native kernel: auto (parallel where the "
+                          "measured FMU steps pay for it; the default unless the scenario's [simulation] threads "
+                          "says otherwise), or a whole number (1: serial)")
     fmu = run.add_argument_group("an FMU or SSP (a scenario file sets these in its own tables)")
     fmu.add_argument("--stop-time", type=_number(float, what="--stop-time"), metavar="T",
                      help="[s] default: the FMU's or SSP's DefaultExperiment (an FMU without one: start + 1 s)")

@@ -92,7 +92,7 @@ __all__ = ["RECORDING_KEYS", "SIMULATION_KEYS", "TABLES", "Scenario", "ScenarioC
 
 TABLES = ("title", "plugins", "simulation", "recording", "component", "connections", "plot")
 SIMULATION_KEYS = ("stop_time", "start_time", "step_size", "order", "loops", "loop_tolerance",
-                   "loop_max_iter", "loop_solver", "engine")
+                   "loop_max_iter", "loop_solver", "engine", "threads")
 RECORDING_KEYS = ("signals", "output_interval", "stream")
 PLOT_KEYS = ("truth", "estimate", "measured")
 
@@ -251,7 +251,7 @@ class Scenario:
         context = ScenarioContext(self.base_dir, self.fmu_dir)
         components = [self._component(c, context) for c in comps]
         options = {k: sim[k] for k in ("order", "loops", "loop_tolerance", "loop_max_iter", "loop_solver",
-                                              "engine") if k in sim}
+                                              "engine", "threads") if k in sim}
         connections = spec.get("connections", {})
         if not isinstance(connections, dict):
             raise ConfigurationError("[connections] must be a table of \"input\" = \"output\"")

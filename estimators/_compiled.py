@@ -21,6 +21,7 @@ import casadi as ca
 
 from fmu_models.errors import BuildError, CompilerNotFoundError, UnknownNameError
 from fmu_models.infra.cache import cache_dir, cached_file, writable_cache
+from fmu_models.infra.codegen import inline_min_max
 from fmu_models.infra.compiler import find_compiler, run_compiler
 
 __all__ = ["BACKENDS", "cache_dir", "compile_functions"]
@@ -125,7 +126,7 @@ def _library(fns: list[ca.Function], extra_code: str, cc: str, directory: Path) 
     cg = ca.CodeGenerator("fns.c")
     for f in fns:
         cg.add(f)
-    code = cg.dump() + extra_code        # in memory: CasADi ignores failed file writes
+    code = inline_min_max(cg.dump()) + extra_code        # in memory: CasADi ignores failed file writes
     key = "\n".join([code, ca.__version__, " ".join(_FLAGS + _STDS), _cpu_identity()])
     lib = directory / f"fns_{hashlib.sha256(key.encode()).hexdigest()[:24]}.so"
     try:

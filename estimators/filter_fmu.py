@@ -65,6 +65,7 @@ from fmu_models.export.config import c_array, config_header, work_sizes
 from fmu_models.export.description import Description, Unknown, fmi2, fmi3
 from fmu_models.export.pack import pack_fmu
 from fmu_models.export.variable_list import VariableList
+from fmu_models.infra.codegen import inline_min_max_file
 
 from .linalg import finite_flag
 from .protocol import renamed
@@ -273,6 +274,7 @@ class _FilterCore:
         cg.add(self.init)
         cg.add(self.step)
         cg.generate(str(folder) + "/")
+        inline_min_max_file(folder / "model_funcs.c")
         less, n_init, dt = self.less, len(self.init_off), self.filt.system.dt
         header = config_header(
             v, name, guid, "estimators.filter_fmu", groups=("U", "Y", "OUT", "VALID", "TIME"),

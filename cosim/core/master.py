@@ -60,6 +60,8 @@ LOOPS = ("refuse", "iterate")
 LOOP_SOLVERS = ("newton", "fixed-point")
 #: Largest number of base steps of one run.
 MAX_STEPS = 10**10
+#: Most threads that step FMUs at once (the native kernel's pool).
+MAX_THREADS = 64
 
 
 class Cosimulation:
@@ -98,6 +100,15 @@ class Cosimulation:
         ports, algebraic loops) return to Python between native segments; runs with clocks
         or ``order="jacobi"`` take the Python loop. :meth:`describe` says which path each
         component takes.
+    threads : "auto" or int
+        Threads that step the FMUs of an update phase at once in the native kernel (see
+        :mod:`cosim.core.native_loop`): ``"auto"`` (default) steps in parallel, on up to one
+        thread per core, only where the FMU steps measured on the threads at the start of
+        the run (and again now and then) took at most 0.9 of their serial time; an integer
+        N steps on up to N threads; 1 serially.
+        FMUs sharing a library, or declaring ``canBeInstantiatedOnlyOncePerProcess``, never
+        step at once. The results are the same bit for bit; :attr:`stepping` says what the
+        last run did.
 
     Attributes
     ----------
@@ -114,6 +125,8 @@ class Cosimulation:
     clock_ticks : DataFrame or None
         Every clock activation of the last run (columns ``time`` [s], ``clock``:
         ``component.clock``), or None without clocks.
+    stepping : str
+        How the last run stepped its FMUs: serially and why, or on which threads.
 
     Raises
     ------
@@ -126,7 +139,8 @@ class Cosimulation:
 
     def __init__(self, components: Sequence[Component], connections, step_size: float | None = None,
                  order: str = "auto", loops: str = "refuse", loop_tolerance: float = 1e-10,
-                 loop_max_iter: int = 50, loop_solver: str = "newton", engine: str = "auto"):
+                 loop_max_iter: int = 50, loop_solver: str = "newton", engine: str = "auto",
+                 threads: int | str = "auto"):
 
         for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
                                    ("loop_solver", loop_solver, LOOP_SOLVERS)):
@@ -158,6 +172,8 @@ class Cosimulation:
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
         self.engine = engine                    # checked by the property, like a later change
+        self.threads = threads
+        self.stepping = "no run yet"
         #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
@@ -250,6 +266,19 @@ class Cosimulation:
             self._engine = old
             raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
 
+    @property
+    def threads(self) -> int | str:
+        """Threads that step the FMUs at once, ``"auto"`` or a whole number from 1 to
+        :data:`MAX_THREADS` (see the constructor); may be changed between runs."""
+        return self._threads
+
+    @threads.setter
+    def threads(self, value: int | str) -> None:
+        if value != "auto" and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                or not 1 <= value <= MAX_THREADS):
+            raise ConfigurationError(f"threads must be 'auto' or a whole number from 1 to {MAX_THREADS}, got {value!r}")
+        self._threads = value if value == "auto" else int(value)
+
     def _whole_run_python(self) -> str | None:
         """Why every call of a run takes the Python path, or None."""
         if self.engine == "python":
@@ -294,6 +323,7 @@ class Cosimulation:
                 lines.append(f"  {name:16s} " + ("native" if why is None else f"Python ({why})"))
             if any(g.loop for g in self.schedule):
                 lines.append("  algebraic loops: Python (solved by iteration)")
+            lines += self._threads_lines()
         position = {}
         for i, g in enumerate(self.schedule):
             for u in g.units:
@@ -324,6 +354,20 @@ class Cosimulation:
                            else "used for the component's next instant"))
             lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {when}{hold}")
         return "\n".join(lines)
+
+    def _threads_lines(self) -> list[str]:
+        """The lines of :meth:`describe` on parallel stepping."""
+        paths = self.component_paths()
+        fmus = [c for c in self.components if paths[c.name] is None and getattr(c, "md", None) is not None]
+        once = [c.name for c in fmus if getattr(c.md.coSimulation, "canBeInstantiatedOnlyOncePerProcess", False)]
+        how = {"auto": "where the FMU steps, timed on threads in the first block, pay for them", 1: "never (serial)"}
+        lines = ["", f"parallel stepping (threads={self.threads}): "
+                 + how.get(self.threads, f"on up to {self.threads} threads") + "; FMUs that may step at once: "
+                 + (", ".join(c.name for c in fmus) if len(fmus) >= 2 and self.threads != 1 else "none")]
+        if len(once) >= 2:
+            lines.append(f"  never at once (canBeInstantiatedOnlyOncePerProcess): {', '.join(once)}")
+        lines.append(f"  last run: {self.stepping}")
+        return lines
 
     def sample_counts(self, stop_time: float, start_time: float = 0.0) -> dict[str, int]:
         """How many times each component computes its outputs in a run (a planning aid)."""

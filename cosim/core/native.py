@@ -15,6 +15,11 @@ The kernel computes what the Python path computes, operation for operation (``t 
 h`` and the same comparisons, compiled without fused multiply-adds), so the results are
 the same bit for bit. A failed call returns to Python with its status, and the call's own
 ``fail`` handler raises the error the Python path raises.
+
+Parallel stepping: in an update phase, the runs of consecutive FMU updates (set the inputs,
+``doStep``; a filter's held input beside them) between two calls that return to Python are
+the :meth:`Program.parallel_runs`; :meth:`Program.lanes` makes the kernel's parallel segments of
+them for a given thread of each FMU update (:mod:`cosim.core.native_loop` decides which).
 """
 from __future__ import annotations
 
@@ -58,7 +63,8 @@ class KState(ctypes.Structure):
                 ("nsig", _I), ("block", _I), ("values", _P), ("integers", _P), ("buf", _P), ("ibuf", _P),
                 ("sel", _P), ("isel", _P), ("pattern", _P), ("out_start", _P), ("out_len", _P), ("upd_start", _P),
                 ("upd_len", _P), ("ops", _P), ("k", _I), ("phase", _I), ("pc", _I), ("j", _I), ("jb", _I),
-                ("k0", _I), ("kstop", _I), ("at", _I)]
+                ("k0", _I), ("kstop", _I), ("at", _I), ("pool", _P), ("lane", _P), ("seg", _P), ("fail_at", _P),
+                ("cost", _P), ("seg_time", _D), ("timing", _I)]
 
 
 @dataclass
@@ -108,9 +114,13 @@ def native_ops(fn) -> list[Op] | None:
     return getattr(fn, "native", None)
 
 
+#: The doStep operations (FMI 1.0, 2.0, 3.0).
+STEP_KINDS = (OP_STEP1, OP_STEP2, OP_STEP3)
+# an FMU's update on a worker thread: its inputs set, its doStep; beside them, a filter's held input
+_WORKER_KINDS, _BESIDE = {OP_SET, *STEP_KINDS}, {OP_HOLD}
 _SOURCE = Path(__file__).with_name("kernel.c")
 #: No fused multiply-add: the kernel's arithmetic must be Python's, operation for operation.
-_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-ffp-contract=off", "-fno-fast-math")
+_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pthread", "-ffp-contract=off", "-fno-fast-math")
 _kernel: list = []          # [library or None, reason]
 
 
@@ -120,10 +130,14 @@ def load_kernel() -> tuple[ctypes.CDLL | None, str]:
     if _kernel:
         return _kernel[0], _kernel[1]
     lib, why = compiled_library(_SOURCE.read_text(), "kernel", _FLAGS, "kernel_run", "the native co-simulation kernel",
-                                "runs take the Python path (same results, slower)", link=("-lm",))
+                                "runs take the Python path (same results, slower)", link=("-lm", "-pthread"))
     if lib is not None:
         lib.kernel_run.restype = ctypes.c_int
         lib.kernel_run.argtypes = [ctypes.POINTER(KState)]
+        lib.kernel_pool_start.restype = ctypes.c_void_p
+        lib.kernel_pool_start.argtypes = [ctypes.c_int64]
+        lib.kernel_pool_stop.restype = None
+        lib.kernel_pool_stop.argtypes = [ctypes.c_void_p]
     _kernel[:] = [lib, why]
     return lib, why
 
@@ -165,6 +179,53 @@ class Program:
     n_native: int
     calls: list
     updates: list
+
+    def parallel_runs(self) -> list[list[tuple]]:
+        """The runs of update calls that may run at once, with at least two FMU updates: per
+        run, its calls in their order as ``(call, first, end, fmu)`` (its operations
+        ``ops[first:end]``; ``fmu``: an FMU's update, set inputs and ``doStep``, which may run
+        on a worker thread; else a filter's held input, made by the calling thread). Any
+        other call (one into Python, or a native operation that writes signals) ends a run."""
+        runs: list[list[tuple]] = []
+        for start, length in zip(self.upd_start.tolist(), self.upd_len.tolist()):
+            run: list[tuple] = []
+            i = start
+            while i < start + length:
+                j = i + 1
+                while j < start + length and self.calls[j] is self.calls[i]:
+                    j += 1
+                kinds = {self.ops[q].kind for q in range(i, j)}
+                fmu = bool(kinds & set(STEP_KINDS)) and kinds <= _WORKER_KINDS
+                if fmu or kinds <= _BESIDE:
+                    run.append((self.calls[i], i, j, fmu))
+                else:
+                    runs.append(run)
+                    run = []
+                i = j
+            runs.append(run)
+        return [run for run in runs if sum(fmu for *_, fmu in run) >= 2]
+
+    def lanes(self, runs: list[list[tuple]], thread_of: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel's ``lane`` and ``seg`` arrays (see ``kernel.c``): every run of
+        :meth:`parallel_runs` whose FMU updates fall on two threads or more becomes a parallel
+        segment.
+
+        Parameters
+        ----------
+        runs : list
+            :meth:`parallel_runs`.
+        thread_of : dict
+            The thread (0: the calling one) of each FMU update call.
+        """
+        lane = np.full(len(self.ops), -1, dtype=np.int64)
+        seg = np.zeros(len(self.ops), dtype=np.int64)
+        for run in runs:
+            if len({thread_of[call] for call, _, _, fmu in run if fmu}) < 2:
+                continue
+            seg[run[0][1]] = run[-1][2] - run[0][1]
+            for call, first, end, fmu in run:
+                lane[first:end] = thread_of[call] if fmu else 0
+        return lane, seg
 
 
 def build_program(schedule: list) -> Program:

@@ -19,10 +19,30 @@ or inf in the block that ended), ``EV_FAIL`` (a native operation failed: its own
 raises the error the Python path raises) or a component's stop request. Whichever way it
 ends, also by an exception, the run's position and the state the kernel keeps for Python
 objects (a filter's current state copy and step count) are first handed back to them.
+
+**Parallel stepping** (:class:`Stepping`, the master's ``threads`` option). In an update
+phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other, so the
+runs of them between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`)
+may step on threads of a pool made once per run. FMUs that share a loaded library, and
+FMUs that declare ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their
+serial order. The first base steps run on the threads, the groups of FMUs taken in turn,
+each FMU update's time and each segment's wall time measured, until the measured chunks
+last :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at least); the updates'
+times then assign the groups to the threads (the costliest first, each to the least loaded
+thread). With ``threads="auto"`` the run goes on serially unless the measured steps gained
+at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
+time (the sum of the updates' times: what they cost one after the other); the threads are
+measured again in the same way after :data:`RECHECK` base steps, then after twice as many
+each time, so that a run that began while other processes took the cores takes the threads
+once they are free, and the reverse. An integer ``threads`` keeps that many threads (at most one per group of FMUs).
+Each FMU's calls are the serial run's, in the same order, so the results are the same bit
+for bit; a failure is the first in the serial order, and if it is a stop request the
+updates the other threads already made are not made again.
 """
 from __future__ import annotations
 
 import ctypes
+import os
 import time
 
 import numpy as np
@@ -31,9 +51,21 @@ from fmu_models.errors import CosimError
 
 from . import crash_guard
 from .component import StopRequest
-from .native import EV_CHUNK, EV_DONE, EV_FAIL, EV_FLUSH, EV_HOOK, EV_NONFINITE, EV_PY, EV_REFILL, KState
+from .native import (
+    EV_CHUNK,
+    EV_DONE,
+    EV_FAIL,
+    EV_FLUSH,
+    EV_HOOK,
+    EV_NONFINITE,
+    EV_PY,
+    EV_REFILL,
+    STEP_KINDS,
+    KState,
+)
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "NativeLoop"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MEASURE_SECONDS", "MIN_GAIN", "RECHECK", "NativeLoop",
+           "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -42,6 +74,222 @@ BLOCK = 64
 CHUNK = 64 * BLOCK
 #: Wall time [s] the native kernel aims at between two returns to Python.
 CHUNK_SECONDS = 0.02
+#: ``threads="auto"``: the least gain [s per base step] parallel stepping must have measured
+#: to be kept (below it, the gain is within the timing's own noise).
+MIN_GAIN = 0.2e-6
+#: ``threads="auto"``: parallel stepping is kept if the measured steps took at most this
+#: fraction of the serial time of the same updates.
+KEEP_RATIO = 0.9
+#: Wall time [s] the threads are measured for before they are kept or left (at least one
+#: block): long enough that a preemption or a page fault does not decide it.
+MEASURE_SECONDS = 0.01
+#: ``threads="auto"``: base steps after a measured block until the next (twice as many after each).
+RECHECK = 16 * BLOCK
+
+
+class _DlInfo(ctypes.Structure):
+    _fields_ = [("fname", ctypes.c_char_p), ("base", ctypes.c_void_p), ("sname", ctypes.c_char_p),
+                ("saddr", ctypes.c_void_p)]
+
+
+def _library_base(address: int) -> int:
+    """The load address of the library holding the function at ``address`` (itself if unknown)."""
+    info = _DlInfo()
+    try:
+        found = ctypes.CDLL(None).dladdr(ctypes.c_void_p(address), ctypes.byref(info))
+    except (OSError, AttributeError):
+        found = 0
+    return info.base if found and info.base else address
+
+
+def _seconds(value: float) -> str:
+    """A duration [s] in words (µs or ms)."""
+    return f"{value * 1e3:.3g} ms" if value >= 1e-3 else f"{value * 1e6:.3g} µs"
+
+
+def _once_per_process(component) -> bool:
+    """Whether the FMU of ``component`` declares ``canBeInstantiatedOnlyOncePerProcess``."""
+    cs = getattr(getattr(component, "md", None), "coSimulation", None)
+    return bool(getattr(cs, "canBeInstantiatedOnlyOncePerProcess", False))
+
+
+class Stepping:
+    """Which thread steps each FMU update of a run (see the module documentation).
+
+    Parameters
+    ----------
+    run : cosim.core.run.Run
+        The run, with its native program and kernel.
+    kst : KState
+        The kernel's state (its ``lane``, ``seg``, ``fail_at``, ``cost``, ``timing`` and
+        ``pool`` are set here).
+
+    Attributes
+    ----------
+    text : str
+        The decision in words (the master's ``stepping``).
+    """
+
+    def __init__(self, run, kst: KState) -> None:
+        self.run, self.kst, self.program = run, kst, run.program
+        self.threads = run.cosim.threads
+        self.runs = self.program.parallel_runs() if self.threads != 1 else []
+        self.groups = self._groups()
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        wanted = cores if self.threads == "auto" else self.threads
+        self.n = min(wanted, len(self.groups))
+        self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
+        self.cost = np.zeros(len(self.program.ops))
+        self.pool, self.on_threads, self.next_check, self.wait = None, False, 0, RECHECK
+        self.measured = (0, 0.0)                   # base steps measured, their wall time [s]
+        kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
+        if self.n < 2:
+            self.state, self.runs = "serial", []
+            self.text = "serial: " + ("threads=1" if self.threads == 1 else
+                                      "fewer than two FMUs that may step at once" if len(self.groups) < 2 else
+                                      "one core")
+            self._lanes({})
+        else:
+            self.state = "measure"                  # the groups in turn, until their costs are measured
+            self.members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
+                            for me in range(self.n)]
+            self.thread_of = {c: me for me, calls in enumerate(self.members) for c in calls}
+            self._parallel(self.thread_of, self.members)
+        kst.timing = self.state != "serial"
+
+    def _groups(self) -> list[tuple[set, list]]:
+        """The FMU update calls of the parallel runs, in groups that never step at once (a
+        library they share, or ``canBeInstantiatedOnlyOncePerProcess``): ``(keys, calls)``."""
+        program, owner, by_name = self.program, self.run.owner, self.run.cosim.by_name
+        groups: list[tuple[set, list]] = []
+        for run in self.runs:
+            for call, first, end, fmu in run:
+                if not fmu or any(call in calls for _, calls in groups):
+                    continue
+                step = next(program.ops[q] for q in range(first, end) if program.ops[q].kind in STEP_KINDS)
+                keys = {("library", _library_base(step.fn))}
+                if _once_per_process(by_name.get(owner.get(call))):
+                    keys.add(("once",))
+                merged = [g for g in groups if g[0] & keys]
+                joined = (keys.union(*(k for k, _ in merged)), [c for _, cs in merged for c in cs] + [call])
+                at = groups.index(merged[0]) if merged else len(groups)
+                groups = [g for g in groups if g not in merged]
+                groups.insert(at, joined)
+        return groups
+
+    def _lanes(self, thread_of: dict) -> None:
+        """Point the kernel at the segments for ``thread_of`` (the thread of each FMU update)."""
+        self.lane, self.seg = self.program.lanes(self.runs, thread_of)
+        self.kst.lane, self.kst.seg = self.lane.ctypes.data, self.seg.ctypes.data
+
+    def _names(self, calls) -> str:
+        """The components of ``calls``, in words."""
+        return ", ".join(self.run.owner.get(c, "?") for c in calls)
+
+    def _assign(self) -> tuple[dict, list[float], list[list]]:
+        """The costliest group first, each to the least loaded thread (the calling thread
+        also makes the filters' held inputs): the thread of each call, each thread's load
+        [s] and calls."""
+        cost = self.cost
+        span = {call: (first, end) for run in self.runs for call, first, end, _ in run}
+        costs = [sum(cost[slice(*span[c])].sum() for c in calls) for _, calls in self.groups]
+        loads = [sum(cost[first:end].sum() for run in self.runs for _, first, end, fmu in run if not fmu)]
+        loads += [0.0] * (self.n - 1)
+        members: list[list] = [[] for _ in range(self.n)]
+        thread_of = {}
+        for g in sorted(range(len(self.groups)), key=lambda g: -costs[g]):
+            me = loads.index(min(loads))
+            loads[me] += costs[g]
+            members[me] += self.groups[g][1]
+            thread_of.update(dict.fromkeys(self.groups[g][1], me))
+        return thread_of, loads, members
+
+    def _parallel(self, thread_of: dict, members: list) -> bool:
+        """Step on the pool's threads (started if need be) by ``thread_of``, the calls of each
+        thread being ``members``; False (and serially) if the threads could not be started."""
+        if self.pool is None:
+            self.pool = self.run.kernel.kernel_pool_start(self.n) or None
+            if self.pool is None:
+                self._serial(f"serial: {self.n} threads could not be started")
+                return False
+        self.kst.pool, self.on_threads = self.pool, True
+        self._lanes(thread_of)
+        self.text = f"{self.n} threads: " + "; ".join(f"[{self._names(m)}]" for m in members)
+        return True
+
+    def chunk(self, steps: int, seconds: float) -> None:
+        """A chunk of ``steps`` base steps done in ``seconds`` [s]: once the measured chunks
+        last :data:`MEASURE_SECONDS`, balance the threads, keep them or go on serially; with
+        ``threads="auto"``, measure again when it is time (see the module documentation)."""
+        kst = self.kst
+        if self.state == "measure":
+            steps, seconds = self.measured[0] + steps, self.measured[1] + seconds
+            self.measured = (steps, seconds)
+            if seconds < MEASURE_SECONDS and kst.k < self.run.n:
+                return
+            self._decide(steps)
+            self.next_check, self.wait = kst.k + self.wait, 2 * self.wait
+        elif self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check:
+            decided = self.text
+            if self._parallel(self.thread_of, self.members):
+                self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
+                self.state, kst.timing, kst.seg_time, self.measured = "measure", 1, 0.0, (0, 0.0)
+                self.cost[:] = 0.0
+
+    def _decide(self, steps: int) -> None:
+        """The measured chunks of ``steps`` base steps done: the threads balanced by the
+        updates' measured times, and kept or (``threads="auto"``) left for the serial loop."""
+        serial, parallel = self.cost.sum() / max(steps, 1), self.kst.seg_time / max(steps, 1)
+        self.thread_of, _, self.members = self._assign()
+        measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)}"
+        if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
+            self._serial(f"serial: the FMU updates that may step at once took {measured}")
+        elif self._parallel(self.thread_of, self.members):
+            self.state, self.kst.timing = "parallel", 0
+            self.text += f" (measured: {measured})"
+
+    def _serial(self, why: str) -> None:
+        """Go on serially (the threads kept, asleep, for a later measurement), for the reason ``why``."""
+        self.kst.pool, self.on_threads = None, False
+        self.state, self.text, self.kst.timing = "serial", why, 0
+
+    def finish(self, steps: int, seconds: float) -> None:
+        """The loop ended ``steps`` base steps and ``seconds`` [s] after the last chunk: a
+        measurement under way is decided on what it measured (what :attr:`text` says), and
+        the pool's threads end."""
+        if self.state == "measure" and self.measured[0] + steps > 0:
+            self.measured = (self.measured[0] + steps, self.measured[1] + seconds)
+            self._decide(self.measured[0])
+        self.stop()
+
+    def stop(self) -> None:
+        """End the pool's threads (the kernel runs serially after it)."""
+        pool, self.pool = self.pool, None
+        self.kst.pool = None
+        if pool:
+            self.run.kernel.kernel_pool_stop(pool)
+
+    def ran_ahead(self, at: int) -> dict:
+        """After the operation ``at`` failed in a parallel segment: the update calls the other
+        threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
+        failed operation's ``fail``)."""
+        starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
+        if not self.on_threads or not starts:          # the segment ran serially
+            return {}
+        program, made, failed = self.program, {}, {}
+        for q in range(starts[0], starts[0] + int(self.seg[starts[0]])):
+            call, last = program.calls[q], int(self.fail_at[self.lane[q]])
+            made[call] = made.get(call, True) and (last < 0 or q <= last)
+            if q == last:
+                failed[call] = q
+        out = {}
+        for call, done in made.items():
+            if call in failed:
+                q = failed[call]
+                out[call] = lambda t, q=q: program.meta[q].fail(program.ops[q], t)
+            elif done:
+                out[call] = lambda t: None
+        return out
 
 
 class NativeLoop:
@@ -64,6 +312,7 @@ class NativeLoop:
         self.kst = KState(t0=run.t0, h=run.h, n=run.n, m=run.m, L=len(run.schedule), cap=rec.cap, block=BLOCK,
                           ncols=rec.buffer.shape[1], nint=rec.ibuffer.shape[1], nsig=len(run.values), kstop=BLOCK,
                           ops=ctypes.addressof(program.ops), **{k: a.ctypes.data for k, a in arrays.items()})
+        self.stepping = Stepping(run, self.kst)
         self.done, self.chunk, self.since = 0, BLOCK, 0.0      # steps shown by the bar; the chunk's length, start
 
     def loop(self) -> None:
@@ -100,6 +349,8 @@ class NativeLoop:
                 else:
                     break
         finally:
+            self.stepping.finish(kst.k - self.done, time.perf_counter() - self.since)
+            run.cosim.stepping = self.stepping.text
             run.k, run.j, run.jb, run.k0 = kst.k, kst.j, kst.jb, kst.k0
             for sync in program.syncs_out:
                 sync()
@@ -122,6 +373,7 @@ class NativeLoop:
         kst = self.kst
         self.run.bar.update(kst.k - self.done)
         now = time.perf_counter()
+        self.stepping.chunk(kst.k - self.done, now - self.since)
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
         self.done, self.since, kst.kstop = kst.k, now, kst.k + self.chunk
@@ -141,6 +393,7 @@ class NativeLoop:
         run.failing, run.phase = program.calls[at], "update" if program.updates[at] else "output"
         if event == EV_FAIL:
             op = program.ops[at]
+            run.ran_ahead = self.stepping.ran_ahead(at)
             try:
                 program.meta[at].fail(op, run.t0 + run.k * run.h)
                 raise CosimError(f"native call of {run.owner.get(run.failing, '?')} failed with status {op.status}")

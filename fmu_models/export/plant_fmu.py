@@ -17,6 +17,7 @@ from pathlib import Path
 import casadi as ca
 
 from ..catalog import get_model, model_names
+from ..infra.codegen import inline_min_max_file
 from ..plant import PlantModel
 from .config import c_array, config_header, work_sizes
 from .description import Description, Unknown, fmi2, fmi3
@@ -84,6 +85,7 @@ def _write_sources(model: PlantModel, variables: VariableList, guid: str, folder
     for f in funcs:
         cg.add(f)
     cg.generate(str(folder) + "/")
+    inline_min_max_file(folder / "model_funcs.c")
     header = config_header(variables, model.fmu_name, guid, "fmu_models.export.plant_fmu", work=work_sizes(funcs, 3, 2),
                            defines=[("DEFAULT_STEP_SIZE", repr(DEFAULT_STEP_SIZE))],
                            tables=[c_array("double", "X_START", [repr(float(s.start)) for s in model.states])])

@@ -8,5 +8,6 @@
 * :mod:`.interrupts`: SIGTERM handled as Ctrl-C, signals deferred over critical sections;
 * :mod:`.compiler`: the C compiler, run interruptibly and leaving nothing behind;
 * :mod:`.cache`: the on-disk cache of compiled code;
+* :mod:`.codegen`: CasADi's generated C with its ``fmin``/``fmax`` helpers inlined;
 * :mod:`.cli`: the one error handler of both command lines (exit statuses, messages).
 """
