@@ -29,6 +29,7 @@ def _failing_cc(tmp_path: Path) -> Path:
     return bin_dir
 
 
+@pytest.mark.slow
 def test_a_failing_compiler_named_by_cc_refuses_the_run(tmp_path):
     env = _env(tmp_path, CC="/bin/false")
     proc = subprocess.run([sys.executable, "-c", FILTER], env=env, capture_output=True, text=True, timeout=300)

@@ -114,7 +114,8 @@ CHECKS = {"offline": _offline, "another-tool-loop": _another_tool_loop, "another
 #: seconds each): run with the slow tests; the README's, the tutorial's and the smaller
 #: pages' examples stay in the default run.
 SLOW_PAGES = {"docs/guide/cosimulation.md", "docs/guide/another-tool.md", "docs/guide/extending.md",
-              "docs/guide/reliability.md", "docs/guide/third-party-fmus.md", "docs/guide/clocks.md"}
+              "docs/guide/reliability.md", "docs/guide/third-party-fmus.md", "docs/guide/clocks.md",
+              "docs/tutorial.md", "docs/tutorial-fmu.md", "docs/guide/offline.md", "docs/guide/writing-a-filter.md"}
 
 def _cases():
     cases = []

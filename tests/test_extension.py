@@ -171,6 +171,7 @@ def test_the_four_extensions_are_found_by_name():
     assert EXPERIMENTS.get("toy-study") is ToyStudy
 
 
+@pytest.mark.slow
 def test_a_user_scenario_runs_from_the_command_line(tmp_path):
     (tmp_path / "s.toml").write_text(SCENARIO)
     proc = _cli("run", "s.toml", "--out", "out", cwd=tmp_path)

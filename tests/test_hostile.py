@@ -293,6 +293,7 @@ def test_interrupting_a_run_writes_partial_results_not_finished_ones(tmp_path):
     assert "results.csv" not in names and "results.partial.csv" in names, names
 
 
+@pytest.mark.slow
 def test_two_runs_into_one_output_folder(tmp_path):
     out = tmp_path / "out"
     procs = [subprocess.Popen([*CLI, "run", "seed000_cartpole", "--out", str(out), "--no-progress"],
@@ -418,6 +419,7 @@ def test_a_read_only_cache_falls_back_to_the_vm(tmp_path):
         ro.chmod(0o700)
 
 
+@pytest.mark.slow
 def test_an_impossible_cache_falls_back_to_the_vm_and_xdg_is_honoured(tmp_path):
     p = _probe({"PENDULUM_COSIM_CACHE": "/proc/no/such/cache"})
     out, err = p.communicate(timeout=300)

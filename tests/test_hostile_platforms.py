@@ -92,6 +92,7 @@ def test_a_missing_or_damaged_fmu_is_named(tmp_path, content, expect):
     assert sorted(p.name for p in tmp_path.iterdir()) == ([] if content is None else ["x.fmu"])
 
 
+@pytest.mark.slow
 @needs_cross
 def test_ctrl_c_during_a_cross_build_leaves_no_fmu_no_compiler_and_no_temporary_file(tmp_path):
     out, tmp, cache = tmp_path / "fmus", tmp_path / "tmp", tmp_path / "cache"

@@ -122,6 +122,7 @@ def test_campaign_pcrb_and_verdicts_equal_the_estimators_functions():
     assert (other[1:] >= res["bound"][1:]).all()             # less known at the start: a higher bound
 
 
+@pytest.mark.slow
 def test_master_path_campaign_has_the_same_bound_and_bands():
     s = replace(SMALL, runs=2, duration=0.3, scenarios=SMALL.scenarios[:1], readings=("eqs",))
     fast = seed000.run(s, backend="serial", progress=False).consistency
@@ -188,6 +189,7 @@ def test_seed001_fast_equals_master_and_kf_diverges_only_far_from_its_linearisat
     assert not np.isfinite(hang["KF"]["t_div"]).any()
 
 
+@pytest.mark.slow
 def test_seed001_report_has_the_pcrb_and_the_verdicts(tmp_path):
     from cosim.experiments import seed001
 

@@ -39,6 +39,7 @@ def run_seed_raising(fmu, seed, log):
     Cosimulation([Sine("src", 0.01, 1.0, 1.0), comp], {"chaos.u": "src.out"}).run(STOP)
 
 
+@pytest.mark.slow
 def test_a_failing_chaos_run_from_the_command_line_is_one_line_and_keeps_its_rows(chaos_fmu, tmp_path):
     (tmp_path / "s.toml").write_text(scenario(chaos_fmu, "seed = 9, rate = 0.02, actions = 12", 1.0))
     proc = subprocess.run([sys.executable, "-c", "import sys; from cosim.cli import main; sys.exit(main())", "run",

@@ -38,6 +38,7 @@ def test_a_clocked_ssp_runs_in_the_master_like_the_scenario(tmp_path):
     np.testing.assert_allclose(got.to_numpy(), reference.to_numpy(), rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_cli_export_fmu_clocked(tmp_path, capsys):
     assert main(["export-fmu", "seed000_cartpole", "--out", str(tmp_path / "f"), "--fmi-version", "3",
                  "--clocked", "--component", "ekf", "--component", "sensor"]) == 0

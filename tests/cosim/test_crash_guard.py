@@ -56,6 +56,7 @@ def test_a_crash_names_the_fmu_the_call_and_the_time_and_keeps_the_streamed_rows
     assert os.listdir(tmp) == []                        # the FMU's unpacked folder removed, and nothing else left
 
 
+@pytest.mark.slow
 def test_the_command_line_says_it_in_one_line(chaos_fmu, tmp_path):
     text = scenario(chaos_fmu, f"seed = 3, rate = 0.0005, actions = {CRASH}", 5.0, stream=True)
     (tmp_path / "s.toml").write_text(text)
@@ -92,6 +93,7 @@ def test_a_crash_outside_any_fmu_passes_through_untouched(chaos_fmu, tmp_path):
     assert "error: the FMU" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_python_s_own_crash_report_still_follows(chaos_fmu, tmp_path):
     """A handler installed before (here Python's faulthandler) still runs after the guard."""
     out = tmp_path / "r.parquet"
@@ -135,6 +137,7 @@ def test_salvage_of_nothing_and_bad_arguments(tmp_path, capsys):
     assert "unknown argument '--what'" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_an_isolated_fmu_s_crash_is_the_parent_s_named_error_not_the_guard_s(chaos_fmu, tmp_path):
     code = textwrap.dedent(f"""
         from cosim import Cosimulation, FMUComponent, Sine
@@ -151,6 +154,7 @@ def test_an_isolated_fmu_s_crash_is_the_parent_s_named_error_not_the_guard_s(cha
     assert "error: the FMU" not in proc.stderr and "isolate = true" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_a_crash_in_a_later_run_on_the_kept_library_is_named_too(chaos_fmu, tmp_path):
     """Between runs a component keeps its FMU's library loaded: the guard still knows it."""
     code = textwrap.dedent(f"""

@@ -128,6 +128,7 @@ def test_model_exchange_says_it_runs_in_python():
     assert repr(comp).endswith("FMI 1.0 ME, period=0.01)")
 
 
+@pytest.mark.slow
 @needs_reference
 @pytest.mark.parametrize("label", ["Stair-fmi1-cs", "Feedthrough-fmi1-cs", "BouncingBall-fmi1-me"])
 def test_isolated_gives_the_same_rows(label):
@@ -358,6 +359,7 @@ def test_broken_fmi1_fmus_are_named_errors(bad_fmi1, name, message, call_log):
     call_log()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("fmu", "table", "message"), [
     ("other_guid", "", "fmiInstantiateSlave returned no instance"),
     ("cs", "parameters = { fail_step = 3, fail_status = 3 }", "fmiDoStep(t = 0.02 s, h = 0.01 s) returned error")])
@@ -381,6 +383,7 @@ def test_the_command_line_says_it_in_one_line(fmu1, bad_fmi1, call_log, tmp_path
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the crash checks read POSIX signals")
 
 
+@pytest.mark.slow
 @linux_only
 def test_a_crash_is_named_by_the_guard(fmu1, tmp_path):
     code = textwrap.dedent(f"""

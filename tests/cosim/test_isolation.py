@@ -36,6 +36,7 @@ def test_isolated_gives_the_same_rows(call_rules_fmu):
     assert _children() == []
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(rc.reference_dir() is None, reason="the Reference FMUs are absent")
 @pytest.mark.parametrize("label", ["Stair-fmi2-cs", "Stair-fmi3-me", "BouncingBall-fmi3-me", "Feedthrough-fmi3-cs",
                                    "StateSpace-fmi3-cs"])
@@ -82,6 +83,7 @@ def _scenario(tmp_path, fmu, **parameters) -> str:
     return str(sc)
 
 
+@pytest.mark.slow
 @linux_only
 def test_cli_crash_leaves_nothing_behind(call_rules_fmu, tmp_path):
     tmp = tmp_path / "tmp"

@@ -112,6 +112,7 @@ def test_refusals_name_the_problem(bouncing_me_fmu):
         MESystem("s", [iso], {}, 0.1)
 
 
+@pytest.mark.slow
 @needs_reference
 def test_from_a_scenario_file(bouncing_me_fmu, tmp_path):
     sc = write_scenario(tmp_path / "s.toml", 1.0, [

@@ -247,6 +247,7 @@ def test_a_bad_threads_value_is_refused_by_name(work, bad):
     assert cs.threads == 3
 
 
+@pytest.mark.slow
 def test_a_scenario_and_the_command_line_set_threads(work, tmp_path):
     text = textwrap.dedent(f"""
         [simulation]
@@ -316,6 +317,7 @@ except Interrupted as e:
 """
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_parallel_run_ends_it_with_the_rows_so_far(work):
     proc = subprocess.Popen([sys.executable, "-c", SCRIPT.format(path=str(work["plain"]), extra="")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -124,6 +124,7 @@ def test_roberts_reference_is_independent_of_the_fmu():
     assert ref["y1"].iloc[-1] < 1e-4 and ref["y3"].iloc[-1] > 0.9999
 
 
+@pytest.mark.slow
 def test_the_cli_in_a_process_of_its_own_gives_what_main_gives(tmp_path):
     case = next(c for c in CASES if not c.refused and c.interface == "cs")
     df, proc = rc.run_cli(case, tmp_path / "process", in_process=False)

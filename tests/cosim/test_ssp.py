@@ -291,6 +291,7 @@ def test_open_ssp_refuses_bad_archives_and_cleans_up(tmp_path, seed000_ssp):
     assert set(Path(tempfile.gettempdir()).glob("pendulum_cosim_ssp_*")) == before
 
 
+@pytest.mark.slow
 def test_cli_export_fmu_and_ssp(tmp_path, capsys):
     assert main(["export-fmu", "seed000_cartpole", "--out", str(tmp_path / "f"), "--fmi-version", "3"]) == 0
     assert sorted(p.name for p in (tmp_path / "f").iterdir()) == [".pendulum-cosim-output", "ekf.fmu", "mfiae.fmu"]

@@ -44,6 +44,7 @@ def test_nees_and_nis_are_consistent_on_a_linear_gaussian_model():
         assert abs(values.mean() / dof - 1) < 0.1
 
 
+@pytest.mark.slow
 def test_iae_recovers_true_r_from_a_wrong_start():
     Qt, Rt = np.diag([1e-4, 1e-3]), np.array([[0.5]])
     sys_ = linear_model(A2, np.zeros((2, 1)), C2)

@@ -82,7 +82,8 @@ def test_cartpole_fmu_ekf_equals_casadi_ekf(cartpole_fmus, record, version, meth
     lambda s: UKF(s, **KW),
     lambda s: IAE(s, **KW, window=10),
     lambda s: MFIAE(s, KW["x0"], 1.0, 0.2, 0.1, window=10),
-    lambda s: SWML(s, KW["x0"], 1.0, 0.2, 0.1, window=20, every=10, early_until=10),
+    pytest.param(lambda s: SWML(s, KW["x0"], 1.0, 0.2, 0.1, window=20, every=10, early_until=10),
+                 marks=pytest.mark.slow),
 ], ids=["KF", "UKF", "IAE", "MFIAE", "SWML"])
 def test_every_filter_takes_the_fmu_model(cartpole_fmus, record, make):
     us, ys = record
@@ -201,6 +202,7 @@ def test_vanderpol_directional_and_difference_jacobians_agree(vanderpol):
         np.testing.assert_allclose(exact.F(x, []), vdp_rk4(x)[1], rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_vanderpol_filters_against_the_pcrb_on_the_fmu_model(vanderpol):
     """EKF, UKF and SWML (given the true Q, R; its MAP form, a prior of 1 nat on ln q and ln r)
     on the FMU model against the bound computed on the same model: no estimator beats the

@@ -100,6 +100,7 @@ def cartpole_truth(cp):
     return X, us
 
 
+@pytest.mark.slow
 def test_equals_an_independent_numpy_implementation_on_the_cartpole(cp, cartpole_truth):
     """Jacobians of the Euler map from complex steps of the Lagrange derivation, the
     recursion as printed with explicit inverses, plain means; with and without missing

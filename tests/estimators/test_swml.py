@@ -50,6 +50,7 @@ def test_converges_to_the_true_q_and_r_from_1000x_wrong(lin, factor):
     assert hist.index[1:12].tolist() == [2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 50]   # the schedule
 
 
+@pytest.mark.slow
 def test_posterior_average_keeps_the_filter_consistent_from_1000x_too_small_noise(lin):
     """100 realisations of 200 steps from Q0 = R0 = 1e-3 times the truth: with the prior and
     the posterior average the average NEES and NIS lie inside their two-sided 95 % chi-square
@@ -288,6 +289,7 @@ def test_step_run_batch_and_fmu_agree(cp, record, tmp_path, options):
         inst.free()
 
 
+@pytest.mark.slow
 def test_history_lists_every_update(cp, record):
     us, ys = record
     f = make(cp)
