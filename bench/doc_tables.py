@@ -210,8 +210,20 @@ def add_option(parser) -> None:
                         help="save the figures in bench/figures/ and rewrite the pages' tables from them")
 
 
+def _parallel_rows(saved) -> list[list[str]]:
+    """The README's rows of parallel stepping and of the master against Ecos."""
+    big = saved["bench_parallel"]["figures"]["big"]
+    modes, ecos = big["modes"], saved["bench_ecos"]["figures"]["rows"][-1]
+    mine, theirs = ecos["median"]["master, nothing recorded"][0], ecos["median"]["Ecos --noCsv"][0]
+    return [[f"two FMUs of {big['step_ms']:.1f} ms a step, {big['steps']} steps, 2 cores",
+             f"{modes['auto'][0]:.2f} s (parallel stepping, the same bits)",
+             f"the serial kernel {modes['1'][0]:.2f} s ({modes['1'][0] / modes['auto'][0]:.2f}x)"],
+            ["the seed 000 SSP (6 FMUs), " + f"{ecos['steps']:,}".replace(",", " ") + " steps, nothing recorded",
+             f"{mine:.3f} s", f"Ecos 0.7.2 `--noCsv` {theirs:.3f} s ({mine / theirs:.2f}x its time)"]]
+
+
 def readme_table(saved) -> str:
-    """The README's summary of the performance page, from the saved figures of four scripts."""
+    """The README's summary of the performance page, from the saved figures of six scripts."""
     est, off = saved["bench_estimators"]["figures"], saved["bench_offline"]["figures"]
     master, camp = saved["bench_master"]["figures"]["us_per_step"]["plant + source"], saved["bench_campaign"]["figures"]
     ekf, fp = est["EKF (lists)"], est["filterpy EKF (model via CasADi numpy calls)"]
@@ -230,7 +242,8 @@ def readme_table(saved) -> str:
              f"{python:.2f} µs)", f"hand-written fmpy loop {fmpy_loop:.2f} µs, raw ctypes loop {raw:.2f} µs"],
             [f"seed 000 campaign, 4 x {camp['runs']} realisations x {len(camp['filters'])} filters x "
              f"{camp['steps']} steps", f"{wall['fast']:.2f} s (through the FMU master: {wall['master']:.2f} s)", ""]]
-    stems = ("bench_estimators", "bench_offline", "bench_master", "bench_campaign")
+    rows += _parallel_rows(saved)
+    stems = ("bench_estimators", "bench_offline", "bench_master", "bench_campaign", "bench_parallel", "bench_ecos")
     runs = [saved[stem]["run"] for stem in stems]
     dates = sorted({run["date"] for run in runs})
     dates = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
