@@ -9,6 +9,8 @@ Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
     stop_time = 5.0
     order = "auto"                  # or "given" (list order), "jacobi"
     loops = "refuse"                # or "iterate" (then loop_solver, loop_tolerance, loop_max_iter)
+    engine = "auto"                 # or "native", "python": which loop runs the base steps
+    threads = "auto"                # FMUs stepped in parallel where it pays; or a number (1: serially)
 
     [recording]                     # optional
     signals = ["plant.*", "ekf.*"]  # glob patterns (default: all)
