@@ -107,7 +107,7 @@ class Cosimulation:
         the run (and again now and then) took at most 0.9 of their serial time; an integer
         N steps on up to N threads; 1 serially.
         FMUs sharing a library, or declaring ``canBeInstantiatedOnlyOncePerProcess``, never
-        step at once. The results are the same bit for bit; :attr:`stepping` says what the
+        step at once. The results are the same bit for bit; ``stepping`` says what the
         last run did.
 
     Attributes

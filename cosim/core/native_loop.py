@@ -255,7 +255,7 @@ class Stepping:
 
     def finish(self, steps: int, seconds: float) -> None:
         """The loop ended ``steps`` base steps and ``seconds`` [s] after the last chunk: a
-        measurement under way is decided on what it measured (what :attr:`text` says), and
+        measurement under way is decided on what it measured (what ``text`` says), and
         the pool's threads end."""
         if self.state == "measure" and self.measured[0] + steps > 0:
             self.measured = (self.measured[0] + steps, self.measured[1] + seconds)
