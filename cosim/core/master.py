@@ -360,7 +360,8 @@ class Cosimulation:
         paths = self.component_paths()
         fmus = [c for c in self.components if paths[c.name] is None and getattr(c, "md", None) is not None]
         once = [c.name for c in fmus if getattr(c.md.coSimulation, "canBeInstantiatedOnlyOncePerProcess", False)]
-        how = {"auto": "where the FMU steps, timed on threads in the first block, pay for them", 1: "never (serial)"}
+        how = {"auto": "where the FMU steps, timed on threads at the start (and now and then), pay for them",
+               1: "never (serial)"}
         lines = ["", f"parallel stepping (threads={self.threads}): "
                  + how.get(self.threads, f"on up to {self.threads} threads") + "; FMUs that may step at once: "
                  + (", ".join(c.name for c in fmus) if len(fmus) >= 2 and self.threads != 1 else "none")]

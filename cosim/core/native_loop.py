@@ -22,22 +22,25 @@ objects (a filter's current state copy and step count) are first handed back to 
 
 **Parallel stepping** (:class:`Stepping`, the master's ``threads`` option). In an update
 phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other, so the
-runs of them between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`)
-may step on threads of a pool made once per run. FMUs that share a loaded library, and
-FMUs that declare ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their
-serial order. The first base steps run on the threads, the groups of FMUs taken in turn,
-each FMU update's time and each segment's wall time measured, until the measured chunks
-last :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at least); the updates'
-times then assign the groups to the threads (the costliest first, each to the least loaded
-thread). With ``threads="auto"`` the run goes on serially unless the measured steps gained
-at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
-time (the sum of the updates' times: what they cost one after the other); the threads are
-measured again in the same way after :data:`RECHECK` base steps, then after twice as many
-each time, so that a run that began while other processes took the cores takes the threads
-once they are free, and the reverse. An integer ``threads`` keeps that many threads (at most one per group of FMUs).
-Each FMU's calls are the serial run's, in the same order, so the results are the same bit
-for bit; a failure is the first in the serial order, and if it is a stop request the
-updates the other threads already made are not made again.
+runs of them between two calls into Python
+(:meth:`~cosim.core.native.Program.parallel_runs`) may step on threads of a pool made once
+per run. FMUs that share a loaded library, and FMUs that declare
+``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their serial order. The
+first base steps run on the threads, the groups of FMUs taken in turn, each FMU update's
+time and each segment's wall time measured, until the measured chunks last
+:data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at least; sooner where the
+threads plainly lose or win, see :data:`CLEAR_RATIO`); the updates' times then assign the
+groups to the threads (the costliest first, each to the least loaded thread). With
+``threads="auto"`` the run goes on serially unless the measured steps gained at least
+:data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial time (the
+sum of the updates' times: what they cost one after the other); the threads are measured
+again in the same way after :data:`RECHECK` base steps, then after twice as many each time
+(and :data:`RECHECK_SECONDS` at least), so that a run that began while other processes took
+the cores takes the threads once they are free, and the reverse. An integer ``threads``
+keeps that many threads (at most one per group of FMUs). Each FMU's calls are the serial
+run's, in the same order, so the results are the same bit for bit; a failure is the first in
+the serial order, and if it is a stop request the updates the other threads already made are
+not made again.
 """
 from __future__ import annotations
 
@@ -64,8 +67,8 @@ from .native import (
     KState,
 )
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "KEEP_RATIO", "MEASURE_SECONDS", "MIN_GAIN", "RECHECK", "NativeLoop",
-           "Stepping"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "KEEP_RATIO", "MEASURE_SECONDS", "MIN_GAIN", "RECHECK",
+           "RECHECK_SECONDS", "NativeLoop", "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -81,10 +84,16 @@ MIN_GAIN = 0.2e-6
 #: fraction of the serial time of the same updates.
 KEEP_RATIO = 0.9
 #: Wall time [s] the threads are measured for before they are kept or left (at least one
-#: block): long enough that a preemption or a page fault does not decide it.
-MEASURE_SECONDS = 0.01
-#: ``threads="auto"``: base steps after a measured block until the next (twice as many after each).
+#: block): long enough that a preemption or a page fault does not decide it; sooner when
+#: the threads took longer than the serial time, or less than :data:`CLEAR_RATIO` of it.
+MEASURE_SECONDS = 0.002
+#: The measured fraction of the serial time below which the threads are kept at once.
+CLEAR_RATIO = 0.6
+#: ``threads="auto"``: base steps after a measurement until the next (twice as many after each)...
 RECHECK = 16 * BLOCK
+#: ... and at least this wall time [s], so that measuring (each FMU update timed) stays a
+#: small share of a run.
+RECHECK_SECONDS = 0.5
 
 
 class _DlInfo(ctypes.Structure):
@@ -141,6 +150,7 @@ class Stepping:
         self.fail_at = np.full(max(self.n, 1), -1, dtype=np.int64)
         self.cost = np.zeros(len(self.program.ops))
         self.pool, self.on_threads, self.next_check, self.wait = None, False, 0, RECHECK
+        self.next_time = 0.0                       # perf_counter() of the next measurement, at the earliest
         self.measured = (0, 0.0)                   # base steps measured, their wall time [s]
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
         if self.n < 2:
@@ -225,16 +235,25 @@ class Stepping:
         if self.state == "measure":
             steps, seconds = self.measured[0] + steps, self.measured[1] + seconds
             self.measured = (steps, seconds)
-            if seconds < MEASURE_SECONDS and kst.k < self.run.n:
+            if seconds < MEASURE_SECONDS and kst.k < self.run.n and not self._plain(steps):
                 return
             self._decide(steps)
             self.next_check, self.wait = kst.k + self.wait, 2 * self.wait
-        elif self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check:
+            self.next_time = time.perf_counter() + RECHECK_SECONDS
+        elif (self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check
+              and time.perf_counter() >= self.next_time):
             decided = self.text
             if self._parallel(self.thread_of, self.members):
                 self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
                 self.state, kst.timing, kst.seg_time, self.measured = "measure", 1, 0.0, (0, 0.0)
                 self.cost[:] = 0.0
+
+    def _plain(self, steps: int) -> bool:
+        """Whether the measured ``steps`` already decide it: the threads took longer than the
+        serial time, or less than :data:`CLEAR_RATIO` of it (a cheap FMU's run is then not
+        spent measuring; a wrong call is corrected at the next measurement)."""
+        serial, parallel = self.cost.sum(), self.kst.seg_time
+        return parallel > serial or parallel < CLEAR_RATIO * serial
 
     def _decide(self, steps: int) -> None:
         """The measured chunks of ``steps`` base steps done: the threads balanced by the
@@ -376,7 +395,8 @@ class NativeLoop:
         self.stepping.chunk(kst.k - self.done, now - self.since)
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-        self.done, self.since, kst.kstop = kst.k, now, kst.k + self.chunk
+        measuring = self.stepping.state == "measure"             # in blocks: a losing measurement stops soon
+        self.done, self.since, kst.kstop = kst.k, now, kst.k + (BLOCK if measuring else self.chunk)
 
     def _end(self, event: int) -> None:
         """The end of the loop, by ``event`` (the position handed back): the bar's last steps,

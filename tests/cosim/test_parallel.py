@@ -176,6 +176,7 @@ def test_auto_measures_again_and_takes_the_threads_when_they_pay(work, monkeypat
 
     monkeypatch.setattr(native_loop, "KEEP_RATIO", 0.0)
     monkeypatch.setattr(native_loop, "RECHECK", 2 * native_loop.BLOCK)
+    monkeypatch.setattr(native_loop, "RECHECK_SECONDS", 0.0)
     (serial, parallel), cs = both(make, stop=30.0)
     assert_same(serial, parallel)
     assert cs.stepping.startswith("2 threads: [") and " (measured: on 2 threads " in cs.stepping
