@@ -26,8 +26,9 @@ runs of them between two calls into Python
 (:meth:`~cosim.core.native.Program.parallel_runs`) may step on threads of a pool made once
 per run. FMUs that share a loaded library, and FMUs that declare
 ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their serial order. The
-first base steps run on the threads, the groups of FMUs taken in turn, each FMU update's
-time and each segment's wall time measured, until the measured chunks last
+first base steps run on the threads, the groups of FMUs taken in turn; after one block that
+warms the threads, each FMU update's time and each segment's wall time are measured, in
+chunks of :data:`MEASURE_BLOCKS` blocks, until the measured chunks last
 :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at least; sooner where the
 threads plainly lose or win, see :data:`CLEAR_RATIO`); the updates' times then assign the
 groups to the threads (the costliest first, each to the least loaded thread). With
@@ -67,8 +68,8 @@ from .native import (
     KState,
 )
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "KEEP_RATIO", "MEASURE_SECONDS", "MIN_GAIN", "RECHECK",
-           "RECHECK_SECONDS", "NativeLoop", "Stepping"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "KEEP_RATIO", "MEASURE_BLOCKS", "MEASURE_SECONDS",
+           "MIN_GAIN", "RECHECK", "RECHECK_SECONDS", "NativeLoop", "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -89,6 +90,9 @@ KEEP_RATIO = 0.9
 MEASURE_SECONDS = 0.002
 #: The measured fraction of the serial time below which the threads are kept at once.
 CLEAR_RATIO = 0.6
+#: Blocks in a measured chunk (after the first block of a measurement, which warms the threads
+#: and is not counted).
+MEASURE_BLOCKS = 4
 #: ``threads="auto"``: base steps after a measurement until the next (twice as many after each)...
 RECHECK = 16 * BLOCK
 #: ... and at least this wall time [s], so that measuring (each FMU update timed) stays a
@@ -152,6 +156,7 @@ class Stepping:
         self.pool, self.on_threads, self.next_check, self.wait = None, False, 0, RECHECK
         self.next_time = 0.0                       # perf_counter() of the next measurement, at the earliest
         self.measured = (0, 0.0)                   # base steps measured, their wall time [s]
+        self.warm = True                           # the measurement's first block: not counted
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
         if self.n < 2:
             self.state, self.runs = "serial", []
@@ -232,7 +237,10 @@ class Stepping:
         last :data:`MEASURE_SECONDS`, balance the threads, keep them or go on serially; with
         ``threads="auto"``, measure again when it is time (see the module documentation)."""
         kst = self.kst
-        if self.state == "measure":
+        if self.state == "measure" and self.warm and kst.k < self.run.n:
+            self.warm, self.measured, kst.seg_time = False, (0, 0.0), 0.0   # threads started and woken: not counted
+            self.cost[:] = 0.0
+        elif self.state == "measure":
             steps, seconds = self.measured[0] + steps, self.measured[1] + seconds
             self.measured = (steps, seconds)
             if seconds < MEASURE_SECONDS and kst.k < self.run.n and not self._plain(steps):
@@ -246,7 +254,15 @@ class Stepping:
             if self._parallel(self.thread_of, self.members):
                 self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
                 self.state, kst.timing, kst.seg_time, self.measured = "measure", 1, 0.0, (0, 0.0)
-                self.cost[:] = 0.0
+                self.cost[:], self.warm = 0.0, True
+
+    def chunk_length(self, adaptive: int) -> int:
+        """The next chunk's base steps: ``adaptive`` (the loop's own), or while measuring one
+        block to warm the threads, then :data:`MEASURE_BLOCKS` blocks (a return to Python
+        between chunks may let the threads fall asleep: a wake-up each chunk)."""
+        if self.state != "measure":
+            return adaptive
+        return BLOCK if self.warm else MEASURE_BLOCKS * BLOCK
 
     def _plain(self, steps: int) -> bool:
         """Whether the measured ``steps`` already decide it: the threads took longer than the
@@ -395,8 +411,7 @@ class NativeLoop:
         self.stepping.chunk(kst.k - self.done, now - self.since)
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-        measuring = self.stepping.state == "measure"             # in blocks: a losing measurement stops soon
-        self.done, self.since, kst.kstop = kst.k, now, kst.k + (BLOCK if measuring else self.chunk)
+        self.done, self.since, kst.kstop = kst.k, now, kst.k + self.stepping.chunk_length(self.chunk)
 
     def _end(self, event: int) -> None:
         """The end of the loop, by ``event`` (the position handed back): the bar's last steps,
