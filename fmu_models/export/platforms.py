@@ -17,8 +17,8 @@ aarch64-linux  (FMI 2.0 has no folder: left   ``binaries/aarch64-linux/*.so``
                out with a note)
 ============== ============================== =====================================
 
-The platform the FMU was built on keeps its native binary. Flags: ``-O2 -std=c99
--fvisibility=hidden -ffp-contract=off`` (no fused multiply-add: the results equal the
+The platform the FMU was built on keeps its native binary. Flags: ``-O3 -fno-math-errno
+-std=c99 -fvisibility=hidden -ffp-contract=off`` (no fused multiply-add: the results equal the
 x86-64 build's), Linux targets against glibc 2.17, macOS 11.0 and later, Windows against
 the Universal C runtime; CasADi's ``CASADI_SYMBOL_EXPORT`` is emptied so that only the FMI
 functions are exported. zig's Apple-silicon code carries zig's ad-hoc signature: the
@@ -50,7 +50,7 @@ __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_p
 #: The platforms ``--platforms`` accepts.
 PLATFORMS = ("linux64", "win64", "darwin", "aarch64-linux")
 _INSTALL = "pip install -e '.[cross]' (or: pip install 'ziglang>=0.11' lief)"
-_COMMON = ("-shared", "-O2", "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
+_COMMON = ("-shared", "-O3", "-fno-math-errno", "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
 
 
 @dataclass(frozen=True)
