@@ -27,21 +27,22 @@ runs of them between two calls into Python
 per run. FMUs that share a loaded library, and FMUs that declare
 ``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their serial order. The
 first base steps run on the threads, the groups of FMUs taken in turn; after one block that
-warms the threads, each FMU update's time and each segment's wall time are measured, in
-chunks of :data:`MEASURE_BLOCKS` blocks, until the measured chunks last
-:data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at least; sooner where the
-threads plainly lose or win, see :data:`CLEAR_RATIO`); the updates' times then assign the
-groups to the threads (the costliest first, each to the least loaded thread). With
-``threads="auto"`` the run goes on serially unless the measured steps gained at least
-:data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial time (the
-sum of the updates' times: what they cost one after the other); the threads are measured
-again in the same way after :data:`RECHECK` base steps, then after twice as many each time
-(and :data:`RECHECK_SECONDS` at least), so that a run that began while other processes took
-the cores takes the threads once they are free, and the reverse. An integer ``threads``
-keeps that many threads (at most one per group of FMUs). Each FMU's calls are the serial
-run's, in the same order, so the results are the same bit for bit; a failure is the first in
-the serial order, and if it is a stop request the updates the other threads already made are
-not made again.
+warms the threads (and ends the measurement where the threads took more than
+:data:`HOPELESS_RATIO` times the serial time even so), each FMU update's time and each
+segment's wall time are measured, in chunks of :data:`MEASURE_BLOCKS` blocks, until the
+measured chunks last :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at
+least; sooner where the threads plainly lose or win, see :data:`CLEAR_RATIO`); the updates'
+times then assign the groups to the threads (the costliest first, each to the least loaded
+thread). With ``threads="auto"`` the run goes on serially unless the measured steps gained
+at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
+time (the sum of the updates' times: what they cost one after the other); the threads are
+measured again in the same way after :data:`RECHECK` base steps, then after twice as many
+each time (and :data:`RECHECK_SECONDS` at least), so that a run that began while other
+processes took the cores takes the threads once they are free, and the reverse. An integer
+``threads`` keeps that many threads (at most one per group of FMUs). Each FMU's calls are
+the serial run's, in the same order, so the results are the same bit for bit; a failure is
+the first in the serial order, and if it is a stop request the updates the other threads
+already made are not made again.
 """
 from __future__ import annotations
 
@@ -68,8 +69,8 @@ from .native import (
     KState,
 )
 
-__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "KEEP_RATIO", "MEASURE_BLOCKS", "MEASURE_SECONDS",
-           "MIN_GAIN", "RECHECK", "RECHECK_SECONDS", "NativeLoop", "Stepping"]
+__all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "HOPELESS_RATIO", "KEEP_RATIO", "MEASURE_BLOCKS",
+           "MEASURE_SECONDS", "MIN_GAIN", "RECHECK", "RECHECK_SECONDS", "NativeLoop", "Stepping"]
 
 #: Base steps between checks that every signal is finite (and progress updates), in both loops.
 BLOCK = 64
@@ -90,6 +91,9 @@ KEEP_RATIO = 0.9
 MEASURE_SECONDS = 0.002
 #: The measured fraction of the serial time below which the threads are kept at once.
 CLEAR_RATIO = 0.6
+#: ``threads="auto"``: the threads are left after the warming block if they took more than
+#: this many times the serial time in it.
+HOPELESS_RATIO = 2.0
 #: Blocks in a measured chunk (after the first block of a measurement, which warms the threads
 #: and is not counted).
 MEASURE_BLOCKS = 4
@@ -156,7 +160,7 @@ class Stepping:
         self.pool, self.on_threads, self.next_check, self.wait = None, False, 0, RECHECK
         self.next_time = 0.0                       # perf_counter() of the next measurement, at the earliest
         self.measured = (0, 0.0)                   # base steps measured, their wall time [s]
-        self.warm = True                           # the measurement's first block: not counted
+        self.warm = False                          # True: the measurement's first block, not counted
         kst.fail_at, kst.cost = self.fail_at.ctypes.data, self.cost.ctypes.data
         if self.n < 2:
             self.state, self.runs = "serial", []
@@ -165,12 +169,11 @@ class Stepping:
                                       "one core")
             self._lanes({})
         else:
-            self.state = "measure"                  # the groups in turn, until their costs are measured
+            self._measure(warm=True)                # the groups in turn, until their costs are measured
             self.members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
                             for me in range(self.n)]
             self.thread_of = {c: me for me, calls in enumerate(self.members) for c in calls}
             self._parallel(self.thread_of, self.members)
-        kst.timing = self.state != "serial"
 
     def _groups(self) -> list[tuple[set, list]]:
         """The FMU update calls of the parallel runs, in groups that never step at once (a
@@ -237,13 +240,13 @@ class Stepping:
         last :data:`MEASURE_SECONDS`, balance the threads, keep them or go on serially; with
         ``threads="auto"``, measure again when it is time (see the module documentation)."""
         kst = self.kst
-        if self.state == "measure" and self.warm and kst.k < self.run.n:
-            self.warm, self.measured, kst.seg_time = False, (0, 0.0), 0.0   # threads started and woken: not counted
-            self.cost[:] = 0.0
-        elif self.state == "measure":
+        if self.state == "measure":
+            if self.warm and kst.k < self.run.n and not self._hopeless():
+                self._measure(warm=False)           # the threads started and woken: not counted
+                return
             steps, seconds = self.measured[0] + steps, self.measured[1] + seconds
             self.measured = (steps, seconds)
-            if seconds < MEASURE_SECONDS and kst.k < self.run.n and not self._plain(steps):
+            if not self.warm and seconds < MEASURE_SECONDS and kst.k < self.run.n and not self._plain():
                 return
             self._decide(steps)
             self.next_check, self.wait = kst.k + self.wait, 2 * self.wait
@@ -253,8 +256,14 @@ class Stepping:
             decided = self.text
             if self._parallel(self.thread_of, self.members):
                 self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
-                self.state, kst.timing, kst.seg_time, self.measured = "measure", 1, 0.0, (0, 0.0)
-                self.cost[:], self.warm = 0.0, True
+                self._measure(warm=True)
+
+    def _measure(self, warm: bool) -> None:
+        """Count a measurement afresh (the kernel times the updates), its first block not
+        counted if ``warm``."""
+        self.state, self.warm, self.measured = "measure", warm, (0, 0.0)
+        self.kst.timing, self.kst.seg_time = 1, 0.0
+        self.cost[:] = 0.0
 
     def chunk_length(self, adaptive: int) -> int:
         """The next chunk's base steps: ``adaptive`` (the loop's own), or while measuring one
@@ -264,8 +273,14 @@ class Stepping:
             return adaptive
         return BLOCK if self.warm else MEASURE_BLOCKS * BLOCK
 
-    def _plain(self, steps: int) -> bool:
-        """Whether the measured ``steps`` already decide it: the threads took longer than the
+    def _hopeless(self) -> bool:
+        """Whether ``threads="auto"`` stops at the warming block already: the threads took
+        more than :data:`HOPELESS_RATIO` times the serial time even with their start counted
+        (the other cores are busy, e.g. a campaign's workers on every core)."""
+        return self.threads == "auto" and self.kst.seg_time > HOPELESS_RATIO * self.cost.sum()
+
+    def _plain(self) -> bool:
+        """Whether the steps measured so far already decide it: the threads took longer than the
         serial time, or less than :data:`CLEAR_RATIO` of it (a cheap FMU's run is then not
         spent measuring; a wrong call is corrected at the next measurement)."""
         serial, parallel = self.cost.sum(), self.kst.seg_time
