@@ -68,12 +68,14 @@ from fmu_models.export.variable_list import VariableList
 from fmu_models.infra.codegen import inline_min_max_file
 
 from .linalg import finite_flag
-from .protocol import renamed
 
 __all__ = ["export_filter_fmu", "filter_parameters"]
 
 #: The step's measurement inputs, set by the FMU from its variables.
 _FED = ("u", "y", "mask")
+#: The step's outputs the FMU uses besides the new state: what the others take (the
+#: log-determinant of S, the gain, ...) is left out of its generated step.
+_SHOWN = ("innov", "nis", "status")
 
 
 def _is_filter(filt) -> bool:
@@ -194,7 +196,9 @@ class _FilterCore:
         self.state_names = list(filt.state_arrays())
         self.fixed_names = [n for n in self.names_in if n not in self.state_names and n not in _FED]
         self.init = self._init_function(step)
-        self.step = renamed(step, "flt_step")
+        keep = [i for i, n in enumerate(self.names_out) if n.endswith("_new") or n in _SHOWN]
+        self.names_out = [self.names_out[i] for i in keep]
+        self.step = step.slice("flt_step", list(range(step.n_in())), keep)
         st_off, self.nstate = _offsets(self.state_names, step.nnz_in)
         fx_off, self.nfixed = _offsets(self.fixed_names, step.nnz_in)
         dg_off, self.ndiag = _offsets([n for n in self.names_out if not n.endswith("_new") and n != "status"],
