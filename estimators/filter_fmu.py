@@ -1,56 +1,18 @@
 """A configured filter as a native Co-Simulation FMU (FMI 2.0 or 3.0), no Python inside.
 
 :func:`export_filter_fmu` generates C code for the filter's compiled fused step (the very
-CasADi Function the filter's ``step`` runs) and for a function mapping the FMU's
-parameters to the filter's initial state, and packs them with the estimator core
-(``c/filter_core.c``) and the project's FMI wrappers (:mod:`fmu_models.export.pack`): the
-same machinery as the plant FMUs. It works on any filter of the protocol of
-:mod:`estimators.protocol` (it never asks which filter it is):
+CasADi Function the filter's ``step`` runs, with only the outputs the FMU shows) and for a
+function mapping the FMU's parameters to the filter's initial state, and packs them with the
+estimator core (``c/filter_core.c``) and the project's FMI wrappers
+(:mod:`fmu_models.export.pack`), the machinery of the plant FMUs. It works on any filter of
+the protocol of :mod:`estimators.protocol`: the FMU's parameters are the filter's
+``fmu_parameters()``, its initial state ``fmu_initial(p)``.
 
-* the FMU's parameters are the filter's ``fmu_parameters()`` (one FMU variable per entry,
-  named by the parameter's labels, checked against its domain as in Python);
-* ``fmu_initial(p)`` gives the initial state arrays and the step's fixed inputs as
-  expressions of those parameters.
-
-Variables (names from the model):
-
-* inputs: the model's inputs ``u`` (e.g. ``F``) and measurements ``y`` (e.g. ``y_x``), and
-  one Boolean ``valid_<measurement>`` per channel (false: that channel's update is skipped;
-  a NaN measurement is missing too unless the filter has ``nan_is_missing=False``);
-* outputs: the estimate (one variable per state, the state names), the diagonal of P
-  (``P_<state>``), the innovation (``innov_<measurement>``), ``nis``, and for adaptive
-  filters their current Q and R diagonals (``Q_<state>``, ``R_<measurement>``);
-* parameters (with the exported filter's values as defaults): for the built-in filters
-  ``x0_<state>``, ``P0_<state>`` (diagonal), ``gate`` (chi-square gate on the NIS, 0: none),
-  ``Q0_<state>``, ``R0_<measurement>`` (diagonals; MF-IAE: ``q0``, ``r0``), and the step
-  parameters (IAE and MF-IAE: ``q_min, q_max, r_min, r_max``; MF-IAE ``gain_q``, ``gain_r``).
-
-Timing: the filter updates at its own sample instants ``t0 + k period`` whatever the
-communication step (``canHandleVariableCommunicationStepSize="true"``), as
-:class:`~cosim.components.estimation.EstimatorComponent` does at its period:
-
-* the update at ``t_k`` predicts with the input ``u`` as set at the last communication point
-  at or before ``t_(k-1)`` and updates with the measurements and ``valid_*`` flags as set at
-  the last communication point at or before ``t_k``;
-* at a communication point on an instant (within ``1e-6`` periods, against accumulated
-  rounding of ``t += h``) the outputs already show that instant's update from the
-  measurements set there (direct feedthrough, as in Python); a ``doStep`` over ``[t, t+h]``
-  performs the updates of the instants strictly inside it with the inputs held as set;
-* between instants the outputs hold the latest estimate; a step shorter than a period only
-  advances time.
-
-Clocked form (``clocked=True``, FMI 3.0 only): the FMU has an input clock ``sample``
-(``intervalVariability="constant"``, ``intervalDecimal`` the filter's sample period, first
-activation at the start time) that clocks every input, measurement, valid flag and output;
-Co-Simulation with Event Mode (``hasEventMode="true"``, instantiated with ``eventModeUsed``)
-and Scheduled Execution (the partition of ``sample``, priority 0). Activation 0 shows the
-initial estimate and takes the input; activation ``k >= 1`` is the filter step of instant
-``t_k`` (predicted with the input set at activation ``k - 1``, updated with the measurements
-set at activation ``k``): in Co-Simulation the outputs show it after ``fmi3SetClock`` and
-``fmi3UpdateDiscreteStates`` commits it, in Scheduled Execution ``fmi3ActivateModelPartition``
-runs it. Nothing runs between activations; a ``fmi3DoStep`` past a due activation is refused.
-
-See ``c/filter_core.h``.
+The manual's page "Taking the estimator to another tool" gives the FMU's variables, its
+timing (an update at each sample instant ``t0 + k period`` whatever the communication step,
+direct feedthrough at an instant) and the clocked form (``clocked=True``, FMI 3.0: an input
+clock ``sample``, Co-Simulation with Event Mode and Scheduled Execution); ``c/filter_core.h``
+the C side.
 """
 from __future__ import annotations
 
