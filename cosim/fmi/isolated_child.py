@@ -1,7 +1,6 @@
-"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`): builds the
-:class:`~cosim.fmi.fmu_component.FMUComponent` from the parent's arguments on the parent's
-unpacked folder and answers its requests over the pipe until told to close. Started as
-``python -m cosim.fmi.isolated_child`` by :class:`~cosim.fmi.isolated.RemoteFMU`."""
+"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`), started as ``python -m
+cosim.fmi.isolated_child``: builds the component on the parent's unpacked folder and
+answers its requests until told to close."""
 from __future__ import annotations
 
 import os
