@@ -1,10 +1,5 @@
-"""Opening FMU files safely: a checked zip, bounded extraction, named errors, no leftovers.
-
-A damaged, hostile or wrong file ends in one :class:`~fmu_models.errors.FMUError` saying
-what is wrong. :func:`read_description` (and :func:`read_archive`, which also keeps the
-names of the files and the XML) checks the archive and parses its ``modelDescription.xml``;
-:class:`Extraction` unpacks it into a private temporary folder within limits on the total
-size and the number of files, removed when closed, garbage-collected or at exit.
+"""Opening FMU files safely: a checked zip, bounded extraction into a private temporary
+folder, one named :class:`~fmu_models.errors.FMUError` for a bad file, no leftovers.
 """
 from __future__ import annotations
 

@@ -1,11 +1,6 @@
-"""What an FMU declares, read once from its archive (:class:`FMUDescription`: the FMI
-version, interfaces, variables, clocks, ``ModelStructure``), and a component's choices
+"""What an FMU declares, read once (:class:`FMUDescription`), and a component's choices
 checked against it: the interface, clock intervals, parameter and start values, ports
 (:mod:`cosim.fmi.ports`) and their direct dependencies.
-
-FMI 1.0: one interface (Co-Simulation if the model description has an ``Implementation``),
-variables as fmpy reads them, no declared dependencies (every output depends on every
-input); a ``negatedAlias`` variable is no port and cannot be set.
 """
 from __future__ import annotations
 
@@ -44,14 +39,12 @@ class FMUDescription:
 
     Attributes
     ----------
-    path : Path
-    md : fmpy ModelDescription
     version : int
         1, 2 or 3.
     interfaces : dict
         The interfaces it has (fmpy's) by key, in the order ``"cs"``, ``"me"``, ``"se"``.
     variables : dict
-        Its variables (fmpy's ``ModelVariable``) by name.
+        Its variables (fmpy's) by name.
     clocks : FMIClocks or None
         Its clocks (:mod:`cosim.fmi.clocks`), None if it declares none.
     dependencies : dict

@@ -1,12 +1,6 @@
-"""Typed value exchange with an FMU through its raw FMI functions, every argument prebuilt.
-
-An :class:`Exchange` moves the values of element ports (:mod:`cosim.fmi.ports`) between the
-master's signal arrays and the FMU, one call per FMI type (``fmiGetReal`` ...,
-``fmi2GetReal`` ..., ``fmi3GetFloat64`` ... ``fmi3GetUInt64``; Enumerations through the
-Integer/Int64 functions), through function pointers without ``argtypes`` (ctypes' per-call
-conversion would cost about 1.5 us). Integer signals travel exactly (``integers``, int64; a
-UInt64 as its bit pattern) and are checked against the destination type's range before
-they are set, never wrapped.
+"""Typed value exchange with an FMU through its raw FMI functions (no ctypes ``argtypes``,
+every argument prebuilt): one call per FMI type, integers exact (``integers``, int64; a
+UInt64 as its bit pattern) and checked against the destination's range, never wrapped.
 """
 from __future__ import annotations
 
@@ -19,7 +13,7 @@ import numpy as np
 from fmu_models.errors import FMUError, InputError, TypeMismatchError
 
 from ..core.native import OP_GET, OP_SET, Op
-from .ports import ElementPort, integer_range
+from .ports import REAL_TYPES, ElementPort, integer_range
 
 __all__ = ["Exchange", "raw_function"]
 
@@ -33,7 +27,6 @@ _FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "F
          "Int32": (ctypes.c_int32, "Int32"), "UInt32": (ctypes.c_uint32, "UInt32"),
          "Int64": (ctypes.c_int64, "Int64"), "UInt64": (ctypes.c_uint64, "UInt64"),
          "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")}
-_REAL = ("Real", "Float64", "Float32")
 
 
 def raw_function(dll, name: str):
@@ -66,7 +59,7 @@ class _Group:
         #: the ports are the group's values in order (no gather needed)
         self.identity = bool(np.array_equal(self.offsets, np.arange(self.n_values)))
         self.type_name = type_name
-        self.real = type_name in _REAL
+        self.real = type_name in REAL_TYPES
         self.boolean = type_name == "Boolean"
         self.unsigned64 = type_name == "UInt64"
         self.ports = [p for _, p in ports]

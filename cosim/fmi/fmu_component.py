@@ -1,15 +1,6 @@
 """An FMI 1.0, 2.0 or 3.0 FMU (Co-Simulation, Model Exchange or Scheduled Execution) as a
-co-simulation component.
-
-At an instant ``t`` its outputs are the FMU's at ``t``: with ``feedthrough="model"`` the
-inputs the ``ModelStructure`` lists as direct dependencies of an output are set first; with
-``"none"`` the outputs are read before any input changes (left limits). ``update`` sets the
-connected inputs and advances over ``[t, t + period]`` with them held: ``doStep`` (FMI 1.0
-``fmiDoStep``, its Pending steps waited for in Python), or the integrator of
-:mod:`cosim.fmi.model_exchange`. The FMI rules of an instance's life are in
-:mod:`cosim.fmi.instance`, the clocks' call sequences in :mod:`cosim.fmi.clock_run`,
-isolation in :mod:`cosim.fmi.isolated`; the user's view is on the co-simulation and
-third-party FMUs pages of the documentation.
+co-simulation component: its timing, ports and call sequences are described in the
+co-simulation page of the documentation (FMUs in the master).
 """
 from __future__ import annotations
 
@@ -85,7 +76,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     Parameters
     ----------
     name : str
-        Component name.
     path : str or Path
         The ``.fmu`` file (FMI 1.0, 2.0 or 3.0).
     period : float
@@ -95,20 +85,18 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         default: all inputs of a numeric type. Unconnected ones keep their start values.
     outputs : sequence of str, optional
         As ``inputs``, for outputs; locals such as ``der(alpha_dot)`` may be listed too.
-    parameters : mapping, optional
-        Parameter values by name (lists for arrays), set before initialisation; structural
-        parameters are set in Configuration Mode (FMI 3.0) and decide the arrays' sizes.
-    start : mapping, optional
-        Start values by name (e.g. initial states), set before initialisation.
+    parameters, start : mapping, optional
+        Parameter and start values by name (lists for arrays), set before initialisation;
+        structural parameters in Configuration Mode (FMI 3.0), deciding the arrays' sizes.
     interface : {"auto", "cs", "me", "se"}
         Co-Simulation, Model Exchange or Scheduled Execution; ``"auto"``: the first the FMU has.
     solver : {"cvode", "euler", "rk4"}
-        Model Exchange solver (see :mod:`cosim.fmi.model_exchange`; default CVODE).
+        Model Exchange solver (:mod:`cosim.fmi.model_exchange`).
     solver_step : float, optional
         Model Exchange: the fixed step [s] of Euler/RK4 (default: the period), or CVODE's
         largest step (default: none).
     rtol : float
-        Model Exchange: CVODE's relative tolerance (default 1e-6).
+        Model Exchange: CVODE's relative tolerance.
     feedthrough : {"model", "none"}
         Direct dependencies of outputs on inputs: from the ``ModelStructure`` (default; an
         output without declared ones depends on every input), or none (left limits).
@@ -125,14 +113,11 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     Attributes
     ----------
     description : FMUDescription
-        What the FMU declares (:mod:`cosim.fmi.description`), read once.
-    md : fmpy ModelDescription
-    version : int
-        1, 2 or 3.
+        What the FMU declares (:mod:`cosim.fmi.description`); ``md``, ``version`` are its.
     interface : str
         ``"cs"``, ``"me"`` or ``"se"``, as resolved.
     clock_model : FMIClocks or None
-        The FMU's clocks (:mod:`cosim.fmi.clocks`), None if it declares none.
+        The FMU's clocks (:mod:`cosim.fmi.clocks`).
     messages : collections.deque of (int, str)
         The last 200 log messages of the FMU (status, text), quoted in errors.
     integrator : MEIntegrator or None
@@ -364,9 +349,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             self._start_integrator(t0)
 
     def _start_integrator(self, t0: float) -> None:
-        """Model Exchange: the integrator of the new instance, started at ``t0`` [s] (a clocked
-        FMU's first Event Mode ends in its first update); after a nominals Error, on a new
-        instance (:func:`~cosim.fmi.model_exchange.unit_nominals_instead`)."""
+        """Model Exchange: the integrator started at ``t0`` [s] (a clocked FMU's in its first update)."""
         model = FMUModel(self.instance, self.unit_nominals)
         self.integrator = MEIntegrator(model, self.solver, self.solver_step, self.rtol)
         if self.clock_model is not None:
@@ -468,8 +451,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         return self._output_fn(set_ft, get_out), self._cs_update(set_all)
 
     def _input_starts(self) -> list:
-        """The start value of every connected input element (what an array's unconnected
-        elements are sent as)."""
+        """The start value of every connected input (what an array's unconnected elements send)."""
         ports = [self.element_ports[n] for n in self.connected_inputs]
         return [parse_start(p.variable, p.size)[p.offset] for p in ports]
 
@@ -547,8 +529,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                                    lambda op, t: ended3(op.status, bool(op.flag), op.d, t))
 
     def _native_update(self, update_fn, set_all, kind: int, do_step, fail):
-        """``update_fn`` with its native operations (set the inputs, ``doStep``) when the
-        inputs can be set natively."""
+        """``update_fn`` with its native operations (set the inputs, ``doStep``) if it can have them."""
         ops = native_ops(set_all)
         if ops is not None and self.native_reason() is None:
             step = Op(kind, dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=self.instance.handle,

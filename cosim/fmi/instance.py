@@ -1,20 +1,13 @@
-"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life.
-
-:class:`FMUInstance` loads the library (restoring the working directory fmpy changes),
-instantiates it with a logger that keeps the last messages, and tracks the worst status a
-call returned. The end (:meth:`FMUInstance.finish`): after *Error* only ``FreeInstance``
-(never ``Terminate``); after *Fatal* no call at all (the instance is abandoned); otherwise
-``Terminate`` (if initialised) and ``FreeInstance``. A failure raises
-:class:`~fmu_models.errors.FMUError` naming the component, the call, the status and the
-FMU's last messages. FMI 1.0 keeps the same rules under its own names, its symbols prefixed
-with the ``modelIdentifier``; a Pending ``fmiDoStep`` is waited for with
-``fmiGetStatus(fmiDoStepStatus)`` (Ctrl-C: ``fmiCancelStep``), a Discard names
-``fmiLastSuccessfulTime``. Stop requests (:class:`~cosim.core.component.StopRequest`) are
-not failures: FMI 2.0 ``fmi2Terminated`` after a Discard, FMI 3.0 ``terminateSimulation``.
+"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life: loaded,
+instantiated with a logger that keeps its last messages, its worst status remembered, ended
+as the standard allows (:meth:`FMUInstance.finish`: after *Error* only ``FreeInstance``,
+after *Fatal* no call at all); a failure is an :class:`~fmu_models.errors.FMUError` naming
+the component, the call, the status and the FMU's last messages.
 """
 from __future__ import annotations
 
 import ctypes
+import functools
 import logging
 import os
 import time
@@ -37,22 +30,20 @@ _ERROR, _FATAL, _PENDING = 3, 4, 5
 #: componentEnvironment (an int), FMI 1.0 (no environment) by its instance name (bytes; of
 #: two live instances of one name, the newer).
 _LOGS: dict[int | bytes, object] = {}
-_CALLBACK: list = []                  # the one ctypes callback behind the proxy, kept alive
 _KEYS = iter(range(1, 2**62))
 
 
+@functools.cache
 def _shared_logger():
-    """The ctypes logger every FMI 1.0 and 2.0 instance shares (created once)."""
-    if not _CALLBACK:
-        from fmpy import fmi2
+    """The ctypes logger every FMI 1.0 and 2.0 instance shares (created once, kept alive)."""
+    from fmpy import fmi2
 
-        def dispatch(env, inst, status, category, message):
-            log = _LOGS.get(env or 0) or _LOGS.get(inst)
-            if log is not None:
-                log(status, message)
+    def dispatch(env, inst, status, category, message):
+        log = _LOGS.get(env or 0) or _LOGS.get(inst)
+        if log is not None:
+            log(status, message)
 
-        _CALLBACK.append(fmi2.fmi2CallbackLoggerTYPE(dispatch))
-    return _CALLBACK[0]
+    return fmi2.fmi2CallbackLoggerTYPE(dispatch)
 
 
 class _Symbols:
@@ -105,17 +96,11 @@ class FMUInstance:
 
     Attributes
     ----------
-    md : fmpy ModelDescription
-    fmu : fmpy FMU1Slave, FMU1Model, FMU2Slave, FMU2Model, FMU3Slave, FMU3Model or FMU3ScheduledExecution
+    fmu : fmpy FMU object (``FMU2Slave``, ``FMU3Model``, ...)
     dll : ctypes.CDLL
         The library (FMI 1.0: its functions by fmpy's names, ``fmi1DoStep``).
     handle : int
         The instance pointer.
-    version : {1, 2, 3}
-    prefix : str
-        The FMI functions' prefix in messages (``fmi``, ``fmi2``, ``fmi3``).
-    asynchronous : bool
-        FMI 1.0 Co-Simulation: the FMU declares ``canRunAsynchronuously``.
     initial_events : tuple of (bool, float or None)
         FMI 1.0 Model Exchange: what ``fmiInitialize`` said (terminate, the next time event).
     worst : int
@@ -171,8 +156,7 @@ class FMUInstance:
                 LOGGER.debug("%s: setDebugLogging refused", owner)
 
     def _instantiate12(self, args: dict, library) -> None:
-        """FMI 1.0 and 2.0: load (or reuse) the library and instantiate with the shared logger
-        (FMI 1.0: no ``stepFinished``, a Pending ``fmiDoStep`` is asked with ``fmiGetStatus``)."""
+        """FMI 1.0 and 2.0: instantiate with the shared logger (FMI 1.0: no ``stepFinished``)."""
         from fmpy import fmi1, fmi2
         from fmpy.logging import addLoggerProxy
 
@@ -269,11 +253,6 @@ class FMUInstance:
             return fn(*args)
         except FMICallException as e:
             self.fail(what, e.status)
-
-    @property
-    def usable(self) -> bool:
-        """No call returned Error or Fatal (other calls are allowed)."""
-        return self.worst < _ERROR
 
     def raw(self, name: str):
         """A fresh pointer to the FMI function ``name`` (no argtypes; see :func:`raw_function`)."""

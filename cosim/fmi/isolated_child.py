@@ -3,6 +3,7 @@ cosim.fmi.isolated_child``: builds the component on the parent's unpacked folder
 answers its requests until told to close."""
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import signal
@@ -23,10 +24,8 @@ def _die_with_parent() -> None:
     if sys.platform.startswith("linux"):
         import ctypes
 
-        try:
+        with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
 
 
 def _serve(fd_in: int, fd_out: int) -> None:

@@ -1,13 +1,10 @@
 """Connected Model Exchange FMUs integrated as one system (:class:`MESystem`): one solver
-for the union of their states, the connections evaluated inside every right-hand-side
-evaluation (members in the order of their direct feed-through) and the events of any member
-handled jointly (every member in Event Mode, the event iteration over all of them with the
-connections propagated, discrete inputs set there). Its ports are the members' unconnected
-inputs and all their outputs, named ``member.port``. When to use it: the third-party FMUs
-page of the documentation.
+for all their states, the connections evaluated inside every right-hand-side evaluation,
+events handled jointly (see the third-party FMUs page of the documentation).
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from itertools import accumulate, pairwise
 
@@ -134,14 +131,12 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
     ----------
     name : str
     members : sequence of FMUComponent
-        The FMUs (each built with ``interface="me"`` or ``"auto"`` on an ME-only FMU; their
-        own periods are ignored). Their names are the members' names.
+        The Model Exchange FMUs, by their names (their own periods are ignored).
     connections : mapping {"member.input": "member.output"}
-        The connections between members, evaluated inside every right-hand-side
-        evaluation (continuous inputs) and event iteration (all inputs).
+        The connections between members, evaluated inside every right-hand-side evaluation
+        (continuous inputs) and event iteration (all inputs).
     period : float
-        The communication step [s] with the master (outputs sampled, external inputs
-        held).
+        The communication step [s] with the master.
     solver : {"cvode", "euler", "rk4"}
     solver_step : float, optional
         Euler/RK4 step or CVODE's largest step [s] (see :class:`~cosim.fmi.FMUComponent`).
@@ -150,7 +145,6 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
 
     Attributes
     ----------
-    members : list of FMUComponent
     connections : dict {(member, input): (member, output)}
     integrator : MEIntegrator or None
         The integrator of the current run.
@@ -174,8 +168,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             if m.clock_model is not None:
                 raise ConfigurationError(f"{name}: member {m.name!r} has clocks; an ME system does not drive "
                                          "clocks: give it to the master as a component of its own")
-        names = [m.name for m in self.members]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        dup = sorted(n for n, k in Counter(m.name for m in self.members).items() if k > 1)
         if dup:
             raise ConfigurationError(f"{name}: duplicate member names: {dup}")
         self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
@@ -243,8 +236,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         return out
 
     def _order(self, name: str) -> list[FMUComponent]:
-        """Members in an order where each one's feed-through inputs come from members
-        before it (Kahn's algorithm); a cycle is an algebraic loop."""
+        """Members ordered so that each one's feed-through inputs come from those before it."""
         after = {m.name: set() for m in self.members}
         for (dm, di), (sm, _so) in self.connections.items():
             if any(di in deps for deps in self.by_name[dm].feedthrough.values()):
@@ -257,25 +249,21 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                 raise ConfigurationError(f"{name}: the members {loop} feed each other's outputs through at once "
                                          "(an algebraic loop); break it with a member whose input does not reach "
                                          "its output directly")
-            for m in ready:
-                order.append(m)
-                done.add(m.name)
+            order += ready
+            done.update(m.name for m in ready)
         return order
 
     def _feedthrough_map(self) -> dict[str, set[str]]:
-        """Which external inputs each output depends on at once, through the members'
-        feed-through and the connections."""
+        """The external inputs each output depends on directly (through the connections)."""
         memo: dict[tuple[str, str], set[str]] = {}
 
         def deps(member: str, output: str) -> set[str]:
             key = (member, output)
             if key not in memo:
-                memo[key] = set()
-                found = set()
+                found = memo[key] = set()          # _order refused cycles: no recursion comes back here
                 for i in self.by_name[member].feedthrough.get(output, ()):
                     src = self.connections.get((member, i))
                     found |= deps(*src) if src is not None else {f"{member}.{i}"}
-                memo[key] = found
             return memo[key]
         return {f"{m.name}.{o}": deps(m.name, o) for m in self.members for o in m.output_names}
 
@@ -306,8 +294,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             self.reset(t0)
 
     def _coupled(self) -> _Coupled:
-        """The members' FMUModels and the propagation of the connections over a buffer of
-        the connected outputs."""
+        """The members' models and the connections propagated over a buffer of their outputs."""
         sources = sorted(set(self.connections.values()))
         slot = {s: k for k, s in enumerate(sources)}
         buf = np.zeros(max(len(sources), 1))

@@ -1,19 +1,7 @@
-"""Model Exchange FMUs integrated between communication points, with their events.
-
-:class:`MEIntegrator` advances a :class:`ContinuousModel` (:class:`FMUModel`: one ME FMU;
-:class:`cosim.fmi.me_system.MESystem`: several connected ones) with CVODE (through fmpy,
-root finding on the event indicators, integrating across communication points and
-reinitialised only at events and where an input changed) or fixed Euler/RK4 steps (a state
-event handled at the end of the step where an indicator changed sign). Events follow the
-standard: time events end a step exactly; state and step events enter Event Mode, the
-event iteration, Continuous-Time Mode, the states read again; discrete inputs change only in
-Event Mode. FMI 1.0: ``fmiEventUpdate`` until ``iterationConverged``,
-``fmiCompletedIntegratorStep`` after every step, ``fmiInitialize``'s event information.
-
-An FMU whose ``GetNominalsOfContinuousStates`` returns Error when its integrator starts may
-only be freed after it (FMI 2.0 section 2.1.3, FMI 3.0 section 2.2.3): it is instantiated
-afresh and integrated with nominal values of 1 (:func:`unit_nominals_instead`). The
-solvers are described on the co-simulation page of the documentation.
+"""Model Exchange FMUs integrated between communication points (CVODE, Euler, RK4), with
+their time, state and step events as the standard describes them; an FMU whose nominals
+call returns Error is freed and integrated afresh with nominals of 1 (FMI 2.0 section
+2.1.3, FMI 3.0 section 2.2.3; the co-simulation page of the documentation says more).
 """
 from __future__ import annotations
 
@@ -48,8 +36,13 @@ def check_solver(owner: str, solver: str, solver_step: float | None, rtol: float
 
 
 class ContinuousModel:
-    """The interface :class:`MEIntegrator` integrates (see the module documentation); the
-    arrays its methods fill or read have nx (states) or nz (indicators) values.
+    """The interface :class:`MEIntegrator` integrates; defaults for what a model may leave out.
+
+    A model also has ``set_time(t)`` [s], ``get_states(x)``, ``set_states(x)``,
+    ``derivatives(dx)`` (arrays of nx values), ``indicators(z)`` (nz values),
+    ``event(t, set_inputs=None)`` (Event Mode, ``set_inputs()``, the event iteration,
+    Continuous-Time Mode) and ``initial_event(t)`` (the same after
+    ``ExitInitializationMode``), both returning ``(terminate, next event time or None)``.
 
     Attributes
     ----------
@@ -76,26 +69,6 @@ class ContinuousModel:
     def refresh(self) -> None:
         """Bring the values the outputs are read from up to date (nothing to do for one FMU)."""
 
-    def set_time(self, t: float) -> None:
-        """Set the time [s]."""
-        raise NotImplementedError
-
-    def get_states(self, x: np.ndarray) -> None:
-        """Write the continuous states into ``x``."""
-        raise NotImplementedError
-
-    def set_states(self, x: np.ndarray) -> None:
-        """Set the continuous states from ``x``."""
-        raise NotImplementedError
-
-    def derivatives(self, dx: np.ndarray) -> None:
-        """Write the state derivatives into ``dx``."""
-        raise NotImplementedError
-
-    def indicators(self, z: np.ndarray) -> None:
-        """Write the event indicators into ``z``."""
-        raise NotImplementedError
-
     def nominals(self, out: np.ndarray) -> None:
         """Write the states' nominal values into ``out``."""
         out[:] = 1.0
@@ -103,15 +76,6 @@ class ContinuousModel:
     def completed_step(self) -> tuple[bool, bool]:
         """After an integrator step: ``(enter_event_mode, terminate)``."""
         return False, False
-
-    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
-        """Event Mode at ``t`` [s]: ``set_inputs()`` (discrete inputs), the event iteration,
-        Continuous-Time Mode. Returns ``(terminate, next event time or None)``."""
-        raise NotImplementedError
-
-    def initial_event(self, t: float) -> tuple[bool, float | None]:
-        """After ``ExitInitializationMode`` (in Event Mode): as :meth:`event` without inputs."""
-        raise NotImplementedError
 
 
 class FMUModel(ContinuousModel):
@@ -187,7 +151,8 @@ class FMUModel(ContinuousModel):
         if self.version > 1:
             self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
 
-    def event(self, t, set_inputs=None):
+    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
+        """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
         self.enter_event_mode()
         if set_inputs is not None:
             set_inputs()
@@ -353,7 +318,6 @@ class MEIntegrator:
         self.next_event: float | None = None
         self.cvode = None
         self._cb = None
-        self.resets = 0
         self.t = float("nan")
 
     # ------------------------------------------------------------------ events
@@ -378,7 +342,6 @@ class MEIntegrator:
         """Reinitialise the solver at ``t`` (after an event, or an input that changed)."""
         if self.cvode is not None:
             self.cvode.reset(t)
-            self.resets += 1
 
     def at_event(self, t: float, set_inputs: Callable[[], None]) -> None:
         """An event at ``t`` [s] whose Event Mode sets discrete inputs (``set_inputs()``)."""
