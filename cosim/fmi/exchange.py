@@ -107,7 +107,6 @@ class Exchange:
         self.version, self.direction, self._fail, self.owner = version, direction, fail, owner
         self.inst = ctypes.c_void_p(instance)
         self.n = len(ports)
-        self.ports = list(ports)
         self.sources = list(sources) if sources is not None else [("?", "Int64")] * len(ports)
         self.groups = []
         for suffix, (ctype, type_name, members) in by_suffix.items():

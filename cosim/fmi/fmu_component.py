@@ -143,7 +143,12 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self.path, self.md, self.version, self.clock_model = d.path, d.md, d.version, d.clocks
         self.interface = d.choose_interface(interface)
         self.clock_overrides = d.clock_overrides(clock_intervals, isolate)
-        self._options(name, solver, solver_step, rtol, feedthrough, logging, isolate)
+        self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
+        if feedthrough not in FEEDTHROUGH_MODES:
+            raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
+        if not isinstance(isolate, bool):
+            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
+        self.feedthrough_mode, self.logging, self.isolate = feedthrough, bool(logging), isolate
         d.check_binary(self.interface)
         #: The project's plant model this FMU was built from (a scenario's ``model``), or None.
         self.plant_model = None
@@ -168,17 +173,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self.connected_inputs = list(self.input_names)
         self._remote = None
         self.unit_nominals = False
-
-    def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,
-                 logging: bool, isolate: bool) -> None:
-        """Check and keep the options that are the component's, not the FMU's."""
-        self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
-        if feedthrough not in FEEDTHROUGH_MODES:
-            raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
-        self.feedthrough_mode, self.logging = feedthrough, bool(logging)
-        if not isinstance(isolate, bool):
-            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
-        self.isolate = isolate
 
     @classmethod
     def from_scenario(cls, name, table, context):
@@ -217,13 +211,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         if fmi_version not in FMI_VERSIONS:
             raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
         check_clocked(clocked, fmi_version, self.name)
-        exported = self._export_fmu(folder, fmi_version)
-        if not clocked:
-            return exported
-        note = f"{self.name}: an FMU component has no clocked form; written unclocked"
-        return ExportedFMU(exported.path, exported.parameters, "; ".join(n for n in (exported.note, note) if n))
-
-    def _export_fmu(self, folder: Path, fmi_version: int) -> ExportedFMU:
         if self.clock_model is not None:
             raise ConfigurationError(f"{self.name}: an FMU with clocks has no SSP form here (the SSP 1.0 files "
                                      "written have no clock connections)")
@@ -236,14 +223,17 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 atomic_copy(build_fmu(self.plant_model, tmp, fmi_version=fmi_version), dst)
             note = (f"{self.name}: built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run "
                     f"used the FMI {self.version}.0 FMU of the same model)")
-            return ExportedFMU(dst, dict(self.settings), note)
-        atomic_copy(self.path, dst)
-        if fmi_version != self.version:
-            note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
-                    f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
-        elif self.interface == "me":
-            note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
-                    "importer may use its Co-Simulation interface")
+        else:
+            atomic_copy(self.path, dst)
+            if fmi_version != self.version:
+                note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
+                        f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
+            elif self.interface == "me":
+                note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
+                        "importer may use its Co-Simulation interface")
+        if clocked:
+            unclocked = f"{self.name}: an FMU component has no clocked form; written unclocked"
+            note = f"{note}; {unclocked}" if note else unclocked
         return ExportedFMU(dst, dict(self.settings), note)
 
     def timing(self) -> str:
