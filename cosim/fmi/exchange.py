@@ -13,7 +13,7 @@ import numpy as np
 from fmu_models.errors import FMUError, InputError, TypeMismatchError
 
 from ..core.native import OP_GET, OP_SET, Op
-from .ports import REAL_TYPES, ElementPort, integer_range
+from .ports import INTEGER_RANGES, REAL_TYPES, ElementPort, integer_range
 
 __all__ = ["Exchange", "raw_function"]
 
@@ -22,10 +22,7 @@ _FMI2 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer")
          "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int, "Boolean")}
 _FMI1 = {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")}          # fmiBoolean is a char
 _FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
-         "Int8": (ctypes.c_int8, "Int8"), "UInt8": (ctypes.c_uint8, "UInt8"),
-         "Int16": (ctypes.c_int16, "Int16"), "UInt16": (ctypes.c_uint16, "UInt16"),
-         "Int32": (ctypes.c_int32, "Int32"), "UInt32": (ctypes.c_uint32, "UInt32"),
-         "Int64": (ctypes.c_int64, "Int64"), "UInt64": (ctypes.c_uint64, "UInt64"),
+         **{t: (getattr(ctypes, f"c_{t.lower()}"), t) for t in INTEGER_RANGES if t not in ("Integer", "Boolean")},
          "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")}
 
 
@@ -266,7 +263,6 @@ def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:
             bad = (int(unsigned[out[0]]), int(u[out[0]]))
     if bad is not None:
         k, value = bad
-        port = g.ports[k]
         src_name, src_type = sources[g.positions[k]]
-        raise InputError(f"{owner}.{port.name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
+        raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
                          f"{src_name} ({src_type}): it does not fit (a value is never wrapped)")
