@@ -25,7 +25,6 @@ from .archive import Extraction
 from .clock_run import clocked_run
 from .clock_timing import ClockedRun, initialise
 from .description import FMUDescription
-from .exchange import no_exchange as _nothing
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
 from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
@@ -423,8 +422,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
         def exchange(positions, direction, changes=False):
-            if not positions:
-                return _nothing
             ex = inst.exchange([ports[i] for i in positions], direction, [sources[i] for i in positions])
             ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
             return ex.bind(values, idx[positions], integers, changes)
@@ -434,8 +431,11 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         ft_pos = [i for i, n in enumerate(self.connected_inputs) if n in ft_names]
         get_out = inst.exchange([self.element_ports[n] for n in self.output_names], "get").bind(values, outputs,
                                                                                                 integers)
-        if self.interface == "me":
-            return self._bind_me(ports, exchange, all_pos, ft_pos, get_out)
+        if self.interface == "me":            # continuous inputs and discrete ones (set in Event Mode) apart
+            def setters(positions: list[int]) -> tuple[list, list]:
+                kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
+                return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
+            return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
         set_all = exchange(all_pos, "set")
         set_ft = exchange(ft_pos, "set") if ft_pos else None
         return self._output_fn(set_ft, get_out), self._cs_update(set_all)
@@ -526,13 +526,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                                  a=float(self.period)), (do_step,), fail)
             update_fn.native = [*ops, step]
         return update_fn
-
-    def _bind_me(self, ports, exchange, all_pos, ft_pos, get_out):
-        """Model Exchange: the inputs held over the step (:func:`~cosim.fmi.model_exchange.held_inputs`)."""
-        def setters(positions: list[int]) -> tuple[list, list]:
-            kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
-            return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
-        return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
 
     def _set_private_inputs(self, buf, ints, u) -> None:
         n_in = len(self.connected_inputs)
