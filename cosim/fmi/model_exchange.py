@@ -9,6 +9,7 @@ import ctypes
 import logging
 import math
 from collections.abc import Callable
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -237,14 +238,6 @@ class _Callbacks:
         self._out(self.m.nominals, np.ones(max(self.m.nx, 1)), ptr, n)
 
 
-class _NoInput:
-    """fmpy's CVODE binding applies inputs at each root evaluation; the master holds ours."""
-
-    @staticmethod
-    def apply(t, **kw):
-        return None
-
-
 def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
     """fmpy's CVodeSolver for ``model``, its callbacks guarded (:class:`_Callbacks`), a
     destructor that cannot fail (fmpy's reads ``cvode_mem``, never set by a constructor that
@@ -279,7 +272,8 @@ def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
 
     try:
         solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
-                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
+                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time,
+                         input=SimpleNamespace(apply=lambda t, **kw: None),     # the master holds the inputs
                          startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
     except FMUError:
         raise
