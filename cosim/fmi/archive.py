@@ -1,14 +1,5 @@
-"""Opening FMU files safely: checked zip, bounded extraction, named errors, no leftovers.
-
-An FMU is a zip archive; a damaged, hostile or wrong file must end in one
-:class:`~fmu_models.errors.FMUError` that says what is wrong, never a traceback from the
-zip or XML layers, a disk filled by a zip bomb, or a temporary folder left behind.
-:func:`read_description` checks the archive and parses its ``modelDescription.xml``
-(:func:`read_archive` also keeps the names of its files and the XML itself, one opening of
-the zip for all);
-:class:`Extraction` unpacks it into a private temporary folder with limits on the
-total size and the number of files, and removes the folder when closed (or when the
-object is garbage-collected, or at interpreter exit).
+"""Opening FMU files safely: a checked zip, bounded extraction into a private temporary
+folder, one named :class:`~fmu_models.errors.FMUError` for a bad file, no leftovers.
 """
 from __future__ import annotations
 
@@ -63,8 +54,8 @@ def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: in
 
 
 def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
-    """Check the archive at ``path`` (at most ``max_bytes`` unpacked, ``max_files`` files)
-    and return fmpy's ``ModelDescription`` of it.
+    """fmpy's ``ModelDescription`` of the FMU at ``path``, checked (at most ``max_bytes``
+    unpacked, ``max_files`` files).
 
     Raises
     ------
@@ -94,16 +85,14 @@ class FMUArchive:
 
     @cached_property
     def root(self):
-        """The XML's root element (entities not resolved, no network), for what fmpy leaves
-        unread."""
+        """The XML's root element (no entities, no network), for what fmpy leaves unread."""
         from lxml import etree
 
         return etree.fromstring(self.xml, etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False))
 
 
 def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES) -> FMUArchive:
-    """The FMU at ``path`` checked as :func:`read_description` does, with the names of the
-    files it holds and its XML.
+    """The FMU at ``path`` checked as :func:`read_description` does, with its files' names and XML.
 
     Parameters
     ----------
@@ -133,8 +122,7 @@ def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX
 
 
 def _complete_ranges(archive: FMUArchive) -> None:
-    """fmpy leaves ``min``/``max`` of FMI 3.0 integer variables unread (None): read them
-    from the XML, so declared ranges can be checked."""
+    """Read ``min``/``max`` of FMI 3.0 integer variables, which fmpy leaves None."""
     md = archive.md
     if not str(md.fmiVersion).startswith("3"):
         return
@@ -160,8 +148,8 @@ class Extraction:
     path : path
         The ``.fmu`` file.
     max_bytes, max_files : int
-        Limits on the total unpacked size and the number of files, enforced while
-        unpacking (sizes declared in the archive are not trusted).
+        Limits on the total unpacked size [bytes] and the number of files, enforced while
+        unpacking.
     required : str
         The member the archive must hold (default ``modelDescription.xml``).
     label : str
@@ -204,13 +192,10 @@ class Extraction:
                                 raise FMUError(f"{path.name} unpacks to more than {max_bytes / 2**20:.0f} MiB "
                                                "(its declared sizes are wrong)")
                             dst.write(chunk)
-        except FMUError:
-            self.close()
-            raise
         except (zipfile.BadZipFile, OSError, EOFError) as e:
             self.close()
             raise FMUError(f"cannot unpack {path.name}: {e}") from None
-        except BaseException:
+        except BaseException:          # FMUError and Ctrl-C too
             self.close()
             raise
 

@@ -1,16 +1,6 @@
-"""What an FMU declares, read once from its archive
-(:class:`~cosim.fmi.description.FMUDescription`: the FMI version, the interfaces, the
-variables, the clocks, the ``ModelStructure``), and a component's choices checked against
-it: the interface, the clock intervals, the parameter and start values, the ports (an array
-variable is one port per element, its size from the structural parameters:
-:mod:`cosim.fmi.ports`) and their direct dependencies.
-
-An FMI 1.0 FMU has one interface (Co-Simulation if its model description has an
-``Implementation``, else Model Exchange) and one ``modelIdentifier``; its variables read as
-fmpy reads them (causality ``internal`` is ``local``; ``variability="parameter"`` is a
-parameter); it declares no direct dependencies (every output depends on every input). A
-``negatedAlias`` variable (its value the negation of its value reference's) is no port and
-cannot be set: the refusal names its variable.
+"""What an FMU declares, read once (:class:`FMUDescription`), and a component's choices
+checked against it: the interface, clock intervals, parameter and start values, ports
+(:mod:`cosim.fmi.ports`) and their direct dependencies.
 """
 from __future__ import annotations
 
@@ -38,7 +28,7 @@ _WORDS = {"cs": "Co-Simulation", "me": "Model Exchange", "se": "Scheduled Execut
 
 
 class FMUDescription:
-    """An FMU file as its model description declares it (see the module documentation).
+    """An FMU file as its model description declares it.
 
     Parameters
     ----------
@@ -49,23 +39,20 @@ class FMUDescription:
 
     Attributes
     ----------
-    path : Path
-    md : fmpy ModelDescription
     version : int
         1, 2 or 3.
     interfaces : dict
-        The FMU's interfaces (fmpy's) by key, in the order ``"cs"``, ``"me"``, ``"se"``; only
-        those it has.
+        The interfaces it has (fmpy's) by key, in the order ``"cs"``, ``"me"``, ``"se"``.
     variables : dict
-        Its variables (fmpy's ``ModelVariable``) by name.
+        Its variables (fmpy's) by name.
     clocks : FMIClocks or None
         Its clocks (:mod:`cosim.fmi.clocks`), None if it declares none.
     dependencies : dict
         The ``ModelStructure``: the name of each output and derivative -> the variables it
         depends on directly (None: on every input).
     asynchronous : bool
-        FMI 1.0 Co-Simulation: the FMU declares ``canRunAsynchronuously`` (its ``fmiDoStep``
-        may return Pending).
+        FMI 1.0 Co-Simulation: it declares ``canRunAsynchronuously`` (``fmiDoStep`` may
+        return Pending).
     negated : frozenset of str
         FMI 1.0: the names of the ``negatedAlias`` variables.
     """
@@ -95,16 +82,14 @@ class FMUDescription:
 
     @property
     def prefix(self) -> str:
-        """``fmi`` (FMI 1.0, where the library's symbols are ``<modelIdentifier>_fmi...``),
-        ``fmi2`` or ``fmi3``, the prefix of the FMI functions' names in messages."""
+        """The FMI functions' prefix in messages: ``fmi`` (FMI 1.0), ``fmi2`` or ``fmi3``."""
         return "fmi" if self.version == 1 else f"fmi{self.version}"
 
     # ------------------------------------------------------------------ the interface
     def choose_interface(self, interface: str) -> str:
-        """``interface`` (one of :data:`INTERFACES`) resolved (``"auto"``: Co-Simulation if the
-        FMU has it, else Model Exchange, else Scheduled Execution) and checked: the FMU has it,
-        its clocks allow it (:meth:`~cosim.fmi.clocks.FMIClocks.check_interface`), Scheduled
-        Execution has clocks to activate."""
+        """``interface`` (one of :data:`INTERFACES`; ``"auto"``: the first the FMU has) resolved
+        and checked: the FMU has it, its clocks allow it
+        (:meth:`~cosim.fmi.clocks.FMIClocks.check_interface`), Scheduled Execution has clocks."""
         owner, file = self.owner, self.path.name
         if interface not in INTERFACES:
             raise UnknownNameError(f"{owner}: interface must be one of {INTERFACES}, got {interface!r}")
@@ -125,9 +110,9 @@ class FMUDescription:
         return interface
 
     def clock_overrides(self, intervals: Mapping[str, float] | None, isolate: object) -> dict[str, Fraction]:
-        """The clock intervals [s] a component sets (``clock_intervals``, checked by
-        :meth:`~cosim.fmi.clocks.FMIClocks.check_overrides`), by clock name; refused for an FMU
-        without clocks, as ``isolate`` (true) is for one with clocks."""
+        """The clock ``intervals`` [s] a component sets, by clock name, checked
+        (:meth:`~cosim.fmi.clocks.FMIClocks.check_overrides`); refused without clocks, as
+        ``isolate`` is with clocks."""
         if self.clocks is None:
             if intervals is not None:
                 raise ConfigurationError(f"{self.owner}: clock_intervals given, but {self.path.name} has no clocks")
@@ -160,9 +145,8 @@ class FMUDescription:
     # ------------------------------------------------------------------ values
     def settings(self, parameters: Mapping, start: Mapping) -> tuple[dict, dict[str, int]]:
         """The ``parameters`` and ``start`` values (by variable name) checked: exact integers,
-        finite reals, Booleans, within the declared ranges, lists for arrays (of their sizes).
-        Returns them by name, and the values of the integer structural parameters (their start
-        values, or as set) by name."""
+        finite reals, Booleans, within the declared ranges, lists for arrays. Returns them and
+        the integer structural parameters' values (start values, or as set), both by name."""
         owner = self.owner
         if not isinstance(parameters, Mapping) or not isinstance(start, Mapping):
             raise TypeMismatchError(f"{owner}: parameters and start must be tables of name = value")
@@ -213,11 +197,9 @@ class FMUDescription:
     # ------------------------------------------------------------------ ports
     def ports(self, element_ports: Mapping[str, ElementPort], chosen: Sequence[str] | None,
               direction: str) -> list[Port]:
-        """The ports ``chosen`` (names of element ports or of whole variables: all their
-        elements) among the FMU's inputs (``direction`` "input") or outputs and locals
-        ("output"); None: every input or output of a port type, and the clock ports
-        (:meth:`~cosim.fmi.clocks.FMIClocks.default_ports`). ``element_ports``: by name
-        (:func:`~cosim.fmi.ports.element_ports`)."""
+        """The ports ``chosen`` (element ports, or whole variables: all their elements) among
+        the ``element_ports`` (by name) that are inputs (``direction`` "input") or outputs and
+        locals ("output"); None: every input or output of a port type and the clock ports."""
         owner, clocks = self.owner, self.clocks
         causalities = ("input",) if direction == "input" else ("output", "local")
         available = {p.name: p for p in element_ports.values()
@@ -253,9 +235,8 @@ class FMUDescription:
     def feedthrough(self, element_ports: Mapping[str, ElementPort], outs: Sequence[Port], ins: Sequence[Port],
                     interface: str) -> dict[str, list[str]]:
         """The direct dependencies of each output port on input ports as the ``ModelStructure``
-        declares them (by variable: an array element depends on every element of what its
-        array does; an output without declared dependencies on every input), and as the
-        clocks restrict them in ``interface`` (:meth:`~cosim.fmi.clocks.FMIClocks.feedthrough`)."""
+        declares them (by variable; undeclared: every input), restricted by the clocks in
+        ``interface`` (:meth:`~cosim.fmi.clocks.FMIClocks.feedthrough`)."""
         by_variable: dict[str, list[str]] = {}
         for p in ins:
             by_variable.setdefault(element_ports[p.name].variable.name, []).append(p.name)

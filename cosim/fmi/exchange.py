@@ -1,50 +1,29 @@
-"""Typed value exchange with an FMU through its raw FMI functions, every argument prebuilt.
-
-An :class:`Exchange` moves the values of a list of element ports (:mod:`cosim.fmi.ports`)
-between the master's signal arrays and the FMU, one FMI call per variable type:
-``fmiGetReal``/``fmiGetInteger``/``fmiGetBoolean`` in FMI 1.0 (``fmiBoolean`` a char;
-the library's symbols prefixed with the ``modelIdentifier``, see
-:class:`~cosim.fmi.instance.FMUInstance`), ``fmi2GetReal``/``fmi2GetInteger``/``fmi2GetBoolean``
-in FMI 2.0, ``fmi3GetFloat64``,
-``fmi3GetFloat32``, ``fmi3GetInt8`` ... ``fmi3GetUInt64`` and ``fmi3GetBoolean`` in FMI
-3.0 (Enumerations use the Integer/Int64 functions), with the value count of array
-variables. The functions are fresh pointers from the library without ``argtypes``
-(ctypes' per-call conversion costs about 1.5 us a call), so a call costs what the FMU
-costs.
-
-The master keeps every signal as a float (``values``) and every integer or Boolean
-signal also exactly (``integers``, int64; a UInt64 as its bit pattern), so 64-bit
-integers travel exactly. Getting an integer variable writes both; setting one reads the
-exact value, checks it against the destination type's range (knowing whether the source
-is a UInt64) and refuses, naming the ports, the value and the range, what does not fit,
-instead of wrapping it. A real destination takes the float.
+"""Typed value exchange with an FMU through its raw FMI functions (no ctypes ``argtypes``,
+every argument prebuilt): one call per FMI type, integers exact (``integers``, int64; a
+UInt64 as its bit pattern) and checked against the destination's range, never wrapped.
 """
 from __future__ import annotations
 
 import ctypes
 from collections.abc import Callable, Sequence
+from itertools import accumulate
 
 import numpy as np
 
 from fmu_models.errors import FMUError, InputError, TypeMismatchError
 
 from ..core.native import OP_GET, OP_SET, Op
-from .ports import ElementPort, integer_range
+from .ports import INTEGER_RANGES, REAL_TYPES, ElementPort, integer_range
 
 __all__ = ["Exchange", "raw_function"]
 
 # FMI type name -> (ctypes element type, FMI function suffix)
-_FMI1 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
-         "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int8, "Boolean")}
 _FMI2 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
          "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int, "Boolean")}
+_FMI1 = {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")}          # fmiBoolean is a char
 _FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
-         "Int8": (ctypes.c_int8, "Int8"), "UInt8": (ctypes.c_uint8, "UInt8"),
-         "Int16": (ctypes.c_int16, "Int16"), "UInt16": (ctypes.c_uint16, "UInt16"),
-         "Int32": (ctypes.c_int32, "Int32"), "UInt32": (ctypes.c_uint32, "UInt32"),
-         "Int64": (ctypes.c_int64, "Int64"), "UInt64": (ctypes.c_uint64, "UInt64"),
+         **{t: (getattr(ctypes, f"c_{t.lower()}"), t) for t in INTEGER_RANGES if t not in ("Integer", "Boolean")},
          "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")}
-_REAL = ("Real", "Float64", "Float32")
 
 
 def raw_function(dll, name: str):
@@ -63,13 +42,10 @@ class _Group:
     """The variables of one FMI type: one call moves them all (every element of an array)."""
 
     def __init__(self, ctype, type_name: str, ports: list[tuple[int, ElementPort]]):
-        variables = list(dict.fromkeys(p.variable.valueReference for _, p in ports))
-        sizes = {p.variable.valueReference: p.size for _, p in ports}
-        start, base = 0, {}
-        for vr in variables:
-            base[vr] = start
-            start += sizes[vr]
-        self.n_values = start
+        sizes = {p.variable.valueReference: p.size for _, p in ports}       # in order of appearance
+        variables = list(sizes)
+        base = dict(zip(variables, accumulate(sizes.values(), initial=0)))
+        self.n_values = sum(sizes.values())
         self.positions = np.array([pos for pos, _ in ports], dtype=np.intp)      # in the port list
         self.offsets = np.array([base[p.variable.valueReference] + p.offset for _, p in ports], dtype=np.intp)
         self.vr = (ctypes.c_uint32 * len(variables))(*variables)
@@ -80,7 +56,7 @@ class _Group:
         #: the ports are the group's values in order (no gather needed)
         self.identity = bool(np.array_equal(self.offsets, np.arange(self.n_values)))
         self.type_name = type_name
-        self.real = type_name in _REAL
+        self.real = type_name in REAL_TYPES
         self.boolean = type_name == "Boolean"
         self.unsigned64 = type_name == "UInt64"
         self.ports = [p for _, p in ports]
@@ -106,8 +82,7 @@ class Exchange:
     owner : str
         The component's name, for messages.
     sources : sequence of (str, str), optional
-        For ``"set"``: each port's source signal name and FMI type (default: unknown, taken
-        as signed).
+        For ``"set"``: each port's source signal name and FMI type (default: unknown, signed).
 
     Attributes
     ----------
@@ -129,14 +104,12 @@ class Exchange:
         self.version, self.direction, self._fail, self.owner = version, direction, fail, owner
         self.inst = ctypes.c_void_p(instance)
         self.n = len(ports)
-        self.ports = list(ports)
         self.sources = list(sources) if sources is not None else [("?", "Int64")] * len(ports)
         self.groups = []
         for suffix, (ctype, type_name, members) in by_suffix.items():
             fn = raw_function(dll, f"fmi{version}{direction.capitalize()}{suffix}")
             self.groups.append((fn, f"{direction.capitalize()}{suffix}", _Group(ctype, type_name, members)))
-        # aliases (FMI 3 <Alias>, FMI 2 variables sharing a value reference) are one value
-        # moved once and copied to each port: not the in-place path
+        # aliases (sharing a value reference) are one value copied to each port: not in place
         self.direct = (all(p.type in ("Real", "Float64") and p.size == 1 for p in ports)
                        and all(g.identity for _, _, g in self.groups))
 
@@ -155,14 +128,10 @@ class Exchange:
 
     def bind(self, values: np.ndarray, index, integers: np.ndarray | None = None,
              changes: bool = False) -> Callable[[], bool | None]:
-        """A call that moves the values between the FMU and ``values[index]`` (floats) and,
-        for integer and Boolean ports, ``integers[index]`` (exact int64).
-
-        ``index`` is a slice or an int array. With one scalar Real group and a contiguous
-        slice the FMU reads or writes ``values`` in place. With ``changes`` (a setter), the
-        call returns whether any value differs from the one set before (what Model
-        Exchange needs to know: an input that jumped).
-        """
+        """A call that moves the values between the FMU and ``values[index]`` (floats) and, for
+        integer and Boolean ports, ``integers[index]`` (exact int64); ``index`` a slice (the FMU
+        works in ``values`` in place if it can) or an int array. With ``changes`` (a setter),
+        the call returns whether a value differs from the one set before (an input that jumped)."""
         if self.n == 0:
             return no_exchange
         fail = self._fail
@@ -179,7 +148,7 @@ class Exchange:
             return call
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
-        idx = np.arange(len(values))[index] if isinstance(index, slice) else np.asarray(index, np.intp)
+        idx = np.arange(len(values))[index]
         parts = [(fn, label, g, self._args(g, g.buf), idx[g.positions]) for fn, label, g in self.groups]
         call = (self._getter(parts, values, integers) if self.direction == "get"
                 else self._setter(parts, values, integers, changes))
@@ -189,9 +158,8 @@ class Exchange:
         return call
 
     def _op(self, fn, label: str, g: _Group, buf: int, where, values):
-        """The native kernel's operation (:mod:`cosim.core.native`) of group ``g``'s call:
-        ``buf`` the address the FMU reads or writes, ``where`` the signal of every port (None:
-        the FMU works in ``values`` in place)."""
+        """The native kernel's operation (:mod:`cosim.core.native`) of group ``g``'s call: ``buf``
+        the address the FMU reads or writes, ``where`` each port's signal (None: in place)."""
         fail = self._fail
         if where is None:
             idx = off = np.zeros(0, np.int64)
@@ -218,9 +186,7 @@ class Exchange:
         return call
 
     def _setter(self, parts, values, integers, changes: bool):
-        plans = []
-        for fn, label, g, args, where in parts:
-            plans.append((fn, label, g, args, where, g.offsets, self._range_plan(g)))
+        plans = [(fn, label, g, args, where, g.offsets, self._range_plan(g)) for fn, label, g, args, where in parts]
         owner, sources, fail = self.owner, self.sources, self._fail
 
         def new_values(g, where, plan):
@@ -269,8 +235,7 @@ class Exchange:
             (unsigned if src_type == "UInt64" else signed).append(k)
         if not signed and not unsigned:
             return None
-        clip = lambda x: max(min(x, 2**63 - 1), -2**63)  # noqa: E731
-        return (np.array(signed, np.intp), np.int64(clip(lo_d)), np.int64(clip(hi_d)),
+        return (np.array(signed, np.intp), np.int64(lo_d), np.int64(min(hi_d, 2**63 - 1)),
                 np.array(unsigned, np.intp), np.uint64(hi_d), lo_d, hi_d)
 
 
@@ -298,7 +263,6 @@ def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:
             bad = (int(unsigned[out[0]]), int(u[out[0]]))
     if bad is not None:
         k, value = bad
-        port = g.ports[k]
         src_name, src_type = sources[g.positions[k]]
-        raise InputError(f"{owner}.{port.name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
+        raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
                          f"{src_name} ({src_type}): it does not fit (a value is never wrapped)")

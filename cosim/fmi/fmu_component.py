@@ -1,45 +1,6 @@
-"""An FMI 1.0, 2.0 or 3.0 FMU (Co-Simulation or Model Exchange) as a co-simulation component.
-
-Timing (see :mod:`cosim.core.component`): at an instant ``t`` the component's outputs are the
-FMU's outputs at ``t``. With ``feedthrough="model"`` (default) the inputs the
-``ModelStructure`` lists as direct dependencies of an output are set to their values at
-``t`` before the outputs are read, so a feed-through FMU passes its input on at the same
-instant; with ``feedthrough="none"`` the outputs are read before any input changes (the
-left limit at ``t``: computed with the inputs held over the previous step), which breaks
-algebraic loops through the FMU at the price of one step of latency, as a sensor that
-samples just before the actuator updates. Then ``update`` sets all connected inputs and
-advances the FMU over ``[t, t + period]`` with the inputs held: ``doStep`` in
-Co-Simulation, the integrator of :mod:`cosim.fmi.model_exchange` in Model Exchange (which
-sets discrete-time inputs only in Event Mode, as the standard requires).
-
-Ports (:mod:`cosim.fmi.ports`) may be of any FMI numeric type (Float64/Real, Float32, the
-integer types, Enumeration, Boolean); an FMI 3.0 array variable is one port per element
-(``y[1]``, ``y[2]``, ...), its size from its dimensions or structural parameters (set in
-Configuration Mode where the FMU has one). Integer values travel exactly and are checked
-against their destination's range (:mod:`cosim.fmi.exchange`), start values too.
-Parameters and start values of arrays are lists.
-
-The FMI rules of an instance's life are kept on every path (:mod:`cosim.fmi.instance`):
-after a call returned Error only FreeInstance follows; after Fatal nothing. An FMU that
-asks to terminate ends the run normally (:class:`~cosim.core.component.StopRequest`).
-An FMI 3.0 FMU with clocks (Model Exchange, Co-Simulation with Event Mode, Scheduled
-Execution) runs as the standard's call sequences for clocks say (:mod:`cosim.fmi.clocks`;
-the master's side in :mod:`cosim.core.clocking`). With ``isolate=True`` the FMU
-runs in a process of its own (:mod:`cosim.fmi.isolated`): a crash of its code ends the run
-with an error naming the FMU, the call and the signal, not the process.
-
-An FMI 1.0 FMU has one interface and runs by the FMI 1.0 call sequences
-(:mod:`cosim.fmi.instance`): ``fmiInstantiateSlave``, the parameters and start values,
-``fmiInitializeSlave``, ``fmiDoStep`` per step (in the native kernel, like FMI 2.0 and 3.0,
-unless it declares ``canRunAsynchronuously``: then its Pending steps are waited for in
-Python); Model Exchange ``fmiInstantiateModel``, ``fmiSetTime``, the parameters and start
-values, ``fmiInitialize``, then the integrator with ``fmiEventUpdate`` at events
-(:mod:`cosim.fmi.model_exchange`). Its ports are Real, Integer, Enumeration and Boolean
-(FMI 1.0 has no arrays and no structural parameters).
-
-FMU log messages go to the Python logger ``cosim.fmu`` (warnings and errors always;
-everything with ``logging=True``), and the last ones are kept in
-``FMUComponent.messages`` and quoted in errors.
+"""An FMI 1.0, 2.0 or 3.0 FMU (Co-Simulation, Model Exchange or Scheduled Execution) as a
+co-simulation component: its timing, ports and call sequences are described in the
+co-simulation page of the documentation (FMUs in the master).
 """
 from __future__ import annotations
 
@@ -64,8 +25,6 @@ from .archive import Extraction
 from .clock_run import clocked_run
 from .clock_timing import ClockedRun, initialise
 from .description import FMUDescription
-from .exchange import Exchange
-from .exchange import no_exchange as _nothing
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
 from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
@@ -88,10 +47,9 @@ def _unload_box(box: list) -> None:
 
 
 class HeldInputs:
-    """What the FMU components share about their inputs (a mixin of :class:`FMUComponent`
-    and :class:`~cosim.fmi.me_system.MESystem`): the master sets only the connected ones, in
-    its order (:meth:`use_inputs`); the others keep their start values; all are held over the
-    step."""
+    """The inputs of :class:`FMUComponent` and :class:`~cosim.fmi.me_system.MESystem` (a
+    mixin): the master sets only the connected ones (:meth:`use_inputs`); the others keep
+    their start values; all are held over the step."""
 
     reentrant = True
     holds_inputs = True
@@ -117,70 +75,57 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     Parameters
     ----------
     name : str
-        Component name.
     path : str or Path
         The ``.fmu`` file (FMI 1.0, 2.0 or 3.0).
     period : float
         Communication step [s].
     inputs : sequence of str, optional
-        FMU variables (causality input) offered as input ports (an array's name means all
-        its elements, ``u[2]`` one); default: all inputs of a numeric type. Unconnected ones
-        keep their start values.
+        FMU inputs offered as ports (an array's name means all its elements, ``u[2]`` one);
+        default: all inputs of a numeric type. Unconnected ones keep their start values.
     outputs : sequence of str, optional
-        FMU variables offered as output ports (as ``inputs``); default: all outputs of a
-        numeric type. Local variables such as ``der(alpha_dot)`` may be listed too.
-    parameters : mapping, optional
-        Parameter values by name (lists for arrays), set before initialisation; structural
-        parameters are set in Configuration Mode (FMI 3.0) and decide the arrays' sizes.
-    start : mapping, optional
-        Start values by name (e.g. initial states), set before initialisation.
+        As ``inputs``, for outputs; locals such as ``der(alpha_dot)`` may be listed too.
+    parameters, start : mapping, optional
+        Parameter and start values by name (lists for arrays), set before initialisation;
+        structural parameters in Configuration Mode (FMI 3.0), deciding the arrays' sizes.
     interface : {"auto", "cs", "me", "se"}
-        Co-Simulation, Model Exchange or Scheduled Execution; ``"auto"`` takes
-        Co-Simulation if the FMU has it, else Model Exchange, else Scheduled Execution.
+        Co-Simulation, Model Exchange or Scheduled Execution; ``"auto"``: the first the FMU has.
     solver : {"cvode", "euler", "rk4"}
-        Model Exchange solver (see :mod:`cosim.fmi.model_exchange`; default CVODE).
+        Model Exchange solver (:mod:`cosim.fmi.model_exchange`).
     solver_step : float, optional
         Model Exchange: the fixed step [s] of Euler/RK4 (default: the period), or CVODE's
         largest step (default: none).
     rtol : float
-        Model Exchange: CVODE's relative tolerance (default 1e-6).
+        Model Exchange: CVODE's relative tolerance.
     feedthrough : {"model", "none"}
-        Direct dependencies of outputs on inputs: from the FMU's ``ModelStructure``
-        (default; an output without declared dependencies depends on every input), or
-        none (outputs are the left limits at each instant; see the module documentation).
+        Direct dependencies of outputs on inputs: from the ``ModelStructure`` (default; an
+        output without declared ones depends on every input), or none (left limits).
     logging : bool
-        Ask the FMU for debug messages (``SetDebugLogging``) and log them at INFO level;
-        warnings and errors are always logged (default False).
+        Ask the FMU for debug messages and log them at INFO level on the ``cosim.fmu``
+        logger (warnings and errors always are; default False).
     isolate : bool
-        Run the FMU in a process of its own, so that a crash of its code ends the run with
-        a named error instead of the process (default False; costs a round trip between
-        the processes per call, see the performance page of the documentation).
+        Run the FMU in a process of its own: a crash of its code ends the run with a named
+        error, not the process (default False).
     clock_intervals : mapping, optional
-        Intervals [s] of fixed or tunable input clocks that declare ``intervalDecimal``
-        (the importer sets those), by clock name; default: the declared ones. Each must be
-        a multiple of ``period``.
+        Intervals [s] of the fixed or tunable input clocks that declare ``intervalDecimal``,
+        by clock name (default: the declared ones); multiples of ``period``.
 
     Attributes
     ----------
     description : FMUDescription
-        What the FMU declares (:mod:`cosim.fmi.description`), read once.
-    md : fmpy ModelDescription
-    version : int
-        1, 2 or 3.
+        What the FMU declares (:mod:`cosim.fmi.description`); ``md``, ``version`` are its.
     interface : str
         ``"cs"``, ``"me"`` or ``"se"``, as resolved.
     clock_model : FMIClocks or None
-        The FMU's clocks (:mod:`cosim.fmi.clocks`), None if it declares none.
+        The FMU's clocks (:mod:`cosim.fmi.clocks`).
     messages : collections.deque of (int, str)
-        The last 200 log messages of the FMU (status, text).
+        The last 200 log messages of the FMU (status, text), quoted in errors.
     integrator : MEIntegrator or None
         The Model Exchange integrator of the current run.
     unit_nominals : bool
-        Model Exchange: the FMU's nominals call returned Error when its integrator started,
-        so its states' nominal values are 1 (:mod:`cosim.fmi.model_exchange`).
+        Model Exchange: the states' nominal values are 1 (:mod:`cosim.fmi.model_exchange`).
     arguments : dict
-        The constructor's arguments but ``isolate`` (what the isolating child process
-        builds its own copy of the component from).
+        The constructor's arguments but ``isolate`` (what an isolating child process builds
+        its copy from).
     """
 
     def __init__(self, name: str, path, period: float, inputs: Sequence[str] | None = None,
@@ -189,8 +134,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                  solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6,
                  feedthrough: str = "model", logging: bool = False, isolate: bool = False,
                  clock_intervals: Mapping[str, float] | None = None):
-
-        #: what a child process needs to build the same component (``isolate=True``)
         self.arguments = dict(name=name, path=str(path), period=period, inputs=inputs, outputs=outputs,
                               parameters=parameters, start=start, interface=interface, solver=solver,
                               solver_step=solver_step, rtol=rtol, feedthrough=feedthrough, logging=logging,
@@ -199,10 +142,14 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self.path, self.md, self.version, self.clock_model = d.path, d.md, d.version, d.clocks
         self.interface = d.choose_interface(interface)
         self.clock_overrides = d.clock_overrides(clock_intervals, isolate)
-        self._options(name, solver, solver_step, rtol, feedthrough, logging, isolate)
+        self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
+        if feedthrough not in FEEDTHROUGH_MODES:
+            raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
+        if not isinstance(isolate, bool):
+            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
+        self.feedthrough_mode, self.logging, self.isolate = feedthrough, bool(logging), isolate
         d.check_binary(self.interface)
-        #: The project's plant model this FMU was built from (a scenario's ``model = ...``),
-        #: or None for an FMU file: an FMU export in another FMI version rebuilds from it.
+        #: The project's plant model this FMU was built from (a scenario's ``model``), or None.
         self.plant_model = None
         self.settings, structural = d.settings(parameters or {}, start or {})
         self.element_ports = element_ports(d.md, structural)
@@ -219,24 +166,12 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
         self._extraction: Extraction | None = None
-        # the loaded library of the last instance (Co-Simulation), reused by the next; unloaded
-        # by release() or when the component is garbage-collected
+        # the library of the last Co-Simulation instance, reused by the next
         self._library_box: list = [None]
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
         self._remote = None
         self.unit_nominals = False
-
-    def _options(self, name: str, solver: str, solver_step: float | None, rtol: float, feedthrough: str,
-                 logging: bool, isolate: bool) -> None:
-        """Check and keep the options that are the component's, not the FMU's."""
-        self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
-        if feedthrough not in FEEDTHROUGH_MODES:
-            raise UnknownNameError(f"{name}: feedthrough must be one of {FEEDTHROUGH_MODES}, got {feedthrough!r}")
-        self.feedthrough_mode, self.logging = feedthrough, bool(logging)
-        if not isinstance(isolate, bool):
-            raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
-        self.isolate = isolate
 
     @classmethod
     def from_scenario(cls, name, table, context):
@@ -248,7 +183,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             raise ConfigurationError(f"component {name!r}: give either model (this project's plant, built on "
                                      "the fly) or path (an .fmu file)")
         if "model" in table:
-
             version = table.pop("fmi_version", 2)
             if isinstance(version, bool) or version not in FMI_VERSIONS:
                 raise ConfigurationError(f"component {name!r}: fmi_version must be one of {FMI_VERSIONS}, "
@@ -258,12 +192,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             comp = context.construct(cls, name, table, path=path)
             comp.plant_model = model
             return comp
-        else:
-            for key in ("fmi_version", "model_parameters"):
-                if key in table:
-                    raise ConfigurationError(f"component {name!r}: {key} applies to a built model, not to an FMU "
-                                             "file")
-            path = context.path(table.pop("path"), f"component {name!r}: path")
+        for key in ("fmi_version", "model_parameters"):
+            if key in table:
+                raise ConfigurationError(f"component {name!r}: {key} applies to a built model, not to an FMU file")
+        path = context.path(table.pop("path"), f"component {name!r}: path")
         return context.construct(cls, name, table, path=path)
 
     def __repr__(self):
@@ -271,22 +203,13 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 f"{self.interface.upper()}, period={self.period})")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
-        """The FMU as ``<folder>/<name>.fmu``, with this component's parameters and start
-        values. A plant built from the project's model is written in ``fmi_version`` (built
-        again from its model if the run used the other version); an FMU file is copied as it
-        is, and an ``fmi_version`` other than its own is said in the note, not converted.
-        ``clocked`` (FMI 3.0 only): the FMU has no clocked form; it is written unclocked,
-        which the note says."""
+        """The FMU as ``<folder>/<name>.fmu`` with this component's parameters and start values:
+        a plant built from the project's model in ``fmi_version`` (built again if the run used
+        another), an FMU file copied as it is (another ``fmi_version`` is said in the note, not
+        converted); ``clocked``: written unclocked, which the note says."""
         if fmi_version not in FMI_VERSIONS:
             raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
         check_clocked(clocked, fmi_version, self.name)
-        exported = self._export_fmu(folder, fmi_version)
-        if not clocked:
-            return exported
-        note = f"{self.name}: an FMU component has no clocked form; written unclocked"
-        return ExportedFMU(exported.path, exported.parameters, "; ".join(n for n in (exported.note, note) if n))
-
-    def _export_fmu(self, folder: Path, fmi_version: int) -> ExportedFMU:
         if self.clock_model is not None:
             raise ConfigurationError(f"{self.name}: an FMU with clocks has no SSP form here (the SSP 1.0 files "
                                      "written have no clock connections)")
@@ -299,14 +222,17 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 atomic_copy(build_fmu(self.plant_model, tmp, fmi_version=fmi_version), dst)
             note = (f"{self.name}: built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run "
                     f"used the FMI {self.version}.0 FMU of the same model)")
-            return ExportedFMU(dst, dict(self.settings), note)
-        atomic_copy(self.path, dst)
-        if fmi_version != self.version:
-            note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
-                    f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
-        elif self.interface == "me":
-            note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
-                    "importer may use its Co-Simulation interface")
+        else:
+            atomic_copy(self.path, dst)
+            if fmi_version != self.version:
+                note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
+                        f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
+            elif self.interface == "me":
+                note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
+                        "importer may use its Co-Simulation interface")
+        if clocked:
+            unclocked = f"{self.name}: an FMU component has no clocked form; written unclocked"
+            note = f"{note}; {unclocked}" if note else unclocked
         return ExportedFMU(dst, dict(self.settings), note)
 
     def timing(self) -> str:
@@ -328,22 +254,20 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     @property
     def input_sources(self) -> list[tuple[str, str]] | None:
-        """Each connected input's source signal name and FMI type (as :meth:`use_inputs`
-        was given them), or None."""
+        """Each connected input's source signal name and FMI type (given to :meth:`use_inputs`),
+        or None."""
         return list(self._sources) if self._sources is not None else None
 
     # ------------------------------------------------------------------ clocks
     @property
     def clock_infos(self) -> tuple:
-        """The FMU's clocks as the master's plan sees them (empty without clocks; see
-        :mod:`cosim.core.clocking`)."""
+        """The FMU's clocks as the master's plan (:mod:`cosim.core.clocking`) sees them."""
         if self.clock_model is None:
             return ()
         return self.clock_model.infos(self.interface, self.clock_overrides, self.input_names + self.output_names)
 
     def port_clocks(self, port: str) -> list[str]:
-        """The clocks of the data port ``port`` (it is exchanged only at their activations);
-        empty for a port without clock."""
+        """The clocks of the data port ``port`` (exchanged only at their activations)."""
         if self.clock_model is None or port not in self.element_ports or port in self.clock_model.by_name:
             return []
         by_vr = self.clock_model.by_vr
@@ -354,9 +278,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         self._board = board
 
     def _clock_update(self, env) -> None:
-        """The Scheduled Execution ``clockUpdate`` callback, passed on to the run (an
-        exception, Ctrl-C too, is kept by the run and raised when the FMU returns: a ctypes
-        callback cannot raise)."""
+        """The Scheduled Execution ``clockUpdate`` callback, passed on to the run (an exception
+        is kept by the run and raised when the FMU returns: a ctypes callback cannot raise)."""
         try:
             run = self._run
             if run is not None:
@@ -390,9 +313,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                                 f"{stop_time:g} s, more than {MAX_INTERNAL_STEPS:.0e}{hint}")
 
     def use_unpacked(self, directory: str) -> None:
-        """Instantiate from the FMU already unpacked in ``directory`` (owned by the caller,
-        which removes it: the process of an isolated FMU uses its parent's folder, so that
-        nothing is left behind if it crashes)."""
+        """Instantiate from the FMU unpacked in ``directory`` (the caller's, which removes it:
+        an isolated FMU's process uses its parent's folder)."""
         self.close()
         self._extraction = Extraction.existing(directory)
 
@@ -404,13 +326,11 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         return self._extraction.directory
 
     def reset(self, t0: float) -> None:
-        """Unpack (once) and instantiate the FMU, apply the structural parameters (in
-        Configuration Mode), the parameters and start values, initialise it at ``t0`` and,
-        in Model Exchange, start its integrator."""
+        """Unpack (once), instantiate and initialise the FMU at ``t0`` [s] (:meth:`instantiate`)
+        and, in Model Exchange, start its integrator."""
         self.close()
         super().reset(t0)
         if self.isolate:
-
             self._remote = RemoteFMU(self, t0)
             return
         self.instantiate(t0)
@@ -418,10 +338,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             self._start_integrator(t0)
 
     def _start_integrator(self, t0: float) -> None:
-        """Model Exchange: the integrator of the new instance, started at ``t0`` [s] (a
-        clocked FMU's first Event Mode ends in its first update); an FMU whose nominals call
-        returned Error there runs on a new instance with nominals of 1
-        (:func:`~cosim.fmi.model_exchange.unit_nominals_instead`)."""
+        """Model Exchange: the integrator started at ``t0`` [s] (a clocked FMU's in its first update)."""
         model = FMUModel(self.instance, self.unit_nominals)
         self.integrator = MEIntegrator(model, self.solver, self.solver_step, self.rtol)
         if self.clock_model is not None:
@@ -435,11 +352,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             self._start_integrator(t0)
 
     def instantiate(self, t0: float) -> FMUInstance:
-        """A new instance of the FMU (closing any previous one), initialised at ``t0``
-        [s] with the structural parameters (in Configuration Mode), parameters and start
-        values; left after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the
-        integrator not started: what :class:`~cosim.fmi.me_system.MESystem` builds on; FMI
-        1.0: after ``fmiInitializeSlave`` or ``fmiInitialize``)."""
+        """A new instance of the FMU (closing any previous one), initialised at ``t0`` [s] with
+        the structural parameters (in Configuration Mode), parameters and start values; left
+        after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the integrator not
+        started; FMI 1.0: after ``fmiInitializeSlave`` or ``fmiInitialize``)."""
         self.close()
         options = {}
         if self.clock_model is not None:
@@ -495,46 +411,39 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return self._remote.bind(values, inputs, outputs, integers)
         if self.instance is None:
             raise FMUError(f"{self.name}: reset() must be called before bind()")
+        if integers is None:
+            integers = np.zeros(len(values), dtype=np.int64)
         if self.clock_model is not None:
-            if integers is None:
-                integers = np.zeros(len(values), dtype=np.int64)
             board = self._board if self._board is not None else ClockBoard(None, values, integers, {})
             run = self._run = clocked_run(self, board, values, inputs, outputs, integers, self.integrator)
             return run.output, run.update
-        inst = self.instance
-        if integers is None:
-            integers = np.zeros(len(values), dtype=np.int64)
-        idx = np.arange(len(values))[inputs] if isinstance(inputs, slice) else np.asarray(inputs, np.intp)
+        inst, idx = self.instance, np.arange(len(values))[inputs]
         ports = [self.element_ports[n] for n in self.connected_inputs]
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
         def exchange(positions, direction, changes=False):
-            if not positions:
-                return _nothing
-            ex = Exchange(inst.dll, inst.handle, self.version, [ports[i] for i in positions], direction, inst.fail,
-                          self.name, [sources[i] for i in positions])
+            ex = inst.exchange([ports[i] for i in positions], direction, [sources[i] for i in positions])
             ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
             return ex.bind(values, idx[positions], integers, changes)
 
         all_pos = list(range(len(ports)))
         ft_names = set().union(*self.feedthrough.values()) if self.feedthrough else set()
         ft_pos = [i for i, n in enumerate(self.connected_inputs) if n in ft_names]
-        get_out = Exchange(inst.dll, inst.handle, self.version, [self.element_ports[n] for n in self.output_names],
-                           "get", inst.fail, self.name).bind(values, outputs, integers)
-        if self.interface == "me":
-            return self._bind_me(ports, exchange, all_pos, ft_pos, get_out)
+        get_out = inst.exchange([self.element_ports[n] for n in self.output_names], "get").bind(values, outputs,
+                                                                                                integers)
+        if self.interface == "me":            # continuous inputs and discrete ones (set in Event Mode) apart
+            def setters(positions: list[int]) -> tuple[list, list]:
+                kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
+                return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
+            return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
         set_all = exchange(all_pos, "set")
         set_ft = exchange(ft_pos, "set") if ft_pos else None
         return self._output_fn(set_ft, get_out), self._cs_update(set_all)
 
     def _input_starts(self) -> list:
-        """The start value of every connected input element (what an array's unconnected
-        elements are sent as)."""
-        out = []
-        for n in self.connected_inputs:
-            p = self.element_ports[n]
-            out.append(parse_start(p.variable, p.size)[p.offset])
-        return out
+        """The start value of every connected input (what an array's unconnected elements send)."""
+        ports = [self.element_ports[n] for n in self.connected_inputs]
+        return [parse_start(p.variable, p.size)[p.offset] for p in ports]
 
     @staticmethod
     def _output_fn(set_ft, get_out):
@@ -551,8 +460,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         return output_fn
 
     def native_reason(self) -> str | None:
-        """Why this FMU's calls run in Python (None: in the native kernel, see
-        :mod:`cosim.core.native`)."""
+        """Why this FMU's calls run in Python (None: in the native kernel, :mod:`cosim.core.native`)."""
         if self.isolate:
             return "isolated in a process of its own"
         if self.interface != "cs":
@@ -571,30 +479,26 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         inst, h, name = self.instance, self.period, self.name
         do_step, D = inst.raw(f"fmi{self.version}DoStep"), ctypes.c_double
         c, Dh = ctypes.c_void_p(inst.handle), ctypes.c_double(h)
-        if self.version == 1:
-            new_step = ctypes.c_char(1)
-
-            def update_fn(t: float) -> None:
-                set_all()
-                st = do_step(c, D(t), Dh, new_step)
-                if st > 1:
+        if self.version < 3:
+            def failed(st: int, t: float) -> None:
+                if self.version == 1:            # Pending waited for, Discard without a stop request
                     inst.step_failed(st, t, h)
-            return self._native_update(update_fn, set_all, OP_STEP1, do_step,
-                                       lambda op, t: inst.step_failed(op.status, t, h))
-        if self.version == 2:
-            def failed2(st: int, t: float) -> None:
+                    return
                 if st == 2:
                     when = inst.discard_reason()
                     if when is not None:
                         raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
                 inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
 
+            new_step = ctypes.c_char(1) if self.version == 1 else 1
+
             def update_fn(t: float) -> None:
                 set_all()
-                st = do_step(c, D(t), Dh, 1)
+                st = do_step(c, D(t), Dh, new_step)
                 if st > 1:
-                    failed2(st, t)
-            return self._native_update(update_fn, set_all, OP_STEP2, do_step, lambda op, t: failed2(op.status, t))
+                    failed(st, t)
+            return self._native_update(update_fn, set_all, OP_STEP1 if self.version == 1 else OP_STEP2, do_step,
+                                       lambda op, t: failed(op.status, t))
         flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
         refs = [ctypes.byref(x) for x in flags]
         term, last = flags[1], flags[3]
@@ -615,23 +519,13 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                                    lambda op, t: ended3(op.status, bool(op.flag), op.d, t))
 
     def _native_update(self, update_fn, set_all, kind: int, do_step, fail):
-        """``update_fn`` with its native operations (set the inputs, ``doStep``) when the
-        inputs can be set natively."""
+        """``update_fn`` with its native operations (set the inputs, ``doStep``) if it can have them."""
         ops = native_ops(set_all)
         if ops is not None and self.native_reason() is None:
             step = Op(kind, dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=self.instance.handle,
                                  a=float(self.period)), (do_step,), fail)
             update_fn.native = [*ops, step]
         return update_fn
-
-    def _bind_me(self, ports, exchange, all_pos, ft_pos, get_out):
-        """Model Exchange: the inputs held over the step, continuous ones set in
-        Continuous-Time Mode, discrete ones in Event Mode
-        (:func:`~cosim.fmi.model_exchange.held_inputs`)."""
-        def setters(positions: list[int]) -> tuple[list, list]:
-            kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
-            return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
-        return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
 
     def _set_private_inputs(self, buf, ints, u) -> None:
         n_in = len(self.connected_inputs)
@@ -641,8 +535,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 ints[i] = int(u[i])
 
     def close(self) -> None:
-        """End and free the FMU instance as the FMI rules allow (see :mod:`cosim.fmi.instance`);
-        the unpacked files stay for the next run (:meth:`release` removes them). Safe twice."""
+        """End and free the FMU instance as the FMI rules allow (:mod:`cosim.fmi.instance`); the
+        unpacked files stay for the next run. Safe twice."""
         remote, self._remote = self._remote, None
         if remote is not None:
             remote.close()
@@ -656,9 +550,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 unload_library(inst.fmu)
 
     def release(self) -> None:
-        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (both kept
-        between runs otherwise; removed anyway when the component is garbage-collected or
-        at interpreter exit)."""
+        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (otherwise kept
+        between runs, until garbage collection or interpreter exit)."""
         self.close()
         _unload_box(self._library_box)
         if self._extraction is not None:

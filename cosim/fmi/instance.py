@@ -1,35 +1,13 @@
-"""One FMU instance and the rules of its life (FMI 1.0, 2.0 and 3.0): created, initialised,
-its failures remembered, ended as the standard allows.
-
-:class:`FMUInstance` loads the FMU's library (through fmpy, restoring the working directory
-it changes), instantiates it with a logger that keeps the last messages, and tracks the
-worst status any call returned. The standard's rules for the end are kept on every path
-(:meth:`FMUInstance.finish`): after a call returned *Error*, only ``FreeInstance`` (or
-``Reset``) may follow, never ``Terminate``; after *Fatal* no call at all (the instance is
-abandoned, its memory with it); otherwise ``Terminate`` (if initialised) and
-``FreeInstance``. A failure raises :class:`~fmu_models.errors.FMUError` naming the
-component, the call, the status and the FMU's last messages.
-
-FMI 1.0 has the same rules under its own names (``fmiInstantiateSlave`` /
-``fmiInstantiateModel``, ``fmiInitializeSlave`` / ``fmiInitialize``, ``fmiTerminateSlave`` /
-``fmiTerminate``, ``fmiFreeSlaveInstance`` / ``fmiFreeModelInstance``), its library's
-symbols prefixed with the ``modelIdentifier`` (``<modelIdentifier>_fmiDoStep``): the
-instance's ``FMUInstance.dll`` resolves fmpy's names for them (``fmi1DoStep``). A
-Co-Simulation ``fmiDoStep`` that returns *Pending* (an FMU that declares
-``canRunAsynchronuously``) is waited for with ``fmiGetStatus(fmiDoStepStatus)`` (Ctrl-C
-cancels it: ``fmiCancelStep``, after which only ``fmiFreeSlaveInstance`` follows); a
-*Discard* is an error naming ``fmiGetRealStatus(fmiLastSuccessfulTime)`` (FMI 1.0 has no
-stop request).
-
-Stop requests are not failures (:class:`~cosim.core.component.StopRequest`): an FMI 2.0
-``DoStep`` returning *Discard* is asked ``fmi2GetBooleanStatus(fmi2Terminated)`` and
-``fmi2GetRealStatus(fmi2LastSuccessfulTime)``; FMI 3.0 says it in ``DoStep``'s
-``terminateSimulation`` and ``lastSuccessfulTime``; Model Exchange in the event update and
-``CompletedIntegratorStep``.
+"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life: loaded,
+instantiated with a logger that keeps its last messages, its worst status remembered, ended
+as the standard allows (:meth:`FMUInstance.finish`: after *Error* only ``FreeInstance``,
+after *Fatal* no call at all); a failure is an :class:`~fmu_models.errors.FMUError` naming
+the component, the call, the status and the FMU's last messages.
 """
 from __future__ import annotations
 
 import ctypes
+import functools
 import logging
 import os
 import time
@@ -38,7 +16,7 @@ from collections import deque
 from fmu_models.errors import FMUError
 
 from ..core import crash_guard
-from .exchange import raw_function
+from .exchange import Exchange, raw_function
 
 __all__ = ["STATUS", "FMUInstance", "unload_library"]
 
@@ -47,33 +25,29 @@ _LEVELS = {0: logging.INFO, 1: logging.WARNING, 2: logging.WARNING, 3: logging.E
 #: FMI status codes by name.
 STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 _ERROR, _FATAL, _PENDING = 3, 4, 5
-#: FMI 1.0 and 2.0 loggers by instance key: one C proxy formats an FMU's printf-style
-#: message with its arguments (fmpy's addLoggerProxy, which holds a single callback), and
-#: this table sends it to the instance that logged it: an FMI 2.0 instance by the
-#: componentEnvironment it is given (an int), an FMI 1.0 one (whose logger gets no
-#: environment) by its instance name (bytes; of two live instances of one name, the newer).
+#: FMI 1.0 and 2.0 loggers by instance key: fmpy's addLoggerProxy (one callback) formats a
+#: printf-style message, this table sends it to its instance: FMI 2.0 by its
+#: componentEnvironment (an int), FMI 1.0 (no environment) by its instance name (bytes; of
+#: two live instances of one name, the newer).
 _LOGS: dict[int | bytes, object] = {}
-_CALLBACK: list = []                  # the one ctypes callback behind the proxy, kept alive
 _KEYS = iter(range(1, 2**62))
 
 
+@functools.cache
 def _shared_logger():
-    """The ctypes logger every FMI 1.0 and 2.0 instance shares (created once)."""
-    if not _CALLBACK:
-        from fmpy import fmi2
+    """The ctypes logger every FMI 1.0 and 2.0 instance shares (created once, kept alive)."""
+    from fmpy import fmi2
 
-        def dispatch(env, inst, status, category, message):
-            log = _LOGS.get(env or 0) or _LOGS.get(inst)
-            if log is not None:
-                log(status, message)
+    def dispatch(env, inst, status, category, message):
+        log = _LOGS.get(env or 0) or _LOGS.get(inst)
+        if log is not None:
+            log(status, message)
 
-        _CALLBACK.append(fmi2.fmi2CallbackLoggerTYPE(dispatch))
-    return _CALLBACK[0]
+    return fmi2.fmi2CallbackLoggerTYPE(dispatch)
 
 
 class _Symbols:
-    """An FMI 1.0 library's functions by the names fmpy gives them: ``fmi1DoStep`` is the
-    library's ``<modelIdentifier>_fmiDoStep``."""
+    """An FMI 1.0 library's functions by fmpy's names (``fmi1DoStep``: ``<modelIdentifier>_fmiDoStep``)."""
 
     def __init__(self, dll, identifier: str):
         self._dll, self._prefix = dll, f"{identifier}_fmi"
@@ -108,35 +82,25 @@ class FMUInstance:
     interface : {"cs", "me", "se"}
         The interface (FMI 1.0: the FMU's one).
     logging_on : bool
-        Ask the FMU for debug messages and log them at INFO level (warnings and errors are
-        always logged, on the ``cosim.fmu`` logger).
+        Ask the FMU for debug messages and log them at INFO level (warnings and errors always
+        are, on the ``cosim.fmu`` logger).
     event_mode : bool
         FMI 3.0 Co-Simulation: instantiate with ``eventModeUsed`` (what clocks need).
     early_return : bool
         FMI 3.0 Co-Simulation: instantiate with ``earlyReturnAllowed``.
     clock_update : callable, optional
-        Scheduled Execution: the ``clockUpdate`` callback, called with the instance
-        environment (it must not raise: a ctypes callback cannot).
+        Scheduled Execution: the ``clockUpdate`` callback (it must not raise).
     library : fmpy FMU object, optional
-        The FMU's library loaded by an earlier instance of the same FMU and interface,
-        whose instance was freed (:attr:`keep_library`): instantiated again without loading
-        the library and its functions again (the standard allows a new instance after
-        ``FreeInstance``).
+        The library of an earlier, freed instance of the same FMU and interface
+        (:attr:`keep_library`), instantiated again without loading it again.
 
     Attributes
     ----------
-    md : fmpy ModelDescription
-    fmu : fmpy FMU1Slave, FMU1Model, FMU2Slave, FMU2Model, FMU3Slave, FMU3Model or FMU3ScheduledExecution
+    fmu : fmpy FMU object (``FMU2Slave``, ``FMU3Model``, ...)
     dll : ctypes.CDLL
-        The library (FMI 1.0: its functions by fmpy's names, ``fmi1DoStep`` for
-        ``<modelIdentifier>_fmiDoStep``).
+        The library (FMI 1.0: its functions by fmpy's names, ``fmi1DoStep``).
     handle : int
         The instance pointer.
-    version : {1, 2, 3}
-    prefix : str
-        The FMI functions' prefix in messages (``fmi``, ``fmi2``, ``fmi3``).
-    asynchronous : bool
-        FMI 1.0 Co-Simulation: the FMU declares ``canRunAsynchronuously``.
     initial_events : tuple of (bool, float or None)
         FMI 1.0 Model Exchange: what ``fmiInitialize`` said (terminate, the next time event).
     worst : int
@@ -164,10 +128,8 @@ class FMUInstance:
         args = dict(guid=self.md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
         cwd = os.getcwd()
         try:
-            if self.version == 1:
-                self._instantiate1(args, library)
-            elif self.version == 2:
-                self._instantiate2(args, library)
+            if self.version < 3:
+                self._instantiate12(args, library)
             else:
                 self._instantiate3(args, directory, event_mode, early_return, clock_update, library)
         except Exception as e:  # noqa: BLE001 - ctypes, fmpy and OSError: all become one FMUError
@@ -193,48 +155,31 @@ class FMUInstance:
             except Exception:  # noqa: BLE001 - optional: an FMU may refuse debug logging
                 LOGGER.debug("%s: setDebugLogging refused", owner)
 
-    def _instantiate1(self, args: dict, library) -> None:
-        """FMI 1.0: load (or reuse) the library and instantiate the slave or the model with
-        the shared logger (its messages found by the instance name) and no ``stepFinished``
-        (a Pending ``fmiDoStep`` is asked with ``fmiGetStatus``)."""
-        from fmpy import fmi1
+    def _instantiate12(self, args: dict, library) -> None:
+        """FMI 1.0 and 2.0: instantiate with the shared logger (FMI 1.0: no ``stepFinished``)."""
+        from fmpy import fmi1, fmi2
         from fmpy.logging import addLoggerProxy
 
-        fmu = self._guarded(library or (fmi1.FMU1Slave if self.interface == "cs" else fmi1.FMU1Model)(**args))
-        self._log_key = self.owner.encode()
+        fmi, p = (fmi1, "fmi1") if self.version == 1 else (fmi2, "fmi2")
+        kinds = (fmi1.FMU1Slave, fmi1.FMU1Model) if self.version == 1 else (fmi2.FMU2Slave, fmi2.FMU2Model)
+        fmu = self._guarded(library or kinds[self.interface != "cs"](**args))
+        self._log_key = self.owner.encode() if self.version == 1 else next(_KEYS)
         _LOGS[self._log_key] = self._logger = self._log
-        cb = fmi1.fmi1CallbackFunctions()
+        cb = getattr(fmi, f"{p}CallbackFunctions")()
         cb.logger = _shared_logger()
-        cb.allocateMemory = fmi1.fmi1CallbackAllocateMemoryTYPE(fmi1.calloc)
-        cb.freeMemory = fmi1.fmi1CallbackFreeMemoryTYPE(fmi1.free)
+        cb.allocateMemory = getattr(fmi, f"{p}CallbackAllocateMemoryTYPE")(fmi1.calloc)
+        cb.freeMemory = getattr(fmi, f"{p}CallbackFreeMemoryTYPE")(fmi1.free)
+        if self.version == 2:
+            cb.componentEnvironment = self._log_key
         addLoggerProxy(ctypes.byref(cb))     # printf-style messages formatted with their arguments
         self._callbacks = cb
-        fmu.instantiate(functions=cb, loggingOn=self.logging_on)
-
-    def _instantiate2(self, args: dict, library) -> None:
-        """FMI 2.0: load (or reuse) the library and instantiate with the shared logger."""
-        from fmpy import fmi2
-        from fmpy.fmi1 import calloc, free
-        from fmpy.logging import addLoggerProxy
-
-        fmu = self._guarded(library or (fmi2.FMU2Slave if self.interface == "cs" else fmi2.FMU2Model)(**args))
-        self._log_key = next(_KEYS)
-        _LOGS[self._log_key] = self._logger = self._log
-        cb = fmi2.fmi2CallbackFunctions()
-        cb.logger = _shared_logger()
-        cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
-        cb.componentEnvironment = self._log_key
-        addLoggerProxy(ctypes.byref(cb))     # printf-style messages formatted with their arguments
-        self._callbacks = cb
-        fmu.instantiate(callbacks=cb, loggingOn=self.logging_on)
+        fmu.instantiate(**{"functions" if self.version == 1 else "callbacks": cb}, loggingOn=self.logging_on)
 
     def _instantiate3(self, args: dict, directory: str, event_mode: bool, early_return: bool, clock_update,
                       library) -> None:
-        """FMI 3.0: load (or reuse) the library and instantiate the interface with this
-        instance's logger (always on: an FMI 3.0 FMU calls it only with loggingOn, errors
-        included, and a failing call names its reason; :meth:`_log` keeps the debug messages
-        off the log unless ``logging_on``)."""
+        """FMI 3.0: load (or reuse) the library and instantiate with this instance's logger,
+        always on (an FMI 3.0 FMU logs even its errors only with loggingOn; :meth:`_log` keeps
+        debug messages off the log unless ``logging_on``)."""
         from fmpy import fmi3
 
         def log3(env, status, category, message):
@@ -262,9 +207,9 @@ class FMUInstance:
         return fmu
 
     def _instantiate_se(self, fmu, directory: str, clock_update) -> None:
-        """``fmi3InstantiateScheduledExecution`` with this instance's logger and the
-        ``clockUpdate`` callback (fmpy's own instantiate passes one that does nothing); the
-        preemption locks do nothing (partitions run one after the other here)."""
+        """``fmi3InstantiateScheduledExecution`` with this instance's logger and ``clockUpdate``
+        (fmpy's instantiate passes a no-op); the preemption locks are no-ops (partitions run
+        one after the other here)."""
         from fmpy import fmi3
 
         def noop(*args):
@@ -293,7 +238,7 @@ class FMUInstance:
 
     def fail(self, what: str, status: int):
         """Remember ``status`` and raise the FMUError of the call ``what`` (the FMI function's
-        name without its ``fmi``/``fmi2``/``fmi3`` prefix, e.g. ``"DoStep(t = 1 s, h = 0.1 s)"``)."""
+        name without its prefix, e.g. ``"DoStep(t = 1 s, h = 0.1 s)"``)."""
         status = int(status)
         self.worst = max(self.worst, status)
         label = STATUS.get(status, f"status {status}")
@@ -309,14 +254,14 @@ class FMUInstance:
         except FMICallException as e:
             self.fail(what, e.status)
 
-    @property
-    def usable(self) -> bool:
-        """No call returned Error or Fatal (other calls are allowed)."""
-        return self.worst < _ERROR
-
     def raw(self, name: str):
         """A fresh pointer to the FMI function ``name`` (no argtypes; see :func:`raw_function`)."""
         return raw_function(self.dll, name)
+
+    def exchange(self, ports, direction: str, sources=None) -> Exchange:
+        """The :class:`~cosim.fmi.exchange.Exchange` of ``ports`` (ElementPorts) in ``direction``
+        ("get" or "set") with this instance; ``sources``: each port's source signal and type."""
+        return Exchange(self.dll, self.handle, self.version, ports, direction, self.fail, self.owner, sources)
 
     # ------------------------------------------------------------------ initialisation
     def setup(self, t0: float) -> None:
@@ -328,10 +273,9 @@ class FMUInstance:
             self.call("SetTime", self.fmu.setTime, t0)
 
     def enter_initialization(self, t0: float) -> None:
-        """After the parameters and start values: ``EnterInitializationMode`` (FMI 3.0 at
-        ``t0`` [s]); FMI 1.0, which has no Initialization Mode, initialises at once:
-        ``fmiInitializeSlave(t0, no stop time)`` or ``fmiInitialize`` (no tolerance control;
-        its event information kept in ``initial_events``)."""
+        """After the parameters and start values: ``EnterInitializationMode`` (FMI 3.0 at ``t0``
+        [s]); FMI 1.0 initialises at once: ``fmiInitializeSlave(t0, no stop time)`` or
+        ``fmiInitialize`` (no tolerance control; its event information in ``initial_events``)."""
         fmu = self.fmu
         if self.version == 3:
             self.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
@@ -353,9 +297,9 @@ class FMUInstance:
 
     # ------------------------------------------------------------------ FMI 1.0 steps
     def step_failed(self, status: int, t: float, h: float) -> None:
-        """After an FMI 1.0 ``fmiDoStep(t, h)`` [s] returned ``status`` (above Warning):
-        Pending waited for (returns if the step then ended well), else
-        the FMUError, a Discard naming the FMU's ``fmiLastSuccessfulTime``."""
+        """After an FMI 1.0 ``fmiDoStep(t, h)`` [s] returned ``status`` above Warning: Pending
+        waited for (returns if the step then ended well), else the FMUError (a Discard names
+        ``fmiLastSuccessfulTime``)."""
         what = f"DoStep(t = {t:g} s, h = {h:g} s)"
         if status == _PENDING:
             status = self._await_step(what)
@@ -369,9 +313,8 @@ class FMUInstance:
         self.fail(what, status)
 
     def _await_step(self, what: str) -> int:
-        """A Pending ``fmiDoStep``: ``fmiGetStatus(fmiDoStepStatus)`` until it is no longer
-        Pending (its status returned); Ctrl-C cancels the step. An FMU that does not declare
-        ``canRunAsynchronuously`` may not return Pending: its step is cancelled and refused."""
+        """``fmiGetStatus(fmiDoStepStatus)`` until the step is no longer Pending (its status
+        returned); Ctrl-C cancels it. Without ``canRunAsynchronuously`` it is cancelled and refused."""
         if not self.asynchronous:
             self._cancel_step()
             raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.file} does not declare "
@@ -391,15 +334,14 @@ class FMUInstance:
             raise
 
     def _cancel_step(self) -> None:
-        """``fmiCancelStep``: after it, only ``fmiResetSlave`` or ``fmiFreeSlaveInstance`` may
-        follow (the instance counts as failed)."""
+        """``fmiCancelStep`` (then only ``fmiFreeSlaveInstance``: the instance counts as failed)."""
         self.worst = max(self.worst, _ERROR)
         self.raw("fmi1CancelStep")(ctypes.c_void_p(self.handle))
 
     # ------------------------------------------------------------------ stop requests
     def discard_reason(self) -> float | None:
-        """After an FMI 2.0 ``DoStep`` returned Discard: the time the FMU asks to stop at
-        (``fmi2Terminated`` true: its ``fmi2LastSuccessfulTime``), or None (not a stop)."""
+        """After an FMI 2.0 ``DoStep`` returned Discard: the time the FMU asks to stop at (if
+        ``fmi2Terminated``: its ``fmi2LastSuccessfulTime``), or None."""
         from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
         try:

@@ -1,26 +1,17 @@
-"""An FMU in a process of its own (``FMUComponent(..., isolate=True)``, ``isolate = true``
-in a scenario): a crash of the FMU's code (a segfault, an abort, ``exit()``) ends the run
-with an :class:`~fmu_models.errors.FMUError` naming the FMU, the call, the time and the
-signal, the master keeps the rows recorded so far, and nothing is left behind.
+"""An FMU in a process of its own (``isolate=True``): a crash of its code ends the run with
+an :class:`~fmu_models.errors.FMUError` naming the FMU, the call, the time and the signal.
 
-The parent (:class:`RemoteFMU`, used by the component in place of its own instance)
-unpacks the FMU and owns the folder; the child (``python -m cosim.fmi.isolated_child``,
-:mod:`cosim.fmi.isolated_child`) builds
-the same :class:`~cosim.fmi.fmu_component.FMUComponent` from the parent's arguments on that
-folder and answers requests over a pipe:
-
-* ``O``: set the feed-through inputs, get the outputs at ``t``;
-* ``U``: set all inputs, advance over ``[t, t + period]``; the reply carries the outputs
-  at ``t + period``, so an FMU without feed-through needs one round trip per step;
-* ``C``: end the instance by the FMI rules and exit.
-
-Each request is the op byte, ``t`` and the inputs (float64 and exact int64 values); each
-reply a status byte (``K`` ok, ``S`` a stop request, ``E`` an error, the last two with a
-pickled description) and the outputs. The child ignores Ctrl-C (the parent decides) and,
-on Linux, dies with its parent. Cost: see the performance page of the documentation.
+The parent (:class:`RemoteFMU`) unpacks the FMU and owns the folder; the child
+(:mod:`cosim.fmi.isolated_child`) builds the same component on it and answers requests
+over a pipe: ``R`` set up, ``O`` set the feed-through inputs and get the outputs at ``t``,
+``U`` set all inputs and advance (the reply carries the outputs at ``t + period``), ``C``
+end the instance and exit. A request is the op byte, ``t`` and the inputs (float64, then
+exact int64); a reply a status byte (``K`` ok; ``S`` stop request, ``E`` error, with a
+pickled payload) and the outputs.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import select
@@ -44,17 +35,15 @@ HEAD = struct.Struct("<cd")
 REPLY = struct.Struct("<cI")
 #: Seconds a child may take to end its instance and exit before it is killed.
 CLOSE_TIMEOUT = 2.0
-
-
 #: Seconds the parent waits on the child's pipe between checks for Ctrl-C (a signal that
 #: the kernel hands to another thread of the parent does not interrupt a blocking read).
 POLL = 0.25 if os.name == "posix" else None
 
 
 def read_exactly(fd: int, n: int, poll: float | None = None) -> bytes:
-    """Exactly ``n`` bytes from ``fd`` (b"" if the other end closed first); with ``poll``
-    [s] the wait returns to the interpreter that often, so that a pending Ctrl-C is raised
-    even while the other end never answers (an FMU stuck in its code)."""
+    """Exactly ``n`` bytes from ``fd`` (b"" if the other end closed first); with ``poll`` [s]
+    the wait returns to the interpreter that often, so that Ctrl-C is raised even while the
+    other end never answers."""
     chunks, got = [], 0
     while got < n:
         if poll is not None:
@@ -75,8 +64,17 @@ def write_all(fd: int, data: bytes) -> None:
         view = view[os.write(fd, view):]
 
 
+def _reap(proc: subprocess.Popen) -> int:
+    """The exit code of ``proc``, killed if it does not exit in :data:`CLOSE_TIMEOUT` s."""
+    try:
+        return proc.wait(timeout=CLOSE_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait()
+
+
 class RemoteFMU:
-    """The parent's side of an isolated FMU (see the module documentation).
+    """The parent's side of an isolated FMU.
 
     Parameters
     ----------
@@ -116,11 +114,7 @@ class RemoteFMU:
 
     # ------------------------------------------------------------------ the pipe
     def _died(self, what: str, t: float) -> FMUError:
-        try:
-            code = self.proc.wait(timeout=CLOSE_TIMEOUT)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            code = self.proc.wait()
+        code = _reap(self.proc)
         how = (f"signal {signal.Signals(-code).name}" if code < 0 and -code in signal.Signals._value2member_map_
                else f"exit status {code}")
         return FMUError(f"{self.name}: the process running {self.fmu_name} died ({how}) during {what} at "
@@ -139,8 +133,7 @@ class RemoteFMU:
         if len(body) < length:
             raise self._died(what, t)
         if status == b"K":
-            out = np.frombuffer(body, dtype=np.float64, count=self.n_out)
-            self.outputs[:] = out
+            self.outputs[:] = np.frombuffer(body, dtype=np.float64, count=self.n_out)
             self.int_outputs[:] = np.frombuffer(body, dtype=np.int64, count=self.n_out, offset=8 * self.n_out)
             return
         info = pickle.loads(body[:length])
@@ -165,12 +158,11 @@ class RemoteFMU:
 
     # ------------------------------------------------------------------ the binding
     def bind(self, values: np.ndarray, inputs, outputs, integers: np.ndarray | None = None):
-        """Output and update closures (see :class:`~cosim.core.component.FastBinding`),
-        each one round trip to the child (the output of an FMU without feed-through is the
-        one the last update returned)."""
+        """Output and update closures (:class:`~cosim.core.component.FastBinding`), each one round
+        trip to the child (without feed-through, the output is the one the last update returned)."""
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
-        out_idx = np.arange(len(values))[outputs] if isinstance(outputs, slice) else np.asarray(outputs, np.intp)
+        out_idx = np.arange(len(values))[outputs]
         feedthrough = self.feedthrough
 
         def output_fn(t: float) -> None:
@@ -185,22 +177,13 @@ class RemoteFMU:
         return output_fn, update_fn
 
     def close(self) -> None:
-        """End the child: ask it to end its instance by the FMI rules, then kill it if it
-        does not exit in :data:`CLOSE_TIMEOUT` s (e.g. stuck inside the FMU). Safe twice."""
+        """Ask the child to end its instance by the FMI rules; kill it if it does not exit in
+        :data:`CLOSE_TIMEOUT` s. Safe twice."""
         proc = self.proc
         if proc.poll() is None:
-            try:
-                write_all(self._to, bytes(self._request(b"C", 0.0, np.zeros(self.n_in), np.zeros(self.n_in, np.int64),
-                                                     slice(None))))
-            except OSError:
-                pass
-            try:
-                proc.wait(timeout=CLOSE_TIMEOUT)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            with contextlib.suppress(OSError):
+                write_all(self._to, HEAD.pack(b"C", 0.0) + bytes(16 * self.n_in))
+            _reap(proc)
         for f in (proc.stdin, proc.stdout):
-            try:
+            with contextlib.suppress(OSError):
                 f.close()
-            except OSError:
-                pass

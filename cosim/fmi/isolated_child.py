@@ -1,9 +1,9 @@
-"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`): builds the
-:class:`~cosim.fmi.fmu_component.FMUComponent` from the parent's arguments on the parent's
-unpacked folder and answers its requests over the pipe until told to close. Started as
-``python -m cosim.fmi.isolated_child`` by :class:`~cosim.fmi.isolated.RemoteFMU`."""
+"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`), started as ``python -m
+cosim.fmi.isolated_child``: builds the component on the parent's unpacked folder and
+answers its requests until told to close."""
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import signal
@@ -24,10 +24,8 @@ def _die_with_parent() -> None:
     if sys.platform.startswith("linux"):
         import ctypes
 
-        try:
+        with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
 
 
 def _serve(fd_in: int, fd_out: int) -> None:

@@ -1,37 +1,19 @@
-"""Connected Model Exchange FMUs integrated as one system: one solver for the union of
-their continuous states, the connections between them evaluated inside every evaluation
-of the right-hand side.
-
-Connecting ME FMUs as separate components of the master holds each one's inputs constant
-over a communication step (a zero-order hold: an error of the order of the step wherever
-a signal changes within it). :class:`MESystem` removes the hold: at every right-hand-side
-evaluation CVODE asks for, the members get the time and their states, then, in the order
-of their direct feed-through (each member after those it depends on), their inputs from
-the other members' outputs, then their derivatives and event indicators. Events of any
-member (time, state, step events) stop the whole system: every member enters Event Mode,
-the event iteration runs over all of them with the connections propagated (discrete
-inputs are set here, as the standard requires) until no member needs another round and
-no connected value changed, then all enter Continuous-Time Mode.
-
-The system is one component of the master: its inputs are the members' unconnected
-inputs, its outputs all members' outputs, both named ``member.port`` (signals
-``system.member.port``), held over the communication step like any ME component's.
-A cycle of direct feed-through between members is an algebraic loop and is refused.
-
-Use it when ME FMUs exchange signals that change within a communication step (coupled
-dynamics, continuous controllers); keep separate components for FMUs at different
-periods, Co-Simulation FMUs, or Python components (see the third-party FMUs page of the documentation).
+"""Connected Model Exchange FMUs integrated as one system (:class:`MESystem`): one solver
+for all their states, the connections evaluated inside every right-hand-side evaluation,
+events handled jointly (see the third-party FMUs page of the documentation).
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
+from itertools import accumulate, pairwise
 
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
-from .exchange import Exchange, no_exchange
+from .exchange import no_exchange
 from .fmu_component import FMUComponent, HeldInputs
 from .model_exchange import ContinuousModel, FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
 
@@ -41,21 +23,22 @@ __all__ = ["MESystem"]
 MAX_EVENT_ROUNDS = 1000
 
 
+def _slices(sizes: list[int]) -> list[slice]:
+    """Consecutive slices of these sizes."""
+    ends = list(accumulate(sizes, initial=0))
+    return [slice(a, b) for a, b in pairwise(ends)]
+
+
 class _Coupled(ContinuousModel):
-    """The members as one :class:`~cosim.fmi.model_exchange.ContinuousModel` (see the
-    module documentation): states and indicators concatenated in member order, the
-    internal connections propagated before derivatives, indicators and outputs."""
+    """The members as one :class:`~cosim.fmi.model_exchange.ContinuousModel`: states and
+    indicators concatenated in member order, the connections propagated before derivatives,
+    indicators and outputs."""
 
     def __init__(self, name: str, models: list[FMUModel], propagate):
         self.name, self.models = name, models
         self.nx, self.nz = sum(m.nx for m in models), sum(m.nz for m in models)
         self.needs_completed_step = any(m.needs_completed_step for m in models)
-        xs, zs, i, j = [], [], 0, 0
-        for m in models:
-            xs.append(slice(i, i + m.nx))
-            zs.append(slice(j, j + m.nz))
-            i, j = i + m.nx, j + m.nz
-        self._x, self._z = xs, zs
+        self._x, self._z = _slices([m.nx for m in models]), _slices([m.nz for m in models])
         self._propagate = propagate
         self.dirty = True
 
@@ -148,14 +131,12 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
     ----------
     name : str
     members : sequence of FMUComponent
-        The FMUs (each built with ``interface="me"`` or ``"auto"`` on an ME-only FMU; their
-        own periods are ignored). Their names are the members' names.
+        The Model Exchange FMUs, by their names (their own periods are ignored).
     connections : mapping {"member.input": "member.output"}
-        The connections between members, evaluated inside every right-hand-side
-        evaluation (continuous inputs) and event iteration (all inputs).
+        The connections between members, evaluated inside every right-hand-side evaluation
+        (continuous inputs) and event iteration (all inputs).
     period : float
-        The communication step [s] with the master (outputs sampled, external inputs
-        held).
+        The communication step [s] with the master.
     solver : {"cvode", "euler", "rk4"}
     solver_step : float, optional
         Euler/RK4 step or CVODE's largest step [s] (see :class:`~cosim.fmi.FMUComponent`).
@@ -164,7 +145,6 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
 
     Attributes
     ----------
-    members : list of FMUComponent
     connections : dict {(member, input): (member, output)}
     integrator : MEIntegrator or None
         The integrator of the current run.
@@ -188,8 +168,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             if m.clock_model is not None:
                 raise ConfigurationError(f"{name}: member {m.name!r} has clocks; an ME system does not drive "
                                          "clocks: give it to the master as a component of its own")
-        names = [m.name for m in self.members]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        dup = sorted(n for n, k in Counter(m.name for m in self.members).items() if k > 1)
         if dup:
             raise ConfigurationError(f"{name}: duplicate member names: {dup}")
         self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
@@ -220,15 +199,13 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             m = dict(m)
             if "name" not in m:
                 raise ConfigurationError(f"component {name!r}: every member needs a name")
-            for key, allowed in (("period", None), ("interface", "me")):
-                if key in m and m[key] != allowed:
-                    raise ConfigurationError(f"component {name!r}, member {m['name']!r}: {key} is the system's"
-                                             if key == "period" else
-                                             f"component {name!r}, member {m['name']!r}: interface must be 'me'")
-            m.pop("interface", None)
-            member_name = m.pop("name")
-            built.append(FMUComponent.from_scenario(member_name, {**m, "interface": "me",
-                                                                  "period": table.get("period", 1.0)}, context))
+            what = f"component {name!r}, member {m['name']!r}"
+            if m.get("period") is not None:
+                raise ConfigurationError(f"{what}: period is the system's")
+            if m.pop("interface", "me") != "me":
+                raise ConfigurationError(f"{what}: interface must be 'me'")
+            built.append(FMUComponent.from_scenario(m.pop("name"), {**m, "interface": "me",
+                                                                    "period": table.get("period", 1.0)}, context))
         table["members"] = built
         return context.construct(cls, name, table)
 
@@ -259,8 +236,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         return out
 
     def _order(self, name: str) -> list[FMUComponent]:
-        """Members in an order where each one's feed-through inputs come from members
-        before it (Kahn's algorithm); a cycle is an algebraic loop."""
+        """Members ordered so that each one's feed-through inputs come from those before it."""
         after = {m.name: set() for m in self.members}
         for (dm, di), (sm, _so) in self.connections.items():
             if any(di in deps for deps in self.by_name[dm].feedthrough.values()):
@@ -273,25 +249,21 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                 raise ConfigurationError(f"{name}: the members {loop} feed each other's outputs through at once "
                                          "(an algebraic loop); break it with a member whose input does not reach "
                                          "its output directly")
-            for m in ready:
-                order.append(m)
-                done.add(m.name)
+            order += ready
+            done.update(m.name for m in ready)
         return order
 
     def _feedthrough_map(self) -> dict[str, set[str]]:
-        """Which external inputs each output depends on at once, through the members'
-        feed-through and the connections."""
+        """The external inputs each output depends on directly (through the connections)."""
         memo: dict[tuple[str, str], set[str]] = {}
 
         def deps(member: str, output: str) -> set[str]:
             key = (member, output)
             if key not in memo:
-                memo[key] = set()
-                found = set()
+                found = memo[key] = set()          # _order refused cycles: no recursion comes back here
                 for i in self.by_name[member].feedthrough.get(output, ()):
                     src = self.connections.get((member, i))
                     found |= deps(*src) if src is not None else {f"{member}.{i}"}
-                memo[key] = found
             return memo[key]
         return {f"{m.name}.{o}": deps(m.name, o) for m in self.members for o in m.output_names}
 
@@ -322,9 +294,8 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             self.reset(t0)
 
     def _coupled(self) -> _Coupled:
-        """The members' FMUModels and the propagation of the connections over a buffer of
-        the connected outputs."""
-        sources = sorted(set(self.connections.values()), key=lambda s: (s[0], s[1]))
+        """The members' models and the connections propagated over a buffer of their outputs."""
+        sources = sorted(set(self.connections.values()))
         slot = {s: k for k, s in enumerate(sources)}
         buf = np.zeros(max(len(sources), 1))
         ints = np.zeros(max(len(sources), 1), dtype=np.int64)
@@ -334,37 +305,31 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         rank = {m.name: k for k, m in enumerate(self.order)}
         early, late = [], []
         for m in self.order:
-            inst = m.instance
-            mine = sorted(s for s in sources if s[0] == m.name)
-            get = (Exchange(inst.dll, inst.handle, m.version, [m.element_ports[p] for _, p in mine], "get",
-                            inst.fail, m.name).bind(buf, np.array([slot[s] for s in mine], np.intp), ints)
-                   if mine else no_exchange)
-            for before, steps in ((True, early), (False, late)):
-                setters = []
+            setters = {}
+            for before in (True, False):
                 for discrete in (False, True):
                     conns = [(di, src) for (dm, di), src in self.connections.items()
                              if dm == m.name and m.element_ports[di].discrete == discrete
                              and (rank[src[0]] < rank[m.name]) == before]
-                    if not conns:
-                        setters.append(None)
-                        continue
-                    ports = [m.element_ports[di] for di, _ in conns]
-                    names = [(f"{self.name}.{s[0]}.{s[1]}", self.by_name[s[0]].element_ports[s[1]].type)
-                             for _, s in conns]
-                    ex = Exchange(inst.dll, inst.handle, m.version, ports, "set", inst.fail, m.name, names)
-                    setters.append(ex.bind(buf, np.array([slot[s] for _, s in conns], np.intp), ints, changes=True))
-                steps.append((setters[0], setters[1], get if before else None))
+                    names = [(f"{self.name}.{sm}.{so}", self.by_name[sm].element_ports[so].type)
+                             for _, (sm, so) in conns]
+                    ex = m.instance.exchange([m.element_ports[di] for di, _ in conns], "set", names)
+                    setters[before, discrete] = ex.bind(buf, np.array([slot[s] for _, s in conns], np.intp), ints,
+                                                        changes=True)
+            mine = [s for s in sources if s[0] == m.name]
+            get = m.instance.exchange([m.element_ports[p] for _, p in mine], "get").bind(
+                buf, np.array([slot[s] for s in mine], np.intp), ints)
+            early.append((setters[True, False], setters[True, True], get))
+            late.append((setters[False, False], setters[False, True], no_exchange))
 
         def propagate(discrete: bool) -> bool:
             changed = False
             for phase in (early, late):
                 for set_cont, set_disc, get in phase:
-                    if set_cont is not None:
-                        changed |= bool(set_cont())
-                    if discrete and set_disc is not None:
+                    changed |= bool(set_cont())
+                    if discrete:
                         changed |= bool(set_disc())
-                    if get is not None:
-                        get()
+                    get()
             return changed
 
         return _Coupled(self.name, [FMUModel(m.instance, m.unit_nominals) for m in self.order], propagate)
@@ -377,8 +342,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             raise FMUError(f"{self.name}: reset() must be called before bind()")
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
-        idx = np.arange(len(values))[inputs] if isinstance(inputs, slice) else np.asarray(inputs, np.intp)
-        out_idx = np.arange(len(values))[outputs] if isinstance(outputs, slice) else np.asarray(outputs, np.intp)
+        idx, out_idx = np.arange(len(values))[inputs], np.arange(len(values))[outputs]
         sources = self._sources or [(f"{self.name}.{n}", "Float64") for n in self.connected_inputs]
         ft_names = set().union(*self.feedthrough.values()) if self.feedthrough else set()
         set_cont, set_disc, ft_cont, ft_disc, getters = [], [], [], [], []
@@ -391,14 +355,12 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                 sel = [(k, p) for k, p in mine if m.element_ports[p].discrete == discrete]
                 for group, chosen in ((plain, sel), (ft, [(k, p) for k, p in sel if f"{m.name}.{p}" in ft_names])):
                     if chosen:
-                        ex = Exchange(inst.dll, inst.handle, m.version, [m.element_ports[p] for _, p in chosen],
-                                      "set", inst.fail, m.name, [sources[k] for k, _ in chosen])
+                        ex = inst.exchange([m.element_ports[p] for _, p in chosen], "set",
+                                           [sources[k] for k, _ in chosen])
                         group.append(ex.bind(values, idx[[k for k, _ in chosen]], integers, changes=True))
-            outs = m.output_names
-            if outs:
-                ex = Exchange(inst.dll, inst.handle, m.version, [m.element_ports[o] for o in outs], "get", inst.fail,
-                              m.name)
-                getters.append(ex.bind(values, out_idx[[out_pos[f"{m.name}.{o}"] for o in outs]], integers))
+            if m.output_names:
+                ex = inst.exchange([m.element_ports[o] for o in m.output_names], "get")
+                getters.append(ex.bind(values, out_idx[[out_pos[f"{m.name}.{o}"] for o in m.output_names]], integers))
         return held_inputs(self.integrator, self.period, (set_cont, set_disc), (ft_cont, ft_disc), getters)
 
     def close(self) -> None:

@@ -1,44 +1,7 @@
-"""Integrating Model Exchange FMUs between communication points, with their events.
-
-A :class:`ContinuousModel` is what the integrator needs: continuous states, derivatives,
-event indicators and the FMI event machinery. :class:`FMUModel` is one ME FMU;
-:class:`cosim.fmi.me_system.MESystem` is several connected ones integrated as one.
-
-:class:`MEIntegrator` advances a model over ``[t, t + h]`` with one of three solvers:
-
-* ``"cvode"``: SUNDIALS CVODE (BDF, variable step, relative tolerance ``rtol``, absolute
-  tolerance ``rtol`` times the states' nominal values) through fmpy's binding, with root
-  finding on the event indicators. The solver integrates **across** communication points:
-  its step-size and order history is kept, and it is reinitialised only at events and
-  where an input of the model actually changed (a continuous input's jump is a
-  discontinuity of the right-hand side). Its largest step is ``max_step`` (default none).
-* ``"euler"``, ``"rk4"``: fixed steps of ``solver_step`` (a last partial step ends on the
-  communication point); a state event is handled at the end of the step in which an
-  indicator changed sign (no localisation).
-
-Events follow the standard: time events (``nextEventTime``) end an integration step
-exactly; state events (CVODE's roots of the event indicators) and step events
-(``CompletedIntegratorStep`` asking for Event Mode) are handled where they occur: Event
-Mode, the event iteration (``NewDiscreteStates``/``UpdateDiscreteStates`` until no more is
-needed), Continuous-Time Mode, the states read again (they may jump), the solver
-reinitialised. Discrete-time inputs change only in Event Mode (:meth:`MEIntegrator.at_event`).
-
-The states' nominal values (CVODE's absolute tolerances) come from
-``GetNominalsOfContinuousStates``. Some exporters leave that helper unimplemented and return
-Error; after an Error the FMI rules allow only ``FreeInstance`` (or ``Reset``) on that
-instance (FMI 2.0 section 2.1.3, FMI 3.0 section 2.2.3, no exception for this function), so
-an FMU whose nominals call returns Error when its integrator starts is not continued: the
-component frees it, warns (logger ``cosim.fmu``, naming the FMU), instantiates it afresh and
-integrates with nominal values of 1, the value the standard asks of an FMU without nominal
-information, never calling that function again (:func:`unit_nominals_instead`). An Error
-later in the run (the call worked at the start) ends the run as any Error does.
-A model that asks to terminate ends the run at that time
-(:class:`~cosim.core.component.StopRequest`).
-
-FMI 1.0 has no Event Mode and no Continuous-Time Mode: its event iteration is
-``fmiEventUpdate`` until ``iterationConverged`` (discrete inputs set just before it),
-``fmiCompletedIntegratorStep`` follows every integrator step (FMI 1.0 has no flag to skip
-it), and what ``fmiInitialize`` said about events starts the run.
+"""Model Exchange FMUs integrated between communication points (CVODE, Euler, RK4), with
+their time, state and step events as the standard describes them; an FMU whose nominals
+call returns Error is freed and integrated afresh with nominals of 1 (FMI 2.0 section
+2.1.3, FMI 3.0 section 2.2.3; the co-simulation page of the documentation says more).
 """
 from __future__ import annotations
 
@@ -46,6 +9,7 @@ import ctypes
 import logging
 import math
 from collections.abc import Callable
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -73,7 +37,13 @@ def check_solver(owner: str, solver: str, solver_step: float | None, rtol: float
 
 
 class ContinuousModel:
-    """The interface :class:`MEIntegrator` integrates (see the module documentation).
+    """The interface :class:`MEIntegrator` integrates; defaults for what a model may leave out.
+
+    A model also has ``set_time(t)`` [s], ``get_states(x)``, ``set_states(x)``,
+    ``derivatives(dx)`` (arrays of nx values), ``indicators(z)`` (nz values),
+    ``event(t, set_inputs=None)`` (Event Mode, ``set_inputs()``, the event iteration,
+    Continuous-Time Mode) and ``initial_event(t)`` (the same after
+    ``ExitInitializationMode``), both returning ``(terminate, next event time or None)``.
 
     Attributes
     ----------
@@ -100,57 +70,24 @@ class ContinuousModel:
     def refresh(self) -> None:
         """Bring the values the outputs are read from up to date (nothing to do for one FMU)."""
 
-    def set_time(self, t: float) -> None:
-        """Set the time [s]."""
-        raise NotImplementedError
-
-    def get_states(self, x: np.ndarray) -> None:
-        """Write the continuous states into ``x`` (nx)."""
-        raise NotImplementedError
-
-    def set_states(self, x: np.ndarray) -> None:
-        """Set the continuous states from ``x`` (nx)."""
-        raise NotImplementedError
-
-    def derivatives(self, dx: np.ndarray) -> None:
-        """Write the state derivatives at the current time and states into ``dx`` (nx)."""
-        raise NotImplementedError
-
-    def indicators(self, z: np.ndarray) -> None:
-        """Write the event indicators into ``z`` (nz)."""
-        raise NotImplementedError
-
     def nominals(self, out: np.ndarray) -> None:
-        """Write the states' nominal values into ``out`` (nx)."""
+        """Write the states' nominal values into ``out``."""
         out[:] = 1.0
 
     def completed_step(self) -> tuple[bool, bool]:
         """After an integrator step: ``(enter_event_mode, terminate)``."""
         return False, False
 
-    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
-        """Event Mode at ``t`` [s]: ``set_inputs()`` (discrete inputs), the event iteration,
-        Continuous-Time Mode. Returns ``(terminate, next event time or None)``."""
-        raise NotImplementedError
-
-    def initial_event(self, t: float) -> tuple[bool, float | None]:
-        """After ``ExitInitializationMode`` (already in Event Mode): the event iteration and
-        Continuous-Time Mode. Returns ``(terminate, next event time or None)``."""
-        raise NotImplementedError
-
 
 class FMUModel(ContinuousModel):
     """One Model Exchange FMU instance (after ``ExitInitializationMode``; FMI 1.0: after
-    ``fmiInitialize``) as a :class:`ContinuousModel`: its states, derivatives, indicators and
-    nominals are calls of the FMU's raw FMI functions, bound when it is made.
+    ``fmiInitialize``) as a :class:`ContinuousModel` over its raw FMI functions.
 
     Parameters
     ----------
     instance : FMUInstance
-        The instance (:mod:`cosim.fmi.instance`).
     unit_nominals : bool
-        The states' nominal values are 1, the FMU is not asked (see the module
-        documentation).
+        The states' nominal values are 1, the FMU is not asked (see the module documentation).
 
     Attributes
     ----------
@@ -174,7 +111,6 @@ class FMUModel(ContinuousModel):
                 fail(what, st)
 
         def vector(function: str, n: int, what: str):
-            """``function`` on an array of ``n`` values (nothing to do for none)."""
             fn, size = instance.raw(f"{p}{function}"), ctypes.c_size_t(n)
             return (lambda x: check(fn(c, x.ctypes.data_as(_DP), size), what)) if n else (lambda x: None)
 
@@ -202,8 +138,7 @@ class FMUModel(ContinuousModel):
         self._completed = lambda: check(completed(*args), "CompletedIntegratorStep")
 
     def completed_step(self):
-        """``CompletedIntegratorStep``: ``(enter_event_mode, terminate)`` (FMI 1.0:
-        ``callEventUpdate``; it never terminates here)."""
+        """``CompletedIntegratorStep`` (FMI 1.0: ``callEventUpdate``, never terminates)."""
         self._completed()
         return bool(self._enter.value), bool(self._term.value)
 
@@ -217,7 +152,7 @@ class FMUModel(ContinuousModel):
         if self.version > 1:
             self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
 
-    def event(self, t, set_inputs=None):
+    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
         """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
         self.enter_event_mode()
         if set_inputs is not None:
@@ -225,8 +160,7 @@ class FMUModel(ContinuousModel):
         return self._settle(t)
 
     def initial_event(self, t):
-        """The event iteration after initialisation, then Continuous-Time Mode; FMI 1.0:
-        what ``fmiInitialize`` said (its initial event iteration is its own)."""
+        """FMI 1.0: what ``fmiInitialize`` said (its initial event iteration is its own)."""
         if self.version == 1:
             return self.inst.initial_events
         return self._settle(t)
@@ -239,9 +173,8 @@ class FMUModel(ContinuousModel):
         return terminate, nxt
 
     def iterate(self, t: float) -> tuple[bool, float | None]:
-        """In Event Mode: update the discrete states until no more update is needed
-        (at most 1000 rounds; FMI 1.0: ``fmiEventUpdate`` until ``iterationConverged``);
-        returns ``(terminate, next event time or None)``."""
+        """In Event Mode: update the discrete states until no more update is needed (at most
+        1000 rounds); returns ``(terminate, next event time or None)``."""
         fmu, inst = self.inst.fmu, self.inst
         name = {1: "EventUpdate", 2: "NewDiscreteStates", 3: "UpdateDiscreteStates"}[self.version]
         update = getattr(fmu, name[0].lower() + name[1:])
@@ -260,10 +193,9 @@ class FMUModel(ContinuousModel):
 
 
 class _Callbacks:
-    """The functions fmpy's CVODE binding calls, for a :class:`ContinuousModel`; an exception
-    inside one (a failing FMU call) is kept and raised after CVODE returns (a ctypes
-    callback cannot raise), and no model call follows it (after an Error only FreeInstance
-    may)."""
+    """The functions fmpy's CVODE binding calls; an exception inside one is kept and raised
+    after CVODE returns (a ctypes callback cannot raise), and no model call follows it (after
+    an Error only FreeInstance may)."""
 
     def __init__(self, model: ContinuousModel):
         self.m = model
@@ -282,9 +214,13 @@ class _Callbacks:
             self.pending = e
             return -1
 
+    @staticmethod
+    def _out(fill, buf: np.ndarray, ptr, n: int) -> None:
+        fill(buf)
+        ctypes.memmove(ptr, buf.ctypes.data, 8 * n)
+
     def get_x(self, ptr, n):
-        self.m.get_states(self.x)
-        ctypes.memmove(ptr, self.x.ctypes.data, 8 * n)
+        self._out(self.m.get_states, self.x, ptr, n)
 
     def set_x(self, ptr, n):
         if self.pending is not None:        # fmpy sets the states after a failed CVode call too
@@ -293,32 +229,19 @@ class _Callbacks:
         self.m.set_states(self.x)
 
     def get_dx(self, ptr, n):
-        self.m.derivatives(self.dx)
-        ctypes.memmove(ptr, self.dx.ctypes.data, 8 * n)
+        self._out(self.m.derivatives, self.dx, ptr, n)
 
     def get_z(self, ptr, n):
-        self.m.indicators(self.z)
-        ctypes.memmove(ptr, self.z.ctypes.data, 8 * n)
+        self._out(self.m.indicators, self.z, ptr, n)
 
     def get_nominals(self, ptr, n):
-        nom = np.ones(max(self.m.nx, 1))
-        self.m.nominals(nom)
-        ctypes.memmove(ptr, nom.ctypes.data, 8 * n)
-
-
-class _NoInput:
-    """fmpy's CVODE binding applies inputs at each root evaluation; the master holds ours."""
-
-    @staticmethod
-    def apply(t, **kw):
-        return None
+        self._out(self.m.nominals, np.ones(max(self.m.nx, 1)), ptr, n)
 
 
 def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
-    """fmpy's CVodeSolver for ``model``, with its callbacks guarded (see :class:`_Callbacks`),
-    a destructor that cannot fail (fmpy's reads ``cvode_mem``, which a constructor that
-    failed on a model call never set: "Exception ignored in ..." on stderr) and SUNDIALS'
-    error messages kept for the FMUError instead of printed on stderr."""
+    """fmpy's CVodeSolver for ``model``, its callbacks guarded (:class:`_Callbacks`), a
+    destructor that cannot fail (fmpy's reads ``cvode_mem``, never set by a constructor that
+    failed) and SUNDIALS' error messages kept for the FMUError, not printed on stderr."""
     from fmpy.sundials import NV_DATA_S, CVodeSolver, SUNContext_PushErrHandler
     from fmpy.sundials.libraries import sundials_core
 
@@ -349,7 +272,8 @@ def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
 
     try:
         solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
-                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time, input=_NoInput(),
+                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time,
+                         input=SimpleNamespace(apply=lambda t, **kw: None),     # the master holds the inputs
                          startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
     except FMUError:
         raise
@@ -369,8 +293,8 @@ class MEIntegrator:
     model : ContinuousModel
     solver : {"cvode", "euler", "rk4"}
     solver_step : float, optional
-        The fixed step [s] of Euler and RK4 (default: the communication step given to
-        :meth:`advance`), or CVODE's largest step (default: none).
+        The fixed step [s] of Euler and RK4 (default: the communication step), or CVODE's
+        largest step (default: none).
     rtol : float
         CVODE's relative tolerance.
     """
@@ -388,7 +312,6 @@ class MEIntegrator:
         self.next_event: float | None = None
         self.cvode = None
         self._cb = None
-        self.resets = 0
         self.t = float("nan")
 
     # ------------------------------------------------------------------ events
@@ -396,14 +319,13 @@ class MEIntegrator:
         if terminate:
             raise StopRequest(self.model.name, t, self.model.stop_reason)
         self.next_event = nxt
-        m = self.model
-        m.get_states(self.x)
-        m.indicators(self.z)
+        self.model.get_states(self.x)
+        self.model.indicators(self.z)
         self.reset(t)
 
     def start(self, t0: float) -> None:
-        """After ``ExitInitializationMode`` (the model in Event Mode): the initial event
-        iteration, Continuous-Time Mode, the solver created."""
+        """After ``ExitInitializationMode``: the initial event iteration, Continuous-Time
+        Mode, the solver created."""
         terminate, nxt = self.model.initial_event(t0)
         self.t = t0
         if self.solver == "cvode":
@@ -414,7 +336,6 @@ class MEIntegrator:
         """Reinitialise the solver at ``t`` (after an event, or an input that changed)."""
         if self.cvode is not None:
             self.cvode.reset(t)
-            self.resets += 1
 
     def at_event(self, t: float, set_inputs: Callable[[], None]) -> None:
         """An event at ``t`` [s] whose Event Mode sets discrete inputs (``set_inputs()``)."""
@@ -429,21 +350,15 @@ class MEIntegrator:
         if self.solver == "euler":
             x += h * dx
         else:
-            k1 = dx.copy()
-            s[:] = x + h / 2 * k1
-            m.set_time(t + h / 2)
-            m.set_states(s)
-            m.derivatives(dx)
-            k2 = dx.copy()
-            s[:] = x + h / 2 * k2
-            m.set_states(s)
-            m.derivatives(dx)
-            k3 = dx.copy()
-            s[:] = x + h * k3
-            m.set_time(t + h)
-            m.set_states(s)
-            m.derivatives(dx)
-            x += h / 6 * (k1 + 2 * k2 + 2 * k3 + dx)
+            k = [dx.copy()]
+            for stage, c in enumerate((h / 2, h / 2, h)):
+                s[:] = x + c * k[-1]
+                if stage != 1:                   # the second stage is at the first's time
+                    m.set_time(t + c)
+                m.set_states(s)
+                m.derivatives(dx)
+                k.append(dx.copy())
+            x += h / 6 * (k[0] + 2 * k[1] + 2 * k[2] + k[3])
         m.set_time(t + h)
         m.set_states(x)
 
@@ -452,16 +367,13 @@ class MEIntegrator:
         try:
             root, _, t_reached = self.cvode.step(t, t_next)
         except RuntimeError as e:
-            if cb.pending is not None:
-                err, cb.pending = cb.pending, None
-                raise err from None
-            raise FMUError(f"{self.model.name}: CVODE failed between t = {t:g} s and {t_next:g} s: {e}") from None
+            if cb.pending is None:
+                raise FMUError(f"{self.model.name}: CVODE failed between t = {t:g} s and {t_next:g} s: {e}") from None
         if cb.pending is not None:
             err, cb.pending = cb.pending, None
-            raise err
-        m = self.model
-        m.set_time(t_reached)
-        m.get_states(self.x)
+            raise err from None
+        self.model.set_time(t_reached)
+        self.model.get_states(self.x)
         return t_reached, bool(root)
 
     def advance(self, t: float, h: float, inputs_changed: bool = False) -> None:
@@ -520,10 +432,9 @@ class MEIntegrator:
 
 
 def unit_nominals_instead(models: list[FMUModel], components: list) -> bool:
-    """After an integrator failed to start: each of ``models`` whose nominals call returned
-    Error (see the module documentation) gets, in its component (``components``, in the same
-    order), ``unit_nominals = True``, with a warning naming the FMU. Returns whether there
-    was one (the caller then instantiates afresh and starts again)."""
+    """After an integrator failed to start: the component (``components``, in the order of
+    ``models``) of each model whose nominals call returned Error gets ``unit_nominals = True``,
+    with a warning. Returns whether there was one (the caller then starts afresh)."""
     refused = False
     for model, comp in zip(models, components):
         if model.nominals_refused:
@@ -539,9 +450,8 @@ def unit_nominals_instead(models: list[FMUModel], components: list) -> bool:
 def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthrough: tuple[list, list],
                 getters: list) -> tuple[Callable[[float], None], Callable[[float], None]]:
     """The output and update functions of the model ``me`` integrates, its inputs held over
-    each communication step: continuous inputs set in Continuous-Time Mode (the solver
-    reinitialised where one jumped), discrete ones only in Event Mode (an event at the
-    communication point where one changed).
+    each step: continuous ones set in Continuous-Time Mode (the solver reinitialised where one
+    jumped), discrete ones in Event Mode (an event where one changed).
 
     Parameters
     ----------
@@ -552,7 +462,7 @@ def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthro
         The calls that set the continuous and the discrete inputs (each returns whether a
         value changed; its ``differs()`` whether one would).
     feedthrough : (list, list)
-        The same for the inputs that feed through, set at ``t`` before the outputs are read.
+        The same for the feed-through inputs, set at ``t`` before the outputs are read.
     getters : list
         The calls that read the outputs.
     """

@@ -1,13 +1,5 @@
-"""The ports of an FMU: its variables, scalar or array, as element ports with exact types.
-
-An FMI 3.0 array variable (``<Dimension start=.../>`` or ``valueReference=...``, a
-structural parameter) becomes one port per element, named as the standard's structured
-naming does (1-based): ``y[1]``, ``y[2]``; ``A[1,2]`` for a matrix (row-major, the order
-of the FMI values). Its shape comes from the dimensions' start values, or from the
-structural parameters' values (their start values, or what the component sets).
-
-Integer types keep their exact range (:data:`INTEGER_RANGES`): a value is checked against
-the destination's type before it is set (:func:`check_integer`), never wrapped.
+"""The ports of an FMU: its variables as element ports (an FMI 3.0 array is one port per
+element, ``y[1]``, ``A[1,2]``: 1-based, row-major) with exact integer types.
 """
 from __future__ import annotations
 
@@ -19,9 +11,11 @@ import numpy as np
 
 from fmu_models.errors import ConfigurationError, TypeMismatchError
 
-__all__ = ["INTEGER_RANGES", "ElementPort", "array_shape", "check_integer", "element_ports", "integer_range",
-           "parse_start"]
+__all__ = ["INTEGER_RANGES", "REAL_TYPES", "ElementPort", "array_shape", "check_declared_range", "check_integer",
+           "element_ports", "integer_range", "parse_start"]
 
+#: The FMI real types.
+REAL_TYPES = ("Real", "Float64", "Float32")
 #: The value range of every FMI integer type (FMI 1.0's and 2.0's Integer and Enumeration are
 #: 32-bit; FMI 3.0's Enumeration is 64-bit).
 INTEGER_RANGES = {
@@ -41,9 +35,8 @@ def integer_range(type_name: str, version: int) -> tuple[int, int]:
 
 def check_integer(value, type_name: str, version: int, what: str) -> int:
     """``value`` as an exact Python int within the range of ``type_name`` (in FMI ``version``);
-    else TypeMismatchError (not an integer) or ConfigurationError (out of range) naming
-    ``what``, the value and the range. Python ints (from TOML) are exact at any size; a
-    float must be integral and below 2**53 (beyond, it is not exact)."""
+    else TypeMismatchError (not an integer; a float beyond 2**53 is not exact) or
+    ConfigurationError (out of range) naming ``what``, the value and the range."""
     if isinstance(value, (bool, np.bool_)):
         raise TypeMismatchError(f"{what}: {value!r} is a Boolean, not an integer (the variable is {type_name})")
     if isinstance(value, (int, np.integer)):
@@ -68,38 +61,25 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
 def check_declared_range(values: list, variable, what: str) -> None:
     """Refuse values outside the variable's declared ``min``/``max`` (the standard makes
     them an error), naming ``what``, the value and the range."""
-    real = variable.type in ("Real", "Float64", "Float32")
-    conv = float if real else int
+    conv = float if variable.type in REAL_TYPES else int
     try:
-        lo = conv(variable.min) if variable.min is not None else None
-        hi = conv(variable.max) if variable.max is not None else None
+        lo = -math.inf if variable.min is None else conv(variable.min)
+        hi = math.inf if variable.max is None else conv(variable.max)
     except (TypeError, ValueError):
         return                                   # an unreadable bound: nothing to go by
-    if lo is None and hi is None:
-        return
     for x in values:
-        if (lo is not None and x < lo) or (hi is not None and x > hi):
+        if not lo <= x <= hi:
             raise ConfigurationError(f"{what}: {x!r} is outside the range the FMU declares for "
-                                     f"{variable.name!r} [{'-inf' if lo is None else lo}, "
-                                     f"{'inf' if hi is None else hi}]")
+                                     f"{variable.name!r} [{lo}, {hi}]")
 
 
 def parse_start(variable, count: int) -> list:
-    """The start value(s) of ``variable`` as Python numbers, ``count`` of them (an array's
-    start may hold one value for all elements); zeros if it has none."""
-    text = variable.start
-    if text is None:
+    """The start value(s) of ``variable`` as Python numbers, ``count`` of them (one value may
+    stand for all elements); zeros if it has none."""
+    if variable.start is None:
         return [0] * count
-    parts = str(text).split()
-    real = variable.type in ("Real", "Float64", "Float32")
-    conv = []
-    for p in parts:
-        if variable.type == "Boolean":
-            conv.append(1 if p in ("true", "1") else 0)
-        elif real:
-            conv.append(float(p))
-        else:
-            conv.append(int(p))
+    cast = float if variable.type in REAL_TYPES else int
+    conv = [int(p in ("true", "1")) if variable.type == "Boolean" else cast(p) for p in str(variable.start).split()]
     if len(conv) == 1 and count > 1:
         conv = conv * count
     if len(conv) != count:
@@ -108,8 +88,8 @@ def parse_start(variable, count: int) -> list:
 
 
 def array_shape(variable, structural: Mapping[str, int]) -> tuple[int, ...]:
-    """The shape of ``variable`` (``()`` for a scalar) from its dimensions: fixed ``start``
-    sizes or structural parameters, whose values are in ``structural`` (by name)."""
+    """The shape of ``variable`` (``()`` for a scalar) from its dimensions: fixed sizes, or
+    structural parameters whose values are in ``structural`` (by name)."""
     shape = []
     for d in getattr(variable, "dimensions", []) or []:
         if d.start is not None:
@@ -167,7 +147,7 @@ def element_ports(md, structural: Mapping[str, int]) -> dict[str, ElementPort]:
             continue
         shape = array_shape(v, structural)
         size = int(np.prod(shape)) if shape else 1
-        discrete = v.variability not in ("continuous", None) or v.type not in ("Real", "Float64", "Float32")
+        discrete = v.variability not in ("continuous", None) or v.type not in REAL_TYPES
         for k, n in enumerate(_element_names(v.name, shape)):
             ports[n] = ElementPort(n, v, k, size, v.type, discrete)
     return ports
