@@ -1,8 +1,4 @@
-"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame).
-
-Sources have no inputs; their output at ``t`` is a function of ``t`` alone, so they are
-reentrant and may sit anywhere in a component list.
-"""
+"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame), functions of time alone."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,21 +15,21 @@ from ..core.native import OP_CONST, OP_PRBS, OP_SWITCH, Op
 
 
 class _Source(Component):
-    """A component whose outputs depend on time only."""
+    """A component whose outputs depend on time only (reentrant)."""
 
     reentrant = True
 
     def _value(self, t):
+        """The outputs at ``t`` [s]."""
         raise NotImplementedError
 
     def _signal(self) -> tuple[str, list[tuple], list[tuple]]:
-        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`fmu_models.export.signal_fmu`)."""
+        """(kind, Real parameters, Integer parameters) of the signal FMU."""
         raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``
         (``clocked``: its clocked form, FMI 3.0)."""
-
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,
                           description=f"{type(self).__name__} source {self.name} (pendulum-cosim)")
@@ -43,6 +39,14 @@ class _Source(Component):
     def output(self, t, u):
         """Outputs at ``t`` [s] (``u`` is empty)."""
         return np.atleast_1d(self._value(t))
+
+
+def _python_reason(source: _Source, native_values: tuple) -> str | None:
+    """Why ``source`` runs in Python: its own calls, or a ``_value`` the kernel does not know."""
+    cls = type(source)
+    if cls.output is not _Source.output or cls.update is not Component.update or cls._value not in native_values:
+        return "a Python component (its own output or update)"
+    return None
 
 
 class Constant(_Source, kind="constant"):
@@ -68,16 +72,11 @@ class Constant(_Source, kind="constant"):
 
     def native_reason(self) -> str | None:
         """Why this source's calls run in Python (None: in the native kernel)."""
-        cls = type(self)
-        if (cls.output is not _Source.output or cls.update is not Component.update
-                or cls._value not in (Constant._value, Step._value)):
-            return "a Python component (its own output or update)"
-        return None
+        return _python_reason(self, (Constant._value, Step._value))
 
     def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
-        the native kernel runs itself: the value is a constant, or a switch at ``t_step``
-        (:mod:`cosim.core.native`)."""
+        """The Python component's calls, which the native kernel runs itself: a constant, or a
+        switch at ``t_step``."""
         if self.native_reason() is not None:
             return bind_protocol(self, values, values, inputs, outputs, integers)
         value = self._value
@@ -131,13 +130,12 @@ class Sine(_Source, kind="sine"):
     ----------
     name : str
     period : float
-    amplitude : float
+    amplitude, offset : float
+        (default offset 0)
     frequency : float
         [Hz]
     phase : float
         [rad] (default 0)
-    offset : float
-        (default 0)
     """
 
     def __init__(self, name, period, amplitude, frequency, phase=0.0, offset=0.0):
@@ -153,46 +151,42 @@ class Sine(_Source, kind="sine"):
                         ("phase", self.ph, "real", "phase [rad]"), ("offset", self.off, "real", "offset")], []
 
 
+#: The taps of a maximal-length Fibonacci LFSR by its order.
+_TAPS = {2: (2, 1), 3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4), 9: (9, 5), 10: (10, 7),
+         11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8), 14: (14, 13, 12, 2), 15: (15, 14), 16: (16, 15, 13, 4)}
+
+
 def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
     """``n`` bits of the maximal-length sequence of a Fibonacci LFSR of ``order`` 2..16,
     started from state ``seed`` (non-zero, reduced modulo 2^order)."""
-    taps = {2: (2, 1), 3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4),
-            9: (9, 5), 10: (10, 7), 11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8),
-            14: (14, 13, 12, 2), 15: (15, 14), 16: (16, 15, 13, 4)}
-    if order not in taps:
+    if order not in _TAPS:
         raise ConfigurationError(f"PRBS order must be in 2..16, got {order}")
     state = int(seed) % (2**order) or 1
     out = np.empty(n, dtype=bool)
     for i in range(n):
-        bit = 0
-        for tp in taps[order]:
-            bit ^= (state >> (tp - 1)) & 1
+        bit = sum((state >> (tp - 1)) & 1 for tp in _TAPS[order]) & 1    # the taps' XOR
         out[i] = state & 1
         state = (state >> 1) | (bit << (order - 1))
     return out
 
 
 class PRBS(_Source, kind="prbs"):
-    """Pseudo-random binary sequence ``+/- amplitude`` (a maximal-length LFSR sequence).
-
-    The level is held for ``bit_time`` seconds per bit; the sequence repeats after
-    ``2**order - 1`` bits. Deterministic given ``seed`` (the LFSR's start state).
+    """Pseudo-random binary sequence ``offset +/- amplitude`` of a maximal-length LFSR, each
+    bit held ``bit_time``; it repeats after ``2**order - 1`` bits.
 
     Parameters
     ----------
     name : str
     period : float
         Sample period [s].
-    amplitude : float
-        Output levels are ``offset +/- amplitude``.
+    amplitude, offset : float
+        The levels ``offset +/- amplitude`` (default offset 0).
     bit_time : float
         Duration of one bit [s].
     order : int
-        LFSR length, 2..16 (default 7: period 127 bits).
+        LFSR length, 2..16 (default 7: 127 bits).
     seed : int
         Non-zero LFSR start state (default 1).
-    offset : float
-        (default 0)
     """
 
     def __init__(self, name, period, amplitude, bit_time, order=7, seed=1, offset=0.0):
@@ -209,14 +203,11 @@ class PRBS(_Source, kind="prbs"):
 
     def native_reason(self) -> str | None:
         """Why this source's calls run in Python (None: in the native kernel)."""
-        cls = type(self)
-        if cls.output is not _Source.output or cls.update is not Component.update or cls._value is not PRBS._value:
-            return "a Python component (its own output or update)"
-        return None
+        return _python_reason(self, (PRBS._value,))
 
     def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
-        the native kernel runs itself (the same bit of the same arithmetic, :mod:`cosim.core.native`)."""
+        """The Python component's calls, which the native kernel runs itself (the same bit of
+        the same arithmetic)."""
         output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
         if self.native_reason() is None:
             bits = np.ascontiguousarray(self.bits, dtype=float)
@@ -244,12 +235,11 @@ class Table(_Source, kind="table"):
     data : DataFrame or str
         Table (or CSV path) with column ``time`` [s] and one column per output port.
     interpolation : {"zoh", "linear"} or mapping
-        Between rows: hold the last row (default) or interpolate linearly; one for all
-        columns or one per column (``{column: mode}``, the others hold). Before the first row
-        the first row holds; after the last, the last.
+        Between rows: hold the last row (default) or interpolate linearly, for all columns or
+        per column (``{column: mode}``, the others hold); the first and last rows hold outside.
     types : mapping, optional
         FMI type of a column's port (default ``"Float64"``); integer and Boolean columns must
-        hold whole numbers (Booleans 0 or 1) and are held between rows.
+        hold whole numbers and are held between rows.
     """
 
     def __init__(self, name, period, data, interpolation="zoh", types=None):
@@ -285,14 +275,11 @@ class Table(_Source, kind="table"):
     @staticmethod
     def read(data, name: str = "table") -> pd.DataFrame:
         """``data`` (a DataFrame, or a CSV file's path) as a DataFrame with a ``time`` column
-        (a ConfigurationError naming ``name`` if it cannot be read or has none)."""
-        if isinstance(data, pd.DataFrame):
-            df = data
-        else:
-            try:
-                df = pd.read_csv(data)
-            except (OSError, ValueError, pd.errors.ParserError) as e:
-                raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
+        (errors name ``name``)."""
+        try:
+            df = data if isinstance(data, pd.DataFrame) else pd.read_csv(data)
+        except (OSError, ValueError, pd.errors.ParserError) as e:
+            raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
         if "time" not in df.columns:
             raise ConfigurationError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
         return df
