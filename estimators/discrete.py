@@ -75,23 +75,12 @@ class DiscreteModel:
         return self._compiled[k]
 
     def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)`` with ``F = df/dx`` exact, at the symbols ``x`` and ``u``.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        u : casadi.SX, shape (nu, 1)
-        """
+        """``(f(x, u), F)`` with ``F = df/dx`` exact, at the symbols ``x`` (nx, 1) and ``u`` (nu, 1)."""
         xu, sym = ca.vertcat(x, u), ca.vertcat(self.x, self.u)
         return ca.substitute(self.fx, sym, xu), ca.substitute(ca.jacobian(self.fx, self.x), sym, xu)
 
     def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)`` with ``H = dh/dx`` exact, at the symbol ``x``.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        """
+        """``(h(x), H)`` with ``H = dh/dx`` exact, at the symbol ``x`` (nx, 1)."""
         return ca.substitute(self.hx, self.x, x), ca.substitute(ca.jacobian(self.hx, self.x), self.x, x)
 
     def take_failure(self) -> Exception | None:
@@ -131,8 +120,7 @@ class DiscreteModel:
         return np.asarray(self._H(checks.vector(x, self.nx, "x")))
 
     def linearized(self, x_op, u_op) -> DiscreteModel:
-        """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001).
-
+        """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001),
         ``x_{k+1} = f(x_op, u_op) + F0 (x_k - x_op) + G0 (u_k - u_op)``,
         ``y_k = h(x_op) + H0 (x_k - x_op)``, with the exact Jacobians of the discrete map
         (for the Euler map, ``F0 = I + T A``: seed 000 eq 20).

@@ -1,18 +1,7 @@
 """Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record
-(Shumway and Stoffer, 1982; Ghahramani and Hinton, 1996).
-
-E-step: the filter's pass with the current ``(x0, P0, Q, R)`` (its log-likelihood is the
-trace), smoothed by :func:`~estimators.smoother.rts_smooth`. M-step, with the smoothed
-``xs_k, Ps_k``, lag-one covariances ``Ps_{k+1,k}``, ``e_k = xs_{k+1} - f(xs_k, u_k)``,
-``F_k = df/dx(xs_k, u_k)``, ``r_k = y_k - h(xs_k)``, ``H_k = dh/dx(xs_k)``::
-
-    Q  = 1/N sum_k [ e_k e_k^T + F_k Ps_k F_k^T + Ps_{k+1} - Ps_{k+1,k} F_k^T - F_k Ps_{k+1,k}^T ]
-    R  = 1/M sum_k [ r_k r_k^T + H_k Ps_k H_k^T ]           (entries over the valid channels)
-    x0 = xs_0,  P0 = Ps_0
-
-exact for a linear model (the log-likelihood never decreases); for a nonlinear one the same
-formulas on the extended-RTS linearisation. A scalar structure is seed 000 eqs 24-25's
-``sigma^2 I`` (the mean of the diagonal).
+(Shumway and Stoffer, 1982; Ghahramani and Hinton, 1996): the filter's pass and its RTS
+smoothing, then the M-step's closed forms (in the guide's page on offline estimation,
+docs/guide/offline.md); a scalar structure is seed 000 eqs 24-25's ``sigma^2 I``.
 """
 from __future__ import annotations
 
@@ -132,8 +121,7 @@ def _settings(filt, n_iter, tol, learn, structure, floor) -> tuple:
 
 
 class _EM:
-    """An EM run of :func:`em_noise`: the record (``y0`` its first measurement, if given), the
-    current ``x0, P0, Q, R`` and the last filter pass."""
+    """An EM run of :func:`em_noise`: the record, the current ``x0, P0, Q, R`` and the last pass."""
 
     def __init__(self, filt: KalmanBase, us, ys, masks, y0, learn: tuple, structure: str, floor: float):
         self.filt, self.us, self.ys, self.masks, self.y0 = filt, us, ys, masks, y0

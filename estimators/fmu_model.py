@@ -399,8 +399,7 @@ class FMUProcessModel(DiscreteModel):
         return self._rt.keep[0]["nominal_x"]
 
     def _check_accuracy(self, tol: float | None) -> None:
-        """Refuse an integration that diverges, or whose error by step doubling at the start
-        values is above ``tol`` (None: any finite error)."""
+        """Refuse an integration whose error by step doubling at the start values is above ``tol``."""
         n, x, u = self.substeps, self.start, self._u_start
         coarse, fine = self._advance(x, u, n), self._advance(x, u, 2 * n)
         scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._nominal_x)
@@ -417,8 +416,7 @@ class FMUProcessModel(DiscreteModel):
                    "substeps, a shorter period or another integrator"))
 
     def _check_directional(self, tol: float) -> None:
-        """Refuse directional derivatives of the map or the measurement that disagree with the
-        FMU's own central differences at the start values."""
+        """Refuse directional derivatives that disagree with the FMU's central differences."""
         x, u = self.start, self._u_start
         steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._nominal_x)
         for what, exact, fn in (("f", self.F(x, u), lambda z: self.f(z, u)), ("h", self.H(x), self.h)):
@@ -433,22 +431,13 @@ class FMUProcessModel(DiscreteModel):
                                f"tolerance {tol:g}); pass jacobian='fd' to use differences")
 
     def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)``: one call of the compiled map and its tangent.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        u : casadi.SX, shape (nu, 1)
-        """
+        """``(f(x, u), F)`` at the symbols ``x`` (nx, 1) and ``u`` (nu, 1): one call of the compiled
+        map and its tangent."""
         return self._ext["fF"](x, u)
 
     def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)``: one call of the compiled measurement and its Jacobian.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        """
+        """``(h(x), H)`` at the symbol ``x`` (nx, 1): one call of the compiled measurement and its
+        Jacobian."""
         return self._ext["hH"](x)
 
     def take_failure(self) -> Exception | None:

@@ -44,16 +44,14 @@ class PCRB:
     ----------
     P : ndarray, shape (N + 1, nx, nx)
         The bound ``J_k^-1`` on the error covariance of any estimator of ``x_k`` from
-        ``y_1 .. y_k``, k = 0..N (row 0: the prior covariance, zero for a known initial
-        state) [state units squared].
+        ``y_1 .. y_k``, k = 0..N (row 0: the prior covariance) [state units squared].
     runs : int
         Number of realisations the expectations were taken over.
     state_names : list of str
-        The model's state names.
     known_initial_state : bool
         True if the bound assumed ``x_0`` known exactly (``P[0] = 0``).
     jacobians : str
-        How the model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
+        How the model's Jacobians were computed.
     """
 
     P: np.ndarray
@@ -135,8 +133,7 @@ def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: 
 
 
 class _Jacobians:
-    """The exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) of ``system``, compiled
-    mapped over :data:`JACOBIAN_BLOCK` points."""
+    """The exact Jacobians ``F(x, u)`` and ``H(x)`` of ``system``, compiled over :data:`JACOBIAN_BLOCK` points."""
 
     def __init__(self, system: DiscreteModel, backend: str = "compiled"):
         x, u = system.x, system.u
@@ -226,8 +223,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     ConfigurationError
         ``Q``, ``R`` or ``P0`` is not a finite symmetric positive definite matrix of its shape.
     InputError
-        ``X``, ``us``, ``masks`` or ``ys`` has the wrong shape, ``X`` or ``us`` is not
-        finite, ``X`` holds no realisation.
+        ``X``, ``us``, ``masks`` or ``ys`` has the wrong shape, or ``X`` or ``us`` is not finite.
     NumericalError
         A Jacobian along the trajectories, or the recursion, is not finite (an ill-posed model).
     ResourceError
@@ -243,8 +239,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
 
 
 class _Recursion:
-    """The recursion of :func:`posterior_crb` in covariance form over checked arguments,
-    :data:`PCRB_CHUNK` steps at a time (the Jacobians of a chunk in one call)."""
+    """The recursion of :func:`posterior_crb` over checked arguments, :data:`PCRB_CHUNK` steps at a time."""
 
     def __init__(self, system: DiscreteModel, X: np.ndarray, us: np.ndarray, Q: np.ndarray, R: np.ndarray,
                  P0: np.ndarray | None, valid: np.ndarray | None):
@@ -311,15 +306,13 @@ class _Recursion:
 
 
 def rmse_ratio(err, bound: PCRB, steps=None) -> np.ndarray:
-    """Each state's RMSE over realisations and steps as a multiple of the PCRB:
-    ``sqrt(mean_{r,k} e_{r,k,i}^2 / mean_k [J_k^-1]_ii)``, shape (nx,) (1 is the best any
-    estimator can do, in expectation).
+    """Each state's RMSE over realisations and steps as a multiple of the PCRB,
+    ``sqrt(mean_{r,k} e_{r,k,i}^2 / mean_k [J_k^-1]_ii)``, shape (nx,) (1 is the best possible).
 
     Parameters
     ----------
     err : array_like, shape (runs, N + 1, nx) or (runs, N, nx)
-        Estimation errors ``x_hat - x`` along the bound's steps (with or without k = 0)
-        [state units].
+        Estimation errors ``x_hat - x`` along the bound's steps (with or without k = 0) [state units].
     bound : PCRB
         The bound along the same steps.
     steps : slice, optional

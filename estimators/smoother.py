@@ -1,15 +1,7 @@
-"""Rauch-Tung-Striebel smoothing of a stored filter pass, one compiled step per time step
-folded in native code, with the filter's own predictions ``x^-_{k+1}``, ``P^-_{k+1}``.
-
-The extended RTS smoother (Rauch, Tung and Striebel, 1965) on the exact Jacobian ``F_k`` at
-the filtered ``x_k``, or for the UKF the unscented one (Särkkä, 2008: ``C_k = D_k
-(P^-_{k+1})^{-1}``, ``D_k`` the sigma points' cross-covariance)::
-
-    C_k  = P_k F_k^T (P^-_{k+1})^{-1}            (by a solve, no inverse)
-    xs_k = x_k + C_k (xs_{k+1} - x^-_{k+1})
-    Ps_k = P_k + C_k (Ps_{k+1} - P^-_{k+1}) C_k^T
-
-with the lag-one covariance ``Cov(x_{k+1}, x_k | all) = Ps_{k+1} C_k^T`` for EM.
+"""Rauch-Tung-Striebel smoothing of a stored filter pass (Rauch, Tung and Striebel, 1965; for
+the UKF, Särkkä, 2008), one compiled step per time step folded in native code, with the
+filter's own predictions; the equations are in the guide's page on offline estimation
+(docs/guide/offline.md).
 """
 from __future__ import annotations
 

@@ -199,8 +199,7 @@ class EstimatorComponent(Component, kind="estimator"):
         return ops, [Op(OP_HOLD, dict(fields), keep)]
 
     def _after_op(self, cur, ny: int, sync_in, sync_out) -> Op:
-        """The kernel's operation after an adaptive filter's step: its ``after_step`` from
-        Python, or the rows of Q and R written by the kernel for a filter that only records them."""
+        """The kernel's operation after an adaptive filter's step (its ``after_step``, or its records)."""
         f = self.filter
         rt = f._rt
         flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None

@@ -15,7 +15,7 @@ import numpy as np
 
 from estimators import KF, linear_model
 from fmu_models.errors import ConfigurationError
-from fmu_models.infra.checks import finite, positive_int
+from fmu_models.infra.checks import finite, positive, positive_int
 
 from ..core.component import Component
 from .noise import PerInstantNoise
@@ -52,9 +52,7 @@ class Accelerometer(Component, kind="accelerometer"):
         self.r = finite(r, f"{name}: r [m]")
         if self.r < 0:
             raise ConfigurationError(f"{name}: r must be a distance >= 0 m, got {r!r}")
-        if not finite(g, f"{name}: g") > 0:
-            raise ConfigurationError(f"{name}: g must be > 0")
-        self.g, self.seed = float(g), positive_int(seed, f"{name}: seed", minimum=0)
+        self.g, self.seed = positive(g, f"{name}: g"), positive_int(seed, f"{name}: seed", minimum=0)
         self.noise_std = _per_channel(noise_std, 3, "noise_std", name, positive=True)
         self.bias = _per_channel(bias, 3, "bias", name)
 

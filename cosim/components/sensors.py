@@ -32,8 +32,7 @@ def _per_channel(value, n, what, owner, positive=False):
 
 
 class _Noisy(Component):
-    """A component drawing ``n`` channels of seeded noise per instant, in Python or in the
-    native kernel (from the rows of its PCG64 stream's block)."""
+    """A component drawing seeded noise per instant, in Python or in the native kernel."""
 
     reentrant = True
 
@@ -48,8 +47,7 @@ class _Noisy(Component):
         self._noise = make_noise(self.generator, self.seed, self._channels, self.period, self.name)
 
     def _noise_reason(self, cls, methods) -> str | None:
-        """Why this component runs in Python: a subclass of ``cls`` with its own calls, or
-        another generator than the block-drawn PCG64 stream."""
+        """Why this component runs in Python: its own calls (beyond ``cls``'s), or the counter generator."""
         kind = type(self)
         if any(getattr(kind, m) is not getattr(cls, m) for m in ("output", "update", "reset", *methods)):
             return "a Python component (its own output or update)"
@@ -73,8 +71,7 @@ class _Noisy(Component):
 
     def _export(self, kind: str, reals: list, description: str, folder: Path, fmi_version: int, clocked: bool,
                 inputs: Sequence[str] = ()) -> ExportedFMU:
-        """This component as a signal FMU of ``kind`` drawing from the counter generator, with a
-        note if this component draws from PCG64."""
+        """This component as a signal FMU of ``kind`` (drawing from the counter generator)."""
         spec = SignalSpec(kind, self.period, self.output_names, inputs=list(inputs), reals=reals,
                           ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
                           description=description)
@@ -224,8 +221,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         return self._noise_reason(ProcessNoise, ())
 
     def _native_rows(self, values, inputs):
-        """The rows ``L v`` of the noise stream's block (as :meth:`output` computes them), the
-        kernel's fields and what they point to."""
+        """The rows ``L v`` of the noise block (as :meth:`output`), the kernel's fields, what they point to."""
         noise, L = self._noise, self.L
         rows = np.empty_like(noise.block)
         d = np.diag(L).copy()
