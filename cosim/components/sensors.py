@@ -147,10 +147,8 @@ class Sensor(_Noisy, kind="sensor"):
     def output(self, t, u):
         """The measurement at ``t``: the sample ``delay`` instants old (the first one until
         that many exist)."""
-        y = self._measure(t, u)
-        if not self.delay or not self._queue:
-            return y
-        return self._queue[0]
+        y = self._measure(t, u)                    # drawn at every instant, delayed or not
+        return self._queue[0] if self.delay and self._queue else y
 
     def update(self, t, u):
         """Store this instant's sample for the delay line."""

@@ -18,6 +18,8 @@ class _Source(Component):
     """A component whose outputs depend on time only (reentrant)."""
 
     reentrant = True
+    #: The ``_value`` methods whose arithmetic the native kernel has (as :meth:`_native_op`).
+    _native_values: tuple = ()
 
     def _value(self, t):
         """The outputs at ``t`` [s]."""
@@ -40,13 +42,31 @@ class _Source(Component):
         """Outputs at ``t`` [s] (``u`` is empty)."""
         return np.atleast_1d(self._value(t))
 
+    def native_reason(self) -> str | None:
+        """Why this source's calls run in Python (None: in the native kernel)."""
+        cls = type(self)
+        if not self._native_values:
+            return "a Python component"
+        if (cls.output is not _Source.output or cls.update is not Component.update
+                or cls._value not in self._native_values):
+            return "a Python component (its own output or update)"
+        return None
 
-def _python_reason(source: _Source, native_values: tuple) -> str | None:
-    """Why ``source`` runs in Python: its own calls, or a ``_value`` the kernel does not know."""
-    cls = type(source)
-    if cls.output is not _Source.output or cls.update is not Component.update or cls._value not in native_values:
-        return "a Python component (its own output or update)"
-    return None
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls, which the native kernel runs itself (the same arithmetic)
+        when :meth:`native_reason` is None."""
+        if self.native_reason() is not None:
+            return bind_protocol(self, values, values, inputs, outputs, integers)
+        value = self._value
+
+        def output_fn(t: float) -> None:
+            values[outputs] = value(t)
+
+        def update_fn(t: float) -> None:
+            pass
+
+        output_fn.native, update_fn.native = [self._native_op(outputs)], []
+        return output_fn, update_fn
 
 
 class Constant(_Source, kind="constant"):
@@ -67,32 +87,13 @@ class Constant(_Source, kind="constant"):
     def _value(self, t):
         return self.value
 
+    _native_values = (_value,)
+
+    def _native_op(self, outputs: slice) -> Op:
+        return Op(OP_CONST, dict(slot=outputs.start, a=self.value))
+
     def _signal(self):
         return "constant", [("value", self.value, "real", "the output")], []
-
-    def native_reason(self) -> str | None:
-        """Why this source's calls run in Python (None: in the native kernel)."""
-        return _python_reason(self, (Constant._value, Step._value))
-
-    def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls, which the native kernel runs itself: a constant, or a
-        switch at ``t_step``."""
-        if self.native_reason() is not None:
-            return bind_protocol(self, values, values, inputs, outputs, integers)
-        value = self._value
-
-        def output_fn(t: float) -> None:
-            values[outputs] = value(t)
-
-        def update_fn(t: float) -> None:
-            pass
-
-        if type(self)._value is Step._value:
-            op = Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
-        else:
-            op = Op(OP_CONST, dict(slot=outputs.start, a=self.value))
-        output_fn.native, update_fn.native = [op], []
-        return output_fn, update_fn
 
 
 class Step(Constant, kind="step"):
@@ -116,6 +117,11 @@ class Step(Constant, kind="step"):
 
     def _value(self, t):
         return self.after if t >= self.t_step - 1e-12 else self.before
+
+    _native_values = (_value,)
+
+    def _native_op(self, outputs: slice) -> Op:
+        return Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
 
     def _signal(self):
         return "step", [("t_step", self.t_step, "real", "switching time [s]"),
@@ -201,20 +207,12 @@ class PRBS(_Source, kind="prbs"):
         b = self.bits[int(np.floor(t / self.bit_time + 1e-9)) % len(self.bits)]
         return self.offset + (self.amplitude if b else -self.amplitude)
 
-    def native_reason(self) -> str | None:
-        """Why this source's calls run in Python (None: in the native kernel)."""
-        return _python_reason(self, (PRBS._value,))
+    _native_values = (_value,)
 
-    def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls, which the native kernel runs itself (the same bit of
-        the same arithmetic)."""
-        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
-        if self.native_reason() is None:
-            bits = np.ascontiguousarray(self.bits, dtype=float)
-            output_fn.native = [Op(OP_PRBS, dict(slot=outputs.start, a=self.bit_time, b=self.offset,
-                                                 c=self.amplitude, buf=bits.ctypes.data, n=len(bits)), (bits,))]
-            update_fn.native = []
-        return output_fn, update_fn
+    def _native_op(self, outputs: slice) -> Op:
+        bits = np.ascontiguousarray(self.bits, dtype=float)
+        return Op(OP_PRBS, dict(slot=outputs.start, a=self.bit_time, b=self.offset, c=self.amplitude,
+                                buf=bits.ctypes.data, n=len(bits)), (bits,))
 
     def _signal(self):
         reals = [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),
