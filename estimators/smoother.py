@@ -59,10 +59,6 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
     run : FilterRun
         What ``filt.run(us, ys)`` returned.
 
-    Returns
-    -------
-    Smoothed
-
     Raises
     ------
     NumericalError
