@@ -1,29 +1,7 @@
 """Consistency tests of a filter over Monte Carlo runs: chi-square bands of the NEES and NIS,
 and the whiteness of the innovations (Bar-Shalom, Li and Kirubarajan, *Estimation with
-Applications to Tracking and Navigation*, 2001, section 5.4).
-
-A filter is consistent when its errors agree with the covariances it reports. Over ``N``
-independent runs, at each step ``k``:
-
-* the NEES ``e_k^T P_k^-1 e_k`` of a consistent filter is chi-square with ``n_x`` degrees of
-  freedom, so ``N`` times the average over the runs is chi-square with ``N n_x``: at
-  confidence ``1 - alpha`` the average lies in ``[chi2(alpha/2, N n_x) / N,
-  chi2(1 - alpha/2, N n_x) / N]`` (for ``N = 100``, ``n_x = 4``: about
-  [3.46, 4.57]);
-* the same for the NIS ``nu_k^T S_k^-1 nu_k`` with the number of measured channels;
-* the innovations are white: the normalised autocorrelation over the runs
-  ``rho(k, k+l) = sum_r nu_r(k) nu_r(k+l) / sqrt(sum_r nu_r(k)^2 sum_r nu_r(k+l)^2)`` (per
-  channel, each innovation divided by its predicted standard deviation) is approximately
-  normal with variance ``1/N`` at every lag ``l >= 1``: inside
-  ``+-z_{1-alpha/2} / sqrt(N)``.
-
-Each test gives the statistic at every step beside its band, the share of steps inside,
-and a verdict on the time average: the average over runs *and steps* must lie inside the
-per-step band. That verdict tests the filter's average behaviour at the level of one
-step's test; it is conservative (the steps of a run are correlated, so the time average is
-treated as one sample, not as ``N x steps``); the tighter band for independent steps is
-given too (``strict_band``), exact for the NIS and the innovations of an optimal filter,
-whose innovations are independent in time.
+Applications to Tracking and Navigation*, 2001, section 5.4); the rules and the verdicts are
+described in the guide's page on the experiments (docs/guide/experiments.md).
 """
 from __future__ import annotations
 
@@ -46,9 +24,9 @@ def _confidence(confidence) -> float:
 
 
 def chi2_band(runs, dof, confidence: float = 0.95) -> tuple[float, float]:
-    """Two-sided band of the average over ``runs`` independent chi-square(``dof``) values
-    at ``confidence``: ``(chi2.ppf(alpha/2, runs dof) / runs, chi2.ppf(1 - alpha/2, runs dof) / runs)``
-    with ``alpha = 1 - confidence`` (Bar-Shalom et al. 2001, section 5.4).
+    """Two-sided band of the average of ``runs`` independent chi-square(``dof``) values:
+    ``chi2.ppf([alpha/2, 1 - alpha/2], runs dof) / runs``, ``alpha = 1 - confidence``
+    (Bar-Shalom et al. 2001, section 5.4).
 
     Parameters
     ----------
@@ -75,21 +53,18 @@ class BandTest:
     statistic : str
         ``"NEES"`` or ``"NIS"``.
     confidence : float
-        Probability of the bands.
     runs : int
         Number of runs ``N``.
     dof : float
         Degrees of freedom of one value (mean over runs and steps if channels were missing).
-    per_step : ndarray, shape (K,)
-        Average over the runs at each step (NaN at a step without degrees of freedom).
-    lower, upper : ndarray, shape (K,)
-        The per-step band (varies only if channels were missing).
+    per_step, lower, upper : ndarray, shape (K,)
+        Average over the runs at each step (NaN without degrees of freedom), and its band.
     average : float
         Average over runs and steps.
     band : tuple of float
-        The per-step band of the average's degrees of freedom: the verdict's band.
+        The verdict's band: the per-step band of the average's degrees of freedom.
     strict_band : tuple of float
-        The band of the average if all runs and steps were independent (``N K`` values).
+        The band of the average if all ``N K`` values were independent.
     share_inside : float
         Share of the steps whose average lies inside its band (1 - alpha expected).
     consistent : bool
@@ -166,8 +141,8 @@ def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:
     Parameters
     ----------
     nees : array_like, shape (runs, steps) or (steps,)
-        Normalised estimation errors squared ``e^T P^-1 e`` of each run and step (a 1-D
-        array is one run); a diverged run may be ``inf`` (it fails the test), NaN is refused.
+        Normalised estimation errors squared ``e^T P^-1 e`` (a 1-D array is one run); a
+        diverged run may be ``inf`` (it fails the test), NaN is refused.
     nx : int
         State dimension (the degrees of freedom).
     confidence : float
@@ -176,8 +151,6 @@ def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:
     Returns
     -------
     BandTest
-        Per-step averages and bands, the share of steps inside, and the verdict on the
-        average over runs and steps (see the module documentation).
     """
     return _band_test("NEES", nees, checks.positive_int(nx, "state dimension nx"), confidence)
 
@@ -190,15 +163,13 @@ def nis_test(nis, dof, confidence: float = 0.95) -> BandTest:
     nis : array_like, shape (runs, steps) or (steps,)
         Normalised innovations squared ``nu^T S^-1 nu`` (a 1-D array is one run).
     dof : int or array_like, shape (runs, steps)
-        Measured channels of each value: ``n_y``, or per run and step the number of valid
-        channels (0 where the measurement was missing: no information, no degree of freedom).
+        Measured channels: ``n_y``, or the number of valid channels of each value (0: missing).
     confidence : float
         Probability of the bands (default 0.95).
 
     Returns
     -------
     BandTest
-        As :func:`nees_test`.
     """
     return _band_test("NIS", nis, dof, confidence)
 
@@ -210,23 +181,18 @@ class WhitenessTest:
     Attributes
     ----------
     confidence : float
-        Probability of the bands.
     runs : int
         Number of runs ``N``.
     lags : ndarray of int, shape (L,)
-        The lags tested (>= 1).
     autocorrelation : ndarray, shape (ny, L)
-        Normalised autocorrelation of each channel's normalised innovations at each lag,
-        pooled over runs and steps.
+        Each channel's normalised autocorrelation at each lag, pooled over runs and steps.
     per_step : ndarray, shape (ny, L, K)
-        Bar-Shalom's ``rho(k, k + l)`` over the runs at each step ``k`` (NaN where fewer
-        than one valid pair, or beyond the record).
+        ``rho(k, k + l)`` over the runs at each step (NaN without a valid pair, or beyond the record).
     band : float
-        Half-width of the per-step band, ``z_{1-alpha/2} / sqrt(N)`` (``N``: the mean number
-        of runs with a valid pair at a step, the runs if none is missing): the verdict's band.
+        The verdict's half-width ``z_{1-alpha/2} / sqrt(N)`` (``N``: the mean number of runs
+        with a valid pair at a step).
     strict_band : ndarray, shape (ny, L)
-        Half-width for the pooled autocorrelation if all pairs were independent,
-        ``z_{1-alpha/2} / sqrt(pairs)`` (exact for an optimal filter).
+        Half-width ``z_{1-alpha/2} / sqrt(pairs)`` if all pairs were independent.
     share_inside : ndarray, shape (ny, L)
         Share of the steps whose ``rho(k, k + l)`` lies inside the band.
     white : bool
@@ -245,10 +211,8 @@ class WhitenessTest:
 
 
 def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.95, valid=None) -> WhitenessTest:
-    """The whiteness test of the innovations (Bar-Shalom et al. 2001, section 5.4).
-
-    Each channel's innovation is divided by its predicted standard deviation
-    ``sqrt(S_jj)``; missing channels (``valid`` False) take no part in the sums.
+    """The whiteness test of the innovations, each divided by ``sqrt(S_jj)`` (Bar-Shalom et al.
+    2001, section 5.4).
 
     Parameters
     ----------
@@ -266,7 +230,6 @@ def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.9
     Returns
     -------
     WhitenessTest
-        The autocorrelations, the bands, the share of steps inside and the verdict.
     """
     e, ok, lags = _normalised(innovations, S, valid, lags)
     N, K, ny = e.shape
@@ -289,9 +252,8 @@ def whiteness_test(innovations, S, lags=(1, 2, 3, 4, 5), confidence: float = 0.9
 
 
 def _normalised(innovations, S, valid, lags) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The arguments of :func:`whiteness_test` checked: the innovations divided by their
-    standard deviations (0 in missing channels), the valid channels (runs, steps, ny) and the
-    lags."""
+    """The arguments of :func:`whiteness_test` checked: the normalised innovations (0 in missing
+    channels), the valid channels (runs, steps, ny) and the lags."""
     nu = checks.float_array(innovations, "innovations")
     if nu.ndim != 3 or min(nu.shape) < 1:
         raise InputError(f"innovations must have shape (runs, steps, ny) with none empty, got {nu.shape}")
@@ -321,10 +283,9 @@ def _normalised(innovations, S, valid, lags) -> tuple[np.ndarray, np.ndarray, np
 
 
 def _at_lag(e: np.ndarray, ok: np.ndarray | None, lag: int, z: float) -> tuple:
-    """The statistics of the normalised innovations ``e`` (runs, K, ny) at ``lag`` (``ok``: the
-    valid channels, None if all are): the pooled autocorrelation (ny,), ``rho(k, k + lag)``
-    (K - lag, ny), the share of steps inside ``+-z / sqrt(n_k)`` (ny,), the half-width of the
-    strict band (ny,) and the number of valid pairs ``n_k`` at each step (K - lag, ny)."""
+    """At ``lag``, of ``e`` (runs, K, ny) with valid channels ``ok`` (None: all): the pooled
+    autocorrelation (ny,), ``rho(k, k + lag)`` (K - lag, ny), the share of steps inside
+    ``+-z / sqrt(n_k)`` (ny,), the strict half-width (ny,) and the valid pairs ``n_k`` (K - lag, ny)."""
     if ok is None:
         a, b = e[:, :-lag], e[:, lag:]
         n_k = np.full((e.shape[1] - lag, e.shape[2]), e.shape[0])

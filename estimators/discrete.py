@@ -1,31 +1,12 @@
-"""Discrete-time models that the filters run on, as CasADi expressions with numbers bound.
-
-A :class:`DiscreteModel` is ``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` with every model
-parameter replaced by its value, so that a filter can fuse prediction, Jacobians and
-update into one CasADi Function. Build one from a plant with :func:`discretize`, or from a
-Model Exchange FMU with :class:`~estimators.FMUProcessModel`.
-
-The process-model protocol (what every filter, the smoother, EM and the PCRB use of a model;
-:class:`DiscreteModel` implements it from CasADi expressions, :class:`~estimators.FMUProcessModel`
-from an FMU):
-
-* the sizes and names ``nx``, ``nu``, ``ny``, ``state_names``, ``input_names``,
-  ``output_names``, the period ``dt``, ``description`` and :attr:`~DiscreteModel.identity`;
-* the symbols ``x``, ``u`` and the expressions ``fx``, ``hx`` in them (SX; they may call
-  compiled code, as the FMU's model does);
-* :meth:`~DiscreteModel.transition` and :meth:`~DiscreteModel.measurement`: the map and the
-  measurement with their Jacobians at given symbols, what the filters' steps are built from;
-* the numerical :meth:`~DiscreteModel.f`, :meth:`~DiscreteModel.h`, :meth:`~DiscreteModel.F`,
-  :meth:`~DiscreteModel.G`, :meth:`~DiscreteModel.H` and :meth:`~DiscreteModel.linearized`;
-* :meth:`~DiscreteModel.compiled`, the cache of the compiled code built on it;
-* :attr:`~DiscreteModel.jacobians` (how the Jacobians are computed, for the results'
-  metadata), :meth:`~DiscreteModel.describe`, :attr:`~DiscreteModel.exportable` (its filters
-  can become FMUs) and :meth:`~DiscreteModel.take_failure` (the error of compiled code the
-  expressions call, which made a result non-finite).
+"""Discrete-time models that the filters run on, as CasADi expressions with numbers bound:
+:class:`DiscreteModel`, built from a plant by :func:`discretize` (the process-model protocol
+it implements is in the guide's page on writing a filter, docs/guide/writing-a-filter.md).
 """
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
+from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -71,61 +52,40 @@ class DiscreteModel:
             raise ConfigurationError(f"f has {f.numel()} entries, expected nx = {self.nx}")
         if ca.depends_on(self.hx, u):
             raise ConfigurationError("h must not depend on the input u (no feed-through)")
-        F, G = ca.jacobian(self.fx, x), ca.jacobian(self.fx, u)
-        H = ca.jacobian(self.hx, x)
         self._f = ca.Function("f", [x, u], [self.fx])
         self._h = ca.Function("h", [x], [self.hx])
-        self._jac = ca.Function("jac_fu", [x, u], [ca.densify(F), ca.densify(G)])
-        self._H = ca.Function("jac_h", [x], [ca.densify(H)])
+        self._jac = ca.Function("jac_fu", [x, u], [ca.densify(ca.jacobian(self.fx, v)) for v in (x, u)])
+        self._H = ca.Function("jac_h", [x], [ca.densify(ca.jacobian(self.hx, x))])
         self._compiled: dict = {}
 
-    @property
+    @cached_property
     def identity(self) -> str:
-        """A digest of the model's equations, period and names; two models with the same
-        identity step identically (what :func:`~estimators.rts_smooth` checks a run
-        against)."""
-        if not hasattr(self, "_identity"):
-            import hashlib
-
-            text = "\n".join([str(self.fx), str(self.hx), repr(self.dt), *self.state_names, *self.input_names,
-                              *self.output_names])
-            self._identity = hashlib.sha1(text.encode()).hexdigest()[:16]
-        return self._identity
+        """A digest of the model's equations, period and names: two models with the same
+        identity step identically."""
+        text = "\n".join([str(self.fx), str(self.hx), repr(self.dt), *self.state_names, *self.input_names,
+                          *self.output_names])
+        return hashlib.sha1(text.encode()).hexdigest()[:16]
 
     def compiled(self, kind: str, key: tuple, backend: str, build):
-        """The compiled object ``kind`` (``"step"``, ``"fold"``, ``"update"``, ``"batch"``,
-        ``"rts"``, ``"em"``) of the filter configuration ``key`` with ``backend`` on this model,
-        built by ``build()`` the first time: filters share compiled code per model, under
-        this one key scheme ``(kind, key, backend)``."""
+        """The compiled object ``kind`` (``"step"``, ``"rts"``, ...) of the filter configuration
+        ``key`` with ``backend`` on this model, built by ``build()`` the first time."""
         k = (kind, key, backend)
         if k not in self._compiled:
             self._compiled[k] = build()
         return self._compiled[k]
 
     def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)`` with ``F = df/dx`` exact, at the symbols ``x`` (nx, 1) and ``u``
-        (nu, 1): what the filters' steps are built from.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        u : casadi.SX, shape (nu, 1)
-        """
+        """``(f(x, u), F)`` with ``F = df/dx`` exact, at the symbols ``x`` (nx, 1) and ``u`` (nu, 1)."""
         xu, sym = ca.vertcat(x, u), ca.vertcat(self.x, self.u)
         return ca.substitute(self.fx, sym, xu), ca.substitute(ca.jacobian(self.fx, self.x), sym, xu)
 
     def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)`` with ``H = dh/dx`` exact, at the symbol ``x`` (nx, 1).
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        """
+        """``(h(x), H)`` with ``H = dh/dx`` exact, at the symbol ``x`` (nx, 1)."""
         return ca.substitute(self.hx, self.x, x), ca.substitute(ca.jacobian(self.hx, self.x), self.x, x)
 
     def take_failure(self) -> Exception | None:
-        """The first failure of compiled code the expressions call since the last call, as the
-        error to raise (taking it clears it), or None: always None for CasADi expressions."""
+        """The first failure of compiled code the expressions call (taking it clears it), or
+        None: always None for CasADi expressions."""
         return None
 
     def describe(self) -> str:
@@ -160,8 +120,7 @@ class DiscreteModel:
         return np.asarray(self._H(checks.vector(x, self.nx, "x")))
 
     def linearized(self, x_op, u_op) -> DiscreteModel:
-        """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001).
-
+        """The affine model tangent at (x_op, u_op): the Kalman filter's model (seed 001),
         ``x_{k+1} = f(x_op, u_op) + F0 (x_k - x_op) + G0 (u_k - u_op)``,
         ``y_k = h(x_op) + H0 (x_k - x_op)``, with the exact Jacobians of the discrete map
         (for the Euler map, ``F0 = I + T A``: seed 000 eq 20).
@@ -177,8 +136,7 @@ class DiscreteModel:
 
 
 def checked_model(system) -> DiscreteModel:
-    """``system`` if it is a :class:`DiscreteModel`, else TypeMismatchError saying how to make
-    one (:func:`discretize`).
+    """``system`` if it is a :class:`DiscreteModel`, else TypeMismatchError saying how to make one.
 
     Parameters
     ----------

@@ -1,26 +1,7 @@
-"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record.
-
-The principled answer to unknown noise covariances (Shumway and Stoffer, 1982; Ghahramani
-and Hinton, 1996): iterate
-
-* E-step: run the filter with the current ``(x0, P0, Q, R)`` (its log-likelihood is the
-  trace), smooth the pass (:func:`~estimators.smoother.rts_smooth`);
-* M-step: with the smoothed ``xs_k, Ps_k`` and lag-one covariances ``Ps_{k+1,k}``,
-  ``e_k = xs_{k+1} - f(xs_k, u_k)``, ``F_k = df/dx(xs_k, u_k)``, ``r_k = y_k - h(xs_k)``,
-  ``H_k = dh/dx(xs_k)``::
-
-      Q  = 1/N sum_k [ e_k e_k^T + F_k Ps_k F_k^T + Ps_{k+1} - Ps_{k+1,k} F_k^T - F_k Ps_{k+1,k}^T ]
-      R  = 1/M sum_k [ r_k r_k^T + H_k Ps_k H_k^T ]           (entries over the valid channels)
-      x0 = xs_0,  P0 = Ps_0
-
-  exact for a linear model (the log-likelihood never decreases), and for a nonlinear one
-  the same formulas on the EKF/extended-RTS linearisation (a first-order approximation).
-
-Each estimate is kept symmetric positive definite (eigenvalues at least ``floor``) in the
-chosen ``structure``: ``"full"``, ``"diagonal"`` or ``"scalar"`` (``sigma^2 I``, the form
-of seed 000 eqs 24-25; the M-step of a scalar covariance is the mean of the diagonal).
-Stopping rule: the relative change of the log-likelihood falls below ``tol``, or
-``n_iter`` iterations.
+"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record
+(Shumway and Stoffer, 1982; Ghahramani and Hinton, 1996): the filter's pass and its RTS
+smoothing, then the M-step's closed forms (in the guide's page on offline estimation,
+docs/guide/offline.md); a scalar structure is seed 000 eqs 24-25's ``sigma^2 I``.
 """
 from __future__ import annotations
 
@@ -42,6 +23,7 @@ LEARNABLE = ("Q", "R", "x0", "P0")
 
 
 def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
+    """``M`` in ``structure``, symmetric with eigenvalues at least ``floor``."""
     n = M.shape[0]
     if structure == "scalar":
         return max(float(np.trace(M)) / n, floor) * np.eye(n)
@@ -52,9 +34,8 @@ def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
 
 
 def _terms(filt: KalmanBase):
-    """Compiled per-step M-step terms (cached on the model): transition ``(xs_k, xs_k1, Ps_k,
-    Ps_k1, Plag, u) -> Q term`` and measurement ``(xs, Ps, y, mask) -> (R term, counts)``."""
-
+    """The compiled per-step M-step terms (cached on the model): ``(xs_k, xs_k1, Ps_k, Ps_k1,
+    Plag, u) -> Q term`` and ``(xs, Ps, y, mask) -> (R term, counts)``."""
     s = filt.system
 
     def build():
@@ -86,12 +67,10 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
     Parameters
     ----------
     filt : KF, EKF or UKF
-        The filter; its current x, P, Q, R are the starting values. At the end it holds
+        The filter; its current x, P, Q, R are the starting values, and at the end it holds
         the learned values, reset to the start of the record.
-    us, ys, masks
+    us, ys, masks, y0
         The record, as :meth:`~estimators.base.KalmanBase.run` takes it.
-    y0 : array_like, shape (ny,), optional
-        A measurement of the initial state (as in :meth:`~estimators.base.KalmanBase.run`).
     n_iter : int
         Most iterations (default 50).
     tol : float
@@ -101,7 +80,7 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
     structure : {"full", "diagonal", "scalar"}
         The form kept for Q and R (and P0).
     floor : float
-        Smallest eigenvalue allowed in a learned covariance (default 1e-12).
+        Smallest eigenvalue of a learned covariance (default 1e-12).
 
     Returns
     -------
@@ -115,17 +94,15 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
     learn, n_iter, tol, floor = _settings(filt, n_iter, tol, learn, structure, floor)
     us, ys, masks = filt.check_record(us, ys, masks)
     em = _EM(filt, us, ys, masks, y0, learn, structure, floor)
-    ll, converged, it = [], False, 0
-    for it in range(n_iter + 1):
-        ll.append(em.expectation())
-        if it and abs(ll[-1] - ll[-2]) <= tol * abs(ll[-1]):
-            converged = True
-            break
-        if it == n_iter:
-            break
+    ll = [em.expectation()]
+    for _ in range(n_iter):
         em.maximisation()
+        ll.append(em.expectation())
+        converged = abs(ll[-1] - ll[-2]) <= tol * abs(ll[-1])
+        if converged:
+            break
     em.install()
-    return EMResult(Q=em.Q, R=em.R, x0=em.x0, P0=em.P0, log_likelihood=ll, iterations=it, converged=converged)
+    return EMResult(Q=em.Q, R=em.R, x0=em.x0, P0=em.P0, log_likelihood=ll, iterations=len(ll) - 1, converged=converged)
 
 
 def _settings(filt, n_iter, tol, learn, structure, floor) -> tuple:
@@ -144,9 +121,7 @@ def _settings(filt, n_iter, tol, learn, structure, floor) -> tuple:
 
 
 class _EM:
-    """An EM run of :func:`em_noise`: the record (with ``y0``, if given, as its first
-    measurement), the current ``x0, P0, Q, R`` (the filter's at the start) and the last
-    filter pass."""
+    """An EM run of :func:`em_noise`: the record, the current ``x0, P0, Q, R`` and the last pass."""
 
     def __init__(self, filt: KalmanBase, us, ys, masks, y0, learn: tuple, structure: str, floor: float):
         self.filt, self.us, self.ys, self.masks, self.y0 = filt, us, ys, masks, y0
@@ -171,7 +146,7 @@ class _EM:
         return self.run.log_likelihood
 
     def maximisation(self) -> None:
-        """The M-step from the smoothed pass (see the module documentation)."""
+        """The M-step from the smoothed pass."""
         sm = rts_smooth(self.filt, self.run)
         N = len(self.ys)
         xs = np.ascontiguousarray(sm.x)
@@ -187,8 +162,7 @@ class _EM:
             self.P0 = _project(sm.P[0], self.structure, self.floor)
 
     def _process_noise(self, xs, Ps, lag) -> np.ndarray:
-        """The M-step's Q from the smoothed states ``xs`` (N + 1, nx), covariances ``Ps`` and
-        lag-one covariances ``lag`` (column-major rows)."""
+        """The M-step's Q from the smoothed ``xs`` (N + 1, nx), ``Ps`` and ``lag`` (column-major rows)."""
         N, nx = len(self.ys), self.filt.system.nx
         qt = np.empty((1, N, nx * nx))
         self.trans(1, N, {"xs": xs[:-1][None], "xs1": xs[1:][None], "Ps": Ps[:-1][None], "Ps1": Ps[1:][None],

@@ -1,34 +1,10 @@
 """A Model Exchange FMU (FMI 2.0 or 3.0) as the process model of the filters.
 
-:class:`FMUProcessModel` is a :class:`~estimators.DiscreteModel` whose map and measurement are
-the FMU's: the state is the FMU's continuous state vector (the variables whose derivatives it
-declares, in its order), the inputs are FMU inputs and the measurements FMU outputs or states,
-named by the user, and the FMU's parameters are set by name. One sample period ``dt`` is a
-fixed-step integrator over the FMU's right-hand side (``"rk4"``, the classical Runge-Kutta
-scheme, by default, or ``"euler"``, in ``substeps`` equal steps) with the input held, and
-``F = df/dx``, ``G = df/du`` are the exact derivatives of that map: the tangents of the
-integrator's stages, each stage's Jacobian from the FMU's directional derivatives
-(``GetDirectionalDerivative``), or, where the FMU provides none, from central differences of
-its derivatives with steps ``eps^(1/3) max(|x_j|, nominal_j)`` (:attr:`FMUProcessModel.jacobians`
-says which; it is in :meth:`~FMUProcessModel.describe` and in every run's metadata).
-
-Native speed: the map, the measurement and their Jacobians are compiled C
-(``estimators/c/fmu_process.c``, compiled once per model and cached) that calls the FMU's own
-functions; the model's CasADi expressions call it (CasADi's external functions), so a
-filter's compiled step calls the FMU with no Python in between, in
-:meth:`~estimators.base.KalmanBase.step`, in a whole :meth:`~estimators.base.KalmanBase.run`,
-batched, and in the co-simulation master's kernel.
-
-The FMU is driven through the standard's Model Exchange calls only, and each evaluation
-starts from the same FMU state (restored with ``SetFMUState`` where the FMU can save it; else
-every evaluation is a trial step from the start time, as an integrator's, without
-``CompletedIntegratorStep``). The model is time-invariant, ``x_{k+1} = f(x_k, u_k)``: every
-period is integrated from the FMU's start time. Refused by name (:class:`~fmu_models.errors.FMUError`
-and its relatives): an FMU without Model Exchange, a state that is not a scalar Float64, a
-time event, an integrator that cannot meet the tolerance, directional derivatives that
-disagree with the FMU's own finite differences; during filtering, a state or step event inside
-a sample period, a non-finite derivative, a call that returns Error or Fatal: the filter raises
-the FMU's message and keeps its state.
+:class:`FMUProcessModel` is a :class:`~estimators.DiscreteModel` whose map (a fixed-step
+integrator over the FMU's right-hand side, with exact Jacobians through its stages) and
+measurement are the FMU's, compiled C (``estimators/c/fmu_process.c``) that calls the FMU's
+own functions through its Model Exchange calls only; how, and what is refused, is in the
+FMU tutorial (docs/tutorial-fmu.md).
 """
 from __future__ import annotations
 
@@ -99,8 +75,7 @@ class _Description:
 
 
 def _flag(xml: bytes, *names: str) -> bool:
-    """Whether one of the boolean attributes ``names`` of the ``ModelExchange`` element is true
-    (fmpy reads FMI 3.0's ``providesDirectionalDerivatives`` under its FMI 2.0 name only)."""
+    """Whether one of the boolean attributes ``names`` of the ``ModelExchange`` element is true."""
     from lxml import etree
 
     root = etree.fromstring(xml, etree.XMLParser(resolve_entities=False, no_network=True))
@@ -131,8 +106,8 @@ def _read(path: Path) -> tuple[_Description, bytes]:
         raise FMUError(f"{path.name} has no Model Exchange interface (only "
                        f"{'Co-Simulation' if md.coSimulation else 'other interfaces'}): a process model integrates "
                        "the FMU's right-hand side, which only Model Exchange gives")
-    # FMI 3.0 spells it providesDirectionalDerivatives; its FMI 2.0 spelling is read too, since
-    # some FMI 3.0 FMUs carry it (their derivatives are checked against differences anyway)
+    # fmpy reads FMI 3.0's providesDirectionalDerivatives under its FMI 2.0 name only; that
+    # spelling is read too, since some FMI 3.0 FMUs carry it (their derivatives are checked anyway)
     directional = _flag(xml, "providesDirectionalDerivative", *(("providesDirectionalDerivatives",) * (version == 3)))
     states = [d.variable.derivative for d in md.derivatives]
     return _Description(md, version, me.modelIdentifier, directional,
@@ -143,18 +118,19 @@ def _read(path: Path) -> tuple[_Description, bytes]:
 
 
 def _nominal(v) -> float:
+    """The nominal value of the variable ``v`` (its type's, else 1), positive."""
     value = getattr(v, "nominal", None) or getattr(getattr(v, "declaredType", None), "nominal", None)
     return abs(float(value)) if value not in (None, "") and float(value) != 0 else 1.0
 
 
 def _start(v) -> float:
+    """The start value of the variable ``v`` (0 if none)."""
     return float(v.start) if v.start not in (None, "") else 0.0
 
 
 def _names(value, what: str) -> list[str]:
-    if isinstance(value, str):
-        value = [value]
-    value = list(value)
+    """``value`` (a name or names) as a list of names, or TypeMismatchError."""
+    value = [value] if isinstance(value, str) else list(value)
     if not all(isinstance(v, str) for v in value):
         raise TypeMismatchError(f"{what} must be variable names (strings), got {value!r}")
     return value
@@ -210,10 +186,6 @@ def _close_all() -> None:
         rt.close()
 
 
-def _source() -> str:
-    return shipped("estimators", "c", "fmu_process.c").read_text()
-
-
 def _platform(version: int) -> str:
     """The folder of this platform's binary in an FMU of FMI ``version``."""
     import fmpy
@@ -221,15 +193,8 @@ def _platform(version: int) -> str:
     return fmpy.platform if version == 2 else fmpy.platform_tuple
 
 
-def _headers() -> str:
-    import fmpy
-
-    return str(Path(fmpy.__file__).parent / "c-code")
-
-
 class FMUProcessModel(DiscreteModel):
-    """``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` of a Model Exchange FMU (see the module
-    documentation).
+    """``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` of a Model Exchange FMU.
 
     Parameters
     ----------
@@ -238,11 +203,9 @@ class FMUProcessModel(DiscreteModel):
     dt : float
         Sample period [s].
     measurements : sequence of str
-        The measured variables: FMU outputs (read at the state, with the inputs at their
-        start values) or continuous states.
+        FMU outputs (read with the inputs at their start values) or continuous states.
     inputs : sequence of str
-        The FMU's continuous Float64 inputs the filters set, held over each period (others
-        keep their start values); default none.
+        The FMU's continuous Float64 inputs the filters set, held over each period (default none).
     parameters : mapping of str to float, optional
         FMU parameters (Float64, fixed or tunable) set by name before initialisation.
     method : {"rk4", "euler"}
@@ -252,14 +215,12 @@ class FMUProcessModel(DiscreteModel):
     jacobian : {"auto", "directional", "fd"}
         The Jacobians' source (:data:`JACOBIANS`; default ``"auto"``).
     tolerance : float, optional
-        Largest relative error of one period's integration, estimated at the FMU's start values
-        by step doubling (relative to ``max(|x|, nominal)``); default the FMU's
-        ``DefaultExperiment`` tolerance, else none (only a diverging integration is refused). A
-        larger error is refused, naming the substeps that would meet it.
+        Largest relative error (to ``max(|x|, nominal)``) of one period's integration by step
+        doubling at the start values; default the FMU's ``DefaultExperiment`` tolerance, else
+        none (only a diverging integration is refused).
     jacobian_check : float
         With directional derivatives: largest relative difference to the FMU's own central
-        differences of the map's Jacobians at its start values (default 1e-5); a larger one is
-        refused (pass ``jacobian="fd"``).
+        differences at its start values (default 1e-5).
 
     Attributes
     ----------
@@ -268,7 +229,7 @@ class FMUProcessModel(DiscreteModel):
     jacobians : str
         How the Jacobians are computed (also in every run's metadata).
     start : ndarray, shape (nx,)
-        The FMU's start values of the states.
+        The states' start values.
     """
 
     #: The filters' steps call this model's compiled code, so they cannot be packed into FMUs.
@@ -317,7 +278,6 @@ class FMUProcessModel(DiscreteModel):
         if directional:
             self._check_directional(checks.positive(jacobian_check, "jacobian_check"))
 
-    # ---------------------------------------------------------------- reading the names
     def _input(self, d: _Description, name: str):
         v = _check_float(d, name, "input", self.path)
         if v.causality != "input":
@@ -335,8 +295,7 @@ class FMUProcessModel(DiscreteModel):
         if v.causality != "output":
             raise ConfigurationError(f"{self.path.name}: measurement {name!r} is neither an output nor a "
                                      f"continuous state (its causality is {v.causality})")
-        deps = d.outputs.get(name)
-        bad = [u.name for u in deps or () if u.causality == "input"]
+        bad = [u.name for u in d.outputs.get(name) or () if u.causality == "input"]
         if bad:
             raise ConfigurationError(f"{self.path.name}: output {name!r} depends directly on the input(s) "
                                      f"{', '.join(bad)} (feed-through); a filter's measurement h(x) depends on the "
@@ -357,12 +316,15 @@ class FMUProcessModel(DiscreteModel):
             out[name] = checks.finite(value, f"parameter {name}")
         return out
 
-    # ---------------------------------------------------------------- the compiled model
     def _runtime(self, d: _Description, digest: str, dt: float, states, ins, meas, pars, directional) -> _Runtime:
+        """The compiled model of this configuration, its FMU unpacked and instantiated."""
+        import fmpy
+
         prefix = f"fmumodel_{digest}_"
-        lib, why = compiled_library(_source(), "fmu_process", ["-O2", "-std=gnu99", "-shared", "-fPIC",
-                                                               "-fvisibility=hidden", f"-I{_headers()}",
-                                                               f"-DFP_PREFIX={prefix}"],
+        headers = Path(fmpy.__file__).parent / "c-code"
+        lib, why = compiled_library(shipped("estimators", "c", "fmu_process.c").read_text(), "fmu_process",
+                                    ["-O2", "-std=gnu99", "-shared", "-fPIC", "-fvisibility=hidden", f"-I{headers}",
+                                     f"-DFP_PREFIX={prefix}"],
                                     f"{prefix}open", "the compiled process model of an FMU",
                                     "the FMU cannot be a process model", link=["-ldl", "-lm"])
         if lib is None:
@@ -391,6 +353,7 @@ class FMUProcessModel(DiscreteModel):
         return rt
 
     def _config(self, d: _Description, folder: str, dt: float, states, ins, meas, pars, directional):
+        """The ``_Config`` of the C code, and the arrays it points to."""
         import fmpy
 
         version, md = d.version, d.md
@@ -421,7 +384,6 @@ class FMUProcessModel(DiscreteModel):
                        for k, v in keep.items()}, **strings)
         return c, (keep, strings)
 
-    # ---------------------------------------------------------------- the checks of the constructor
     def _advance(self, x: np.ndarray, u: np.ndarray, substeps: int) -> np.ndarray:
         """One period of ``substeps`` steps from ``x`` with ``u``, or the FMU's error."""
         D = _P(ctypes.c_double)
@@ -431,12 +393,16 @@ class FMUProcessModel(DiscreteModel):
             raise self.take_failure() or FMUError(f"{self.path.name}: one period from the start values failed")
         return out
 
+    @property
+    def _nominal_x(self) -> np.ndarray:
+        """The states' nominal values."""
+        return self._rt.keep[0]["nominal_x"]
+
     def _check_accuracy(self, tol: float | None) -> None:
-        """Step doubling at the start values: refuse an integration that diverges, or whose
-        error is above ``tol`` (None: any finite error)."""
+        """Refuse an integration whose error by step doubling at the start values is above ``tol``."""
         n, x, u = self.substeps, self.start, self._u_start
         coarse, fine = self._advance(x, u, n), self._advance(x, u, 2 * n)
-        scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._config_array("nominal_x"))
+        scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._nominal_x)
         order = 4 if self.method == "rk4" else 1
         err = np.abs(coarse - fine) / scale * (2**order / (2**order - 1))
         i = int(np.argmax(err))
@@ -449,14 +415,10 @@ class FMUProcessModel(DiscreteModel):
                    f"diverges on {self.state_names[i]} over one period from the start values: use many more "
                    "substeps, a shorter period or another integrator"))
 
-    def _config_array(self, name: str) -> np.ndarray:
-        return self._rt.keep[0][name]
-
     def _check_directional(self, tol: float) -> None:
-        """Refuse directional derivatives that disagree with the FMU's own central differences
-        of the map (and of the measurement) at the start values."""
+        """Refuse directional derivatives that disagree with the FMU's central differences."""
         x, u = self.start, self._u_start
-        steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._config_array("nominal_x"))
+        steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._nominal_x)
         for what, exact, fn in (("f", self.F(x, u), lambda z: self.f(z, u)), ("h", self.H(x), self.h)):
             fd = np.column_stack([(fn(x + s * e) - fn(x - s * e)) / (2 * s) for s, e in zip(steps, np.eye(self.nx))])
             bad = np.abs(exact - fd) > tol * max(1.0, np.abs(fd).max())
@@ -468,32 +430,20 @@ class FMUProcessModel(DiscreteModel):
                                f"from the directional derivatives, {fd[i, j]:.10g} from central differences (relative "
                                f"tolerance {tol:g}); pass jacobian='fd' to use differences")
 
-    # ---------------------------------------------------------------- the protocol
     def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)``: one call of the compiled map and its tangent.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        u : casadi.SX, shape (nu, 1)
-        """
-        f, F = self._ext["fF"](x, u)
-        return f, F
+        """``(f(x, u), F)`` at the symbols ``x`` (nx, 1) and ``u`` (nu, 1): one call of the compiled
+        map and its tangent."""
+        return self._ext["fF"](x, u)
 
     def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)``: one call of the compiled measurement and its Jacobian.
-
-        Parameters
-        ----------
-        x : casadi.SX, shape (nx, 1)
-        """
-        h, H = self._ext["hH"](x)
-        return h, H
+        """``(h(x), H)`` at the symbol ``x`` (nx, 1): one call of the compiled measurement and its
+        Jacobian."""
+        return self._ext["hH"](x)
 
     def take_failure(self) -> Exception | None:
-        """The first failure of the FMU's evaluations since the last call, as the error to raise
-        (NumericalError: a non-finite derivative or measurement; FMUError: a call that failed,
-        an event inside a period), or None; taking it clears it."""
+        """The first failure of the FMU's evaluations since the last call (NumericalError: a
+        non-finite derivative or measurement; FMUError: a failed call, an event inside a
+        period), or None; taking it clears it."""
         if not self._rt.call("failures"):
             return None
         error = NumericalError if self._rt.call("numerical") else FMUError
@@ -508,7 +458,7 @@ class FMUProcessModel(DiscreteModel):
                    "not restorable (no SetFMUState): every evaluation is a trial step from the start time, "
                    "without CompletedIntegratorStep")
         outputs = [m for m in self.output_names if m not in self.state_names]
-        lines = [f"{self.path.name}: FMI {d.version}.0 Model Exchange, model identifier {d.identifier}",
+        return "\n".join([f"{self.path.name}: FMI {d.version}.0 Model Exchange, model identifier {d.identifier}",
                  f"state ({self.nx}): {', '.join(self.state_names)}",
                  f"inputs ({self.nu}): {', '.join(self.input_names) or 'none'} (held over each period)",
                  f"measurements ({self.ny}): {', '.join(self.output_names)}"
@@ -518,8 +468,7 @@ class FMUProcessModel(DiscreteModel):
                  f"Jacobians: {self.jacobians}",
                  f"FMU state: {restore}",
                  f"events: {int(d.md.numberOfEventIndicators or 0)} event indicator(s), checked at every substep; "
-                 "an event inside a period is refused"]
-        return "\n".join(lines)
+                 "an event inside a period is refused"])
 
     def __repr__(self):
         return (f"FMUProcessModel({str(self.path)!r}, dt={self.dt}, states={self.state_names}, "

@@ -1,41 +1,15 @@
 """The posterior Cramér-Rao bound (PCRB): the lowest mean-square error any estimator can reach.
 
-For ``x_{k+1} = f(x_k, u_k) + w_k``, ``y_k = h(x_k) + v_k`` with ``w_k ~ N(0, Q)``,
-``v_k ~ N(0, R)`` and a Gaussian prior ``x_0 ~ N(m_0, P_0)``, the Fisher information
-``J_k`` of the state at step ``k`` follows the recursion of Tichavský, Muravchik and Nehorai
-(IEEE Trans. Signal Processing 46(5), 1998: the Fisher information recursion and its form for
-additive Gaussian noise):
+The Fisher information recursion of Tichavský, Muravchik and Nehorai (IEEE Trans. Signal
+Processing 46(5), 1998) for additive Gaussian noise, ``w_k ~ N(0, Q)``, ``v_k ~ N(0, R)``,
+``x_0 ~ N(m_0, P_0)``::
 
     J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
     D11 = E[F^T Q^-1 F],  D12 = D21^T = -E[F^T] Q^-1,  D22 = Q^-1 + E[H^T R^-1 H],
 
-with ``J_0 = P_0^-1``, ``F`` the Jacobian of ``f`` at the true ``x_k`` and ``H`` that of
-``h`` at the true ``x_{k+1}``; every estimator's error covariance at step ``k`` is at least
-``J_k^-1`` (in the positive semi-definite order), so its mean-square error on state ``i``
-is at least ``[J_k^-1]_ii``. The expectations are taken by Monte Carlo over true
-trajectories (a campaign's own realisations), with the exact Jacobians of the model's
-CasADi expressions.
-
-Numerics. With ``F_bar = E[F]`` and the spread ``V = E[(F - F_bar)^T Q^-1 (F - F_bar)]``,
-the matrix inversion lemma turns the recursion into the covariance form of a Kalman filter
-(no difference of large matrices when Q is small, and no inverse of an ill-conditioned
-information matrix):
-
-    B_k' = (B_k^-1 + V)^-1,    P_pred = F_bar B_k' F_bar^T + Q,    B_{k+1} = (P_pred^-1 + E[H^T R^-1 H])^-1,
-
-with ``B_k = J_k^-1``, which is exactly the recursion above. The first and the last step
-are measurement updates with the pseudo-measurement ``Z`` of unit noise, ``Z^T Z = V``
-(or ``E[H^T R^-1 H]``; ``Z`` from the symmetric eigendecomposition), in Joseph form with
-Cholesky solves; a known initial state is ``B_0 = 0``. On a linear model (``V = 0``) it is
-the Kalman filter's covariance recursion, which the bound then equals.
-
-Missing measurements: a channel that is missing (a NaN measurement, or masked out) carries
-no information. For a realisation whose valid channels at step ``k`` are ``s``, the
-measurement information is ``H_s^T (R_ss)^-1 H_s`` (the marginal of the Gaussian
-measurement on those channels), and ``E[H^T R^-1 H]`` is its mean over the realisations:
-the bound of an estimator that knows which channels are missing, averaged over the
-realisations' patterns of missing data, as the mean-square error of a Monte Carlo campaign
-is.
+``J_0 = P_0^-1``, computed in covariance form with expectations by Monte Carlo over true
+trajectories; the form, and the bound with missing measurements, are in the guide's page
+on the experiments (docs/guide/experiments.md).
 """
 from __future__ import annotations
 
@@ -58,6 +32,8 @@ __all__ = ["PCRB", "posterior_crb", "rmse_ratio"]
 #: Steps whose Jacobians are evaluated in one batched call (bounds the memory of a call
 #: to ``runs x PCRB_CHUNK x nx^2`` numbers).
 PCRB_CHUNK = 500
+#: Points per call of the compiled Jacobians (one compiled library per model).
+JACOBIAN_BLOCK = 1024
 
 
 @dataclass
@@ -68,16 +44,14 @@ class PCRB:
     ----------
     P : ndarray, shape (N + 1, nx, nx)
         The bound ``J_k^-1`` on the error covariance of any estimator of ``x_k`` from
-        ``y_1 .. y_k``, k = 0..N (row 0: the prior covariance, zero for a known initial
-        state) [state units squared].
+        ``y_1 .. y_k``, k = 0..N (row 0: the prior covariance) [state units squared].
     runs : int
         Number of realisations the expectations were taken over.
     state_names : list of str
-        The model's state names.
     known_initial_state : bool
         True if the bound assumed ``x_0`` known exactly (``P[0] = 0``).
     jacobians : str
-        How the model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
+        How the model's Jacobians were computed.
     """
 
     P: np.ndarray
@@ -137,9 +111,7 @@ def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
             raise InputError("measurements ys contain inf (a missing channel is NaN)")
         ok = ~np.isnan(y)
         valid = ok if valid is None else valid & ok
-    if valid is not None and valid.all():
-        return None
-    return valid
+    return None if valid is None or valid.all() else valid
 
 
 def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: int) -> np.ndarray | None:
@@ -160,15 +132,8 @@ def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: 
     return W
 
 
-#: Points per call of the compiled Jacobians (one compiled library per model, whatever the
-#: number of realisations and steps).
-JACOBIAN_BLOCK = 1024
-
-
 class _Jacobians:
-    """The exact Jacobians ``F(x, u)`` (nx, nx) and ``H(x)`` (ny, nx) of ``system``: one
-    CasADi Function mapped over :data:`JACOBIAN_BLOCK` points, compiled to native code
-    (cached on disk; CasADi's VM without a C compiler), bound to numpy arrays."""
+    """The exact Jacobians ``F(x, u)`` and ``H(x)`` of ``system``, compiled over :data:`JACOBIAN_BLOCK` points."""
 
     def __init__(self, system: DiscreteModel, backend: str = "compiled"):
         x, u = system.x, system.u
@@ -206,16 +171,14 @@ def _jacobians(system: DiscreteModel) -> _Jacobians:
 
 
 def _root(M: np.ndarray) -> np.ndarray:
-    """``Z`` (..., n, n) with ``Z^T Z = M`` for symmetric positive semi-definite ``M`` (..., n, n)
-    (eigendecomposition; rounding's negative eigenvalues become zero)."""
+    """``Z`` with ``Z^T Z = M`` (..., n, n) by eigendecomposition (negative eigenvalues become 0)."""
     lam, U = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
     return np.sqrt(np.clip(lam, 0.0, None))[..., :, None] * np.swapaxes(U, -1, -2)
 
 
 def _joseph(P: np.ndarray, Z: np.ndarray) -> np.ndarray:
-    """``(P^+ + Z^T Z)^-1`` for a covariance ``P`` (PSD, zero allowed): the update of ``P``
-    with the measurement matrix ``Z`` and unit noise, in Joseph form (symmetric and positive
-    semi-definite by construction; the gain by a Cholesky solve of ``I + Z P Z^T``)."""
+    """``(P^+ + Z^T Z)^-1``: the update of ``P`` (PSD, zero allowed) with the measurement
+    matrix ``Z`` and unit noise, in Joseph form."""
     S = np.eye(len(Z)) + Z @ P @ Z.T
     L = np.linalg.cholesky(0.5 * (S + S.T))
     K = np.linalg.solve(L.T, np.linalg.solve(L, Z @ P)).T       # P Z^T S^-1 by the Cholesky factor
@@ -226,32 +189,25 @@ def _joseph(P: np.ndarray, Z: np.ndarray) -> np.ndarray:
 
 def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=None) -> PCRB:
     """The posterior Cramér-Rao bound along true trajectories (Tichavský, Muravchik and
-    Nehorai 1998, the recursion for additive Gaussian noise; see the module documentation
-    for the form computed and for missing data).
+    Nehorai 1998, the recursion for additive Gaussian noise).
 
     Parameters
     ----------
     system : DiscreteModel
-        The model ``x_{k+1} = f(x_k, u_k) + w_k``, ``y_k = h(x_k) + v_k``; its exact
-        Jacobians give ``F`` and ``H``.
+        The model ``x_{k+1} = f(x_k, u_k) + w_k``, ``y_k = h(x_k) + v_k`` (its exact Jacobians).
     X : array_like, shape (runs, N + 1, nx)
         True trajectories (``X[:, 0]``: the initial states) [state units]; the expectations
-        are means over the ``runs`` realisations.
+        are means over the realisations.
     us : array_like, shape (N, nu) or (runs, N, nu)
-        Inputs; ``us[k]`` is held over the step ``k -> k + 1`` (as in
-        :meth:`~estimators.base.KalmanBase.run`).
-    Q : array_like
-        Process noise covariance (nx, nx), diagonal (nx,) or scalar (times I); symmetric
-        positive definite.
-    R : array_like
-        Measurement noise covariance (ny, ny), diagonal or scalar; symmetric positive definite.
+        Inputs; ``us[k]`` is held over the step ``k -> k + 1``.
+    Q, R : array_like
+        Process (nx, nx) and measurement (ny, ny) noise covariances, or their diagonal, or a
+        scalar (times I); symmetric positive definite.
     P0 : array_like, optional
-        Covariance of the prior of ``x_0`` (``J_0 = P0^-1``), symmetric positive definite;
-        None (default): the initial state is known exactly (``J_0`` infinite, so the first
-        prediction's covariance is ``Q``), as in a campaign whose truth starts at a fixed state.
+        Covariance of the prior of ``x_0`` (``J_0 = P0^-1``); None (default): ``x_0`` known
+        exactly (the first prediction's covariance is ``Q``).
     masks : array_like of bool, shape (runs, N, ny), optional
-        ``masks[r, k, j]`` False: channel ``j`` of the measurement ``y_{k+1}`` of realisation
-        ``r`` is missing (no information).
+        ``masks[r, k, j]`` False: channel ``j`` of ``y_{k+1}`` of realisation ``r`` is missing.
     ys : array_like, shape (runs, N, ny), optional
         Measurements ``y_1 .. y_N``; only where they are NaN (missing channels) is used.
 
@@ -265,14 +221,11 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     TypeMismatchError
         ``system`` is not a DiscreteModel, or an argument is not numbers.
     ConfigurationError
-        ``Q``, ``R`` or ``P0`` has the wrong shape, is not finite, not symmetric or not
-        positive definite.
+        ``Q``, ``R`` or ``P0`` is not a finite symmetric positive definite matrix of its shape.
     InputError
-        ``X``, ``us``, ``masks`` or ``ys`` has the wrong shape, ``X`` or ``us`` is not
-        finite, ``X`` holds no realisation.
+        ``X``, ``us``, ``masks`` or ``ys`` has the wrong shape, or ``X`` or ``us`` is not finite.
     NumericalError
-        A Jacobian along the trajectories is not finite, or the recursion lost positive
-        definiteness (an ill-posed model).
+        A Jacobian along the trajectories, or the recursion, is not finite (an ill-posed model).
     ResourceError
         The work arrays would not fit in memory.
     """
@@ -286,9 +239,7 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
 
 
 class _Recursion:
-    """The recursion of :func:`posterior_crb` in covariance form (see the module
-    documentation) over checked arguments, :data:`PCRB_CHUNK` steps at a time: the
-    Jacobians of a chunk in one call, then its steps."""
+    """The recursion of :func:`posterior_crb` over checked arguments, :data:`PCRB_CHUNK` steps at a time."""
 
     def __init__(self, system: DiscreteModel, X: np.ndarray, us: np.ndarray, Q: np.ndarray, R: np.ndarray,
                  P0: np.ndarray | None, valid: np.ndarray | None):
@@ -355,15 +306,13 @@ class _Recursion:
 
 
 def rmse_ratio(err, bound: PCRB, steps=None) -> np.ndarray:
-    """Each state's RMSE over realisations and steps as a multiple of the PCRB:
-    ``sqrt(mean_{r,k} e_{r,k,i}^2 / mean_k [J_k^-1]_ii)``, shape (nx,) (1 is the best any
-    estimator can do, in expectation).
+    """Each state's RMSE over realisations and steps as a multiple of the PCRB,
+    ``sqrt(mean_{r,k} e_{r,k,i}^2 / mean_k [J_k^-1]_ii)``, shape (nx,) (1 is the best possible).
 
     Parameters
     ----------
     err : array_like, shape (runs, N + 1, nx) or (runs, N, nx)
-        Estimation errors ``x_hat - x`` along the bound's steps (with or without k = 0)
-        [state units].
+        Estimation errors ``x_hat - x`` along the bound's steps (with or without k = 0) [state units].
     bound : PCRB
         The bound along the same steps.
     steps : slice, optional

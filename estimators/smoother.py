@@ -1,24 +1,7 @@
-"""Rauch-Tung-Striebel smoothing of a stored filter pass, in native code.
-
-:func:`rts_smooth` takes a filter and the :class:`~estimators.base.FilterRun` its
-:meth:`~estimators.base.KalmanBase.run` returned, and runs the backward pass from the last
-step to the first (Rauch, Tung and Striebel, 1965), one compiled step per time step,
-folded in native code (``estimators._fold``), with the filter's own predictions
-``x^-_{k+1}``, ``P^-_{k+1}`` (so time-varying or adapted Q is used as the filter used it):
-
-* KF and EKF-family filters (the extended RTS smoother on the exact CasADi Jacobian
-  ``F_k = df/dx`` at the filtered ``x_k``)::
-
-      C_k  = P_k F_k^T (P^-_{k+1})^{-1}            (by a solve, no inverse)
-      xs_k = x_k + C_k (xs_{k+1} - x^-_{k+1})
-      Ps_k = P_k + C_k (Ps_{k+1} - P^-_{k+1}) C_k^T
-
-* the UKF (the unscented RTS smoother of Särkkä, 2008): ``C_k = D_k (P^-_{k+1})^{-1}``
-  with ``D_k`` the cross-covariance of the sigma points of ``(x_k, P_k)`` and their images
-  under ``f``, the filter's own sigma-point parameters.
-
-The lag-one covariance ``Cov(x_{k+1}, x_k | all) = Ps_{k+1} C_k^T`` comes with it, for EM
-(:mod:`estimators.em`).
+"""Rauch-Tung-Striebel smoothing of a stored filter pass (Rauch, Tung and Striebel, 1965; for
+the UKF, Särkkä, 2008), one compiled step per time step folded in native code, with the
+filter's own predictions; the equations are in the guide's page on offline estimation
+(docs/guide/offline.md).
 """
 from __future__ import annotations
 
@@ -36,10 +19,14 @@ __all__ = ["Smoothed", "rts_smooth", "smoother_step"]
 
 
 def smoother_step(filt: KalmanBase) -> ca.Function:
-    """The backward step ``(xs, Ps, x, P, xp, Pp, u) -> (xs_new, Ps_new, C, Plag)`` for the
-    filter's model, with the filter's
-    :meth:`~estimators.base.KalmanBase.smoother_cross_covariance` (extended RTS for the
-    EKF family, unscented RTS for the UKF)."""
+    """The backward step ``(xs, Ps, x, P, xp, Pp, u) -> (xs_new, Ps_new, C, Plag)`` on the
+    filter's :meth:`~estimators.base.KalmanBase.smoother_cross_covariance`.
+
+    Parameters
+    ----------
+    filt : KalmanBase
+        The filter (its model and cross-covariance).
+    """
     s = filt.system
     n = s.nx
     xs, Ps = ca.SX.sym("xs", n), ca.SX.sym("Ps", n, n)
@@ -57,13 +44,13 @@ def smoother_step(filt: KalmanBase) -> ca.Function:
 
 
 def _fold(filt: KalmanBase):
-
+    """The compiled backward step of ``filt``, folded over time (cached on the model)."""
     return filt.system.compiled("rts", filt.cache_key, filt.backend,
                                 lambda: NativeFold(smoother_step(filt), 2, filt.backend))
 
 
 def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
-    """Smooth the filter pass ``run`` that ``filt`` produced (see the module documentation).
+    """Smooth the filter pass ``run`` that ``filt`` produced.
 
     Parameters
     ----------

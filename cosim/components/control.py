@@ -1,5 +1,4 @@
-"""Controller components: state feedback by LQR on the model linearised at an operating
-point (seed 002's balancing controller)."""
+"""State feedback by LQR on the model linearised at an operating point (seed 002's balancing controller)."""
 from __future__ import annotations
 
 import numpy as np
@@ -15,10 +14,8 @@ __all__ = ["LQRController", "lqr_gain"]
 
 def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
     """Discrete LQR gain K (nu, nx) of ``model`` linearised at (x_op, u_op) and discretised
-    with exact ZOH over ``period`` [s]; weights Q (state) and R (input).
-
-    Minimises ``sum x^T Q x + u^T R u`` for ``x_{k+1} = Ad x_k + Bd u_k`` (deviations from
-    the operating point); ``u = u_op - K (x - x_op)``.
+    with exact ZOH over ``period`` [s]: ``u = u_op - K (x - x_op)`` minimises ``sum x^T Q x +
+    u^T R u`` for ``x_{k+1} = Ad x_k + Bd u_k`` (deviations from the operating point).
     """
     Ad, Bd = model.discretize(x_op, u_op, period, method="zoh")
     Q = np.atleast_2d(float_array(Q, "LQR weight Q")) * (np.eye(model.nx) if np.ndim(Q) == 0 else 1)
@@ -37,10 +34,8 @@ def lqr_gain(model: PlantModel, x_op, u_op, period: float, Q, R) -> np.ndarray:
 
 
 class LQRController(Component, kind="lqr"):
-    """State feedback ``u = u_op - K (x_hat - x_op)`` with a discrete LQR gain.
-
-    Input ports: the model's state names (connect them to an estimator's outputs, as in
-    seed 002, or to the plant's states); output ports: the model's input names.
+    """State feedback ``u = u_op - K (x_hat - x_op)`` with a discrete LQR gain; input ports the
+    model's state names (an estimator's outputs, as in seed 002), output ports its inputs.
 
     Parameters
     ----------
@@ -67,7 +62,6 @@ class LQRController(Component, kind="lqr"):
     def __init__(self, name: str, model: PlantModel, period: float, Q, R, x_op=None,
                  u_op=None, u_limits=None):
         super().__init__(name, period, inputs=model.state_names, outputs=model.input_names)
-
         self.x_op = np.zeros(model.nx) if x_op is None else vector(x_op, model.nx, f"{name}: x_op", ConfigurationError)
         self.u_op = np.zeros(model.nu) if u_op is None else vector(u_op, model.nu, f"{name}: u_op", ConfigurationError)
         self.K = lqr_gain(model, self.x_op, self.u_op, self.period, Q, R)
@@ -76,9 +70,8 @@ class LQRController(Component, kind="lqr"):
         if eig.max() >= 1:
             raise ConfigurationError(f"{name}: the LQR design does not stabilise the linearisation "
                                      f"(closed-loop |eig| max {eig.max():.3f})")
-        if u_limits is None:
-            self.u_limits = None
-        else:
+        self.u_limits = None
+        if u_limits is not None:
             lim = float_array(u_limits, f"{name}: u_limits")
             if lim.shape != (2,) or not lim[0] < lim[1]:
                 raise ConfigurationError(f"{name}: u_limits must be (low, high) with low < high, got {u_limits!r}")

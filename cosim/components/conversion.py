@@ -1,6 +1,5 @@
-"""A conversion on a connection: ``y = factor * u + offset``, or a table of values (what an
-SSP's connection transformations and unit conversions become in the master, and what a
-scenario writes for the same system)."""
+"""A conversion on a connection: ``y = factor * u + offset``, or a table of values (an SSP's
+connection transformations and unit conversions)."""
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -16,9 +15,8 @@ __all__ = ["Conversion"]
 
 
 class Conversion(Component, kind="conversion"):
-    """One input ``u``, one output ``y``: ``y = factor * u + offset`` (reals), or
-    ``y = table[u]`` (integers, Booleans). Direct feedthrough: ``y`` at ``t`` is computed
-    from ``u`` at ``t``.
+    """``y = factor * u + offset`` (reals), or ``y = table[u]`` (integers, Booleans), ``y`` at
+    ``t`` from ``u`` at ``t``.
 
     Parameters
     ----------
@@ -28,8 +26,8 @@ class Conversion(Component, kind="conversion"):
     factor, offset : float
         The linear map (default the identity).
     table : mapping, optional
-        Input value -> output value (integers or Booleans); an input value it lacks stops the
-        run with an error naming it. Excludes ``factor`` and ``offset``.
+        Input value -> output value (integers or Booleans), instead of ``factor`` and
+        ``offset``; an input value it lacks stops the run.
     input_type, output_type : str
         FMI types of ``u`` and ``y`` (default ``"Float64"``).
     """
@@ -43,11 +41,8 @@ class Conversion(Component, kind="conversion"):
         if table is None and port_kind(output_type) != "real":
             raise ConfigurationError(f"{name}: a linear map gives reals; an output of type {output_type} needs a "
                                      "table")
-        self.table = None if table is None else {self._key(k): v for k, v in dict(table).items()}
-
-    @staticmethod
-    def _key(value) -> int:
-        return int(value) if not isinstance(value, str) else int(float(value))
+        self.table = None if table is None else {int(float(k) if isinstance(k, str) else k): v
+                                                  for k, v in dict(table).items()}
 
     def timing(self) -> str:
         """What an output at ``t`` means."""

@@ -22,24 +22,20 @@ COVARIANCE_OUTPUTS = ("diagonal", "full")
 class EstimatorComponent(Component, kind="estimator"):
     """Runs a filter of :mod:`estimators` at its model's sample period.
 
-    Input ports: the model's inputs (e.g. ``F``) and outputs (e.g. ``y_x, y_theta``: the
-    measurements). Output ports: the state estimate (state names), the covariance
-    diagonal (``P_<state>``), with ``covariance="full"`` also its upper off-diagonal
-    entries ``P_<i>_<j>`` (0-based state indices, ``i < j``), and ``nis``.
+    Input ports: the model's inputs and outputs (the measurements). Output ports: the state
+    estimate (state names), the covariance diagonal (``P_<state>``), with
+    ``covariance="full"`` also its upper off-diagonal entries ``P_<i>_<j>`` (0-based, ``i <
+    j``), and ``nis``.
 
-    Timing (seed 000 eqs 14-23): at its first instant the component outputs the initial
-    estimate; at each later instant ``t_k`` it runs one ``step(u_{k-1}, y_k)``: it predicts
-    with the input it read at its previous instant and updates with the measurement at
-    ``t_k``. The estimate therefore depends directly on the measurement inputs only
-    (feedthrough), never on the input ``u`` at the same instant, and the result does not
-    depend on where the component sits in a component list.
+    Timing (seed 000 eqs 14-23): the initial estimate at the first instant, then at each
+    ``t_k`` one ``step(u_{k-1}, y_k)`` (the input read at the previous instant, the measurement
+    at ``t_k``): a direct dependence on the measurements only, wherever the component sits.
 
     Parameters
     ----------
     name : str
     make_filter : callable
-        Returns a new filter (called at every reset, so each run starts afresh), e.g.
-        ``lambda: EKF(system, x0, P0, Q, R)``.
+        Returns a new filter (at every reset), e.g. ``lambda: EKF(system, x0, P0, Q, R)``.
     period : float, optional
         Must equal the filter's model period ``system.dt`` (default: that period).
     covariance : {"diagonal", "full"}
@@ -62,8 +58,7 @@ class EstimatorComponent(Component, kind="estimator"):
                                      f"{sys_.dt} s; discretise the model with dt = period")
         n = sys_.nx
         self.covariance = covariance
-        upper = np.triu_indices(n, 1) if covariance == "full" else (np.array([], int),) * 2
-        off = [f"P_{i}_{j}" for i, j in zip(*upper)]
+        off = [f"P_{i}_{j}" for i, j in zip(*self._upper(n))]
         outputs = sys_.state_names + [f"P_{s}" for s in sys_.state_names] + off + ["nis"]
         super().__init__(name, period, inputs=sys_.input_names + sys_.output_names, outputs=outputs,
                          feedthrough={o: sys_.output_names for o in outputs})
@@ -72,15 +67,17 @@ class EstimatorComponent(Component, kind="estimator"):
         self._u_prev = None
         self.estimated_states = list(sys_.state_names)
 
+    def _upper(self, n: int) -> tuple:
+        """The indices of the off-diagonal covariance entries output (none unless "full")."""
+        return np.triu_indices(n, 1) if self.covariance == "full" else (np.zeros(0, int),) * 2
+
     @classmethod
     def from_scenario(cls, name, table, context):
-        """The keys ``filter`` (a registered filter, :data:`estimators.FILTERS`), ``model``
-        (a registered model, with ``model_parameters``, optional ``method`` and ``substeps``
-        of the discretisation; or the path of a Model Exchange FMU, ``model =
-        "plant.fmu"``, with the keys of :meth:`~cosim.scenario.ScenarioContext.fmu_process_model`),
-        ``period``, ``bias_on`` (augment the state with the offset of this output),
-        ``covariance``; every other key is an argument of the filter's constructor, checked
-        against its signature."""
+        """The keys ``filter`` (:data:`estimators.FILTERS`), ``model`` (a registered model, with
+        ``model_parameters``, ``method``, ``substeps``; or a Model Exchange FMU's path, with the
+        keys of :meth:`~cosim.scenario.ScenarioContext.fmu_process_model`), ``period``,
+        ``bias_on`` (augment the state with the offset of this output), ``covariance``; the
+        other keys are the filter's constructor's."""
         import estimators
 
         t = dict(table)
@@ -106,16 +103,9 @@ class EstimatorComponent(Component, kind="estimator"):
     def timing(self) -> str:
         return "outputs at t: the estimate after predict(u read at the previous instant) and update(y at t)"
 
-    def _outputs(self):
-        out = np.empty(len(self.output_ports))
-        self.filter.bind_summary(out, self.covariance)()
-        return out
-
     def bind(self, values, inputs, outputs, integers=None):
         """The master's fast path (:class:`~cosim.core.component.FastBinding`): the filter's
-        step reads the measurements from ``values``, and its summary (estimate, covariance
-        entries, NIS) is written straight into ``values[outputs]`` (``integers``: unused,
-        every port is real)."""
+        step reads ``values`` and writes its summary straight into ``values[outputs]``."""
         f, nu = self.filter, self._nu
         summary = None              # bound at the first call from Python (the native kernel writes its own)
         if isinstance(inputs, slice):
@@ -144,8 +134,7 @@ class EstimatorComponent(Component, kind="estimator"):
         return output_fn, update_fn
 
     def native_reason(self) -> str | None:
-        """Why this filter's calls run in Python (None: its compiled step runs in the native
-        kernel, see :mod:`cosim.core.native`)."""
+        """Why this filter's calls run in Python (None: its compiled step runs in the native kernel)."""
         f = self.filter
         if f.backend != "compiled" or getattr(f, "_step_library", None) is None:
             return "the filter runs in CasADi's virtual machine (no compiled step)"
@@ -154,9 +143,8 @@ class EstimatorComponent(Component, kind="estimator"):
         return None
 
     def _compiled_step(self):
-        """The filter's compiled step as the kernel calls it: ``(library, symbol, iw, w,
-        argument and result pointer arrays per bound step)``, kept while the filter is the
-        same (a restored filter keeps its pointers); None where the library cannot be read."""
+        """The filter's compiled step as the kernel calls it, ``(library, symbol, iw, w, argument
+        and result pointers per bound step)``, kept per filter; None if the library cannot be read."""
         f = self.filter
         cached = getattr(self, "_compiled", None)
         if cached is None or cached[0] is not f:
@@ -174,16 +162,13 @@ class EstimatorComponent(Component, kind="estimator"):
         return cached[1:]
 
     def _native_ops(self, values, u_at, y_at, outputs: slice, u_prev, cur):
-        """The kernel's operations (output: the compiled step, the adaptive filters' hook, then
-        the summary; update: keep the inputs), or None. The step is the very function
-        :meth:`step` evaluates, called through its symbol in the filter's compiled library, on
-        the same arrays."""
+        """The kernel's operations (output: the compiled step :meth:`step` evaluates, on the same
+        arrays, the adaptive filters' hook, the summary; update: keep the inputs), or None."""
         if self.native_reason() is not None or (compiled := self._compiled_step()) is None:
             return None
         f, (lib, sym, iw, w, ptrs) = self.filter, compiled
         rt, n = f._rt, self._nx
-        upper = np.triu_indices(n, 1) if self.covariance == "full" else (np.zeros(0, int),) * 2
-        upi, upj = (np.ascontiguousarray(a, np.int64) for a in upper)
+        upi, upj = (np.ascontiguousarray(a, np.int64) for a in self._upper(n))
         idx = np.arange(len(values))
         uidx, yidx = (np.ascontiguousarray(idx[at], np.int64) for at in (u_at, y_at))
         xs, Ps = rt.pairs["x"], rt.pairs["P"]
@@ -214,9 +199,7 @@ class EstimatorComponent(Component, kind="estimator"):
         return ops, [Op(OP_HOLD, dict(fields), keep)]
 
     def _after_op(self, cur, ny: int, sync_in, sync_out) -> Op:
-        """The kernel's operation after an adaptive filter's step: its ``after_step`` from
-        Python, or, for a filter that only records its Q and R, their rows written by the
-        kernel (Python takes over when the rows are full)."""
+        """The kernel's operation after an adaptive filter's step (its ``after_step``, or its records)."""
         f = self.filter
         rt = f._rt
         flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
@@ -250,7 +233,9 @@ class EstimatorComponent(Component, kind="estimator"):
         """The estimate at ``t``: the initial one, then ``step(u_prev, y)``."""
         if self._u_prev is not None:
             self.filter.step(self._u_prev, u[self._nu:])
-        return self._outputs()
+        out = np.empty(len(self.output_ports))
+        self.filter.bind_summary(out, self.covariance)()
+        return out
 
     def update(self, t, u):
         """Keep the input read at ``t`` for the next prediction."""
@@ -258,10 +243,8 @@ class EstimatorComponent(Component, kind="estimator"):
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """The filter as an estimator FMU (:func:`estimators.filter_fmu.export_filter_fmu`;
-        ``clocked``: its clocked form, FMI 3.0), with the same timing as this component. Its
-        outputs are the state estimate, ``P_<state>`` and ``nis`` as here (not the
-        off-diagonal ``P_<i>_<j>``), and more."""
-
+        ``clocked``: its clocked form, FMI 3.0) with this component's timing and outputs (but the
+        off-diagonal ``P_<i>_<j>``)."""
         filt = self.make_filter()
         path = export_filter_fmu(filt, folder, fmi_version, name=self._fmu_identifier(),
                                  file_name=f"{self.name}.fmu", clocked=clocked)

@@ -1,17 +1,13 @@
 """The wheel pendulum's sensor chain (seed 002): accelerometer, gyroscope, encoder and the
-accelerometer-gyroscope fusion filter, as co-simulation components.
+accelerometer-gyroscope fusion filter.
 
-Geometry: the pendulum angle ``alpha`` is measured from the upright vertical; the
-sensor board sits on the pendulum at distance ``r`` from the pivot. Body axes: ``r``
-(radial, from the pivot towards the sensor), ``t`` (tangential, towards increasing
-alpha), ``z`` (the pivot axis). An accelerometer measures the specific force
-``a - g`` (with ``g`` pointing down), which in body axes is::
+The accelerometer sits at distance ``r`` from the pivot; ``alpha`` is measured from the
+upright vertical, the body axes are ``t`` (towards increasing alpha), ``r`` (from the pivot
+to the sensor) and ``z`` (the pivot axis). It measures the specific force ``a - g``::
 
-    a_t = r alpha'' - g sin(alpha)
-    a_r = g cos(alpha) - r alpha'^2
-    a_z = 0
+    a_t = r alpha'' - g sin(alpha),    a_r = g cos(alpha) - r alpha'^2,    a_z = 0
 
-At rest it reads ``(-g sin alpha, g cos alpha)``, so ``atan2(-a_t, a_r)`` is the tilt.
+so at rest ``atan2(-a_t, a_r)`` is the tilt.
 """
 from __future__ import annotations
 
@@ -19,7 +15,7 @@ import numpy as np
 
 from estimators import KF, linear_model
 from fmu_models.errors import ConfigurationError
-from fmu_models.infra.checks import finite, positive_int
+from fmu_models.infra.checks import finite, positive, positive_int
 
 from ..core.component import Component
 from .noise import PerInstantNoise
@@ -32,7 +28,7 @@ class Accelerometer(Component, kind="accelerometer"):
     """3-axis accelerometer at distance ``r`` [m] from the pivot, in body axes.
 
     Input ports ``alpha`` [rad], ``alpha_dot`` [rad/s], ``alpha_ddot`` [rad/s^2]; output
-    ports ``a_t``, ``a_r``, ``a_z`` [m/s^2] (see the module documentation).
+    ports ``a_t``, ``a_r``, ``a_z`` [m/s^2].
 
     Parameters
     ----------
@@ -41,10 +37,8 @@ class Accelerometer(Component, kind="accelerometer"):
         Sample period [s].
     r : float
         Distance of the sensor from the pivot [m], >= 0.
-    noise_std : float or sequence
-        Standard deviation per axis [m/s^2] (default 0).
-    bias : float or sequence
-        Constant offset per axis [m/s^2] (default 0).
+    noise_std, bias : float or sequence
+        Standard deviation and constant offset per axis [m/s^2] (default 0).
     g : float
         Gravitational acceleration [m/s^2] (default 9.81).
     seed : int
@@ -58,9 +52,7 @@ class Accelerometer(Component, kind="accelerometer"):
         self.r = finite(r, f"{name}: r [m]")
         if self.r < 0:
             raise ConfigurationError(f"{name}: r must be a distance >= 0 m, got {r!r}")
-        if not finite(g, f"{name}: g") > 0:
-            raise ConfigurationError(f"{name}: g must be > 0")
-        self.g, self.seed = float(g), positive_int(seed, f"{name}: seed", minimum=0)
+        self.g, self.seed = positive(g, f"{name}: g"), positive_int(seed, f"{name}: seed", minimum=0)
         self.noise_std = _per_channel(noise_std, 3, "noise_std", name, positive=True)
         self.bias = _per_channel(bias, 3, "bias", name)
 
@@ -77,10 +69,8 @@ class Accelerometer(Component, kind="accelerometer"):
 
 
 class Gyroscope(Component, kind="gyroscope"):
-    """Rate gyroscope: ``omega = alpha_dot + b(t) + v``.
-
-    The offset ``b`` starts at ``bias`` and, with ``drift_std > 0``, drifts as a random
-    walk of ``drift_std`` [rad/s per sqrt(s)]. Input ``alpha_dot``, output ``omega``.
+    """Rate gyroscope: ``omega = alpha_dot + b(t) + v``, the offset ``b`` a random walk from
+    ``bias``. Input ``alpha_dot``, output ``omega``.
 
     Parameters
     ----------
@@ -127,12 +117,9 @@ class Gyroscope(Component, kind="gyroscope"):
 
 
 class Encoder(Component, kind="encoder"):
-    """Incremental encoder on the wheel: speed from counted increments over each period.
-
-    The wheel angle is integrated from the input ``phi_dot`` at the encoder's own rate
-    (rectangle rule over each period, exact for a speed held over the period); the
-    output ``phi_dot`` is ``(counts_k - counts_{k-1}) 2 pi / (counts_per_rev period) +
-    offset`` with ``counts = floor(phi counts_per_rev / (2 pi))``.
+    """Incremental encoder on the wheel: the output ``phi_dot`` is ``(counts_k - counts_{k-1})
+    2 pi / (counts_per_rev period) + offset``, ``counts = floor(phi counts_per_rev / (2 pi))``,
+    with the wheel angle integrated from the input ``phi_dot`` held over each period.
 
     Parameters
     ----------
@@ -173,14 +160,12 @@ class Encoder(Component, kind="encoder"):
 
 
 class TiltFusion(Component, kind="tilt_fusion"):
-    """Kalman filter fusing accelerometer tilt and gyro rate: state ``[alpha, b]`` (tilt and
-    gyro offset), ``alpha_{k+1} = alpha_k + T (omega_k - b_k)``, ``b_{k+1} = b_k``;
-    measurement ``atan2(-a_t, a_r)`` (the tilt at rest).
+    """Kalman filter (:class:`estimators.KF`) fusing accelerometer tilt and gyro rate: state
+    ``[alpha, b]`` (tilt and gyro offset), ``alpha_{k+1} = alpha_k + T (omega_k - b_k)``,
+    ``b_{k+1} = b_k``; measurement ``atan2(-a_t, a_r)``.
 
-    Input ports ``a_t``, ``a_r`` (accelerometer), ``omega`` (gyroscope); output ports
-    ``alpha`` (fused tilt), ``alpha_dot`` (the gyro rate as measured, or corrected by the
-    offset estimate with ``correct_rate=True``), ``bias`` (offset estimate). Runs on
-    :class:`estimators.KF` (the model is linear).
+    Input ports ``a_t``, ``a_r``, ``omega``; output ports ``alpha`` (fused tilt),
+    ``alpha_dot`` (the gyro rate, or ``omega - b``) and ``bias`` (offset estimate).
 
     Parameters
     ----------
@@ -194,8 +179,8 @@ class TiltFusion(Component, kind="tilt_fusion"):
     r_tilt : float
         Variance of the accelerometer tilt [rad^2] (default 1e-3).
     correct_rate : bool
-        Output ``omega - b`` instead of the raw rate (default False: seed 002's EKF sees
-        the raw gyro rate and removes the offset itself).
+        Output ``omega - b`` instead of the raw rate (default False: seed 002's EKF removes
+        the offset itself).
     """
 
     def __init__(self, name, period, q_angle=1e-6, q_bias=1e-8, r_tilt=1e-3, correct_rate=False):
@@ -204,16 +189,15 @@ class TiltFusion(Component, kind="tilt_fusion"):
         super().__init__(name, period, ["a_t", "a_r", "omega"], ["alpha", "alpha_dot", "bias"],
                          feedthrough={"alpha": ["a_t", "a_r"], "bias": ["a_t", "a_r"],
                                       "alpha_dot": ["a_t", "a_r", "omega"]})
-
         T = self.period
         self.system = linear_model([[1.0, -T], [0.0, 1.0]], [[T], [0.0]], [[1.0, 0.0]], T,
                                    ["alpha", "bias"], ["omega"], ["tilt"])
         self.q_angle, self.q_bias, self.r_tilt = float(q_angle), float(q_bias), float(r_tilt)
         self.correct_rate = bool(correct_rate)
-        self._make()                     # validates the covariances now
+        self._make()
 
     def _make(self):
-
+        """A new filter (checks the covariances)."""
         self.filter = KF(self.system, [0.0, 0.0], [1.0, 0.1], [self.q_angle, self.q_bias],
                          [[self.r_tilt]])
 
@@ -226,10 +210,7 @@ class TiltFusion(Component, kind="tilt_fusion"):
         """Fused tilt, rate and offset at ``t``: one filter step with the previous rate."""
         a_t, a_r, omega = u
         tilt = np.arctan2(-a_t, a_r)
-        if self.omega_prev is not None:
-            x = self.filter.step([self.omega_prev], [tilt])
-        else:
-            x = self.filter.update([tilt])
+        x = self.filter.update([tilt]) if self.omega_prev is None else self.filter.step([self.omega_prev], [tilt])
         rate = omega - x[1] if self.correct_rate else omega
         return np.array([x[0], rate, x[1]])
 

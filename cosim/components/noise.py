@@ -1,25 +1,7 @@
-"""Gaussian noise streams for the sensor and process-noise components.
-
-Two generators, chosen per component with ``generator=``:
-
-``"pcg64"`` (default)
-    numpy's PCG64 seeded with ``seed``, drawn sequentially: one vector per sample instant,
-    in the order the instants occur. A run started at another time, or with another
-    period, gets another sequence.
-
-``"counter"``
-    A counter-based generator whose value at sample ``k = round(t / period)`` is computed
-    directly from ``(seed, k, channel)``: :func:`counter_normal`. The signal FMUs
-    (:mod:`fmu_models.export.signal_fmu`) use the same generator in C, so a scenario exported as an
-    SSP draws the same noise as the project's master (within one rounding of the
-    libraries' ``log`` and ``cos``), whatever the start time.
-
-The counter generator: channel ``c`` of ``n`` at sample ``k`` takes words
-``i = 2 (k n + c)`` and ``i + 1`` of SplitMix64 seeded with ``seed`` (Steele, Lea and
-Flood, OOPSLA 2014: word ``i`` is ``mix(seed + (i + 1) * 0x9E3779B97F4A7C15)``),
-forms ``u1 = ((a >> 11) + 1) 2^-53`` in (0, 1] and ``u2 = (b >> 11) 2^-53`` in [0, 1),
-and returns the Box-Muller ``z = sqrt(-2 ln u1) cos(2 pi u2)``. SplitMix64 passes
-BigCrush; Box-Muller with 53-bit uniforms is exact up to ``|z|`` ~ 8.6.
+"""Gaussian noise streams for the sensor and process-noise components: numpy's PCG64 drawn
+per instant (``"pcg64"``), or the counter-based generator of the signal FMUs (``"counter"``,
+SplitMix64 and Box-Muller, :func:`counter_normal`), described in the guide's page on
+co-simulation (docs/guide/cosimulation.md).
 """
 from __future__ import annotations
 
@@ -39,6 +21,7 @@ MAX_COUNTER_SEED = 2**31 - 1
 
 
 def _splitmix64(seed: np.uint64, i: np.ndarray) -> np.ndarray:
+    """Words ``i`` of SplitMix64 seeded with ``seed`` (Steele, Lea and Flood, OOPSLA 2014)."""
     z = seed + (i + np.uint64(1)) * _GOLDEN
     z = (z ^ (z >> np.uint64(30))) * _M1
     z = (z ^ (z >> np.uint64(27))) * _M2
@@ -46,7 +29,7 @@ def _splitmix64(seed: np.uint64, i: np.ndarray) -> np.ndarray:
 
 
 def counter_normal(seed: int, k, n: int) -> np.ndarray:
-    """Standard normal draws of the counter generator (see the module documentation).
+    """Standard normal draws of the counter generator.
 
     Parameters
     ----------
@@ -72,14 +55,13 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
 
 
 class PerInstantNoise:
-    """``n`` standard normal numbers per instant from a seeded PCG64 stream, drawn once
-    per instant (a repeated call at the same instant returns the same draw).
+    """``n`` standard normal numbers per instant from a seeded PCG64 stream (a repeated call at
+    the same instant returns the same draw).
 
-    The numbers are drawn :data:`BLOCK` instants at a time into ``block`` (numpy's
-    generator gives the same numbers drawn in a block as one vector at a time), so the
-    native co-simulation kernel reads the same rows as :meth:`at`: ``state`` holds
-    the current row and the rows drawn, ``last`` the instant of the current row (NaN
-    before the first). ``on_refill`` callables run after every new block.
+    They are drawn :data:`BLOCK` instants at a time into ``block`` (the same numbers as one
+    vector at a time), so the native kernel reads the rows :meth:`at` reads: ``state`` holds
+    the current row and the rows drawn, ``last`` the instant of the current row (NaN before
+    the first); ``on_refill`` callables run after every new block.
     """
 
     #: Instants drawn at a time.
@@ -110,7 +92,7 @@ class PerInstantNoise:
 
 
 class CounterNoise:
-    """``n`` standard normal numbers at sample ``round(t / period)`` of the counter
+    """``n`` standard normal numbers at sample ``round(t / period)`` [s] of the counter
     generator (:func:`.counter_normal`) with ``seed``."""
 
     def __init__(self, seed: int, n: int, period: float):
@@ -125,8 +107,8 @@ class CounterNoise:
 
 
 def make_noise(generator: str, seed: int, n: int, period: float, owner: str):
-    """A noise stream of ``generator`` (see :data:`.GENERATORS`), ``seed``, ``n`` channels
-    drawn at ``period`` [s]; errors name ``owner`` (the component)."""
+    """A noise stream of ``generator`` (:data:`.GENERATORS`), ``seed``, ``n`` channels drawn at
+    ``period`` [s]; errors name ``owner`` (the component)."""
     if generator not in GENERATORS:
         raise UnknownNameError(f"{owner}: generator must be one of {GENERATORS}, got {generator!r}")
     if generator == "counter":

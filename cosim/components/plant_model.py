@@ -1,13 +1,6 @@
-"""A plant stepped from its CasADi model in Python: the FMU's semantics without an FMU.
-
-Same ports and behaviour as the plant FMUs of :mod:`fmu_models`: inputs (the model's
-inputs and one process-noise input ``w_<state>`` per state, added at the end of each
-step), outputs (the states, the measured outputs and, on request, ``der(<state>)``).
-The step is the same CasADi expression the FMU's C code is generated from, so a
-co-simulation with this component reproduces one with the FMU (the experiments' fast
-paths use it). ``der(<state>)`` depends directly on the model's inputs, as in the FMU's
-ModelStructure; ``feedthrough="none"`` reads it with the input of the previous step.
-"""
+"""A plant stepped from its CasADi model in Python: the FMU's semantics without an FMU (the
+same step expression the FMU's C code is generated from, so a co-simulation with it
+reproduces one with the FMU)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -22,7 +15,9 @@ from ..core.component import Component
 
 
 class ModelComponent(Component, kind="plant_model"):
-    """A :class:`~fmu_models.PlantModel` as a continuous co-simulation component.
+    """A :class:`~fmu_models.PlantModel` as a continuous co-simulation component, with the
+    ports of its plant FMU: inputs (the model's, and ``w_<state>`` added at the end of each
+    step), outputs (states, measured outputs and ``der(<state>)``).
 
     Parameters
     ----------
@@ -37,10 +32,10 @@ class ModelComponent(Component, kind="plant_model"):
     start : mapping, optional
         Initial states by name (default: the model's ``x0``).
     outputs : sequence of str, optional
-        Output ports; default: states and measured outputs. ``der(<state>)`` allowed.
+        Output ports (default: states and measured outputs).
     feedthrough : {"model", "none"}
-        As :class:`~cosim.fmi.fmu_component.FMUComponent`: ``der(<state>)`` at ``t`` uses the
-        input at ``t`` ("model", default) or the input of the previous step ("none").
+        ``der(<state>)`` at ``t`` uses the input at ``t`` ("model", default, as the FMU's
+        ModelStructure) or the input of the previous step ("none").
     """
 
     reentrant = True
@@ -92,10 +87,6 @@ class ModelComponent(Component, kind="plant_model"):
         self._in_index = [("u", model_in.index(p)) if p in model_in else ("w", self.model.state_names.index(p[2:]))
                           for p in self.connected_inputs]
 
-    def _set_inputs(self, u):
-        for (kind, i), v in zip(self._in_index, u):
-            (self.u if kind == "u" else self.w)[i] = v
-
     def reset(self, t0: float) -> None:
         super().reset(t0)
         self.x, self.u, self.w = self.x0.copy(), np.zeros(self.model.nu), np.zeros(self.model.nx)
@@ -120,7 +111,8 @@ class ModelComponent(Component, kind="plant_model"):
 
     def update(self, t: float, u: np.ndarray) -> None:
         """Set the inputs and step over ``[t, t + period]``, then add the noise ``w``."""
-        self._set_inputs(u)
+        for (kind, i), v in zip(self._in_index, u):
+            (self.u if kind == "u" else self.w)[i] = v
         x = np.asarray(self._step(self.x, self.u, self.model.p, self.period)).ravel() + self.w
         if not np.all(np.isfinite(x)):
             raise NumericalError(f"{self.name}: the state became non-finite at t = {t + self.period:g} s")

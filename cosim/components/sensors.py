@@ -1,7 +1,6 @@
-"""Sensor and process-noise components (seeded Gaussian noise).
-
-Both draw their random numbers once per sample instant (a repeated ``output`` call at the
-same instant, as in an iterated loop, reuses them), so they are reentrant.
+"""Sensor and process-noise components: seeded Gaussian noise drawn once per sample instant
+(a repeated ``output`` call at the same instant, as in an iterated loop, reuses it), so they
+are reentrant.
 """
 from __future__ import annotations
 
@@ -17,10 +16,11 @@ from fmu_models.infra.checks import float_array, positive_int
 
 from ..core.component import Component, ExportedFMU, bind_protocol
 from ..core.native import OP_NOISE, Op
-from .noise import PerInstantNoise, make_noise
+from .noise import make_noise
 
 
 def _per_channel(value, n, what, owner, positive=False):
+    """``value`` (one or ``n`` numbers) as ``n`` finite numbers (``positive``: >= 0), or the named error."""
     a = float_array(value, f"{owner}: {what}")
     try:
         a = np.broadcast_to(a, (n,)).copy()
@@ -31,7 +31,58 @@ def _per_channel(value, n, what, owner, positive=False):
     return a
 
 
-class Sensor(Component, kind="sensor"):
+class _Noisy(Component):
+    """A component drawing seeded noise per instant, in Python or in the native kernel."""
+
+    reentrant = True
+
+    def _noise_setup(self, seed: int, generator: str, n: int) -> None:
+        """Check and keep the seed and the generator of ``n`` channels."""
+        self.seed = positive_int(seed, f"{self.name}: seed", minimum=0)
+        self.generator, self._channels = generator, n
+        make_noise(generator, self.seed, n, self.period, self.name)          # checks the choice now
+
+    def reset(self, t0):
+        super().reset(t0)
+        self._noise = make_noise(self.generator, self.seed, self._channels, self.period, self.name)
+
+    def _noise_reason(self, cls, methods) -> str | None:
+        """Why this component runs in Python: its own calls (beyond ``cls``'s), or the counter generator."""
+        kind = type(self)
+        if any(getattr(kind, m) is not getattr(cls, m) for m in ("output", "update", "reset", *methods)):
+            return "a Python component (its own output or update)"
+        if self.generator != "pcg64":
+            return "the counter generator runs in Python"
+        return None
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
+        the native kernel runs itself when :meth:`native_reason` is None."""
+        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
+        if self.native_reason() is None:
+            rows, fields, keep = self._native_rows(values, inputs)
+            idx = np.ascontiguousarray(np.arange(len(values))[outputs], dtype=np.int64)
+            noise = self._noise
+            output_fn.native = [Op(OP_NOISE, dict(fields, buf=rows.ctypes.data, n=rows.shape[1], idx=idx.ctypes.data,
+                                                  cur=noise.state.ctypes.data, w=noise.last.ctypes.data),
+                                   (noise, rows, idx, *keep), hook=noise.refill)]
+            update_fn.native = []
+        return output_fn, update_fn
+
+    def _export(self, kind: str, reals: list, description: str, folder: Path, fmi_version: int, clocked: bool,
+                inputs: Sequence[str] = ()) -> ExportedFMU:
+        """This component as a signal FMU of ``kind`` (drawing from the counter generator)."""
+        spec = SignalSpec(kind, self.period, self.output_names, inputs=list(inputs), reals=reals,
+                          ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
+                          description=description)
+        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
+        note = "" if self.generator == "counter" else (
+            f"{self.name}: the FMU draws from the counter generator, the component from PCG64 "
+            "(same statistics, another realisation); set generator = \"counter\" for the same noise")
+        return ExportedFMU(path, spec.parameters(), note)
+
+
+class Sensor(_Noisy, kind="sensor"):
     """Samples signals and adds seeded Gaussian noise, a bias, quantisation and a delay.
 
     ``y = q(s + bias + v)``, ``v ~ N(0, noise_std^2)``, quantised to ``quantization``
@@ -45,12 +96,9 @@ class Sensor(Component, kind="sensor"):
         Sample period [s].
     signals : sequence of str
         Names of the measured signals (input ports).
-    noise_std : float or sequence
-        Standard deviation per channel (default 0).
-    bias : float or sequence
-        Constant offset per channel (default 0).
-    quantization : float or sequence
-        Quantisation step per channel, 0 for none (default 0).
+    noise_std, bias, quantization : float or sequence
+        Standard deviation, constant offset and quantisation step (0: none) per channel
+        (default 0).
     delay : int
         Delay in samples (default 0); until filled, the first measurement is repeated.
     seed : int
@@ -60,13 +108,9 @@ class Sensor(Component, kind="sensor"):
         signal FMUs use (:mod:`cosim.components.noise`).
     """
 
-    reentrant = True
-
     def __init__(self, name: str, period: float, signals: Sequence[str], noise_std=0.0,
                  bias=0.0, quantization=0.0, delay: int = 0, seed: int = 0, generator: str = "pcg64"):
-        if isinstance(signals, str):
-            signals = [signals]
-        signals = list(signals)
+        signals = [signals] if isinstance(signals, str) else list(signals)
         if not signals:
             raise ConfigurationError(f"{name}: a sensor needs at least one signal to measure (signals is empty)")
         super().__init__(name, period, inputs=signals, outputs=[f"y_{s}" for s in signals])
@@ -75,13 +119,10 @@ class Sensor(Component, kind="sensor"):
         self.bias = _per_channel(bias, n, "bias", name)
         self.quantization = _per_channel(quantization, n, "quantization", name, positive=True)
         self.delay = positive_int(delay, f"{name}: delay (samples)", minimum=0)
-        self.seed = positive_int(seed, f"{name}: seed", minimum=0)
-        self.generator = generator
-        make_noise(generator, self.seed, n, period, name)          # checks the choice now
+        self._noise_setup(seed, generator, n)
 
     def reset(self, t0):
         super().reset(t0)
-        self._noise = make_noise(self.generator, self.seed, len(self.input_ports), self.period, self.name)
         self._queue = deque(maxlen=max(self.delay, 1))
 
     def _measure(self, t, u):
@@ -92,31 +133,22 @@ class Sensor(Component, kind="sensor"):
         return y
 
     def native_reason(self) -> str | None:
-        """Why this sensor's calls run in Python (None: in the native kernel, which reads
-        the very rows of its noise stream, :class:`~cosim.components.noise.PerInstantNoise`)."""
-        return _noise_reason(self, Sensor, ("_measure",)) or (
+        """Why this sensor's calls run in Python (None: in the native kernel, ``y = u + bias +
+        std z`` with ``z`` the row of the instant in the noise stream's block)."""
+        return self._noise_reason(Sensor, ("_measure",)) or (
             "a sensor with a delay or quantisation" if self.delay or self.quantization.any() else None)
 
-    def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
-        the native kernel runs itself when :meth:`native_reason` is None: ``y = u + bias +
-        std z`` with ``z`` the row of the instant in the noise stream's block."""
-        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
-        if self.native_reason() is None:
-            uidx = np.ascontiguousarray(np.arange(len(values))[inputs], dtype=np.int64)
-            output_fn.native = [_noise_op(self._noise, self._noise.block, outputs, values,
-                                          dict(flag=1, uidx=uidx.ctypes.data, ub=self.bias.ctypes.data,
-                                               yb=self.noise_std.ctypes.data), (uidx, self.bias, self.noise_std))]
-            update_fn.native = []
-        return output_fn, update_fn
+    def _native_rows(self, values, inputs):
+        """The rows the kernel reads, its fields and what they point to."""
+        uidx = np.ascontiguousarray(np.arange(len(values))[inputs], dtype=np.int64)
+        return self._noise.block, dict(flag=1, uidx=uidx.ctypes.data, ub=self.bias.ctypes.data,
+                                       yb=self.noise_std.ctypes.data), (uidx, self.bias, self.noise_std)
 
     def output(self, t, u):
         """The measurement at ``t``: the sample ``delay`` instants old (the first one until
         that many exist)."""
-        y = self._measure(t, u)
-        if not self.delay or not self._queue:
-            return y
-        return self._queue[0]     # y_{k-delay}, or y_0 while fewer than delay samples exist
+        y = self._measure(t, u)                    # drawn at every instant, delayed or not
+        return self._queue[0] if self.delay and self._queue else y
 
     def update(self, t, u):
         """Store this instant's sample for the delay line."""
@@ -126,26 +158,19 @@ class Sensor(Component, kind="sensor"):
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This sensor as a signal FMU (kind ``sensor``, :mod:`fmu_models.export.signal_fmu`) drawing
         from the counter generator (``clocked``: its clocked form, FMI 3.0); refused with a delay."""
-
         if self.delay:
             raise ConfigurationError(f"{self.name}: a sensor with a delay has no FMU form (delay = {self.delay})")
         sig = self.input_names
-        spec = SignalSpec("sensor", self.period, self.output_names, inputs=sig,
-                          reals=channel_params("std", sig, self.noise_std, "nonnegative", "noise standard deviation")
-                          + channel_params("bias", sig, self.bias, "real", "bias")
-                          + channel_params("quantization", sig, self.quantization, "nonnegative",
-                                           "quantisation step (0: none)"),
-                          ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
-                          description=f"sensor {self.name}: y = q(s + bias + std z) (pendulum-cosim)")
-        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
-        return ExportedFMU(path, spec.parameters(), _generator_note(self))
+        reals = (channel_params("std", sig, self.noise_std, "nonnegative", "noise standard deviation")
+                 + channel_params("bias", sig, self.bias, "real", "bias")
+                 + channel_params("quantization", sig, self.quantization, "nonnegative", "quantisation step (0: none)"))
+        return self._export("sensor", reals, f"sensor {self.name}: y = q(s + bias + std z) (pendulum-cosim)", folder,
+                            fmi_version, clocked, sig)
 
 
-class ProcessNoise(Component, kind="process_noise"):
-    """Seeded Gaussian samples ``w ~ N(0, cov)`` for an FMU's process-noise inputs.
-
-    Connect its ports ``w_<state>`` to the plant FMU's inputs of the same names; the
-    plant adds them to its states at the end of its step (seed 000 eq 12).
+class ProcessNoise(_Noisy, kind="process_noise"):
+    """Seeded Gaussian samples ``w ~ N(0, cov)`` for an FMU's process-noise inputs ``w_<state>``,
+    which the plant adds to its states at the end of its step (seed 000 eq 12).
 
     Parameters
     ----------
@@ -163,8 +188,6 @@ class ProcessNoise(Component, kind="process_noise"):
     generator : {"pcg64", "counter"}
         As for :class:`Sensor`.
     """
-
-    reentrant = True
 
     def __init__(self, name: str, period: float, states: Sequence[str], cov, seed: int = 0,
                  generator: str = "pcg64"):
@@ -184,13 +207,7 @@ class ProcessNoise(Component, kind="process_noise"):
         else:
             self.L = V * np.sqrt(np.clip(w, 0, None))  # L L^T = cov, also for singular cov
         self.cov = c
-        self.seed = positive_int(seed, f"{name}: seed", minimum=0)
-        self.generator = generator
-        make_noise(generator, self.seed, n, period, name)
-
-    def reset(self, t0):
-        super().reset(t0)
-        self._noise = make_noise(self.generator, self.seed, len(self.output_ports), self.period, self.name)
+        self._noise_setup(seed, generator, n)
 
     def output(self, t, u):
         """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
@@ -198,77 +215,39 @@ class ProcessNoise(Component, kind="process_noise"):
 
     def native_reason(self) -> str | None:
         """Why this component's calls run in Python (None: in the native kernel, which reads
-        ``L v`` of each row of its noise stream, computed in Python for each block)."""
-        return _noise_reason(self, ProcessNoise, ())
+        the rows ``L v`` of the noise stream's block, computed when the block is drawn)."""
+        return self._noise_reason(ProcessNoise, ())
 
-    def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
-        the native kernel runs itself when :meth:`native_reason` is None: the rows ``L v`` of
-        the noise stream's block, computed when the block is drawn (as :meth:`output` does)."""
-        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
-        if self.native_reason() is None:
-            noise, L = self._noise, self.L
-            rows = np.empty_like(noise.block)
-            d = np.diag(L).copy()
-            # a diagonal L with d > 0: L v is d v exactly (each entry one non-zero product plus
-            # exact zeros, in any order), except for the sign of a zero draw's entry
-            diagonal = not np.count_nonzero(L - np.diag(d)) and bool(np.all(d > 0))
+    def _native_rows(self, values, inputs):
+        """The rows ``L v`` of the noise block (as :meth:`output`), the kernel's fields, what they point to."""
+        noise, L = self._noise, self.L
+        rows = np.empty_like(noise.block)
+        d = np.diag(L).copy()
+        # a diagonal L with d > 0: L v is d v exactly (each entry one non-zero product plus
+        # exact zeros, in any order), except for the sign of a zero draw's entry
+        diagonal = not np.count_nonzero(L - np.diag(d)) and bool(np.all(d > 0))
 
-            def derive() -> None:
-                block = noise.block
-                if diagonal:
-                    np.multiply(block, d, out=rows)
-                    for i in np.flatnonzero((block == 0).any(axis=1)):
-                        rows[i] = L @ block[i]
-                else:
-                    for i, v in enumerate(block):
-                        rows[i] = L @ v
+        def derive() -> None:
+            block = noise.block
+            if diagonal:
+                np.multiply(block, d, out=rows)
+                for i in np.flatnonzero((block == 0).any(axis=1)):
+                    rows[i] = L @ block[i]
+            else:
+                for i, v in enumerate(block):
+                    rows[i] = L @ v
 
-            noise.on_refill.append(derive)
-            output_fn.native = [_noise_op(noise, rows, outputs, values, dict(flag=0), ())]
-            update_fn.native = []
-        return output_fn, update_fn
+        noise.on_refill.append(derive)
+        return rows, dict(flag=0), ()
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
         drawing from the counter generator (``clocked``: its clocked form, FMI 3.0); refused for a
         non-diagonal ``cov``."""
-
         if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "
                                      "off-diagonal entries")
-        spec = SignalSpec("noise", self.period, self.output_names,
-                          reals=channel_params("std", self.output_names, np.sqrt(np.diag(self.cov)), "nonnegative",
-                                               "standard deviation"),
-                          ints=[("seed", self.seed, 0, 2**31 - 1, "seed of the counter noise generator")],
-                          description=f"Gaussian noise {self.name} (pendulum-cosim)")
-        path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
-        return ExportedFMU(path, spec.parameters(), _generator_note(self))
-
-
-def _noise_reason(component, cls, methods) -> str | None:
-    """Why a noise component runs in Python: a subclass with its own calls, or another
-    generator than the block-drawn PCG64 stream."""
-    kind = type(component)
-    if any(getattr(kind, m) is not getattr(cls, m) for m in ("output", "update", "reset", *methods)):
-        return "a Python component (its own output or update)"
-    if component.generator != "pcg64":
-        return "the counter generator runs in Python"
-    return None
-
-
-def _noise_op(noise: PerInstantNoise, rows: np.ndarray, outputs: slice, values: np.ndarray, fields: dict,
-              keep: tuple) -> Op:
-    """The kernel's ``OP_NOISE`` on ``noise``'s stream: the rows ``rows`` (the block's shape),
-    written to ``values[outputs]`` (``fields``: the sensor's part), refilled from Python."""
-    idx = np.ascontiguousarray(np.arange(len(values))[outputs], dtype=np.int64)
-    return Op(OP_NOISE, dict(fields, buf=rows.ctypes.data, n=rows.shape[1], idx=idx.ctypes.data,
-                             cur=noise.state.ctypes.data, w=noise.last.ctypes.data),
-              (noise, rows, idx, *keep), hook=noise.refill)
-
-
-def _generator_note(component) -> str:
-    if component.generator == "counter":
-        return ""
-    return (f"{component.name}: the FMU draws from the counter generator, the component from PCG64 "
-            "(same statistics, another realisation); set generator = \"counter\" for the same noise")
+        reals = channel_params("std", self.output_names, np.sqrt(np.diag(self.cov)), "nonnegative",
+                               "standard deviation")
+        return self._export("noise", reals, f"Gaussian noise {self.name} (pendulum-cosim)", folder, fmi_version,
+                            clocked)

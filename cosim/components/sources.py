@@ -1,8 +1,4 @@
-"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame).
-
-Sources have no inputs; their output at ``t`` is a function of ``t`` alone, so they are
-reentrant and may sit anywhere in a component list.
-"""
+"""Signal sources: constant, step, sine, PRBS, table (CSV or DataFrame), functions of time alone."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,21 +15,23 @@ from ..core.native import OP_CONST, OP_PRBS, OP_SWITCH, Op
 
 
 class _Source(Component):
-    """A component whose outputs depend on time only."""
+    """A component whose outputs depend on time only (reentrant)."""
 
     reentrant = True
+    #: The ``_value`` methods whose arithmetic the native kernel has (as :meth:`_native_op`).
+    _native_values: tuple = ()
 
     def _value(self, t):
+        """The outputs at ``t`` [s]."""
         raise NotImplementedError
 
     def _signal(self) -> tuple[str, list[tuple], list[tuple]]:
-        """(kind, Real parameters, Integer parameters) of the signal FMU (:mod:`fmu_models.export.signal_fmu`)."""
+        """(kind, Real parameters, Integer parameters) of the signal FMU."""
         raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``
         (``clocked``: its clocked form, FMI 3.0)."""
-
         kind, reals, ints = self._signal()
         spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,
                           description=f"{type(self).__name__} source {self.name} (pendulum-cosim)")
@@ -43,6 +41,32 @@ class _Source(Component):
     def output(self, t, u):
         """Outputs at ``t`` [s] (``u`` is empty)."""
         return np.atleast_1d(self._value(t))
+
+    def native_reason(self) -> str | None:
+        """Why this source's calls run in Python (None: in the native kernel)."""
+        cls = type(self)
+        if not self._native_values:
+            return "a Python component"
+        if (cls.output is not _Source.output or cls.update is not Component.update
+                or cls._value not in self._native_values):
+            return "a Python component (its own output or update)"
+        return None
+
+    def bind(self, values, inputs, outputs, integers=None):
+        """The Python component's calls, which the native kernel runs itself (the same arithmetic)
+        when :meth:`native_reason` is None."""
+        if self.native_reason() is not None:
+            return bind_protocol(self, values, values, inputs, outputs, integers)
+        value = self._value
+
+        def output_fn(t: float) -> None:
+            values[outputs] = value(t)
+
+        def update_fn(t: float) -> None:
+            pass
+
+        output_fn.native, update_fn.native = [self._native_op(outputs)], []
+        return output_fn, update_fn
 
 
 class Constant(_Source, kind="constant"):
@@ -63,37 +87,13 @@ class Constant(_Source, kind="constant"):
     def _value(self, t):
         return self.value
 
+    _native_values = (_value,)
+
+    def _native_op(self, outputs: slice) -> Op:
+        return Op(OP_CONST, dict(slot=outputs.start, a=self.value))
+
     def _signal(self):
         return "constant", [("value", self.value, "real", "the output")], []
-
-    def native_reason(self) -> str | None:
-        """Why this source's calls run in Python (None: in the native kernel)."""
-        cls = type(self)
-        if (cls.output is not _Source.output or cls.update is not Component.update
-                or cls._value not in (Constant._value, Step._value)):
-            return "a Python component (its own output or update)"
-        return None
-
-    def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
-        the native kernel runs itself: the value is a constant, or a switch at ``t_step``
-        (:mod:`cosim.core.native`)."""
-        if self.native_reason() is not None:
-            return bind_protocol(self, values, values, inputs, outputs, integers)
-        value = self._value
-
-        def output_fn(t: float) -> None:
-            values[outputs] = value(t)
-
-        def update_fn(t: float) -> None:
-            pass
-
-        if type(self)._value is Step._value:
-            op = Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
-        else:
-            op = Op(OP_CONST, dict(slot=outputs.start, a=self.value))
-        output_fn.native, update_fn.native = [op], []
-        return output_fn, update_fn
 
 
 class Step(Constant, kind="step"):
@@ -118,6 +118,11 @@ class Step(Constant, kind="step"):
     def _value(self, t):
         return self.after if t >= self.t_step - 1e-12 else self.before
 
+    _native_values = (_value,)
+
+    def _native_op(self, outputs: slice) -> Op:
+        return Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
+
     def _signal(self):
         return "step", [("t_step", self.t_step, "real", "switching time [s]"),
                         ("before", self.before, "real", "output before t_step"),
@@ -131,13 +136,12 @@ class Sine(_Source, kind="sine"):
     ----------
     name : str
     period : float
-    amplitude : float
+    amplitude, offset : float
+        (default offset 0)
     frequency : float
         [Hz]
     phase : float
         [rad] (default 0)
-    offset : float
-        (default 0)
     """
 
     def __init__(self, name, period, amplitude, frequency, phase=0.0, offset=0.0):
@@ -153,46 +157,42 @@ class Sine(_Source, kind="sine"):
                         ("phase", self.ph, "real", "phase [rad]"), ("offset", self.off, "real", "offset")], []
 
 
+#: The taps of a maximal-length Fibonacci LFSR by its order.
+_TAPS = {2: (2, 1), 3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4), 9: (9, 5), 10: (10, 7),
+         11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8), 14: (14, 13, 12, 2), 15: (15, 14), 16: (16, 15, 13, 4)}
+
+
 def prbs_bits(order: int, seed: int, n: int) -> np.ndarray:
     """``n`` bits of the maximal-length sequence of a Fibonacci LFSR of ``order`` 2..16,
     started from state ``seed`` (non-zero, reduced modulo 2^order)."""
-    taps = {2: (2, 1), 3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4),
-            9: (9, 5), 10: (10, 7), 11: (11, 9), 12: (12, 11, 10, 4), 13: (13, 12, 11, 8),
-            14: (14, 13, 12, 2), 15: (15, 14), 16: (16, 15, 13, 4)}
-    if order not in taps:
+    if order not in _TAPS:
         raise ConfigurationError(f"PRBS order must be in 2..16, got {order}")
     state = int(seed) % (2**order) or 1
     out = np.empty(n, dtype=bool)
     for i in range(n):
-        bit = 0
-        for tp in taps[order]:
-            bit ^= (state >> (tp - 1)) & 1
+        bit = sum((state >> (tp - 1)) & 1 for tp in _TAPS[order]) & 1    # the taps' XOR
         out[i] = state & 1
         state = (state >> 1) | (bit << (order - 1))
     return out
 
 
 class PRBS(_Source, kind="prbs"):
-    """Pseudo-random binary sequence ``+/- amplitude`` (a maximal-length LFSR sequence).
-
-    The level is held for ``bit_time`` seconds per bit; the sequence repeats after
-    ``2**order - 1`` bits. Deterministic given ``seed`` (the LFSR's start state).
+    """Pseudo-random binary sequence ``offset +/- amplitude`` of a maximal-length LFSR, each
+    bit held ``bit_time``; it repeats after ``2**order - 1`` bits.
 
     Parameters
     ----------
     name : str
     period : float
         Sample period [s].
-    amplitude : float
-        Output levels are ``offset +/- amplitude``.
+    amplitude, offset : float
+        The levels ``offset +/- amplitude`` (default offset 0).
     bit_time : float
         Duration of one bit [s].
     order : int
-        LFSR length, 2..16 (default 7: period 127 bits).
+        LFSR length, 2..16 (default 7: 127 bits).
     seed : int
         Non-zero LFSR start state (default 1).
-    offset : float
-        (default 0)
     """
 
     def __init__(self, name, period, amplitude, bit_time, order=7, seed=1, offset=0.0):
@@ -207,23 +207,12 @@ class PRBS(_Source, kind="prbs"):
         b = self.bits[int(np.floor(t / self.bit_time + 1e-9)) % len(self.bits)]
         return self.offset + (self.amplitude if b else -self.amplitude)
 
-    def native_reason(self) -> str | None:
-        """Why this source's calls run in Python (None: in the native kernel)."""
-        cls = type(self)
-        if cls.output is not _Source.output or cls.update is not Component.update or cls._value is not PRBS._value:
-            return "a Python component (its own output or update)"
-        return None
+    _native_values = (_value,)
 
-    def bind(self, values, inputs, outputs, integers=None):
-        """The Python component's calls (:func:`~cosim.core.component.bind_protocol`), which
-        the native kernel runs itself (the same bit of the same arithmetic, :mod:`cosim.core.native`)."""
-        output_fn, update_fn = bind_protocol(self, values, values, inputs, outputs, integers)
-        if self.native_reason() is None:
-            bits = np.ascontiguousarray(self.bits, dtype=float)
-            output_fn.native = [Op(OP_PRBS, dict(slot=outputs.start, a=self.bit_time, b=self.offset,
-                                                 c=self.amplitude, buf=bits.ctypes.data, n=len(bits)), (bits,))]
-            update_fn.native = []
-        return output_fn, update_fn
+    def _native_op(self, outputs: slice) -> Op:
+        bits = np.ascontiguousarray(self.bits, dtype=float)
+        return Op(OP_PRBS, dict(slot=outputs.start, a=self.bit_time, b=self.offset, c=self.amplitude,
+                                buf=bits.ctypes.data, n=len(bits)), (bits,))
 
     def _signal(self):
         reals = [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),
@@ -244,12 +233,11 @@ class Table(_Source, kind="table"):
     data : DataFrame or str
         Table (or CSV path) with column ``time`` [s] and one column per output port.
     interpolation : {"zoh", "linear"} or mapping
-        Between rows: hold the last row (default) or interpolate linearly; one for all
-        columns or one per column (``{column: mode}``, the others hold). Before the first row
-        the first row holds; after the last, the last.
+        Between rows: hold the last row (default) or interpolate linearly, for all columns or
+        per column (``{column: mode}``, the others hold); the first and last rows hold outside.
     types : mapping, optional
         FMI type of a column's port (default ``"Float64"``); integer and Boolean columns must
-        hold whole numbers (Booleans 0 or 1) and are held between rows.
+        hold whole numbers and are held between rows.
     """
 
     def __init__(self, name, period, data, interpolation="zoh", types=None):
@@ -285,14 +273,11 @@ class Table(_Source, kind="table"):
     @staticmethod
     def read(data, name: str = "table") -> pd.DataFrame:
         """``data`` (a DataFrame, or a CSV file's path) as a DataFrame with a ``time`` column
-        (a ConfigurationError naming ``name`` if it cannot be read or has none)."""
-        if isinstance(data, pd.DataFrame):
-            df = data
-        else:
-            try:
-                df = pd.read_csv(data)
-            except (OSError, ValueError, pd.errors.ParserError) as e:
-                raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
+        (errors name ``name``)."""
+        try:
+            df = data if isinstance(data, pd.DataFrame) else pd.read_csv(data)
+        except (OSError, ValueError, pd.errors.ParserError) as e:
+            raise ConfigurationError(f"{name}: cannot read the table {data}: {e}") from None
         if "time" not in df.columns:
             raise ConfigurationError(f"{name}: the table needs a 'time' column; columns are {list(df.columns)}")
         return df
