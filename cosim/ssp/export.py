@@ -1,29 +1,7 @@
-"""A co-simulation written as an SSP (System Structure and Parameterization 1.0).
-
-:func:`export_ssp` writes a scenario whose every component is an FMU or can be written as
-one (:meth:`cosim.core.component.ExportsFMU.export_fmu`: FMUs, estimators, sources, process
-noise and sensors) as
-
-* ``SystemStructure.ssd``: one ``Component`` per component (``source`` =
-  ``resources/<name>.fmu``) with a connector per port, the connections, one system-level
-  ``ParameterBinding`` holding every parameter and start value as ``<component>.<variable>``,
-  the start and stop time as ``DefaultExperiment``, and each component's sample period in
-  an annotation (``type="org.pendulum-cosim"``), since SSP 1.0 has no place for it; and the
-  communication step (the greatest common divisor of the periods) in OMSimulator's
-  vendor annotation on the System (``type="org.openmodelica"``, ``oms:FixedStepMaster``),
-  which OMSimulator reads instead of its default 1 ms step;
-* ``resources/<name>.fmu``: the FMUs;
-* ``<name>.ssp``: the same two as one archive (what most tools open).
-
-Noise components draw from the counter generator in their FMUs (:mod:`cosim.components.noise`):
-give them ``generator = "counter"`` for the scenario to draw the same noise in the
-project's master; otherwise the export says so in its notes.
-
-Importers differ in how they order the FMUs within a step. fmpy's ``simulate_ssp``
-(FMI 2.0 only) steps every FMU with the connector values of the previous step (Jacobi)
-and starts every connector at 0, so over its first step the plant sees 0 for the force
-and the noise; after that a plant driven by sources gets the same inputs as in the
-project's master.
+"""A co-simulation written as an SSP 1.0 (:func:`export_ssp`): the SSD, an FMU per component
+in ``resources/`` and both as a ``.ssp`` archive; what the SSD holds (the periods in the
+``org.pendulum-cosim`` annotation, the step in OMSimulator's) is told in the documentation's
+page on running the loop in another tool.
 """
 from __future__ import annotations
 

@@ -1,22 +1,6 @@
 """An SSP 1.0 opened in the project's master (:func:`open_ssp`) and run in one call
-(:func:`run_ssp`).
-
-What is read: a ``.ssp`` archive, its unpacked folder or its ``.ssd`` file; systems nested
-to any depth; connections between components and through the systems' connectors; unit
-conversions between connectors of different units (the SSD's and the FMUs' unit
-definitions) and the connections' transformations (linear, Boolean, integer and
-enumeration mappings), each a :class:`~cosim.components.conversion.Conversion` component
-on the connection; parameter bindings inline or in ``.ssv`` files, with parameter
-mappings inline or in ``.ssm`` files (:mod:`cosim.ssp.parameters`); component and
-connector names with spaces or dots (:mod:`cosim.ssp.system` says how they are named in
-the master). What is refused is named with the SSP element and the reason: a Component
-that is not an FMU, a signal dictionary, a file outside the SSP, a unit that cannot be
-converted.
-
-A component's communication step: ``communication_step`` if given (every FMU steps with
-it, as a tool with one fixed-step master does), else the period in the project's
-annotation (``org.pendulum-cosim``), the FMU's ``DefaultExperiment`` stepSize,
-OMSimulator's ``FixedStepMaster`` step, or ``step_size``, the first that is given.
+(:func:`run_ssp`); what is read and what is refused is listed in the documentation's page
+on third-party FMUs.
 """
 from __future__ import annotations
 

@@ -1,19 +1,10 @@
 """An SSP 1.0 system structure flattened for the master: nested systems dissolved into their
-FMU components, connections through the systems' own connectors followed to the FMU
-output that drives each FMU input (with the unit conversions and transformations met on
-the way), and the parameter bindings of every level resolved to component variables.
-
-Names: a component is named by its path of SSD element names, each made an identifier
-(characters other than letters, digits and ``_`` become ``_``) and joined by ``_``
-(``Drive Train`` in ``Vehicle`` becomes ``Vehicle_Drive_Train``); ``FlatSystem.names`` maps
-each SSD path (``Vehicle.Drive Train``) to its name. Connector names are the FMU variable
-names, spaces and dots included.
-
-Parameter bindings follow the standard: the names of a binding are relative to the element
-that holds it (a system's: ``Element.variable``, nested systems' names prepended; a
-component's: its variables), a later binding of one element wins over an earlier one, and a
-binding of a system over those of the elements inside it. A name that reaches no variable
-is ignored, as the standard says, and logged as a warning.
+FMU components, each FMU input followed back to the FMU output that drives it (with the
+unit conversions and transformations met on the way), and the parameter bindings of every
+level resolved to component variables with the standard's precedence (a later binding over
+an earlier one, a system's over its elements'; a name that reaches no variable is logged
+and ignored). A component is named by its SSD path made an identifier (``Drive Train`` in
+``Vehicle``: ``Vehicle_Drive_Train``).
 """
 from __future__ import annotations
 
