@@ -42,10 +42,8 @@ class SSPExport:
 
     Attributes
     ----------
-    ssd : Path
-        ``SystemStructure.ssd``.
-    archive : Path
-        The ``.ssp`` file.
+    ssd, archive : Path
+        ``SystemStructure.ssd`` and the ``.ssp`` file.
     fmus : dict of str to Path
         Each component's FMU.
     notes : list of str
@@ -66,18 +64,16 @@ def _value_xml(kind: str, value) -> str:
     return f'<ssv:Real value="{float(value)!r}"/>'
 
 
-def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descriptions: dict, connections: dict,
+def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], variables: dict, connections: dict,
               start_time: float, stop_time: float | None, description: str, step_size: float) -> str:
+    """The SSD; ``variables``: each component's FMU variables by name."""
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
              f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{PC_NS}" version="1.0"{xml_attrs(name=name)}'
              f'{xml_attrs(generationTool=f"pendulum-cosim {VERSION}")}>',
              f"  <ssd:System{xml_attrs(name=name, description=description or None)}>"]
-    params = []
-    for c in components:
-        variables = {v.name: v for v in descriptions[c.name].modelVariables}
-        for key, value in exported[c.name].parameters.items():
-            params.append((f"{c.name}.{key}", PORT_TYPES[variables[key].type], value))
+    params = [(f"{c.name}.{key}", PORT_TYPES[variables[c.name][key].type], value)
+              for c in components for key, value in exported[c.name].parameters.items()]
     if params:
         lines += ["    <ssd:ParameterBindings>", "      <ssd:ParameterBinding>", "        <ssd:ParameterValues>",
                   '          <ssv:ParameterSet version="1.0" name="parameters">', "            <ssv:Parameters>"]
@@ -87,15 +83,14 @@ def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descripti
                   "      </ssd:ParameterBinding>", "    </ssd:ParameterBindings>"]
     lines.append("    <ssd:Elements>")
     for c in components:
-        variables = {v.name: v for v in descriptions[c.name].modelVariables}
+        own = variables[c.name]
         lines.append(f'      <ssd:Component{xml_attrs(name=c.name, type="application/x-fmu-sharedlibrary")}'
                      f'{xml_attrs(source=f"resources/{c.name}.fmu")}>')
-        conns = [(p, "input") for p in c.input_names if p in variables]
-        conns += [(p, "output") for p in c.output_names if p in variables]
+        conns = [(p, "input") for p in c.input_names if p in own] + [(p, "output") for p in c.output_names if p in own]
         if conns:
             lines.append("        <ssd:Connectors>")
             lines += [f"          <ssd:Connector{xml_attrs(name=p, kind=k)}>"
-                      f"<ssc:{_SSP_TYPES[PORT_TYPES[variables[p].type]]}/></ssd:Connector>" for p, k in conns]
+                      f"<ssc:{_SSP_TYPES[PORT_TYPES[own[p].type]]}/></ssd:Connector>" for p, k in conns]
             lines.append("        </ssd:Connectors>")
         lines += ["        <ssd:Annotations>",
                   f'          <ssc:Annotation type="{ANNOTATION}"><pc:Timing{xml_attrs(period=repr(c.period))}/>'
@@ -162,9 +157,8 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         (:func:`fmu_models.export.platforms.add_platforms`; needs the ``cross`` extra).
     clocked : bool
         Write the estimators and signal FMUs in their clocked form (FMI 3.0 only,
-        :mod:`fmu_models.export.clocked`): each has an input clock ``sample`` at its sample
-        period, which an FMI 3.0 importer schedules from the FMU itself (no clock connection
-        in the SSD); components without a clocked form are written unclocked (a note says so).
+        :mod:`fmu_models.export.clocked`: an input clock ``sample`` at the sample period, which
+        the importer schedules, no clock connection in the SSD); others unclocked, with a note.
 
     Raises
     ------
@@ -186,10 +180,10 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         resources.mkdir()
         exported = _export_all(cosim.components, resources, fmi_version, clocked)
         notes = [e.note for e in exported.values() if e.note] + _platforms(exported, platforms)
-        descriptions = {n: read_description(e.path) for n, e in exported.items()}
-        _check_connections(cosim.connections, descriptions)
+        variables = {n: {v.name: v for v in read_description(e.path).modelVariables} for n, e in exported.items()}
+        _check_connections(cosim.connections, variables)
         step = float(base_step({c.name: c.period for c in cosim.components})[0])
-        text = _ssd_text(name, cosim.components, exported, descriptions, cosim.connections,
+        text = _ssd_text(name, cosim.components, exported, variables, cosim.connections,
                          getattr(system, "start_time", 0.0), stop, getattr(system, "title", ""), step)
         _move_into(out_dir, tmp, text, name, [c.name for c in cosim.components])
     return SSPExport(out_dir / "SystemStructure.ssd", out_dir / f"{name}.ssp",
@@ -223,11 +217,11 @@ def _platforms(exported: dict[str, ExportedFMU], platforms: Sequence[str]) -> li
     return notes
 
 
-def _check_connections(connections: dict, descriptions: dict) -> None:
+def _check_connections(connections: dict, variables: dict) -> None:
     """Every connection's ends are variables of the exported FMUs."""
     for (dc, dp), (sc, sp) in connections.items():
         for comp, port, kind in ((sc, sp, "output"), (dc, dp, "input")):
-            have = {v.name for v in descriptions[comp].modelVariables if v.causality == kind}
+            have = {n for n, v in variables[comp].items() if v.causality == kind}
             if port not in have:
                 raise ConfigurationError(f"cannot export as an SSP: the FMU of {comp!r} has no {kind} {port!r} "
                                          f"(connection {sc}.{sp} -> {dc}.{dp}); its {kind}s: "
@@ -238,13 +232,10 @@ def _move_into(out_dir: Path, tmp: Path, ssd_text: str, name: str, components: l
     """The SSD, the archive and the FMUs written in ``tmp``, moved into ``out_dir`` (replacing
     those files only)."""
     (tmp / "SystemStructure.ssd").write_text(ssd_text, encoding="utf-8")
-    archive = tmp / f"{name}.ssp"
-    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
-        z.write(tmp / "SystemStructure.ssd", "SystemStructure.ssd")
-        for c in components:
-            z.write(tmp / "resources" / f"{c}.fmu", f"resources/{c}.fmu")
+    fmus = [f"resources/{c}.fmu" for c in components]
+    with zipfile.ZipFile(tmp / f"{name}.ssp", "w", zipfile.ZIP_DEFLATED) as z:
+        for rel in ["SystemStructure.ssd", *fmus]:
+            z.write(tmp / rel, rel)
     (out_dir / "resources").mkdir(exist_ok=True)
-    for c in components:
-        os.replace(tmp / "resources" / f"{c}.fmu", out_dir / "resources" / f"{c}.fmu")
-    os.replace(tmp / "SystemStructure.ssd", out_dir / "SystemStructure.ssd")
-    os.replace(archive, out_dir / f"{name}.ssp")
+    for rel in [*fmus, "SystemStructure.ssd", f"{name}.ssp"]:     # the FMUs before what names them
+        os.replace(tmp / rel, out_dir / rel)

@@ -1,14 +1,11 @@
 """Parameter bindings of an SSP 1.0 system: parameter sets (``ParameterValues`` inline or an
-``.ssv`` file), parameter mappings (``ParameterMapping`` inline or an ``.ssm`` file) with
-their transformations, the binding's ``prefix``, and the units of the values.
-
-A binding yields named values (:class:`Value`); which component and variable a name reaches
-is for the system to say (:mod:`cosim.ssp.system`): the hierarchical names of the SSP
-standard, relative to the element that holds the binding.
+``.ssv`` file), parameter mappings (inline or an ``.ssm`` file) with their transformations,
+the binding's ``prefix``, and the units of the values; which variable a name reaches is for
+:mod:`cosim.ssp.system` to say.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fmu_models.errors import ConfigurationError, FMUError
@@ -156,11 +153,7 @@ def binding_values(binding, base: Path, root: Path, where: str) -> list[Value]:
     for p in doc.findall("ssv:Parameters/ssv:Parameter", NS):
         v = _parse_value(p, units, where)
         name = prefix + v.name
-        if name in mapping:
-            target, transform, convert = mapping[name]
-            value = v.value if transform is None else transform.apply(v.value, f"{where}: parameter {name!r}")
-            v = Value(target, value, v.kind, v.unit, convert, where)
-        else:
-            v = Value(name, v.value, v.kind, v.unit, v.convert, where)
-        out.append(v)
+        target, transform, convert = mapping.get(name, (name, None, v.convert))
+        value = v.value if transform is None else transform.apply(v.value, f"{where}: parameter {name!r}")
+        out.append(replace(v, name=target, value=value, convert=convert))
     return out

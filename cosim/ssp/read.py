@@ -18,7 +18,7 @@ from ..fmi.archive import Extraction
 from ..fmi.fmu_component import FMUComponent
 from .export import ANNOTATION, OMS_ANNOTATION, OMS_NS, PC_NS
 from .schema import NS, parse_xml, q
-from .system import Element, FlatSystem, Link
+from .system import Element, FlatSystem, Link, _items
 
 __all__ = ["SSPSystem", "open_ssp", "run_ssp"]
 
@@ -33,9 +33,9 @@ class SSPSystem:
     ----------
     cosim : Cosimulation
         The system's FMUs, connections and parameters in the project's master.
+    name : str
     start_time, stop_time : float or None
         From the SSD's ``DefaultExperiment``.
-    name : str
     step_size : float or None
         The communication step of OMSimulator's annotation (``oms:FixedStepMaster``), if any.
     names : dict of str to str
@@ -59,12 +59,8 @@ class SSPSystem:
 
 
 def _annotation(node, kind: str, tag: str):
-    for a in node.findall("ssd:Annotations/ssc:Annotation", NS):
-        if a.get("type") == kind:
-            found = a.find(f".//{tag}")
-            if found is not None:
-                return found
-    return None
+    found = (a.find(f".//{tag}") for a in node.findall("ssd:Annotations/ssc:Annotation", NS) if a.get("type") == kind)
+    return next((f for f in found if f is not None), None)
 
 
 def _period(elem: Element, oms_step: float | None, step_size: float | None) -> float:
@@ -83,20 +79,18 @@ def _period(elem: Element, oms_step: float | None, step_size: float | None) -> f
                              "(step_size, or --step-size on the command line)")
 
 
-def _table_of(link: Link, steps, variables) -> dict:
-    """The mapping tables of ``steps`` composed into one table of the source's values."""
+def _table_of(link: Link, variables) -> dict:
+    """The mapping tables of ``link``'s steps composed into one table of the source's values."""
     table = None
-    for s in steps:
+    for s in link.steps:
         entries = dict(s.table)
         if s.kind == "enumeration":
-            src_items = {i.name: int(i.value) for i in getattr(variables[0].declaredType, "items", None) or []}
-            dst_items = {i.name: int(i.value) for i in getattr(variables[1].declaredType, "items", None) or []}
-            missing = [n for pair in entries.items() for n, items in zip(pair, (src_items, dst_items))
-                       if n not in items]
+            items = [_items(v) for v in variables]
+            missing = [n for pair in entries.items() for n, known in zip(pair, items) if n not in known]
             if missing:
                 raise ConfigurationError(f"connection {'.'.join(link.src)} -> {'.'.join(link.dst)}: the enumeration "
                                          f"mapping names {missing[0]!r}, not an item of the connected variables")
-            entries = {src_items[a]: dst_items[b] for a, b in entries.items()}
+            entries = {items[0][a]: items[1][b] for a, b in entries.items()}
         else:
             entries = {int(a): int(b) for a, b in entries.items()}
         table = entries if table is None else {k: entries[v] for k, v in table.items() if v in entries}
@@ -105,17 +99,16 @@ def _table_of(link: Link, steps, variables) -> dict:
 
 def _conversion(link: Link, period: float, variables) -> Conversion:
     """The component that carries ``link``'s steps (unit conversions, transformations)."""
-    types = [v.type for v in variables]
+    types = {"input_type": variables[0].type, "output_type": variables[1].type}
     name = f"{link.dst[0]}_{''.join(ch if ch.isalnum() else '_' for ch in link.dst[1])}_conversion"
     kinds = {s.kind == "linear" for s in link.steps}
     if kinds == {True}:
         a, b = 1.0, 0.0
         for s in link.steps:
             a, b = s.factor * a, s.factor * b + s.offset
-        return Conversion(name, period, a, b, input_type=types[0], output_type=types[1])
+        return Conversion(name, period, a, b, **types)
     if kinds == {False}:
-        return Conversion(name, period, table=_table_of(link, link.steps, variables),
-                          input_type=types[0], output_type=types[1])
+        return Conversion(name, period, table=_table_of(link, variables), **types)
     raise ConfigurationError(f"connection {'.'.join(link.src)} -> {'.'.join(link.dst)}: a linear transformation or "
                              "unit conversion and a mapping on one path cannot be combined")
 
@@ -176,19 +169,19 @@ def _locate(path: Path) -> tuple[Path, Path, Extraction | None]:
 @contextlib.contextmanager
 def open_ssp(path, communication_step: float | None = None, step_size: float | None = None,
              start: Mapping | None = None) -> Iterator[SSPSystem]:
-    """Open the SSP at ``path`` (a ``.ssp`` archive, its unpacked folder, or its ``.ssd``
-    file) as an :class:`.SSPSystem` (see the module documentation); a context manager that
-    removes what it unpacked.
+    """Open the SSP at ``path`` as an :class:`.SSPSystem`; a context manager that removes
+    what it unpacked.
 
     Parameters
     ----------
     path : str or Path
+        A ``.ssp`` archive, its unpacked folder, or its ``.ssd`` file.
     communication_step : float, optional
         [s] Every FMU steps with this one step instead of its own period, as a tool with a
-        single fixed-step master does (the project's FMUs keep their own sample instants
-        under any step).
+        single fixed-step master does.
     step_size : float, optional
-        [s] The step of the FMUs whose period the SSP does not give.
+        [s] The step of the FMUs whose period the SSP does not give (its own annotation, the
+        FMU's ``DefaultExperiment``, OMSimulator's ``FixedStepMaster``, first given first).
     start : mapping, optional
         Parameter and start values over the SSP's own, by hierarchical name
         (``Element.variable``, systems' names first) or ``component.variable``.
@@ -235,25 +228,19 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
 def run_ssp(path, stop_time: float | None = None, *, step_size: float | None = None,
             communication_step: float | None = None, start: Mapping | None = None,
             outputs: Sequence[str] | None = None, output_interval: float | None = None):
-    """Open the SSP at ``path`` (see :func:`open_ssp`), run it and return the recorded signals.
+    """Open the SSP at ``path``, run it and return the recorded signals (a DataFrame indexed
+    by ``time`` [s], one column per signal).
 
     Parameters
     ----------
-    path : str or Path
+    path, step_size, communication_step, start
+        As :func:`open_ssp` takes them.
     stop_time : float, optional
         [s] Default: the SSD's ``DefaultExperiment`` stop time.
-    step_size, communication_step : float, optional
-        [s] As :func:`open_ssp` takes them.
-    start : mapping, optional
-        Parameter and start values (as :func:`open_ssp` takes them).
     outputs : sequence of str, optional
         Glob patterns of the signals to record (``component.port``); default all.
     output_interval : float, optional
         [s] Record every this many seconds (a multiple of the base step).
-
-    Returns
-    -------
-    DataFrame indexed by ``time`` [s], one column per recorded signal.
     """
     with open_ssp(path, communication_step, step_size, start) as system:
         return system.run(stop_time, signals=outputs, output_interval=output_interval, progress=False)
