@@ -176,7 +176,7 @@ class _Job:
     options: dict = field(default_factory=dict)     # Cosimulation.run keywords
     stream: bool = False
     columns: Callable | None = None                 # the DataFrame's column names from the master's
-    extras: Callable | None = None                  # (df, folder) -> paths; default: the plot of the signals
+    extras: Callable | None = None                  # (df, folder) -> paths; None: the plot of the signals
     wall: float = 0.0                               # [s] of the run, set by _record
 
 
@@ -233,9 +233,19 @@ def _run(args) -> int:
             return 0
         with OutputFolder(Path(args.out), args.overwrite) as folder:
             df, paths = _record(job, folder, False if args.no_progress else None, t0 if kind == "scenario" else None)
-            if df is not None:
-                paths += job.extras(df, folder) if job.extras else _plot_outputs(df, folder, job.title)
-            _report(job, df, paths, "(including FMU build)" if kind == "scenario" else "")
+            span = f"{job.stop_time - job.start_time:g} s simulated in {job.wall:.2f} s"
+            if df is None:
+                print(f"\n{span}; streamed")
+            else:
+                if job.extras is not None:
+                    paths += job.extras(df, folder)
+                elif len(df.columns):                   # an FMU's or SSP's plot of every recorded signal
+                    plot_signals(df, folder / "outputs.png", job.title)
+                    paths.append(folder / "outputs.png")
+                print(f"\n{len(df)} rows x {len(df.columns)} signals, {span}"
+                      + (" (including FMU build)" if kind == "scenario" else ""))
+            for written in paths:
+                print(f"wrote {written}")
     return 0
 
 
@@ -327,24 +337,6 @@ def _scenario_extras(sc, df, out: Path, fmus: Path) -> list[Path]:
         plot_estimates(df, sc.plot["truth"], sc.plot["estimate"], measured, png, sc.title)
         paths.append(png)
     return paths
-
-
-def _plot_outputs(df, out: Path, title: str) -> list[Path]:
-    """An FMU or SSP run's plot of every recorded signal, if it recorded any."""
-    if not len(df.columns):
-        return []
-    plot_signals(df, out / "outputs.png", title)
-    return [out / "outputs.png"]
-
-
-def _report(job: _Job, df, paths: list[Path], note: str = "") -> None:
-    span = f"{job.stop_time - job.start_time:g} s simulated in {job.wall:.2f} s"
-    if df is None:
-        print(f"\n{span}; streamed")
-    else:
-        print(f"\n{len(df)} rows x {len(df.columns)} signals, {span}" + (f" {note}" if note else ""))
-    for p in paths:
-        print(f"wrote {p}")
 
 
 def _export(args) -> int:

@@ -33,10 +33,8 @@ class FMUExperiment:
     ----------
     cosim : Cosimulation
         The FMU (component ``fmu``) and its input table (component ``input``), if any.
-    start_time, stop_time : float
-        [s]
-    step_size : float
-        The communication step (Model Exchange: the output grid) [s].
+    start_time, stop_time, step_size : float
+        [s] The span and the communication step (Model Exchange: the output grid).
     """
 
     cosim: Cosimulation
@@ -122,16 +120,15 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
 
 def run_fmu(path, stop_time: float | None = None, **options) -> pd.DataFrame:
     """Run the FMU at ``path`` and return its outputs (a DataFrame indexed by ``time`` [s],
-    one column per recorded variable). The options are those of :func:`open_fmu`; also
-    ``output_interval`` [s] (a multiple of the step) and ``progress``.
+    one column per recorded variable).
 
     Parameters
     ----------
-    path : str or Path
-    stop_time : float, optional
-        [s]
+    path, stop_time
+        As :func:`open_fmu` takes them.
     **options
-        Keywords of :func:`open_fmu` and of :meth:`FMUExperiment.run`.
+        Keywords of :func:`open_fmu`, and ``output_interval`` [s] (a multiple of the step)
+        and ``progress`` of :meth:`FMUExperiment.run`.
     """
     run_kw = {k: options.pop(k) for k in ("output_interval", "progress") if k in options}
     return open_fmu(path, stop_time, **options).run(**{"progress": False, **run_kw})

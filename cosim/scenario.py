@@ -55,10 +55,6 @@ class ScenarioContext:
         The scenario file's folder (relative paths refer to it).
     fmu_dir : path
         Where to build this project's FMUs.
-
-    Attributes
-    ----------
-    base_dir, fmu_dir : Path
     """
 
     def __init__(self, base_dir, fmu_dir):
@@ -133,7 +129,8 @@ class ScenarioContext:
 
 
 class Scenario:
-    """A parsed scenario: ``cosim`` (the :class:`Cosimulation`), ``stop_time``, ``plot``.
+    """A parsed scenario: ``cosim`` (the :class:`Cosimulation`), ``start_time`` and
+    ``stop_time`` [s], ``title``, and the checked ``recording`` and ``plot`` (or None) tables.
 
     Parameters
     ----------
@@ -142,16 +139,8 @@ class Scenario:
     base_dir : path
         Directory that relative paths in the scenario refer to.
     fmu_dir : path, optional
-        Where to build this project's FMUs (default ``<base_dir>/.fmus``); each FMI
-        version in its own subfolder, so FMI 2.0 and 3.0 builds of one model coexist.
-
-    Attributes
-    ----------
-    recording : dict
-        The ``[recording]`` table (``signals``, ``output_interval``, ``stream``), checked.
-    plot : dict or None
-        The ``[plot]`` table, checked against the recorded signals.
-    title : str
+        Where to build this project's FMUs (default ``<base_dir>/.fmus``), each FMI
+        version in its own subfolder.
     """
 
     def __init__(self, spec: dict, base_dir, fmu_dir=None):
@@ -221,13 +210,8 @@ class Scenario:
 
     @classmethod
     def load(cls, path, fmu_dir=None) -> Scenario:
-        """Read a TOML scenario file at ``path``; ``fmu_dir`` as in the constructor.
-
-        Raises
-        ------
-        ConfigurationError
-            Missing file, a folder, not TOML, or any problem of the scenario itself.
-        """
+        """Read a TOML scenario file at ``path``; ``fmu_dir`` as in the constructor; a missing
+        file, a folder, not TOML or any problem of the scenario is a ConfigurationError."""
         return cls(tomlfile.read(path, "scenario file"), Path(path).parent, fmu_dir)
 
     def run(self):

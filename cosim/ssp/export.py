@@ -140,14 +140,13 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
     Parameters
     ----------
     system : Scenario or Cosimulation
-        What to export (a :class:`cosim.scenario.Scenario` brings its start and stop
-        time and title).
+        What to export (a :class:`cosim.scenario.Scenario` brings its times and title).
     out_dir : path
         Folder for ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if
         missing; those files are replaced, nothing else is touched).
     fmi_version : {2, 3}
         FMI version of the FMUs the export builds (FMU files of ``fmu`` components are
-        copied as they are). fmpy simulates SSPs of FMI 2.0 FMUs only.
+        copied as they are).
     name : str, optional
         System name and archive name (default ``system``).
     stop_time : float, optional

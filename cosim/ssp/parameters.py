@@ -31,13 +31,13 @@ class Value:
     ----------
     name : str
         Its hierarchical name, the prefix and mapping applied.
-    value : float, int, bool or str
-    kind : {"real", "integer", "boolean", "string", "enumeration"}
+    value, kind
+        The value and its kind: "real", "integer", "boolean", "string" or "enumeration".
     unit : Unit or None
         The unit the value is given in (reals), if the parameter set names one.
     convert : bool
-        Whether the value is converted to the unit of the variable it sets (False where a
-        mapping entry says ``suppressUnitConversion``).
+        Whether it is converted to the unit of the variable it sets (not where a mapping
+        entry says ``suppressUnitConversion``).
     where : str
         Where it was read (for messages).
     """
@@ -135,10 +135,9 @@ def binding_values(binding, base: Path, root: Path, where: str) -> list[Value]:
     ----------
     binding : Element
         The ``ssd:ParameterBinding``.
-    base : Path
-        The folder its relative sources are resolved against (the SSD's).
-    root : Path
-        The SSP's folder (no source may leave it).
+    base, root : Path
+        The SSD's folder (relative sources are resolved against it) and the SSP's (no
+        source may leave it).
     where : str
         The binding's place, for messages.
     """
