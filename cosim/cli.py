@@ -49,7 +49,6 @@ def _scenario_dir() -> Path:
     return shipped("cosim", "scenarios")
 
 
-# ---------------------------------------------------------------------------- argument types
 #: The longest ``models --duration`` [s] (1e5 steps of 0.01 s: a report of ten rows).
 MAX_MODELS_DURATION = 1000.0
 
@@ -83,11 +82,7 @@ def _threads(text: str) -> int | str:
     except ValueError:
         raise argparse.ArgumentTypeError(f"--threads must be auto or a whole number, got {text!r}") from None
 
-_nonneg_int = _number(int, 0, "the seed")
-_positive_float = _number(float, 0, "the duration", strict=True)
 
-
-# ---------------------------------------------------------------------------- run / demo
 def _estimated(df, est: str) -> list[str]:
     """The states estimator ``est`` outputs (its columns but the covariances and the NIS)."""
     names = [c.split(".", 1)[1] for c in df.columns if c.startswith(est + ".")]
@@ -95,9 +90,8 @@ def _estimated(df, est: str) -> list[str]:
 
 
 def _truth_of(df, est: str, estimators_) -> str | None:
-    """The component whose outputs are the true values of estimator ``est``'s states: the
-    one (not an estimator) that outputs every state ``est`` estimates, ``plant`` first if
-    several do; None if none does."""
+    """The component (not an estimator) that outputs every state ``est`` estimates, ``plant``
+    first if several do; None if none does."""
     states = _estimated(df, est)
     comps = sorted({c.split(".", 1)[0] for c in df.columns} - set(estimators_))
     found = [c for c in comps if states and all(f"{c}.{n}" in df.columns for n in states)]
@@ -280,9 +274,8 @@ def _ssp_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
 
 
 def _record(job: _Job, out: Path, progress: bool | None, t0: float | None = None) -> tuple:
-    """Run ``job`` into the held folder ``out``: the results (streamed, or as a DataFrame),
-    the clock ticks; partial results on failure. Returns the DataFrame (None when streamed)
-    and the paths written."""
+    """Run ``job`` into the held folder ``out`` (results, clock ticks; partial ones on failure);
+    returns the DataFrame (None when streamed) and the paths written."""
     print(f"{job.kind}: {job.title}")
     job.wall = -(t0 if t0 is not None else time.perf_counter())
     try:
@@ -389,8 +382,7 @@ def _export(args) -> int:
 
 
 def _models(args) -> int:
-    """Simulate every registered model (Euler truth map and RK4) from its example state and
-    input, and print trajectories and Jacobians."""
+    """``models``: every registered model's trajectories (Euler truth map, RK4) and Jacobians."""
     for name in model_names():
         with np.printoptions(precision=5, suppress=True, linewidth=110):
             _model_report(get_model(name), args.duration)
@@ -414,7 +406,6 @@ def _model_report(m, duration: float) -> None:
     print()
 
 
-# ---------------------------------------------------------------------------- experiments
 def _experiment(args) -> int:
     """Any registered experiment (:mod:`cosim.experiments.experiment`): its settings are validated
     before ``--out`` is touched; an interrupted run writes a partial report."""
@@ -447,7 +438,6 @@ def _experiment(args) -> int:
     return 0
 
 
-# ---------------------------------------------------------------------------- parser and main
 def build_parser() -> argparse.ArgumentParser:
     """The ``pendulum-cosim`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -539,7 +529,7 @@ def _add_experiment(sub) -> None:
                      help="with --backend dask: the scheduler of a running dask cluster (e.g. tcp://host:8786; "
                           "default: dask's configuration, else a local cluster)")
     exp.add_argument("--jobs", type=_positive_int, help="worker processes (default: all cores)")
-    exp.add_argument("--seed", type=_nonneg_int, help="seed of all random streams")
+    exp.add_argument("--seed", type=_number(int, 0, "the seed"), help="seed of all random streams")
     exp.add_argument("--out", help="output directory (default out/NAME)")
     exp.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -48,8 +48,7 @@ MARKER = ".pendulum-cosim-output"
 
 
 def _files_below(folder: Path) -> list[str]:
-    """Every file, symlink and folder below ``folder`` (not following links), as relative
-    POSIX paths, the marker excluded."""
+    """Every entry below ``folder`` (links not followed) as a relative POSIX path, but the marker."""
     paths = [(Path(root).relative_to(folder) / name).as_posix()
              for root, dirs, files in os.walk(folder, followlinks=False) for name in dirs + files]
     return sorted(p for p in paths if p != MARKER)

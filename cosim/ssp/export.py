@@ -12,10 +12,10 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.clocked import check_clocked
-from fmu_models.export.description import xml_attrs
 from fmu_models.export.platforms import add_platforms
 from fmu_models.infra.version import VERSION
 
@@ -24,6 +24,7 @@ from ..core.master import Cosimulation
 from ..core.schedule import base_step
 from ..fmi.archive import read_description
 from .schema import NS
+from .system import FMU_TYPE
 
 __all__ = ["ANNOTATION", "OMS_ANNOTATION", "SSPExport", "export_component", "export_ssp"]
 
@@ -56,68 +57,53 @@ class SSPExport:
     notes: list = field(default_factory=list)
 
 
-def _value_xml(kind: str, value) -> str:
+def _value_text(kind: str, value) -> str:
     if kind == "boolean":
-        return f'<ssv:Boolean value="{"true" if value else "false"}"/>'
-    if kind == "integer":
-        return f'<ssv:Integer value="{int(value)}"/>'
-    return f'<ssv:Real value="{float(value)!r}"/>'
+        return "true" if value else "false"
+    return str(int(value)) if kind == "integer" else repr(float(value))
+
+
+def _sub(parent, tag: str, **attributes) -> ET.Element:
+    """A child element of ``parent`` with the ``attributes`` that are not None."""
+    return ET.SubElement(parent, tag, {k: str(v) for k, v in attributes.items() if v is not None})
 
 
 def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], variables: dict, connections: dict,
               start_time: float, stop_time: float | None, description: str, step_size: float) -> str:
     """The SSD; ``variables``: each component's FMU variables by name."""
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
-             f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{PC_NS}" version="1.0"{xml_attrs(name=name)}'
-             f'{xml_attrs(generationTool=f"pendulum-cosim {VERSION}")}>',
-             f"  <ssd:System{xml_attrs(name=name, description=description or None)}>"]
+    root = ET.Element("ssd:SystemStructureDescription", {
+        "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:pc": PC_NS, "version": "1.0",
+        "name": name, "generationTool": f"pendulum-cosim {VERSION}"})
+    system = _sub(root, "ssd:System", name=name, description=description or None)
     params = [(f"{c.name}.{key}", PORT_TYPES[variables[c.name][key].type], value)
               for c in components for key, value in exported[c.name].parameters.items()]
     if params:
-        lines += ["    <ssd:ParameterBindings>", "      <ssd:ParameterBinding>", "        <ssd:ParameterValues>",
-                  '          <ssv:ParameterSet version="1.0" name="parameters">', "            <ssv:Parameters>"]
-        lines += [f"              <ssv:Parameter{xml_attrs(name=n)}>{_value_xml(k, v)}</ssv:Parameter>"
-                  for n, k, v in params]
-        lines += ["            </ssv:Parameters>", "          </ssv:ParameterSet>", "        </ssd:ParameterValues>",
-                  "      </ssd:ParameterBinding>", "    </ssd:ParameterBindings>"]
-    lines.append("    <ssd:Elements>")
+        values = _sub(_sub(_sub(system, "ssd:ParameterBindings"), "ssd:ParameterBinding"), "ssd:ParameterValues")
+        values = _sub(_sub(values, "ssv:ParameterSet", version="1.0", name="parameters"), "ssv:Parameters")
+        for n, kind, value in params:
+            _sub(_sub(values, "ssv:Parameter", name=n), f"ssv:{_SSP_TYPES[kind]}", value=_value_text(kind, value))
+    elements = _sub(system, "ssd:Elements")
     for c in components:
         own = variables[c.name]
-        lines.append(f'      <ssd:Component{xml_attrs(name=c.name, type="application/x-fmu-sharedlibrary")}'
-                     f'{xml_attrs(source=f"resources/{c.name}.fmu")}>')
+        element = _sub(elements, "ssd:Component", name=c.name, type=FMU_TYPE, source=f"resources/{c.name}.fmu")
         conns = [(p, "input") for p in c.input_names if p in own] + [(p, "output") for p in c.output_names if p in own]
         if conns:
-            lines.append("        <ssd:Connectors>")
-            lines += [f"          <ssd:Connector{xml_attrs(name=p, kind=k)}>"
-                      f"<ssc:{_SSP_TYPES[PORT_TYPES[own[p].type]]}/></ssd:Connector>" for p, k in conns]
-            lines.append("        </ssd:Connectors>")
-        lines += ["        <ssd:Annotations>",
-                  f'          <ssc:Annotation type="{ANNOTATION}"><pc:Timing{xml_attrs(period=repr(c.period))}/>'
-                  "</ssc:Annotation>",
-                  "        </ssd:Annotations>", "      </ssd:Component>"]
-    lines.append("    </ssd:Elements>")
+            connectors = _sub(element, "ssd:Connectors")
+            for p, k in conns:
+                _sub(_sub(connectors, "ssd:Connector", name=p, kind=k), f"ssc:{_SSP_TYPES[PORT_TYPES[own[p].type]]}")
+        timing = _sub(_sub(element, "ssd:Annotations"), "ssc:Annotation", type=ANNOTATION)
+        _sub(timing, "pc:Timing", period=repr(c.period))
     if connections:
-        lines.append("    <ssd:Connections>")
+        wires = _sub(system, "ssd:Connections")
         for (dc, dp), (sc, sp) in connections.items():
-            lines.append(f"      <ssd:Connection{xml_attrs(startElement=sc, startConnector=sp, endElement=dc)}"
-                         f"{xml_attrs(endConnector=dp)}/>")
-        lines.append("    </ssd:Connections>")
-    lines += ["    <ssd:Annotations>",
-              f'      <ssc:Annotation type="{OMS_ANNOTATION}">',
-              f'        <oms:Annotations xmlns:oms="{OMS_NS}">',
-              "          <oms:SimulationInformation>",
-              f"            <oms:FixedStepMaster{xml_attrs(description='oms-ma', stepSize=repr(float(step_size)))}"
-              f"{xml_attrs(relativeTolerance='1e-4')}/>",
-              "          </oms:SimulationInformation>",
-              "        </oms:Annotations>",
-              "      </ssc:Annotation>",
-              "    </ssd:Annotations>"]
-    lines += ["  </ssd:System>",
-              f"  <ssd:DefaultExperiment{xml_attrs(startTime=repr(float(start_time)))}"
-              f"{xml_attrs(stopTime=None if stop_time is None else repr(float(stop_time)))}/>",
-              "</ssd:SystemStructureDescription>"]
-    return "\n".join(lines) + "\n"
+            _sub(wires, "ssd:Connection", startElement=sc, startConnector=sp, endElement=dc, endConnector=dp)
+    oms = _sub(_sub(system, "ssd:Annotations"), "ssc:Annotation", type=OMS_ANNOTATION)
+    oms = _sub(_sub(oms, "oms:Annotations", **{"xmlns:oms": OMS_NS}), "oms:SimulationInformation")
+    _sub(oms, "oms:FixedStepMaster", description="oms-ma", stepSize=repr(float(step_size)), relativeTolerance="1e-4")
+    _sub(root, "ssd:DefaultExperiment", startTime=repr(float(start_time)),
+         stopTime=None if stop_time is None else repr(float(stop_time)))
+    ET.indent(root, "  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
 def export_component(c, folder: Path, fmi_version: int, clocked: bool) -> ExportedFMU:
@@ -228,8 +214,7 @@ def _check_connections(connections: dict, variables: dict) -> None:
 
 
 def _move_into(out_dir: Path, tmp: Path, ssd_text: str, name: str, components: list[str]) -> None:
-    """The SSD, the archive and the FMUs written in ``tmp``, moved into ``out_dir`` (replacing
-    those files only)."""
+    """The SSD and the archive written in ``tmp`` and the FMUs there, moved into ``out_dir``."""
     (tmp / "SystemStructure.ssd").write_text(ssd_text, encoding="utf-8")
     fmus = [f"resources/{c}.fmu" for c in components]
     with zipfile.ZipFile(tmp / f"{name}.ssp", "w", zipfile.ZIP_DEFLATED) as z:

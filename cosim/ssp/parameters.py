@@ -91,9 +91,8 @@ def _resolve(base: Path, root: Path, source: str, where: str) -> Path:
 
 
 def _document(holder, tag: str, inline: str, kind: str, base: Path, root: Path, where: str):
-    """The ``ssv:ParameterSet`` or ``ssm:ParameterMapping`` (``tag``) of a binding (``holder``:
-    the binding or its ``ParameterMapping`` element): from its ``source`` file, else the
-    element at ``inline`` below it (None if there is none); and where it was read."""
+    """The ``tag`` document of ``holder`` (a binding or its ``ParameterMapping``): its ``source``
+    file, else the element at ``inline`` below it (or None); and where it was read."""
     mime = holder.get("type", kind)
     if mime != kind:
         raise ConfigurationError(f"{where}: type {mime!r} is not read (only {kind})")
