@@ -383,27 +383,23 @@ def _export(args) -> int:
 
 def _models(args) -> int:
     """``models``: every registered model's trajectories (Euler truth map, RK4) and Jacobians."""
-    for name in model_names():
+    dt, n = 0.01, round(args.duration / 0.01)
+    for m in map(get_model, model_names()):
+        x0 = m.x0 if m.example_x0 is None else np.asarray(m.example_x0, float)
+        u = m.example_input or (lambda t, m=m: np.zeros(m.nu))
+        print(f"== {m.description}")
+        print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
         with np.printoptions(precision=5, suppress=True, linewidth=110):
-            _model_report(get_model(name), args.duration)
+            xs = m.simulate(x0, u, dt, n, method="euler")
+            xr = m.simulate(x0, u, dt, n, method="rk4", substeps=4)
+            print(f"   t [s] | Euler (T = {dt} s) state | RK4 (4 substeps) state")
+            for k in range(0, n + 1, max(1, n // 10)):
+                print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
+            A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
+            print("   exact A = df/dx at x = 0, u = 0:\n", A)
+            print("   exact B = df/du:", B.ravel())
+        print()
     return 0
-
-
-def _model_report(m, duration: float) -> None:
-    x0 = m.x0 if m.example_x0 is None else np.asarray(m.example_x0, float)
-    u = m.example_input or (lambda t: np.zeros(m.nu))
-    dt, n = 0.01, round(duration / 0.01)
-    print(f"== {m.description}")
-    print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
-    xs = m.simulate(x0, u, dt, n, method="euler")
-    xr = m.simulate(x0, u, dt, n, method="rk4", substeps=4)
-    print(f"   t [s] | Euler (T = {dt} s) state | RK4 (4 substeps) state")
-    for k in range(0, n + 1, max(1, n // 10)):
-        print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
-    A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
-    print("   exact A = df/dx at x = 0, u = 0:\n", A)
-    print("   exact B = df/du:", B.ravel())
-    print()
 
 
 def _experiment(args) -> int:
@@ -418,15 +414,13 @@ def _experiment(args) -> int:
             import dask
         except ImportError:
             raise ConfigurationError("--backend dask needs dask: pip install 'pendulum-cosim[dask]'") from None
-
         dask.config.set({"scheduler-address": args.scheduler})
     config = args.config or exp.default_config
     settings = exp.settings(config, args.settings, args.set, args.runs, args.seed)
-    common = dict(path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
     out = Path(args.out or f"out/{args.name}" + (f"-{args.config}" if args.config else ""))
     with OutputFolder(out, args.overwrite) as folder:
         try:
-            result = exp.run(settings, **common)
+            result = exp.run(settings, path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
         except Interrupted as e:
             if e.partial is not None and len(e.partial[0]):
                 md = exp.write_report(e.partial, settings, folder, args.path, config, partial=True)
