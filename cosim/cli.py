@@ -169,7 +169,7 @@ class _Job:
     stop_time: float
     options: dict = field(default_factory=dict)     # Cosimulation.run keywords
     stream: bool = False
-    columns: Callable | None = None                 # the DataFrame's column names from the master's
+    prefix: str = ""                                # taken off the DataFrame's column names
     extras: Callable | None = None                  # (df, folder) -> paths; None: the plot of the signals
     wall: float = 0.0                               # [s] of the run, set by _record
 
@@ -260,7 +260,7 @@ def _fmu_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
                    start=_start_values(args.start), inputs=args.input, outputs=args.outputs,
                    interface=args.interface or "auto")
     return _Job("fmu", path.name, exp.cosim, exp.start_time, exp.stop_time, {"signals": [f"{FMU_NAME}.*"]},
-                columns=lambda c: c.split(".", 1)[1] if c.startswith(f"{FMU_NAME}.") else c)
+                prefix=f"{FMU_NAME}.")
 
 
 def _ssp_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
@@ -298,8 +298,8 @@ def _record(job: _Job, out: Path, progress: bool | None, t0: float | None = None
 
 
 def _named(job: _Job, df):
-    if job.columns is not None:
-        df.columns = [job.columns(c) for c in df.columns]
+    if job.prefix:
+        df.columns = [c.removeprefix(job.prefix) for c in df.columns]
     return df
 
 

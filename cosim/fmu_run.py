@@ -47,7 +47,7 @@ class FMUExperiment:
         keywords go to :meth:`cosim.core.master.Cosimulation.run`."""
         kw.setdefault("signals", [f"{NAME}.*"])
         df = self.cosim.run(self.stop_time, self.start_time, **kw)
-        df.columns = [c.split(".", 1)[1] if c.startswith(f"{NAME}.") else c for c in df.columns]
+        df.columns = [c.removeprefix(f"{NAME}.") for c in df.columns]
         return df
 
 

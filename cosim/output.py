@@ -55,12 +55,9 @@ def _files_below(folder: Path) -> list[str]:
 
 
 class OutputFolder:
-    """An output folder held for one run (a context manager): created, checked, optionally
-    cleared, locked (``flock``).
-
-    Only a previous result of this project is ever cleared: the :data:`MARKER` file lists
-    every file a run wrote, and ``overwrite`` removes those and nothing else. Folders created
-    for a run (parents included) are removed again if it wrote nothing.
+    """An output folder held for one run (a context manager): created (and removed again,
+    parents included, if the run wrote nothing), checked, optionally cleared, locked
+    (``flock``); only the files a previous run listed in its :data:`MARKER` are ever cleared.
 
     Parameters
     ----------

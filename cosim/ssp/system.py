@@ -138,7 +138,6 @@ class FlatSystem:
         self.links = [link for node in inputs if (link := self._link(node)) is not None]
         self._parameters()
 
-    # ------------------------------------------------------------------ structure
     def _walk(self, system, path: tuple) -> None:
         self.systems[path] = system
         self._read_connectors(system, path)
@@ -221,7 +220,6 @@ class FlatSystem:
         name = self.connectors[node][1]
         return self.units[name] if name is not None else _variable_unit(self.elements.get(node[0]), node[1])
 
-    # ------------------------------------------------------------------ links
     def _link(self, dst: tuple) -> Link | None:
         """The FMU output that drives the FMU input ``dst``, followed back through system
         connectors (None: it ends at an unconnected system connector)."""
@@ -240,7 +238,6 @@ class FlatSystem:
             node = src
         return Link((self.elements[src[0]].name, src[1]), (self.elements[dst[0]].name, dst[1]), steps)
 
-    # ------------------------------------------------------------------ parameters
     def _parameters(self) -> None:
         holders = [*self.systems.items(), *((path, e.node) for path, e in self.elements.items())]
         for path, node in sorted(holders, key=lambda h: -len(h[0])):      # the deepest first: higher levels win
