@@ -52,10 +52,9 @@ class Value:
 
 def _parse_value(p, units: dict[str, Unit], where: str) -> Value:
     name = p.get("name")
-    for child in p:
-        tag = child.tag.rpartition("}")[2]
-        kind = _KINDS.get(tag)
-        if kind is None or child.tag != q(f"ssv:{tag}"):
+    for child in p.findall("ssv:*", NS):
+        kind = _KINDS.get(child.tag.rpartition("}")[2])
+        if kind is None:
             continue
         text, what = child.get("value"), f"{where}: parameter {name!r}"
         if kind == "real":
