@@ -10,7 +10,9 @@ import argparse
 import contextlib
 import logging
 import math
+import shutil
 import sys
+import tempfile
 import time
 import tomllib
 import zipfile
@@ -311,15 +313,12 @@ def _ticks(job: _Job, out: Path, name: str) -> list[Path]:
 
 def _scenario_extras(sc, df, out: Path, fmus: Path) -> list[Path]:
     """A scenario run's FMUs (those it built), RMSE table and plot."""
-    import shutil
-
     paths = []
     for fmu in fmus.rglob("*.fmu"):                 # keep the FMUs the scenario built
         dst = out / "fmus" / fmu.relative_to(fmus)
         dst.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(fmu, dst)
-    ests = [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)]
-    table = _rmse_table(df, ests)
+    table = _rmse_table(df, [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)])
     if len(table):
         print("\nRMSE against the plant's true states:")
         print(table.to_string(float_format=lambda v: f"{v:.4f}"))
@@ -334,8 +333,6 @@ def _scenario_extras(sc, df, out: Path, fmus: Path) -> list[Path]:
 
 def _export(args) -> int:
     """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
-    import tempfile
-
     check_clocked(args.clocked, args.fmi_version, args.command)  # named before anything is written
     platforms = parse_platforms(args.platforms)
     if platforms:

@@ -116,25 +116,23 @@ def _conversion(link: Link, period: float, variables) -> Conversion:
 def _components(flat: FlatSystem, communication_step, oms_step, step_size) -> tuple[list, list]:
     """The FMU components, the conversions and the wiring of the flattened system."""
     sources = {link.src for link in flat.links}
-    components, by_name = [], {}
-    for elem in flat.elements.values():
+    fmus, elements = {}, {e.name: e for e in flat.elements.values()}
+    for elem in elements.values():
         kind = elem.node.get("implementation", "any")
         if kind not in _INTERFACES:
             raise ConfigurationError(f"component {'.'.join(elem.path)!r}: implementation {kind!r} is not one of "
                                      f"{', '.join(_INTERFACES)}")
         outs = [c for c, k in elem.connectors.items() if k == "output" or (elem.name, c) in sources]
-        c = FMUComponent(elem.name, elem.fmu, communication_step or _period(elem, oms_step, step_size),
-                         inputs=[c for c, k in elem.connectors.items() if k == "input"], outputs=outs,
-                         parameters=elem.parameters, interface=_INTERFACES[kind])
-        components.append(c)
-        by_name[elem.name] = elem
-    wiring = []
+        fmus[elem.name] = FMUComponent(elem.name, elem.fmu, communication_step or _period(elem, oms_step, step_size),
+                                       inputs=[c for c, k in elem.connectors.items() if k == "input"], outputs=outs,
+                                       parameters=elem.parameters, interface=_INTERFACES[kind])
+    components, wiring = list(fmus.values()), []
     for link in flat.links:
         if not link.steps:
             wiring.append((".".join(link.src), ".".join(link.dst)))
             continue
-        variables = [by_name[n].variable(port) for n, port in (link.src, link.dst)]
-        conv = _conversion(link, next(c.period for c in components if c.name == link.dst[0]), variables)
+        variables = [elements[n].variable(port) for n, port in (link.src, link.dst)]
+        conv = _conversion(link, fmus[link.dst[0]].period, variables)
         components.append(conv)
         wiring += [(".".join(link.src), f"{conv.name}.u"), (f"{conv.name}.y", ".".join(link.dst))]
     return components, wiring

@@ -78,10 +78,8 @@ def _identifier(text: str) -> str:
 
 def _variable_unit(element: Element | None, connector: str) -> Unit | None:
     """The unit of an FMU variable, from the FMU's own unit definitions."""
-    if element is None:
-        return None
-    v = element.variable(connector)
-    name = v is not None and (v.unit or (v.declaredType.unit if v.declaredType is not None else None))
+    v = element.variable(connector) if element is not None else None
+    name = v is not None and (v.unit or getattr(v.declaredType, "unit", None))
     if not name:
         return None
     for u in element.md.unitDefinitions or []:
