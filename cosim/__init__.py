@@ -1,15 +1,6 @@
-"""Co-simulation of FMUs and Python components, each at its own sample period.
-
-The names a user needs, in one place::
-
-    from cosim import Cosimulation, FMUComponent, EstimatorComponent, Sensor, Step, Scenario
-
-Sub-packages: :mod:`cosim.core` (the component protocol, the master, its schedule and
-recording), :mod:`cosim.fmi` (FMUs as components), :mod:`cosim.components` (the component
-library), :mod:`cosim.experiments` (the papers' experiments); modules: :mod:`cosim.scenario`
-(scenario files), :mod:`cosim.ssp` (SSP export and import), :mod:`cosim.output` (output
-folders, files, plots), :mod:`cosim.cli` (the command line). Every error is one of
-:mod:`fmu_models.errors` (re-exported here).
+"""Co-simulation of FMUs and Python components, each at its own sample period: the names a
+user needs, in one place (the errors of :mod:`fmu_models.errors` among them); the layout of
+the sub-packages is in the developers' page of the documentation.
 """
 from fmu_models.errors import (
     BuildError,

@@ -1,17 +1,8 @@
-"""Command line: ``pendulum-cosim``.
-
-    pendulum-cosim demo [--out DIR]             run the seed 000 scenario, write results and plot
-    pendulum-cosim run PATH --out DIR           run a scenario file, an FMU or an SSP (--dry-run: the schedule)
-    pendulum-cosim scenarios                    list the scenarios shipped with the package
-    pendulum-cosim models                       print both plant models and their Jacobians
-    pendulum-cosim experiment NAME [--runs N]   reproduce a paper's experiment (seed000, ...)
-    pendulum-cosim export-fmu SCENARIO --out DIR   the scenario's estimators as native FMUs
-    pendulum-cosim export-ssp SCENARIO --out DIR   the whole scenario as an SSP (SSD + FMUs)
+"""Command line ``pendulum-cosim`` (``pendulum-cosim --help`` lists its commands).
 
 Every error of the package's family (:mod:`fmu_models.errors`) and the known library and
-system errors (bad zip, bad XML, OS errors) print one line ``error: ...`` and exit with
-status 2; ``--debug`` shows the traceback instead. Ctrl-C and SIGTERM stop a run, save
-what finished as partial results, and exit with status 130.
+system errors print one line ``error: ...`` and exit with status 2 (``--debug``: the
+traceback); Ctrl-C and SIGTERM save what finished as partial results and exit with 130.
 """
 from __future__ import annotations
 
@@ -19,7 +10,9 @@ import argparse
 import contextlib
 import logging
 import math
+import shutil
 import sys
+import tempfile
 import time
 import tomllib
 import zipfile
@@ -58,7 +51,6 @@ def _scenario_dir() -> Path:
     return shipped("cosim", "scenarios")
 
 
-# ---------------------------------------------------------------------------- argument types
 #: The longest ``models --duration`` [s] (1e5 steps of 0.01 s: a report of ten rows).
 MAX_MODELS_DURATION = 1000.0
 
@@ -92,20 +84,24 @@ def _threads(text: str) -> int | str:
     except ValueError:
         raise argparse.ArgumentTypeError(f"--threads must be auto or a whole number, got {text!r}") from None
 
-_nonneg_int = _number(int, 0, "the seed")
-_positive_float = _number(float, 0, "the duration", strict=True)
+
+def _estimated(df, est: str) -> list[str]:
+    """The states estimator ``est`` outputs (its columns but the covariances and the NIS)."""
+    names = [c.split(".", 1)[1] for c in df.columns if c.startswith(est + ".")]
+    return [n for n in names if not n.startswith("P_") and n != "nis"]
 
 
-# ---------------------------------------------------------------------------- run / demo
 def _truth_of(df, est: str, estimators_) -> str | None:
-    """The component whose outputs are the true values of estimator ``est``'s states: the
-    one (not an estimator) that outputs every state ``est`` estimates, ``plant`` first if
-    several do; None if none does."""
-    states = [c.split(".", 1)[1] for c in df.columns if c.startswith(est + ".")]
-    states = [n for n in states if not n.startswith("P_") and n != "nis"]
+    """The component (not an estimator) that outputs every state ``est`` estimates, ``plant``
+    first if several do; None if none does."""
+    states = _estimated(df, est)
     comps = sorted({c.split(".", 1)[0] for c in df.columns} - set(estimators_))
     found = [c for c in comps if states and all(f"{c}.{n}" in df.columns for n in states)]
     return "plant" if "plant" in found else (found[0] if found else None)
+
+
+def _rms(a, b) -> float:
+    return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
 def _rmse_table(df, estimators_):
@@ -116,19 +112,15 @@ def _rmse_table(df, estimators_):
     rows, truths = {}, set()
     for est in estimators_:
         truth = _truth_of(df, est, estimators_)
-        if truth is None:
-            continue
-        truths.add(truth)
-        rows[est] = {c.split(".", 1)[1]: float(np.sqrt(np.mean((df[c] - df[f"{truth}.{c.split('.', 1)[1]}"]) ** 2)))
-                     for c in df.columns if c.startswith(est + ".") and f"{truth}.{c.split('.', 1)[1]}" in df.columns
-                     and not c.split(".", 1)[1].startswith("P_") and c.split(".", 1)[1] != "nis"}
+        if truth is not None:
+            truths.add(truth)
+            rows[est] = {n: _rms(df[f"{est}.{n}"], df[f"{truth}.{n}"]) for n in _estimated(df, est)}
     meas = {}
     for truth in sorted(truths):
         for c in df.columns:
-            if ".y_" in c and not c.startswith(truth + "."):
-                tc = f"{truth}.{c.split('.y_')[1]}"
-                if tc in df.columns:
-                    meas[c.split(".y_")[1]] = float(np.sqrt(np.mean((df[c] - df[tc]) ** 2)))
+            state = c.split(".y_")[1] if ".y_" in c else ""
+            if state and not c.startswith(truth + ".") and f"{truth}.{state}" in df.columns:
+                meas[state] = _rms(df[c], df[f"{truth}.{state}"])
     if meas:
         rows["raw measurement"] = meas
     return pd.DataFrame(rows).T
@@ -179,7 +171,8 @@ class _Job:
     stop_time: float
     options: dict = field(default_factory=dict)     # Cosimulation.run keywords
     stream: bool = False
-    columns: Callable | None = None                 # the DataFrame's column names from the master's
+    prefix: str = ""                                # taken off the DataFrame's column names
+    extras: Callable | None = None                  # (df, folder) -> paths; None: the plot of the signals
     wall: float = 0.0                               # [s] of the run, set by _record
 
 
@@ -207,8 +200,15 @@ def _start_values(items: list[str] | None) -> dict:
     return out
 
 
+def _demo(args) -> int:
+    """``demo``: ``run`` of the shipped seed 000 scenario."""
+    args.scenario = str(shipped("cosim", "scenarios", "seed000_cartpole.toml"))
+    return _run(args)
+
+
 def _run(args) -> int:
-    """``run``: a scenario file, an FMU or an SSP (see :func:`_kind_of`)."""
+    """``run``: a scenario file, an FMU or an SSP (see :func:`_kind_of`), read and checked
+    before ``--out`` is touched."""
     path = _resolve_target(args.scenario)
     kind = _kind_of(path)
     if kind == "scenario" and _given(args, _FILE_OPTIONS):
@@ -218,29 +218,43 @@ def _run(args) -> int:
         raise ConfigurationError(f"{', '.join(_given(args, ('input', 'interface')))}: for an FMU run, not an SSP")
     if not args.dry_run and not args.out:
         raise ConfigurationError("run needs --out DIR (or --dry-run)")
-    progress = False if args.no_progress else None
-    if kind == "scenario":
-        return _run_scenario(path, Path(args.out or "."), args.overwrite, args.dry_run, args.stream, progress,
-                             args.engine, args.threads)
     with contextlib.ExitStack() as stack:
-        job = _fmu_job(path, args) if kind == "fmu" else _ssp_job(path, args, stack)
-        if args.engine is not None:
-            job.cosim.engine = args.engine
-        if args.threads is not None:
-            job.cosim.threads = args.threads
+        t0 = time.perf_counter()
+        job = {"scenario": _scenario_job, "fmu": _fmu_job, "ssp": _ssp_job}[kind](path, args, stack)
+        for key in ("engine", "threads"):           # over a scenario's [simulation] ones
+            if getattr(args, key) is not None:
+                setattr(job.cosim, key, getattr(args, key))
         if args.dry_run:
             print(f"{kind}: {job.title}\n{job.cosim.describe()}")
             return 0
         with OutputFolder(Path(args.out), args.overwrite) as folder:
-            df, paths = _record(job, folder, progress)
-            if df is not None and len(df.columns):
-                plot_signals(df, folder / "outputs.png", job.title)
-                paths.append(folder / "outputs.png")
-            _report(job, df, paths)
+            df, paths = _record(job, folder, False if args.no_progress else None, t0 if kind == "scenario" else None)
+            span = f"{job.stop_time - job.start_time:g} s simulated in {job.wall:.2f} s"
+            if df is None:
+                print(f"\n{span}; streamed")
+            else:
+                if job.extras is not None:
+                    paths += job.extras(df, folder)
+                elif len(df.columns):                   # an FMU's or SSP's plot of every recorded signal
+                    plot_signals(df, folder / "outputs.png", job.title)
+                    paths.append(folder / "outputs.png")
+                print(f"\n{len(df)} rows x {len(df.columns)} signals, {span}"
+                      + (" (including FMU build)" if kind == "scenario" else ""))
+            for written in paths:
+                print(f"wrote {written}")
     return 0
 
 
-def _fmu_job(path: Path, args) -> _Job:
+def _scenario_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
+    fmus = Path(stack.enter_context(crash_guard.temporary_folder("pendulum_cosim_run_"))) / "fmus"
+    sc = Scenario.load(path, fmu_dir=fmus)
+    stream = bool(sc.recording.get("stream", False)) if args.stream is None else args.stream
+    return _Job("scenario", sc.title or path.name, sc.cosim, sc.start_time, sc.stop_time,
+                {k: v for k, v in sc.recording.items() if k != "stream"}, stream,
+                extras=lambda df, out: _scenario_extras(sc, df, out, fmus))
+
+
+def _fmu_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
     if args.stream:
         raise ConfigurationError("--stream: an FMU run records in memory; choose --outputs or a larger --step-size "
                                  "for a long run, or write a scenario file")
@@ -248,7 +262,7 @@ def _fmu_job(path: Path, args) -> _Job:
                    start=_start_values(args.start), inputs=args.input, outputs=args.outputs,
                    interface=args.interface or "auto")
     return _Job("fmu", path.name, exp.cosim, exp.start_time, exp.stop_time, {"signals": [f"{FMU_NAME}.*"]},
-                columns=lambda c: c.split(".", 1)[1] if c.startswith(f"{FMU_NAME}.") else c)
+                prefix=f"{FMU_NAME}.")
 
 
 def _ssp_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
@@ -261,37 +275,9 @@ def _ssp_job(path: Path, args, stack: contextlib.ExitStack) -> _Job:
                 bool(args.stream))
 
 
-def _run_scenario(path: Path, out: Path, overwrite: bool = False, dry_run: bool = False,
-                  stream: bool | None = None, progress: bool | None = None, engine: str | None = None,
-                  threads: int | str | None = None) -> int:
-    """Load and check the scenario, then (only then) take ``out`` and run it (``engine`` and
-    ``threads``: replace the scenario's ``[simulation] engine`` and ``threads``)."""
-    with crash_guard.temporary_folder("pendulum_cosim_run_") as fmus:
-        t0 = time.perf_counter()
-        sc = Scenario.load(path, fmu_dir=Path(fmus) / "fmus")      # read and checked before --out is touched
-        if engine is not None:
-            sc.cosim.engine = engine
-        if threads is not None:
-            sc.cosim.threads = threads
-        if dry_run:
-            print(f"scenario: {sc.title or path.name}")
-            print(sc.cosim.describe())
-            return 0
-        stream = bool(sc.recording.get("stream", False)) if stream is None else stream
-        job = _Job("scenario", sc.title or path.name, sc.cosim, sc.start_time, sc.stop_time,
-                   {k: v for k, v in sc.recording.items() if k != "stream"}, stream)
-        with OutputFolder(out, overwrite) as folder:
-            df, paths = _record(job, folder, progress, t0)
-            if df is not None:
-                paths += _scenario_extras(sc, df, folder, Path(fmus) / "fmus")
-            _report(job, df, paths, "(including FMU build)")
-    return 0
-
-
 def _record(job: _Job, out: Path, progress: bool | None, t0: float | None = None) -> tuple:
-    """Run ``job`` into the held folder ``out``: the results (streamed, or as a DataFrame),
-    the clock ticks; partial results on failure. Returns the DataFrame (None when streamed)
-    and the paths written."""
+    """Run ``job`` into the held folder ``out`` (results, clock ticks; partial ones on failure);
+    returns the DataFrame (None when streamed) and the paths written."""
     print(f"{job.kind}: {job.title}")
     job.wall = -(t0 if t0 is not None else time.perf_counter())
     try:
@@ -314,8 +300,8 @@ def _record(job: _Job, out: Path, progress: bool | None, t0: float | None = None
 
 
 def _named(job: _Job, df):
-    if job.columns is not None:
-        df.columns = [job.columns(c) for c in df.columns]
+    if job.prefix:
+        df.columns = [c.removeprefix(job.prefix) for c in df.columns]
     return df
 
 
@@ -327,15 +313,12 @@ def _ticks(job: _Job, out: Path, name: str) -> list[Path]:
 
 def _scenario_extras(sc, df, out: Path, fmus: Path) -> list[Path]:
     """A scenario run's FMUs (those it built), RMSE table and plot."""
-    import shutil
-
     paths = []
     for fmu in fmus.rglob("*.fmu"):                 # keep the FMUs the scenario built
         dst = out / "fmus" / fmu.relative_to(fmus)
         dst.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(fmu, dst)
-    ests = [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)]
-    table = _rmse_table(df, ests)
+    table = _rmse_table(df, [c.name for c in sc.cosim.components if isinstance(c, StateEstimator)])
     if len(table):
         print("\nRMSE against the plant's true states:")
         print(table.to_string(float_format=lambda v: f"{v:.4f}"))
@@ -348,22 +331,8 @@ def _scenario_extras(sc, df, out: Path, fmus: Path) -> list[Path]:
     return paths
 
 
-def _report(job: _Job, df, paths: list[Path], note: str = "") -> None:
-    span = f"{job.stop_time - job.start_time:g} s simulated in {job.wall:.2f} s"
-    if df is None:
-        print(f"\n{span}; streamed")
-    else:
-        print(f"\n{len(df)} rows x {len(df.columns)} signals, {span}" + (f" {note}" if note else ""))
-    for p in paths:
-        print(f"wrote {p}")
-
-
 def _export(args) -> int:
     """export-fmu and export-ssp: write FMUs (or an SSP) of a scenario's components."""
-    import tempfile
-
-
-
     check_clocked(args.clocked, args.fmi_version, args.command)  # named before anything is written
     platforms = parse_platforms(args.platforms)
     if platforms:
@@ -410,37 +379,29 @@ def _export(args) -> int:
 
 
 def _models(args) -> int:
-    """Simulate every registered model (Euler truth map and RK4) from its example state and
-    input, and print trajectories and Jacobians."""
-
-    for name in model_names():
+    """``models``: every registered model's trajectories (Euler truth map, RK4) and Jacobians."""
+    dt, n = 0.01, round(args.duration / 0.01)
+    for m in map(get_model, model_names()):
+        x0 = m.x0 if m.example_x0 is None else np.asarray(m.example_x0, float)
+        u = m.example_input or (lambda t, m=m: np.zeros(m.nu))
+        print(f"== {m.description}")
+        print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
         with np.printoptions(precision=5, suppress=True, linewidth=110):
-            _model_report(get_model(name), args.duration)
+            xs = m.simulate(x0, u, dt, n, method="euler")
+            xr = m.simulate(x0, u, dt, n, method="rk4", substeps=4)
+            print(f"   t [s] | Euler (T = {dt} s) state | RK4 (4 substeps) state")
+            for k in range(0, n + 1, max(1, n // 10)):
+                print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
+            A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
+            print("   exact A = df/dx at x = 0, u = 0:\n", A)
+            print("   exact B = df/du:", B.ravel())
+        print()
     return 0
 
 
-def _model_report(m, duration: float) -> None:
-    x0 = m.x0 if m.example_x0 is None else np.asarray(m.example_x0, float)
-    u = m.example_input or (lambda t: np.zeros(m.nu))
-    dt, n = 0.01, round(duration / 0.01)
-    print(f"== {m.description}")
-    print(f"   states {m.state_names}, input {m.input_names}, params {m.params}")
-    xs = m.simulate(x0, u, dt, n, method="euler")
-    xr = m.simulate(x0, u, dt, n, method="rk4", substeps=4)
-    print(f"   t [s] | Euler (T = {dt} s) state | RK4 (4 substeps) state")
-    for k in range(0, n + 1, max(1, n // 10)):
-        print(f"   {k * dt:5.2f} | {xs[k]} | {xr[k]}")
-    A, B = m.linearize(np.zeros(m.nx), np.zeros(m.nu))
-    print("   exact A = df/dx at x = 0, u = 0:\n", A)
-    print("   exact B = df/du:", B.ravel())
-    print()
-
-
-# ---------------------------------------------------------------------------- experiments
 def _experiment(args) -> int:
     """Any registered experiment (:mod:`cosim.experiments.experiment`): its settings are validated
     before ``--out`` is touched; an interrupted run writes a partial report."""
-
     exp = EXPERIMENTS.get(args.name)()
     exp.check_path(args.path)
     if args.scheduler is not None:
@@ -450,15 +411,13 @@ def _experiment(args) -> int:
             import dask
         except ImportError:
             raise ConfigurationError("--backend dask needs dask: pip install 'pendulum-cosim[dask]'") from None
-
         dask.config.set({"scheduler-address": args.scheduler})
     config = args.config or exp.default_config
     settings = exp.settings(config, args.settings, args.set, args.runs, args.seed)
-    common = dict(path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
     out = Path(args.out or f"out/{args.name}" + (f"-{args.config}" if args.config else ""))
     with OutputFolder(out, args.overwrite) as folder:
         try:
-            result = exp.run(settings, **common)
+            result = exp.run(settings, path=args.path, backend=args.backend, n_jobs=args.jobs, progress=not args.quiet)
         except Interrupted as e:
             if e.partial is not None and len(e.partial[0]):
                 md = exp.write_report(e.partial, settings, folder, args.path, config, partial=True)
@@ -470,7 +429,6 @@ def _experiment(args) -> int:
     return 0
 
 
-# ---------------------------------------------------------------------------- parser and main
 def build_parser() -> argparse.ArgumentParser:
     """The ``pendulum-cosim`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -488,12 +446,15 @@ def build_parser() -> argparse.ArgumentParser:
                                        "results table, CSV/Parquet and a truth-vs-estimate plot")
     demo.add_argument("--out", default="out/demo", help="output directory (default out/demo; "
                                                           "replaced on every demo run)")
+    demo.set_defaults(handler=_demo, overwrite=True, dry_run=False, stream=None, no_progress=False, engine=None,
+                      threads=None)
     _add_run(sub)
-    sub.add_parser("scenarios", help="list the shipped scenario files")
+    sub.add_parser("scenarios", help="list the shipped scenario files").set_defaults(handler=_scenarios)
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
     models.add_argument("--duration", type=_number(float, 0, "the duration", strict=True, high=MAX_MODELS_DURATION),
                         default=5.0, help=f"simulated time [s] (default 5, at most {MAX_MODELS_DURATION:g}: "
                                           "the report prints ten rows of it)")
+    models.set_defaults(handler=_models)
     _add_experiment(sub)
     _add_export(sub)
     return parser
@@ -502,6 +463,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_run(sub) -> None:
     run = sub.add_parser("run", help="run a scenario file (TOML; see `pendulum-cosim scenarios`), an FMU or an SSP "
                                      "(archive, folder or .ssd)")
+    run.set_defaults(handler=_run)
     run.add_argument("scenario", metavar="PATH", help="scenario file, FMU, SSP, or the name of a shipped scenario")
     run.add_argument("--out", help="output directory (required unless --dry-run)")
     run.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
@@ -539,6 +501,7 @@ def _add_run(sub) -> None:
 def _add_experiment(sub) -> None:
     exp = sub.add_parser("experiment", help="reproduce a paper's experiment as a Monte Carlo "
                                             "campaign; writes tables, figures and summary.md")
+    exp.set_defaults(handler=_experiment)
     exp.add_argument("name", choices=EXPERIMENTS.names(), help="which experiment: " + "; ".join(
         f"{n}: {EXPERIMENTS.get(n).description}" for n in EXPERIMENTS.names()))
     exp.add_argument("--config", help="named configuration (seed000: default = Q0 = R0 = 0.01 I, both readings; "
@@ -557,7 +520,7 @@ def _add_experiment(sub) -> None:
                      help="with --backend dask: the scheduler of a running dask cluster (e.g. tcp://host:8786; "
                           "default: dask's configuration, else a local cluster)")
     exp.add_argument("--jobs", type=_positive_int, help="worker processes (default: all cores)")
-    exp.add_argument("--seed", type=_nonneg_int, help="seed of all random streams")
+    exp.add_argument("--seed", type=_number(int, 0, "the seed"), help="seed of all random streams")
     exp.add_argument("--out", help="output directory (default out/NAME)")
     exp.add_argument("--overwrite", action="store_true", help="replace the contents of a non-empty --out")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -569,6 +532,7 @@ def _add_export(sub) -> None:
     essp = sub.add_parser("export-ssp", help="write a scenario as an SSP (SystemStructure.ssd plus an FMU per "
                                              "component) for other FMI/SSP tools")
     for p in (efmu, essp):
+        p.set_defaults(handler=_export)
         p.add_argument("scenario", help="scenario file, or the name of a shipped scenario")
         p.add_argument("--out", required=True, help="output directory")
         p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
@@ -584,22 +548,13 @@ def _add_export(sub) -> None:
     essp.add_argument("--name", help="system name and archive name (default: the scenario file's name)")
 
 
-def _dispatch(args) -> int:
-    if args.command == "experiment":
-        return _experiment(args)
-    if args.command == "models":
-        return _models(args)
-    if args.command in ("export-fmu", "export-ssp"):
-        return _export(args)
-    if args.command == "scenarios":
-        for p in sorted(_scenario_dir().glob("*.toml")):
-            first = p.read_text().splitlines()[0]
-            print(f"{p.stem:24s} {first.split('=', 1)[1].strip().strip(chr(34)) if '=' in first else ''}")
-            print(f"{'':24s} {p}")
-        return 0
-    if args.command == "demo":
-        return _run_scenario(shipped("cosim", "scenarios", "seed000_cartpole.toml"), Path(args.out), overwrite=True)
-    return _run(args)
+def _scenarios(args) -> int:
+    """``scenarios``: the shipped scenario files and their titles."""
+    for p in sorted(_scenario_dir().glob("*.toml")):
+        first = p.read_text().splitlines()[0]
+        print(f"{p.stem:24s} {first.split('=', 1)[1].strip().strip(chr(34)) if '=' in first else ''}")
+        print(f"{'':24s} {p}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -623,7 +578,7 @@ def main(argv: list[str] | None = None) -> int:
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
         logging.getLogger("cosim.fmu").setLevel(logging.INFO)
-    return run_command(lambda: _dispatch(args), debug=args.debug)
+    return run_command(lambda: args.handler(args), debug=args.debug)
 
 
 def _load_plugins(plugins: list[str]) -> int:

@@ -1,16 +1,6 @@
-"""One FMU file run on its own, as fmpy's ``simulate_fmu`` runs it: its default experiment,
-start values by name, inputs from a table, the outputs chosen by name
-(:func:`~cosim.fmu_run.open_fmu`, :func:`~cosim.fmu_run.run_fmu`; ``pendulum-cosim run Model.fmu`` on
-the command line).
-
-The FMU is a :class:`~cosim.fmi.fmu_component.FMUComponent` in the master, stepped with the
-communication step (Co-Simulation) or integrated between the points of the output grid
-(Model Exchange). Defaults, as fmpy takes them: the start and stop time of the FMU's
-``DefaultExperiment`` (else 0 and start + 1 s), its ``stepSize`` (else a 500th of the span)
-and, in Model Exchange, its ``tolerance`` (else 1e-5). Inputs come from a table (a CSV file
-or DataFrame with a ``time`` column [s] and one column per input, named as the FMU's
-inputs): continuous real inputs interpolated linearly between rows, the others held, as
-fmpy does.
+"""One FMU file run on its own, as fmpy's ``simulate_fmu`` runs it, with fmpy's defaults
+(``pendulum-cosim run Model.fmu`` on the command line; the documentation's page on
+third-party FMUs says how).
 """
 from __future__ import annotations
 
@@ -43,10 +33,8 @@ class FMUExperiment:
     ----------
     cosim : Cosimulation
         The FMU (component ``fmu``) and its input table (component ``input``), if any.
-    start_time, stop_time : float
-        [s]
-    step_size : float
-        The communication step (Model Exchange: the output grid) [s].
+    start_time, stop_time, step_size : float
+        [s] The span and the communication step (Model Exchange: the output grid).
     """
 
     cosim: Cosimulation
@@ -59,21 +47,17 @@ class FMUExperiment:
         keywords go to :meth:`cosim.core.master.Cosimulation.run`."""
         kw.setdefault("signals", [f"{NAME}.*"])
         df = self.cosim.run(self.stop_time, self.start_time, **kw)
-        df.columns = [c.split(".", 1)[1] if c.startswith(f"{NAME}.") else c for c in df.columns]
+        df.columns = [c.removeprefix(f"{NAME}.") for c in df.columns]
         return df
 
 
 def _times(md, start_time, stop_time, step_size) -> tuple[float, float, float]:
-    exp = md.defaultExperiment
-
-    def default(attribute: str):
-        return getattr(exp, attribute, None) if exp is not None else None
-
-    t0 = finite(start_time if start_time is not None else default("startTime") or 0.0, "start_time [s]")
-    t1 = finite(stop_time if stop_time is not None else default("stopTime") or t0 + 1.0, "stop_time [s]")
+    exp = md.defaultExperiment                     # None, or its attributes None where not given
+    t0 = finite(start_time if start_time is not None else getattr(exp, "startTime", None) or 0.0, "start_time [s]")
+    t1 = finite(stop_time if stop_time is not None else getattr(exp, "stopTime", None) or t0 + 1.0, "stop_time [s]")
     if t1 <= t0:
         raise ConfigurationError(f"stop_time {t1:g} s must be after start_time {t0:g} s")
-    h = step_size if step_size is not None else default("stepSize") or (t1 - t0) / 500
+    h = step_size if step_size is not None else getattr(exp, "stepSize", None) or (t1 - t0) / 500
     return t0, t1, positive(h, "step_size [s]")
 
 
@@ -96,7 +80,7 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
              step_size: float | None = None, start: Mapping | None = None, inputs=None,
              outputs: Sequence[str] | None = None, interface: str = "auto", rtol: float | None = None,
              isolate: bool = False) -> FMUExperiment:
-    """The FMU at ``path`` ready to run (see the module documentation).
+    """The FMU at ``path`` ready to run, with fmpy's defaults.
 
     Parameters
     ----------
@@ -124,8 +108,7 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
     path = Path(path)
     md = read_description(path)
     t0, t1, h = _times(md, start_time, stop_time, step_size)
-    exp = md.defaultExperiment
-    tol = rtol if rtol is not None else float(exp.tolerance) if exp is not None and exp.tolerance else 1e-5
+    tol = rtol if rtol is not None else float(getattr(md.defaultExperiment, "tolerance", None) or 1e-5)
     table = _input_table(md, inputs, h) if inputs is not None else None
     fmu = FMUComponent(NAME, path, h, inputs=table.output_names if table is not None else None,
                        outputs=None if outputs is None else list(outputs), start=dict(start or {}),
@@ -137,18 +120,15 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
 
 def run_fmu(path, stop_time: float | None = None, **options) -> pd.DataFrame:
     """Run the FMU at ``path`` and return its outputs (a DataFrame indexed by ``time`` [s],
-    one column per recorded variable). The options are those of :func:`open_fmu`; also
-    ``output_interval`` [s] (a multiple of the step) and ``progress``.
+    one column per recorded variable).
 
     Parameters
     ----------
-    path : str or Path
-    stop_time : float, optional
-        [s]
+    path, stop_time
+        As :func:`open_fmu` takes them.
     **options
-        Keywords of :func:`open_fmu` and of :meth:`FMUExperiment.run`.
+        Keywords of :func:`open_fmu`, and ``output_interval`` [s] (a multiple of the step)
+        and ``progress`` of :meth:`FMUExperiment.run`.
     """
-    run_keys = {"output_interval", "progress"}
-    run_kw = {k: options.pop(k) for k in list(options) if k in run_keys}
-    run_kw.setdefault("progress", False)
-    return open_fmu(path, stop_time, **options).run(**run_kw)
+    run_kw = {k: options.pop(k) for k in ("output_interval", "progress") if k in options}
+    return open_fmu(path, stop_time, **options).run(**{"progress": False, **run_kw})

@@ -1,16 +1,11 @@
-"""Writing and plotting co-simulation results, and guarding an output folder.
-
-Every file is written under a temporary name in its folder and renamed when complete
-(:func:`atomic_write`), so a reader, a crash or Ctrl-C never leaves a file that looks
-finished but is not. :class:`OutputFolder` refuses a non-empty folder unless asked to
-overwrite it, and then clears only a previous result of this project (recognised by its
-marker file, which lists what it wrote), never anything else; it locks the folder, so that
-two runs cannot write into one folder at once.
+"""Writing and plotting co-simulation results, and guarding an output folder
+(:class:`OutputFolder`); every file is written whole or not at all (:func:`atomic_write`).
 """
 from __future__ import annotations
 
 import contextlib
 import fcntl
+import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -37,7 +32,6 @@ def save_results(df: pd.DataFrame, out_dir, name: str = "results") -> list[Path]
 
     Returns the paths written.
     """
-
     if not isinstance(df, pd.DataFrame):
         raise TypeMismatchError(f"save_results takes a pandas DataFrame, got {type(df).__name__}")
     out = Path(out_dir)
@@ -54,26 +48,16 @@ MARKER = ".pendulum-cosim-output"
 
 
 def _files_below(folder: Path) -> list[str]:
-    """Every file, symlink and folder below ``folder`` (not following links), as relative
-    POSIX paths, the marker excluded."""
-    out = []
-    for root, dirs, files in os.walk(folder, followlinks=False):
-        rel = Path(root).relative_to(folder)
-        for name in dirs + files:
-            path = (rel / name).as_posix()
-            if path != MARKER:
-                out.append(path)
-    return sorted(out)
+    """Every entry below ``folder`` (links not followed) as a relative POSIX path, but the marker."""
+    paths = [(Path(root).relative_to(folder) / name).as_posix()
+             for root, dirs, files in os.walk(folder, followlinks=False) for name in dirs + files]
+    return sorted(p for p in paths if p != MARKER)
 
 
 class OutputFolder:
-    """An output folder held for one run: created, checked, optionally cleared, locked.
-
-    A folder is only ever cleared if it is a previous result of this project: the
-    :data:`MARKER` file this class writes lists every file the run wrote, and ``overwrite``
-    removes those and nothing else; a folder with anything else in it (the user's files,
-    the scenario itself) is refused with what is in it. Folders created for a run (parents
-    included) are removed again if the run wrote nothing.
+    """An output folder held for one run (a context manager): created (and removed again,
+    parents included, if the run wrote nothing), checked, optionally cleared, locked
+    (``flock``); only the files a previous run listed in its :data:`MARKER` are ever cleared.
 
     Parameters
     ----------
@@ -82,8 +66,6 @@ class OutputFolder:
     overwrite : bool
         Replace a previous result of this project in the folder (default False: refuse
         any non-empty folder).
-
-    Use as a context manager; the lock (``flock`` on the folder) is released at exit.
 
     Raises
     ------
@@ -105,19 +87,14 @@ class OutputFolder:
 
     def _manifest(self) -> set[str] | None:
         """What a previous run of this project wrote here, or None (no or unreadable marker)."""
-        import json
-
         try:
-            with open(self.path / MARKER, encoding="utf-8") as f:
-                data = json.load(f)
+            data = json.loads((self.path / MARKER).read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return None
         files = data.get("files") if isinstance(data, dict) and data.get("tool") == "pendulum-cosim" else None
         return set(files) if isinstance(files, list) and all(isinstance(x, str) for x in files) else None
 
     def _write_marker(self, files: list[str], state: str) -> None:
-        import json
-
         atomic_write(self.path / MARKER, lambda tmp: tmp.write_text(json.dumps(
             {"tool": "pendulum-cosim", "state": state, "files": files}, indent=1), encoding="utf-8"))
 
@@ -125,11 +102,7 @@ class OutputFolder:
         p = self.path
         if p.exists() and not p.is_dir():
             raise ConfigurationError(f"--out {p} is a file, not a folder")
-        missing = []
-        q = p.absolute()
-        while not q.exists():
-            missing.append(q)
-            q = q.parent
+        missing = [q for q in (p.absolute(), *p.absolute().parents) if not q.exists()]
         try:
             for d in reversed(missing):
                 d.mkdir()
@@ -222,7 +195,6 @@ def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[st
     """
     from matplotlib.figure import Figure
 
-
     if len(truth) != len(estimate):
         raise ConfigurationError("truth and estimate must list the same number of columns")
     for col in [*truth, *estimate, *[m for m in (measured or []) if m]]:
@@ -239,6 +211,11 @@ def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[st
         ax.set_ylabel(tc.split(".")[-1])
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize=8)
+    return _finish(fig, axes, title, path)
+
+
+def _finish(fig, axes, title: str, path):
+    """The figure's time axis and title laid out, written to the PNG file ``path`` if given."""
     axes[-1, 0].set_xlabel("time [s]")
     if title:
         fig.suptitle(title)
@@ -278,12 +255,6 @@ def plot_signals(df: pd.DataFrame, path=None, title: str = ""):
         ax.plot(df.index, df[col].astype(float), lw=1.0)
         ax.set_ylabel(col, rotation=0, ha="right", fontsize=8)
         ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s]")
     more = f" (the first {len(columns)} of {len(df.columns)} signals)" if len(df.columns) > len(columns) else ""
-    if title or more:
-        fig.suptitle(title + more)
-    fig.tight_layout()
-    if path is not None:
-        atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    return fig
+    return _finish(fig, axes, title + more, path)
 

@@ -1,76 +1,6 @@
-"""Scenario files (TOML): components, connections and settings of a co-simulation.
-
-Example (``cosim/scenarios/seed000_cartpole.toml`` is a complete one)::
-
-    title = "what this scenario shows"
-    plugins = ["my_filters.py"]     # optional: modules or .py files that register more types
-
-    [simulation]
-    stop_time = 5.0
-    order = "auto"                  # or "given" (list order), "jacobi"
-    loops = "refuse"                # or "iterate" (then loop_solver, loop_tolerance, loop_max_iter)
-    engine = "auto"                 # or "native", "python": which loop runs the base steps
-    threads = "auto"                # FMUs stepped in parallel where it pays; or a number (1: serially)
-
-    [recording]                     # optional
-    signals = ["plant.*", "ekf.*"]  # glob patterns (default: all)
-    output_interval = 0.01          # s (default: every base step)
-    stream = false                  # true: rows go to results.parquet in chunks (long runs)
-
-    [[component]]
-    name = "plant"
-    type = "fmu"
-    model = "cartpole"              # build this project's FMU; or path = "other.fmu"
-    fmi_version = 2                 # of the built FMU
-    interface = "auto"              # or "cs", "me" (then solver, solver_step, rtol)
-    period = 0.01
-    start = { x = 0.5, theta = 1.8 }
-
-    [[component]]
-    name = "ekf"
-    type = "estimator"
-    filter = "EKF"                  # any registered filter: KF, EKF, UKF, IAE, MFIAE, ...
-    model = "cartpole"              # or a Model Exchange FMU: model = "plant.fmu" with
-    period = 0.01                   # measurements = ["y_x", ...], inputs = ["F"] (see below)
-    x0 = [0.5, 0, 1.8, 0.5]
-    P0 = 1.0
-    Q = 0.2
-    R = 0.1
-
-    [connections]                   # input = output
-    "ekf.y_x" = "sensor.y_x"
-
-A clocked FMI 3.0 FMU is a ``type = "fmu"`` component like any other (``clock_intervals``
-sets the intervals the importer may set); its triggered input clocks take their activations
-from an output clock, another FMU's or a ``clock_ticks`` source's, through the same
-``[connections]`` table (see :mod:`cosim.core.clocking`)::
-
-    [[component]]
-    name = "ctrl"
-    type = "fmu"
-    path = "controller.fmu"         # a periodic clock "sample", a triggered clock "mode"
-    period = 0.01
-
-    [[component]]
-    name = "ticks"
-    type = "clock_ticks"
-    period = 0.01
-    times = [0.5, 1.25]             # or interval = ..., shift = ...
-
-    [connections]
-    "ctrl.mode" = "ticks.tick"
-
-    [plot]                          # optional: truth/estimate figure
-    truth = ["plant.x"]
-    estimate = ["ekf.x"]
-    measured = ["sensor.y_x"]       # optional, "" where a state is not measured
-
-Component types are the registry :data:`cosim.core.component.COMPONENTS` (``pendulum-cosim
-scenarios`` lists them): each component class declares its ``kind`` and builds itself from
-its table (:meth:`~cosim.core.component.Component.from_scenario`); by default the table's
-keys are the constructor's keyword arguments, checked against its signature, so an unknown
-or missing key is refused with the valid ones named. Relative paths are relative to the
-scenario file. Unknown tables and keys are refused with the valid ones named.
+"""Scenario files (TOML): components, connections and settings of a co-simulation; every
+table and key is listed in the co-simulation page of the documentation. Unknown tables and
+keys are refused with the valid ones named.
 """
 from __future__ import annotations
 
@@ -125,10 +55,6 @@ class ScenarioContext:
         The scenario file's folder (relative paths refer to it).
     fmu_dir : path
         Where to build this project's FMUs.
-
-    Attributes
-    ----------
-    base_dir, fmu_dir : Path
     """
 
     def __init__(self, base_dir, fmu_dir):
@@ -138,35 +64,29 @@ class ScenarioContext:
         """``p`` as a path, relative to the scenario file's folder unless absolute."""
         if not isinstance(p, str) or not p:
             raise TypeMismatchError(f"{what} must be a file name (a string), got {p!r}")
-        q = Path(p)
-        return q if q.is_absolute() else self.base_dir / q
+        return self.base_dir / p
 
     def model(self, name, parameters=None):
         """The registered plant model ``name`` with ``parameters`` (a table) overridden."""
-
-        if parameters is None:
-            parameters = {}
-        if not isinstance(parameters, dict):
+        if not isinstance(parameters, dict | None):
             raise TypeMismatchError(f"model_parameters must be a table, got {parameters!r}")
-        return get_model(name, **parameters)
+        return get_model(name, **(parameters or {}))
 
     @staticmethod
     def check_keys(target: Callable, table: dict, where: str, skip: tuple[str, ...] = ()) -> dict:
         """``table`` if its keys are keyword arguments of ``target`` (a class or a function)
         and every required one (besides ``skip``) is there; else UnknownNameError /
         ConfigurationError naming the keys (``where`` says whose)."""
-        fn = target.__init__ if inspect.isclass(target) else target
-        params = [p for p in list(inspect.signature(fn).parameters.values())[1 if inspect.isclass(target) else 0:]
-                  if p.name not in skip and p.kind not in (p.VAR_POSITIONAL,)]
+        params = [p for p in inspect.signature(target).parameters.values() if p.name not in skip]
         if any(p.kind == p.VAR_KEYWORD for p in params):
             return dict(table)
-        names = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        params = [p for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        names = [p.name for p in params]
         unknown = sorted(set(table) - set(names))
         if unknown:
             raise UnknownNameError(f"{where} has the unknown key{'s' if len(unknown) > 1 else ''} "
                                    f"{', '.join(map(repr, unknown))}; valid keys: {', '.join(names)}")
-        missing = [p.name for p in params if p.default is p.empty and p.name not in table
-                   and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        missing = [p.name for p in params if p.default is p.empty and p.name not in table]
         if missing:
             raise ConfigurationError(f"{where} needs the key{'s' if len(missing) > 1 else ''} "
                                      f"{', '.join(map(repr, missing))}")
@@ -209,7 +129,8 @@ class ScenarioContext:
 
 
 class Scenario:
-    """A parsed scenario: ``cosim`` (the :class:`Cosimulation`), ``stop_time``, ``plot``.
+    """A parsed scenario: ``cosim`` (the :class:`Cosimulation`), ``start_time`` and
+    ``stop_time`` [s], ``title``, and the checked ``recording`` and ``plot`` (or None) tables.
 
     Parameters
     ----------
@@ -218,16 +139,8 @@ class Scenario:
     base_dir : path
         Directory that relative paths in the scenario refer to.
     fmu_dir : path, optional
-        Where to build this project's FMUs (default ``<base_dir>/.fmus``); each FMI
-        version in its own subfolder, so FMI 2.0 and 3.0 builds of one model coexist.
-
-    Attributes
-    ----------
-    recording : dict
-        The ``[recording]`` table (``signals``, ``output_interval``, ``stream``), checked.
-    plot : dict or None
-        The ``[plot]`` table, checked against the recorded signals.
-    title : str
+        Where to build this project's FMUs (default ``<base_dir>/.fmus``), each FMI
+        version in its own subfolder.
     """
 
     def __init__(self, spec: dict, base_dir, fmu_dir=None):
@@ -252,17 +165,15 @@ class Scenario:
             raise ConfigurationError("the scenario needs at least one [[component]]")
         context = ScenarioContext(self.base_dir, self.fmu_dir)
         components = [self._component(c, context) for c in comps]
-        options = {k: sim[k] for k in ("order", "loops", "loop_tolerance", "loop_max_iter", "loop_solver",
-                                              "engine", "threads") if k in sim}
+        options = {k: v for k, v in sim.items() if k not in ("stop_time", "start_time", "step_size")}
         connections = spec.get("connections", {})
         if not isinstance(connections, dict):
             raise ConfigurationError("[connections] must be a table of \"input\" = \"output\"")
         self.cosim = Cosimulation(components, connections, step_size=sim.get("step_size"), **options)
         self.plot = self._plot(spec.get("plot"))
-        title = spec.get("title", "")
-        if not isinstance(title, str):
-            raise TypeMismatchError(f"title must be a string, got {title!r}")
-        self.title = title
+        self.title = spec.get("title", "")
+        if not isinstance(self.title, str):
+            raise TypeMismatchError(f"title must be a string, got {self.title!r}")
 
     @staticmethod
     def _recording(table) -> dict:
@@ -287,7 +198,7 @@ class Scenario:
         if len(plot["truth"]) != len(plot["estimate"]):
             raise ConfigurationError(f"[plot] truth and estimate must name as many signals ({len(plot['truth'])} "
                                      f"and {len(plot['estimate'])})")
-        if "measured" in plot and plot["measured"] and len(plot["measured"]) != len(plot["truth"]):
+        if plot.get("measured") and len(plot["measured"]) != len(plot["truth"]):
             raise ConfigurationError("[plot] measured must name one signal (or \"\") per truth signal")
         known = set(self.cosim.signal_names)
         for key, names in plot.items():
@@ -299,17 +210,9 @@ class Scenario:
 
     @classmethod
     def load(cls, path, fmu_dir=None) -> Scenario:
-        """Read a TOML scenario file at ``path``; ``fmu_dir`` as in the constructor.
-
-        Raises
-        ------
-        ConfigurationError
-            Missing file, a folder, not TOML, or any problem of the scenario itself.
-        """
-
-        path = Path(path)
-        spec = tomlfile.read(path, "scenario file")
-        return cls(spec, path.parent, fmu_dir)
+        """Read a TOML scenario file at ``path``; ``fmu_dir`` as in the constructor; a missing
+        file, a folder, not TOML or any problem of the scenario is a ConfigurationError."""
+        return cls(tomlfile.read(path, "scenario file"), Path(path).parent, fmu_dir)
 
     def run(self):
         """Run the co-simulation in memory with the scenario's recording settings; returns
@@ -317,7 +220,6 @@ class Scenario:
         rec = {k: v for k, v in self.recording.items() if k != "stream"}
         return self.cosim.run(self.stop_time, self.start_time, **rec)
 
-    # ---------------------------------------------------------------- builders
     @staticmethod
     def _component(c, context: ScenarioContext) -> Component:
         if not isinstance(c, dict):

@@ -5,6 +5,7 @@ every failure a :class:`~fmu_models.errors.ConfigurationError` naming the file.
 """
 from __future__ import annotations
 
+import re
 import tomllib
 from pathlib import Path
 
@@ -18,30 +19,16 @@ MAX_TOML_BYTES = 16 * 2**20
 MAX_TOML_DEPTH = 64
 
 
+#: Strings (an escape skipped in basic ones; an unclosed one runs to the end) and comments.
+_NOT_NESTING = re.compile(r'"(?:\\[\s\S]?|[^"\\])*(?:"|\Z)|\'[^\']*(?:\'|\Z)|#[^\n]*')
+
+
 def _depth(text: str) -> int:
     """The deepest nesting of ``[``/``{`` outside strings and comments (a scan, no parse)."""
     depth = deepest = 0
-    quote, i, n = "", 0, len(text)
-    while i < n:
-        ch = text[i]
-        if quote:
-            if ch == "\\" and quote == '"':
-                i += 2
-                continue
-            if ch == quote:
-                quote = ""
-        elif ch in "\"'":
-            quote = ch
-        elif ch == "#":
-            j = text.find("\n", i)
-            i = n if j < 0 else j
-            continue
-        elif ch in "[{":
-            depth += 1
-            deepest = max(deepest, depth)
-        elif ch in "]}":
-            depth -= 1
-        i += 1
+    for ch in re.findall(r"[][{}]", _NOT_NESTING.sub("", text)):
+        depth += 1 if ch in "[{" else -1
+        deepest = max(deepest, depth)
     return deepest
 
 

@@ -1,29 +1,7 @@
-"""A co-simulation written as an SSP (System Structure and Parameterization 1.0).
-
-:func:`export_ssp` writes a scenario whose every component is an FMU or can be written as
-one (:meth:`cosim.core.component.ExportsFMU.export_fmu`: FMUs, estimators, sources, process
-noise and sensors) as
-
-* ``SystemStructure.ssd``: one ``Component`` per component (``source`` =
-  ``resources/<name>.fmu``) with a connector per port, the connections, one system-level
-  ``ParameterBinding`` holding every parameter and start value as ``<component>.<variable>``,
-  the start and stop time as ``DefaultExperiment``, and each component's sample period in
-  an annotation (``type="org.pendulum-cosim"``), since SSP 1.0 has no place for it; and the
-  communication step (the greatest common divisor of the periods) in OMSimulator's
-  vendor annotation on the System (``type="org.openmodelica"``, ``oms:FixedStepMaster``),
-  which OMSimulator reads instead of its default 1 ms step;
-* ``resources/<name>.fmu``: the FMUs;
-* ``<name>.ssp``: the same two as one archive (what most tools open).
-
-Noise components draw from the counter generator in their FMUs (:mod:`cosim.components.noise`):
-give them ``generator = "counter"`` for the scenario to draw the same noise in the
-project's master; otherwise the export says so in its notes.
-
-Importers differ in how they order the FMUs within a step. fmpy's ``simulate_ssp``
-(FMI 2.0 only) steps every FMU with the connector values of the previous step (Jacobi)
-and starts every connector at 0, so over its first step the plant sees 0 for the force
-and the noise; after that a plant driven by sources gets the same inputs as in the
-project's master.
+"""A co-simulation written as an SSP 1.0 (:func:`export_ssp`): the SSD, an FMU per component
+in ``resources/`` and both as a ``.ssp`` archive; what the SSD holds (the periods in the
+``org.pendulum-cosim`` annotation, the step in OMSimulator's) is told in the documentation's
+page on running the loop in another tool.
 """
 from __future__ import annotations
 
@@ -34,10 +12,10 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.export.clocked import check_clocked
-from fmu_models.export.description import xml_attrs
 from fmu_models.export.platforms import add_platforms
 from fmu_models.infra.version import VERSION
 
@@ -46,6 +24,7 @@ from ..core.master import Cosimulation
 from ..core.schedule import base_step
 from ..fmi.archive import read_description
 from .schema import NS
+from .system import FMU_TYPE
 
 __all__ = ["ANNOTATION", "OMS_ANNOTATION", "SSPExport", "export_component", "export_ssp"]
 
@@ -64,10 +43,8 @@ class SSPExport:
 
     Attributes
     ----------
-    ssd : Path
-        ``SystemStructure.ssd``.
-    archive : Path
-        The ``.ssp`` file.
+    ssd, archive : Path
+        ``SystemStructure.ssd`` and the ``.ssp`` file.
     fmus : dict of str to Path
         Each component's FMU.
     notes : list of str
@@ -80,71 +57,53 @@ class SSPExport:
     notes: list = field(default_factory=list)
 
 
-def _value_xml(kind: str, value) -> str:
+def _value_text(kind: str, value) -> str:
     if kind == "boolean":
-        return f'<ssv:Boolean value="{"true" if value else "false"}"/>'
-    if kind == "integer":
-        return f'<ssv:Integer value="{int(value)}"/>'
-    return f'<ssv:Real value="{float(value)!r}"/>'
+        return "true" if value else "false"
+    return str(int(value)) if kind == "integer" else repr(float(value))
 
 
-def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], descriptions: dict, connections: dict,
+def _sub(parent, tag: str, **attributes) -> ET.Element:
+    """A child element of ``parent`` with the ``attributes`` that are not None."""
+    return ET.SubElement(parent, tag, {k: str(v) for k, v in attributes.items() if v is not None})
+
+
+def _ssd_text(name: str, components, exported: dict[str, ExportedFMU], variables: dict, connections: dict,
               start_time: float, stop_time: float | None, description: str, step_size: float) -> str:
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}" '
-             f'xmlns:ssv="{NS["ssv"]}" xmlns:pc="{PC_NS}" version="1.0"{xml_attrs(name=name)}'
-             f'{xml_attrs(generationTool=f"pendulum-cosim {VERSION}")}>',
-             f"  <ssd:System{xml_attrs(name=name, description=description or None)}>"]
-    params = []
-    for c in components:
-        variables = {v.name: v for v in descriptions[c.name].modelVariables}
-        for key, value in exported[c.name].parameters.items():
-            params.append((f"{c.name}.{key}", PORT_TYPES[variables[key].type], value))
+    """The SSD; ``variables``: each component's FMU variables by name."""
+    root = ET.Element("ssd:SystemStructureDescription", {
+        "xmlns:ssd": NS["ssd"], "xmlns:ssc": NS["ssc"], "xmlns:ssv": NS["ssv"], "xmlns:pc": PC_NS, "version": "1.0",
+        "name": name, "generationTool": f"pendulum-cosim {VERSION}"})
+    system = _sub(root, "ssd:System", name=name, description=description or None)
+    params = [(f"{c.name}.{key}", PORT_TYPES[variables[c.name][key].type], value)
+              for c in components for key, value in exported[c.name].parameters.items()]
     if params:
-        lines += ["    <ssd:ParameterBindings>", "      <ssd:ParameterBinding>", "        <ssd:ParameterValues>",
-                  '          <ssv:ParameterSet version="1.0" name="parameters">', "            <ssv:Parameters>"]
-        lines += [f"              <ssv:Parameter{xml_attrs(name=n)}>{_value_xml(k, v)}</ssv:Parameter>"
-                  for n, k, v in params]
-        lines += ["            </ssv:Parameters>", "          </ssv:ParameterSet>", "        </ssd:ParameterValues>",
-                  "      </ssd:ParameterBinding>", "    </ssd:ParameterBindings>"]
-    lines.append("    <ssd:Elements>")
+        values = _sub(_sub(_sub(system, "ssd:ParameterBindings"), "ssd:ParameterBinding"), "ssd:ParameterValues")
+        values = _sub(_sub(values, "ssv:ParameterSet", version="1.0", name="parameters"), "ssv:Parameters")
+        for n, kind, value in params:
+            _sub(_sub(values, "ssv:Parameter", name=n), f"ssv:{_SSP_TYPES[kind]}", value=_value_text(kind, value))
+    elements = _sub(system, "ssd:Elements")
     for c in components:
-        variables = {v.name: v for v in descriptions[c.name].modelVariables}
-        lines.append(f'      <ssd:Component{xml_attrs(name=c.name, type="application/x-fmu-sharedlibrary")}'
-                     f'{xml_attrs(source=f"resources/{c.name}.fmu")}>')
-        conns = [(p, "input") for p in c.input_names if p in variables]
-        conns += [(p, "output") for p in c.output_names if p in variables]
+        own = variables[c.name]
+        element = _sub(elements, "ssd:Component", name=c.name, type=FMU_TYPE, source=f"resources/{c.name}.fmu")
+        conns = [(p, "input") for p in c.input_names if p in own] + [(p, "output") for p in c.output_names if p in own]
         if conns:
-            lines.append("        <ssd:Connectors>")
-            lines += [f"          <ssd:Connector{xml_attrs(name=p, kind=k)}>"
-                      f"<ssc:{_SSP_TYPES[PORT_TYPES[variables[p].type]]}/></ssd:Connector>" for p, k in conns]
-            lines.append("        </ssd:Connectors>")
-        lines += ["        <ssd:Annotations>",
-                  f'          <ssc:Annotation type="{ANNOTATION}"><pc:Timing{xml_attrs(period=repr(c.period))}/>'
-                  "</ssc:Annotation>",
-                  "        </ssd:Annotations>", "      </ssd:Component>"]
-    lines.append("    </ssd:Elements>")
+            connectors = _sub(element, "ssd:Connectors")
+            for p, k in conns:
+                _sub(_sub(connectors, "ssd:Connector", name=p, kind=k), f"ssc:{_SSP_TYPES[PORT_TYPES[own[p].type]]}")
+        timing = _sub(_sub(element, "ssd:Annotations"), "ssc:Annotation", type=ANNOTATION)
+        _sub(timing, "pc:Timing", period=repr(c.period))
     if connections:
-        lines.append("    <ssd:Connections>")
+        wires = _sub(system, "ssd:Connections")
         for (dc, dp), (sc, sp) in connections.items():
-            lines.append(f"      <ssd:Connection{xml_attrs(startElement=sc, startConnector=sp, endElement=dc)}"
-                         f"{xml_attrs(endConnector=dp)}/>")
-        lines.append("    </ssd:Connections>")
-    lines += ["    <ssd:Annotations>",
-              f'      <ssc:Annotation type="{OMS_ANNOTATION}">',
-              f'        <oms:Annotations xmlns:oms="{OMS_NS}">',
-              "          <oms:SimulationInformation>",
-              f"            <oms:FixedStepMaster{xml_attrs(description='oms-ma', stepSize=repr(float(step_size)))}"
-              f"{xml_attrs(relativeTolerance='1e-4')}/>",
-              "          </oms:SimulationInformation>",
-              "        </oms:Annotations>",
-              "      </ssc:Annotation>",
-              "    </ssd:Annotations>"]
-    lines += ["  </ssd:System>",
-              f"  <ssd:DefaultExperiment{xml_attrs(startTime=repr(float(start_time)))}"
-              f"{xml_attrs(stopTime=None if stop_time is None else repr(float(stop_time)))}/>",
-              "</ssd:SystemStructureDescription>"]
-    return "\n".join(lines) + "\n"
+            _sub(wires, "ssd:Connection", startElement=sc, startConnector=sp, endElement=dc, endConnector=dp)
+    oms = _sub(_sub(system, "ssd:Annotations"), "ssc:Annotation", type=OMS_ANNOTATION)
+    oms = _sub(_sub(oms, "oms:Annotations", **{"xmlns:oms": OMS_NS}), "oms:SimulationInformation")
+    _sub(oms, "oms:FixedStepMaster", description="oms-ma", stepSize=repr(float(step_size)), relativeTolerance="1e-4")
+    _sub(root, "ssd:DefaultExperiment", startTime=repr(float(start_time)),
+         stopTime=None if stop_time is None else repr(float(stop_time)))
+    ET.indent(root, "  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
 def export_component(c, folder: Path, fmi_version: int, clocked: bool) -> ExportedFMU:
@@ -167,14 +126,13 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
     Parameters
     ----------
     system : Scenario or Cosimulation
-        What to export (a :class:`cosim.scenario.Scenario` brings its start and stop
-        time and title).
+        What to export (a :class:`cosim.scenario.Scenario` brings its times and title).
     out_dir : path
         Folder for ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if
         missing; those files are replaced, nothing else is touched).
     fmi_version : {2, 3}
         FMI version of the FMUs the export builds (FMU files of ``fmu`` components are
-        copied as they are). fmpy simulates SSPs of FMI 2.0 FMUs only.
+        copied as they are).
     name : str, optional
         System name and archive name (default ``system``).
     stop_time : float, optional
@@ -184,9 +142,8 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         (:func:`fmu_models.export.platforms.add_platforms`; needs the ``cross`` extra).
     clocked : bool
         Write the estimators and signal FMUs in their clocked form (FMI 3.0 only,
-        :mod:`fmu_models.export.clocked`): each has an input clock ``sample`` at its sample
-        period, which an FMI 3.0 importer schedules from the FMU itself (no clock connection
-        in the SSD); components without a clocked form are written unclocked (a note says so).
+        :mod:`fmu_models.export.clocked`: an input clock ``sample`` at the sample period, which
+        the importer schedules, no clock connection in the SSD); others unclocked, with a note.
 
     Raises
     ------
@@ -208,10 +165,10 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         resources.mkdir()
         exported = _export_all(cosim.components, resources, fmi_version, clocked)
         notes = [e.note for e in exported.values() if e.note] + _platforms(exported, platforms)
-        descriptions = {n: read_description(e.path) for n, e in exported.items()}
-        _check_connections(cosim.connections, descriptions)
+        variables = {n: {v.name: v for v in read_description(e.path).modelVariables} for n, e in exported.items()}
+        _check_connections(cosim.connections, variables)
         step = float(base_step({c.name: c.period for c in cosim.components})[0])
-        text = _ssd_text(name, cosim.components, exported, descriptions, cosim.connections,
+        text = _ssd_text(name, cosim.components, exported, variables, cosim.connections,
                          getattr(system, "start_time", 0.0), stop, getattr(system, "title", ""), step)
         _move_into(out_dir, tmp, text, name, [c.name for c in cosim.components])
     return SSPExport(out_dir / "SystemStructure.ssd", out_dir / f"{name}.ssp",
@@ -245,11 +202,11 @@ def _platforms(exported: dict[str, ExportedFMU], platforms: Sequence[str]) -> li
     return notes
 
 
-def _check_connections(connections: dict, descriptions: dict) -> None:
+def _check_connections(connections: dict, variables: dict) -> None:
     """Every connection's ends are variables of the exported FMUs."""
     for (dc, dp), (sc, sp) in connections.items():
         for comp, port, kind in ((sc, sp, "output"), (dc, dp, "input")):
-            have = {v.name for v in descriptions[comp].modelVariables if v.causality == kind}
+            have = {n for n, v in variables[comp].items() if v.causality == kind}
             if port not in have:
                 raise ConfigurationError(f"cannot export as an SSP: the FMU of {comp!r} has no {kind} {port!r} "
                                          f"(connection {sc}.{sp} -> {dc}.{dp}); its {kind}s: "
@@ -257,16 +214,12 @@ def _check_connections(connections: dict, descriptions: dict) -> None:
 
 
 def _move_into(out_dir: Path, tmp: Path, ssd_text: str, name: str, components: list[str]) -> None:
-    """The SSD, the archive and the FMUs written in ``tmp``, moved into ``out_dir`` (replacing
-    those files only)."""
+    """The SSD and the archive written in ``tmp`` and the FMUs there, moved into ``out_dir``."""
     (tmp / "SystemStructure.ssd").write_text(ssd_text, encoding="utf-8")
-    archive = tmp / f"{name}.ssp"
-    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
-        z.write(tmp / "SystemStructure.ssd", "SystemStructure.ssd")
-        for c in components:
-            z.write(tmp / "resources" / f"{c}.fmu", f"resources/{c}.fmu")
+    fmus = [f"resources/{c}.fmu" for c in components]
+    with zipfile.ZipFile(tmp / f"{name}.ssp", "w", zipfile.ZIP_DEFLATED) as z:
+        for rel in ["SystemStructure.ssd", *fmus]:
+            z.write(tmp / rel, rel)
     (out_dir / "resources").mkdir(exist_ok=True)
-    for c in components:
-        os.replace(tmp / "resources" / f"{c}.fmu", out_dir / "resources" / f"{c}.fmu")
-    os.replace(tmp / "SystemStructure.ssd", out_dir / "SystemStructure.ssd")
-    os.replace(archive, out_dir / f"{name}.ssp")
+    for rel in [*fmus, "SystemStructure.ssd", f"{name}.ssp"]:     # the FMUs before what names them
+        os.replace(tmp / rel, out_dir / rel)

@@ -1,14 +1,11 @@
 """Parameter bindings of an SSP 1.0 system: parameter sets (``ParameterValues`` inline or an
-``.ssv`` file), parameter mappings (``ParameterMapping`` inline or an ``.ssm`` file) with
-their transformations, the binding's ``prefix``, and the units of the values.
-
-A binding yields named values (:class:`Value`); which component and variable a name reaches
-is for the system to say (:mod:`cosim.ssp.system`): the hierarchical names of the SSP
-standard, relative to the element that holds the binding.
+``.ssv`` file), parameter mappings (inline or an ``.ssm`` file) with their transformations,
+the binding's ``prefix``, and the units of the values; which variable a name reaches is for
+:mod:`cosim.ssp.system` to say.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fmu_models.errors import ConfigurationError, FMUError
@@ -34,13 +31,13 @@ class Value:
     ----------
     name : str
         Its hierarchical name, the prefix and mapping applied.
-    value : float, int, bool or str
-    kind : {"real", "integer", "boolean", "string", "enumeration"}
+    value, kind
+        The value and its kind: "real", "integer", "boolean", "string" or "enumeration".
     unit : Unit or None
         The unit the value is given in (reals), if the parameter set names one.
     convert : bool
-        Whether the value is converted to the unit of the variable it sets (False where a
-        mapping entry says ``suppressUnitConversion``).
+        Whether it is converted to the unit of the variable it sets (not where a mapping
+        entry says ``suppressUnitConversion``).
     where : str
         Where it was read (for messages).
     """
@@ -55,10 +52,9 @@ class Value:
 
 def _parse_value(p, units: dict[str, Unit], where: str) -> Value:
     name = p.get("name")
-    for child in p:
-        tag = child.tag.rpartition("}")[2]
-        kind = _KINDS.get(tag)
-        if kind is None or child.tag != q(f"ssv:{tag}"):
+    for child in p.findall("ssv:*", NS):
+        kind = _KINDS.get(child.tag.rpartition("}")[2])
+        if kind is None:
             continue
         text, what = child.get("value"), f"{where}: parameter {name!r}"
         if kind == "real":
@@ -94,9 +90,8 @@ def _resolve(base: Path, root: Path, source: str, where: str) -> Path:
 
 
 def _document(holder, tag: str, inline: str, kind: str, base: Path, root: Path, where: str):
-    """The ``ssv:ParameterSet`` or ``ssm:ParameterMapping`` (``tag``) of a binding (``holder``:
-    the binding or its ``ParameterMapping`` element): from its ``source`` file, else the
-    element at ``inline`` below it (None if there is none); and where it was read."""
+    """The ``tag`` document of ``holder`` (a binding or its ``ParameterMapping``): its ``source``
+    file, else the element at ``inline`` below it (or None); and where it was read."""
     mime = holder.get("type", kind)
     if mime != kind:
         raise ConfigurationError(f"{where}: type {mime!r} is not read (only {kind})")
@@ -138,10 +133,9 @@ def binding_values(binding, base: Path, root: Path, where: str) -> list[Value]:
     ----------
     binding : Element
         The ``ssd:ParameterBinding``.
-    base : Path
-        The folder its relative sources are resolved against (the SSD's).
-    root : Path
-        The SSP's folder (no source may leave it).
+    base, root : Path
+        The SSD's folder (relative sources are resolved against it) and the SSP's (no
+        source may leave it).
     where : str
         The binding's place, for messages.
     """
@@ -156,11 +150,7 @@ def binding_values(binding, base: Path, root: Path, where: str) -> list[Value]:
     for p in doc.findall("ssv:Parameters/ssv:Parameter", NS):
         v = _parse_value(p, units, where)
         name = prefix + v.name
-        if name in mapping:
-            target, transform, convert = mapping[name]
-            value = v.value if transform is None else transform.apply(v.value, f"{where}: parameter {name!r}")
-            v = Value(target, value, v.kind, v.unit, convert, where)
-        else:
-            v = Value(name, v.value, v.kind, v.unit, v.convert, where)
-        out.append(v)
+        target, transform, convert = mapping.get(name, (name, None, v.convert))
+        value = v.value if transform is None else transform.apply(v.value, f"{where}: parameter {name!r}")
+        out.append(replace(v, name=target, value=value, convert=convert))
     return out

@@ -1,22 +1,6 @@
 """An SSP 1.0 opened in the project's master (:func:`open_ssp`) and run in one call
-(:func:`run_ssp`).
-
-What is read: a ``.ssp`` archive, its unpacked folder or its ``.ssd`` file; systems nested
-to any depth; connections between components and through the systems' connectors; unit
-conversions between connectors of different units (the SSD's and the FMUs' unit
-definitions) and the connections' transformations (linear, Boolean, integer and
-enumeration mappings), each a :class:`~cosim.components.conversion.Conversion` component
-on the connection; parameter bindings inline or in ``.ssv`` files, with parameter
-mappings inline or in ``.ssm`` files (:mod:`cosim.ssp.parameters`); component and
-connector names with spaces or dots (:mod:`cosim.ssp.system` says how they are named in
-the master). What is refused is named with the SSP element and the reason: a Component
-that is not an FMU, a signal dictionary, a file outside the SSP, a unit that cannot be
-converted.
-
-A component's communication step: ``communication_step`` if given (every FMU steps with
-it, as a tool with one fixed-step master does), else the period in the project's
-annotation (``org.pendulum-cosim``), the FMU's ``DefaultExperiment`` stepSize,
-OMSimulator's ``FixedStepMaster`` step, or ``step_size``, the first that is given.
+(:func:`run_ssp`); what is read and what is refused is listed in the documentation's page
+on third-party FMUs.
 """
 from __future__ import annotations
 
@@ -34,7 +18,7 @@ from ..fmi.archive import Extraction
 from ..fmi.fmu_component import FMUComponent
 from .export import ANNOTATION, OMS_ANNOTATION, OMS_NS, PC_NS
 from .schema import NS, parse_xml, q
-from .system import Element, FlatSystem, Link
+from .system import Element, FlatSystem, Link, _items
 
 __all__ = ["SSPSystem", "open_ssp", "run_ssp"]
 
@@ -49,9 +33,9 @@ class SSPSystem:
     ----------
     cosim : Cosimulation
         The system's FMUs, connections and parameters in the project's master.
+    name : str
     start_time, stop_time : float or None
         From the SSD's ``DefaultExperiment``.
-    name : str
     step_size : float or None
         The communication step of OMSimulator's annotation (``oms:FixedStepMaster``), if any.
     names : dict of str to str
@@ -75,12 +59,8 @@ class SSPSystem:
 
 
 def _annotation(node, kind: str, tag: str):
-    for a in node.findall("ssd:Annotations/ssc:Annotation", NS):
-        if a.get("type") == kind:
-            found = a.find(f".//{tag}")
-            if found is not None:
-                return found
-    return None
+    found = (a.find(f".//{tag}") for a in node.findall("ssd:Annotations/ssc:Annotation", NS) if a.get("type") == kind)
+    return next((f for f in found if f is not None), None)
 
 
 def _period(elem: Element, oms_step: float | None, step_size: float | None) -> float:
@@ -99,20 +79,18 @@ def _period(elem: Element, oms_step: float | None, step_size: float | None) -> f
                              "(step_size, or --step-size on the command line)")
 
 
-def _table_of(link: Link, steps, variables) -> dict:
-    """The mapping tables of ``steps`` composed into one table of the source's values."""
+def _table_of(link: Link, variables) -> dict:
+    """The mapping tables of ``link``'s steps composed into one table of the source's values."""
     table = None
-    for s in steps:
+    for s in link.steps:
         entries = dict(s.table)
         if s.kind == "enumeration":
-            src_items = {i.name: int(i.value) for i in getattr(variables[0].declaredType, "items", None) or []}
-            dst_items = {i.name: int(i.value) for i in getattr(variables[1].declaredType, "items", None) or []}
-            missing = [n for pair in entries.items() for n, items in zip(pair, (src_items, dst_items))
-                       if n not in items]
+            items = [_items(v) for v in variables]
+            missing = [n for pair in entries.items() for n, known in zip(pair, items) if n not in known]
             if missing:
                 raise ConfigurationError(f"connection {'.'.join(link.src)} -> {'.'.join(link.dst)}: the enumeration "
                                          f"mapping names {missing[0]!r}, not an item of the connected variables")
-            entries = {src_items[a]: dst_items[b] for a, b in entries.items()}
+            entries = {items[0][a]: items[1][b] for a, b in entries.items()}
         else:
             entries = {int(a): int(b) for a, b in entries.items()}
         table = entries if table is None else {k: entries[v] for k, v in table.items() if v in entries}
@@ -121,17 +99,16 @@ def _table_of(link: Link, steps, variables) -> dict:
 
 def _conversion(link: Link, period: float, variables) -> Conversion:
     """The component that carries ``link``'s steps (unit conversions, transformations)."""
-    types = [v.type for v in variables]
+    types = {"input_type": variables[0].type, "output_type": variables[1].type}
     name = f"{link.dst[0]}_{''.join(ch if ch.isalnum() else '_' for ch in link.dst[1])}_conversion"
     kinds = {s.kind == "linear" for s in link.steps}
     if kinds == {True}:
         a, b = 1.0, 0.0
         for s in link.steps:
             a, b = s.factor * a, s.factor * b + s.offset
-        return Conversion(name, period, a, b, input_type=types[0], output_type=types[1])
+        return Conversion(name, period, a, b, **types)
     if kinds == {False}:
-        return Conversion(name, period, table=_table_of(link, link.steps, variables),
-                          input_type=types[0], output_type=types[1])
+        return Conversion(name, period, table=_table_of(link, variables), **types)
     raise ConfigurationError(f"connection {'.'.join(link.src)} -> {'.'.join(link.dst)}: a linear transformation or "
                              "unit conversion and a mapping on one path cannot be combined")
 
@@ -139,25 +116,23 @@ def _conversion(link: Link, period: float, variables) -> Conversion:
 def _components(flat: FlatSystem, communication_step, oms_step, step_size) -> tuple[list, list]:
     """The FMU components, the conversions and the wiring of the flattened system."""
     sources = {link.src for link in flat.links}
-    components, by_name = [], {}
-    for elem in flat.elements.values():
+    fmus, elements = {}, {e.name: e for e in flat.elements.values()}
+    for elem in elements.values():
         kind = elem.node.get("implementation", "any")
         if kind not in _INTERFACES:
             raise ConfigurationError(f"component {'.'.join(elem.path)!r}: implementation {kind!r} is not one of "
                                      f"{', '.join(_INTERFACES)}")
         outs = [c for c, k in elem.connectors.items() if k == "output" or (elem.name, c) in sources]
-        c = FMUComponent(elem.name, elem.fmu, communication_step or _period(elem, oms_step, step_size),
-                         inputs=[c for c, k in elem.connectors.items() if k == "input"], outputs=outs,
-                         parameters=elem.parameters, interface=_INTERFACES[kind])
-        components.append(c)
-        by_name[elem.name] = elem
-    wiring = []
+        fmus[elem.name] = FMUComponent(elem.name, elem.fmu, communication_step or _period(elem, oms_step, step_size),
+                                       inputs=[c for c, k in elem.connectors.items() if k == "input"], outputs=outs,
+                                       parameters=elem.parameters, interface=_INTERFACES[kind])
+    components, wiring = list(fmus.values()), []
     for link in flat.links:
         if not link.steps:
             wiring.append((".".join(link.src), ".".join(link.dst)))
             continue
-        variables = [by_name[n].variable(port) for n, port in (link.src, link.dst)]
-        conv = _conversion(link, next(c.period for c in components if c.name == link.dst[0]), variables)
+        variables = [elements[n].variable(port) for n, port in (link.src, link.dst)]
+        conv = _conversion(link, fmus[link.dst[0]].period, variables)
         components.append(conv)
         wiring += [(".".join(link.src), f"{conv.name}.u"), (f"{conv.name}.y", ".".join(link.dst))]
     return components, wiring
@@ -192,19 +167,19 @@ def _locate(path: Path) -> tuple[Path, Path, Extraction | None]:
 @contextlib.contextmanager
 def open_ssp(path, communication_step: float | None = None, step_size: float | None = None,
              start: Mapping | None = None) -> Iterator[SSPSystem]:
-    """Open the SSP at ``path`` (a ``.ssp`` archive, its unpacked folder, or its ``.ssd``
-    file) as an :class:`.SSPSystem` (see the module documentation); a context manager that
-    removes what it unpacked.
+    """Open the SSP at ``path`` as an :class:`.SSPSystem`; a context manager that removes
+    what it unpacked.
 
     Parameters
     ----------
     path : str or Path
+        A ``.ssp`` archive, its unpacked folder, or its ``.ssd`` file.
     communication_step : float, optional
         [s] Every FMU steps with this one step instead of its own period, as a tool with a
-        single fixed-step master does (the project's FMUs keep their own sample instants
-        under any step).
+        single fixed-step master does.
     step_size : float, optional
-        [s] The step of the FMUs whose period the SSP does not give.
+        [s] The step of the FMUs whose period the SSP does not give (its own annotation, the
+        FMU's ``DefaultExperiment``, OMSimulator's ``FixedStepMaster``, first given first).
     start : mapping, optional
         Parameter and start values over the SSP's own, by hierarchical name
         (``Element.variable``, systems' names first) or ``component.variable``.
@@ -251,25 +226,19 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
 def run_ssp(path, stop_time: float | None = None, *, step_size: float | None = None,
             communication_step: float | None = None, start: Mapping | None = None,
             outputs: Sequence[str] | None = None, output_interval: float | None = None):
-    """Open the SSP at ``path`` (see :func:`open_ssp`), run it and return the recorded signals.
+    """Open the SSP at ``path``, run it and return the recorded signals (a DataFrame indexed
+    by ``time`` [s], one column per signal).
 
     Parameters
     ----------
-    path : str or Path
+    path, step_size, communication_step, start
+        As :func:`open_ssp` takes them.
     stop_time : float, optional
         [s] Default: the SSD's ``DefaultExperiment`` stop time.
-    step_size, communication_step : float, optional
-        [s] As :func:`open_ssp` takes them.
-    start : mapping, optional
-        Parameter and start values (as :func:`open_ssp` takes them).
     outputs : sequence of str, optional
         Glob patterns of the signals to record (``component.port``); default all.
     output_interval : float, optional
         [s] Record every this many seconds (a multiple of the base step).
-
-    Returns
-    -------
-    DataFrame indexed by ``time`` [s], one column per recorded signal.
     """
     with open_ssp(path, communication_step, step_size, start) as system:
         return system.run(stop_time, signals=outputs, output_interval=output_interval, progress=False)

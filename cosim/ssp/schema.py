@@ -1,8 +1,6 @@
-"""The XML of SSP 1.0 files as this project reads them: namespaces, size-limited parsing,
-unit definitions and their conversions, values of parameter sets, and the transformations
-of connections and parameter mappings (SSP 1.0, ``SystemStructureCommon``: ``Units``,
-``LinearTransformation``, ``BooleanMappingTransformation``, ``IntegerMappingTransformation``,
-``EnumerationMappingTransformation``).
+"""The XML of SSP 1.0 files as this project reads them: namespaces, size-limited parsing, and
+of ``SystemStructureCommon`` the unit definitions with their conversions and the linear and
+mapping transformations of connections and parameter mappings.
 """
 from __future__ import annotations
 
@@ -140,16 +138,15 @@ class Transformation:
     @classmethod
     def read(cls, parent, where: str) -> Transformation | None:
         """The transformation element below ``parent`` (a connection or mapping entry), if any."""
-        for kind, tag in (("linear", "LinearTransformation"), ("boolean", "BooleanMappingTransformation"),
-                          ("integer", "IntegerMappingTransformation"),
-                          ("enumeration", "EnumerationMappingTransformation")):
+        e = parent.find("ssc:LinearTransformation", NS)
+        if e is not None:
+            return cls("linear", finite(e.get("factor", "1"), f"{where}: LinearTransformation factor"),
+                       finite(e.get("offset", "0"), f"{where}: LinearTransformation offset"))
+        for kind, conv in (("boolean", _bool), ("integer", _int), ("enumeration", lambda text, _: text)):
+            tag = f"{kind.capitalize()}MappingTransformation"
             e = parent.find(f"ssc:{tag}", NS)
             if e is None:
                 continue
-            if kind == "linear":
-                return cls(kind, finite(e.get("factor", "1"), f"{where}: LinearTransformation factor"),
-                           finite(e.get("offset", "0"), f"{where}: LinearTransformation offset"))
-            conv = {"boolean": _bool, "integer": _int, "enumeration": lambda s, w: s}[kind]
             entries = e.findall("ssc:MapEntry", NS)
             if not entries:
                 raise ConfigurationError(f"{where}: {tag} without a MapEntry")
@@ -166,10 +163,4 @@ class Transformation:
             if s == value:
                 return t
         raise ConfigurationError(f"{where}: the {self.kind} mapping has no entry for the value {value!r}")
-
-    def describe(self) -> str:
-        """The transformation in words (for messages and ``describe()``)."""
-        if self.kind == "linear":
-            return f"{self.factor:g} * u + {self.offset:g}"
-        return f"{self.kind} mapping " + ", ".join(f"{s}->{t}" for s, t in self.table)
 

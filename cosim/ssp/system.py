@@ -1,19 +1,10 @@
 """An SSP 1.0 system structure flattened for the master: nested systems dissolved into their
-FMU components, connections through the systems' own connectors followed to the FMU
-output that drives each FMU input (with the unit conversions and transformations met on
-the way), and the parameter bindings of every level resolved to component variables.
-
-Names: a component is named by its path of SSD element names, each made an identifier
-(characters other than letters, digits and ``_`` become ``_``) and joined by ``_``
-(``Drive Train`` in ``Vehicle`` becomes ``Vehicle_Drive_Train``); ``FlatSystem.names`` maps
-each SSD path (``Vehicle.Drive Train``) to its name. Connector names are the FMU variable
-names, spaces and dots included.
-
-Parameter bindings follow the standard: the names of a binding are relative to the element
-that holds it (a system's: ``Element.variable``, nested systems' names prepended; a
-component's: its variables), a later binding of one element wins over an earlier one, and a
-binding of a system over those of the elements inside it. A name that reaches no variable
-is ignored, as the standard says, and logged as a warning.
+FMU components, each FMU input followed back to the FMU output that drives it (with the
+unit conversions and transformations met on the way), and the parameter bindings of every
+level resolved to component variables with the standard's precedence (a later binding over
+an earlier one, a system's over its elements'; a name that reaches no variable is logged
+and ignored). A component is named by its SSD path made an identifier (``Drive Train`` in
+``Vehicle``: ``Vehicle_Drive_Train``).
 """
 from __future__ import annotations
 
@@ -26,7 +17,7 @@ from fmu_models.errors import ConfigurationError, FMUError
 
 from ..fmi.archive import read_description
 from .parameters import Value, binding_values
-from .schema import NS, Transformation, Unit, read_units, unit_factor
+from .schema import BASE_UNITS, NS, Transformation, Unit, read_units, unit_factor
 
 __all__ = ["Element", "FlatSystem", "Link"]
 
@@ -46,14 +37,10 @@ class Element:
         Its SSD element names from the top system down.
     name : str
         Its component name in the master.
-    fmu : Path
-    node : Element
-        Its ``ssd:Component``.
-    md : fmpy ModelDescription
-    connectors : dict of str to str
-        Connector name -> kind.
-    parameters : dict
-        Resolved parameter and start values by variable name.
+    fmu, node, md
+        Its FMU file, its ``ssd:Component`` and the FMU's fmpy model description.
+    connectors, parameters : dict
+        Connector name -> kind; the resolved parameter and start values by variable name.
     """
 
     path: tuple
@@ -79,6 +66,11 @@ class Link:
     steps: list
 
 
+def _items(variable) -> dict[str, int]:
+    """An FMU variable's enumeration items by name (none for other types)."""
+    return {i.name: int(i.value) for i in getattr(variable.declaredType, "items", None) or []}
+
+
 def _identifier(text: str) -> str:
     name = re.sub(r"\W", "_", text, flags=re.ASCII)
     return f"c_{name}" if not name or name[0].isdigit() else name
@@ -86,16 +78,14 @@ def _identifier(text: str) -> str:
 
 def _variable_unit(element: Element | None, connector: str) -> Unit | None:
     """The unit of an FMU variable, from the FMU's own unit definitions."""
-    if element is None:
-        return None
-    v = element.variable(connector)
-    name = v is not None and (v.unit or (v.declaredType.unit if v.declaredType is not None else None))
+    v = element.variable(connector) if element is not None else None
+    name = v is not None and (v.unit or getattr(v.declaredType, "unit", None))
     if not name:
         return None
     for u in element.md.unitDefinitions or []:
         if u.name == name and u.baseUnit is not None:
             b = u.baseUnit
-            return Unit(name, (b.kg, b.m, b.s, b.A, b.K, b.mol, b.cd, b.rad), b.factor, b.offset)
+            return Unit(name, tuple(getattr(b, k) for k in BASE_UNITS), b.factor, b.offset)
     return Unit(name, ())
 
 
@@ -112,8 +102,7 @@ def _conversion(src: Unit | None, dst: Unit | None, where: str) -> Transformatio
 
 
 class FlatSystem:
-    """The SSD's top system (``system``, an ``ssd:System``) flattened (see the module
-    documentation).
+    """The SSD's top system flattened (see the module documentation).
 
     Parameters
     ----------
@@ -128,10 +117,8 @@ class FlatSystem:
 
     Attributes
     ----------
-    elements : dict of tuple to Element
-        The FMU components by SSD path.
-    names : dict of str to str
-        SSD path (dotted) -> component name.
+    elements, names : dict
+        The FMU components (:class:`Element`) by SSD path; SSD path (dotted) -> component name.
     links : list of Link
     """
 
@@ -142,13 +129,13 @@ class FlatSystem:
         self.systems: dict[tuple, object] = {}
         self.connectors: dict[tuple, tuple[str, str | None]] = {}     # node -> (kind, SSD unit)
         self.edges: dict[tuple, tuple[tuple, list]] = {}               # node -> (source node, steps)
-        self._taken: set[str] = set()
         self.names: dict[str, str] = {}
         self._walk(document.find("ssd:System", NS), ())
-        self.links = [link for node in self._fmu_inputs() if (link := self._link(node)) is not None]
+        inputs = [(path, c) for path, e in self.elements.items() for c, k in e.connectors.items()
+                  if k == "input" and (path, c) in self.edges]
+        self.links = [link for node in inputs if (link := self._link(node)) is not None]
         self._parameters()
 
-    # ------------------------------------------------------------------ structure
     def _walk(self, system, path: tuple) -> None:
         self.systems[path] = system
         self._read_connectors(system, path)
@@ -190,10 +177,9 @@ class FlatSystem:
             raise FMUError(f"component {label!r}: source {source!r} points outside the SSP")
         name = base = _identifier("_".join(path))
         n = 1
-        while name in self._taken:
+        while name in self.names.values():
             n += 1
             name = f"{base}_{n}"
-        self._taken.add(name)
         self.names[label] = name
         self._read_connectors(node, path)
         conns = {c: k for (p, c), (k, _) in self.connectors.items() if p == path}
@@ -217,15 +203,9 @@ class FlatSystem:
         if dst in self.edges:
             raise ConfigurationError(f"{self.where}: {'.'.join((*dst[0], dst[1]))} is connected twice")
         where = f"{self.where}: connection {self._label(c)}"
-        steps = []
-        if c.get("suppressUnitConversion", "false") not in ("true", "1"):
-            conversion = _conversion(self._unit(src), self._unit(dst), where)
-            if conversion is not None:
-                steps.append(conversion)
-        transform = Transformation.read(c, where)
-        if transform is not None:
-            steps.append(transform)
-        self.edges[dst] = (src, steps)
+        convert = c.get("suppressUnitConversion", "false") not in ("true", "1")
+        steps = [convert and _conversion(self._unit(src), self._unit(dst), where), Transformation.read(c, where)]
+        self.edges[dst] = (src, [step for step in steps if step])
 
     @staticmethod
     def _label(c) -> str:
@@ -236,14 +216,7 @@ class FlatSystem:
 
     def _unit(self, node) -> Unit | None:
         name = self.connectors[node][1]
-        if name is not None:
-            return self.units[name]
-        return _variable_unit(self.elements.get(node[0]), node[1])
-
-    # ------------------------------------------------------------------ links
-    def _fmu_inputs(self) -> list[tuple]:
-        return [(path, c) for path, e in self.elements.items() for c, k in e.connectors.items()
-                if k == "input" and (path, c) in self.edges]
+        return self.units[name] if name is not None else _variable_unit(self.elements.get(node[0]), node[1])
 
     def _link(self, dst: tuple) -> Link | None:
         """The FMU output that drives the FMU input ``dst``, followed back through system
@@ -263,12 +236,9 @@ class FlatSystem:
             node = src
         return Link((self.elements[src[0]].name, src[1]), (self.elements[dst[0]].name, dst[1]), steps)
 
-    # ------------------------------------------------------------------ parameters
     def _parameters(self) -> None:
-        holders = [(path, node) for path, node in self.systems.items()]
-        holders += [(path, e.node) for path, e in self.elements.items()]
-        holders.sort(key=lambda h: -len(h[0]))          # the deepest first: higher levels win
-        for path, node in holders:
+        holders = [*self.systems.items(), *((path, e.node) for path, e in self.elements.items())]
+        for path, node in sorted(holders, key=lambda h: -len(h[0])):      # the deepest first: higher levels win
             for i, b in enumerate(node.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS)):
                 where = f"{self.where}: parameter binding {i + 1} of {'.'.join(path) or 'the system'}"
                 for value in binding_values(b, self.base, self.root, where):
@@ -309,12 +279,10 @@ class FlatSystem:
         x = value.value
         where = f"{value.where}: parameter {value.name!r}"
         if value.kind == "enumeration":
-            items = getattr(v.declaredType, "items", None) or []
-            match = [int(i.value) for i in items if i.name == x]
-            if not match:
-                raise ConfigurationError(f"{where}: {x!r} is not an item of {var!r} "
-                                         f"({', '.join(i.name for i in items)})")
-            x = match[0]
+            items = _items(v)
+            if x not in items:
+                raise ConfigurationError(f"{where}: {x!r} is not an item of {var!r} ({', '.join(items)})")
+            x = items[x]
         if value.kind == "real" and value.convert:
             conversion = _conversion(value.unit, _variable_unit(elem, var), where)
             steps = ([conversion] if conversion is not None else []) + steps
