@@ -1,10 +1,13 @@
 """The component protocol: what the co-simulation master needs from every component.
 
-Every component, FMU or Python, is a :class:`Component`, the one class the master depends on;
-optional capabilities are protocols the master tests with ``isinstance`` (:class:`FastBinding`,
-:class:`ExportsFMU`, :class:`StateEstimator`). The calls at an instant, the zero-order hold, the
-feedthrough declaration, exact integer signals and :class:`StopRequest` are described in the
-extending page of the documentation ("The component protocol").
+Every component, FMU or Python, is a :class:`Component`, the one class the master depends on. At
+each of its instants the master calls ``output(t, u)`` (in an order that respects the declared
+direct ``feedthrough``), records the row, then ``update(t, u)``; ``reset`` comes before a run,
+``close`` after it; a ``reentrant`` component may evaluate ``output`` twice at an instant (an
+algebraic loop). Optional capabilities are protocols tested with ``isinstance``:
+:class:`FastBinding` (``bind``, the loop's fast path), :class:`ExportsFMU`, :class:`StateEstimator`.
+The whole protocol (zero-order hold, exact integer signals, :class:`StopRequest`) is on the
+extending page of the documentation.
 """
 from __future__ import annotations
 
