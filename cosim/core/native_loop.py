@@ -1,48 +1,27 @@
-"""A run's loop in the native kernel, and the driver that answers the kernel's events.
+"""A run's loop in the native kernel (:class:`NativeLoop`), and which thread steps each FMU (:class:`Stepping`).
 
-The kernel (:mod:`cosim.core.native`) runs the base steps of a :class:`~cosim.core.run.Run`
-and records its rows itself; it returns to Python with an event when it needs Python:
+The kernel (:mod:`cosim.core.native`) runs a :class:`~cosim.core.run.Run`'s base steps and records
+its rows; it returns to Python for a call that runs in Python (``EV_PY``), a filter's hook
+(``EV_HOOK``), a noise stream's refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: about
+:data:`CHUNK_SECONDS`; the bar moves, Ctrl-C is seen) and a full record buffer (``EV_FLUSH``). It
+ends with ``EV_DONE``, ``EV_NONFINITE``, ``EV_FAIL`` (the operation's own ``fail`` raises the
+Python path's error) or a stop request; whichever way, also by an exception, the run's position
+and the state the kernel keeps for Python objects are handed back to them first.
 
-* ``EV_PY``: a call that runs in Python (a Python component, Model Exchange, an isolated
-  FMU, integer ports, an algebraic loop), made as the Python loop makes it; the kernel
-  resumes after it;
-* ``EV_HOOK``: a filter's Python hook after its step, then its operation pointed at the
-  arrays the hook replaced; the kernel resumes after it;
-* ``EV_REFILL``: a noise stream drawn to its end: its next block is drawn, and the kernel
-  resumes at the same operation;
-* ``EV_CHUNK``: a chunk of base steps is done (about :data:`CHUNK_SECONDS` of wall time, at
-  most :data:`CHUNK` steps): the progress bar moves, Ctrl-C is seen;
-* ``EV_FLUSH``: the record buffer is full: the sink writes it.
-
-The loop ends with ``EV_DONE`` (every base step ran), ``EV_NONFINITE`` (a signal became NaN
-or inf in the block that ended), ``EV_FAIL`` (a native operation failed: its own handler
-raises the error the Python path raises) or a component's stop request. Whichever way it
-ends, also by an exception, the run's position and the state the kernel keeps for Python
-objects (a filter's current state copy and step count) are first handed back to them.
-
-**Parallel stepping** (:class:`Stepping`, the master's ``threads`` option). In an update
-phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other, so the
-runs of them between two calls into Python
-(:meth:`~cosim.core.native.Program.parallel_runs`) may step on threads of a pool made once
-per run. FMUs that share a loaded library, and FMUs that declare
-``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their serial order. The
-first base steps run on the threads, the groups of FMUs taken in turn; after one block that
-warms the threads (and ends the measurement where the threads took more than
-:data:`HOPELESS_RATIO` times the serial time even so), each FMU update's time and each
-segment's wall time are measured, in chunks of :data:`MEASURE_BLOCKS` blocks, until the
-measured chunks last :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at
-least; sooner where the threads plainly lose or win, see :data:`CLEAR_RATIO`); the updates'
-times then assign the groups to the threads (the costliest first, each to the least loaded
-thread). With ``threads="auto"`` the run goes on serially unless the measured steps gained
-at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
-time (the sum of the updates' times: what they cost one after the other); the threads are
-measured again in the same way after :data:`RECHECK` base steps, then after twice as many
-each time (and :data:`RECHECK_SECONDS` at least), so that a run that began while other
-processes took the cores takes the threads once they are free, and the reverse. An integer
-``threads`` keeps that many threads (at most one per group of FMUs). Each FMU's calls are
-the serial run's, in the same order, so the results are the same bit for bit; a failure is
-the first in the serial order, and if it is a stop request the updates the other threads
-already made are not made again.
+Parallel stepping (the master's ``threads``; see the co-simulation page of the documentation):
+the FMU updates of an update phase between two calls into Python
+(:meth:`~cosim.core.native.Program.parallel_runs`) may step on a pool's threads; FMUs sharing a
+library or declaring ``canBeInstantiatedOnlyOncePerProcess`` stay on one thread. A measurement
+runs the groups on the threads in turn: a warming block (that ends it if the threads took more
+than :data:`HOPELESS_RATIO` times the serial time), then chunks of :data:`MEASURE_BLOCKS` blocks
+timing each update and each segment for :data:`MEASURE_SECONDS` (sooner, see
+:data:`CLEAR_RATIO`); the groups then go to the threads, the costliest first, each to the least
+loaded. ``threads="auto"`` keeps them only for a gain of :data:`MIN_GAIN` per base step and at
+most :data:`KEEP_RATIO` of the serial time (the sum of the updates' times), and measures again
+after :data:`RECHECK` base steps (twice as many each time) and :data:`RECHECK_SECONDS`; an
+integer ``threads`` keeps that many (at most one per group). Each FMU gets the serial run's
+calls in their order: the same results bit for bit, a failure is the first in the serial order,
+and after a stop request the updates other threads made are not made again.
 """
 from __future__ import annotations
 
@@ -56,18 +35,7 @@ from fmu_models.errors import CosimError
 
 from . import crash_guard
 from .component import StopRequest
-from .native import (
-    EV_CHUNK,
-    EV_DONE,
-    EV_FAIL,
-    EV_FLUSH,
-    EV_HOOK,
-    EV_NONFINITE,
-    EV_PY,
-    EV_REFILL,
-    STEP_KINDS,
-    KState,
-)
+from .native import EV_CHUNK, EV_DONE, EV_FAIL, EV_FLUSH, EV_HOOK, EV_NONFINITE, EV_PY, EV_REFILL, STEP_KINDS, KState
 
 __all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "HOPELESS_RATIO", "KEEP_RATIO", "MEASURE_BLOCKS",
            "MEASURE_SECONDS", "MIN_GAIN", "RECHECK", "RECHECK_SECONDS", "NativeLoop", "Stepping"]
