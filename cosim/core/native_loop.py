@@ -99,20 +99,15 @@ def _once_per_process(component) -> bool:
 
 
 class Stepping:
-    """Which thread steps each FMU update of a run (see the module documentation).
+    """Which thread steps each FMU update of a run (see the module documentation); ``text`` says
+    it in words (the master's ``stepping``).
 
     Parameters
     ----------
     run : cosim.core.run.Run
         The run, with its native program and kernel.
     kst : KState
-        The kernel's state (its ``lane``, ``seg``, ``fail_at``, ``cost``, ``timing`` and
-        ``pool`` are set here).
-
-    Attributes
-    ----------
-    text : str
-        The decision in words (the master's ``stepping``).
+        The kernel's state (its ``lane``, ``seg``, ``fail_at``, ``cost``, ``timing`` and ``pool`` set here).
     """
 
     def __init__(self, run, kst: KState) -> None:
@@ -172,10 +167,9 @@ class Stepping:
         """The components of ``calls``, in words."""
         return ", ".join(self.run.owner.get(c, "?") for c in calls)
 
-    def _assign(self) -> tuple[dict, list[float], list[list]]:
-        """The costliest group first, each to the least loaded thread (the calling thread
-        also makes the filters' held inputs): the thread of each call, each thread's load
-        [s] and calls."""
+    def _assign(self) -> tuple[dict, list[list]]:
+        """The thread of each call and each thread's calls: the costliest group first, each to the
+        least loaded thread (the calling thread also makes the filters' held inputs)."""
         cost = self.cost
         span = {call: (first, end) for run in self.runs for call, first, end, _ in run}
         costs = [sum(cost[slice(*span[c])].sum() for c in calls) for _, calls in self.groups]
@@ -188,11 +182,11 @@ class Stepping:
             loads[me] += costs[g]
             members[me] += self.groups[g][1]
             thread_of.update(dict.fromkeys(self.groups[g][1], me))
-        return thread_of, loads, members
+        return thread_of, members
 
     def _parallel(self, thread_of: dict, members: list) -> bool:
-        """Step on the pool's threads (started if need be) by ``thread_of``, the calls of each
-        thread being ``members``; False (and serially) if the threads could not be started."""
+        """Step on the pool's threads by ``thread_of`` (each thread's calls: ``members``); False
+        (and serially) if the threads could not be started."""
         if self.pool is None:
             self.pool = self.run.kernel.kernel_pool_start(self.n) or None
             if self.pool is None:
@@ -204,9 +198,8 @@ class Stepping:
         return True
 
     def chunk(self, steps: int, seconds: float) -> None:
-        """A chunk of ``steps`` base steps done in ``seconds`` [s]: once the measured chunks
-        last :data:`MEASURE_SECONDS`, balance the threads, keep them or go on serially; with
-        ``threads="auto"``, measure again when it is time (see the module documentation)."""
+        """A chunk of ``steps`` base steps done in ``seconds`` [s]: a measurement goes on, or is
+        decided, or (``threads="auto"``) a new one starts when it is time."""
         kst = self.kst
         if self.state == "measure":
             if self.warm and kst.k < self.run.n and not self._hopeless():
@@ -227,38 +220,34 @@ class Stepping:
                 self._measure(warm=True)
 
     def _measure(self, warm: bool) -> None:
-        """Count a measurement afresh (the kernel times the updates), its first block not
-        counted if ``warm``."""
+        """Start a measurement afresh (the kernel times the updates), not counting its first block if ``warm``."""
         self.state, self.warm, self.measured = "measure", warm, (0, 0.0)
         self.kst.timing, self.kst.seg_time = 1, 0.0
         self.cost[:] = 0.0
 
     def chunk_length(self, adaptive: int) -> int:
         """The next chunk's base steps: ``adaptive`` (the loop's own), or while measuring one
-        block to warm the threads, then :data:`MEASURE_BLOCKS` blocks (a return to Python
-        between chunks may let the threads fall asleep: a wake-up each chunk)."""
+        warming block, then :data:`MEASURE_BLOCKS` blocks (the threads may sleep between chunks)."""
         if self.state != "measure":
             return adaptive
         return BLOCK if self.warm else MEASURE_BLOCKS * BLOCK
 
     def _hopeless(self) -> bool:
-        """Whether ``threads="auto"`` stops at the warming block already: the threads took
-        more than :data:`HOPELESS_RATIO` times the serial time even with their start counted
-        (the other cores are busy, e.g. a campaign's workers on every core)."""
+        """Whether ``threads="auto"`` ends the measurement at the warming block (the other cores
+        busy, e.g. a campaign's workers on every core)."""
         return self.threads == "auto" and self.kst.seg_time > HOPELESS_RATIO * self.cost.sum()
 
     def _plain(self) -> bool:
-        """Whether the steps measured so far already decide it: the threads took longer than the
-        serial time, or less than :data:`CLEAR_RATIO` of it (a cheap FMU's run is then not
-        spent measuring; a wrong call is corrected at the next measurement)."""
+        """Whether the steps measured so far decide it already (a cheap FMU's run is not spent
+        measuring; a wrong call is corrected at the next measurement)."""
         serial, parallel = self.cost.sum(), self.kst.seg_time
         return parallel > serial or parallel < CLEAR_RATIO * serial
 
     def _decide(self, steps: int) -> None:
-        """The measured chunks of ``steps`` base steps done: the threads balanced by the
-        updates' measured times, and kept or (``threads="auto"``) left for the serial loop."""
+        """After ``steps`` measured base steps: the threads balanced by the updates' times, and kept
+        or (``threads="auto"``) left for the serial loop."""
         serial, parallel = self.cost.sum() / max(steps, 1), self.kst.seg_time / max(steps, 1)
-        self.thread_of, _, self.members = self._assign()
+        self.thread_of, self.members = self._assign()
         measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)}"
         if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
             self._serial(f"serial: the FMU updates that may step at once took {measured}")
@@ -273,8 +262,7 @@ class Stepping:
 
     def finish(self, steps: int, seconds: float) -> None:
         """The loop ended ``steps`` base steps and ``seconds`` [s] after the last chunk: a
-        measurement under way is decided on what it measured (what ``text`` says), and
-        the pool's threads end."""
+        measurement under way is decided on what it measured, and the pool's threads end."""
         if self.state == "measure" and self.measured[0] + steps > 0:
             self.measured = (self.measured[0] + steps, self.measured[1] + seconds)
             self._decide(self.measured[0])
@@ -289,8 +277,7 @@ class Stepping:
 
     def ran_ahead(self, at: int) -> dict:
         """After the operation ``at`` failed in a parallel segment: the update calls the other
-        threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
-        failed operation's ``fail``)."""
+        threads made in it, each with ``f(t)`` replaying its outcome (nothing, or its ``fail``)."""
         starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
         if not self.on_threads or not starts:          # the segment ran serially
             return {}
@@ -300,24 +287,13 @@ class Stepping:
             made[call] = made.get(call, True) and (last < 0 or q <= last)
             if q == last:
                 failed[call] = q
-        out = {}
-        for call, done in made.items():
-            if call in failed:
-                q = failed[call]
-                out[call] = lambda t, q=q: program.meta[q].fail(program.ops[q], t)
-            elif done:
-                out[call] = lambda t: None
-        return out
+        replay = {call: (lambda t: None) for call, done in made.items() if done}
+        return replay | {call: (lambda t, q=q: program.meta[q].fail(program.ops[q], t)) for call, q in failed.items()}
 
 
 class NativeLoop:
-    """A run's base steps in the native kernel (see the module documentation).
-
-    Parameters
-    ----------
-    run : cosim.core.run.Run
-        The run, set up, with its native program and kernel.
-    """
+    """A run's base steps in the native kernel; ``run`` (a :class:`~cosim.core.run.Run`) is set up,
+    with its native program and kernel."""
 
     def __init__(self, run) -> None:
         self.run, self.program = run, run.program
@@ -375,9 +351,8 @@ class NativeLoop:
         self._end(event)
 
     def _hook(self, after_step: bool) -> None:
-        """The Python hook of the operation the kernel stopped at: a filter's after its step
-        (``after_step``: the operation is then rebound, the kernel resumes after it), or a
-        noise stream's refill (the kernel resumes at the operation)."""
+        """The hook of the operation the kernel stopped at: a filter's ``after_step`` (the operation
+        rebound, resumed after it), or a noise stream's refill (resumed at the operation)."""
         at, program = self.kst.at, self.program
         self.run.failing, meta = program.calls[at], program.meta[at]
         meta.hook()
@@ -397,9 +372,8 @@ class NativeLoop:
         self.done, self.since, kst.kstop = kst.k, now, kst.k + self.stepping.chunk_length(self.chunk)
 
     def _end(self, event: int) -> None:
-        """The end of the loop, by ``event`` (the position handed back): the bar's last steps,
-        the non-finite signal raised, or the failed call's error raised or the stop request
-        finished."""
+        """The end of the loop by ``event``: the bar's last steps, the non-finite signal or the
+        failed call's error raised, or the stop request finished."""
         run, kst, program = self.run, self.kst, self.program
         if event == EV_DONE:
             run.bar.update(run.n + 1 - self.done)
