@@ -80,18 +80,9 @@ class Port:
 
 @dataclass(frozen=True)
 class ExportedFMU:
-    """A component written as an FMU by :meth:`ExportsFMU.export_fmu`.
-
-    Attributes
-    ----------
-    path : Path
-        The ``.fmu`` file.
-    parameters : dict
-        Parameter and start values (by FMU variable name) that make the FMU behave as the
-        component: they go into the SSP's parameter bindings.
-    note : str
-        What differs from the component, if anything (empty: nothing).
-    """
+    """A component written as an FMU by :meth:`ExportsFMU.export_fmu`: the ``.fmu`` file ``path``, the
+    ``parameters`` (parameter and start values by FMU variable name) that make it behave as the
+    component (the SSP's parameter bindings), and a ``note`` of what differs (empty: nothing)."""
 
     path: Path
     parameters: dict
@@ -125,17 +116,8 @@ def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Por
 
 
 class StopRequest(Exception):           # a request, not an error: the run ends normally
-    """Raised by a component's ``update`` to end the run normally at ``time``.
-
-    Parameters
-    ----------
-    component : str
-        Who asks.
-    time : float
-        When [s] (within the component's step).
-    reason : str
-        Why, in words.
-    """
+    """Raised by the ``update`` of ``component`` (its name) to end the run normally at ``time`` [s]
+    (within its step), for the ``reason`` in words."""
 
     def __init__(self, component: str, time: float, reason: str = ""):
         super().__init__(f"{component} asked to stop at t = {time:g} s" + (f" ({reason})" if reason else ""))

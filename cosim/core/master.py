@@ -91,8 +91,7 @@ class Cosimulation:
     clock_plan : ClockPlan or None
         The clocks and clock connections, checked (None without clocks).
     clock_ticks : DataFrame or None
-        Every clock activation of the last run (columns ``time`` [s], ``clock``:
-        ``component.clock``), or None without clocks.
+        The last run's clock activations (columns ``time`` [s], ``clock``), None without clocks.
     stepping : str
         How the last run stepped its FMUs: serially and why, or on which threads.
 
@@ -134,13 +133,11 @@ class Cosimulation:
         else:
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
-        #: The clocks and clock connections, checked here before any run (None without any).
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
         self.engine = engine                    # checked by the property, like a later change
         self.threads = threads
         self.stepping = "no run yet"
-        #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
 
@@ -212,9 +209,8 @@ class Cosimulation:
     # ---------------------------------------------------------------- engine
     @property
     def engine(self) -> str:
-        """The loop that runs the co-simulation, ``"auto"`` (the native kernel
-        where it can run, the Python loop elsewhere), ``"native"`` (refused where the kernel
-        cannot run the co-simulation) or ``"python"``; may be changed between runs."""
+        """The loop that runs the co-simulation (see the constructor; ``"native"`` is refused where
+        the kernel cannot run it); may be changed between runs."""
         return self._engine
 
     @engine.setter
@@ -338,7 +334,7 @@ class Cosimulation:
 
     # ---------------------------------------------------------------- running
     def _steps(self, stop_time: float, start_time: float, output_interval) -> tuple[int, int]:
-
+        """The run's base steps and the base steps between rows, checked."""
         stop, start = finite(stop_time, "stop_time [s]"), finite(start_time, "start_time [s]")
         n = self._multiple(stop - start, "stop_time - start_time",
                            f"stop_time {stop!r} s - start_time {start!r} s = {stop - start!r} s")

@@ -163,11 +163,10 @@ class Program:
     updates: list
 
     def parallel_runs(self) -> list[list[tuple]]:
-        """The runs of update calls that may run at once, with at least two FMU updates: per
-        run, its calls in their order as ``(call, first, end, fmu)`` (its operations
-        ``ops[first:end]``; ``fmu``: an FMU's update, set inputs and ``doStep``, which may run
-        on a worker thread; else a filter's held input, made by the calling thread). Any
-        other call (one into Python, or a native operation that writes signals) ends a run."""
+        """The runs of update calls that may run at once, with two FMU updates at least: each a list
+        of ``(call, first, end, fmu)`` (operations ``ops[first:end]``; ``fmu``: an FMU's set inputs
+        and ``doStep``, for a worker thread; else a filter's held input, for the calling thread).
+        Any other call (into Python, or a native one that writes signals) ends a run."""
         runs: list[list[tuple]] = []
         for start, length in zip(self.upd_start.tolist(), self.upd_len.tolist()):
             run: list[tuple] = []
@@ -184,17 +183,9 @@ class Program:
         return [run for run in runs if sum(fmu for *_, fmu in run) >= 2]
 
     def lanes(self, runs: list[list[tuple]], thread_of: dict) -> tuple[np.ndarray, np.ndarray]:
-        """The kernel's ``lane`` and ``seg`` arrays (see ``kernel.c``): every run of
-        :meth:`parallel_runs` whose FMU updates fall on two threads or more becomes a parallel
-        segment.
-
-        Parameters
-        ----------
-        runs : list
-            :meth:`parallel_runs`.
-        thread_of : dict
-            The thread (0: the calling one) of each FMU update call.
-        """
+        """The kernel's ``lane`` and ``seg`` arrays (see ``kernel.c``): each of the ``runs`` (of
+        :meth:`parallel_runs`) whose FMU updates fall on two threads or more by ``thread_of`` (the
+        thread of each, 0: the calling one) becomes a parallel segment."""
         lane = np.full(len(self.ops), -1, dtype=np.int64)
         seg = np.zeros(len(self.ops), dtype=np.int64)
         for run in runs:
@@ -207,14 +198,8 @@ class Program:
 
 
 def build_program(schedule: list) -> Program:
-    """The kernel's program of a run.
-
-    Parameters
-    ----------
-    schedule : list of (tuple, tuple)
-        Per base step of the hyperperiod, the output calls and the update calls the Python
-        loop makes (equal entries shared).
-    """
+    """The kernel's program of a run from its ``schedule``: per base step of the hyperperiod, the
+    output calls and the update calls (a tuple each) the Python loop makes, equal entries shared."""
     index: dict[int, int] = {}
     pattern = np.empty(len(schedule), dtype=np.int64)
     structs: list[OpStruct] = []

@@ -18,6 +18,7 @@ the phase (``reset``, ``bind``, ``output``, ``update``) and the call being made 
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Sequence
@@ -248,10 +249,8 @@ class Run:
         t_next = t + self.h
         upds = self.schedule[k % L][1]
         for g in upds[upds.index(self.failing) + 1:]:
-            try:
+            with contextlib.suppress(StopRequest):
                 self.ran_ahead.get(g, g)(t)         # an update a thread already made: not again
-            except StopRequest:
-                pass
         ts = request.time
         if not np.isfinite(ts) or abs(ts - t_next) <= 1e-9 * max(1.0, abs(t_next)) or ts > t_next:
             ts = t_next
