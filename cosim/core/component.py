@@ -142,8 +142,7 @@ def split_port(ref, what: str, owner: str = "component") -> tuple[str, str]:
     the word for its first part in that message ("component", "member")."""
     if not isinstance(ref, str) or "." not in ref or ref.startswith(".") or ref.endswith("."):
         raise ConfigurationError(f"{what} {ref!r} must be written '{owner}.port'")
-    first, port = ref.split(".", 1)
-    return first, port
+    return tuple(ref.split(".", 1))
 
 
 class BoundCalls:

@@ -249,11 +249,8 @@ class Cosimulation:
     def component_paths(self) -> dict[str, str | None]:
         """Per component, why its calls run in Python (None: in the native kernel)."""
         whole = self._whole_run_python()
-        out = {}
-        for c in self.components:
-            reason = getattr(c, "native_reason", None)
-            out[c.name] = whole or (reason() if callable(reason) else "a Python component")
-        return out
+        return {c.name: whole or (c.native_reason() if callable(getattr(c, "native_reason", None))
+                                  else "a Python component") for c in self.components}
 
     # ---------------------------------------------------------------- description
     def describe(self) -> str:

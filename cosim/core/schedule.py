@@ -76,7 +76,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
             "or set step_size and periods that divide it")
     hyper = 1
     for r in ratios.values():
-        hyper = hyper * r // math.gcd(hyper, r)
+        hyper = math.lcm(hyper, r)
         if hyper > MAX_HYPERPERIOD:
             raise ResourceError(
                 f"the periods ({listing}) repeat their pattern only every {hyper}+ base steps of "
