@@ -1,27 +1,19 @@
 """A run's loop in the native kernel (:class:`NativeLoop`), and which thread steps each FMU (:class:`Stepping`).
 
 The kernel (:mod:`cosim.core.native`) runs a :class:`~cosim.core.run.Run`'s base steps and records
-its rows; it returns to Python for a call that runs in Python (``EV_PY``), a filter's hook
-(``EV_HOOK``), a noise stream's refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: about
-:data:`CHUNK_SECONDS`; the bar moves, Ctrl-C is seen) and a full record buffer (``EV_FLUSH``). It
-ends with ``EV_DONE``, ``EV_NONFINITE``, ``EV_FAIL`` (the operation's own ``fail`` raises the
-Python path's error) or a stop request; whichever way, also by an exception, the run's position
-and the state the kernel keeps for Python objects are handed back to them first.
+its rows; it returns to Python for a Python call (``EV_PY``), a filter's hook (``EV_HOOK``), a noise
+refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: the bar moves, Ctrl-C is seen) and a full record
+buffer (``EV_FLUSH``), and ends with ``EV_DONE``, ``EV_NONFINITE``, ``EV_FAIL`` or a stop request,
+the run's position and the Python objects' state handed back first whichever way it ends.
 
-Parallel stepping (the master's ``threads``; see the co-simulation page of the documentation):
-the FMU updates of an update phase between two calls into Python
-(:meth:`~cosim.core.native.Program.parallel_runs`) may step on a pool's threads; FMUs sharing a
-library or declaring ``canBeInstantiatedOnlyOncePerProcess`` stay on one thread. A measurement
-runs the groups on the threads in turn: a warming block (that ends it if the threads took more
-than :data:`HOPELESS_RATIO` times the serial time), then chunks of :data:`MEASURE_BLOCKS` blocks
-timing each update and each segment for :data:`MEASURE_SECONDS` (sooner, see
-:data:`CLEAR_RATIO`); the groups then go to the threads, the costliest first, each to the least
-loaded. ``threads="auto"`` keeps them only for a gain of :data:`MIN_GAIN` per base step and at
-most :data:`KEEP_RATIO` of the serial time (the sum of the updates' times), and measures again
-after :data:`RECHECK` base steps (twice as many each time) and :data:`RECHECK_SECONDS`; an
-integer ``threads`` keeps that many (at most one per group). Each FMU gets the serial run's
-calls in their order: the same results bit for bit, a failure is the first in the serial order,
-and after a stop request the updates other threads made are not made again.
+Parallel stepping (the master's ``threads``; the co-simulation page of the documentation): the FMU
+updates between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`) may step
+on a pool's threads, FMUs sharing a library or ``canBeInstantiatedOnlyOncePerProcess`` on one. A
+measurement (one warming block, then chunks timed until :data:`MEASURE_SECONDS`) balances the
+groups on the threads, costliest first; ``threads="auto"`` keeps them only where they gained (the
+constants below say by how much) and measures again now and then. Each FMU gets the serial run's
+calls in order: the same results bit for bit, a failure is the first in the serial order, and
+after a stop request no update is made twice.
 """
 from __future__ import annotations
 

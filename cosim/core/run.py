@@ -1,20 +1,15 @@
 """One run of a co-simulation: its state, its setup, the Python loop and the run's end.
 
 :meth:`Cosimulation.run <cosim.core.master.Cosimulation.run>` and ``run_to_parquet`` make a
-:class:`Run` and call :meth:`Run.execute`. The run holds the signal arrays (``values``; ``integers``,
-the exact integer and Boolean signals; ``source``, what the components read: ``values``, or a copy
-taken before each instant with ``order="jacobi"``), the sink and its row writer, the bound calls,
-the schedule (per base step of the hyperperiod, the output calls and the update calls), the position
-(base step ``k``, next row ``j``; the block being run starts at base step ``k0`` and row ``jb``),
-the phase (``reset``, ``bind``, ``output``, ``update``) and the call being made (``failing``).
-
-1. Setup (:meth:`Run.setup`): reset, clocks attached, calls bound, schedule listed, the native
-   program built where the kernel runs (:mod:`cosim.core.native`).
-2. The loop: :meth:`Run.python_loop` or :class:`~cosim.core.native_loop.NativeLoop`, the same
-   results bit for bit; every signal is checked for NaN and inf after each block.
-3. The end: the sink's result (:meth:`Run.finish`, :meth:`Run.finish_stop` for a stop request), a
-   failure's CosimError with the rows so far (:meth:`Run.failure`), and whatever happened every
-   component closed (:meth:`Run.teardown`).
+:class:`Run` and call :meth:`Run.execute`: the setup (:meth:`Run.setup`: reset, clocks attached,
+calls bound, the schedule listed, the native program built where the kernel runs), the loop
+(:meth:`Run.python_loop` or :class:`~cosim.core.native_loop.NativeLoop`, the same results bit for
+bit, every signal checked for NaN and inf after each block of
+:data:`~cosim.core.native_loop.BLOCK` base steps), and the end (the sink's result, a stop request
+finished by :meth:`Run.finish_stop`, a failure's CosimError with the rows so far, and whatever
+happened every component closed by :meth:`Run.teardown`). Its position: base step ``k``, next row
+``j``, the block's first base step ``k0`` and row ``jb``; ``phase`` is ``reset``, ``bind``,
+``output`` or ``update``, ``failing`` the call being made.
 """
 from __future__ import annotations
 
@@ -135,12 +130,9 @@ class Run:
         for c in cs.components:
             self.bound[c.name] = self._bind(c)
         self.owner = {fn: name for name, calls in self.bound.items() for fn in calls}
-        entries: dict[frozenset, tuple] = {}            # one entry per set of due components
-        for i in range(cs._hyper):
-            due = frozenset(c.name for c in cs.components if i % cs._ratio[c.name] == 0)
-            if due not in entries:
-                entries[due] = self._entry(due)
-            self.schedule.append(entries[due])
+        dues = [frozenset(c.name for c in cs.components if i % cs._ratio[c.name] == 0) for i in range(cs._hyper)]
+        entries = {due: self._entry(due) for due in dict.fromkeys(dues)}      # one per set of due components
+        self.schedule = [entries[due] for due in dues]
         self.program = self._program()
 
     def _bind(self, c) -> tuple:
