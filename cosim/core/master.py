@@ -49,13 +49,11 @@ class Cosimulation:
         (:class:`~cosim.components.plant_model.ModelComponent`) and Python components. With the
         default order the list order does not change results.
     connections : mapping or iterable of pairs
-        ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input
-        gets at most one source, of a compatible type (see
-        :func:`cosim.core.component.ports_compatible`). Every input of a Python component must
-        be connected; unconnected FMU inputs keep their start values.
+        ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input gets at most
+        one source, of a compatible type (:func:`cosim.core.component.ports_compatible`). Every
+        input of a Python component must be connected; unconnected FMU inputs keep their start values.
     step_size : float, optional
-        Base step [s]; every period must be an integer multiple of it. Default: the
-        greatest common divisor of the periods.
+        Base step [s]; every period must be a multiple of it. Default: the periods' greatest common divisor.
     order : {"auto", "given", "jacobi"}
         Evaluation order within an instant: from the connections and the declared direct
         feedthrough (default), the list order, or every component reading the values before it.
@@ -366,11 +364,9 @@ class Cosimulation:
         stop_time, start_time : float
             [s]; the span must be a multiple of the base step.
         signals : str or sequence of str, optional
-            Glob patterns of the signals to record (e.g. ``["plant.*", "ekf.x"]``);
-            default all.
+            Glob patterns of the signals to record (e.g. ``["plant.*", "ekf.x"]``); default all.
         output_interval : float, optional
-            Record every this many seconds (a multiple of the base step); default every
-            base step.
+            Record every this many seconds (a multiple of the base step); default every base step.
         progress : bool, optional
             Show a progress bar; default: shown when the run takes more than 2 s.
 
@@ -381,10 +377,9 @@ class Cosimulation:
         Raises
         ------
         CosimError
-            A component raised, an FMU returned discard/error/fatal, or a signal became
-            NaN or inf; the message names the component and the time, and
-            ``error.results`` holds the rows recorded until then. FMU instances are
-            always freed.
+            A component raised, an FMU returned discard/error/fatal, or a signal became NaN or
+            inf; the message names the component and the time, ``error.results`` holds the rows
+            so far. FMU instances are always freed.
         Interrupted
             Ctrl-C: ``error.partial`` holds the rows recorded so far.
         ResourceError
