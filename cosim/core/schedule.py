@@ -174,10 +174,11 @@ def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
 
 def _cycle(scc: list, edges: dict, why: dict) -> str:
     """A readable cycle through the units of one strongly connected component."""
-    members, path = set(scc), [scc[-1]]
-    while (nxt := next(w for w in edges[path[-1]] if w in members)) not in path:
+    members, path, seen = set(scc), [scc[-1]], {scc[-1]: 0}
+    while (nxt := next(w for w in edges[path[-1]] if w in members)) not in seen:
+        seen[nxt] = len(path)
         path.append(nxt)
-    cycle = path[path.index(nxt):] + [nxt]
+    cycle = path[seen[nxt]:] + [nxt]
     return ", ".join(f"{why[(a, b)][0]} -> {why[(a, b)][1]}" for a, b in itertools.pairwise(cycle))
 
 
@@ -196,7 +197,10 @@ def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str 
         or become a :class:`Group` with ``loop=True`` (all its components must be
         ``reentrant``).
     """
-    connected = {c.name: {q for (d, q) in conn if d == c.name} for c in components}
+    connected: dict[str, set] = {c.name: set() for c in components}
+    for (d, q) in conn:
+        if d in connected:
+            connected[d].add(q)
     split: set[str] = set()
     while True:                 # split the reentrant components of a cycle, while that breaks one
         units = [u for c in components for u in _units(c, connected[c.name], c.name in split)]
