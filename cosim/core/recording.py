@@ -194,7 +194,9 @@ class ParquetSink(_Rows):
         self._ipc.write_table(table)
         self.total += rows
 
-    def _end_stream(self) -> None:
+    def _close(self) -> None:
+        """Close the Parquet writer and end the crash-safe stream."""
+        self.writer.close()
         crash_guard.stream_ended(id(self))
         with contextlib.suppress(OSError, self._pa.ArrowException):
             self._ipc.close()
@@ -204,16 +206,14 @@ class ParquetSink(_Rows):
 
     def finish(self) -> Path:
         """End of a successful run: close and rename to the target; returns it."""
-        self.writer.close()
-        self._end_stream()
+        self._close()
         os.replace(self.tmp, self.path)
         return self.path
 
     def abort(self) -> Path | None:
         """End of a failed or interrupted run (after the last :meth:`flush`): keep the rows so far as
         ``<name>.partial.parquet`` (returned), or nothing if no row was recorded."""
-        self.writer.close()
-        self._end_stream()
+        self._close()
         if self.total == 0:
             with contextlib.suppress(OSError):
                 os.unlink(self.tmp)
