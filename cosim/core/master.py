@@ -131,11 +131,13 @@ class Cosimulation:
         else:
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
+        #: The clocks and clock connections, checked here before any run (None without any).
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
         self.engine = engine                    # checked by the property, like a later change
         self.threads = threads
         self.stepping = "no run yet"
+        #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
 

@@ -1,19 +1,21 @@
-"""A run's loop in the native kernel (:class:`NativeLoop`), and which thread steps each FMU (:class:`Stepping`).
+"""A run's loop in the native kernel, and which thread steps each FMU.
 
 The kernel (:mod:`cosim.core.native`) runs a :class:`~cosim.core.run.Run`'s base steps and records
-its rows; it returns to Python for a Python call (``EV_PY``), a filter's hook (``EV_HOOK``), a noise
-refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: the bar moves, Ctrl-C is seen) and a full record
-buffer (``EV_FLUSH``), and ends with ``EV_DONE``, ``EV_NONFINITE``, ``EV_FAIL`` or a stop request,
-the run's position and the Python objects' state handed back first whichever way it ends.
+its rows, driven by :class:`NativeLoop`; it returns to Python for a Python call (``EV_PY``), a
+filter's hook (``EV_HOOK``), a noise refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: the bar
+moves, Ctrl-C is seen) and a full record buffer (``EV_FLUSH``), and ends with ``EV_DONE``,
+``EV_NONFINITE``, ``EV_FAIL`` or a stop request, the run's position and the Python objects' state
+handed back first whichever way it ends.
 
-Parallel stepping (the master's ``threads``; the co-simulation page of the documentation): the FMU
-updates between two calls into Python (:meth:`~cosim.core.native.Program.parallel_runs`) may step
-on a pool's threads, FMUs sharing a library or ``canBeInstantiatedOnlyOncePerProcess`` on one. A
-measurement (one warming block, then chunks timed until :data:`MEASURE_SECONDS`) balances the
-groups on the threads, costliest first; ``threads="auto"`` keeps them only where they gained (the
-constants below say by how much) and measures again now and then. Each FMU gets the serial run's
-calls in order: the same results bit for bit, a failure is the first in the serial order, and
-after a stop request no update is made twice.
+Parallel stepping (:class:`Stepping`, the master's ``threads``; the co-simulation page of the
+documentation): the FMU updates between two calls into Python
+(:meth:`~cosim.core.native.Program.parallel_runs`) may step on a pool's threads, FMUs sharing a
+library or ``canBeInstantiatedOnlyOncePerProcess`` on one. A measurement (one warming block, then
+chunks timed until :data:`MEASURE_SECONDS`) balances the groups on the threads, costliest first;
+``threads="auto"`` keeps them only where they gained (the constants below say by how much) and
+measures again now and then. Each FMU gets the serial run's calls in order: the same results bit
+for bit, a failure is the first in the serial order, and after a stop request no update is made
+twice.
 """
 from __future__ import annotations
 
