@@ -1,12 +1,10 @@
 """Algebraic loops solved at each instant (``loops="iterate"`` of :class:`~cosim.core.master.Cosimulation`).
 
-A loop's outputs depend directly on each other at one instant. Its signals ``z`` (every
-output of its components) are a fixed point of ``g``, one pass of the components' output
-calls from ``z``. Newton's method (default) solves ``g(z) = z`` with ``g`` a Jacobi pass
-(every component reads ``z``) and a finite-difference Jacobian, exact in one step for a
-linear loop; fixed-point iteration repeats a Gauss-Seidel sweep ``z = g(z)``. Iteration
-stops when every signal changes by less than ``tolerance * (1 + |z|)``; a loop that does
-not converge within ``max_iter`` iterations stops the run with a CosimError.
+A loop's signals ``z`` (every output of its components) are a fixed point of ``g``, one pass of
+the components' output calls from ``z``. Newton's method (default) solves ``g(z) = z`` with ``g`` a
+Jacobi pass and a finite-difference Jacobian (exact in one step for a linear loop); fixed-point
+iteration repeats a Gauss-Seidel sweep ``z = g(z)``. Iteration stops when every signal changes by
+less than ``tolerance * (1 + |z|)``, or fails with a CosimError after ``max_iter`` iterations.
 """
 from __future__ import annotations
 
@@ -26,12 +24,11 @@ class LoopSolver:
     Parameters
     ----------
     units : sequence of Unit
-        The loop's units (:class:`~cosim.core.schedule.Unit`, of a loop group of the
-        evaluation order).
+        The loop's units (:class:`~cosim.core.schedule.Unit`, of a loop group).
     outputs : sequence of callable
         Each unit's bound output call ``f(t)``, which reads and writes ``values``.
     signals : ndarray of int, shape (n_loop,)
-        The loop's signals: the positions in ``values`` of its components' outputs.
+        The positions in ``values`` of the loop's components' outputs.
     values : ndarray, shape (n_signals,)
         The run's signal values.
     tolerance : float

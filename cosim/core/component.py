@@ -1,61 +1,13 @@
 """The component protocol: what the co-simulation master needs from every component.
 
-Every component, FMU or Python, is a :class:`Component`. The master depends on this
-class only. A component has a ``name``, a sample ``period`` [s], typed input and output
-ports (:class:`Port`), and declares which outputs depend *directly* on which inputs
-(its ``feedthrough`` attribute). At each of its sample instants ``t`` (every ``period``
-seconds from the start time) the master calls, for all components due at ``t``:
-
-1. :meth:`Component.output` ``(t, u) -> y`` in an order that respects the direct
-   dependencies (a component's feedthrough inputs are computed before it reads them):
-   the outputs at ``t``. ``u`` holds every input's current value; only the feedthrough
-   inputs are guaranteed to be the values at ``t`` (the others may still be the
-   values before ``t``, and must not change the outputs).
-2. the row of all signals at ``t`` is recorded;
-3. :meth:`Component.update` ``(t, u)`` once, with every input at its value at ``t``: the
-   component consumes its inputs and advances its state to its next instant. An FMU
-   sets its inputs and steps over ``[t, t + period]`` here; its outputs at
-   ``t + period`` are then read by the next ``output``.
-
-Between its instants a component's outputs are held (zero-order hold). A component
-whose output at ``t`` must not depend on its input at ``t`` (a filter's input ``u``
-predicts the *next* state; a unit delay; an encoder counting over the last period)
-declares no feedthrough for that input and reads it in :meth:`Component.update`. That
-declaration is what makes results independent of the order in which components are
-listed, and what lets the master find algebraic loops before a run.
-
-To write a component: subclass :class:`Component`, pass the ports to ``__init__``, and
-implement :meth:`~Component.output` (and :meth:`~Component.update`,
-:meth:`~Component.reset`, :meth:`~Component.close` when needed). Set ``feedthrough``
-when some output does not depend on every input, and ``reentrant = True`` if
-``output`` may be called several times at one instant with improving inputs (needed to
-iterate an algebraic loop through it; ``output`` must then not change the state). Give
-the class a ``kind`` keyword (``class Thermometer(Component, kind="thermometer")``) to use
-it from scenario files (:data:`COMPONENTS`); :meth:`~Component.from_scenario` builds it
-from its table (default: the constructor, with the table's keys checked against its
-signature).
-
-Optional capabilities, declared by implementing a protocol (the master and the exporters
-test ``isinstance(component, Protocol)``, never the class):
-
-* :class:`FastBinding`: ``bind(values, inputs, outputs)``, a fast path for the master's
-  inner loop (the FMU components exchange values with the FMU without copies);
-* :class:`ExportsFMU`: ``export_fmu(folder, fmi_version)``, the component as an FMU (what
-  :func:`cosim.ssp.export_ssp` and ``pendulum-cosim export-fmu`` need);
-* :class:`StateEstimator`: ``estimated_states``, the names of the states whose estimates
-  the component outputs (the command line compares them with the plant's).
-
-``holds_inputs = True`` declares that the inputs :meth:`~Component.update` consumes are
-held over ``[t, t + period]`` (a plant integrating them) rather than used at the next
-instant. The master counts every component's instants itself (``Component.n_samples``).
-
-Signals: the master keeps every signal as a float and every integer or Boolean signal
-also as an exact int64 (a UInt64 as its bit pattern), so 64-bit integers travel exactly
-between components that exchange them (:class:`FastBinding` receives both arrays).
-
-A component that wants the run to end (an FMU asking to terminate) raises
-:class:`StopRequest` from :meth:`~Component.update`: the run then ends normally, its last
-row at the time the component asked for.
+Every component, FMU or Python, is a :class:`Component`, the one class the master depends on. At
+each of its instants the master calls ``output(t, u)`` (in an order that respects the declared
+direct ``feedthrough``), records the row, then ``update(t, u)``; ``reset`` comes before a run,
+``close`` after it; a ``reentrant`` component may evaluate ``output`` twice at an instant (an
+algebraic loop). Optional capabilities are protocols tested with ``isinstance``:
+:class:`FastBinding` (``bind``, the loop's fast path), :class:`ExportsFMU`, :class:`StateEstimator`.
+The whole protocol (zero-order hold, exact integer signals, :class:`StopRequest`) is on the
+extending page of the documentation.
 """
 from __future__ import annotations
 
@@ -77,17 +29,18 @@ __all__ = ["CLOCK", "COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "Expo
 
 #: FMI type names a port may have, by kind (real, integer incl. enumerations, boolean).
 PORT_TYPES = {
-    "Float64": "real", "Float32": "real", "Real": "real",
-    "Int8": "integer", "UInt8": "integer", "Int16": "integer", "UInt16": "integer",
-    "Int32": "integer", "UInt32": "integer", "Int64": "integer", "UInt64": "integer",
-    "Integer": "integer", "Enumeration": "integer",
+    **dict.fromkeys(("Float64", "Float32", "Real"), "real"),
+    **dict.fromkeys(("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Integer",
+                     "Enumeration"), "integer"),
     "Boolean": "boolean",
 }
-
 
 #: The type of a clock port, an FMI 3.0 Clock. A clock connection carries its activations and
 #: its signal counts them (see :mod:`cosim.core.clocking`).
 CLOCK = "Clock"
+
+#: The component types usable in scenario files, by their ``kind``.
+COMPONENTS: Registry = Registry("component type")
 
 
 def port_kind(type_name: str) -> str:
@@ -95,20 +48,16 @@ def port_kind(type_name: str) -> str:
     :data:`PORT_TYPES`), ``"clock"`` for :data:`CLOCK`."""
     if type_name == CLOCK:
         return "clock"
-    try:
-        return PORT_TYPES[type_name]
-    except KeyError:
+    if type_name not in PORT_TYPES:
         raise TypeMismatchError(f"port type {type_name!r} is not supported; supported types: "
-                                f"{', '.join(PORT_TYPES)}") from None
+                                f"{', '.join(PORT_TYPES)}")
+    return PORT_TYPES[type_name]
 
 
 def ports_compatible(src_type: str, dst_type: str) -> bool:
-    """True if an output of type ``src_type`` may drive an input of type ``dst_type``.
-
-    Same kind always; integer and boolean outputs may also drive real inputs (exact).
-    A real output never drives an integer or boolean input (that would round silently). A
-    clock drives only a clock, and only a clock drives a clock.
-    """
+    """True if an output of type ``src_type`` may drive an input of type ``dst_type``: the same
+    kind, or an integer or Boolean output into a real input (exact); never a real output into
+    an integer or Boolean input (it would round), and a clock only to a clock."""
     s, d = port_kind(src_type), port_kind(dst_type)
     return s == d or (d == "real" and s != "clock")
 
@@ -131,18 +80,9 @@ class Port:
 
 @dataclass(frozen=True)
 class ExportedFMU:
-    """A component written as an FMU by :meth:`ExportsFMU.export_fmu`.
-
-    Attributes
-    ----------
-    path : Path
-        The ``.fmu`` file.
-    parameters : dict
-        Parameter and start values (by FMU variable name) that make the FMU behave as the
-        component: they go into the SSP's parameter bindings.
-    note : str
-        What differs from the component, if anything (empty: nothing).
-    """
+    """A component written as an FMU by :meth:`ExportsFMU.export_fmu`: the ``.fmu`` file ``path``, the
+    ``parameters`` (parameter and start values by FMU variable name) that make it behave as the
+    component (the SSP's parameter bindings), and a ``note`` of what differs (empty: nothing)."""
 
     path: Path
     parameters: dict
@@ -164,40 +104,24 @@ def check_period(period, owner: str) -> float:
 
 
 def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Port, ...]:
-    out = []
-    for p in ports:
-        port = p if isinstance(p, Port) else Port(p)
+    out = tuple(p if isinstance(p, Port) else Port(p) for p in ports)
+    for port in out:
         if check_names:
             check_name(port.name, f"{owner}: {direction} port")
         port_kind(port.type)
-        out.append(port)
     names = [p.name for p in out]
     if len(set(names)) != len(names):
         raise ConfigurationError(f"{owner}: duplicate {direction} port names in {names}")
-    return tuple(out)
+    return out
 
 
 class StopRequest(Exception):           # a request, not an error: the run ends normally
-    """Raised by a component's ``update`` to end the run normally at ``time`` (see the module
-    documentation).
-
-    Parameters
-    ----------
-    component : str
-        Who asks.
-    time : float
-        When [s] (within the component's step).
-    reason : str
-        Why, in words.
-    """
+    """Raised by the ``update`` of ``component`` (its name) to end the run normally at ``time`` [s]
+    (within its step), for the ``reason`` in words."""
 
     def __init__(self, component: str, time: float, reason: str = ""):
         super().__init__(f"{component} asked to stop at t = {time:g} s" + (f" ({reason})" if reason else ""))
         self.component, self.time, self.reason = component, float(time), reason
-
-
-#: The component types usable in scenario files, by their ``kind``.
-COMPONENTS: Registry = Registry("component type")
 
 
 @runtime_checkable
@@ -218,16 +142,14 @@ def split_port(ref, what: str, owner: str = "component") -> tuple[str, str]:
     the word for its first part in that message ("component", "member")."""
     if not isinstance(ref, str) or "." not in ref or ref.startswith(".") or ref.endswith("."):
         raise ConfigurationError(f"{what} {ref!r} must be written '{owner}.port'")
-    first, port = ref.split(".", 1)
-    return first, port
+    return tuple(ref.split(".", 1))
 
 
 class BoundCalls:
     """``output`` and ``update`` of a :class:`FastBinding` component through its own
-    :meth:`~FastBinding.bind` on a private buffer (the path of calls from outside the
-    master's loop). A mixin: the class sets ``self._private = None`` and drops it again
-    whenever its binding becomes stale (new instance, closed); it may override
-    ``_set_private_inputs`` for ports that need their exact integer value."""
+    :meth:`~FastBinding.bind` on a private buffer (calls from outside the master's loop). A
+    mixin: the class drops ``self._private`` (sets None) whenever its binding becomes stale, and
+    may override ``_set_private_inputs`` for ports that need their exact integer value."""
 
     _private = None
 
@@ -244,8 +166,7 @@ class BoundCalls:
         ints[:n_in] = np.asarray(u, dtype=float).astype(np.int64)
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
-        """Outputs at ``t`` [s] with the connected inputs ``u`` (one value per connected
-        input, in order); returns a new array, one value per output."""
+        """Outputs at ``t`` [s] from the connected inputs ``u`` (in order); a new array."""
         buf, ints, out_fn, _ = self._private_binding()
         self._set_private_inputs(buf, ints, u)
         out_fn(t)
@@ -277,7 +198,7 @@ class StateEstimator(Protocol):
 
 
 class Component(ABC):
-    """A block of the co-simulation (see the module documentation for the protocol).
+    """A block of the co-simulation (the protocol: see the module documentation).
 
     Parameters
     ----------
@@ -299,21 +220,16 @@ class Component(ABC):
 
     Attributes
     ----------
-    name : str
-    period : float
     input_ports, output_ports : tuple of Port
-    input_names, output_names : list of str
     feedthrough : dict of str to frozenset of str
         Output name -> the input names it depends on directly.
     reentrant : bool
-        ``output`` may be called several times at one instant (class attribute, default
-        False).
+        ``output`` may be called several times at one instant (class attribute, default False).
     holds_inputs : bool
-        The inputs consumed by ``update`` are held over ``[t, t + period]`` (class
-        attribute, default False).
+        The inputs consumed by ``update`` are held over ``[t, t + period]`` (class attribute,
+        default False).
     n_samples : int
-        Instants of the last run at which the component computed its outputs (counted by
-        the master, or by :meth:`sample`).
+        Instants of the last run at which the component computed its outputs.
     """
 
     reentrant: bool = False
@@ -328,10 +244,8 @@ class Component(ABC):
     @classmethod
     def from_scenario(cls, name: str, table: dict, context) -> Component:
         """Build the component ``name`` from its scenario table (the keys besides ``name`` and
-        ``type``); ``context`` is the :class:`~cosim.scenario.ScenarioContext` (paths relative to
-        the scenario, models by name, the checked constructor call). Default:
-        ``context.construct(cls, name, table)``, the constructor with the keys as keyword
-        arguments, refused with the valid keys named if one is unknown or missing."""
+        ``type``); ``context`` is the :class:`~cosim.scenario.ScenarioContext`. Default:
+        ``context.construct(cls, name, table)``, the constructor with the keys checked."""
         return context.construct(cls, name, table)
 
     def __init__(self, name: str, period: float, inputs: Sequence = (), outputs: Sequence = (),
@@ -346,11 +260,9 @@ class Component(ABC):
 
     def _feedthrough(self, spec) -> dict[str, frozenset[str]]:
         ins, outs = set(self.input_names), self.output_names
-        if spec is True:
-            return {o: frozenset(ins) for o in outs}
-        if spec is False or spec is None:
-            return {o: frozenset() for o in outs}
-        result = {o: frozenset() for o in outs}
+        result = {o: frozenset(ins if spec is True else ()) for o in outs}
+        if spec is True or spec is False or spec is None:
+            return result
         for o, deps in spec.items():
             if o not in result:
                 raise ConfigurationError(f"{self.name}: feedthrough names {o!r}, not an output; "
@@ -368,8 +280,8 @@ class Component(ABC):
                             doc="Output port names, in order.")
 
     def required_inputs(self) -> list[str]:
-        """Inputs that must be connected (default: all). FMUs return none: their
-        unconnected inputs keep their start values."""
+        """Inputs that must be connected (default: all; FMUs: none, their unconnected inputs
+        keep their start values)."""
         return self.input_names
 
     def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
@@ -387,11 +299,10 @@ class Component(ABC):
         """One line on what an output at ``t`` means (for :meth:`~cosim.core.master.Cosimulation.describe`)."""
         return "sampled: outputs at t from the inputs at t"
 
-    # ------------------------------------------------------------------ the protocol
     def check_run(self, start_time: float, stop_time: float) -> None:  # noqa: B027 - optional
         """Refuse, before anything starts, a run from ``start_time`` to ``stop_time`` [s]
-        this component cannot do (raise a :class:`~fmu_models.errors.CosimError` subclass that
-        says why). Default: every run is possible."""
+        this component cannot do (a :class:`~fmu_models.errors.CosimError` subclass that says
+        why). Default: every run is possible."""
 
     def reset(self, t0: float) -> None:
         """Prepare a run starting at ``t0`` [s] (instantiate, clear state)."""
@@ -407,8 +318,8 @@ class Component(ABC):
         to the next instant. Default: nothing."""
 
     def close(self) -> None:  # noqa: B027 - optional, default does nothing
-        """Release resources (called by the master at the end of every run, also after a
-        failure; must be safe to call twice)."""
+        """Release resources (called at the end of every run, also after a failure; safe to
+        call twice)."""
 
     def _fmu_identifier(self) -> str:
         """A model identifier for this component's FMU (``pc_<name>``)."""
@@ -442,15 +353,14 @@ def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, input
                   integers: np.ndarray | None = None) -> tuple[Callable[[float], None], Callable[[float], None]]:
     """``(output_fn, update_fn)`` calling ``comp``'s :meth:`~Component.output` and
     :meth:`~Component.update` with its inputs read from ``source[inputs]`` and its outputs
-    written to ``values[outputs]`` (the number checked): the binding of a component without
-    :class:`FastBinding` (``source is values``), and the Jacobi order's binding of any
-    component (``source``: the values before the instant). The exact values of integer and
-    Boolean output ports also go to ``integers[outputs]``."""
+    written to ``values[outputs]`` (the number checked), the exact values of integer and Boolean
+    ports also to ``integers[outputs]``: the binding of a component without :class:`FastBinding`
+    (``source is values``), and the Jacobi order's binding of any component (``source``: the
+    values before the instant)."""
     n_out = outputs.stop - outputs.start
     output, update = comp.output, comp.update
-    exact = [(j, outputs.start + j, p.type) for j, p in enumerate(comp.output_ports) if p.kind != "real"]
-    if integers is None:
-        exact = []
+    exact = [] if integers is None else [(j, outputs.start + j, p.type) for j, p in enumerate(comp.output_ports)
+                                         if p.kind != "real"]
 
     def output_fn(t: float) -> None:
         y = output(t, source[inputs])
@@ -461,7 +371,7 @@ def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, input
         if not ok:
             raise ConfigurationError(f"output returned {y!r}, expected {n_out} value(s)")
         values[outputs] = y
-        for j, at, type_name in exact:           # integer and Boolean ports: their exact values too
+        for j, at, type_name in exact:
             integers[at] = _exact(y[j], type_name, comp.name, comp.output_names[j])
 
     def update_fn(t: float) -> None:

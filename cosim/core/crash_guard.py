@@ -1,22 +1,13 @@
 """The crash guard: an FMU's code that kills the master's process says so before it dies.
 
-An FMU that is not isolated (``isolate = false``, the default) runs its C code in the
-master's own process; a fatal signal there (a NULL dereference, a stack overflow, an
-abort) ends the process, and no Python code can run after it. The guard is a fatal-signal
-handler, compiled once and cached like the project's other native code
-(``crash_guard.c``), that
-
-- names the component whose FMU crashed (its library is registered when it is loaded),
-  the FMI function the master was in (the outermost frame in the FMU's library) and the
-  time of the base step (the master registers its step counter),
-- tells the user to set ``isolate = true`` for that component,
-- starts the salvage program (:mod:`cosim.core.salvage`): the rows streamed to Parquet so
-  far become ``<name>.partial.parquet``, the run's temporary folders are removed,
-- then hands the signal on to the previous handler (or the default action): the process
-  ends as it would have, with the same status.
-
-Without a C compiler there is no guard (the crash is then only the signal), which
-:func:`guard` reports as ``None``.
+A not isolated FMU runs its C code in the master's process, where a fatal signal ends the process
+with no Python after it. The guard is a fatal-signal handler (``crash_guard.c``, compiled once and
+cached) that names the component whose FMU crashed (its library registered when loaded), the FMI
+function it was in and the time of the base step (the master registers its step counter), tells
+the user to set ``isolate = true``, starts the salvage program (:mod:`cosim.core.salvage`: the
+streamed rows so far become ``<name>.partial.parquet``, the run's temporary folders go), then
+hands the signal on, so the process ends as it would have. Without a C compiler there is no
+guard (:func:`guard` returns None).
 """
 from __future__ import annotations
 
@@ -29,18 +20,8 @@ from pathlib import Path
 from fmu_models.infra.files import private_tempdir
 from fmu_models.infra.native_library import compiled_library
 
-__all__ = [
-    "active",
-    "forget_library",
-    "guard",
-    "register_library",
-    "set_step_counter",
-    "stream_ended",
-    "stream_started",
-    "temp_folder_made",
-    "temp_folder_removed",
-    "temporary_folder",
-]
+__all__ = ["active", "forget_library", "guard", "register_library", "set_step_counter", "stream_ended",
+           "stream_started", "temp_folder_made", "temp_folder_removed", "temporary_folder"]
 
 _SOURCE = Path(__file__).with_name("crash_guard.c")
 _FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99")
@@ -107,19 +88,8 @@ def set_step_counter(address: int | None, t0: float = 0.0, h: float = 0.0) -> No
 
 
 def stream_started(key: int, ipc: str, tmp: str, partial: str) -> None:
-    """A streamed recording begins.
-
-    Parameters
-    ----------
-    key : int
-        The recording's key (for :func:`stream_ended`).
-    ipc : str
-        The Arrow stream holding its rows so far.
-    tmp : str
-        Its Parquet file being written.
-    partial : str
-        Where its partial result goes.
-    """
+    """The streamed recording ``key`` (for :func:`stream_ended`) begins: its rows so far in the Arrow
+    stream ``ipc``, its Parquet file being written ``tmp``, its partial result to go to ``partial``."""
     _streams[key] = (ipc, tmp, partial)
     _update()
 
@@ -156,16 +126,16 @@ def temporary_folder(prefix: str) -> Iterator[str]:
 
 
 def _update() -> None:
+    """Hand the guard the salvage program's command line for the streams and folders now."""
     lib = _state.get("lib")
     if lib is None:
         return
-    argv = [sys.executable, "-m", "cosim.core.salvage"]
-    for ipc, tmp, partial in _streams.values():
-        argv += ["--stream", ipc, tmp, partial]
-    argv += [a for f in _folders for a in ("--remove", f)]
-    if len(_streams) + len(_folders) == 0:
+    if not _streams and not _folders:
         lib.guard_salvage(None, 0)
         return
+    argv = [sys.executable, "-m", "cosim.core.salvage"]
+    argv += [a for stream in _streams.values() for a in ("--stream", *stream)]
+    argv += [a for f in _folders for a in ("--remove", f)]
     encoded = [a.encode(errors="surrogateescape") for a in argv]
     array = (ctypes.c_char_p * len(encoded))(*encoded)
     if lib.guard_salvage(array, len(encoded)) != 0:          # too many: at least the streams

@@ -1,41 +1,16 @@
 """The co-simulation master: steps FMUs and Python components, each at its own period.
 
-Time runs on a base step ``h`` that divides every component's period (their greatest
-common divisor unless given; see :func:`cosim.core.schedule.base_step`). At each base time
-``t_k = t0 + k h``, for the components due at ``t_k`` (the protocol of
-:mod:`cosim.core.component`):
-
-1. their outputs at ``t_k`` are computed (``output``) in an order derived from the
-   connections and each component's declared direct feedthrough (``order="auto"``,
-   default): a component reads a same-instant value of every input its outputs depend on
-   directly, whatever the order of the component list. ``order="given"`` evaluates in list
-   order instead (a component listed before its source sees the source's previous value);
-   ``order="jacobi"`` makes every component read the values as they were before ``t_k``;
-2. the row of recorded signals at ``t_k`` is stored;
-3. each due component consumes its inputs at ``t_k`` (``update``): FMUs set their inputs and
-   step over ``[t_k, t_k + period]``; filters store the input they will predict with.
-
-Outputs are held between a component's instants (zero-order hold). The papers' discrete
-loop (``x_k = f(x_{k-1}, u_{k-1}) + w_{k-1}``, ``y_k = h(x_k) + v_k``, the filter predicts
-with ``u_{k-1}`` and updates with ``y_k``, the controller computes ``u_k`` from the
-estimate) follows from the components' feedthrough declarations in any list order.
-:meth:`Cosimulation.describe` prints the evaluation order and the latency of every
-connection.
-
-Clocks (FMI 3.0 clocked FMUs, :class:`~cosim.core.clocking.ClockTicks` sources) tick at
-these instants, or between two of them where an activation falls there; clock connections
-go in ``connections`` like any other, and the clocks are checked before the run (see
-:mod:`cosim.core.clocking`); :attr:`Cosimulation.clock_ticks` logs the activations of the
-last run. Without clocks, nothing of this costs anything in the loop.
-
-Algebraic loops (a cycle of direct dependencies at one instant) are refused before the
-run with the loop's ports named, or, with ``loops="iterate"``, solved at each instant by
-Newton's method on the loop's signals (finite-difference Jacobian; exact in one step for
-a linear loop) or by fixed-point iteration (``loop_solver="fixed-point"``), to
-``loop_tolerance`` within ``loop_max_iter`` iterations.
+:class:`Cosimulation` checks the components and connections, lays the signals out and derives the
+base step and evaluation order (:mod:`cosim.core.schedule`) and the clocks
+(:mod:`cosim.core.clocking`) once; each run is a :class:`~cosim.core.run.Run`. The calls at an
+instant are the component protocol's (:mod:`cosim.core.component`); the orders, periods,
+latencies, algebraic loops, the native kernel and parallel stepping are described on the
+co-simulation page of the documentation.
 """
 from __future__ import annotations
 
+import itertools
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from functools import partial
 from pathlib import Path
@@ -74,15 +49,14 @@ class Cosimulation:
         (:class:`~cosim.components.plant_model.ModelComponent`) and Python components. With the
         default order the list order does not change results.
     connections : mapping or iterable of pairs
-        ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input
-        gets at most one source, of a compatible type (see
-        :func:`cosim.core.component.ports_compatible`). Every input of a Python component must
-        be connected; unconnected FMU inputs keep their start values.
+        ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input gets at most
+        one source, of a compatible type (:func:`cosim.core.component.ports_compatible`). Every
+        input of a Python component must be connected; unconnected FMU inputs keep their start values.
     step_size : float, optional
-        Base step [s]; every period must be an integer multiple of it. Default: the
-        greatest common divisor of the periods.
+        Base step [s]; every period must be a multiple of it. Default: the periods' greatest common divisor.
     order : {"auto", "given", "jacobi"}
-        Evaluation order within an instant (see the module documentation).
+        Evaluation order within an instant: from the connections and the declared direct
+        feedthrough (default), the list order, or every component reading the values before it.
     loops : {"refuse", "iterate"}
         Algebraic loops: refused before the run (default) or solved at each instant.
     loop_tolerance : float
@@ -94,21 +68,13 @@ class Cosimulation:
         How loops are iterated (default Newton).
     engine : {"auto", "native", "python"}
         What runs the base-step loop: the native kernel (:mod:`cosim.core.native`), the
-        Python loop, or (default) the native kernel when anything of the run can take it
-        and a C compiler is available. Both give the same results bit for bit; calls that
-        cannot run natively (Python components, Model Exchange, isolated FMUs, integer
-        ports, algebraic loops) return to Python between native segments; runs with clocks
-        or ``order="jacobi"`` take the Python loop. :meth:`describe` says which path each
+        Python loop, or (default) the native kernel where it can run and a C compiler is
+        available; the same results bit for bit. :meth:`describe` says which path each
         component takes.
     threads : "auto" or int
-        Threads that step the FMUs of an update phase at once in the native kernel (see
-        :mod:`cosim.core.native_loop`): ``"auto"`` (default) steps in parallel, on up to one
-        thread per core, only where the FMU steps measured on the threads at the start of
-        the run (and again now and then) took at most 0.9 of their serial time; an integer
-        N steps on up to N threads; 1 serially.
-        FMUs sharing a library, or declaring ``canBeInstantiatedOnlyOncePerProcess``, never
-        step at once. The results are the same bit for bit; ``stepping`` says what the
-        last run did.
+        Threads that step the FMUs of an update phase at once in the native kernel
+        (:mod:`cosim.core.native_loop`): ``"auto"`` (default) where the measured steps pay
+        for them, an integer N on up to N threads, 1 serially; the same results bit for bit.
 
     Attributes
     ----------
@@ -123,8 +89,7 @@ class Cosimulation:
     clock_plan : ClockPlan or None
         The clocks and clock connections, checked (None without clocks).
     clock_ticks : DataFrame or None
-        Every clock activation of the last run (columns ``time`` [s], ``clock``:
-        ``component.clock``), or None without clocks.
+        The last run's clock activations (columns ``time`` [s], ``clock``), None without clocks.
     stepping : str
         How the last run stepped its FMUs: serially and why, or on which threads.
 
@@ -153,15 +118,13 @@ class Cosimulation:
         for c in self.components:
             if not isinstance(c, Component):
                 raise TypeMismatchError(f"{c!r} is not a cosim.core.component.Component")
-        names = [c.name for c in self.components]
-        seen: set[str] = set()
-        dup = sorted({n for n in names if n in seen or seen.add(n)})
+        dup = sorted(name for name, k in Counter(c.name for c in self.components).items() if k > 1)
         if dup:
             raise ConfigurationError(f"duplicate component names: {dup}")
         self.by_name = {c.name: c for c in self.components}
         self.connections = self._parse_connections(connections)
         base, self._ratio, self._hyper = base_step({c.name: c.period for c in self.components}, step_size)
-        self._base, self.step_size = base, float(base)
+        self.step_size = float(base)
         self._layout()
         if order == "auto":
             self.schedule = evaluation_order(self.components, self.connections, loops)
@@ -179,17 +142,19 @@ class Cosimulation:
         self.timings: dict[str, float] = {}
 
     # ---------------------------------------------------------------- validation
-    def _port(self, ref: str, direction: str):
+    def _port(self, ref: str, direction: str) -> tuple[tuple[str, str], str]:
+        """``((component, port), FMI type)`` of the connection end ``ref``."""
         comp, port = split_port(ref, f"{direction} port")
         if comp not in self.by_name:
             raise UnknownNameError(f"unknown component {comp!r} in {ref!r}; components: "
                                    f"{', '.join(self.by_name)}")
         c = self.by_name[comp]
-        ports = c.output_names if direction == "output" else c.input_names
-        if port not in ports:
+        ports = c.output_ports if direction == "output" else c.input_ports
+        found = next((p for p in ports if p.name == port), None)
+        if found is None:
             raise UnknownNameError(f"component {comp!r} has no {direction} {port!r}; its "
-                                   f"{direction}s: {', '.join(ports) or '(none)'}")
-        return comp, port
+                                   f"{direction}s: {', '.join(p.name for p in ports) or '(none)'}")
+        return (comp, port), found.type
 
     def _parse_connections(self, connections) -> dict:
         if isinstance(connections, Mapping):
@@ -206,18 +171,14 @@ class Cosimulation:
             if not isinstance(src, str) or not isinstance(dst, str):
                 raise ConfigurationError(f"connection {dst!r} = {src!r}: both ends must be written "
                                          "'component.port' (text)")
-            s, d = self._port(src, "output"), self._port(dst, "input")
+            (s, st), (d, dt) = self._port(src, "output"), self._port(dst, "input")
             if d in out:
                 raise ConfigurationError(f"input {dst!r} is connected twice "
                                          f"(from {'.'.join(out[d])} and {src})")
-            st = next(p for p in self.by_name[s[0]].output_ports if p.name == s[1]).type
-            dt = next(p for p in self.by_name[d[0]].input_ports if p.name == d[1]).type
-            if not ports_compatible(st, dt) and CLOCK in (st, dt):
-                raise TypeMismatchError(f"connection {src} -> {dst}: a {st} output cannot drive a {dt} input: a clock "
-                                        "connects only to a clock (an output clock to a triggered input clock)")
             if not ports_compatible(st, dt):
-                raise TypeMismatchError(f"connection {src} -> {dst}: a {st} output cannot drive a {dt} "
-                                        "input (values would be rounded); convert it in a component")
+                why = (": a clock connects only to a clock (an output clock to a triggered input clock)"
+                       if CLOCK in (st, dt) else " (values would be rounded); convert it in a component")
+                raise TypeMismatchError(f"connection {src} -> {dst}: a {st} output cannot drive a {dt} input{why}")
             out[d] = s
         for c in self.components:
             for p in c.required_inputs():
@@ -229,15 +190,12 @@ class Cosimulation:
 
     # ---------------------------------------------------------------- layout
     def _layout(self):
-        slots, n = {}, 0
-        self._out_slices = {}
-        for c in self.components:
-            self._out_slices[c.name] = slice(n, n + len(c.output_names))
-            for p in c.output_names:
-                slots[(c.name, p)] = n
-                n += 1
-        self._slots = slots
-        self.signal_names = [f"{c}.{p}" for (c, p) in slots]
+        pairs = [(c.name, p) for c in self.components for p in c.output_names]
+        self._slots = slots = {pair: i for i, pair in enumerate(pairs)}
+        sizes = [len(c.output_names) for c in self.components]
+        self._out_slices = {c.name: slice(end - size, end)
+                            for c, size, end in zip(self.components, sizes, itertools.accumulate(sizes))}
+        self.signal_names = [f"{c}.{p}" for (c, p) in pairs]
         self.signal_types = [p.type for c in self.components for p in c.output_ports]
         self._inputs = {}           # per component, where its connected inputs are: a slice, else indices
         for c in self.components:
@@ -251,9 +209,8 @@ class Cosimulation:
     # ---------------------------------------------------------------- engine
     @property
     def engine(self) -> str:
-        """The loop that runs the co-simulation, ``"auto"`` (the native kernel
-        where it can run, the Python loop elsewhere), ``"native"`` (refused where the kernel
-        cannot run the co-simulation) or ``"python"``; may be changed between runs."""
+        """The loop that runs the co-simulation (see the constructor; ``"native"`` is refused where
+        the kernel cannot run it); may be changed between runs."""
         return self._engine
 
     @engine.setter
@@ -292,11 +249,8 @@ class Cosimulation:
     def component_paths(self) -> dict[str, str | None]:
         """Per component, why its calls run in Python (None: in the native kernel)."""
         whole = self._whole_run_python()
-        out = {}
-        for c in self.components:
-            reason = getattr(c, "native_reason", None)
-            out[c.name] = whole or (reason() if callable(reason) else "a Python component")
-        return out
+        return {c.name: whole or (c.native_reason() if callable(getattr(c, "native_reason", None))
+                                  else "a Python component") for c in self.components}
 
     # ---------------------------------------------------------------- description
     def describe(self) -> str:
@@ -324,36 +278,36 @@ class Cosimulation:
             if any(g.loop for g in self.schedule):
                 lines.append("  algebraic loops: Python (solved by iteration)")
             lines += self._threads_lines()
-        position = {}
-        for i, g in enumerate(self.schedule):
-            for u in g.units:
-                position.setdefault(u.comp.name, i)
+        position = {u.comp.name: i for i, g in reversed(list(enumerate(self.schedule))) for u in g.units}
         lines += ["", "connections (latency = age of the value when it is used):"]
-        for (dn, dp), (sn, sp) in self.connections.items():
-            src, dst = self.by_name[sn], self.by_name[dn]
-            ft = any(dp in deps for deps in dst.feedthrough.values())
-            hold = ("" if src.period <= dst.period and self._ratio[dn] % self._ratio[sn] == 0
-                    else f"; {sn} updates every {src.period:g} s, held in between (zero-order hold)")
-            if self.clock_plan is not None and port_kind(
-                    next(p.type for p in dst.input_ports if p.name == dp)) == "clock":
-                lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {self.clock_plan.connection_text(f'{sn}.{sp}', f'{dn}.{dp}')}")
-                continue
-            clocks = self.clock_plan is not None and getattr(dst, "port_clocks", None) and dst.port_clocks(dp)
-            if clocks:
-                lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {self.clock_plan.clocked_text(dn, clocks, ft)}")
-                continue
-            if self.order == "jacobi":
-                when = "read at t from the values before t: one base step old when both are due"
-            elif ft:
-                before = position.get(sn, -1) <= position.get(dn, -1) or sn == dn
-                when = ("direct feedthrough, read at t after the source's output at t: latency 0" if before
-                        else "read at t before the source's output at t (list order): one source period old")
-            else:
-                when = ("consumed at t by update (no direct feedthrough): "
-                        + ("held over the component's step [t, t + period]" if dst.holds_inputs
-                           else "used for the component's next instant"))
-            lines.append(f"  {sn}.{sp} -> {dn}.{dp}: {when}{hold}")
+        lines += [f"  {sn}.{sp} -> {dn}.{dp}: {self._latency((sn, sp), (dn, dp), position)}"
+                  for (dn, dp), (sn, sp) in self.connections.items()]
         return "\n".join(lines)
+
+    def _latency(self, source: tuple[str, str], target: tuple[str, str], position: dict) -> str:
+        """When the input ``target`` reads the output ``source`` and how old the value is
+        (``position``: each component's first group in the evaluation order)."""
+        (sn, sp), (dn, dp) = source, target
+        src, dst, plan = self.by_name[sn], self.by_name[dn], self.clock_plan
+        ft = any(dp in deps for deps in dst.feedthrough.values())
+        if plan is not None and next(p for p in dst.input_ports if p.name == dp).kind == "clock":
+            return plan.connection_text(f"{sn}.{sp}", f"{dn}.{dp}")
+        clocks = plan is not None and getattr(dst, "port_clocks", None) and dst.port_clocks(dp)
+        if clocks:
+            return plan.clocked_text(dn, clocks, ft)
+        if self.order == "jacobi":
+            when = "read at t from the values before t: one base step old when both are due"
+        elif ft:
+            before = position.get(sn, -1) <= position.get(dn, -1) or sn == dn
+            when = ("direct feedthrough, read at t after the source's output at t: latency 0" if before
+                    else "read at t before the source's output at t (list order): one source period old")
+        else:
+            when = ("consumed at t by update (no direct feedthrough): "
+                    + ("held over the component's step [t, t + period]" if dst.holds_inputs
+                       else "used for the component's next instant"))
+        if src.period > dst.period or self._ratio[dn] % self._ratio[sn]:
+            when += f"; {sn} updates every {src.period:g} s, held in between (zero-order hold)"
+        return when
 
     def _threads_lines(self) -> list[str]:
         """The lines of :meth:`describe` on parallel stepping."""
@@ -377,7 +331,7 @@ class Cosimulation:
 
     # ---------------------------------------------------------------- running
     def _steps(self, stop_time: float, start_time: float, output_interval) -> tuple[int, int]:
-
+        """The run's base steps and the base steps between rows, checked."""
         stop, start = finite(stop_time, "stop_time [s]"), finite(start_time, "start_time [s]")
         n = self._multiple(stop - start, "stop_time - start_time",
                            f"stop_time {stop!r} s - start_time {start!r} s = {stop - start!r} s")
@@ -412,11 +366,9 @@ class Cosimulation:
         stop_time, start_time : float
             [s]; the span must be a multiple of the base step.
         signals : str or sequence of str, optional
-            Glob patterns of the signals to record (e.g. ``["plant.*", "ekf.x"]``);
-            default all.
+            Glob patterns of the signals to record (e.g. ``["plant.*", "ekf.x"]``); default all.
         output_interval : float, optional
-            Record every this many seconds (a multiple of the base step); default every
-            base step.
+            Record every this many seconds (a multiple of the base step); default every base step.
         progress : bool, optional
             Show a progress bar; default: shown when the run takes more than 2 s.
 
@@ -427,10 +379,9 @@ class Cosimulation:
         Raises
         ------
         CosimError
-            A component raised, an FMU returned discard/error/fatal, or a signal became
-            NaN or inf; the message names the component and the time, and
-            ``error.results`` holds the rows recorded until then. FMU instances are
-            always freed.
+            A component raised, an FMU returned discard/error/fatal, or a signal became NaN or
+            inf; the message names the component and the time, ``error.results`` holds the rows
+            so far. FMU instances are always freed.
         Interrupted
             Ctrl-C: ``error.partial`` holds the rows recorded so far.
         ResourceError

@@ -1,29 +1,19 @@
 """The native kernel: the master's base-step loop in compiled C.
 
-One generic kernel (``kernel.c``, shipped with the package), compiled once per machine and
-kept in the compiled-code cache (:mod:`fmu_models.infra.cache`), interprets a program the
-master prepares from the bound components: per pattern of due components, the operations
-of every component's output and update calls. A call that can run natively says so with
-a ``native`` attribute: a list of :class:`Op` (FMUs' get/set of Real or Float64
-variables and ``doStep`` (FMI 1.0, 2.0, 3.0) through the function pointers of the loaded library, the
-compiled step of a filter, a constant or step source); any other call (a Python
-component, Model Exchange, an isolated FMU, integer ports, an algebraic loop being
-iterated) is an operation that returns to Python, which calls it and resumes the kernel,
-so Python components split the loop into native segments.
-
-The kernel computes what the Python path computes, operation for operation (``t = t0 + k
-h`` and the same comparisons, compiled without fused multiply-adds), so the results are
-the same bit for bit. A failed call returns to Python with its status, and the call's own
-``fail`` handler raises the error the Python path raises.
-
-Parallel stepping: in an update phase, the runs of consecutive FMU updates (set the inputs,
-``doStep``; a filter's held input beside them) between two calls that return to Python are
-the :meth:`Program.parallel_runs`; :meth:`Program.lanes` makes the kernel's parallel segments of
-them for a given thread of each FMU update (:mod:`cosim.core.native_loop` decides which).
+One generic kernel (``kernel.c``), compiled once per machine and cached
+(:mod:`fmu_models.infra.cache`), interprets a :class:`Program`: per pattern of due components,
+the operations of the bound output and update calls. A call that can run natively lists them in
+its ``native`` attribute (:class:`Op`: an FMU's get, set and ``doStep`` through its library's
+function pointers, a filter's compiled step, a source); any other call returns to Python, which
+makes it and resumes the kernel. The kernel computes ``t = t0 + k h`` and everything else as the
+Python path does, without fused multiply-adds, so the results are the same bit for bit; a failed
+operation's ``fail`` raises the Python path's error. :meth:`Program.parallel_runs` and
+:meth:`Program.lanes` give the update runs that may step on threads (:mod:`cosim.core.native_loop`).
 """
 from __future__ import annotations
 
 import ctypes
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -80,17 +70,16 @@ class Op:
     keep : tuple
         What the pointers point into (kept alive with the operation).
     fail : callable, optional
-        ``fail(op, t)`` raises the error of the failed operation as the Python path does
-        (``op``: the OpStruct with ``status``, ``flag``, ``d`` set; ``t`` [s]).
+        ``fail(op, t)`` raises the failed operation's error as the Python path does (``op``: its
+        OpStruct, ``status``, ``flag``, ``d`` set; ``t`` [s]).
     sync_in, sync_out : callable, optional
-        Move state the Python objects keep (a filter's current state copy and step count)
-        into and out of the kernel's arrays, when Python needs it.
+        Move the state Python objects keep (a filter's state copy, step count) into and out of
+        the kernel's arrays.
     hook : callable, optional
-        The Python code an ``OP_HOOK`` runs (a filter's ``after_step``; an ``OP_RECORD``'s
-        when its rows are full), or the refill of an ``OP_NOISE`` stream.
+        What an ``OP_HOOK`` runs in Python (a filter's ``after_step``; a full ``OP_RECORD``), or
+        an ``OP_NOISE`` stream's refill.
     rebind : callable, optional
-        ``rebind(op)`` after the hook: point the operation's fields at arrays the hook
-        replaced (``op``: the OpStruct in the program).
+        ``rebind(op)`` after the hook: the OpStruct pointed at the arrays the hook replaced.
     """
 
     kind: int
@@ -104,13 +93,7 @@ class Op:
 
 
 def native_ops(fn) -> list[Op] | None:
-    """The native operations of a bound call, or None if it runs in Python.
-
-    Parameters
-    ----------
-    fn : callable
-        An output or update call of a component's binding.
-    """
+    """The native operations of ``fn``, a bound output or update call, or None if it runs in Python."""
     return getattr(fn, "native", None)
 
 
@@ -125,8 +108,7 @@ _kernel: list = []          # [library or None, reason]
 
 
 def load_kernel() -> tuple[ctypes.CDLL | None, str]:
-    """The compiled kernel (built on first use, cached on disk), or None and why not (no C
-    compiler, an unwritable cache, a compiler that fails)."""
+    """The compiled kernel (built on first use, cached on disk), or None and why not."""
     if _kernel:
         return _kernel[0], _kernel[1]
     lib, why = compiled_library(_SOURCE.read_text(), "kernel", _FLAGS, "kernel_run", "the native co-simulation kernel",
@@ -181,42 +163,29 @@ class Program:
     updates: list
 
     def parallel_runs(self) -> list[list[tuple]]:
-        """The runs of update calls that may run at once, with at least two FMU updates: per
-        run, its calls in their order as ``(call, first, end, fmu)`` (its operations
-        ``ops[first:end]``; ``fmu``: an FMU's update, set inputs and ``doStep``, which may run
-        on a worker thread; else a filter's held input, made by the calling thread). Any
-        other call (one into Python, or a native operation that writes signals) ends a run."""
+        """The runs of update calls that may run at once, with two FMU updates at least: each a list
+        of ``(call, first, end, fmu)`` (operations ``ops[first:end]``; ``fmu``: an FMU's set inputs
+        and ``doStep``, for a worker thread; else a filter's held input, for the calling thread).
+        Any other call (into Python, or a native one that writes signals) ends a run."""
         runs: list[list[tuple]] = []
         for start, length in zip(self.upd_start.tolist(), self.upd_len.tolist()):
             run: list[tuple] = []
-            i = start
-            while i < start + length:
-                j = i + 1
-                while j < start + length and self.calls[j] is self.calls[i]:
-                    j += 1
-                kinds = {self.ops[q].kind for q in range(i, j)}
+            for _, group in itertools.groupby(range(start, start + length), key=lambda q: id(self.calls[q])):
+                span = list(group)          # the operations of one call
+                kinds = {self.ops[q].kind for q in span}
                 fmu = bool(kinds & set(STEP_KINDS)) and kinds <= _WORKER_KINDS
                 if fmu or kinds <= _BESIDE:
-                    run.append((self.calls[i], i, j, fmu))
+                    run.append((self.calls[span[0]], span[0], span[-1] + 1, fmu))
                 else:
                     runs.append(run)
                     run = []
-                i = j
             runs.append(run)
         return [run for run in runs if sum(fmu for *_, fmu in run) >= 2]
 
     def lanes(self, runs: list[list[tuple]], thread_of: dict) -> tuple[np.ndarray, np.ndarray]:
-        """The kernel's ``lane`` and ``seg`` arrays (see ``kernel.c``): every run of
-        :meth:`parallel_runs` whose FMU updates fall on two threads or more becomes a parallel
-        segment.
-
-        Parameters
-        ----------
-        runs : list
-            :meth:`parallel_runs`.
-        thread_of : dict
-            The thread (0: the calling one) of each FMU update call.
-        """
+        """The kernel's ``lane`` and ``seg`` arrays (see ``kernel.c``): each of the ``runs`` (of
+        :meth:`parallel_runs`) whose FMU updates fall on two threads or more by ``thread_of`` (the
+        thread of each, 0: the calling one) becomes a parallel segment."""
         lane = np.full(len(self.ops), -1, dtype=np.int64)
         seg = np.zeros(len(self.ops), dtype=np.int64)
         for run in runs:
@@ -229,14 +198,8 @@ class Program:
 
 
 def build_program(schedule: list) -> Program:
-    """The kernel's program of a run.
-
-    Parameters
-    ----------
-    schedule : list of (tuple, tuple)
-        Per base step of the hyperperiod, the output calls and the update calls the Python
-        loop makes (equal entries shared).
-    """
+    """The kernel's program of a run from its ``schedule``: per base step of the hyperperiod, the
+    output calls and the update calls (a tuple each) the Python loop makes, equal entries shared."""
     index: dict[int, int] = {}
     pattern = np.empty(len(schedule), dtype=np.int64)
     structs: list[OpStruct] = []

@@ -1,48 +1,21 @@
-"""A run's loop in the native kernel, and the driver that answers the kernel's events.
+"""A run's loop in the native kernel, and which thread steps each FMU.
 
-The kernel (:mod:`cosim.core.native`) runs the base steps of a :class:`~cosim.core.run.Run`
-and records its rows itself; it returns to Python with an event when it needs Python:
+The kernel (:mod:`cosim.core.native`) runs a :class:`~cosim.core.run.Run`'s base steps and records
+its rows, driven by :class:`NativeLoop`; it returns to Python for a Python call (``EV_PY``), a
+filter's hook (``EV_HOOK``), a noise refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: the bar
+moves, Ctrl-C is seen) and a full record buffer (``EV_FLUSH``), and ends with ``EV_DONE``,
+``EV_NONFINITE``, ``EV_FAIL`` or a stop request, the run's position and the Python objects' state
+handed back first whichever way it ends.
 
-* ``EV_PY``: a call that runs in Python (a Python component, Model Exchange, an isolated
-  FMU, integer ports, an algebraic loop), made as the Python loop makes it; the kernel
-  resumes after it;
-* ``EV_HOOK``: a filter's Python hook after its step, then its operation pointed at the
-  arrays the hook replaced; the kernel resumes after it;
-* ``EV_REFILL``: a noise stream drawn to its end: its next block is drawn, and the kernel
-  resumes at the same operation;
-* ``EV_CHUNK``: a chunk of base steps is done (about :data:`CHUNK_SECONDS` of wall time, at
-  most :data:`CHUNK` steps): the progress bar moves, Ctrl-C is seen;
-* ``EV_FLUSH``: the record buffer is full: the sink writes it.
-
-The loop ends with ``EV_DONE`` (every base step ran), ``EV_NONFINITE`` (a signal became NaN
-or inf in the block that ended), ``EV_FAIL`` (a native operation failed: its own handler
-raises the error the Python path raises) or a component's stop request. Whichever way it
-ends, also by an exception, the run's position and the state the kernel keeps for Python
-objects (a filter's current state copy and step count) are first handed back to them.
-
-**Parallel stepping** (:class:`Stepping`, the master's ``threads`` option). In an update
-phase the FMUs' updates (set the inputs, ``doStep``) do not depend on each other, so the
-runs of them between two calls into Python
-(:meth:`~cosim.core.native.Program.parallel_runs`) may step on threads of a pool made once
-per run. FMUs that share a loaded library, and FMUs that declare
-``canBeInstantiatedOnlyOncePerProcess``, are kept on one thread, in their serial order. The
-first base steps run on the threads, the groups of FMUs taken in turn; after one block that
-warms the threads (and ends the measurement where the threads took more than
-:data:`HOPELESS_RATIO` times the serial time even so), each FMU update's time and each
-segment's wall time are measured, in chunks of :data:`MEASURE_BLOCKS` blocks, until the
-measured chunks last :data:`MEASURE_SECONDS` (one block of :data:`BLOCK` base steps at
-least; sooner where the threads plainly lose or win, see :data:`CLEAR_RATIO`); the updates'
-times then assign the groups to the threads (the costliest first, each to the least loaded
-thread). With ``threads="auto"`` the run goes on serially unless the measured steps gained
-at least :data:`MIN_GAIN` per base step and took at most :data:`KEEP_RATIO` of the serial
-time (the sum of the updates' times: what they cost one after the other); the threads are
-measured again in the same way after :data:`RECHECK` base steps, then after twice as many
-each time (and :data:`RECHECK_SECONDS` at least), so that a run that began while other
-processes took the cores takes the threads once they are free, and the reverse. An integer
-``threads`` keeps that many threads (at most one per group of FMUs). Each FMU's calls are
-the serial run's, in the same order, so the results are the same bit for bit; a failure is
-the first in the serial order, and if it is a stop request the updates the other threads
-already made are not made again.
+Parallel stepping (:class:`Stepping`, the master's ``threads``; the co-simulation page of the
+documentation): the FMU updates between two calls into Python
+(:meth:`~cosim.core.native.Program.parallel_runs`) may step on a pool's threads, FMUs sharing a
+library or ``canBeInstantiatedOnlyOncePerProcess`` on one. A measurement (one warming block, then
+chunks timed until :data:`MEASURE_SECONDS`) balances the groups on the threads, costliest first;
+``threads="auto"`` keeps them only where they gained (the constants below say by how much) and
+measures again now and then. Each FMU gets the serial run's calls in order: the same results bit
+for bit, a failure is the first in the serial order, and after a stop request no update is made
+twice.
 """
 from __future__ import annotations
 
@@ -56,18 +29,7 @@ from fmu_models.errors import CosimError
 
 from . import crash_guard
 from .component import StopRequest
-from .native import (
-    EV_CHUNK,
-    EV_DONE,
-    EV_FAIL,
-    EV_FLUSH,
-    EV_HOOK,
-    EV_NONFINITE,
-    EV_PY,
-    EV_REFILL,
-    STEP_KINDS,
-    KState,
-)
+from .native import EV_CHUNK, EV_DONE, EV_FAIL, EV_FLUSH, EV_HOOK, EV_NONFINITE, EV_PY, EV_REFILL, STEP_KINDS, KState
 
 __all__ = ["BLOCK", "CHUNK", "CHUNK_SECONDS", "CLEAR_RATIO", "HOPELESS_RATIO", "KEEP_RATIO", "MEASURE_BLOCKS",
            "MEASURE_SECONDS", "MIN_GAIN", "RECHECK", "RECHECK_SECONDS", "NativeLoop", "Stepping"]
@@ -131,20 +93,15 @@ def _once_per_process(component) -> bool:
 
 
 class Stepping:
-    """Which thread steps each FMU update of a run (see the module documentation).
+    """Which thread steps each FMU update of a run (see the module documentation); ``text`` says
+    it in words (the master's ``stepping``).
 
     Parameters
     ----------
     run : cosim.core.run.Run
         The run, with its native program and kernel.
     kst : KState
-        The kernel's state (its ``lane``, ``seg``, ``fail_at``, ``cost``, ``timing`` and
-        ``pool`` are set here).
-
-    Attributes
-    ----------
-    text : str
-        The decision in words (the master's ``stepping``).
+        The kernel's state (its ``lane``, ``seg``, ``fail_at``, ``cost``, ``timing`` and ``pool`` set here).
     """
 
     def __init__(self, run, kst: KState) -> None:
@@ -204,10 +161,9 @@ class Stepping:
         """The components of ``calls``, in words."""
         return ", ".join(self.run.owner.get(c, "?") for c in calls)
 
-    def _assign(self) -> tuple[dict, list[float], list[list]]:
-        """The costliest group first, each to the least loaded thread (the calling thread
-        also makes the filters' held inputs): the thread of each call, each thread's load
-        [s] and calls."""
+    def _assign(self) -> tuple[dict, list[list]]:
+        """The thread of each call and each thread's calls: the costliest group first, each to the
+        least loaded thread (the calling thread also makes the filters' held inputs)."""
         cost = self.cost
         span = {call: (first, end) for run in self.runs for call, first, end, _ in run}
         costs = [sum(cost[slice(*span[c])].sum() for c in calls) for _, calls in self.groups]
@@ -220,11 +176,11 @@ class Stepping:
             loads[me] += costs[g]
             members[me] += self.groups[g][1]
             thread_of.update(dict.fromkeys(self.groups[g][1], me))
-        return thread_of, loads, members
+        return thread_of, members
 
     def _parallel(self, thread_of: dict, members: list) -> bool:
-        """Step on the pool's threads (started if need be) by ``thread_of``, the calls of each
-        thread being ``members``; False (and serially) if the threads could not be started."""
+        """Step on the pool's threads by ``thread_of`` (each thread's calls: ``members``); False
+        (and serially) if the threads could not be started."""
         if self.pool is None:
             self.pool = self.run.kernel.kernel_pool_start(self.n) or None
             if self.pool is None:
@@ -236,9 +192,8 @@ class Stepping:
         return True
 
     def chunk(self, steps: int, seconds: float) -> None:
-        """A chunk of ``steps`` base steps done in ``seconds`` [s]: once the measured chunks
-        last :data:`MEASURE_SECONDS`, balance the threads, keep them or go on serially; with
-        ``threads="auto"``, measure again when it is time (see the module documentation)."""
+        """A chunk of ``steps`` base steps done in ``seconds`` [s]: a measurement goes on, or is
+        decided, or (``threads="auto"``) a new one starts when it is time."""
         kst = self.kst
         if self.state == "measure":
             if self.warm and kst.k < self.run.n and not self._hopeless():
@@ -259,38 +214,34 @@ class Stepping:
                 self._measure(warm=True)
 
     def _measure(self, warm: bool) -> None:
-        """Count a measurement afresh (the kernel times the updates), its first block not
-        counted if ``warm``."""
+        """Start a measurement afresh (the kernel times the updates), not counting its first block if ``warm``."""
         self.state, self.warm, self.measured = "measure", warm, (0, 0.0)
         self.kst.timing, self.kst.seg_time = 1, 0.0
         self.cost[:] = 0.0
 
     def chunk_length(self, adaptive: int) -> int:
         """The next chunk's base steps: ``adaptive`` (the loop's own), or while measuring one
-        block to warm the threads, then :data:`MEASURE_BLOCKS` blocks (a return to Python
-        between chunks may let the threads fall asleep: a wake-up each chunk)."""
+        warming block, then :data:`MEASURE_BLOCKS` blocks (the threads may sleep between chunks)."""
         if self.state != "measure":
             return adaptive
         return BLOCK if self.warm else MEASURE_BLOCKS * BLOCK
 
     def _hopeless(self) -> bool:
-        """Whether ``threads="auto"`` stops at the warming block already: the threads took
-        more than :data:`HOPELESS_RATIO` times the serial time even with their start counted
-        (the other cores are busy, e.g. a campaign's workers on every core)."""
+        """Whether ``threads="auto"`` ends the measurement at the warming block (the other cores
+        busy, e.g. a campaign's workers on every core)."""
         return self.threads == "auto" and self.kst.seg_time > HOPELESS_RATIO * self.cost.sum()
 
     def _plain(self) -> bool:
-        """Whether the steps measured so far already decide it: the threads took longer than the
-        serial time, or less than :data:`CLEAR_RATIO` of it (a cheap FMU's run is then not
-        spent measuring; a wrong call is corrected at the next measurement)."""
+        """Whether the steps measured so far decide it already (a cheap FMU's run is not spent
+        measuring; a wrong call is corrected at the next measurement)."""
         serial, parallel = self.cost.sum(), self.kst.seg_time
         return parallel > serial or parallel < CLEAR_RATIO * serial
 
     def _decide(self, steps: int) -> None:
-        """The measured chunks of ``steps`` base steps done: the threads balanced by the
-        updates' measured times, and kept or (``threads="auto"``) left for the serial loop."""
+        """After ``steps`` measured base steps: the threads balanced by the updates' times, and kept
+        or (``threads="auto"``) left for the serial loop."""
         serial, parallel = self.cost.sum() / max(steps, 1), self.kst.seg_time / max(steps, 1)
-        self.thread_of, _, self.members = self._assign()
+        self.thread_of, self.members = self._assign()
         measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)}"
         if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
             self._serial(f"serial: the FMU updates that may step at once took {measured}")
@@ -305,8 +256,7 @@ class Stepping:
 
     def finish(self, steps: int, seconds: float) -> None:
         """The loop ended ``steps`` base steps and ``seconds`` [s] after the last chunk: a
-        measurement under way is decided on what it measured (what ``text`` says), and
-        the pool's threads end."""
+        measurement under way is decided on what it measured, and the pool's threads end."""
         if self.state == "measure" and self.measured[0] + steps > 0:
             self.measured = (self.measured[0] + steps, self.measured[1] + seconds)
             self._decide(self.measured[0])
@@ -321,8 +271,7 @@ class Stepping:
 
     def ran_ahead(self, at: int) -> dict:
         """After the operation ``at`` failed in a parallel segment: the update calls the other
-        threads made in it, each with what replays its outcome (``f(t)``: nothing, or its own
-        failed operation's ``fail``)."""
+        threads made in it, each with ``f(t)`` replaying its outcome (nothing, or its ``fail``)."""
         starts = [q for q in np.flatnonzero(self.seg).tolist() if q <= at < q + self.seg[q]]
         if not self.on_threads or not starts:          # the segment ran serially
             return {}
@@ -332,24 +281,13 @@ class Stepping:
             made[call] = made.get(call, True) and (last < 0 or q <= last)
             if q == last:
                 failed[call] = q
-        out = {}
-        for call, done in made.items():
-            if call in failed:
-                q = failed[call]
-                out[call] = lambda t, q=q: program.meta[q].fail(program.ops[q], t)
-            elif done:
-                out[call] = lambda t: None
-        return out
+        replay = {call: (lambda t: None) for call, done in made.items() if done}
+        return replay | {call: (lambda t, q=q: program.meta[q].fail(program.ops[q], t)) for call, q in failed.items()}
 
 
 class NativeLoop:
-    """A run's base steps in the native kernel (see the module documentation).
-
-    Parameters
-    ----------
-    run : cosim.core.run.Run
-        The run, set up, with its native program and kernel.
-    """
+    """A run's base steps in the native kernel; ``run`` (a :class:`~cosim.core.run.Run`) is set up,
+    with its native program and kernel."""
 
     def __init__(self, run) -> None:
         self.run, self.program = run, run.program
@@ -407,9 +345,8 @@ class NativeLoop:
         self._end(event)
 
     def _hook(self, after_step: bool) -> None:
-        """The Python hook of the operation the kernel stopped at: a filter's after its step
-        (``after_step``: the operation is then rebound, the kernel resumes after it), or a
-        noise stream's refill (the kernel resumes at the operation)."""
+        """The hook of the operation the kernel stopped at: a filter's ``after_step`` (the operation
+        rebound, resumed after it), or a noise stream's refill (resumed at the operation)."""
         at, program = self.kst.at, self.program
         self.run.failing, meta = program.calls[at], program.meta[at]
         meta.hook()
@@ -429,9 +366,8 @@ class NativeLoop:
         self.done, self.since, kst.kstop = kst.k, now, kst.k + self.stepping.chunk_length(self.chunk)
 
     def _end(self, event: int) -> None:
-        """The end of the loop, by ``event`` (the position handed back): the bar's last steps,
-        the non-finite signal raised, or the failed call's error raised or the stop request
-        finished."""
+        """The end of the loop by ``event``: the bar's last steps, the non-finite signal or the
+        failed call's error raised, or the stop request finished."""
         run, kst, program = self.run, self.kst, self.program
         if event == EV_DONE:
             run.bar.update(run.n + 1 - self.done)

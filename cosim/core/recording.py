@@ -1,22 +1,17 @@
 """Recording of co-simulation signals: which signals, how often, in memory or streamed to disk.
 
-A recording keeps the signals matching ``signals`` (shell-style globs such as
-``"plant.*"`` or ``"ekf.P_*"``; default every signal) at every ``output_interval``
-seconds (a multiple of the master's base step; default every base step). Rows either
-stay in memory (:class:`MemorySink`, a DataFrame at the end) or go to a Parquet file in
-chunks of ``chunk_rows`` rows (:class:`ParquetSink`): memory stays constant however long
-the run. The Parquet file is written under a temporary name and renamed when the run
-ends; an interrupted or failed run leaves ``<name>.partial.parquet`` with the rows
-recorded so far, never a file that looks complete.
-
-Integer signals are recorded exactly (``int64``, ``uint64`` for UInt64 columns), beside the
-float columns of everything else. The last row of a run that a component stopped may lie
-between two recording instants (``last_time``).
+The signals matching glob ``signals`` (:func:`select_signals`) are recorded every
+``output_interval`` (a multiple of the base step), in memory (:class:`MemorySink`, a DataFrame at
+the end) or streamed to a Parquet file in chunks (:class:`ParquetSink`, constant memory; written
+under a temporary name and renamed at the end; a failed run leaves ``<name>.partial.parquet``).
+Integer signals are recorded exactly (``int64``; ``uint64`` for UInt64 columns); the last row of a
+run a component stopped may lie between two recording instants (``last_time``).
 """
 from __future__ import annotations
 
 import contextlib
 import fnmatch
+import json
 import os
 import shutil
 from collections.abc import Sequence
@@ -43,10 +38,8 @@ def select_signals(names: Sequence[str], patterns: Sequence[str] | str | None) -
     record nothing)."""
     if patterns is None:
         return list(range(len(names)))
-    if isinstance(patterns, str):
-        patterns = [patterns]
     chosen = set()
-    for pat in patterns:
+    for pat in [patterns] if isinstance(patterns, str) else patterns:
         hits = [i for i, n in enumerate(names) if fnmatch.fnmatchcase(n, pat)]
         if not hits:
             raise UnknownNameError(f"signal pattern {pat!r} matches no signal; signals: {', '.join(names)}")
@@ -60,12 +53,35 @@ def partial_path(path: Path) -> Path:
     return path.with_name(f"{path.stem}.partial{path.suffix}")
 
 
-def _integer_layout(columns: Sequence[str], int_columns) -> tuple[np.ndarray, list[str]]:
-    positions = np.array(sorted(int_columns or {}), dtype=np.intp)
-    return positions, [int_columns[p] for p in positions]
+class _Rows:
+    """What both sinks keep: the columns, the row buffers (``buffer``; ``ibuffer``, the exact
+    integer columns at ``int_positions``) and the rows' times."""
+
+    def __init__(self, columns: Sequence[str], rows: int, t0: float, step: float, every: int,
+                 int_columns: dict | None) -> None:
+        self.columns = list(columns)
+        self.buffer = np.empty((rows, len(columns)))
+        self.int_positions = np.array(sorted(int_columns or {}), dtype=np.intp)
+        self._int_types = [int_columns[p] for p in self.int_positions]
+        self.ibuffer = np.empty((rows, len(self.int_positions)), dtype=np.int64)
+        self.t0, self.step, self.every = t0, step, every
+        #: the time of the last row, if it is not on the recording grid (a stopped run)
+        self.last_time = None
+
+    def _times(self, first: int, rows: int) -> np.ndarray:
+        """The times [s] of the rows ``first`` to ``first + rows`` (the master's own arithmetic)."""
+        times = self.t0 + self.step * (self.every * np.arange(first, first + rows))
+        if self.last_time is not None and rows:
+            times[-1] = self.last_time
+        return times
+
+    def _exact(self, k: int, rows: int) -> np.ndarray:
+        """The first ``rows`` values of the ``k``-th exact integer column (a UInt64 one as uint64)."""
+        col = self.ibuffer[:rows, k]
+        return col.view(np.uint64) if self._int_types[k] == "UInt64" else col
 
 
-class MemorySink:
+class MemorySink(_Rows):
     """Rows kept in memory: a preallocated array, a DataFrame at the end.
 
     The writer fills ``buffer`` (and ``ibuffer``, the exact integer columns at
@@ -81,8 +97,7 @@ class MemorySink:
     t0, step : float
         Time [s] of the first row, and the base step [s].
     every : int
-        Base steps between rows (row ``i`` is at ``t0 + step * (every * i)``, the master's
-        own arithmetic).
+        Base steps between rows (row ``i`` is at ``t0 + step * (every * i)``).
     int_columns : dict of int to str, optional
         Columns (positions) of integer signals and their FMI types, kept exactly.
     """
@@ -91,29 +106,19 @@ class MemorySink:
                  every: int = 1, int_columns: dict | None = None):
         check_fits(n_rows * (len(columns) + 1) * 8, f"recording {n_rows} rows x {len(columns)} signals in memory",
                    RECORD_LESS)
-        self.columns = list(columns)
-        self.buffer = np.empty((n_rows, len(columns)))
-        self.int_positions, self._int_types = _integer_layout(columns, int_columns)
-        self.ibuffer = np.empty((n_rows, len(self.int_positions)), dtype=np.int64)
-        self.t0, self.step, self.every, self.n = t0, step, every, 0
-        #: the time of the last row, if it is not on the recording grid (a stopped run)
-        self.last_time = None
+        super().__init__(columns, n_rows, t0, step, every, int_columns)
+        self.n = 0
 
     def flush(self, rows: int) -> None:
-        """``rows`` more rows of ``buffer`` are complete (the buffer holds the whole run,
-        so it fills only once)."""
+        """``rows`` more rows of ``buffer`` are complete (it holds the whole run: it fills once)."""
         self.n += rows
 
     def frame(self) -> pd.DataFrame:
         """The rows recorded so far, indexed by ``time``."""
-        times = self.t0 + self.step * (self.every * np.arange(self.n))
-        if self.last_time is not None and self.n:
-            times[-1] = self.last_time
-        df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(times, name="time"), columns=self.columns,
-                          copy=False)          # the buffer's rows as they are: the run is over, nothing writes it
-        for k, (pos, type_name) in enumerate(zip(self.int_positions, self._int_types)):
-            col = self.ibuffer[: self.n, k]
-            df[self.columns[pos]] = col.view(np.uint64) if type_name == "UInt64" else col.copy()
+        df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(self._times(0, self.n), name="time"),
+                          columns=self.columns, copy=False)     # the run is over, nothing writes the buffer
+        for k, pos in enumerate(self.int_positions):
+            df[self.columns[pos]] = self._exact(k, self.n).copy()
         return df
 
     def finish(self) -> pd.DataFrame:
@@ -125,7 +130,7 @@ class MemorySink:
         return self.frame()
 
 
-class ParquetSink:
+class ParquetSink(_Rows):
     """Rows streamed to a Parquet file in chunks (constant memory).
 
     Parameters
@@ -158,24 +163,16 @@ class ParquetSink:
         if need > free:
             raise ResourceError(f"streaming {n_rows} rows x {len(columns)} signals needs up to "
                                 f"{need / 2**30:.2f} GiB, but {self.path.parent} has {free / 2**30:.2f} GiB free")
-        self.columns = list(columns)
-        self.chunk = int(chunk_rows)
-        self.buffer = np.empty((self.chunk, len(columns)))
-        self.int_positions, self._int_types = _integer_layout(columns, int_columns)
-        self.ibuffer = np.empty((self.chunk, len(self.int_positions)), dtype=np.int64)
-        self._exact = {int(p): (k, t) for k, (p, t) in enumerate(zip(self.int_positions, self._int_types))}
-        self.t0, self.step, self.every, self.total = t0, step, every, 0
-        self.last_time = None
+        super().__init__(columns, int(chunk_rows), t0, step, every, int_columns)
+        self.total, self._pa = 0, pa
+        self._exact_at = {int(p): k for k, p in enumerate(self.int_positions)}     # column -> exact column
+        kinds = [pa.float64() if j not in self._exact_at else
+                 pa.uint64() if self._int_types[self._exact_at[j]] == "UInt64" else pa.int64()
+                 for j in range(len(self.columns))]
+        meta = {b"pandas": _pandas_metadata(self.columns, {self.columns[j]: str(kinds[j]) for j in self._exact_at})}
+        self.schema = pa.schema([pa.field("time", pa.float64())]
+                                + [pa.field(c, kind) for c, kind in zip(self.columns, kinds)], metadata=meta)
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-
-        def kind(j):
-            if j not in self._exact:
-                return pa.float64()
-            return pa.uint64() if self._exact[j][1] == "UInt64" else pa.int64()
-        fields = [pa.field("time", pa.float64())] + [pa.field(c, kind(j)) for j, c in enumerate(self.columns)]
-        meta = {b"pandas": _pandas_metadata(self.columns, {self.columns[p]: str(kind(p)) for p in self._exact})}
-        self.schema = pa.schema(fields, metadata=meta)
-        self._pa = pa
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
         # every chunk also goes to an Arrow stream, complete on disk once written: if an FMU's
         # code kills the process, the crash guard's salvage turns it into the partial file
@@ -189,24 +186,17 @@ class ParquetSink:
         """Write the first ``rows`` rows of ``buffer`` as one row group."""
         if not rows:
             return
-        pa = self._pa
-        times = self.t0 + self.step * (self.every * np.arange(self.total, self.total + rows))
-        if self.last_time is not None:
-            times[-1] = self.last_time
-
-        def column(j):
-            if j not in self._exact:
-                return pa.array(self.buffer[:rows, j])
-            k, type_name = self._exact[j]
-            col = self.ibuffer[:rows, k]
-            return pa.array(col.view(np.uint64) if type_name == "UInt64" else col)
-        arrays = [pa.array(times)] + [column(j) for j in range(len(self.columns))]
-        table = pa.Table.from_arrays(arrays, schema=self.schema)
+        columns = [self.buffer[:rows, j] if j not in self._exact_at else self._exact(self._exact_at[j], rows)
+                   for j in range(len(self.columns))]
+        table = self._pa.Table.from_arrays([self._pa.array(c) for c in (self._times(self.total, rows), *columns)],
+                                           schema=self.schema)
         self.writer.write_table(table)
         self._ipc.write_table(table)
         self.total += rows
 
-    def _end_stream(self) -> None:
+    def _close(self) -> None:
+        """Close the Parquet writer and end the crash-safe stream."""
+        self.writer.close()
         crash_guard.stream_ended(id(self))
         with contextlib.suppress(OSError, self._pa.ArrowException):
             self._ipc.close()
@@ -216,16 +206,14 @@ class ParquetSink:
 
     def finish(self) -> Path:
         """End of a successful run: close and rename to the target; returns it."""
-        self.writer.close()
-        self._end_stream()
+        self._close()
         os.replace(self.tmp, self.path)
         return self.path
 
     def abort(self) -> Path | None:
         """End of a failed or interrupted run (after the last :meth:`flush`): keep the rows so far as
         ``<name>.partial.parquet`` (returned), or nothing if no row was recorded."""
-        self.writer.close()
-        self._end_stream()
+        self._close()
         if self.total == 0:
             with contextlib.suppress(OSError):
                 os.unlink(self.tmp)
@@ -233,12 +221,9 @@ class ParquetSink:
         target = partial_path(self.path)
         os.replace(self.tmp, target)
         return target
-
-
 class RowWriter:
-    """Writes the recorded signals' current values as the next row of a sink's buffer, and
-    flushes the buffer when it is full: the rows of the master's Python loop, and the last
-    row of a stopped run (the native kernel writes its rows itself).
+    """Writes the recorded signals' current values as the next row of a sink's buffer, flushing it
+    when full: the Python loop's rows and a stopped run's last row (the native kernel writes its own).
 
     Parameters
     ----------
@@ -278,16 +263,11 @@ class RowWriter:
         return row
 
 
-def _pandas_metadata(columns: Sequence[str], exact: dict | None = None) -> bytes:
+def _pandas_metadata(columns: Sequence[str], exact: dict) -> bytes:
     """pandas' Parquet metadata for a frame indexed by ``time`` (float columns, and the exact
     integer ones named in ``exact`` with their types), so that ``pandas.read_parquet``
     restores the index."""
-    import json
-
-    exact = exact or {}
     cols = [{"name": c, "field_name": c, "pandas_type": exact.get(c, "float64"),
-             "numpy_type": exact.get(c, "float64"), "metadata": None} for c in columns]
-    cols.append({"name": "time", "field_name": "time", "pandas_type": "float64",
-                 "numpy_type": "float64", "metadata": None})
+             "numpy_type": exact.get(c, "float64"), "metadata": None} for c in [*columns, "time"]]
     return json.dumps({"index_columns": ["time"], "column_indexes": [], "columns": cols,
                        "creator": {"library": "pendulum-cosim"}, "pandas_version": pd.__version__}).encode()

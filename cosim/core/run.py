@@ -1,32 +1,19 @@
 """One run of a co-simulation: its state, its setup, the Python loop and the run's end.
 
 :meth:`Cosimulation.run <cosim.core.master.Cosimulation.run>` and ``run_to_parquet`` make a
-:class:`Run` and call :meth:`Run.execute`. The run holds everything of the run: the signal
-arrays (``values``; ``integers``, the exact values of integer and Boolean signals;
-``source``, what the components read: ``values`` itself, or with ``order="jacobi"`` a copy
-taken before each instant), the sink and its row writer, the bound calls, the schedule
-entries (per base step of the hyperperiod, the output calls and the update calls made
-then), the position (base step ``k``, next row ``j``, and the block of
-:data:`~cosim.core.native_loop.BLOCK` base steps being run: its first base step ``k0`` and
-first row ``jb``), the phase (``reset``, ``bind``, ``output``, ``update``), the call being
-made (``failing``), a component's stop request, the progress bar and the clock board.
-
-1. Setup (:meth:`Run.setup`): every component is reset to the start time, the clocked ones
-   attached to the clock board, each one bound to the signal arrays; the schedule entries
-   are listed (an algebraic loop as one :class:`~cosim.core.algebraic.LoopSolver` call) and
-   the native kernel's program is built where the kernel runs (:mod:`cosim.core.native`).
-2. The loop: the Python loop (:meth:`Run.python_loop`) or the native kernel's
-   (:class:`~cosim.core.native_loop.NativeLoop`), the same results bit for bit; every signal
-   is checked for NaN and inf after each block.
-3. The end: the last rows are flushed and the sink's result returned, with a component's
-   stop request (:meth:`Run.finish_stop` ends the instant it came in); a failure becomes a
-   CosimError naming the component and the time, with the rows so far (a NaN or inf before
-   it is named instead, the root cause); Ctrl-C becomes Interrupted with the partial file.
-   Whatever happened, every component is closed and learns how many instants it computed
-   (:meth:`Run.teardown`).
+:class:`Run` and call :meth:`Run.execute`: the setup (:meth:`Run.setup`: reset, clocks attached,
+calls bound, the schedule listed, the native program built where the kernel runs), the loop
+(:meth:`Run.python_loop` or :class:`~cosim.core.native_loop.NativeLoop`, the same results bit for
+bit, every signal checked for NaN and inf after each block of
+:data:`~cosim.core.native_loop.BLOCK` base steps), and the end (the sink's result, a stop request
+finished by :meth:`Run.finish_stop`, a failure's CosimError with the rows so far, and whatever
+happened every component closed by :meth:`Run.teardown`). Its position: base step ``k``, next row
+``j``, the block's first base step ``k0`` and row ``jb``; ``phase`` is ``reset``, ``bind``,
+``output`` or ``update``, ``failing`` the call being made.
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Sequence
@@ -128,8 +115,8 @@ class Run:
 
     # ---------------------------------------------------------------- setup
     def setup(self) -> None:
-        """Reset every component, attach the clocked ones to the clock board, bind every
-        component, list the schedule entries and build the native program (or None)."""
+        """Reset and bind every component (the clocked ones attached to the clock board), list
+        the schedule and build the native program (or None)."""
         cs = self.cosim
         for c in cs.components:
             self.failing = c
@@ -143,17 +130,13 @@ class Run:
         for c in cs.components:
             self.bound[c.name] = self._bind(c)
         self.owner = {fn: name for name, calls in self.bound.items() for fn in calls}
-        entries: dict[frozenset, tuple] = {}            # one entry per set of due components
-        for i in range(cs._hyper):
-            due = frozenset(c.name for c in cs.components if i % cs._ratio[c.name] == 0)
-            if due not in entries:
-                entries[due] = self._entry(due)
-            self.schedule.append(entries[due])
+        dues = [frozenset(c.name for c in cs.components if i % cs._ratio[c.name] == 0) for i in range(cs._hyper)]
+        entries = {due: self._entry(due) for due in dict.fromkeys(dues)}      # one per set of due components
+        self.schedule = [entries[due] for due in dues]
         self.program = self._program()
 
     def _bind(self, c) -> tuple:
-        """``(output call, update call)`` of component ``c`` on the signal arrays (its fast
-        path, or the protocol's calls)."""
+        """``(output call, update call)`` of ``c`` on the signal arrays (its fast path, or the protocol's)."""
         cs = self.cosim
         inputs, outputs = cs._inputs[c.name], cs._out_slices[c.name]
         try:                # hasattr(c, "bind") = isinstance(c, FastBinding), faster
@@ -172,8 +155,7 @@ class Run:
         for g in cs.schedule:
             units = [u for u in g.units if u.comp.name in due]
             if units and g.loop:
-                signals = np.concatenate([np.arange(cs._out_slices[u.comp.name].start,
-                                                    cs._out_slices[u.comp.name].stop) for u in units])
+                signals = np.r_[tuple(cs._out_slices[u.comp.name] for u in units)]
                 outs.append(LoopSolver(units, [self.bound[u.comp.name][0] for u in units], signals, self.values,
                                        cs.loop_tolerance, cs.loop_max_iter, cs.loop_solver))
             else:
@@ -194,8 +176,8 @@ class Run:
 
     # ---------------------------------------------------------------- the Python loop
     def python_loop(self) -> None:
-        """The base steps in Python, by blocks of :data:`~cosim.core.native_loop.BLOCK`: at
-        each, the due components' outputs, the row (every ``m`` base steps), their updates."""
+        """The base steps in Python, by blocks of :data:`~cosim.core.native_loop.BLOCK`: the due
+        components' outputs, the row (every ``m`` base steps), their updates."""
         n, m, t0, h, L = self.n, self.m, self.t0, self.h, len(self.schedule)
         schedule, values, source, jacobi = self.schedule, self.values, self.source, self.jacobi
         record, bar = self.writer.write, self.bar
@@ -251,20 +233,16 @@ class Run:
         return result
 
     def finish_stop(self) -> None:
-        """A component (``failing``) asked to stop while stepping from ``t_k``: the other
-        components finish the instant; if it stops at ``t_{k+1}`` (within rounding) the
-        instant ``t_{k+1}`` is computed and recorded, else the stopping component's outputs
-        at its stop time are recorded as the last row (the others hold theirs). Logged as a
-        warning."""
+        """A component (``failing``) asked to stop while stepping from ``t_k``: the others finish
+        the instant, then the last row is the instant ``t_{k+1}`` if it stops there (within
+        rounding), else the stopping component's outputs at its stop time (the others held)."""
         request, k, L = self.stop, self.k, len(self.schedule)
         t = self.t0 + k * self.h
         t_next = t + self.h
         upds = self.schedule[k % L][1]
         for g in upds[upds.index(self.failing) + 1:]:
-            try:
+            with contextlib.suppress(StopRequest):
                 self.ran_ahead.get(g, g)(t)         # an update a thread already made: not again
-            except StopRequest:
-                pass
         ts = request.time
         if not np.isfinite(ts) or abs(ts - t_next) <= 1e-9 * max(1.0, abs(t_next)) or ts > t_next:
             ts = t_next
@@ -288,9 +266,8 @@ class Run:
         return self.sink.abort()
 
     def failure(self, error: Exception) -> CosimError:
-        """The CosimError that ``error``, raised by the call being made, ends the run with: the
-        component and the time named, the rows so far in it; or, if a signal became NaN or
-        inf before, the error naming it (the root cause)."""
+        """The CosimError ending the run for ``error`` of the call being made (component, time, the
+        rows so far), or naming a NaN or inf signal that came before it (the root cause)."""
         if self.phase != "reset" and not self.finite():
             return self.nonfinite_error()
         results = self.abort()
@@ -300,8 +277,7 @@ class Run:
         return CosimError(f"{where}: {error}", name, t, results)
 
     def _block_rows(self) -> list[tuple[int, int]]:
-        """The buffer's rows recorded since the block began (``jb`` up to ``j``, in two
-        pieces if the buffer was flushed meanwhile), as ``(first, end)`` pairs."""
+        """The buffer's rows since the block began, ``(first, end)`` pairs (two if it was flushed meanwhile)."""
         return [(self.jb, self.j)] if self.j >= self.jb else [(self.jb, len(self.sink.buffer)), (0, self.j)]
 
     def finite(self) -> bool:
@@ -315,14 +291,9 @@ class Run:
             raise self.nonfinite_error()
 
     def nonfinite_error(self) -> CosimError:
-        """The CosimError for the first NaN or inf signal of the base steps ``k0..k``: in a row
-        recorded since the block began (the row at each base step ``k % m == 0``), else among
-        the current values.
-
-        A recorded non-finite value is named with its exact time, and the results end just
-        before its row (rows a streamed run already wrote stay written); a signal that is not
-        recorded is named with the window ``t_k0..t_k``.
-        """
+        """The CosimError for the first NaN or inf of the base steps ``k0..k``: in a row recorded
+        since the block began, named with its time (the results end just before its row), else
+        among the current values, named with the window ``t_k0..t_k``."""
         buf, h, m, t0 = self.sink.buffer, self.h, self.m, self.t0
         kr = -(-self.k0 // m) * m                            # the base step of row jb
         for lo, hi in self._block_rows():
@@ -340,8 +311,8 @@ class Run:
                           f"{t_bad:g} s (component {sig.split('.')[0]!r})", sig.split(".")[0], t_bad, self.abort())
 
     def teardown(self) -> None:
-        """Whatever happened: the progress bar closed, the clock activations logged, every
-        component's instants counted (``n_samples``) and every component closed."""
+        """Whatever happened: the bar closed, the clock activations kept, every component's
+        instants counted (``n_samples``) and every component closed."""
         cs = self.cosim
         crash_guard.set_step_counter(None)
         if self.bar is not None:

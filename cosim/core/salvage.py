@@ -1,18 +1,17 @@
 """The salvage program: what a run leaves when an FMU's code killed its process.
 
-Started by the crash guard (:mod:`cosim.core.crash_guard`) from the dying process, before it
-ends::
+Started by the crash guard (:mod:`cosim.core.crash_guard`) from the dying process::
 
     python -m cosim.core.salvage [--stream IPC TMP PARTIAL]... [--remove FOLDER]...
 
-For each streamed recording, the rows written so far (the Arrow stream ``IPC`` the
-recording keeps beside its Parquet file; every chunk in it is complete once written)
-become the Parquet file ``PARTIAL``; the unfinished Parquet file ``TMP`` and the stream are
-removed. Each ``FOLDER`` (the run's temporary folders) is removed. It prints one line per
-file kept and exits 0; what it cannot do is said on stderr, never a traceback.
+Each streamed recording's rows so far (the Arrow stream ``IPC`` beside its Parquet file, every
+chunk complete once written) become the Parquet file ``PARTIAL``; ``TMP`` and the stream are
+removed, and each ``FOLDER``. One line per file kept; what it cannot do is said on stderr, never
+a traceback.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
@@ -34,31 +33,23 @@ def salvage_stream(ipc: str, tmp: str, partial: str) -> int:
                 reader = pa.ipc.open_stream(f)
             except (pa.ArrowInvalid, OSError):                # not even its schema: no chunk written
                 return 0
-            writer = None
             part = f"{partial}.{os.getpid()}.tmp"
-            try:
+            with pq.ParquetWriter(part, reader.schema) as writer:
                 while True:
                     try:
                         batch = reader.read_next_batch()
-                    except StopIteration:
+                    except (StopIteration, pa.ArrowInvalid, OSError):   # the end, or the chunk being written
                         break
-                    except (pa.ArrowInvalid, OSError):       # the chunk being written when it died
-                        break
-                    if writer is None:
-                        writer = pq.ParquetWriter(part, reader.schema)
                     writer.write_batch(batch)
                     rows += batch.num_rows
-            finally:
-                if writer is not None:
-                    writer.close()
             if rows:
                 os.replace(part, partial)
+            else:
+                os.unlink(part)
     finally:
         for path in (ipc, tmp):
-            try:
+            with contextlib.suppress(OSError):
                 os.unlink(path)
-            except OSError:
-                pass
     return rows
 
 

@@ -1,17 +1,12 @@
 """Static analysis of a co-simulation before it runs: base step, evaluation order, loops.
 
-* :func:`base_step`: the base step (greatest common divisor of the periods, exact in
-  rational arithmetic), each component's period in base steps, and the hyperperiod after
-  which the pattern of due components repeats. Sets of periods whose base step or
-  hyperperiod would be unreasonable (e.g. 1 ms beside pi ms, or 10 ms beside 10.001 ms)
-  are refused with the periods named.
-* :func:`evaluation_order`: the order in which the components' outputs are computed at an
-  instant, from the connections and each component's declared direct feedthrough (a
-  topological sort, so any list order gives the same result). A cycle of direct
-  dependencies is an algebraic loop: refused with the loop's ports named, or, with
-  ``loops="iterate"``, kept as a group the master solves by iteration. A cycle that exists
-  only between components (not between ports) is broken by evaluating a reentrant
-  component (an FMU) twice: first its outputs that depend on no input, later the others.
+:func:`base_step` gives the base step (the exact rational greatest common divisor of the
+periods), each period in base steps and the hyperperiod, refusing unreasonable sets of periods
+(1 ms beside pi ms). :func:`evaluation_order` sorts the components' outputs at an instant
+topologically by the connections and the declared direct feedthrough (any list order gives the
+same result); a cycle of direct dependencies is an algebraic loop, refused with its ports named
+or kept as a group to iterate (``loops="iterate"``). A cycle only between components, not ports,
+is broken by evaluating a reentrant component twice: its outputs that depend on no input first.
 """
 from __future__ import annotations
 
@@ -19,6 +14,7 @@ import functools
 import heapq
 import itertools
 import math
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
@@ -57,10 +53,8 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
         raise ConfigurationError("no components")
     fr = {n: _fraction(p) for n, p in periods.items()}
     if step_size is None:
-        base = Fraction(0)
-        for p in fr.values():
-            base = Fraction(math.gcd(base.numerator * p.denominator, p.numerator * base.denominator),
-                            base.denominator * p.denominator)
+        common = math.lcm(*(p.denominator for p in fr.values()))
+        base = Fraction(math.gcd(*(p.numerator * (common // p.denominator) for p in fr.values())), common)
     else:
         base = _fraction(step_size)
         if base <= 0:
@@ -82,7 +76,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
             "or set step_size and periods that divide it")
     hyper = 1
     for r in ratios.values():
-        hyper = hyper * r // math.gcd(hyper, r)
+        hyper = math.lcm(hyper, r)
         if hyper > MAX_HYPERPERIOD:
             raise ResourceError(
                 f"the periods ({listing}) repeat their pattern only every {hyper}+ base steps of "
@@ -166,10 +160,7 @@ def _sccs(nodes: list, edges: dict) -> list[list]:
 def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
     """Edges ``src unit -> dst unit`` (a dst feedthrough input reads a src output), with the
     connection ``(src port ref, dst port ref)`` behind each edge."""
-    publisher = {}
-    for u in units:
-        for p in u.ports:
-            publisher[(u.comp.name, p)] = u
+    publisher = {(u.comp.name, p): u for u in units for p in u.ports}
     edges, why = {u: [] for u in units}, {}
     for u in units:
         for q in sorted(u.needs):
@@ -183,20 +174,12 @@ def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
 
 def _cycle(scc: list, edges: dict, why: dict) -> str:
     """A readable cycle through the units of one strongly connected component."""
-    members = set(scc)
-    start = scc[-1]
-    path, seen = [start], {start: 0}
-    node = start
-    while True:
-        nxt = next(w for w in edges[node] if w in members)
-        if nxt in seen:
-            cyc = path[seen[nxt]:] + [nxt]
-            break
+    members, path, seen = set(scc), [scc[-1]], {scc[-1]: 0}
+    while (nxt := next(w for w in edges[path[-1]] if w in members)) not in seen:
         seen[nxt] = len(path)
         path.append(nxt)
-        node = nxt
-    hops = [f"{why[(a, b)][0]} -> {why[(a, b)][1]}" for a, b in itertools.pairwise(cyc)]
-    return ", ".join(hops)
+    cycle = path[seen[nxt]:] + [nxt]
+    return ", ".join(f"{why[(a, b)][0]} -> {why[(a, b)][1]}" for a, b in itertools.pairwise(cycle))
 
 
 def evaluation_order(components: Sequence[Component], conn: Mapping, loops: str = "refuse"
@@ -260,13 +243,9 @@ def _topological(units: list[Unit], edges: dict, node_of: dict, key) -> list[Gro
     for u in units:
         members.setdefault(node_of[u], []).append(u)
     succ: dict = {n: set() for n in members}
-    indeg = {n: 0 for n in members}
     for u, vs in edges.items():
-        for v in vs:
-            a, b = node_of[u], node_of[v]
-            if a != b and b not in succ[a]:
-                succ[a].add(b)
-                indeg[b] += 1
+        succ[node_of[u]].update(node_of[v] for v in vs if node_of[v] != node_of[u])
+    indeg = Counter(b for bs in succ.values() for b in bs)
     keys = {}
     for n, ms in members.items():
         ms.sort(key=key)
