@@ -1,12 +1,9 @@
-"""The ports of a clocked FMI 3.0 FMU in a run (the call sequences are in
-:mod:`cosim.fmi.clock_run`): a clocked variable is set and got only while one of its clocks
-is active (FMI 3.0 §2.2.8.3 Model Partitions and Clocked Variables); the inputs an output
-depends on directly are set before the outputs are read, the others before the state
-changes. Scalar Float64 ports take one ``fmi3SetFloat64`` / ``fmi3GetFloat64`` call (in
-place where the master's signals lie side by side), other scalars one call per type
-(§2.2.7.2), array elements an :class:`~cosim.fmi.exchange.Exchange` (which checks integer
-ranges). Outputs read between instants go to the component's own buffers, the signals at
-the next instant (zero-order hold).
+"""The ports of a clocked FMI 3.0 FMU in a run: a clocked variable is set and got only while
+one of its clocks is active (FMI 3.0 §2.2.8.3 Model Partitions and Clocked Variables); the
+inputs an output depends on directly are set before the outputs are read, the others before
+the state changes. Scalars take one call per type (§2.2.7.2; Float64 in place where the
+signals lie side by side), array elements an :class:`~cosim.fmi.exchange.Exchange`.
+Outputs read between instants go to the own buffers, the signals at the next instant.
 """
 from __future__ import annotations
 
@@ -25,11 +22,9 @@ __all__ = ["ClockPorts", "InputSetters", "Plan"]
 _D, _B, _U32, _SIZE = ctypes.c_double, ctypes.c_bool, ctypes.c_uint32, ctypes.c_size_t
 #: FMI 3.0 type -> (ctypes type, function suffix, value kind) of the scalar fast path.
 _SCALAR = {"Float64": (ctypes.c_double, "Float64", "f"), "Float32": (ctypes.c_float, "Float32", "f"),
-           "Int8": (ctypes.c_int8, "Int8", "i"), "UInt8": (ctypes.c_uint8, "UInt8", "i"),
-           "Int16": (ctypes.c_int16, "Int16", "i"), "UInt16": (ctypes.c_uint16, "UInt16", "i"),
-           "Int32": (ctypes.c_int32, "Int32", "i"), "UInt32": (ctypes.c_uint32, "UInt32", "i"),
-           "Int64": (ctypes.c_int64, "Int64", "i"), "UInt64": (ctypes.c_uint64, "UInt64", "u"),
-           "Enumeration": (ctypes.c_int64, "Int64", "i"), "Boolean": (ctypes.c_bool, "Boolean", "b")}
+           "Enumeration": (ctypes.c_int64, "Int64", "i"), "Boolean": (ctypes.c_bool, "Boolean", "b"),
+           **{t: (getattr(ctypes, f"c_{t.lower()}"), t, "u" if t == "UInt64" else "i")
+              for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")}}
 
 
 class InputSetters(NamedTuple):
@@ -98,13 +93,12 @@ class ClockPorts:
     ----------
     clock_in : dict of int to InputSetters
         Each input clock's clocked inputs.
-    unclocked_in : list of int
-        The positions of the connected inputs without clock.
+    free_in : InputSetters
+        The inputs without clock (in Co-Simulation: but the discrete ones); their positions
+        are ``unclocked_in``.
     get_k, get_kd, get_u, get_ud : dict of int to callable, or callable
         The getters of each clock's outputs and of the outputs without clock (``_d``: into
         the signals, else into the own buffers); None for no output.
-    free_in : InputSetters
-        The inputs without clock (in Co-Simulation: but the discrete ones).
     """
 
     # a run's state, as slots: the hot paths' attribute and method look-ups stay fast
@@ -445,6 +439,13 @@ class ClockPorts:
             self.dirty = False
 
     # ------------------------------------------------------------------ output clocks
+    def _active_out_clocks(self, what: str) -> list[int]:
+        """``fmi3GetClock`` of the output (and local) clocks (the call ``what``): the active ones' indices."""
+        st = self._get_clock(self.c, self._out_vr, self._n_out, self._out_val)
+        if st > 1:
+            self._fail(what, st)
+        return [i for i in range(len(self.out_clocks)) if self._out_val[i]]
+
     def _clocks_ticked(self, t: float, indices, snap: dict | None, direct: bool) -> bool:
         """The output clocks at ``indices`` active at ``t``: each counted, logged, its outputs
         read (``direct``: into the signals), its activation queued; whether any has sinks."""
