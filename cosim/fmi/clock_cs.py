@@ -2,15 +2,14 @@
 in a run, in the FMI 3.0 call sequence: §4.2 State Machine for Co-Simulation, its Event Mode
 (§2.3.5) in :mod:`cosim.fmi.clock_event`, §4.1.3 Early Return.
 
-At an instant: the outputs without clock read in Step Mode, before any input is set (the
-standard forbids a get after a set there, so they depend on no input directly); Event Mode
-if clocks tick. In the update: the event iteration, ``fmi3EnterStepMode``, ``fmi3DoStep``
-over the period, ending at every activation between instants (a clock, the FMU's
-``nextEventTime``) for an Event Mode there. An early return with ``eventHandlingNeeded`` is
-handled in Event Mode at its ``lastSuccessfulTime`` (at the step's end: in the next
-instant's). A discrete input without clock that changes where no clock ticks is set in an
-Event Mode of its own. The common instant (periodic clocks, nothing pending) takes a short
-path (``_tick``, ``_tock``), its calls made once per set of clocks.
+At an instant: the outputs without clock read in Step Mode before any input is set (a get
+after a set is forbidden there, so they depend on no input directly); Event Mode if clocks
+tick. In the update: the event iteration, ``fmi3EnterStepMode``, ``fmi3DoStep`` over the
+period, stopped at every activation between instants (a clock, ``nextEventTime``) for an
+Event Mode there. An early return with ``eventHandlingNeeded`` is handled in Event Mode at
+its ``lastSuccessfulTime`` (at the step's end: in the next instant's). A discrete input
+without clock that changes where no clock ticks is set in an Event Mode of its own. The
+common instant (periodic clocks, nothing pending) takes a short path (``_tick``, ``_tock``).
 """
 from __future__ import annotations
 
@@ -29,7 +28,7 @@ _TERMINATE = "the FMU requested termination in its event update"
 
 
 class CSClockedRun(EventModeRun):
-    """One run of a clocked Co-Simulation FMU (see the module documentation).
+    """One run of a clocked Co-Simulation FMU.
 
     Parameters
     ----------
@@ -39,7 +38,7 @@ class CSClockedRun(EventModeRun):
 
     __slots__ = ("_ch", "_ct", "_do_step", "_ds_any", "_ds_bytes", "_ds_flags", "_ds_last", "_ds_refs",
                  "_enter_step_mode", "_tick_calls", "_tock_calls", "can_vary", "fast", "quiet", "set_u_all_d",
-                 "set_u_ft_d", "set_ud", "u_fill")
+                 "set_u_ft_d", "set_ud")
     discrete_apart = True
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
@@ -55,8 +54,6 @@ class CSClockedRun(EventModeRun):
         self.can_vary = bool(getattr(comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
         self.set_ud = self._or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
         self.set_u_ft_d, self.set_u_all_d = self._or_none(self.free_in.ft_d), self._or_none(self.free_in.all_d)
-        self.u_fill = self.set_ud is not None or any(getattr(f, "needs_fill", False)
-                                                      for f in (self.set_u_ft_d, self.set_u_all_d))
         self.quiet = False       # nothing pending, nothing held: the short path may run (set by each update)
         self.fast: Plan | None = None    # the plan of the short path's activation at this instant
         # the short path's calls, unpacked into locals by _tick and _tock
@@ -96,12 +93,10 @@ class CSClockedRun(EventModeRun):
             self._tick(plan, t)
 
     def _tick(self, plan: Plan, t: float) -> None:
-        """The short path's Event Mode at instant ``t`` for ``plan``'s clocks (§2.3.5):
-        ``fmi3EnterEventMode``, ``fmi3SetClock``, their inputs and outputs, the output clocks."""
+        """The short path's Event Mode (§2.3.5) at instant ``t``: ``fmi3EnterEventMode``,
+        ``fmi3SetClock`` of ``plan``'s clocks, their inputs and outputs, the output clocks."""
         enter_event_mode, set_clock, c, set_u_ft, log_t, log_id = self._tick_calls
-        fill_ft, _, simple, one = plan.short or self._shorten(plan)
-        if fill_ft is not None:
-            fill_ft()
+        _, simple, one = plan.short or self._shorten(plan)
         st = enter_event_mode(c)
         if st > 1:
             self._fail(f"EnterEventMode(t = {t:g} s)", st)
@@ -133,11 +128,11 @@ class CSClockedRun(EventModeRun):
             self.ticked.update(plan.vrs)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path: ``(fill_ft, fill_all, simple, label)``: the fills it needs,
-        whether the update may take it too (no interval to read), its one clock's label."""
-        fill = plan.fill or self.u_fill
-        plan.short = (self.fill_ft if fill else None, self.fill_all if fill else None,
-                      not plan.intervals and not self.countdown, plan.labels[0] if len(plan.labels) == 1 else None)
+        """``plan``'s short path ``(fill_all, simple, label)``: the fill the update needs (for the
+        discrete inputs without clock), whether it may take the short path too (no interval to
+        read), the one clock's label."""
+        plan.short = (self.fill_all if self.set_ud is not None else None, not plan.intervals and not self.countdown,
+                      plan.labels[0] if len(plan.labels) == 1 else None)
         return plan.short
 
     # ------------------------------------------------------------------ the update
@@ -150,7 +145,7 @@ class CSClockedRun(EventModeRun):
             return
         filled = False
         if plan is None and not self.in_event:       # no tick at this instant: Step Mode
-            if self.u_fill and self.fill_all is not None:
+            if self.set_ud is not None:
                 self.fill_all()
                 filled = True
             if self.set_u_all_d is not None:
@@ -179,7 +174,7 @@ class CSClockedRun(EventModeRun):
         ``fmi3EnterStepMode`` (§4.2.1 Step Mode), ``fmi3DoStep``."""
         (set_u_all, set_ud, update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs,
          ds_any) = self._tock_calls
-        fill_all = plan.short[1]
+        fill_all = plan.short[0]
         if fill_all is not None:
             fill_all()
         for f in plan.set_rest_d:
@@ -240,10 +235,7 @@ class CSClockedRun(EventModeRun):
         """The step from ``t`` in Step Mode (§4.2.1), whatever may stop it; then whether the
         next instant may take the short path."""
         if not self.inbox and not self.next_at and self.fmu_next is None:
-            self._ct.value = t
-            st = self._do_step(self.c, self._ct, self._ch, True, *self._ds_refs)
-            if st > 1:
-                self._fail(f"DoStep(t = {t:g} s, h = {self.P:g} s)", st)
+            self._do(t, self._ch)
             if self._ds_any.value:
                 self._stopped(t, filled)
         else:
@@ -271,15 +263,19 @@ class CSClockedRun(EventModeRun):
                 raise FMUError(f"{self.name}: an activation at t = {p:g} s falls between its communication points, "
                                "but the FMU cannot vary its communication step "
                                "(canHandleVariableCommunicationStepSize = false)")
-            self._ct.value = tc
-            st = self._do_step(self.c, self._ct, ctypes.c_double(target - tc), True, *self._ds_refs)
-            if st > 1:
-                self._fail(f"DoStep(t = {tc:g} s, h = {target - tc:g} s)", st)
+            self._do(tc, ctypes.c_double(target - tc))
             tc = self._step_done(t, target)
 
+    def _do(self, tc: float, h: ctypes.c_double) -> None:
+        """``fmi3DoStep`` from ``tc`` over ``h`` [s]."""
+        self._ct.value = tc
+        st = self._do_step(self.c, self._ct, h, True, *self._ds_refs)
+        if st > 1:
+            self._fail(f"DoStep(t = {tc:g} s, h = {h.value:g} s)", st)
+
     def _step_done(self, t: float, target: float) -> float | None:
-        """After ``fmi3DoStep`` towards ``target`` (an early return, §4.1.3): the time to step
-        on from, or None (the step reached its end)."""
+        """After ``fmi3DoStep`` towards ``target`` (§4.1.3 Early Return): the time to step on
+        from, or None (the step reached its end)."""
         end = t + self.P
         ehn, stop, early = (f.value for f in self._ds_flags)
         reached = self._ds_last.value if early else target

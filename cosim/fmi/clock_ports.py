@@ -8,7 +8,6 @@ Outputs read between instants go to the own buffers, the signals at the next ins
 from __future__ import annotations
 
 import ctypes
-import itertools
 from typing import NamedTuple
 
 import numpy as np
@@ -19,19 +18,22 @@ from .ports import parse_start
 
 __all__ = ["ClockPorts", "InputSetters", "Plan"]
 
-_D, _B, _U32, _SIZE = ctypes.c_double, ctypes.c_bool, ctypes.c_uint32, ctypes.c_size_t
-#: FMI 3.0 type -> (ctypes type, function suffix, value kind) of the scalar fast path.
-_SCALAR = {"Float64": (ctypes.c_double, "Float64", "f"), "Float32": (ctypes.c_float, "Float32", "f"),
-           "Enumeration": (ctypes.c_int64, "Int64", "i"), "Boolean": (ctypes.c_bool, "Boolean", "b"),
-           **{t: (getattr(ctypes, f"c_{t.lower()}"), t, "u" if t == "UInt64" else "i")
-              for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")}}
+_B, _U32, _SIZE = ctypes.c_bool, ctypes.c_uint32, ctypes.c_size_t
+
+
+def _index(positions) -> slice | np.ndarray:
+    """``positions`` as a slice if they lie side by side (an Exchange of scalar Float64 ports
+    then works in place, the FMU reading or writing the array itself), else an index array."""
+    idx = np.asarray(positions, np.intp)
+    if len(idx) and np.array_equal(idx, np.arange(idx[0], idx[0] + len(idx))):
+        return slice(int(idx[0]), int(idx[0]) + len(idx))
+    return idx
 
 
 class InputSetters(NamedTuple):
     """The setters of one set of inputs: those some output depends on directly (``ft``),
     the others (``rest``), all of them; each from the component's input buffer and (``_d``)
-    from the master's signals. A setter of no input is ``no_exchange``; one from the signals
-    that needs the buffer filled first has ``needs_fill``."""
+    from the master's signals. A setter of no input is ``no_exchange``."""
 
     ft: object
     rest: object
@@ -53,7 +55,7 @@ class Plan:
         The clocks' value references.
     """
 
-    __slots__ = ("args", "fill", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_ft_d",
+    __slots__ = ("args", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_ft_d",
                  "set_rest_d", "short", "vrs")
 
     def __init__(self, ports: ClockPorts, vrs: tuple[int, ...]):
@@ -68,7 +70,6 @@ class Plan:
         self.get = ports.calls(ports.get_k.get(v) for v in vrs)
         self.get_d = ports.calls(ports.get_kd.get(v) for v in vrs)
         self.intervals = [by_vr[v] for v in vrs if ports.interval_read(by_vr[v])]
-        self.fill = any(getattr(f, "needs_fill", False) for s in ins for f in (s.ft_d, s.rest_d, s.all_d))
         self.short = None                # the short path's calls, made by the interface's run
 
 
@@ -140,17 +141,6 @@ class ClockPorts:
 
     def _fail(self, what: str, status: int):
         self.inst.fail(what, status)
-
-    def _checked(self, fn, args: tuple, label: str):
-        """The call ``fn(*args)``, its status checked; returns False (no input changed)."""
-        fail = self._fail
-
-        def call() -> bool:
-            st = fn(*args)
-            if st > 1:
-                fail(label, st)
-            return False
-        return call
 
     @staticmethod
     def calls(fns) -> tuple:
@@ -236,136 +226,29 @@ class ClockPorts:
         return InputSetters(*(self._setter(p) for p in parts), *(self._setter(p, direct=True) for p in parts))
 
     def _setter(self, positions: list[int], changes: bool = False, direct: bool = False):
-        """A call setting the input ports at ``positions`` from the input buffer (``direct``:
-        scalar Float64 ports from the master's signals; any other such setter has
-        ``needs_fill``); ``changes``: it returns whether a value changed."""
+        """A call setting the input ports at ``positions`` from the input buffer (``direct``: from
+        the master's signals); ``changes``: it returns whether a value changed."""
         if not positions:
             return no_exchange
         comp = self.comp
-        names = comp.connected_inputs
-        ports = [comp.element_ports[names[i]] for i in positions]
-        if not changes and all(p.size == 1 and p.type == "Float64" for p in ports) and \
-                len({p.variable.valueReference for p in ports}) == len(ports):
-            return self._float_setter(positions, ports, direct)
-        if direct:
-            f = self._setter(positions, changes)
-            f.needs_fill = True
-            return f
+        names, starts = comp.connected_inputs, comp._input_starts()
         srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type) for n in names]
-        starts = comp._input_starts()
-        ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "set", self._fail, self.name,
-                      [srcs[i] for i in positions])
+        ex = Exchange(self.inst.dll, self.inst.handle, 3, [comp.element_ports[names[i]] for i in positions], "set",
+                      self._fail, self.name, [srcs[i] for i in positions])
         ex.preset({comp.element_ports[names[i]].name: starts[i] for i in positions})
-        return ex.bind(self.vin, np.asarray(positions, np.intp), self.iin, changes)
+        if direct:
+            return ex.bind(self.values, _index(self.idx_in[positions]), self.integers, changes)
+        return ex.bind(self.vin, _index(positions), self.iin, changes)
 
-    def _float_setter(self, positions: list[int], ports: list, direct: bool):
-        n = _SIZE(len(ports))
-        vrs = (_U32 * len(ports))(*[p.variable.valueReference for p in ports])
-        fn, fail = self._fn("fmi3SetFloat64"), self._fail
-        slots = [int(self.idx_in[j]) for j in positions]
-        if direct and all(b == a + 1 for a, b in itertools.pairwise(slots)):     # the FMU reads the signals
-            return self._checked(fn, (self.c, vrs, n, self._pointer(self.values, slots[0]), n), "SetFloat64")
-        buf = (_D * len(ports))()
-        args = (self.c, vrs, n, buf, n)
-        src = self.values if direct else self.vin
-        pairs = tuple((i, slots[i] if direct else j) for i, j in enumerate(positions))
-
-        def set_reals() -> bool:
-            for i, j in pairs:
-                buf[i] = src[j]
-            st = fn(*args)
-            if st > 1:
-                fail("SetFloat64", st)
-            return False
-        return set_reals
-
-    @staticmethod
-    def _pointer(array: np.ndarray, index: int):
-        return ctypes.cast(array.ctypes.data + 8 * index, ctypes.POINTER(_D))
-
-    # ------------------------------------------------------------------ getters
     def _getter(self, positions: list[int], direct: bool):
         """A call reading the output ports at ``positions`` into the master's signals
-        (``direct``: at an instant) or into the own buffers (between instants); None for
-        none."""
+        (``direct``: at an instant) or into the own buffers (between instants); None for none."""
         if not positions:
             return None
-        comp = self.comp
-        ports = [comp.element_ports[comp.output_names[j]] for j in positions]
         own, own_i, base = (self.values, self.integers, self.out.start) if direct else (self.own, self.own_i, 0)
-        if any(p.size != 1 or p.type not in _SCALAR for p in ports):
-            ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "get", self._fail, self.name)
-            return ex.bind(own, np.asarray(positions, np.intp) + base, own_i)
-        items = sorted(zip([j + base for j in positions], ports), key=lambda x: x[0])
-        calls = []
-        if direct:                               # Float64 at consecutive signals: read in place
-            items = self._in_place(items, calls)
-        groups: dict = {}
-        for j, p in items:
-            ctype, suffix, kind = _SCALAR[p.type]
-            groups.setdefault(suffix, (ctype, kind, []))[2].append((j, p.variable.valueReference))
-        for suffix, (ctype, kind, pairs) in groups.items():
-            vrs = list(dict.fromkeys(vr for _, vr in pairs))
-            n = _SIZE(len(vrs))
-            buf = (ctype * len(vrs))()
-            where = {vr: i for i, vr in enumerate(vrs)}
-            calls.append((self._fn(f"fmi3Get{suffix}"), (self.c, (_U32 * len(vrs))(*vrs), n, buf, n), buf, kind,
-                          tuple((j, where[vr]) for j, vr in pairs), f"Get{suffix}"))
-        return self._reader(calls, own, own_i)
-
-    def _in_place(self, items: list, calls: list) -> list:
-        """Runs of Float64 outputs at consecutive signals, each one ``fmi3GetFloat64`` into
-        the signals (added to ``calls``); returns the other ``items``."""
-        runs, rest = [], []
-        for j, p in items:
-            if p.type == "Float64" and runs and runs[-1][-1][0] == j - 1 and \
-                    all(q.variable.valueReference != p.variable.valueReference for _, q in runs[-1]):
-                runs[-1].append((j, p))
-            elif p.type == "Float64":
-                runs.append([(j, p)])
-            else:
-                rest.append((j, p))
-        for run in runs:
-            n = _SIZE(len(run))
-            vrs = (_U32 * len(run))(*[p.variable.valueReference for _, p in run])
-            calls.append((self._fn("fmi3GetFloat64"), (self.c, vrs, n, self._pointer(self.values, run[0][0]), n),
-                          None, "f", (), "GetFloat64"))
-        return rest
-
-    def _reader(self, calls: list, own: np.ndarray, own_i: np.ndarray):
-        """One function making the getter ``calls`` ``(fn, args, buffer, kind, pairs, label)``
-        (the common cases without a loop)."""
-        fail = self._fail
-        if len(calls) == 1 and calls[0][2] is None:
-            fn, args, _, _, _, label = calls[0]
-            return self._checked(fn, args, label)
-        if len(calls) == 1 and calls[0][3] == "f" and len(calls[0][4]) == 1:
-            fn, args, buf, _, ((j, _),), label = calls[0]
-
-            def get_one() -> None:
-                st = fn(*args)
-                if st > 1:
-                    fail(label, st)
-                own[j] = buf[0]
-            return get_one
-        big = 1 << 63
-
-        def get() -> None:
-            for fn, args, buf, kind, pairs, label in calls:
-                st = fn(*args)
-                if st > 1:
-                    fail(label, st)
-                if kind == "f":
-                    for j, i in pairs:
-                        own[j] = buf[i]
-                else:
-                    for j, i in pairs:
-                        v = buf[i]
-                        if kind == "b":
-                            v = 1 if v else 0
-                        own[j] = v
-                        own_i[j] = v - (big << 1) if kind == "u" and v >= big else v
-        return get
+        ports = [self.comp.element_ports[self.comp.output_names[j]] for j in positions]
+        ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "get", self._fail, self.name)
+        return ex.bind(own, _index(np.asarray(positions) + base), own_i)
 
     # ------------------------------------------------------------------ plans
     def interval_read(self, k) -> bool:

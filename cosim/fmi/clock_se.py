@@ -80,15 +80,13 @@ class SEClockedRun(ClockedRun):
     def _fire(self, plan: Plan, t: float) -> None:
         """The short path of ``plan`` at instant ``t`` (one partition whose interval is not read):
         ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its own."""
-        fill, set_u_ft, set_u_rest, set_own, cv, name, label, get_own, get_u = plan.short or self._shorten(plan)
+        set_u_ft, set_u_rest, set_own, cv, name, label, get_own, get_u = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
             self._run_at(t, list(plan.vrs), None, True)
             return
         activate_model_partition, c, at, log_t, log_id = self._fire_calls
         self.now = t
-        if fill is not None:
-            fill()
         if set_u_ft is not None:
             set_u_ft()
         if set_u_rest is not None:
@@ -112,15 +110,13 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, list(self.queue), None, True)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path: fill, setters, clock, name, label, getters (None: nothing to do)."""
+        """``plan``'s short path: setters, clock, name, label, getters (None: nothing to do)."""
         if len(plan.vrs) > 1 or plan.intervals:
-            plan.short = (None,) * 9
+            plan.short = (None,) * 8
             return plan.short
         vr = plan.vrs[0]
-        ft_d = self.free_in.ft_d
-        fill = self.fill_ft if self.fill_ft is not None and (plan.fill or getattr(ft_d, "needs_fill", False)) else None
-        setters = [self._or_none(f) for f in (ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
-        plan.short = (fill, *setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0], self.get_kd[vr],
+        setters = [self._or_none(f) for f in (self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
+        plan.short = (*setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0], self.get_kd[vr],
                       self.get_ud)
         return plan.short
 
