@@ -24,8 +24,6 @@ from .clock_ports import Plan
 
 __all__ = ["CSClockedRun"]
 
-_TERMINATE = "the FMU requested termination in its event update"
-
 
 class CSClockedRun(EventModeRun):
     """One run of a clocked Co-Simulation FMU.
@@ -187,15 +185,7 @@ class CSClockedRun(EventModeRun):
         if st > 1:
             self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
         if uds_any.value:                            # a flag: the general way
-            flags = self._uds_flags
-            if flags[1].value:
-                raise StopRequest(self.name, t, _TERMINATE)
-            if flags[0].value:
-                self._read_output_clocks(t, None, True)
-                self._event(t)
-            else:
-                self.fmu_next = self._uds_next.value if flags[4].value else None
-                self._step_mode(t)
+            self._event(t, True)
             self._step(t, False)
             return
         if self.out_clocks and self.ticked:
@@ -215,13 +205,11 @@ class CSClockedRun(EventModeRun):
         else:
             self.quiet = True
 
-    def _event(self, t: float) -> None:
-        """The rest of the Event Mode at ``t`` (the event iteration), then Step Mode."""
-        if self._finish(t):
-            raise StopRequest(self.name, t, _TERMINATE)
-        self._step_mode(t)
-
-    def _step_mode(self, t: float) -> None:
+    def _event(self, t: float, called: bool = False) -> None:
+        """The rest of the Event Mode at ``t`` (the event iteration; ``called``: its first
+        ``fmi3UpdateDiscreteStates`` made), then Step Mode."""
+        if self._finish(t, called):
+            raise StopRequest(self.name, t, "the FMU requested termination in its event update")
         st = self._enter_step_mode(self.c)
         if st > 1:
             self._fail(f"EnterStepMode(t = {t:g} s)", st)

@@ -148,16 +148,17 @@ class EventModeRun(ClockedRun):
             self.clock_in[vr].rest()
         self.free_in.all()
 
-    def _finish(self, t: float) -> bool:
+    def _finish(self, t: float, called: bool = False) -> bool:
         """The rest of an Event Mode at ``t``: the event iteration (``fmi3UpdateDiscreteStates``
-        until ``discreteStatesNeedUpdate`` is false, §2.3.5), the intervals, the activations
-        due at once; whether the FMU asks to terminate."""
+        until ``discreteStatesNeedUpdate`` is false, §2.3.5; ``called``: its first call made),
+        the intervals, the activations due at once; whether the FMU asks to terminate."""
         f = self._uds_flags
         uds, args = self._update_discrete_states, self._uds_args
         for _ in range(MAX_SUPERDENSE):
-            st = uds(*args)
+            st = 0 if called else uds(*args)
             if st > 1:
                 self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
+            called = False
             self.active.clear()
             if f[1].value:
                 return True

@@ -134,10 +134,9 @@ class ClockPorts:
 
     # ------------------------------------------------------------------ set-up
     def _fn(self, name: str):
-        f = self._raw.get(name)
-        if f is None:
-            f = self._raw[name] = self.inst.raw(name)
-        return f
+        if name not in self._raw:
+            self._raw[name] = self.inst.raw(name)
+        return self._raw[name]
 
     def _fail(self, what: str, status: int):
         self.inst.fail(what, status)
@@ -332,25 +331,20 @@ class ClockPorts:
     def _clocks_ticked(self, t: float, indices, snap: dict | None, direct: bool) -> bool:
         """The output clocks at ``indices`` active at ``t``: each counted, logged, its outputs
         read (``direct``: into the signals), its activation queued; whether any has sinks."""
-        published = None
-        get = self.get_kd if direct else self.get_k
+        get, floats, ints, base = ((self.get_kd, self.values, self.integers, self.out.start) if direct else
+                                   (self.get_k, self.own, self.own_i, 0))
         for i in indices:
             vr = self.out_clocks[i].vr
             self.out_counts[i] += 1
             pos = self.out_clock_pos[i]
             if pos >= 0:
-                if direct:
-                    self.values[self.out.start + pos] = self.integers[self.out.start + pos] = self.out_counts[i]
-                else:
-                    self.own[pos] = self.own_i[pos] = self.out_counts[i]
+                floats[base + pos] = ints[base + pos] = self.out_counts[i]
             self.log_t(t)
             self.log_id(self.labels[vr])
             g = get[vr]
             if g is not None:
                 g()
-            if self.publishers[i] is not None:
-                published = published or []
-                published.append(self.publishers[i])
+        published = [self.publishers[i] for i in indices if self.publishers[i] is not None]
         if published:
             self._outbox.append((t, snap, published))
         return bool(published)
@@ -369,8 +363,7 @@ class ClockPorts:
                 self.get_u()
             mine = (self.own.copy(), self.own_i.copy())
         for t, snap, published in self._outbox:
-            out = dict(snap) if snap else {}
-            out[self.name] = mine
+            out = {**(snap or {}), self.name: mine}
             for pub in published:
                 pub(t, out)
         self._outbox.clear()
