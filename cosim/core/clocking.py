@@ -185,17 +185,15 @@ class ClockPlan:
                 if k.causality != "input" or k.variability not in PERIODIC or k.interval is None:
                     continue
                 shift = k.shift or Fraction(0)
-                bad = [(what, v) for what, v in (("interval", k.interval), ("shift", shift))
-                       if (v / p).denominator != 1]
-                if bad:
-                    what, v = bad[0]
-                    g = fraction_gcd(p, k.interval, shift)
-                    raise ConfigurationError(
-                        f"component {c.name!r}: clock {k.name!r} ({k.variability}) ticks every {float(k.interval):g} s "
-                        f"from {float(shift):g} s, but its {what} {float(v):g} s is not a multiple of {c.name}'s "
-                        f"period {float(p):g} s, so it would tick between the instants at which the master steps "
-                        f"{c.name}. A "
-                        f"period of {float(g):g} s (and a base step that divides it) would honour it")
+                g = fraction_gcd(p, k.interval, shift)
+                for what, v in (("interval", k.interval), ("shift", shift)):
+                    if (v / p).denominator != 1:
+                        raise ConfigurationError(
+                            f"component {c.name!r}: clock {k.name!r} ({k.variability}) ticks every "
+                            f"{float(k.interval):g} s from {float(shift):g} s, but its {what} {float(v):g} s is not a "
+                            f"multiple of {c.name}'s period {float(p):g} s, so it would tick between the instants at "
+                            f"which the master steps {c.name}. A period of {float(g):g} s (and a base step that "
+                            "divides it) would honour it")
 
     def _check_links(self, order: str) -> None:
         members = {c.name for c in self.members}

@@ -56,9 +56,8 @@ class CSClockedRun(EventModeRun):
         self.fast: Plan | None = None    # the plan of the short path's activation at this instant
         # the short path's calls, unpacked into locals by _tick and _tock
         self._tick_calls = (self._enter_event_mode, self._set_clock, self.c, self.set_u_ft_d, self.log_t, self.log_id)
-        self._tock_calls = (self.set_u_all_d, self.set_ud, self._update_discrete_states, self._uds_args,
-                            self._uds_any, self._enter_step_mode, self._do_step, self._ct, self._ch, self._ds_refs,
-                            self._ds_any)
+        self._tock_calls = (self._update_discrete_states, self._uds_args, self._uds_any, self._enter_step_mode,
+                            self._do_step, self._ct, self._ch, self._ds_refs, self._ds_any)
 
     # ------------------------------------------------------------------ at an instant
     def output(self, t: float) -> None:
@@ -94,7 +93,7 @@ class CSClockedRun(EventModeRun):
         """The short path's Event Mode (§2.3.5) at instant ``t``: ``fmi3EnterEventMode``,
         ``fmi3SetClock`` of ``plan``'s clocks, their inputs and outputs, the output clocks."""
         enter_event_mode, set_clock, c, set_u_ft, log_t, log_id = self._tick_calls
-        _, simple, one = plan.short or self._shorten(plan)
+        simple = (plan.short or self._shorten(plan))[1]
         st = enter_event_mode(c)
         if st > 1:
             self._fail(f"EnterEventMode(t = {t:g} s)", st)
@@ -104,13 +103,9 @@ class CSClockedRun(EventModeRun):
         st = set_clock(*plan.args)
         if st > 1:
             self._fail(f"SetClock({plan.names}, t = {t:g} s)", st)
-        if one is not None:
+        for lab in plan.labels:
             log_t(t)
-            log_id(one)
-        else:
-            for lab in plan.labels:
-                log_t(t)
-                log_id(lab)
+            log_id(lab)
         for f in plan.set_ft_d:
             f()
         for g in plan.get_d:
@@ -126,11 +121,11 @@ class CSClockedRun(EventModeRun):
             self.ticked.update(plan.vrs)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path ``(fill_all, simple, label)``: the fill the update needs (for the
-        discrete inputs without clock), whether it may take the short path too (no interval to
-        read), the one clock's label."""
-        plan.short = (self.fill_all if self.set_ud is not None else None, not plan.intervals and not self.countdown,
-                      plan.labels[0] if len(plan.labels) == 1 else None)
+        """``plan``'s short path ``(sets, simple)``: the update's input buffer fill (for the discrete
+        inputs without clock) and setters, whether it may take the short path (no interval to read)."""
+        sets = self.calls((self.fill_all if self.set_ud is not None else None, *plan.set_rest_d, self.set_u_all_d,
+                           self.set_ud))
+        plan.short = (sets, not plan.intervals and not self.countdown)
         return plan.short
 
     # ------------------------------------------------------------------ the update
@@ -170,17 +165,9 @@ class CSClockedRun(EventModeRun):
     def _tock(self, plan: Plan, t: float) -> None:
         """The short path's update: the other inputs set, ``fmi3UpdateDiscreteStates``,
         ``fmi3EnterStepMode`` (§4.2.1 Step Mode), ``fmi3DoStep``."""
-        (set_u_all, set_ud, update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs,
-         ds_any) = self._tock_calls
-        fill_all = plan.short[0]
-        if fill_all is not None:
-            fill_all()
-        for f in plan.set_rest_d:
+        update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs, ds_any = self._tock_calls
+        for f in plan.short[0]:
             f()
-        if set_u_all is not None:
-            set_u_all()
-        if set_ud is not None:
-            set_ud()
         st = update_discrete_states(*uds_args)
         if st > 1:
             self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)

@@ -80,29 +80,23 @@ class SEClockedRun(ClockedRun):
     def _fire(self, plan: Plan, t: float) -> None:
         """The short path of ``plan`` at instant ``t`` (one partition whose interval is not read):
         ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its own."""
-        set_u_ft, set_u_rest, set_own, cv, name, label, get_own, get_u = plan.short or self._shorten(plan)
+        sets, cv, name, label, gets = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
             self._run_at(t, list(plan.vrs), None, True)
             return
         activate_model_partition, c, at, log_t, log_id = self._fire_calls
         self.now = t
-        if set_u_ft is not None:
-            set_u_ft()
-        if set_u_rest is not None:
-            set_u_rest()
-        if set_own is not None:
-            set_own()
+        for f in sets:
+            f()
         at.value = t
         st = activate_model_partition(c, cv, at)
         if st > 1 or self._error is not None:
             self._activation_failed(st, name, t)
         log_t(t)
         log_id(label)
-        if get_own is not None:
-            get_own()
-        if get_u is not None:
-            get_u()
+        for g in gets:
+            g()
         if self.reported:
             self._outputs(t, None, True)
         self.now = None
@@ -110,14 +104,13 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, list(self.queue), None, True)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path: setters, clock, name, label, getters (None: nothing to do)."""
+        """``plan``'s short path ``(setters, clock, name, label, getters)`` (clock None: not one partition)."""
         if len(plan.vrs) > 1 or plan.intervals:
-            plan.short = (None,) * 8
+            plan.short = ((), None, None, None, ())
             return plan.short
         vr = plan.vrs[0]
-        setters = [self._or_none(f) for f in (self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
-        plan.short = (*setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0], self.get_kd[vr],
-                      self.get_ud)
+        plan.short = (self.calls((self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d)), ctypes.c_uint32(vr),
+                      self.model.by_vr[vr].name, plan.labels[0], self.calls((self.get_kd[vr], self.get_ud)))
         return plan.short
 
     def _run_at(self, t: float, ks: list[int], snap: dict | None, direct: bool) -> None:

@@ -232,8 +232,7 @@ class FMIClocks:
         self.by_vr = {k.vr: k for k in self.clocks}
         self.clocked = {}
         for v in md.modelVariables:
-            refs = getattr(v, "clocks", None) or []
-            if not refs:
+            if not (refs := getattr(v, "clocks", None)):
                 continue
             vrs = []
             for r in refs:
@@ -246,10 +245,8 @@ class FMIClocks:
                 raise FMUError(f"{owner}: clocked variable {v.name!r} has variability {v.variability!r}; clocked "
                                "variables must be discrete or tunable")
             self.clocked[v.name] = tuple(vrs)
-        self.dependencies = {}
-        for u in md.outputs:
-            if u.variable is not None and u.variable.type == "Clock":
-                self.dependencies[u.variable.valueReference] = tuple(d.valueReference for d in u.dependencies or ())
+        self.dependencies = {u.variable.valueReference: tuple(d.valueReference for d in u.dependencies or ())
+                             for u in md.outputs if u.variable is not None and u.variable.type == "Clock"}
 
     def _clock(self, v, a: dict, index: int) -> FMIClock:
         where = f"{self.owner}: clock {v.name!r}"
