@@ -120,10 +120,8 @@ class EventModeRun(ClockedRun):
         """The outputs computed again at the same instant (a split evaluation or a loop)."""
         if self.in_event:
             self._fill(self.in_ft)
-            vrs = set(self.active)
             plan = self.periodic_at(self.done_n)
-            if plan is not None:
-                vrs.update(plan.vrs)
+            vrs = self.active.union(plan.vrs if plan is not None else ())
             self.free_in.ft()
             for vr in vrs:
                 self.clock_in[vr].ft()

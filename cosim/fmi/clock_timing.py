@@ -59,12 +59,10 @@ class ClockSchedule:
     """
 
     def __init__(self, model: FMIClocks, t0: float, period: float, overrides: Mapping[str, Fraction]):
-        self.t0, self.period = t0, period
-        self.tol = 1e-9 * period
+        self.model, self.t0, self.period, self.tol = model, t0, period, 1e-9 * period
+        self.overrides = dict(overrides)
         self.periodic: list[list] = []
         self.next_at: dict[int, float] = {}
-        self.overrides = dict(overrides)
-        self.model = model
 
     def add_periodic(self, k: FMIClock, interval: Fraction, shift: Fraction, owner: str) -> None:
         """Add periodic clock ``k`` of component ``owner``, its ``interval`` and ``shift`` [s]
