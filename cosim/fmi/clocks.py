@@ -134,11 +134,9 @@ def _decimal(text, what: str) -> Fraction | None:
 def _timing(where: str, var: str, a: dict) -> dict:
     """The interval and shift attributes ``a`` of the clock ``where`` (of intervalVariability
     ``var``), parsed and checked: the timing fields of its :class:`FMIClock`."""
-    decimal = _decimal(a["intervalDecimal"], f"{where}: intervalDecimal")
-    shift_decimal = _decimal(a["shiftDecimal"], f"{where}: shiftDecimal")
-    counter = _uint(a["intervalCounter"], f"{where}: intervalCounter")
-    resolution = _uint(a["resolution"], f"{where}: resolution")
-    shift_counter = _uint(a["shiftCounter"], f"{where}: shiftCounter")
+    decimal, shift_decimal = (_decimal(a[n], f"{where}: {n}") for n in ("intervalDecimal", "shiftDecimal"))
+    counter, resolution, shift_counter = (_uint(a[n], f"{where}: {n}")
+                                          for n in ("intervalCounter", "resolution", "shiftCounter"))
     fraction = _bool(a["supportsFraction"], f"{where}: supportsFraction")
     if decimal is not None:
         if var not in PERIODIC:
