@@ -1,47 +1,11 @@
-"""Clocks in the master: components whose instants carry clock activations (FMI 3.0
-clocks), the clock connections between them, and the exchange of activations in a run.
-
-A *clocked component* (:class:`ClockedComponent`, e.g. a clocked FMI 3.0 FMU or a
-:class:`ClockTicks` source) declares its clocks (:class:`ClockInfo`):
-
-* input clocks with a timing of their own: *periodic* (``constant``, ``fixed``,
-  ``tunable``: an interval and a shift) or *aperiodic* (``changing``, ``countdown``: the
-  next activation is known only at run time);
-* *triggered* input clocks: ports of type :data:`~cosim.core.component.CLOCK`, activated
-  through a clock connection ``"sink.clock" = "source.clock"`` from an output clock;
-* output clocks: ports of type ``CLOCK`` whose activations go to the triggered input
-  clocks connected to them. The signal of a clock port counts its activations since the
-  start (an integer column of the results).
-
-Timing, on the master's base grid (:mod:`cosim.core.schedule`):
-
-* periodic clocks tick at instants of their component: their interval and shift must be
-  multiples of its period, which is checked before the run (the message names the period
-  that would honour them);
-* aperiodic clocks, triggered clocks and the events an FMU finds itself (state events,
-  an early return) happen at their exact time: at an instant if they fall on one, else
-  between two instants, where the component is brought to that time, activated, and
-  continues. A triggered clock is activated at the same time as its source, also between
-  instants: a component's updates come after those of the components whose output clocks
-  drive it (``ClockPlan.update_order``), so that a sink knows every activation of its
-  step; for that, a sink must be stepped at least as often as its source (its period must
-  divide the source's), which is checked before the run;
-* an activation between instants reads the outputs of the component whose clock caused it
-  (and of the components before it in that chain) as they were at that time, every other
-  signal as it was at the last instant. Its results appear in the rows of the following
-  instants (zero-order hold).
-
-Refused before the run, by name: a periodic interval or shift that is not a multiple of
-its component's period, a triggered input clock without a source, a clock connection
-from a component to itself or a cycle of clock connections, a sink stepped less often
-than its source, a clock connection with ``order`` other than ``"auto"``.
-
-Every activation of a run is logged (:meth:`ClockBoard.ticks`; the master keeps the last
-run's log as :attr:`~cosim.core.master.Cosimulation.clock_ticks`).
+"""Clocks in the master (FMI 3.0 clocks): what a clocked component declares
+(:class:`ClockInfo`), the clock connections and timing checked before a run
+(:class:`ClockPlan`), a run's activations and their log (:class:`ClockBoard`), and the
+clock source :class:`ClockTicks`. The timing on the base grid, the clock connections and
+what is refused are on the clocks page of the documentation.
 """
 from __future__ import annotations
 
-import heapq
 import itertools
 import math
 from array import array
@@ -140,8 +104,8 @@ class ClockInfo:
 
 @runtime_checkable
 class ClockedComponent(Protocol):
-    """A component with clocks (see the module documentation). A component whose
-    ``clock_infos`` is empty takes no part in clocks."""
+    """A component with clocks (a :class:`ClockInfo` each); one whose ``clock_infos`` is
+    empty takes no part in clocks."""
 
     clock_infos: tuple
 
@@ -155,13 +119,9 @@ def clocked(component: Component) -> bool:
     return bool(getattr(component, "clock_infos", None)) and isinstance(component, ClockedComponent)
 
 
-def _port_type(comp: Component, port: str, direction: str) -> str:
-    ports = comp.input_ports if direction == "input" else comp.output_ports
-    return next(p.type for p in ports if p.name == port)
-
-
 class ClockPlan:
-    """The clocks of a co-simulation, checked before the run (see the module documentation).
+    """The clocks of a co-simulation, checked before the run (what is refused: the clocks
+    page of the documentation).
 
     Parameters
     ----------
@@ -189,7 +149,7 @@ class ClockPlan:
     Raises
     ------
     ConfigurationError
-        Any clock the run cannot honour (see the module documentation), named.
+        Any clock the run cannot honour, named.
     """
 
     def __init__(self, components: Sequence[Component], connections: Mapping, ratios: Mapping[str, int],
@@ -199,10 +159,8 @@ class ClockPlan:
         self.members = [c for c in self.components if clocked(c)]
         self.ratios, self.base = dict(ratios), base
         self.connections = dict(connections)
-        self.links = []
-        for (dn, dp), (sn, sp) in connections.items():
-            if _port_type(self.by_name[dn], dp, "input") == CLOCK:
-                self.links.append((sn, sp, dn, dp))
+        self.links = [(sn, sp, dn, dp) for (dn, dp), (sn, sp) in connections.items()
+                      if next(p.type for p in self.by_name[dn].input_ports if p.name == dp) == CLOCK]
         self._check_periodic()
         self._check_links(order)
         self.update_order = self._topological()
@@ -227,17 +185,15 @@ class ClockPlan:
                 if k.causality != "input" or k.variability not in PERIODIC or k.interval is None:
                     continue
                 shift = k.shift or Fraction(0)
-                bad = [(what, v) for what, v in (("interval", k.interval), ("shift", shift))
-                       if (v / p).denominator != 1]
-                if bad:
-                    what, v = bad[0]
-                    g = fraction_gcd(p, k.interval, shift)
-                    raise ConfigurationError(
-                        f"component {c.name!r}: clock {k.name!r} ({k.variability}) ticks every {float(k.interval):g} s "
-                        f"from {float(shift):g} s, but its {what} {float(v):g} s is not a multiple of {c.name}'s "
-                        f"period {float(p):g} s, so it would tick between the instants at which the master steps "
-                        f"{c.name}. A "
-                        f"period of {float(g):g} s (and a base step that divides it) would honour it")
+                g = fraction_gcd(p, k.interval, shift)
+                for what, v in (("interval", k.interval), ("shift", shift)):
+                    if (v / p).denominator != 1:
+                        raise ConfigurationError(
+                            f"component {c.name!r}: clock {k.name!r} ({k.variability}) ticks every "
+                            f"{float(k.interval):g} s from {float(shift):g} s, but its {what} {float(v):g} s is not a "
+                            f"multiple of {c.name}'s period {float(p):g} s, so it would tick between the instants at "
+                            f"which the master steps {c.name}. A period of {float(g):g} s (and a base step that "
+                            "divides it) would honour it")
 
     def _check_links(self, order: str) -> None:
         members = {c.name for c in self.members}
@@ -280,27 +236,19 @@ class ClockPlan:
                         + (f"; output clocks: {', '.join(outs)}" if outs else ""))
 
     def _topological(self) -> list[Component]:
-        rank = {c.name: i for i, c in enumerate(self.components)}
-        succ = {c.name: set() for c in self.components}
-        indeg = dict.fromkeys(rank, 0)
-        for sn, _, dn, _ in self.links:
-            if dn not in succ[sn]:
-                succ[sn].add(dn)
-                indeg[dn] += 1
-        ready = [rank[n] for n, d in indeg.items() if d == 0]       # a heap: the first in list order first
-        out = []
-        while ready:
-            c = self.components[heapq.heappop(ready)]
+        """The components, each clock source before its sinks, ties in list order."""
+        sources = {c.name: {sn for sn, _, dn, _ in self.links if dn == c.name} for c in self.components}
+        pending, done, out = list(self.components), set(), []
+        while pending:
+            c = next((c for c in pending if sources[c.name] <= done), None)
+            if c is None:
+                cyc = {c.name for c in pending}
+                hops = ", ".join(f"{sn}.{sp} -> {dn}.{dp}" for sn, sp, dn, dp in self.links if sn in cyc and dn in cyc)
+                raise ConfigurationError(f"the clock connections form a cycle ({hops}): no component can be stepped "
+                                         "before the others; break the cycle")
+            pending.remove(c)
+            done.add(c.name)
             out.append(c)
-            for m in succ[c.name]:
-                indeg[m] -= 1
-                if indeg[m] == 0:
-                    heapq.heappush(ready, rank[m])
-        if len(out) < len(self.components):
-            cyc = sorted((n for n, d in indeg.items() if d), key=rank.get)
-            hops = ", ".join(f"{sn}.{sp} -> {dn}.{dp}" for sn, sp, dn, dp in self.links if sn in cyc and dn in cyc)
-            raise ConfigurationError(f"the clock connections form a cycle ({hops}): no component can be stepped "
-                                     "before the others; break the cycle")
         return out
 
     # ------------------------------------------------------------------ description
@@ -367,13 +315,11 @@ class ClockBoard:
 
     def __init__(self, plan: ClockPlan | None, values: np.ndarray, integers: np.ndarray, slots: Mapping):
         self.plan, self.values, self.integers, self.slots = plan, values, integers, dict(slots)
-        links = plan.links if plan is not None else []
         self._routes: dict = {}
-        for sn, sp, dn, dp in links:
+        for sn, sp, dn, dp in plan.links if plan is not None else ():
             self._routes.setdefault((sn, sp), []).append((dn, dp))
         self._inbox: dict = {}
-        self._labels: list[str] = []
-        self._label_of: dict = {}
+        self._label_of: dict[str, int] = {}          # in the order of their numbers
         self._times, self._ids = array("d"), array("q")
 
     def inbox(self, component: str) -> list:
@@ -398,39 +344,25 @@ class ClockBoard:
     def sources(self, component: str, inputs: Sequence[str]) -> list[tuple[str, int, int] | None]:
         """For each of ``component``'s ``inputs``: ``(source component, its output's index in
         that component's outputs, the signal's index)``, or None (not connected)."""
-        out = []
         plan = self.plan
-        for p in inputs:
-            src = plan.connections.get((component, p)) if plan is not None else None
-            if src is None:
-                out.append(None)
-                continue
-            comp = plan.by_name[src[0]]
-            out.append((src[0], comp.output_names.index(src[1]), self.slots[src]))
-        return out
+        srcs = [plan.connections.get((component, p)) if plan is not None else None for p in inputs]
+        return [None if s is None else (s[0], plan.by_name[s[0]].output_names.index(s[1]), self.slots[s])
+                for s in srcs]
 
     def label(self, component: str, clock: str) -> int:
         """The log's number for ``component.clock``."""
-        key = f"{component}.{clock}"
-        if key not in self._label_of:
-            self._label_of[key] = len(self._labels)
-            self._labels.append(key)
-        return self._label_of[key]
+        return self._label_of.setdefault(f"{component}.{clock}", len(self._label_of))
 
     def log_functions(self) -> tuple:
-        """``(log_time, log_label, labels)``: the two appends of :meth:`log` without its limit
-        check, and the log's labels (their ``len`` is :meth:`count`), for a component's hot
-        path (it checks the count once per instant, :meth:`check_room` when above the limit)."""
+        """``(log_time, log_label, labels)``: the appends of :meth:`log` without its limit check
+        and the logged labels, for a hot path (which calls :meth:`check_room` when their
+        ``len`` is above the limit)."""
         return self._times.append, self._ids.append, self._ids
-
-    def count(self) -> int:
-        """Activations logged so far."""
-        return len(self._ids)
 
     def check_room(self) -> None:
         """Refuse (:class:`~fmu_models.errors.ResourceError`) a run that has logged more than
         :data:`MAX_TICKS` activations."""
-        if self.count() > MAX_TICKS:
+        if len(self._ids) > MAX_TICKS:
             raise ResourceError(f"more than {MAX_TICKS} clock activations in one run: the log would not fit; "
                                 "shorten the run")
 
@@ -443,10 +375,9 @@ class ClockBoard:
     def ticks(self) -> pd.DataFrame:
         """Every activation logged, in order: columns ``time`` [s] and ``clock``
         (``component.clock``)."""
-        names = np.array(self._labels + [""], dtype=object)
-        ids = np.frombuffer(self._ids, dtype=np.int64) if len(self._ids) else np.zeros(0, np.int64)
-        return pd.DataFrame({"time": np.frombuffer(self._times, dtype=float) if len(self._times) else np.zeros(0),
-                             "clock": names[ids] if len(ids) else np.array([], dtype=object)})
+        names = np.array([*self._label_of, ""], dtype=object)
+        return pd.DataFrame({"time": np.frombuffer(self._times, dtype=float),
+                             "clock": names[np.frombuffer(self._ids, dtype=np.int64)]})
 
 
 class ClockTicks(Component, kind="clock_ticks"):
@@ -497,12 +428,8 @@ class ClockTicks(Component, kind="clock_ticks"):
         note = (f"at {', '.join(f'{x:g}' for x in self.times[:6])}{' ...' if len(self.times) > 6 else ''} s"
                 if self.times is not None else f"every {self.interval:g} s from {self.shift:g} s")
         self.clock_infos = (ClockInfo("tick", "output", "triggered", port="tick", note=f"activated {note}"),)
-        self._publish = None
-        self._label = None
-        self._board = None
-        self.count = 0
-        self._t0 = 0.0
-        self._i = 0
+        self._publish = self._label = self._board = None
+        self.reset(0.0)
 
     def attach_clocks(self, board: ClockBoard) -> None:
         """Take the run's board: the activations go to the clocks connected to ``tick``."""

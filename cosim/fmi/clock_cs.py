@@ -2,15 +2,14 @@
 in a run, in the FMI 3.0 call sequence: §4.2 State Machine for Co-Simulation, its Event Mode
 (§2.3.5) in :mod:`cosim.fmi.clock_event`, §4.1.3 Early Return.
 
-At an instant: the outputs without clock read in Step Mode, before any input is set (the
-standard forbids a get after a set there, so they depend on no input directly); Event Mode
-if clocks tick. In the update: the event iteration, ``fmi3EnterStepMode``, ``fmi3DoStep``
-over the period, ending at every activation between instants (a clock, the FMU's
-``nextEventTime``) for an Event Mode there. An early return with ``eventHandlingNeeded`` is
-handled in Event Mode at its ``lastSuccessfulTime`` (at the step's end: in the next
-instant's). A discrete input without clock that changes where no clock ticks is set in an
-Event Mode of its own. The common instant (periodic clocks, nothing pending) takes a short
-path (``_tick``, ``_tock``), its calls made once per set of clocks.
+At an instant: the outputs without clock read in Step Mode before any input is set (a get
+after a set is forbidden there, so they depend on no input directly); Event Mode if clocks
+tick. In the update: the event iteration, ``fmi3EnterStepMode``, ``fmi3DoStep`` over the
+period, stopped at every activation between instants (a clock, ``nextEventTime``) for an
+Event Mode there. An early return with ``eventHandlingNeeded`` is handled in Event Mode at
+its ``lastSuccessfulTime`` (at the step's end: in the next instant's). A discrete input
+without clock that changes where no clock ticks is set in an Event Mode of its own. The
+common instant (periodic clocks, nothing pending) takes a short path (``_tick``, ``_tock``).
 """
 from __future__ import annotations
 
@@ -25,11 +24,9 @@ from .clock_ports import Plan
 
 __all__ = ["CSClockedRun"]
 
-_TERMINATE = "the FMU requested termination in its event update"
-
 
 class CSClockedRun(EventModeRun):
-    """One run of a clocked Co-Simulation FMU (see the module documentation).
+    """One run of a clocked Co-Simulation FMU.
 
     Parameters
     ----------
@@ -39,7 +36,7 @@ class CSClockedRun(EventModeRun):
 
     __slots__ = ("_ch", "_ct", "_do_step", "_ds_any", "_ds_bytes", "_ds_flags", "_ds_last", "_ds_refs",
                  "_enter_step_mode", "_tick_calls", "_tock_calls", "can_vary", "fast", "quiet", "set_u_all_d",
-                 "set_u_ft_d", "set_ud", "u_fill")
+                 "set_u_ft_d", "set_ud")
     discrete_apart = True
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
@@ -55,15 +52,12 @@ class CSClockedRun(EventModeRun):
         self.can_vary = bool(getattr(comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
         self.set_ud = self._or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
         self.set_u_ft_d, self.set_u_all_d = self._or_none(self.free_in.ft_d), self._or_none(self.free_in.all_d)
-        self.u_fill = self.set_ud is not None or any(getattr(f, "needs_fill", False)
-                                                      for f in (self.set_u_ft_d, self.set_u_all_d))
         self.quiet = False       # nothing pending, nothing held: the short path may run (set by each update)
         self.fast: Plan | None = None    # the plan of the short path's activation at this instant
         # the short path's calls, unpacked into locals by _tick and _tock
         self._tick_calls = (self._enter_event_mode, self._set_clock, self.c, self.set_u_ft_d, self.log_t, self.log_id)
-        self._tock_calls = (self.set_u_all_d, self.set_ud, self._update_discrete_states, self._uds_args,
-                            self._uds_any, self._enter_step_mode, self._do_step, self._ct, self._ch, self._ds_refs,
-                            self._ds_any)
+        self._tock_calls = (self._update_discrete_states, self._uds_args, self._uds_any, self._enter_step_mode,
+                            self._do_step, self._ct, self._ch, self._ds_refs, self._ds_any)
 
     # ------------------------------------------------------------------ at an instant
     def output(self, t: float) -> None:
@@ -96,12 +90,10 @@ class CSClockedRun(EventModeRun):
             self._tick(plan, t)
 
     def _tick(self, plan: Plan, t: float) -> None:
-        """The short path's Event Mode at instant ``t`` for ``plan``'s clocks (§2.3.5):
-        ``fmi3EnterEventMode``, ``fmi3SetClock``, their inputs and outputs, the output clocks."""
+        """The short path's Event Mode (§2.3.5) at instant ``t``: ``fmi3EnterEventMode``,
+        ``fmi3SetClock`` of ``plan``'s clocks, their inputs and outputs, the output clocks."""
         enter_event_mode, set_clock, c, set_u_ft, log_t, log_id = self._tick_calls
-        fill_ft, _, simple, one = plan.short or self._shorten(plan)
-        if fill_ft is not None:
-            fill_ft()
+        simple = (plan.short or self._shorten(plan))[1]
         st = enter_event_mode(c)
         if st > 1:
             self._fail(f"EnterEventMode(t = {t:g} s)", st)
@@ -111,13 +103,9 @@ class CSClockedRun(EventModeRun):
         st = set_clock(*plan.args)
         if st > 1:
             self._fail(f"SetClock({plan.names}, t = {t:g} s)", st)
-        if one is not None:
+        for lab in plan.labels:
             log_t(t)
-            log_id(one)
-        else:
-            for lab in plan.labels:
-                log_t(t)
-                log_id(lab)
+            log_id(lab)
         for f in plan.set_ft_d:
             f()
         for g in plan.get_d:
@@ -133,11 +121,11 @@ class CSClockedRun(EventModeRun):
             self.ticked.update(plan.vrs)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path: ``(fill_ft, fill_all, simple, label)``: the fills it needs,
-        whether the update may take it too (no interval to read), its one clock's label."""
-        fill = plan.fill or self.u_fill
-        plan.short = (self.fill_ft if fill else None, self.fill_all if fill else None,
-                      not plan.intervals and not self.countdown, plan.labels[0] if len(plan.labels) == 1 else None)
+        """``plan``'s short path ``(sets, simple)``: the update's input buffer fill (for the discrete
+        inputs without clock) and setters, whether it may take the short path (no interval to read)."""
+        sets = self.calls((self.fill_all if self.set_ud is not None else None, *plan.set_rest_d, self.set_u_all_d,
+                           self.set_ud))
+        plan.short = (sets, not plan.intervals and not self.countdown)
         return plan.short
 
     # ------------------------------------------------------------------ the update
@@ -150,7 +138,7 @@ class CSClockedRun(EventModeRun):
             return
         filled = False
         if plan is None and not self.in_event:       # no tick at this instant: Step Mode
-            if self.u_fill and self.fill_all is not None:
+            if self.set_ud is not None:
                 self.fill_all()
                 filled = True
             if self.set_u_all_d is not None:
@@ -177,30 +165,14 @@ class CSClockedRun(EventModeRun):
     def _tock(self, plan: Plan, t: float) -> None:
         """The short path's update: the other inputs set, ``fmi3UpdateDiscreteStates``,
         ``fmi3EnterStepMode`` (§4.2.1 Step Mode), ``fmi3DoStep``."""
-        (set_u_all, set_ud, update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs,
-         ds_any) = self._tock_calls
-        fill_all = plan.short[1]
-        if fill_all is not None:
-            fill_all()
-        for f in plan.set_rest_d:
+        update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs, ds_any = self._tock_calls
+        for f in plan.short[0]:
             f()
-        if set_u_all is not None:
-            set_u_all()
-        if set_ud is not None:
-            set_ud()
         st = update_discrete_states(*uds_args)
         if st > 1:
             self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
         if uds_any.value:                            # a flag: the general way
-            flags = self._uds_flags
-            if flags[1].value:
-                raise StopRequest(self.name, t, _TERMINATE)
-            if flags[0].value:
-                self._read_output_clocks(t, None, True)
-                self._event(t)
-            else:
-                self.fmu_next = self._uds_next.value if flags[4].value else None
-                self._step_mode(t)
+            self._event(t, True)
             self._step(t, False)
             return
         if self.out_clocks and self.ticked:
@@ -220,13 +192,11 @@ class CSClockedRun(EventModeRun):
         else:
             self.quiet = True
 
-    def _event(self, t: float) -> None:
-        """The rest of the Event Mode at ``t`` (the event iteration), then Step Mode."""
-        if self._finish(t):
-            raise StopRequest(self.name, t, _TERMINATE)
-        self._step_mode(t)
-
-    def _step_mode(self, t: float) -> None:
+    def _event(self, t: float, called: bool = False) -> None:
+        """The rest of the Event Mode at ``t`` (the event iteration; ``called``: its first
+        ``fmi3UpdateDiscreteStates`` made), then Step Mode."""
+        if self._finish(t, called):
+            raise StopRequest(self.name, t, "the FMU requested termination in its event update")
         st = self._enter_step_mode(self.c)
         if st > 1:
             self._fail(f"EnterStepMode(t = {t:g} s)", st)
@@ -240,10 +210,7 @@ class CSClockedRun(EventModeRun):
         """The step from ``t`` in Step Mode (§4.2.1), whatever may stop it; then whether the
         next instant may take the short path."""
         if not self.inbox and not self.next_at and self.fmu_next is None:
-            self._ct.value = t
-            st = self._do_step(self.c, self._ct, self._ch, True, *self._ds_refs)
-            if st > 1:
-                self._fail(f"DoStep(t = {t:g} s, h = {self.P:g} s)", st)
+            self._do(t, self._ch)
             if self._ds_any.value:
                 self._stopped(t, filled)
         else:
@@ -271,15 +238,19 @@ class CSClockedRun(EventModeRun):
                 raise FMUError(f"{self.name}: an activation at t = {p:g} s falls between its communication points, "
                                "but the FMU cannot vary its communication step "
                                "(canHandleVariableCommunicationStepSize = false)")
-            self._ct.value = tc
-            st = self._do_step(self.c, self._ct, ctypes.c_double(target - tc), True, *self._ds_refs)
-            if st > 1:
-                self._fail(f"DoStep(t = {tc:g} s, h = {target - tc:g} s)", st)
+            self._do(tc, ctypes.c_double(target - tc))
             tc = self._step_done(t, target)
 
+    def _do(self, tc: float, h: ctypes.c_double) -> None:
+        """``fmi3DoStep`` from ``tc`` over ``h`` [s]."""
+        self._ct.value = tc
+        st = self._do_step(self.c, self._ct, h, True, *self._ds_refs)
+        if st > 1:
+            self._fail(f"DoStep(t = {tc:g} s, h = {h.value:g} s)", st)
+
     def _step_done(self, t: float, target: float) -> float | None:
-        """After ``fmi3DoStep`` towards ``target`` (an early return, §4.1.3): the time to step
-        on from, or None (the step reached its end)."""
+        """After ``fmi3DoStep`` towards ``target`` (§4.1.3 Early Return): the time to step on
+        from, or None (the step reached its end)."""
         end = t + self.P
         ehn, stop, early = (f.value for f in self._ds_flags)
         reached = self._ds_last.value if early else target

@@ -1,16 +1,15 @@
-"""Event Mode with clocks, as Model Exchange (:mod:`cosim.fmi.clock_me`) and Co-Simulation
-with Event Mode (:mod:`cosim.fmi.clock_cs`) share it (FMI 3.0 §2.3.5 State: Event Mode;
-the clock functions §2.2.8.4 Clocks specific API).
+"""Event Mode with clocks (FMI 3.0 §2.3.5 State: Event Mode; the functions of §2.2.8.4
+Clocks specific API), shared by Model Exchange (:mod:`cosim.fmi.clock_me`) and
+Co-Simulation with Event Mode (:mod:`cosim.fmi.clock_cs`).
 
-At an instant where clocks tick: Event Mode (``fmi3EnterEventMode``, or the Event Mode
-after initialisation), ``fmi3SetClock`` of the ticking input clocks, their clocked inputs
-set (those the outputs depend on directly; the others in the update, before the state
-changes), their clocked outputs read, ``fmi3GetClock`` of the output (and local) clocks and
-the outputs they clock read. In the update, the event iteration: ``fmi3UpdateDiscreteStates``
-until no more is needed (``fmi3GetClock`` again in every further super-dense instant), then
-the intervals of every countdown clock (in every Event Mode) and of changing and tunable
-clocks that ticked; a clock due again at once (interval 0) or an activation that arrived
-meanwhile ticks in the same Event Mode.
+At an instant where clocks tick: ``fmi3EnterEventMode`` (unless still in Event Mode),
+``fmi3SetClock`` of the ticking input clocks, the clocked inputs the outputs depend on set
+(the others in the update), their clocked outputs read, ``fmi3GetClock`` of the output
+clocks and the outputs they clock read. In the update, the event iteration:
+``fmi3UpdateDiscreteStates`` until no more is needed (``fmi3GetClock`` again at every
+further super-dense instant), then ``fmi3GetInterval*`` of every countdown clock and of the
+changing and tunable clocks that ticked; a clock due again at once or an activation that
+arrived meanwhile ticks in the same Event Mode.
 """
 from __future__ import annotations
 
@@ -29,8 +28,7 @@ MAX_SUPERDENSE = 1000
 
 
 class EventModeRun(ClockedRun):
-    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run (see the
-    module documentation).
+    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run.
 
     Parameters
     ----------
@@ -60,7 +58,7 @@ class EventModeRun(ClockedRun):
         self.pending_event = False                   # the FMU asked for Event Mode at the next instant
 
     def _event_mode(self, t: float) -> None:
-        """In Event Mode at ``t`` [s]: ``fmi3EnterEventMode`` unless already there."""
+        """``fmi3EnterEventMode`` at ``t`` [s] unless already in Event Mode."""
         if not self.in_event:
             st = self._enter_event_mode(self.c)
             if st > 1:
@@ -69,9 +67,8 @@ class EventModeRun(ClockedRun):
 
     # ------------------------------------------------------------------ at an instant
     def _instant_event(self, t: float, plan: Plan | None) -> bool:
-        """Event Mode at instant ``t`` if anything happens there (the clocks of ``plan``, due
-        or received, a pending event, Event Mode not left yet): the inputs without clock the
-        outputs depend on set, the clocks activated (:meth:`_activate`); whether it did."""
+        """Event Mode at instant ``t`` if anything happens there (the clocks of ``plan``, due or
+        received, a pending event, Event Mode not left yet); whether it did."""
         ks = (list(plan.vrs) if plan is not None else []) + self._due_at(t)
         got, snap = self._received_at(t)
         if not (ks or got or self.pending_event or self.in_event):
@@ -86,9 +83,9 @@ class EventModeRun(ClockedRun):
         return True
 
     def _activate(self, t: float, ks: list[int], direct: bool, snap: dict | None) -> None:
-        """Activate the input clocks ``ks`` at ``t``: ``fmi3SetClock`` (§2.3.5), their clocked
-        inputs set (``direct``, at an instant: those outputs depend on, the outputs read into
-        the signals; else all, into the own buffers), their outputs read, the output clocks."""
+        """``fmi3SetClock`` of the input clocks ``ks`` at ``t`` (§2.3.5), their clocked inputs set
+        and outputs read (``direct``, at an instant: the inputs outputs depend on, the outputs
+        into the signals; else all, into the own buffers), then the output clocks."""
         if not direct:
             self._use_own()
         if ks:
@@ -108,16 +105,11 @@ class EventModeRun(ClockedRun):
         self._read_output_clocks(t, snap, not direct)
 
     def _read_output_clocks(self, t: float, snap: dict | None, fresh: bool) -> None:
-        """``fmi3GetClock`` of the output (and local) clocks; each active one counted, logged,
-        the outputs it clocks read, its activation sent (``fresh``: between instants or after
-        the outputs of the instant, sent at once; else with the instant's outputs)."""
-        n = len(self.out_clocks)
-        if not n:
+        """``fmi3GetClock`` of the output (and local) clocks, the active ones handled by
+        :meth:`_clocks_ticked` (``fresh``: sent at once, else with the instant's outputs)."""
+        if not self.out_clocks:
             return
-        st = self._get_clock(self.c, self._out_vr, self._n_out, self._out_val)
-        if st > 1:
-            self._fail(f"GetClock(t = {t:g} s)", st)
-        active = [i for i in range(n) if self._out_val[i]]
+        active = self._active_out_clocks(f"GetClock(t = {t:g} s)")
         if fresh:
             self._use_own()
         self.ticked.update(self.out_clocks[i].vr for i in active)
@@ -128,10 +120,8 @@ class EventModeRun(ClockedRun):
         """The outputs computed again at the same instant (a split evaluation or a loop)."""
         if self.in_event:
             self._fill(self.in_ft)
-            vrs = set(self.active)
             plan = self.periodic_at(self.done_n)
-            if plan is not None:
-                vrs.update(plan.vrs)
+            vrs = self.active.union(plan.vrs if plan is not None else ())
             self.free_in.ft()
             for vr in vrs:
                 self.clock_in[vr].ft()
@@ -139,7 +129,6 @@ class EventModeRun(ClockedRun):
                 if g is not None:
                     g()
 
-    # ------------------------------------------------------------------ between instants
     def _intra(self, t: float) -> None:
         """Between instants, in Event Mode at ``t``: the activations due."""
         ks = self._due_at(t)
@@ -152,21 +141,22 @@ class EventModeRun(ClockedRun):
     # ------------------------------------------------------------------ the event iteration
     def _set_rest(self) -> None:
         """In the update, before the state changes: the clocked inputs of the active clocks
-        no output depends on directly, and every input without clock."""
+        no output depends on, and every input without clock."""
         for vr in list(self.active):
             self.clock_in[vr].rest()
         self.free_in.all()
 
-    def _finish(self, t: float) -> bool:
+    def _finish(self, t: float, called: bool = False) -> bool:
         """The rest of an Event Mode at ``t``: the event iteration (``fmi3UpdateDiscreteStates``
-        until ``discreteStatesNeedUpdate`` is false, §2.3.5), the intervals, activations due at
-        once; returns whether the FMU asks to terminate."""
+        until ``discreteStatesNeedUpdate`` is false, §2.3.5; ``called``: its first call made),
+        the intervals, the activations due at once; whether the FMU asks to terminate."""
         f = self._uds_flags
         uds, args = self._update_discrete_states, self._uds_args
         for _ in range(MAX_SUPERDENSE):
-            st = uds(*args)
+            st = 0 if called else uds(*args)
             if st > 1:
                 self._fail(f"UpdateDiscreteStates(t = {t:g} s)", st)
+            called = False
             self.active.clear()
             if f[1].value:
                 return True
@@ -192,10 +182,7 @@ class EventModeRun(ClockedRun):
         """``fmi3GetInterval*`` after the event iteration (§2.3.5): every countdown clock, and
         the changing (and tunable without ``intervalDecimal``) input clocks that ticked."""
         want = list(self.countdown)
-        for vr in self.ticked:
-            k = self.model.by_vr[vr]
-            if k.causality == "input" and self.interval_read(k):
-                want.append(k)
+        want += [k for k in map(self.model.by_vr.get, self.ticked) if k.causality == "input" and self.interval_read(k)]
         for k, v, q in self._intervals(want):
             self._apply_interval(k, v, q, t, k.vr in self.ticked)
             self.ticked.discard(k.vr)

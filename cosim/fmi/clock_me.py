@@ -1,15 +1,12 @@
-"""A clocked Model Exchange FMU in a run: its output and update functions, in the FMI 3.0
-call sequence (§3.2 State Machine for Model Exchange: Event Mode §2.3.5, shared with
-Co-Simulation in :mod:`cosim.fmi.clock_event`, and Continuous-Time Mode §3.2.1).
-
-The integrator (:class:`~cosim.fmi.model_exchange.MEIntegrator`) steps the FMU in
-Continuous-Time Mode; the activations between instants (a clock, the FMU's
-``nextEventTime``) are its time events. Every Event Mode it enters (state, time and step
-events) goes through this run, which activates the clocks due there, reads the output
-clocks and ends with the event iteration and ``fmi3EnterContinuousTimeMode``; an event the
-integrator finds at the end of a step waits for that instant's Event Mode. At an instant
-without clocks, inputs without clock are set in Continuous-Time Mode, a discrete one that
-changes in an Event Mode of its own.
+"""A clocked Model Exchange FMU in a run, in the FMI 3.0 call sequence (§3.2 State Machine
+for Model Exchange: Event Mode §2.3.5 in :mod:`cosim.fmi.clock_event`, Continuous-Time Mode
+§3.2.1). The integrator (:class:`~cosim.fmi.model_exchange.MEIntegrator`) steps the FMU in
+Continuous-Time Mode, the activations between instants (a clock, the FMU's
+``nextEventTime``) its time events. Every Event Mode it enters goes through this run: the
+clocks due activated, the output clocks read, the event iteration,
+``fmi3EnterContinuousTimeMode``; an event found at the end of a step waits for that
+instant's Event Mode. At an instant without clocks the inputs without clock are set in
+Continuous-Time Mode, a discrete one that changes in an Event Mode of its own.
 """
 from __future__ import annotations
 
@@ -35,7 +32,7 @@ class _ClockedModel(FMUModel):
 
 
 class MEClockedRun(EventModeRun):
-    """One run of a clocked Model Exchange FMU (see the module documentation).
+    """One run of a clocked Model Exchange FMU.
 
     Parameters
     ----------
@@ -64,9 +61,8 @@ class MEClockedRun(EventModeRun):
         self.inputs_changed = False                  # an input without clock changed in Continuous-Time Mode
 
     def output(self, t: float) -> None:
-        """The outputs at instant ``t`` [s]: Event Mode where clocks tick or an event is pending
-        (§2.3.5), else the inputs without clock the outputs depend on set (in Continuous-Time
-        Mode, §3.2.1; a discrete one that changes in an Event Mode of its own)."""
+        """The outputs at instant ``t`` [s]: Event Mode where clocks tick or an event is pending,
+        else the inputs without clock the outputs depend on set."""
         n = self.instant(t)
         if n == self.done_n:
             self._again()
@@ -90,7 +86,7 @@ class MEClockedRun(EventModeRun):
 
     def update(self, t: float) -> None:
         """The update from instant ``t`` [s]: the instant's Event Mode ended (or the inputs
-        set), the integrator to the next instant through the activations on the way."""
+        set), the integrator through the activations on the way to the next instant."""
         self._fill()
         self.window_end = t + self.P
         if not self.started:
@@ -110,19 +106,13 @@ class MEClockedRun(EventModeRun):
         self.inputs_changed = False
 
     def _next_event(self, t: float) -> float | None:
-        """The integrator's next time event after ``t`` [s]: the next activation in this step
-        or the FMU's ``nextEventTime``."""
-        p = self._next_point(t, self.window_end)
-        f = self.fmu_next
-        if f is not None and f <= t + self.tol:
-            f = None
-        return p if f is None else (f if p is None else min(p, f))
+        """The integrator's next time event after ``t`` [s] (an activation or ``nextEventTime``)."""
+        f = self.fmu_next if self.fmu_next is not None and self.fmu_next > t + self.tol else None
+        return min((x for x in (self._next_point(t, self.window_end), f) if x is not None), default=None)
 
     def _event(self, t: float, set_inputs) -> tuple[bool, float | None]:
-        """An Event Mode of the FMU at ``t`` (entered here unless already in it), the inputs
-        set by ``set_inputs``, ended with ``fmi3EnterContinuousTimeMode`` (§3.2): ``(terminate,
-        next time event)``. An event the integrator finds at the end of the step (within
-        rounding) waits for that instant's Event Mode."""
+        """An Event Mode at ``t`` (entered unless in it), the inputs set by ``set_inputs``, ended
+        with ``fmi3EnterContinuousTimeMode`` (§3.2): ``(terminate, next time event)``."""
         if not self.in_event and set_inputs is None and abs(t - self.window_end) <= self.tol:
             self.pending_event = True
             return False, None

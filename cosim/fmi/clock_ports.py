@@ -1,17 +1,13 @@
-"""The ports of a clocked FMI 3.0 FMU in a run (the call sequences are in
-:mod:`cosim.fmi.clock_run`): a clocked variable is set and got only while one of its clocks
-is active (FMI 3.0 §2.2.8.3 Model Partitions and Clocked Variables); the inputs an output
-depends on directly are set before the outputs are read, the others before the state
-changes. Scalar Float64 ports take one ``fmi3SetFloat64`` / ``fmi3GetFloat64`` call (in
-place where the master's signals lie side by side), other scalars one call per type
-(§2.2.7.2), array elements an :class:`~cosim.fmi.exchange.Exchange` (which checks integer
-ranges). Outputs read between instants go to the component's own buffers, the signals at
-the next instant (zero-order hold).
+"""The ports of a clocked FMI 3.0 FMU in a run: a clocked variable is set and got only while
+one of its clocks is active (FMI 3.0 §2.2.8.3 Model Partitions and Clocked Variables); the
+inputs an output depends on directly are set before the outputs are read, the others before
+the state changes. Each set of ports is one :class:`~cosim.fmi.exchange.Exchange` (a call
+per type, §2.2.7.2; scalar Float64 ports in place where their values lie side by side).
+Outputs read between instants go to the own buffers, the signals at the next instant.
 """
 from __future__ import annotations
 
 import ctypes
-import itertools
 from typing import NamedTuple
 
 import numpy as np
@@ -22,21 +18,22 @@ from .ports import parse_start
 
 __all__ = ["ClockPorts", "InputSetters", "Plan"]
 
-_D, _B, _U32, _SIZE = ctypes.c_double, ctypes.c_bool, ctypes.c_uint32, ctypes.c_size_t
-#: FMI 3.0 type -> (ctypes type, function suffix, value kind) of the scalar fast path.
-_SCALAR = {"Float64": (ctypes.c_double, "Float64", "f"), "Float32": (ctypes.c_float, "Float32", "f"),
-           "Int8": (ctypes.c_int8, "Int8", "i"), "UInt8": (ctypes.c_uint8, "UInt8", "i"),
-           "Int16": (ctypes.c_int16, "Int16", "i"), "UInt16": (ctypes.c_uint16, "UInt16", "i"),
-           "Int32": (ctypes.c_int32, "Int32", "i"), "UInt32": (ctypes.c_uint32, "UInt32", "i"),
-           "Int64": (ctypes.c_int64, "Int64", "i"), "UInt64": (ctypes.c_uint64, "UInt64", "u"),
-           "Enumeration": (ctypes.c_int64, "Int64", "i"), "Boolean": (ctypes.c_bool, "Boolean", "b")}
+_B, _U32, _SIZE = ctypes.c_bool, ctypes.c_uint32, ctypes.c_size_t
+
+
+def _index(positions) -> slice | np.ndarray:
+    """``positions`` as a slice if they lie side by side (an Exchange of scalar Float64 ports
+    then works in place, the FMU reading or writing the array itself), else an index array."""
+    idx = np.asarray(positions, np.intp)
+    if len(idx) and np.array_equal(idx, np.arange(idx[0], idx[0] + len(idx))):
+        return slice(int(idx[0]), int(idx[0]) + len(idx))
+    return idx
 
 
 class InputSetters(NamedTuple):
     """The setters of one set of inputs: those some output depends on directly (``ft``),
     the others (``rest``), all of them; each from the component's input buffer and (``_d``)
-    from the master's signals. A setter of no input is ``no_exchange``; one from the signals
-    that needs the buffer filled first has ``needs_fill``."""
+    from the master's signals. A setter of no input is ``no_exchange``."""
 
     ft: object
     rest: object
@@ -58,7 +55,7 @@ class Plan:
         The clocks' value references.
     """
 
-    __slots__ = ("args", "fill", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_ft_d",
+    __slots__ = ("args", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_ft_d",
                  "set_rest_d", "short", "vrs")
 
     def __init__(self, ports: ClockPorts, vrs: tuple[int, ...]):
@@ -73,7 +70,6 @@ class Plan:
         self.get = ports.calls(ports.get_k.get(v) for v in vrs)
         self.get_d = ports.calls(ports.get_kd.get(v) for v in vrs)
         self.intervals = [by_vr[v] for v in vrs if ports.interval_read(by_vr[v])]
-        self.fill = any(getattr(f, "needs_fill", False) for s in ins for f in (s.ft_d, s.rest_d, s.all_d))
         self.short = None                # the short path's calls, made by the interface's run
 
 
@@ -98,13 +94,12 @@ class ClockPorts:
     ----------
     clock_in : dict of int to InputSetters
         Each input clock's clocked inputs.
-    unclocked_in : list of int
-        The positions of the connected inputs without clock.
+    free_in : InputSetters
+        The inputs without clock (in Co-Simulation: but the discrete ones); their positions
+        are ``unclocked_in``.
     get_k, get_kd, get_u, get_ud : dict of int to callable, or callable
         The getters of each clock's outputs and of the outputs without clock (``_d``: into
         the signals, else into the own buffers); None for no output.
-    free_in : InputSetters
-        The inputs without clock (in Co-Simulation: but the discrete ones).
     """
 
     # a run's state, as slots: the hot paths' attribute and method look-ups stay fast
@@ -139,24 +134,12 @@ class ClockPorts:
 
     # ------------------------------------------------------------------ set-up
     def _fn(self, name: str):
-        f = self._raw.get(name)
-        if f is None:
-            f = self._raw[name] = self.inst.raw(name)
-        return f
+        if name not in self._raw:
+            self._raw[name] = self.inst.raw(name)
+        return self._raw[name]
 
     def _fail(self, what: str, status: int):
         self.inst.fail(what, status)
-
-    def _checked(self, fn, args: tuple, label: str):
-        """The call ``fn(*args)``, its status checked; returns False (no input changed)."""
-        fail = self._fail
-
-        def call() -> bool:
-            st = fn(*args)
-            if st > 1:
-                fail(label, st)
-            return False
-        return call
 
     @staticmethod
     def calls(fns) -> tuple:
@@ -242,136 +225,29 @@ class ClockPorts:
         return InputSetters(*(self._setter(p) for p in parts), *(self._setter(p, direct=True) for p in parts))
 
     def _setter(self, positions: list[int], changes: bool = False, direct: bool = False):
-        """A call setting the input ports at ``positions`` from the input buffer (``direct``:
-        scalar Float64 ports from the master's signals; any other such setter has
-        ``needs_fill``); ``changes``: it returns whether a value changed."""
+        """A call setting the input ports at ``positions`` from the input buffer (``direct``: from
+        the master's signals); ``changes``: it returns whether a value changed."""
         if not positions:
             return no_exchange
         comp = self.comp
-        names = comp.connected_inputs
-        ports = [comp.element_ports[names[i]] for i in positions]
-        if not changes and all(p.size == 1 and p.type == "Float64" for p in ports) and \
-                len({p.variable.valueReference for p in ports}) == len(ports):
-            return self._float_setter(positions, ports, direct)
-        if direct:
-            f = self._setter(positions, changes)
-            f.needs_fill = True
-            return f
+        names, starts = comp.connected_inputs, comp._input_starts()
         srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type) for n in names]
-        starts = comp._input_starts()
-        ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "set", self._fail, self.name,
-                      [srcs[i] for i in positions])
+        ex = Exchange(self.inst.dll, self.inst.handle, 3, [comp.element_ports[names[i]] for i in positions], "set",
+                      self._fail, self.name, [srcs[i] for i in positions])
         ex.preset({comp.element_ports[names[i]].name: starts[i] for i in positions})
-        return ex.bind(self.vin, np.asarray(positions, np.intp), self.iin, changes)
+        if direct:
+            return ex.bind(self.values, _index(self.idx_in[positions]), self.integers, changes)
+        return ex.bind(self.vin, _index(positions), self.iin, changes)
 
-    def _float_setter(self, positions: list[int], ports: list, direct: bool):
-        n = _SIZE(len(ports))
-        vrs = (_U32 * len(ports))(*[p.variable.valueReference for p in ports])
-        fn, fail = self._fn("fmi3SetFloat64"), self._fail
-        slots = [int(self.idx_in[j]) for j in positions]
-        if direct and all(b == a + 1 for a, b in itertools.pairwise(slots)):     # the FMU reads the signals
-            return self._checked(fn, (self.c, vrs, n, self._pointer(self.values, slots[0]), n), "SetFloat64")
-        buf = (_D * len(ports))()
-        args = (self.c, vrs, n, buf, n)
-        src = self.values if direct else self.vin
-        pairs = tuple((i, slots[i] if direct else j) for i, j in enumerate(positions))
-
-        def set_reals() -> bool:
-            for i, j in pairs:
-                buf[i] = src[j]
-            st = fn(*args)
-            if st > 1:
-                fail("SetFloat64", st)
-            return False
-        return set_reals
-
-    @staticmethod
-    def _pointer(array: np.ndarray, index: int):
-        return ctypes.cast(array.ctypes.data + 8 * index, ctypes.POINTER(_D))
-
-    # ------------------------------------------------------------------ getters
     def _getter(self, positions: list[int], direct: bool):
         """A call reading the output ports at ``positions`` into the master's signals
-        (``direct``: at an instant) or into the own buffers (between instants); None for
-        none."""
+        (``direct``: at an instant) or into the own buffers (between instants); None for none."""
         if not positions:
             return None
-        comp = self.comp
-        ports = [comp.element_ports[comp.output_names[j]] for j in positions]
         own, own_i, base = (self.values, self.integers, self.out.start) if direct else (self.own, self.own_i, 0)
-        if any(p.size != 1 or p.type not in _SCALAR for p in ports):
-            ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "get", self._fail, self.name)
-            return ex.bind(own, np.asarray(positions, np.intp) + base, own_i)
-        items = sorted(zip([j + base for j in positions], ports), key=lambda x: x[0])
-        calls = []
-        if direct:                               # Float64 at consecutive signals: read in place
-            items = self._in_place(items, calls)
-        groups: dict = {}
-        for j, p in items:
-            ctype, suffix, kind = _SCALAR[p.type]
-            groups.setdefault(suffix, (ctype, kind, []))[2].append((j, p.variable.valueReference))
-        for suffix, (ctype, kind, pairs) in groups.items():
-            vrs = list(dict.fromkeys(vr for _, vr in pairs))
-            n = _SIZE(len(vrs))
-            buf = (ctype * len(vrs))()
-            where = {vr: i for i, vr in enumerate(vrs)}
-            calls.append((self._fn(f"fmi3Get{suffix}"), (self.c, (_U32 * len(vrs))(*vrs), n, buf, n), buf, kind,
-                          tuple((j, where[vr]) for j, vr in pairs), f"Get{suffix}"))
-        return self._reader(calls, own, own_i)
-
-    def _in_place(self, items: list, calls: list) -> list:
-        """Runs of Float64 outputs at consecutive signals, each one ``fmi3GetFloat64`` into
-        the signals (added to ``calls``); returns the other ``items``."""
-        runs, rest = [], []
-        for j, p in items:
-            if p.type == "Float64" and runs and runs[-1][-1][0] == j - 1 and \
-                    all(q.variable.valueReference != p.variable.valueReference for _, q in runs[-1]):
-                runs[-1].append((j, p))
-            elif p.type == "Float64":
-                runs.append([(j, p)])
-            else:
-                rest.append((j, p))
-        for run in runs:
-            n = _SIZE(len(run))
-            vrs = (_U32 * len(run))(*[p.variable.valueReference for _, p in run])
-            calls.append((self._fn("fmi3GetFloat64"), (self.c, vrs, n, self._pointer(self.values, run[0][0]), n),
-                          None, "f", (), "GetFloat64"))
-        return rest
-
-    def _reader(self, calls: list, own: np.ndarray, own_i: np.ndarray):
-        """One function making the getter ``calls`` ``(fn, args, buffer, kind, pairs, label)``
-        (the common cases without a loop)."""
-        fail = self._fail
-        if len(calls) == 1 and calls[0][2] is None:
-            fn, args, _, _, _, label = calls[0]
-            return self._checked(fn, args, label)
-        if len(calls) == 1 and calls[0][3] == "f" and len(calls[0][4]) == 1:
-            fn, args, buf, _, ((j, _),), label = calls[0]
-
-            def get_one() -> None:
-                st = fn(*args)
-                if st > 1:
-                    fail(label, st)
-                own[j] = buf[0]
-            return get_one
-        big = 1 << 63
-
-        def get() -> None:
-            for fn, args, buf, kind, pairs, label in calls:
-                st = fn(*args)
-                if st > 1:
-                    fail(label, st)
-                if kind == "f":
-                    for j, i in pairs:
-                        own[j] = buf[i]
-                else:
-                    for j, i in pairs:
-                        v = buf[i]
-                        if kind == "b":
-                            v = 1 if v else 0
-                        own[j] = v
-                        own_i[j] = v - (big << 1) if kind == "u" and v >= big else v
-        return get
+        ports = [self.comp.element_ports[self.comp.output_names[j]] for j in positions]
+        ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "get", self._fail, self.name)
+        return ex.bind(own, _index(np.asarray(positions) + base), own_i)
 
     # ------------------------------------------------------------------ plans
     def interval_read(self, k) -> bool:
@@ -445,28 +321,30 @@ class ClockPorts:
             self.dirty = False
 
     # ------------------------------------------------------------------ output clocks
+    def _active_out_clocks(self, what: str) -> list[int]:
+        """``fmi3GetClock`` of the output (and local) clocks (the call ``what``): the active ones' indices."""
+        st = self._get_clock(self.c, self._out_vr, self._n_out, self._out_val)
+        if st > 1:
+            self._fail(what, st)
+        return [i for i in range(len(self.out_clocks)) if self._out_val[i]]
+
     def _clocks_ticked(self, t: float, indices, snap: dict | None, direct: bool) -> bool:
         """The output clocks at ``indices`` active at ``t``: each counted, logged, its outputs
         read (``direct``: into the signals), its activation queued; whether any has sinks."""
-        published = None
-        get = self.get_kd if direct else self.get_k
+        get, floats, ints, base = ((self.get_kd, self.values, self.integers, self.out.start) if direct else
+                                   (self.get_k, self.own, self.own_i, 0))
         for i in indices:
             vr = self.out_clocks[i].vr
             self.out_counts[i] += 1
             pos = self.out_clock_pos[i]
             if pos >= 0:
-                if direct:
-                    self.values[self.out.start + pos] = self.integers[self.out.start + pos] = self.out_counts[i]
-                else:
-                    self.own[pos] = self.own_i[pos] = self.out_counts[i]
+                floats[base + pos] = ints[base + pos] = self.out_counts[i]
             self.log_t(t)
             self.log_id(self.labels[vr])
             g = get[vr]
             if g is not None:
                 g()
-            if self.publishers[i] is not None:
-                published = published or []
-                published.append(self.publishers[i])
+        published = [self.publishers[i] for i in indices if self.publishers[i] is not None]
         if published:
             self._outbox.append((t, snap, published))
         return bool(published)
@@ -485,8 +363,7 @@ class ClockPorts:
                 self.get_u()
             mine = (self.own.copy(), self.own_i.copy())
         for t, snap, published in self._outbox:
-            out = dict(snap) if snap else {}
-            out[self.name] = mine
+            out = {**(snap or {}), self.name: mine}
             for pub in published:
                 pub(t, out)
         self._outbox.clear()

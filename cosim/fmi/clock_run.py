@@ -1,18 +1,8 @@
-"""A clocked FMI 3.0 FMU in a run: the standard's call sequences for clocks (the FMU's
-clocks as :mod:`cosim.fmi.clocks` reads them; the master's side in
-:mod:`cosim.core.clocking`), one module per interface over a shared part.
-
-* :mod:`cosim.fmi.clock_timing`: Initialization Mode (the clocks' intervals set or asked)
-  and the timing of a run (the periodic clocks' patterns, the aperiodic and triggered
-  clocks due, the intervals read at run time);
-* :mod:`cosim.fmi.clock_ports`: the clocked and unclocked inputs and outputs, the output
-  clocks' counts and sinks;
-* :mod:`cosim.fmi.clock_event`: Event Mode (Model Exchange and Co-Simulation);
-* :mod:`cosim.fmi.clock_cs`: Co-Simulation with Event Mode and early return;
-* :mod:`cosim.fmi.clock_me`: Model Exchange;
-* :mod:`cosim.fmi.clock_se`: Scheduled Execution.
-
-Every call's status is checked; a failing call raises
+"""A clocked FMI 3.0 FMU in a run: the standard's call sequence of its interface,
+Co-Simulation with Event Mode (:mod:`cosim.fmi.clock_cs`), Model Exchange
+(:mod:`cosim.fmi.clock_me`) or Scheduled Execution (:mod:`cosim.fmi.clock_se`), over the
+clocks' timing (:mod:`cosim.fmi.clock_timing`), ports (:mod:`cosim.fmi.clock_ports`) and
+the Event Mode of the first two (:mod:`cosim.fmi.clock_event`). A failing call raises
 :class:`~fmu_models.errors.FMUError` naming the call, the time and the FMU's message.
 """
 from __future__ import annotations
@@ -39,5 +29,4 @@ def clocked_run(comp, board: ClockBoard, values, inputs, outputs, integers, inte
     """
     if comp.interface == "me":
         return MEClockedRun(comp, board, values, inputs, outputs, integers, integrator)
-    cls = CSClockedRun if comp.interface == "cs" else SEClockedRun
-    return cls(comp, board, values, inputs, outputs, integers)
+    return (CSClockedRun if comp.interface == "cs" else SEClockedRun)(comp, board, values, inputs, outputs, integers)

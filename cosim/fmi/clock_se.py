@@ -1,15 +1,12 @@
-"""A Scheduled Execution FMU in a run, in the FMI 3.0 call sequence (§5: §5.1.1 Activating
-Model Partitions, §5.2.1 Clock Activation Mode, §5.2.2 Clock Update Mode).
-
-The instance has a ``clockUpdate`` callback, in which (Clock Update Mode) every output clock
-is read with ``fmi3GetClock`` and every countdown clock's interval with
-``fmi3GetInterval*``. At each activation time the partitions due are activated with
-``fmi3ActivateModelPartition`` in priority order (smaller first, then declaration order; a
-countdown clock that becomes due at the same time joins the queue), each after its inputs
-are set, its outputs (and those of the output clocks it activated) read after it; a
-partition's inputs are direct inputs of its outputs (the partition computes both at once).
-``fmi3Discard`` counts as an error. The common instant (one periodic partition, nothing
-pending) takes a short path (``_fire``).
+"""A Scheduled Execution FMU in a run, in the FMI 3.0 call sequence (§5.1.1 Activating
+Model Partitions, §5.2.1 Clock Activation Mode, §5.2.2 Clock Update Mode). At each
+activation time the partitions due are activated with ``fmi3ActivateModelPartition`` in
+priority order (smaller first, then declaration order; a countdown clock due at the same
+time joins the queue), each after its inputs are set (direct inputs of its outputs: the
+partition computes both at once), its outputs and those of the output clocks it activated
+read after it. The ``clockUpdate`` callback (Clock Update Mode) reads the output clocks
+(``fmi3GetClock``) and the countdown clocks' intervals. ``fmi3Discard`` counts as an error.
+The common instant (one periodic partition, nothing pending) takes a short path (``_fire``).
 """
 from __future__ import annotations
 
@@ -27,7 +24,7 @@ __all__ = ["SEClockedRun"]
 
 
 class SEClockedRun(ClockedRun):
-    """One run of a Scheduled Execution FMU (see the module documentation).
+    """One run of a Scheduled Execution FMU.
 
     Parameters
     ----------
@@ -81,34 +78,25 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, ks + got, snap, True)
 
     def _fire(self, plan: Plan, t: float) -> None:
-        """The short path of ``plan`` at instant ``t``: one partition whose interval is not
-        read, ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its
-        own; others go through :meth:`_run_at`."""
-        fill, set_u_ft, set_u_rest, set_own, cv, name, label, get_own, get_u = plan.short or self._shorten(plan)
+        """The short path of ``plan`` at instant ``t`` (one partition whose interval is not read):
+        ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its own."""
+        sets, cv, name, label, gets = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
             self._run_at(t, list(plan.vrs), None, True)
             return
         activate_model_partition, c, at, log_t, log_id = self._fire_calls
         self.now = t
-        if fill is not None:
-            fill()
-        if set_u_ft is not None:
-            set_u_ft()
-        if set_u_rest is not None:
-            set_u_rest()
-        if set_own is not None:
-            set_own()
+        for f in sets:
+            f()
         at.value = t
         st = activate_model_partition(c, cv, at)
         if st > 1 or self._error is not None:
             self._activation_failed(st, name, t)
         log_t(t)
         log_id(label)
-        if get_own is not None:
-            get_own()
-        if get_u is not None:
-            get_u()
+        for g in gets:
+            g()
         if self.reported:
             self._outputs(t, None, True)
         self.now = None
@@ -116,17 +104,13 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, list(self.queue), None, True)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path: its fill, setters, clock, name, label and getters (each None
-        if nothing to do; the clock None: not one partition)."""
+        """``plan``'s short path ``(setters, clock, name, label, getters)`` (clock None: not one partition)."""
         if len(plan.vrs) > 1 or plan.intervals:
-            plan.short = (None,) * 9
+            plan.short = ((), None, None, None, ())
             return plan.short
         vr = plan.vrs[0]
-        ft_d = self.free_in.ft_d
-        fill = self.fill_ft if self.fill_ft is not None and (plan.fill or getattr(ft_d, "needs_fill", False)) else None
-        setters = [self._or_none(f) for f in (ft_d, self.free_in.rest, self.clock_in[vr].all_d)]
-        plan.short = (fill, *setters, ctypes.c_uint32(vr), self.model.by_vr[vr].name, plan.labels[0], self.get_kd[vr],
-                      self.get_ud)
+        plan.short = (self.calls((self.free_in.ft_d, self.free_in.rest, self.clock_in[vr].all_d)), ctypes.c_uint32(vr),
+                      self.model.by_vr[vr].name, plan.labels[0], self.calls((self.get_kd[vr], self.get_ud)))
         return plan.short
 
     def _run_at(self, t: float, ks: list[int], snap: dict | None, direct: bool) -> None:
@@ -150,17 +134,18 @@ class SEClockedRun(ClockedRun):
             if self.interval_read(k):
                 for kk, v, q in self._intervals([k]):
                     self._apply_interval(kk, v, q, t, True)
-                for v2 in self._due_at(t):
-                    if v2 not in queue:
-                        queue.append(v2)
-                queue.sort(key=self.priority.get)
+                self._enqueue(self._due_at(t))
             if self.reported:
                 self._outputs(t, snap, direct)
         self.now = None
 
+    def _enqueue(self, vrs: list[int]) -> None:
+        """Add the partitions ``vrs`` due now to the queue, in priority order."""
+        self.queue.extend(vr for vr in vrs if vr not in self.queue)
+        self.queue.sort(key=self.priority.get)
+
     def _activate(self, t: float, vr: int, k: FMIClock, direct: bool) -> None:
-        """Partition ``k`` at ``t``: its inputs set, activated, its outputs read (``direct``:
-        into the signals)."""
+        """Partition ``k`` at ``t``: its inputs set, activated, its outputs read (``direct``: into the signals)."""
         self.clock_in[vr].all()
         self.reported.clear()
         self._cv.value, self._at.value = vr, t
@@ -173,8 +158,8 @@ class SEClockedRun(ClockedRun):
             g()
 
     def _activation_failed(self, st: int, name: str, t: float) -> None:
-        """After ``fmi3ActivateModelPartition`` of clock ``name`` at ``t`` returned ``st``: what
-        went wrong in its callbacks raised first, else the failed call."""
+        """After ``fmi3ActivateModelPartition`` of ``name`` at ``t`` returned ``st``: raise what went
+        wrong in its callbacks, else the failed call."""
         if self._error is not None:
             err, self._error = self._error, None
             if st > 1:
@@ -184,9 +169,8 @@ class SEClockedRun(ClockedRun):
 
     # ------------------------------------------------------------------ Clock Update Mode
     def clock_update(self, env) -> None:
-        """The ``clockUpdate`` callback (Clock Update Mode, §5.2.2): every output clock read with
-        ``fmi3GetClock``, every countdown clock's interval; an error is kept and raised
-        after the activation returns (a callback cannot raise).
+        """The ``clockUpdate`` callback (Clock Update Mode, §5.2.2): the output clocks and the
+        countdown clocks' intervals read; an error is kept, raised after the activation returns.
 
         Parameters
         ----------
@@ -195,20 +179,14 @@ class SEClockedRun(ClockedRun):
         """
         try:
             self.in_callback = True
-            n = len(self.out_clocks)
-            if n:
-                st = self._get_clock(self.c, self._out_vr, self._n_out, self._out_val)
-                if st > 1:
-                    self._fail("GetClock", st)
-                self.reported += [i for i in range(n) if self._out_val[i]]
+            if self.out_clocks:
+                self.reported += self._active_out_clocks("GetClock")
             t = self.now
             for k, v, q in self._intervals(self.countdown):
                 self._apply_interval(k, v, q, t if t is not None else self.t0, False)
                 if q == CHANGED and t is not None and abs(self.next_at[k.vr] - t) <= self.tol:
                     del self.next_at[k.vr]
-                    if k.vr not in self.queue:
-                        self.queue.append(k.vr)
-                        self.queue.sort(key=self.priority.get)
+                    self._enqueue([k.vr])
         except BaseException as e:  # noqa: BLE001 - kept, raised after the FMU returns
             if self._error is None:
                 self._error = e
@@ -216,16 +194,14 @@ class SEClockedRun(ClockedRun):
             self.in_callback = False
 
     def _outputs(self, t: float, snap: dict | None, direct: bool) -> None:
-        """After an activation: the output clocks its callbacks reported counted, logged,
-        their outputs read, their activations sent."""
+        """After an activation: the output clocks its callbacks reported handled and sent."""
         if self._clocks_ticked(t, self.reported, snap, direct):
             self._publish(direct)
         self.reported.clear()
 
     # ------------------------------------------------------------------ the update
     def update(self, t: float) -> None:
-        """The update from instant ``t`` [s]: the activations strictly before the next
-        instant, each at its time."""
+        """The update from instant ``t`` [s]: the activations before the next instant, each at its time."""
         if len(self._logged) > MAX_TICKS:
             self.board.check_room()
         if not self.inbox and not self.next_at:
@@ -238,14 +214,10 @@ class SEClockedRun(ClockedRun):
         if got:
             self._overlay(snap)
             self._run_at(t, got, snap, False)
-        end = t + self.P
-        tc = t
-        while True:
-            p = self._next_point(tc, end)
-            if p is None:
-                return
+        p = self._next_point(t, t + self.P)
+        while p is not None:
             ks = self._due_at(p)
             got, snap = self._received_at(p)
             self._overlay(snap)
             self._run_at(p, ks + got, snap, False)
-            tc = p
+            p = self._next_point(p, t + self.P)

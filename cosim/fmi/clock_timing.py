@@ -1,17 +1,11 @@
-"""The timing of a clocked FMI 3.0 FMU's clocks (the call sequences are in
-:mod:`cosim.fmi.clock_run`, the master's side in :mod:`cosim.core.clocking`).
-
-**Initialization Mode** (:func:`initialise`; FMI 3.0 §2.3.3, the functions §2.2.8.4 Clocks
-specific API). Fixed and tunable clocks that declare ``intervalDecimal`` get their interval
-with ``fmi3SetIntervalDecimal`` (``fmi3SetIntervalFraction`` in their counter form), the
-declared one or the component's ``clock_intervals``; those that do not are asked
-``fmi3GetInterval*`` and ``fmi3GetShift*`` (multiples of the component's period); changing
-and countdown clocks are asked their first interval.
-
-**A run** (:class:`ClockedRun`). Periodic clocks tick at instants, their activations
-computed once per run as a pattern over their common period. An aperiodic clock ticks when
-its last ``fmi3IntervalChanged`` interval says (relative to the Event Mode or Clock Update
-Mode that read it), a triggered clock when its source sends; between instants too.
+"""The timing of a clocked FMI 3.0 FMU's clocks, shared by the call sequences of
+:mod:`cosim.fmi.clock_run`. In Initialization Mode (§2.3.3; the functions of §2.2.8.4
+Clocks specific API) fixed and tunable clocks that declare ``intervalDecimal`` are set
+their interval (``fmi3SetInterval*``: the declared one or ``clock_intervals``), the others
+asked theirs (``fmi3GetInterval*``, ``fmi3GetShift*``), changing and countdown clocks
+their first one. In a run periodic clocks tick at instants, computed once as a pattern
+over their common period; an aperiodic clock ticks when its last ``fmi3IntervalChanged``
+interval says, a triggered one when its source sends, between instants too.
 """
 from __future__ import annotations
 
@@ -65,12 +59,10 @@ class ClockSchedule:
     """
 
     def __init__(self, model: FMIClocks, t0: float, period: float, overrides: Mapping[str, Fraction]):
-        self.t0, self.period = t0, period
-        self.tol = 1e-9 * period
+        self.model, self.t0, self.period, self.tol = model, t0, period, 1e-9 * period
+        self.overrides = dict(overrides)
         self.periodic: list[list] = []
         self.next_at: dict[int, float] = {}
-        self.overrides = dict(overrides)
-        self.model = model
 
     def add_periodic(self, k: FMIClock, interval: Fraction, shift: Fraction, owner: str) -> None:
         """Add periodic clock ``k`` of component ``owner``, its ``interval`` and ``shift`` [s]
@@ -91,8 +83,8 @@ class ClockSchedule:
 
 # ---------------------------------------------------------------------- Initialization Mode
 def initialise(comp, inst, t0: float) -> ClockSchedule:
-    """In Initialization Mode: the clock intervals set or asked as the standard says (see
-    the module documentation); returns the run's schedule.
+    """In Initialization Mode (§2.3.3): the input clocks' intervals set or asked (see the
+    module documentation); returns the run's schedule.
 
     Parameters
     ----------
@@ -103,36 +95,37 @@ def initialise(comp, inst, t0: float) -> ClockSchedule:
     t0 : float
         The start time [s].
     """
-    model: FMIClocks = comp.clock_model
-    sched = ClockSchedule(model, t0, comp.period, comp.clock_overrides)
-    c = ctypes.c_void_p(inst.handle)
+    sched = ClockSchedule(comp.clock_model, t0, comp.period, comp.clock_overrides)
+    c, owner = ctypes.c_void_p(inst.handle), comp.name
 
-    def call(name: str, k: FMIClock, *args) -> None:
+    def call(name: str, k: FMIClock, *args) -> list:
+        """``name`` of clock ``k`` with the one-element arrays ``args``; their values after it."""
         st = inst.raw(name)(c, (_U32 * 1)(k.vr), _SIZE(1), *args)
         if st > 1:
-            inst.fail(f"{name[4:]}", st)
+            inst.fail(name[4:], st)
+        return [a[0] for a in args]
 
-    for k in model.clocks:
+    for k in sched.model.clocks:
         if k.causality != "input":
             continue
         if k.variability == "constant":
-            sched.add_periodic(k, k.interval, k.shift, comp.name)
+            sched.add_periodic(k, k.interval, k.shift, owner)
         elif k.importer_sets_interval:
-            sched.add_periodic(k, _set_interval(call, k, sched.overrides.get(k.name, k.interval), comp.name),
-                               k.shift, comp.name)
+            sched.add_periodic(k, _set_interval(call, k, sched.overrides.get(k.name, k.interval), owner), k.shift,
+                               owner)
         elif k.periodic:                                  # fixed/tunable without intervalDecimal: ask
-            sched.add_periodic(k, *_ask_periodic(call, k, comp.name), comp.name)
+            sched.add_periodic(k, *_ask_periodic(call, k, owner), owner)
         elif k.aperiodic:
             interval, q = _get_interval(call, k)
             if k.supports_fraction:
                 interval = interval[0] / interval[1] if interval[1] else float("nan")
             if q not in QUALIFIERS:
-                raise FMUError(f"{comp.name}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
+                raise FMUError(f"{owner}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
             if k.variability == "changing" and q == NOT_YET_KNOWN:
-                raise FMUError(f"{comp.name}: fmi3GetInterval of changing clock {k.name!r} returned "
+                raise FMUError(f"{owner}: fmi3GetInterval of changing clock {k.name!r} returned "
                                "fmi3IntervalNotYetKnown, which only countdown clocks may return")
             if q == CHANGED:
-                sched.next_at[k.vr] = t0 + checked_interval(interval, k, comp.name, False)
+                sched.next_at[k.vr] = t0 + checked_interval(interval, k, owner, False)
     return sched
 
 
@@ -151,16 +144,11 @@ def _set_interval(call, k: FMIClock, interval: Fraction, owner: str) -> Fraction
 
 
 def _get_interval(call, k: FMIClock) -> tuple:
-    """``fmi3GetInterval*`` of clock ``k``: ``((counter, resolution) or interval [s],
-    qualifier)``."""
-    q = (_I * 1)()
+    """``fmi3GetInterval*`` of clock ``k``: ``((counter, resolution) or interval [s], qualifier)``."""
     if k.supports_fraction:
-        cnt, res = (_U64 * 1)(), (_U64 * 1)()
-        call("fmi3GetIntervalFraction", k, cnt, res, q)
-        return (cnt[0], res[0]), q[0]
-    iv = (_D * 1)()
-    call("fmi3GetIntervalDecimal", k, iv, q)
-    return iv[0], q[0]
+        cnt, res, q = call("fmi3GetIntervalFraction", k, (_U64 * 1)(), (_U64 * 1)(), (_I * 1)())
+        return (cnt, res), q
+    return tuple(call("fmi3GetIntervalDecimal", k, (_D * 1)(), (_I * 1)()))
 
 
 def _ask_periodic(call, k: FMIClock, owner: str) -> tuple[Fraction, Fraction]:
@@ -170,16 +158,14 @@ def _ask_periodic(call, k: FMIClock, owner: str) -> tuple[Fraction, Fraction]:
         if not interval[1]:
             raise FMUError(f"{owner}: fmi3GetIntervalFraction of clock {k.name!r} returned resolution 0")
         interval = Fraction(*interval)
-        sc, sr = (_U64 * 1)(), (_U64 * 1)()
-        call("fmi3GetShiftFraction", k, sc, sr)
-        shift = Fraction(sc[0], sr[0]) if sr[0] else Fraction(0)
+        sc, sr = call("fmi3GetShiftFraction", k, (_U64 * 1)(), (_U64 * 1)())
+        shift = Fraction(sc, sr) if sr else Fraction(0)
     else:
         interval = time_fraction(checked_interval(interval, k, owner, True))
-        sh = (_D * 1)()
-        call("fmi3GetShiftDecimal", k, sh)
-        if not math.isfinite(sh[0]) or sh[0] < 0:
-            raise FMUError(f"{owner}: fmi3GetShiftDecimal of clock {k.name!r} returned {sh[0]!r}")
-        shift = time_fraction(sh[0])
+        sh = call("fmi3GetShiftDecimal", k, (_D * 1)())[0]
+        if not math.isfinite(sh) or sh < 0:
+            raise FMUError(f"{owner}: fmi3GetShiftDecimal of clock {k.name!r} returned {sh!r}")
+        shift = time_fraction(sh)
     if q == NOT_YET_KNOWN:
         raise FMUError(f"{owner}: fmi3GetInterval of {k.variability} clock {k.name!r} returned "
                        "fmi3IntervalNotYetKnown, which only countdown clocks may return")
@@ -188,9 +174,8 @@ def _ask_periodic(call, k: FMIClock, owner: str) -> tuple[Fraction, Fraction]:
 
 # ---------------------------------------------------------------------- a run
 class ClockedRun(ClockPorts):
-    """One run of a clocked FMU: its ports and its clocks' timing (see the module
-    documentation); each interface's run (:func:`~cosim.fmi.clock_run.clocked_run`) adds
-    the call sequence as the methods ``output(t)`` and ``update(t)``.
+    """One run of a clocked FMU: its ports and its clocks' timing; each interface's run
+    adds its call sequence as the methods ``output(t)`` and ``update(t)``.
 
     Parameters
     ----------
@@ -221,11 +206,7 @@ class ClockedRun(ClockPorts):
         """The periodic clocks' activations at each instant, as plans over their common
         period (``self.plans[n % len]`` for instants from ``self.first`` on)."""
         periodic = self.sched.periodic
-        length = 1
-        for _, every, _ in periodic:
-            length = length * every // math.gcd(length, every)
-            if length > MAX_PATTERN:
-                break
+        length = math.lcm(*(every for _, every, _ in periodic))
         first = max((f for _, _, f in periodic), default=0)
         if length > MAX_PATTERN or first > MAX_PATTERN:
             self.plans, self.plan_len, self.first = None, 1, 0
@@ -306,30 +287,20 @@ class ClockedRun(ClockPorts):
             return []
         key = tuple(k.vr for k in clocks)
         call = self._interval_calls.get(key)
-        n = len(clocks)
         if call is None:
-            vrs = (_U32 * n)(*key)
+            n = len(clocks)
+            fraction = all(k.supports_fraction for k in clocks)
+            bufs = ((_U64 * n)(), (_U64 * n)()) if fraction else ((_D * n)(),)
+            label = "GetIntervalFraction" if fraction else "GetIntervalDecimal"
             q = (_I * n)()
-            if all(k.supports_fraction for k in clocks):
-                cnt, res = (_U64 * n)(), (_U64 * n)()
-                fn, args = self._fn("fmi3GetIntervalFraction"), (self.c, vrs, _SIZE(n), cnt, res, q)
-                label = "GetIntervalFraction"
-
-                def read():
-                    return [(cnt[i] / res[i]) if res[i] else float("inf") for i in range(n)]
-            else:
-                vals = (_D * n)()
-                fn, args = self._fn("fmi3GetIntervalDecimal"), (self.c, vrs, _SIZE(n), vals, q)
-                label = "GetIntervalDecimal"
-
-                def read():
-                    return [vals[i] for i in range(n)]
-            call = self._interval_calls[key] = (fn, args, label, read, q)
-        fn, args, label, read, q = call
+            args = (self.c, (_U32 * n)(*key), _SIZE(n), *bufs, q)
+            call = self._interval_calls[key] = (self._fn(f"fmi3{label}"), args, label, bufs, q)
+        fn, args, label, bufs, q = call
         st = fn(*args)
         if st > 1:
             self._fail(f"{label}({', '.join(k.name for k in clocks)})", st)
-        return [(k, v, int(q[i])) for i, (k, v) in enumerate(zip(clocks, read()))]
+        values = [c / r if r else float("inf") for c, r in zip(*bufs)] if len(bufs) == 2 else bufs[0]
+        return [(k, v, q[i]) for i, (k, v) in enumerate(zip(clocks, values))]
 
     def _apply_interval(self, k: FMIClock, v: float, q: int, t: float, ticked: bool) -> None:
         """Clock ``k``'s interval ``v`` [s] (qualifier ``q``) read at ``t`` (``ticked``: it was

@@ -1,31 +1,9 @@
-"""FMI 3.0 clocks of an imported FMU, read and checked from its model description (the
-attributes, the ports they make, the direct dependencies the master may assume).
-
-What the master does with clocks in general (timing on the base grid, clock connections,
-activations between instants) is in :mod:`cosim.core.clocking`; this module is the FMI
-side, used by :class:`~cosim.fmi.fmu_component.FMUComponent` for any FMU that declares
-clocks.
-
-**Reading** (:class:`FMIClocks`). fmpy reads a Clock's ``intervalVariability`` and the
-``clocks`` attribute of clocked variables; the other attributes (``intervalDecimal``,
-``shiftDecimal``, ``supportsFraction``, ``resolution``, ``intervalCounter``,
-``shiftCounter``, ``priority``, ``canBeDeactivated``, also through a ``ClockType``) are
-read here from the XML. What the standard forbids is refused with the clock and the rule
-named: an output or local clock that is not triggered, an output clock with a priority, a
-constant clock without an interval, ``intervalDecimal``/``intervalCounter`` on a clock
-that may not have them, a counter without ``resolution``, a ``shiftCounter`` without an
-``intervalCounter``, an interval that disagrees with its counter form, a negative or
-non-finite value, a Scheduled Execution input clock without a priority or a local clock in
-Scheduled Execution, a Co-Simulation interface without Event Mode, a ``clocks`` attribute
-naming a variable that is not a clock.
-
-**Ports.** Triggered input clocks and output clocks are ports of type
-:data:`~cosim.core.component.CLOCK` (their signals count the activations); other input
-clocks tick on their own timing. Clocked variables are exchanged only while one of their
-clocks is active: a clocked output keeps (the master holds) its value between the ticks.
-
-How a run drives these clocks (Initialisation Mode, Event Mode in Model Exchange and
-Co-Simulation, Scheduled Execution) is in :mod:`cosim.fmi.clock_run`.
+"""The FMI 3.0 clocks of an imported FMU (§2.2.8 Clocks), read and checked from its model
+description: the attributes fmpy leaves out are read from the XML (also through a
+``ClockType``), and what the standard forbids is refused naming the clock and the rule (the
+list is on the clocks page of the documentation). Triggered input clocks and output clocks
+are ports of type :data:`~cosim.core.component.CLOCK`; how a run drives the clocks is in
+:mod:`cosim.fmi.clock_run`.
 """
 from __future__ import annotations
 
@@ -52,7 +30,7 @@ _ATTRS = ("intervalVariability", "intervalDecimal", "shiftDecimal", "supportsFra
 
 @dataclass(frozen=True)
 class FMIClock:
-    """One Clock variable of an FMU, as declared (see the module documentation).
+    """One Clock variable of an FMU, as declared.
 
     Attributes
     ----------
@@ -73,9 +51,8 @@ class FMIClock:
         from the importer).
     counter, resolution, shift_counter : int or None
         The counter form, if declared.
-    supports_fraction : bool
+    supports_fraction, can_be_deactivated : bool
     priority : int or None
-    can_be_deactivated : bool
     index : int
         Declaration order among the clocks.
     description : str
@@ -119,13 +96,9 @@ class FMIClock:
 
 
 def _bool(text, what: str) -> bool:
-    if text is None:
-        return False
-    if text in ("true", "1"):
-        return True
-    if text in ("false", "0"):
-        return False
-    raise FMUError(f"{what} must be true or false, got {text!r}")
+    if text not in (None, "true", "1", "false", "0"):
+        raise FMUError(f"{what} must be true or false, got {text!r}")
+    return text in ("true", "1")
 
 
 def _number(text, what: str, conv, kind: str):
@@ -161,11 +134,9 @@ def _decimal(text, what: str) -> Fraction | None:
 def _timing(where: str, var: str, a: dict) -> dict:
     """The interval and shift attributes ``a`` of the clock ``where`` (of intervalVariability
     ``var``), parsed and checked: the timing fields of its :class:`FMIClock`."""
-    decimal = _decimal(a["intervalDecimal"], f"{where}: intervalDecimal")
-    shift_decimal = _decimal(a["shiftDecimal"], f"{where}: shiftDecimal")
-    counter = _uint(a["intervalCounter"], f"{where}: intervalCounter")
-    resolution = _uint(a["resolution"], f"{where}: resolution")
-    shift_counter = _uint(a["shiftCounter"], f"{where}: shiftCounter")
+    decimal, shift_decimal = (_decimal(a[n], f"{where}: {n}") for n in ("intervalDecimal", "shiftDecimal"))
+    counter, resolution, shift_counter = (_uint(a[n], f"{where}: {n}")
+                                          for n in ("intervalCounter", "resolution", "shiftCounter"))
     fraction = _bool(a["supportsFraction"], f"{where}: supportsFraction")
     if decimal is not None:
         if var not in PERIODIC:
@@ -259,8 +230,7 @@ class FMIClocks:
         self.by_vr = {k.vr: k for k in self.clocks}
         self.clocked = {}
         for v in md.modelVariables:
-            refs = getattr(v, "clocks", None) or []
-            if not refs:
+            if not (refs := getattr(v, "clocks", None)):
                 continue
             vrs = []
             for r in refs:
@@ -273,10 +243,8 @@ class FMIClocks:
                 raise FMUError(f"{owner}: clocked variable {v.name!r} has variability {v.variability!r}; clocked "
                                "variables must be discrete or tunable")
             self.clocked[v.name] = tuple(vrs)
-        self.dependencies = {}
-        for u in md.outputs:
-            if u.variable is not None and u.variable.type == "Clock":
-                self.dependencies[u.variable.valueReference] = tuple(d.valueReference for d in u.dependencies or ())
+        self.dependencies = {u.variable.valueReference: tuple(d.valueReference for d in u.dependencies or ())
+                             for u in md.outputs if u.variable is not None and u.variable.type == "Clock"}
 
     def _clock(self, v, a: dict, index: int) -> FMIClock:
         where = f"{self.owner}: clock {v.name!r}"
@@ -347,40 +315,28 @@ class FMIClocks:
         Co-Simulation and Scheduled Execution. ``declared``: the dependencies read from the
         ``ModelStructure`` (output port -> input ports)."""
         in_names = [p.name for p in ins]
-        by_clock: dict[int, list[str]] = {}
+        by_clock: dict[int, list[str]] = {}          # input clock -> the input ports it is or clocks
         for p in ins:
-            if p.type == CLOCK:
-                by_clock.setdefault(self.by_name[p.name].vr, []).append(p.name)
-            else:
-                for vr in self.clocks_of(ports[p.name].variable.name):
-                    by_clock.setdefault(vr, []).append(p.name)
+            for vr in (self.by_name[p.name].vr,) if p.type == CLOCK else self.clocks_of(ports[p.name].variable.name):
+                by_clock.setdefault(vr, []).append(p.name)
         result = {}
         for p in outs:
             if p.type == CLOCK:
-                k = self.by_name[p.name]
-                deps = set()
-                for vr in self.dependencies.get(k.vr, ()):
-                    kk = self.by_vr.get(vr)
-                    if kk is not None and kk.is_port and kk.causality == "input":
-                        deps.add(kk.name)
-                    deps.update(n for n in in_names if n in by_clock.get(vr, ()) or
-                                (n in ports and ports[n].variable.valueReference == vr))
-                result[p.name] = sorted(d for d in deps if d in in_names)
-                continue
-            clocks = self.clocks_of(ports[p.name].variable.name)
-            if not clocks:
+                vrs = self.dependencies.get(self.by_name[p.name].vr, ())
+                deps = {n for n in in_names for vr in vrs
+                        if n in by_clock.get(vr, ()) or (n in ports and ports[n].variable.valueReference == vr)}
+            elif not (clocks := self.clocks_of(ports[p.name].variable.name)):
                 result[p.name] = sorted(declared.get(p.name, ())) if interface == "me" else []
                 continue
-            deps = set(declared.get(p.name, ()))
-            if interface == "cs":                   # discrete inputs without clock: set in the update
-                deps = {d for d in deps if d not in ports or ports[d].type == CLOCK or not ports[d].discrete
-                        or self.clocks_of(ports[d].variable.name)}
-            for vr in clocks:
-                k = self.by_vr[vr]
-                if k.is_port and k.causality == "input" and k.name in in_names:
-                    deps.add(k.name)
-                if interface == "se":
-                    deps.update(by_clock.get(vr, ()))
+            else:
+                deps = set(declared.get(p.name, ()))
+                if interface == "cs":                   # discrete inputs without clock: set in the update
+                    deps = {d for d in deps if d not in ports or ports[d].type == CLOCK or not ports[d].discrete
+                            or self.clocks_of(ports[d].variable.name)}
+                for vr in clocks:
+                    deps.add(self.by_vr[vr].name)       # a clock no input port is: left out below
+                    if interface == "se":
+                        deps.update(by_clock.get(vr, ()))
             result[p.name] = sorted(d for d in deps if d in in_names)
         return result
 
