@@ -10,7 +10,7 @@ from fmu_models.infra import checks
 from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
 from .discrete import DiscreteModel
 from .fuzzy import MamdaniFuzzy
-from .protocol import Parameter
+from .protocol import Parameter, per_name
 
 __all__ = ["MFIAE", "Q_MAPPINGS"]
 
@@ -33,20 +33,12 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         sigma_q^2 <- sigma_q^2 - gain_q MAdj                     (eq 41, q_mapping="literal")
         sigma_q^2 <- sigma_q^2 - gain_q trace(K MAdj K^T) / nx   (q_mapping="gain")
 
-    each clipped to its bounds. Too large innovations (``C_I > C_T``, ``m < 0``) raise Q
-    and R, too small ones lower them. ``q_mapping="literal"`` (default) is eqs 41-42 read as
-    printed: both variances move by the same fuzzy output (so their ratio changes
-    whenever they differ, and with it the filter's gain). ``"gain"`` maps MAdj into the
-    state space through the gain, as eq 36 maps ``C_I`` into ``Q = K C_I K^T``; Q then
-    moves by about ``|K|^2`` times less than R.
-
-    Choices the paper leaves open, each a parameter: the mapping above; the scalar summary
-    of the matrices (``trace/ny``, or one adjustment per measurement channel with
-    ``per_channel=True``, R diagonal and Q moved by their mean); the input normalisation
-    and membership functions (:class:`MamdaniFuzzy`); the gains and the bounds.
-
-    Until ``window`` innovations are stored Q and R stay at their initial values. The whole
-    step, fuzzy inference included, is one compiled CasADi Function.
+    each clipped to its bounds: too large innovations (``C_I > C_T``, ``m < 0``) raise Q and R.
+    ``"literal"`` reads eqs 41-42 as printed (both variances move by the same output, so their
+    ratio, and the gain, changes); ``"gain"`` maps MAdj through the gain as eq 36 maps ``C_I``
+    (Q then moves about ``|K|^2`` times less than R). The other choices the paper leaves open
+    are parameters too (the manual's estimators page lists them). Until ``window`` innovations
+    are stored Q and R keep their initial values.
 
     Parameters
     ----------
@@ -58,7 +50,7 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         Initial measurement noise variance sigma_r^2 (R = r0 I), or one per channel.
     window : int
         N of eq 37 (default 10: the paper does not give it; seed 000's Table 3 is matched
-        within 10 % for windows 6 to 15, see the experiments page of the documentation).
+        within 10 % for windows 6 to 15, see the manual's experiments page).
     fuzzy : MamdaniFuzzy, optional
         The fuzzy system (default ``MamdaniFuzzy()``).
     gain_q, gain_r : float
@@ -68,15 +60,13 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     per_channel : bool
         One adjustment per measurement channel (default False: scalar R).
     q_bounds, r_bounds : (float, float), optional
-        Bounds kept on sigma_q^2 and on each sigma_r^2. Default: a factor 1e4 either side
-        of the initial value, so that a start wrong by up to four orders of magnitude can
-        be corrected and nothing collapses to a numerical floor.
+        Bounds on sigma_q^2 and each sigma_r^2 (default a factor 1e4 either side of the start:
+        a start wrong by four orders of magnitude is corrected, nothing collapses to a floor).
 
     Attributes
     ----------
     m : ndarray, shape (ny,)
-        The last normalised fuzzy adjustment per channel (all equal unless
-        ``per_channel``; 0 before the window is full).
+        The last normalised fuzzy adjustment per channel (0 before the window is full).
     """
 
     name = "MF-IAE"
@@ -123,12 +113,10 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
 
     def fmu_noise_parameters(self):
         """``q0`` and ``r0`` (one per channel with ``per_channel``): Q = q0 I, R = r0 I."""
-        s = self.system
         r = np.diag(self.R)
         q = Parameter("q0", self.Q[0, 0], "positive", "initial process noise variance sigma_q^2 (Q = q0 I)")
         if self.per_channel:
-            return [q, Parameter("r0", r, "positive", "initial measurement noise variance",
-                                 tuple(f"r0_{n}" for n in s.output_names), of=tuple(s.output_names))]
+            return [q, per_name("r0", r, "positive", "initial measurement noise variance", self.system.output_names)]
         return [q, Parameter("r0", r[0], "positive", "initial measurement noise variance sigma_r^2 (R = r0 I)")]
 
     def fmu_noise(self, p):
