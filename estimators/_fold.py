@@ -4,8 +4,8 @@ CasADi's ``mapaccum`` copies the accumulated state and every output through work
 each step (0.30 us a step on top of the 0.18 us of the cart-pole EKF step). :class:`NativeFold`
 compiles, with the step's C code, a driver that calls the step in a loop with pointers into
 the caller's numpy arrays: input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]``
-(stride 0: the same every step) or, accumulated, row ``k - 1`` of the output carrying it (row
-0: the initial state); output ``j`` is written at ``res[j] + k * res_stride[j]``, or, for a
+(stride 0: the same every step) or, accumulated, row ``k - 1`` of the output carrying it (step
+0 reads the initial state there); output ``j`` is written at ``res[j] + k * res_stride[j]``, or, for a
 state whose history nobody reads (an innovation window), at row ``k % 2`` of a two-row array
 (``res_cycle``); an outer loop runs ``runs`` realisations, each with its own base pointers.
 With the VM backend the same fold runs through ``mapaccum``.
@@ -30,13 +30,12 @@ _DRIVER = r"""
 int %(name)s_fold(long runs, long n_steps,
                   const double *const *arg0, const long *arg_stride, const long *arg_run_stride,
                   double *const *res0, const long *res_stride, const long *res_run_stride,
-                  const long *acc_out, const double *const *init, const long *init_run_stride,
-                  const long *res_cycle) {
+                  const long *acc_out, const long *res_cycle) {
     casadi_int sz_arg, sz_res, sz_iw, sz_w;
     const casadi_real **arg;
     casadi_real **res, *w;
     casadi_int *iw;
-    long r, k, i;
+    long r, k, i, j;
     int n_in = %(n_in)d, n_out = %(n_out)d, flag = 0;
     %(name)s_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     arg = (const casadi_real **)malloc(sizeof(casadi_real *) * (sz_arg > n_in ? sz_arg : n_in));
@@ -47,10 +46,10 @@ int %(name)s_fold(long runs, long n_steps,
     for (r = 0; r < runs; r++) {
         for (k = 0; k < n_steps; k++) {
             for (i = 0; i < n_in; i++) {
-                if (acc_out[i] >= 0)
-                    arg[i] = k == 0 ? init[i] + r * init_run_stride[i]
-                                    : res0[acc_out[i]] + r * res_run_stride[acc_out[i]]
-                                      + (res_cycle[acc_out[i]] ? (k - 1) %% 2 : k - 1) * res_stride[acc_out[i]];
+                j = acc_out[i];       /* the output carrying a state input; step 0 reads arg0 */
+                if (j >= 0 && k > 0)
+                    arg[i] = res0[j] + r * res_run_stride[j]
+                             + (res_cycle[j] ? (k - 1) %% 2 : k - 1) * res_stride[j];
                 else
                     arg[i] = arg0[i] + r * arg_run_stride[i] + k * arg_stride[i];
             }
@@ -123,11 +122,7 @@ class NativeFold:
         """The fold of :meth:`__call__` with its arguments prebuilt once, as a callable without
         arguments (the arrays stay bound and alive, changed in place between calls); compiled
         backend only."""
-        n_in, n_out = len(self.names_in), len(self.names_out)
         P = ctypes.POINTER(ctypes.c_double)
-        L = ctypes.c_long
-        arg0, arg_stride, arg_run, acc = (P * n_in)(), (L * n_in)(), (L * n_in)(), (L * n_in)()
-        ini, ini_run = (P * n_in)(), (L * n_in)()
         keep = []
 
         def ptr(a):
@@ -136,24 +131,18 @@ class NativeFold:
             keep.append(a)
             return a.ctypes.data_as(P)
 
-        for i, name in enumerate(self.names_in):
-            if i < self.n_state:
-                a = init[name]
-                acc[i] = self.names_out.index(f"{name}_new")
-                ini[i], ini_run[i] = ptr(a), a.strides[0] // 8
-                arg0[i] = ini[i]
-            else:
-                a = args[name]
-                acc[i] = -1
-                arg0[i] = ptr(a)
-                arg_stride[i] = a.strides[1] // 8 if a.ndim == 3 else 0
-                arg_run[i] = a.strides[0] // 8
-        res0, res_stride, res_run, cyc = (P * n_out)(), (L * n_out)(), (L * n_out)(), (L * n_out)()
-        for j, name in enumerate(self.names_out):
-            o = outs[name]
-            res0[j], res_stride[j], res_run[j] = ptr(o), o.strides[1] // 8, o.strides[0] // 8
-            cyc[j] = 1 if name in cycled else 0
-        call = (L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc, ini, ini_run, cyc)
+        def longs(values) -> ctypes.Array:
+            return (ctypes.c_long * len(values))(*values)
+
+        ins = [init[n] if i < self.n_state else args[n] for i, n in enumerate(self.names_in)]
+        res = [outs[n] for n in self.names_out]
+        call = (ctypes.c_long(runs), ctypes.c_long(n_steps), (P * len(ins))(*[ptr(a) for a in ins]),
+                longs([a.strides[1] // 8 if a.ndim == 3 else 0 for a in ins]), longs([a.strides[0] // 8 for a in ins]),
+                (P * len(res))(*[ptr(o) for o in res]), longs([o.strides[1] // 8 for o in res]),
+                longs([o.strides[0] // 8 for o in res]),
+                longs([self.names_out.index(f"{n}_new") if i < self.n_state else -1
+                       for i, n in enumerate(self.names_in)]),
+                longs([int(n in cycled) for n in self.names_out]))
         fold = self._fold
 
         def run() -> int:

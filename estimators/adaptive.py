@@ -36,8 +36,7 @@ def bounds_around(initial: np.ndarray, given, what: str) -> tuple[float, float]:
 
 
 def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
-    """The step parameters ``q_bounds`` and ``r_bounds`` (FMU parameters ``q_min``, ``q_max``,
-    ``r_min``, ``r_max``) of an adaptive filter."""
+    """The step parameters ``q_bounds``, ``r_bounds`` (FMU ``q_min``, ``q_max``, ``r_min``, ``r_max``)."""
     return [Parameter(f"{c}_bounds", b, "positive", (f"smallest adapted {what} variance",
                                                       f"largest adapted {what} variance"),
                       (f"{c}_min", f"{c}_max"), increasing=True)

@@ -49,9 +49,8 @@ class KalmanBase:
     x0 : array_like, shape (nx,)
         Initial state estimate.
     P0, Q, R : array_like
-        Initial state covariance (nx, nx), process noise covariance (nx, nx) and
-        measurement noise covariance (ny, ny); each may also be a diagonal vector or a
-        scalar (times identity). Must be symmetric positive definite.
+        Initial state, process and measurement noise covariances (nx, nx), (nx, nx), (ny, ny),
+        symmetric positive definite, or a diagonal vector, or a scalar (times identity).
     gate : float, optional
         Chi-square gate on the NIS: a measurement vector with ``nis > gate`` is refused (the
         step predicts only), e.g. ``scipy.stats.chi2.ppf(0.999, ny)``. Default None (no gate).
@@ -122,9 +121,7 @@ class KalmanBase:
         self._rt = BoundStep(step, state, self._fixed)
         ins = self._rt.inputs
         self._u, self._y, self._mask = ins["u"], ins["y"], ins["mask"]
-        self._fill_u = VectorInput(self._u, self.name, "u")
-        self._fill_y = VectorInput(self._y, self.name, "y")
-        self._fill_mask = VectorInput(self._mask, self.name, "mask")
+        self._fill_u, self._fill_y, self._fill_mask = (VectorInput(ins[k], self.name, k) for k in ("u", "y", "mask"))
         self._mask[:] = 1.0                    # between calls the mask buffer is all ones
         self._count = [0]                      # the step count k
         self._after = type(self).after_step is not KalmanBase.after_step
@@ -145,8 +142,7 @@ class KalmanBase:
         self._count[0] = int(value)
 
     def config_key(self) -> tuple:
-        """What identifies the compiled step beyond the class (a window length; default none).
-        Values that are step inputs (bounds, gains) do not belong here."""
+        """What identifies the compiled step beyond the class (a window length, not step inputs)."""
         return ()
 
     @property
@@ -169,8 +165,7 @@ class KalmanBase:
         return step
 
     def step_parameters(self) -> list[Parameter]:
-        """The fixed inputs of the step beyond Q and R, with their values (default none); each
-        is also an FMU parameter."""
+        """The step's fixed inputs beyond Q and R, each also an FMU parameter (default none)."""
         return []
 
     def predict_expr(self, ctx: StepContext) -> tuple[ca.SX, ca.SX]:
@@ -178,13 +173,11 @@ class KalmanBase:
         raise NotImplementedError(f"{type(self).__name__} must implement predict_expr (see estimators.protocol)")
 
     def update_expr(self, ctx: StepContext, x_prior: ca.SX, P_prior: ca.SX) -> Update:
-        """The measurement update of the valid channels from the prior ``(x_prior, P_prior)``
-        (required)."""
+        """The measurement update of the valid channels from the prior (required)."""
         raise NotImplementedError(f"{type(self).__name__} must implement update_expr (see estimators.protocol)")
 
     def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
-        """New values of Q, R (if the filter adapts them) and of the extra state, from the
-        step's ``result`` (default: none change)."""
+        """New Q, R (if the filter adapts them) and extra state from the step's ``result`` (default none)."""
         return {}
 
     def after_step(self) -> None:
@@ -201,8 +194,7 @@ class KalmanBase:
         return ca.mtimes(P, F.T)
 
     def fmu_noise_parameters(self) -> list[Parameter]:
-        """The FMU parameters Q and R come from (default: their diagonals ``Q0_<state>`` and
-        ``R0_<measurement>``)."""
+        """The FMU parameters giving Q and R (default their diagonals ``Q0_<state>``, ``R0_<output>``)."""
         s, extra = self.system, " (initial)" if self.adapts_noise else ""
         return [per_name("Q0", _diagonal(self.Q, "Q", self.name), "positive", "process noise variance" + extra,
                          s.state_names),
@@ -210,8 +202,7 @@ class KalmanBase:
                          s.output_names)]
 
     def fmu_noise(self, p: Mapping[str, ca.SX]) -> tuple[ca.SX, ca.SX]:
-        """``(Q, R)`` from the FMU parameters ``p`` (SX column vectors by name) of
-        :meth:`fmu_noise_parameters`."""
+        """``(Q, R)`` from the FMU parameters ``p`` (SX by name) of :meth:`fmu_noise_parameters`."""
         return ca.diag(p["Q0"]), ca.diag(p["R0"])
 
     def fmu_parameters(self) -> list[Parameter]:
@@ -225,8 +216,7 @@ class KalmanBase:
                 *self.fmu_noise_parameters(), *self._params]
 
     def fmu_initial(self, p: Mapping[str, ca.SX]) -> dict[str, ca.SX]:
-        """The initial state arrays and the fixed step inputs from the FMU parameters ``p``
-        (SX column vectors by name)."""
+        """The initial state arrays and the fixed step inputs from the FMU parameters ``p`` (SX by name)."""
         Q, R = self.fmu_noise(p)
         out = {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
                "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing))}
@@ -241,8 +231,7 @@ class KalmanBase:
         return {k: v[self._rt.cur].copy() for k, v in self._rt.pairs.items()}
 
     def parameter_arrays(self) -> dict[str, np.ndarray]:
-        """Copies of the step's flat fixed inputs: ``gate``, ``nan_missing``, ``Q, R`` of a
-        non-adaptive filter and the step parameters."""
+        """Copies of the step's flat fixed inputs (gate, nan_missing, a fixed Q and R, step parameters)."""
         return {k: v.copy() for k, v in self._fixed.items()}
 
     def bind_summary(self, out: np.ndarray, covariance: str = "diagonal"):
@@ -343,8 +332,7 @@ class KalmanBase:
                 "attributes": dict(self.__dict__)}
 
     def restore(self, snapshot: dict) -> None:
-        """Return to the state :meth:`snapshot` took of this filter: the same numbers as a new
-        filter built the same way."""
+        """Return to the state :meth:`snapshot` took of this filter (the numbers of a new one)."""
         for a, saved in snapshot["arrays"]:
             a[:] = saved
         self.__dict__.clear()
@@ -354,12 +342,10 @@ class KalmanBase:
 
     def set_noise(self, Q=None, R=None) -> None:
         """Replace Q and/or R (both validated first: on a refusal nothing changes)."""
-        q = None if Q is None else checks.covariance(Q, self.system.nx, "Q").ravel(order="F")
-        r = None if R is None else checks.covariance(R, self.system.ny, "R").ravel(order="F")
-        if q is not None:
-            self._now("Q")[:] = q
-        if r is not None:
-            self._now("R")[:] = r
+        new = {k: checks.covariance(M, n, k).ravel(order="F")
+               for k, M, n in (("Q", Q, self.system.nx), ("R", R, self.system.ny)) if M is not None}
+        for k, flat in new.items():
+            self._now(k)[:] = flat
         self._record()
 
     def _record(self) -> None:
@@ -371,8 +357,7 @@ class KalmanBase:
 
     # ================================================================ stepping
     def _explain(self, what: str) -> None:
-        """Raise the error of a failed step; a non-finite result that the model's compiled code
-        caused (an FMU's failure) is its error."""
+        """Raise the error of a failed step (an FMU model's own, if it made a result non-finite)."""
         failure = self.system.take_failure()
         if failure is not None and self._rt.status[0] == BAD_RESULT:
             raise type(failure)(f"{self.name}: {failure}, at step {self.k} ({what}); filter state unchanged")
@@ -450,7 +435,6 @@ class KalmanBase:
         try:
             if mask is not None:
                 self._fill_mask.checked(mask)
-            x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
             res = fn(self._now("x"), matrix(self._now("P"), s.nx, s.nx), matrix(self._now("R"), s.ny, s.ny),
                      self._y, self._mask, self.gate, float(self.nan_is_missing))
             self._rt.status[0] = float(res[-1])
@@ -458,18 +442,15 @@ class KalmanBase:
                 self._explain("update")
         finally:
             self._mask[:] = 1.0
-        self._now("x")[:] = np.asarray(res[0]).ravel()
-        self._now("P")[:] = np.asarray(res[1]).ravel(order="F")
         out = self._rt.outputs
-        out["x_prior"][:], out["P_prior"][:] = x_prior, P_prior
-        for name, value in zip(("innov", "S", "K", "nis", "accepted", "logdet_S"), res[2:8]):
-            out[name][:] = np.asarray(value).ravel(order="F")
+        out["x_prior"][:], out["P_prior"][:] = self._now("x"), self._now("P")
+        for dest, value in zip((self._now("x"), self._now("P"), *(out[n] for n in DIAGNOSTICS[2:])), res):
+            dest[:] = np.asarray(value).ravel(order="F")
         return self.x
 
     # ================================================================ whole trajectories
     def native_fold(self):
-        """The fused step folded over trajectories in native code (``estimators._fold.NativeFold``),
-        cached on the model: what :meth:`fold_record` and :class:`~estimators.BatchFilter` run."""
+        """The fused step folded over records in native code (a ``NativeFold``), cached on the model."""
         return self.system.compiled("fold", self.cache_key, self.backend,
                                     lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend,
                                                        library=self._step_library))
@@ -501,9 +482,8 @@ class KalmanBase:
         return {n: a for n, a in outs.items() if n not in cycled}, views, last
 
     def check_record(self, us, ys, masks=None):
-        """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
-        (N, ny), or :class:`InputError` / :class:`~fmu_models.errors.TypeMismatchError` naming the
-        problem."""
+        """A record ``(us, ys, masks)`` as contiguous float arrays (N, nu), (N, ny), (N, ny), or
+        :class:`InputError` / :class:`~fmu_models.errors.TypeMismatchError` naming the problem."""
         nu, ny = self.system.nu, self.system.ny
         us = checks.float_array(us, "us")
         ys = checks.float_array(ys, "ys")
@@ -620,8 +600,7 @@ class KalmanBase:
             self._mask[:] = 1.0
 
     def _make_run(self, cat: dict, us, ys, masks) -> FilterRun:
-        """A FilterRun from per-step outputs ``cat`` (row ``k``: step k's output, flat in
-        CasADi's column-major layout; the state outputs start with the initial state)."""
+        """A FilterRun from the flat per-step outputs ``cat`` (the state's from the initial row)."""
         s = self.system
         nx, ny = s.nx, s.ny
 

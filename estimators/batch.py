@@ -23,10 +23,16 @@ ON_FAILURE = ("raise", "mark")
 
 
 class FoldedStep(StepArrays):
-    """One step of ``runs`` realisations through a filter's native ``fold`` (compiled: no code
-    per number of runs), with the interface of :class:`~estimators.runtime.BoundStep`; the
-    ``state`` (copied) and ``shared`` arrays as :class:`~estimators.runtime.StepArrays`, flat
-    run-major."""
+    """One step of ``runs`` realisations through a filter's native fold (compiled: no code per
+    number of runs), with the interface of :class:`~estimators.runtime.BoundStep`.
+
+    Parameters
+    ----------
+    fold : NativeFold
+    runs : int
+    state, shared : mapping of str to ndarray
+        As :class:`~estimators.runtime.StepArrays`, flat run-major.
+    """
 
     def __init__(self, fold, runs: int, state, shared):
         step = fold.step
@@ -142,17 +148,11 @@ class BatchFilter:
         self._inputs_for(u, y, mask)
         rt = self._rt
         rt.trigger()
-        status = rt.status
-        failure = self.template.system.take_failure() if status.any() else None
-        if status.any() and self.on_failure == "mark":
-            bad = status != 0
+        bad = self._failures(rt.status, lambda: f"step {self.k}")
+        if bad.any():
             for pair in rt.pairs.values():     # failed runs keep their previous state
-                old, new = pair[rt.cur], pair[1 - rt.cur]
-                new.reshape(self.n, -1)[bad] = old.reshape(self.n, -1)[bad]
+                pair[1 - rt.cur].reshape(self.n, -1)[bad] = pair[rt.cur].reshape(self.n, -1)[bad]
             self.failed |= bad
-        elif status.any():
-            run = int(np.flatnonzero(status)[0])
-            self._refuse(status[run], run, f"step {self.k}", failure)
         rt.commit()
         self.k += 1
         return self.x
@@ -181,13 +181,8 @@ class BatchFilter:
         t = self.template
         state = {k: self._rt.now(k).reshape(R, -1) for k in self._rt.pairs}
         outs, _, last = t.fold_record(state, us, ys, masks, {k: v.reshape(R, -1) for k, v in self._params.items()})
-        status = outs["status"][:, :, 0]
-        bad = status != 0
-        failure = t.system.take_failure() if bad.any() else None
-        if bad.any() and self.on_failure == "raise":
-            run, k = map(int, np.argwhere(bad)[0])
-            self._refuse(status[run, k], run, f"index {k}", failure)
-        self.failed |= bad.any(axis=1)
+        bad = self._failures(outs["status"][:, :, 0], lambda k: f"index {k}").any(axis=1)
+        self.failed |= bad
 
         def diag(name, n, fixed):
             if name in outs:
@@ -198,7 +193,7 @@ class BatchFilter:
             x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
             nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
-            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
+            failed=bad, state_names=list(t.system.state_names), output_names=list(t.system.output_names),
             innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny), jacobians=t.system.jacobians)
         for name, value in last.items():
             self._rt.now(name)[:] = value.ravel()
@@ -217,9 +212,17 @@ class BatchFilter:
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         return us, ys, masks
 
-    def _refuse(self, status: float, run: int, where: str, failure: Exception | None) -> None:
-        """Raise the error of realisation ``run`` whose step ``where`` (``"step 3"``) ended with
-        ``status`` (``failure``: the model's error that made a result non-finite, or None)."""
+    def _failures(self, status: np.ndarray, where) -> np.ndarray:
+        """Where ``status`` (n_runs, ...) is not 0; with ``on_failure="raise"``, the error of the
+        first failure (at step ``where(k)``; the model's error if it made a result non-finite)."""
+        bad = status != 0
+        if not bad.any():
+            return bad
+        failure = self.template.system.take_failure()
+        if self.on_failure == "mark":
+            return bad
+        run, *k = map(int, np.argwhere(bad)[0])
+        status, where = status[(run, *k)], where(*k)
         bad_input = status == BAD_INPUT
         if failure is not None and not bad_input:
             raise type(failure)(f"batched {self.template.name}: realisation {run} at {where}: {failure}; state "

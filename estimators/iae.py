@@ -40,16 +40,11 @@ def _project_sym(M, low, high, form):
 class IAE(WindowedAdaptiveEKF, register="IAE"):
     """EKF whose Q and R follow the innovation sequence (Mohamed and Schwarz, 1999).
 
-    After each update, with ``I_j`` the innovations of the last ``window`` steps:
-    ``C_I = (1/N) sum I_j I_j^T`` (eq 37), ``R = C_I - H P^- H^T`` (eq 35) and
-    ``Q = K C_I K^T`` (eq 36), each projected onto the chosen ``form`` with its variances
-    kept inside ``q_bounds`` / ``r_bounds``, so that they stay positive definite and
-    plausible. ``H P^- H^T`` is taken as ``S - R`` of the step. The new values apply from
-    the next step; until the window is full the initial Q and R are kept.
-
-    ``K C_I K^T`` has rank at most ny: unbounded, it collapses Q in the directions the gain
-    does not reach. ``adapt="R"`` is the stable choice when Q is known to within an order of
-    magnitude; the seed 000 campaign adapts both, as the paper does.
+    After each update, from the last ``window`` innovations ``I_j``: ``C_I = (1/N) sum I_j I_j^T``
+    (eq 37), ``R = C_I - H P^- H^T`` (eq 35; ``H P^- H^T = S - R``) and ``Q = K C_I K^T``
+    (eq 36), each projected onto the ``form`` within ``q_bounds`` / ``r_bounds``, applied from
+    the next step. ``K C_I K^T`` has rank at most ny: unbounded, it collapses Q where the gain
+    does not reach, so ``adapt="R"`` is the stable choice when Q is known to an order of magnitude.
 
     Parameters
     ----------

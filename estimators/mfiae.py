@@ -21,24 +21,18 @@ Q_MAPPINGS = ("literal", "gain")
 class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     """EKF whose scalar Q and R are tuned online by a Mamdani fuzzy system (seed 000 sec. 4).
 
-    Each step, after the EKF update: ``C_I`` is the mean of ``I_j I_j^T`` over the last
-    ``window`` innovations (eq 37), ``C_T = H P^- H^T + R`` the theoretical innovation
-    covariance (eq 39, the step's S). The fuzzy system (:class:`MamdaniFuzzy`, Table 2)
-    maps ``(C_T, C_I)`` to a normalised adjustment ``m`` in [-1, 1], and
-    ``MAdj = m s`` with ``s = (C_T + C_I)/2`` is the fuzzy image of ``C_T - C_I``
-    (eq 38), in measurement-variance units. Then, with ``Q = sigma_q^2 I`` and
-    ``R = sigma_r^2 I`` (the scalar forms of eqs 24-25)::
+    Each step, after the EKF update, the fuzzy system (:class:`MamdaniFuzzy`, Table 2) maps
+    ``C_T = H P^- H^T + R`` (eq 39, the step's S) and ``C_I`` (eq 37) to ``m`` in [-1, 1];
+    ``MAdj = m (C_T + C_I)/2`` is the fuzzy image of ``C_T - C_I`` (eq 38). Then, with
+    ``Q = sigma_q^2 I`` and ``R = sigma_r^2 I`` (eqs 24-25)::
 
         sigma_r^2 <- sigma_r^2 - gain_r MAdj                     (eq 42)
         sigma_q^2 <- sigma_q^2 - gain_q MAdj                     (eq 41, q_mapping="literal")
         sigma_q^2 <- sigma_q^2 - gain_q trace(K MAdj K^T) / nx   (q_mapping="gain")
 
     each clipped to its bounds: too large innovations (``C_I > C_T``, ``m < 0``) raise Q and R.
-    ``"literal"`` reads eqs 41-42 as printed (both variances move by the same output, so their
-    ratio, and the gain, changes); ``"gain"`` maps MAdj through the gain as eq 36 maps ``C_I``
-    (Q then moves about ``|K|^2`` times less than R). The other choices the paper leaves open
-    are parameters too (the manual's estimators page lists them). Until ``window`` innovations
-    are stored Q and R keep their initial values.
+    ``"gain"`` maps MAdj through the gain as eq 36 maps ``C_I`` (Q moves about ``|K|^2`` times
+    less than R). The manual's estimators page lists the choices the paper leaves open.
 
     Parameters
     ----------
@@ -49,14 +43,13 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     r0 : float or array_like (ny,)
         Initial measurement noise variance sigma_r^2 (R = r0 I), or one per channel.
     window : int
-        N of eq 37 (default 10: the paper does not give it; seed 000's Table 3 is matched
-        within 10 % for windows 6 to 15, see the manual's experiments page).
+        N of eq 37 (default 10: the paper gives none; Table 3 is matched within 10 % for 6 to 15).
     fuzzy : MamdaniFuzzy, optional
         The fuzzy system (default ``MamdaniFuzzy()``).
     gain_q, gain_r : float
         Step sizes in (0, 1] (default 1 both: eqs 41-42 subtract MAdj itself).
     q_mapping : {"literal", "gain"}
-        How MAdj reaches sigma_q^2 (default "literal", see above).
+        How MAdj reaches sigma_q^2 (default "literal": eqs 41-42 as printed).
     per_channel : bool
         One adjustment per measurement channel (default False: scalar R).
     q_bounds, r_bounds : (float, float), optional

@@ -141,8 +141,7 @@ class StepContext:
     outputs: dict = field(default_factory=dict)
 
     def output(self, name: str, expr) -> None:
-        """Declare an extra output ``name`` of the step (a diagnostic the filter reads back,
-        e.g. whether it adapted); it must not collide with a state or diagnostic name."""
+        """Declare an extra output ``name`` of the step (not a state, diagnostic or reserved name)."""
         if not name.isidentifier() or name in DIAGNOSTICS or name == "status" or name.endswith("_new"):
             raise ConfigurationError(f"extra step output name {name!r} is reserved or not an identifier")
         self.outputs[name] = ca.SX(expr)
@@ -190,8 +189,7 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
 
 
 def renamed(fn: ca.Function, name: str) -> ca.Function:
-    """``fn`` (an SX or MX Function) under another ``name``, inputs and outputs named as in
-    ``fn`` (generated C code calls it by that name)."""
+    """``fn`` (SX or MX) under another ``name`` (generated C code calls it by that name)."""
     sym = ca.SX if fn.is_a("SXFunction") else ca.MX
     args = [sym.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
     return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],

@@ -67,8 +67,7 @@ class FilterRun:
         return len(self.nis)
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy DataFrame indexed by step ``k`` (0..N) with the estimate, the covariance
-        diagonal, the innovation (if kept) and NIS (NaN at k = 0)."""
+        """DataFrame by step ``k`` (0..N): estimate, variances, innovation (if kept), NIS (NaN at 0)."""
         data = _estimates(self.x, self.P, self.state_names)
         if self.innovation is not None:
             for j, name in enumerate(self.output_names):

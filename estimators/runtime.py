@@ -49,8 +49,13 @@ class BufferedFunction:
 
 
 def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """2-D view (column-major, shares memory) of the ``flat`` CasADi matrix array, shape
-    ``(rows, cols)``."""
+    """2-D view (column-major, shared memory) of a flat CasADi matrix array.
+
+    Parameters
+    ----------
+    flat : ndarray
+    rows, cols : int
+    """
     return flat.reshape((rows, cols), order="F")
 
 
@@ -105,8 +110,15 @@ class StepArrays:
 
 
 class BoundStep(StepArrays):
-    """The step Function ``fn`` (an input ``s`` with an output ``s_new`` is state) bound to
-    the arrays of :class:`StepArrays` (``state`` and ``shared`` as there)."""
+    """A step Function bound to the arrays of :class:`StepArrays`.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        The step: an input ``s`` with an output ``s_new`` is state.
+    state, shared : mapping of str to ndarray
+        As :class:`StepArrays`.
+    """
 
     def __init__(self, fn: ca.Function, state: Mapping[str, np.ndarray], shared: Mapping[str, np.ndarray]):
         names_in = [fn.name_in(i) for i in range(fn.n_in())]
@@ -122,16 +134,23 @@ class BoundStep(StepArrays):
         return BufferedFunction(fn, args, res)
 
     def trigger(self) -> float:
-        """Evaluate the step from the current state into the other copy; returns the status
-        (0: fine; the state is then committed only by :meth:`commit`)."""
+        """Evaluate the step into the other state copy (made current by :meth:`commit`); the status."""
         self._steps[self.cur].trigger()
         return self.status[0]
 
 
 class VectorInput:
-    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into the float ``buffer``
-    (length ``n``); ``owner`` and ``what`` name the filter and the input in messages.
+    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into a buffer.
 
+    Parameters
+    ----------
+    buffer : ndarray
+        The float buffer (length ``n``).
+    owner, what : str
+        For messages: the filter's name and the input's (``"u"``, ``"y"``, ``"mask"``).
+
+    Notes
+    -----
     The good path costs a length check and one assignment per entry (a list, a tuple or a
     float array of the right length); anything else goes through :meth:`checked`, which names
     the problem. NaN and inf are left to the compiled step's status (:func:`explain_status`).
@@ -142,8 +161,7 @@ class VectorInput:
         self._entries = range(self.n)
 
     def __call__(self, value) -> None:
-        """Copy ``value`` into the buffer (raises InputError / TypeMismatchError naming the
-        problem; the buffer may then hold part of it)."""
+        """Copy ``value`` into the buffer, or raise InputError / TypeMismatchError naming the problem."""
         buf = self.buffer
         try:
             if value.__class__ is str or len(value) != self.n:
@@ -191,13 +209,24 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
     """A filter's ``step(u, y, mask=None)`` specialised for its sizes.
 
     For the common call (a measurement, no mask) ``u`` and ``y`` (lists, tuples or float
-    arrays) are unpacked into their entries, copied one by one (written out for the filter's
-    ``nu`` and ``ny``, as the standard library's dataclasses write their methods) into the
-    buffers of the bound step ``rt``, and the step is one native call; nothing else is checked
-    unless the conversion fails (then the checked conversions ``fill_u``/``fill_y`` name the
-    problem) or the status is not 0 (then ``explain(what_ran)`` raises). The one-element list
-    ``count`` holds the step count; ``after`` is the runtime hook after a step, or None. Other
-    calls (``y=None``, a mask) go to ``general(u, y, mask)``.
+    arrays) are unpacked and copied entry by entry (written out for ``nu`` and ``ny``, as the
+    standard library's dataclasses write their methods) and the step is one native call;
+    nothing else is checked unless the conversion fails or the status is not 0.
+
+    Parameters
+    ----------
+    rt : BoundStep
+        The filter's bound step.
+    fill_u, fill_y : VectorInput
+        The checked conversions (they name a problem of the conversion).
+    count : list
+        One element: the step count.
+    general : callable
+        ``general(u, y, mask)``, the step for the other calls (``y=None``, a mask).
+    explain : callable
+        ``explain(what)`` raises the error of a failed step.
+    after : callable or None
+        The runtime hook after a step.
     """
     scope = dict(general=general, ndarray=np.ndarray, SCALARS=_SCALARS, ub=memoryview(fill_u.buffer),
                  yb=memoryview(fill_y.buffer), SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked,
@@ -208,8 +237,7 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
 
 
 def _lean_source(nu: int, ny: int, after: bool) -> str:
-    """The source of the lean ``step`` for ``nu`` inputs and ``ny`` measurements (``after``:
-    it calls the runtime hook); the names it uses are those of :func:`lean_step`'s scope."""
+    """The source of the lean ``step`` for ``nu`` inputs, ``ny`` measurements, ``after`` a hook."""
     us, ys = [f"u{i}" for i in range(nu)], [f"y{j}" for j in range(ny)]
     # memoryviews: an entry that is not a number (a string, None, a sequence) is a TypeError,
     # and reading the status gives a float, both cheaper than through numpy; an array is
@@ -240,9 +268,14 @@ def _lean_source(nu: int, ny: int, after: bool) -> str:
 
 
 def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
-    """The inputs ``us`` of ``runs`` records of ``N`` steps, shared (shape (N, nu)) or one
-    sequence each (shape (runs, N, nu)), as a (runs, N, nu) float array (a broadcast view),
-    or InputError naming the problem (a wrong shape, NaN or inf)."""
+    """The inputs of ``runs`` records of ``N`` steps, shared or one sequence each, as a (runs, N,
+    nu) float array (a broadcast view), or InputError naming the problem (a shape, NaN or inf).
+
+    Parameters
+    ----------
+    us : array_like, shape (N, nu) or (runs, N, nu)
+    runs, N, nu : int
+    """
     us = float_array(us, "inputs us")
     try:
         us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
@@ -255,10 +288,23 @@ def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
 
 def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarray, mask: np.ndarray,
                    nan_is_missing: bool, what: str) -> None:
-    """Raise the error of step ``k`` of the filter ``owner`` whose ``status`` is
-    :data:`~estimators.linalg.BAD_INPUT` (InputError: ``u`` or a used ``y`` entry, with its
-    ``mask`` and ``nan_is_missing``, was NaN or inf) or ``BAD_RESULT`` (NumericalError: the
-    estimate became non-finite); ``what`` ran (``"step"``, ``"run index 12"``)."""
+    """Raise the error of a step whose ``status`` is :data:`~estimators.linalg.BAD_INPUT`
+    (InputError: ``u`` or a used ``y`` entry was NaN or inf) or ``BAD_RESULT`` (NumericalError).
+
+    Parameters
+    ----------
+    status : float
+    owner : str
+        The filter's name.
+    k : int
+        The step's index.
+    u, y, mask : ndarray
+        The step's inputs.
+    nan_is_missing : bool
+        Whether a NaN measurement is a missing channel.
+    what : str
+        What was running (``"step"``, ``"run index 12"``).
+    """
     if status == BAD_INPUT:
         bad_u = np.flatnonzero(~np.isfinite(u))
         if len(bad_u):

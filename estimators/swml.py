@@ -205,8 +205,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                 "count": count + 1}
 
     def _window_step(self):
-        """One EKF step of a window re-run at ``theta``: ``(x, P, ll, u, y, valid, active,
-        lq, lr, gate) -> (x', P', ll')`` (an inactive slot changes nothing)."""
+        """One EKF step of a window re-run at ``theta`` (:meth:`_RerunStep.function`)."""
         return _RerunStep(self).function("swml_window_step")
 
     def als_step(self):
@@ -305,8 +304,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
 
 
 def _mixture(ends, w):
-    """Mean and covariance of the mixture of ``[(x_c, P_c), (x_1, P_1), ..., (x_4, P_4)]``
-    with weights ``w``."""
+    """Mean and covariance of the mixture of the ``(x_i, P_i)`` of ``ends`` with weights ``w``."""
     xm = sum(wi * xe for wi, (xe, _) in zip(w, ends))
     Pm = sum(wi * (Pe + ca.mtimes(xe - xm, (xe - xm).T)) for wi, (xe, Pe) in zip(w, ends))
     return xm, 0.5 * (Pm + Pm.T)

@@ -17,12 +17,10 @@ __all__ = ["UKF"]
 class UKF(KalmanBase, register="UKF"):
     """Unscented Kalman filter (Julier; scaled sigma points of van der Merwe).
 
-    ``2n+1`` sigma points ``x``, ``x +/- sqrt(n + lambda) L_i`` with ``P = L L^T``
-    (Cholesky), ``lambda = alpha^2 (n + kappa) - n``; weights ``Wm0 = lambda/(n + lambda)``,
-    ``Wc0 = Wm0 + 1 - alpha^2 + beta``, others ``1/(2(n + lambda))``. The measurement sigma
-    points are drawn anew from the prior ``(x^-, P^-)``; ``K = Pxy S^{-1}`` (by a solve),
-    ``P = P^- - K S K^T``. A covariance that is not positive definite makes the step raise
-    (NumericalError) and keep the previous state.
+    ``2n+1`` sigma points ``x``, ``x +/- sqrt(n + lambda) L_i`` with ``P = L L^T`` (Cholesky),
+    ``lambda = alpha^2 (n + kappa) - n``; weights ``Wm0 = lambda/(n + lambda)``, ``Wc0 = Wm0 + 1
+    - alpha^2 + beta``, others ``1/(2(n + lambda))``. A covariance that is not positive definite
+    makes the step raise (NumericalError) and keep the previous state.
 
     Parameters
     ----------
