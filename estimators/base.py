@@ -131,7 +131,6 @@ class KalmanBase:
         self.history = NoiseHistory(n, p)
         self._record()
 
-    # ================================================================ the protocol (defaults)
     @property
     def k(self) -> int:
         """Number of steps done."""
@@ -224,7 +223,6 @@ class KalmanBase:
         out.update({q.name: p[q.name] for q in self._params})
         return out
 
-    # ================================================================ state and settings
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the flat (column-major) state arrays by name: ``x, P`` and any adaptive
         state (``Q, R``, ...); what :class:`~estimators.BatchFilter` starts from."""
@@ -264,8 +262,8 @@ class KalmanBase:
 
         fn = self.system.compiled("summary", (covariance, n), self.backend, build)
         rt = self._rt
-        nis = rt.outputs["nis"]
-        bound = [BufferedFunction(fn, {0: rt.pairs["x"][i], 1: rt.pairs["P"][i], 2: nis}, {0: out}) for i in (0, 1)]
+        bound = [BufferedFunction(fn, {0: rt.pairs["x"][i], 1: rt.pairs["P"][i], 2: rt.outputs["nis"]}, {0: out})
+                 for i in (0, 1)]
         triggers = tuple(b.trigger for b in bound)
         cell = rt.cell
 
@@ -355,7 +353,6 @@ class KalmanBase:
         """How Q and R changed: DataFrame indexed by step with their diagonals."""
         return self.history.to_frame(self.system.state_names, self.system.output_names)
 
-    # ================================================================ stepping
     def _explain(self, what: str) -> None:
         """Raise the error of a failed step (an FMU model's own, if it made a result non-finite)."""
         failure = self.system.take_failure()
@@ -448,7 +445,6 @@ class KalmanBase:
             dest[:] = np.asarray(value).ravel(order="F")
         return self.x
 
-    # ================================================================ whole trajectories
     def native_fold(self):
         """The fused step folded over records in native code (a ``NativeFold``), cached on the model."""
         return self.system.compiled("fold", self.cache_key, self.backend,

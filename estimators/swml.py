@@ -129,7 +129,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         super().__init__(system, x0, P0, q0, r0, gate, nan_is_missing, backend)
         self._init_adaptation_record()
 
-    # ------------------------------------------------------------------ configuration
     def config_key(self) -> tuple:
         """Window, schedule and the update's constants (the bounds are step inputs)."""
         return (self.window, self.every, self.early_until, self.early_every, self.fd_step, self.max_factor,
@@ -182,7 +181,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             out["sigma"] = ca.vertcat(*self._prior_points(ca.log(p["q0"]), ca.log(p["r0"])))
         return out
 
-    # ------------------------------------------------------------------ the step
     def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
         """Push the step into the window; store the state at every ``every``-th step.
         Declares the output ``adapted`` (set by the update, :meth:`wrap_step`)."""
