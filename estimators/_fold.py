@@ -188,10 +188,9 @@ class NativeFold:
                 size = self.step.size_in(i)
                 if i < self.n_state:
                     call[name] = init[name][r].reshape(size, order="F")
-                elif args[name].ndim == 2:
-                    call[name] = np.tile(args[name][r].reshape(size, order="F"), (1, n_steps))
-                else:
-                    call[name] = np.hstack([row.reshape(size, order="F") for row in args[name][r]])
+                else:      # one row per step, or the same row every step
+                    rows = np.broadcast_to(args[name][r], (n_steps, args[name].shape[-1]))
+                    call[name] = np.hstack([row.reshape(size, order="F") for row in rows])
             res = fn.call(call)
             for name in self.names_out:
                 rr, cc = self.step.size_out(name)

@@ -221,12 +221,10 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         """
         n, p = self.system.nx, self.system.ny
         st = _RerunStep(self)
-        c = ca.SX.sym("c", 3 * n * n + 6 * n * p + 2 * p + 2 + 5)
-        parts, o = [], 0
-        for shape in [(n, n)] * 3 + [(n, p)] * 6 + [(p, 1)] * 2 + [(1, 1)] * 2 + [(5, 1)]:
-            size = shape[0] * shape[1]
-            parts.append(ca.reshape(c[o:o + size], *shape))
-            o += size
+        shapes = [(n, n)] * 3 + [(n, p)] * 6 + [(p, 1)] * 2 + [(1, 1)] * 2 + [(5, 1)]
+        offsets = np.cumsum([0] + [rows * cols for rows, cols in shapes]).tolist()
+        c = ca.SX.sym("c", offsets[-1])
+        parts = [ca.reshape(piece, *shape) for piece, shape in zip(ca.vertsplit(c, offsets), shapes)]
         G, Nc, L, (e1, e2, f1, f2, sums) = parts[0:3], parts[3:6], parts[6:9], parts[9:]
         _, F = self.system.transition(st.x, st.u)
         upd = st.upd
