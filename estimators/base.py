@@ -62,9 +62,6 @@ class KalmanBase:
 
     Attributes
     ----------
-    x, P, x_prior, P_prior, Q, R, innovation, S, K, nis, accepted
-        The current estimate, the last step's diagnostics (see each property; the
-        innovation ``y - h(x_prior)`` is seed 000 eq 26).
     backend : str
         The backend in use.
     k : int
@@ -73,11 +70,9 @@ class KalmanBase:
         The diagonals of Q and R: the initial values, each :meth:`set_noise` and every
         adaptation (:meth:`noise_history` gives a DataFrame).
 
-    Notes
-    -----
-    A new filter overrides the hooks of :mod:`estimators.protocol` (at least
-    :meth:`predict_expr` and :meth:`update_expr`) and registers itself with a class keyword
-    (``register="Name"``).
+    The estimate and the last step's diagnostics are the properties below; a new filter
+    implements the hooks of :mod:`estimators.protocol` and registers itself with a class
+    keyword (``register="Name"``).
     """
 
     name = "base"
@@ -295,7 +290,8 @@ class KalmanBase:
     x_prior = property(lambda self: self._out("x_prior").copy(), doc="Prediction of the last step, (nx,).")
     P_prior = property(lambda self: matrix(self._out("P_prior"), self.system.nx, self.system.nx).copy(),
                        doc="Covariance of the prediction, (nx, nx).")
-    innovation = property(lambda self: self._out("innov").copy(), doc="Last innovation, (ny,).")
+    innovation = property(lambda self: self._out("innov").copy(),
+                          doc="Last innovation ``y - h(x_prior)`` (seed 000 eq 26), (ny,).")
     S = property(lambda self: matrix(self._out("S"), self.system.ny, self.system.ny).copy(),
                  doc="Last innovation covariance, (ny, ny).")
     K = property(lambda self: matrix(self._out("K"), self.system.nx, self.system.ny).copy(),

@@ -55,11 +55,6 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     q_bounds, r_bounds : (float, float), optional
         Bounds on sigma_q^2 and each sigma_r^2 (default a factor 1e4 either side of the start:
         a start wrong by four orders of magnitude is corrected, nothing collapses to a floor).
-
-    Attributes
-    ----------
-    m : ndarray, shape (ny,)
-        The last normalised fuzzy adjustment per channel (0 before the window is full).
     """
 
     name = "MF-IAE"
@@ -149,4 +144,5 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         ctx.outputs["m"] = ca.if_else(ctx.outputs["adapted"], ctx.outputs["m"], ca.SX.zeros(self.system.ny))
         return changes
 
-    m = property(lambda self: self._out("m").copy(), doc="The last normalised fuzzy adjustment, (ny,).")
+    m = property(lambda self: self._out("m").copy(),
+                 doc="The last normalised fuzzy adjustment per channel (0 before the window is full), (ny,).")

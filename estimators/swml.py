@@ -80,11 +80,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     posterior_average : bool
         Average the state and covariance over the posterior of ``(ln q, ln r)`` at every step
         (five unscented points; needs ``prior_sd``; default False).
-
-    Attributes
-    ----------
-    Q, R : ndarray
-        The current ``q I``, ``r I``; :meth:`noise_history` lists every update.
     """
 
     name = "SWML"
