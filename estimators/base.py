@@ -316,14 +316,11 @@ class KalmanBase:
     def snapshot(self) -> dict:
         """The filter's whole state, for :meth:`restore`: copies of every array its step reads or
         writes, the current state copy, the step count, the noise history's length, the attributes."""
-        rt, seen, arrays = self._rt, set(), []
-        for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(), *rt.inputs.values(),
-                  *self._fixed.values(), rt.status]:
-            if id(a) not in seen:
-                seen.add(id(a))
-                arrays.append((a, a.copy()))
-        return {"arrays": arrays, "cur": rt.cur, "k": self.k, "history": len(self.history),
-                "attributes": dict(self.__dict__)}
+        rt = self._rt
+        unique = {id(a): a for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(),
+                                     *rt.inputs.values(), *self._fixed.values(), rt.status]}
+        return {"arrays": [(a, a.copy()) for a in unique.values()], "cur": rt.cur, "k": self.k,
+                "history": len(self.history), "attributes": dict(self.__dict__)}
 
     def restore(self, snapshot: dict) -> None:
         """Return to the state :meth:`snapshot` took of this filter (the numbers of a new one)."""

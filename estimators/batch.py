@@ -1,7 +1,9 @@
-"""Run many realisations of one filter in lockstep: :meth:`BatchFilter.step` is one native call
-per step for all of them, :meth:`BatchFilter.run` one native call for their whole records
-(``estimators._fold``), so a Monte Carlo campaign pays the Python overhead once per step, or
-once, not once per realisation.
+"""Run many realisations of one filter in lockstep: one native call per step for all, or one
+native call for whole trajectories of all.
+
+:meth:`BatchFilter.step` maps the filter's fused step over the realisations,
+:meth:`BatchFilter.run` folds it over their records (``estimators._fold``): a Monte Carlo
+campaign pays the Python overhead once per step, or once, not once per realisation.
 """
 from __future__ import annotations
 

@@ -1,6 +1,8 @@
-"""The filter protocol: the hooks a filter implements (documented with the class attributes
-it declares in the manual's page "Writing a filter"), the symbols they receive, and
-:func:`build_step`, which makes them one fused step Function.
+"""The filter protocol: what a filter declares, the hooks it implements, and how they become one
+compiled step.
+
+The hooks and declarations are documented in the manual's page "Writing a filter";
+:func:`build_step` makes them one fused step Function.
 """
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
-"""The results of the filters' whole-record operations, as plain data with their model's state
-and output names attached: :class:`FilterRun`, :class:`BatchRun`, :class:`Smoothed`,
-:class:`EMResult`; and :class:`NoiseHistory`, a filter's growing record of its Q and R.
+"""The results of the filters' whole-record operations, as plain data with their names attached.
+
+:class:`FilterRun`, :class:`BatchRun`, :class:`Smoothed`, :class:`EMResult`; and
+:class:`NoiseHistory`, a filter's growing record of its Q and R.
 """
 from __future__ import annotations
 

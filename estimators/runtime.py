@@ -1,6 +1,9 @@
-"""The filters' runtime: a compiled step bound once to numpy buffers (:class:`BufferedFunction`,
-:class:`BoundStep`: evaluating it is one native call), the fast conversion of a user's vector
-(:class:`VectorInput`, :func:`lean_step`) and the errors of a failed step (:func:`explain_status`).
+"""The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and
+the errors of a failed step.
+
+:class:`BufferedFunction` and :class:`BoundStep` bind a step once (evaluating it is one native
+call), :class:`VectorInput` and :func:`lean_step` convert a user's vectors, and
+:func:`explain_status` raises the error of a failed step.
 """
 from __future__ import annotations
 
