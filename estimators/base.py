@@ -42,6 +42,10 @@ KEEP = ("all", "estimates")
 class KalmanBase:
     """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``.
 
+    The estimate and the last step's diagnostics are the properties below; a new filter
+    implements the hooks of :mod:`estimators.protocol` and registers itself with a class
+    keyword (``register="Name"``).
+
     Parameters
     ----------
     system : DiscreteModel
@@ -69,10 +73,6 @@ class KalmanBase:
     history : NoiseHistory
         The diagonals of Q and R: the initial values, each :meth:`set_noise` and every
         adaptation (:meth:`noise_history` gives a DataFrame).
-
-    The estimate and the last step's diagnostics are the properties below; a new filter
-    implements the hooks of :mod:`estimators.protocol` and registers itself with a class
-    keyword (``register="Name"``).
     """
 
     name = "base"
