@@ -1,18 +1,10 @@
 """State estimators for the plant models of :mod:`fmu_models`.
 
-Every filter has the interface of :class:`~estimators.base.KalmanBase`:
-``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)`` (a whole record in native
-code) and the attributes ``x, P, Q, R, innovation, S, K, nis``. Offline:
-:func:`rts_smooth` (RTS smoothing of a run) and :func:`em_noise` (EM learning of Q, R).
-A new filter implements the hooks of :mod:`estimators.protocol` in one file and registers
-itself by name (:data:`FILTERS`). Every filter runs on a process model: a
+The filters share one interface (:class:`~estimators.base.KalmanBase`; a new one implements
+:mod:`estimators.protocol` and registers itself in :data:`FILTERS`) and run on a
 :class:`DiscreteModel` of a plant (:func:`discretize`) or of a Model Exchange FMU
-(:class:`FMUProcessModel`), through the protocol of :mod:`estimators.discrete`.
-
->>> from fmu_models import get_model
->>> from estimators import EKF, discretize
->>> sys_ = discretize(get_model("cartpole"), dt=0.01)
->>> ekf = EKF(sys_, x0=[0.5, 0, 1.8, 0.5], P0=1.0, Q=0.2, R=0.1)
+(:class:`FMUProcessModel`); offline, :func:`rts_smooth` and :func:`em_noise`. The manual's
+estimators page shows their use.
 """
 from fmu_models.infra.version import VERSION as __version__
 
@@ -43,8 +35,6 @@ __all__ = ["EKF", "FILTERS", "IAE", "KF", "MFIAE", "PCRB", "SWML", "UKF", "BandT
 
 
 def export_fmu(filt, out_dir=".", fmi_version: int = 2, name=None, file_name=None, clocked: bool = False):
-    """Export the filter ``filt`` as a Co-Simulation FMU; see
-    :func:`estimators.filter_fmu.export_filter_fmu` (parameters ``filt``, ``out_dir``,
-    ``fmi_version``, ``name``, ``file_name``, ``clocked``)."""
-
+    """Export the filter ``filt`` as a Co-Simulation FMU: :func:`estimators.filter_fmu.export_filter_fmu`
+    with the same parameters (``filt``, ``out_dir``, ``fmi_version``, ``name``, ``file_name``, ``clocked``)."""
     return export_filter_fmu(filt, out_dir, fmi_version, name, file_name, clocked)

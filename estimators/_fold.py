@@ -1,23 +1,14 @@
 """Fold a compiled step Function over whole trajectories in native code, without copies.
 
-CasADi's ``mapaccum`` folds a Function too, but copies the accumulated state and every
-output through work vectors at each step (0.30 us a step on top of the 0.18 us of the
-cart-pole EKF step). :class:`NativeFold` compiles, with the step's generated C code, a
-small driver that calls the step in a loop with pointers straight into the caller's
-numpy arrays:
-
-* input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]`` (stride 0: the same
-  array every step), or, for an accumulated input, the row ``k - 1`` of the output that
-  carries it (row ``k = 0`` reads the initial state);
-* output ``j`` of step ``k`` is written at ``res[j] + k * res_stride[j]``, or, for a state
-  whose history nobody reads (a filter's extra state: an innovation window), at row
-  ``k % 2`` of a two-row array (``res_cycle``), so that a long window costs two rows, not
-  one per step;
-* an outer loop runs ``runs`` independent realisations, each with its own base pointers
-  (``arg_run_stride``, ``res_run_stride``).
-
-With the VM backend (no C compiler) the same fold runs through ``mapaccum`` in CasADi's
-virtual machine.
+CasADi's ``mapaccum`` copies the accumulated state and every output through work vectors at
+each step (0.30 us a step on top of the 0.18 us of the cart-pole EKF step). :class:`NativeFold`
+compiles, with the step's C code, a driver that calls the step in a loop with pointers into
+the caller's numpy arrays: input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]``
+(stride 0: the same every step) or, accumulated, row ``k - 1`` of the output carrying it (step
+0 reads the initial state there); output ``j`` is written at ``res[j] + k * res_stride[j]``, or, for a
+state whose history nobody reads (an innovation window), at row ``k % 2`` of a two-row array
+(``res_cycle``); an outer loop runs ``runs`` realisations, each with its own base pointers.
+With the VM backend the same fold runs through ``mapaccum``.
 """
 from __future__ import annotations
 
@@ -39,13 +30,12 @@ _DRIVER = r"""
 int %(name)s_fold(long runs, long n_steps,
                   const double *const *arg0, const long *arg_stride, const long *arg_run_stride,
                   double *const *res0, const long *res_stride, const long *res_run_stride,
-                  const long *acc_out, const double *const *init, const long *init_run_stride,
-                  const long *res_cycle) {
+                  const long *acc_out, const long *res_cycle) {
     casadi_int sz_arg, sz_res, sz_iw, sz_w;
     const casadi_real **arg;
     casadi_real **res, *w;
     casadi_int *iw;
-    long r, k, i;
+    long r, k, i, j;
     int n_in = %(n_in)d, n_out = %(n_out)d, flag = 0;
     %(name)s_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     arg = (const casadi_real **)malloc(sizeof(casadi_real *) * (sz_arg > n_in ? sz_arg : n_in));
@@ -56,10 +46,10 @@ int %(name)s_fold(long runs, long n_steps,
     for (r = 0; r < runs; r++) {
         for (k = 0; k < n_steps; k++) {
             for (i = 0; i < n_in; i++) {
-                if (acc_out[i] >= 0)
-                    arg[i] = k == 0 ? init[i] + r * init_run_stride[i]
-                                    : res0[acc_out[i]] + r * res_run_stride[acc_out[i]]
-                                      + (res_cycle[acc_out[i]] ? (k - 1) %% 2 : k - 1) * res_stride[acc_out[i]];
+                j = acc_out[i];       /* the output carrying a state input; step 0 reads arg0 */
+                if (j >= 0 && k > 0)
+                    arg[i] = res0[j] + r * res_run_stride[j]
+                             + (res_cycle[j] ? (k - 1) %% 2 : k - 1) * res_stride[j];
                 else
                     arg[i] = arg0[i] + r * arg_run_stride[i] + k * arg_stride[i];
             }
@@ -100,8 +90,8 @@ class NativeFold:
         Number of state inputs.
     backend : {"compiled", "vm"}
     library : path, optional
-        The shared library ``step`` was already compiled into with its driver
-        (:func:`compile_with_fold`); default: compile it now.
+        The library ``step`` was compiled into with its driver (:func:`compile_with_fold`);
+        default: compile it now.
     """
 
     def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled", library=None):
@@ -118,40 +108,21 @@ class NativeFold:
             self._fold.restype = ctypes.c_int
 
     def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()) -> int:
-        """Fold ``n_steps`` steps for each of ``runs`` realisations.
-
-        Parameters
-        ----------
-        runs, n_steps : int
-        args : dict of name -> ndarray
-            Non-state inputs, shape ``(runs, n_steps, nnz)`` (per step) or ``(runs, nnz)``
-            (the same every step).
-        init : dict of name -> ndarray
-            Initial state, shape ``(runs, nnz)``.
-        outs : dict of name -> ndarray
-            Every output, shape ``(runs, n_steps, nnz)`` (views allowed, e.g. rows 1..N
-            of a larger array); filled in place.
-        cycled : collection of str
-            State outputs (``<input>_new``) kept in two rows only, ``(runs, 2, nnz)``: step
-            ``k`` writes row ``k % 2`` (see :meth:`outputs`).
-
-        Every array must be float64 with contiguous last axis. Returns 0, or ``1 + k`` if
-        the step's evaluation failed at step ``k``.
-        """
+        """Fold ``n_steps`` steps for each of ``runs`` realisations: the non-state inputs
+        ``args`` are ``(runs, n_steps, nnz)`` (per step) or ``(runs, nnz)`` (the same every
+        step), the initial state ``init`` ``(runs, nnz)``, every output of ``outs`` ``(runs,
+        n_steps, nnz)`` (views allowed), filled in place, except the ``cycled`` state outputs,
+        ``(runs, 2, nnz)`` (see :meth:`outputs`). Every array is float64 with a contiguous last
+        axis, by name. Returns 0, or ``1 + k`` if the step's evaluation failed at step ``k``."""
         if self.backend != "compiled":
             return self._vm(runs, n_steps, args, init, outs, cycled)
         return self.bind(runs, n_steps, args, init, outs, cycled)()
 
     def bind(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()):
-        """The fold of :meth:`__call__` with its arguments prebuilt once: a callable without
-        arguments that runs it (returns as :meth:`__call__`); the arrays stay bound (they
-        are kept alive by the callable, and changed in place between calls). Compiled
+        """The fold of :meth:`__call__` with its arguments prebuilt once, as a callable without
+        arguments (the arrays stay bound and alive, changed in place between calls); compiled
         backend only."""
-        n_in, n_out = len(self.names_in), len(self.names_out)
         P = ctypes.POINTER(ctypes.c_double)
-        L = ctypes.c_long
-        arg0, arg_stride, arg_run, acc = (P * n_in)(), (L * n_in)(), (L * n_in)(), (L * n_in)()
-        ini, ini_run = (P * n_in)(), (L * n_in)()
         keep = []
 
         def ptr(a):
@@ -160,24 +131,18 @@ class NativeFold:
             keep.append(a)
             return a.ctypes.data_as(P)
 
-        for i, name in enumerate(self.names_in):
-            if i < self.n_state:
-                a = init[name]
-                acc[i] = self.names_out.index(f"{name}_new")
-                ini[i], ini_run[i] = ptr(a), a.strides[0] // 8
-                arg0[i] = ini[i]
-            else:
-                a = args[name]
-                acc[i] = -1
-                arg0[i] = ptr(a)
-                arg_stride[i] = a.strides[1] // 8 if a.ndim == 3 else 0
-                arg_run[i] = a.strides[0] // 8
-        res0, res_stride, res_run, cyc = (P * n_out)(), (L * n_out)(), (L * n_out)(), (L * n_out)()
-        for j, name in enumerate(self.names_out):
-            o = outs[name]
-            res0[j], res_stride[j], res_run[j] = ptr(o), o.strides[1] // 8, o.strides[0] // 8
-            cyc[j] = 1 if name in cycled else 0
-        call = (L(runs), L(n_steps), arg0, arg_stride, arg_run, res0, res_stride, res_run, acc, ini, ini_run, cyc)
+        def longs(values) -> ctypes.Array:
+            return (ctypes.c_long * len(values))(*values)
+
+        ins = [init[n] if i < self.n_state else args[n] for i, n in enumerate(self.names_in)]
+        res = [outs[n] for n in self.names_out]
+        call = (ctypes.c_long(runs), ctypes.c_long(n_steps), (P * len(ins))(*[ptr(a) for a in ins]),
+                longs([a.strides[1] // 8 if a.ndim == 3 else 0 for a in ins]), longs([a.strides[0] // 8 for a in ins]),
+                (P * len(res))(*[ptr(o) for o in res]), longs([o.strides[1] // 8 for o in res]),
+                longs([o.strides[0] // 8 for o in res]),
+                longs([self.names_out.index(f"{n}_new") if i < self.n_state else -1
+                       for i, n in enumerate(self.names_in)]),
+                longs([int(n in cycled) for n in self.names_out]))
         fold = self._fold
 
         def run() -> int:
@@ -185,18 +150,13 @@ class NativeFold:
         run.keep = keep
         return run
 
-
     def outputs(self, runs: int, n_steps: int, init: dict, drop=(), cycle=()) -> tuple[dict, dict]:
-        """Arrays for the outputs of a fold: ``(stored, views)``.
-
-        ``stored[name]`` has shape ``(runs, n_steps, nnz)``, or ``(runs, n_steps + 1, nnz)``
-        for an output carrying the state (``<input>_new``), whose row 0 holds the initial
-        state ``init[<input>]`` (shape ``(runs, nnz)``). ``views`` are what the fold writes
-        into (those arrays without the initial row). Outputs named in ``drop`` are not
-        stored: their view is one scratch row, overwritten each step. State outputs named in
-        ``cycle`` get two rows (``(runs, 2, nnz)``, stored and view alike; pass the same names
-        to the call): after the fold the last state is in row ``(n_steps - 1) % 2``.
-        """
+        """Arrays for the outputs of a fold: ``(stored, views)``. ``stored[name]`` is
+        ``(runs, n_steps, nnz)``, or ``(runs, n_steps + 1, nnz)`` for a state output
+        (``<input>_new``) whose row 0 holds ``init[<input>]`` ``(runs, nnz)``; ``views`` are
+        what the fold writes (without that row). An output in ``drop`` is not stored (its view
+        is one scratch row); a state output in ``cycle`` gets two rows, the last state in row
+        ``(n_steps - 1) % 2``."""
         rows = {name: (2 if name in cycle else 0 if name in drop else n_steps + name.endswith("_new"))
                 for name in self.names_out}
         total = 8 * runs * sum(rows[n] * self.step.nnz_out(i) for i, n in enumerate(self.names_out))
@@ -206,18 +166,14 @@ class NativeFold:
         stored, views = {}, {}
         for i, name in enumerate(self.names_out):
             nnz = self.step.nnz_out(i)
-            if name in cycle:
-                stored[name] = views[name] = np.empty((runs, 2, nnz))
-                continue
             if name in drop:
                 views[name] = np.lib.stride_tricks.as_strided(np.empty((1, 1, nnz)), (runs, n_steps, nnz),
                                                               (0, 0, 8))
                 continue
-            lead = 1 if name.endswith("_new") else 0
-            stored[name] = np.empty((runs, n_steps + lead, nnz))
-            if lead:
+            stored[name] = views[name] = np.empty((runs, rows[name], nnz))
+            if name.endswith("_new") and name not in cycle:
                 stored[name][:, 0] = init[name[:-4]]
-            views[name] = stored[name][:, 1:] if lead else stored[name]
+                views[name] = stored[name][:, 1:]
         return stored, views
 
     def _vm(self, runs, n_steps, args, init, outs, cycled=()) -> int:
@@ -232,10 +188,9 @@ class NativeFold:
                 size = self.step.size_in(i)
                 if i < self.n_state:
                     call[name] = init[name][r].reshape(size, order="F")
-                elif args[name].ndim == 2:
-                    call[name] = np.tile(args[name][r].reshape(size, order="F"), (1, n_steps))
-                else:
-                    call[name] = np.hstack([row.reshape(size, order="F") for row in args[name][r]])
+                else:      # one row per step, or the same row every step
+                    rows = np.broadcast_to(args[name][r], (n_steps, args[name].shape[-1]))
+                    call[name] = np.hstack([row.reshape(size, order="F") for row in rows])
             res = fn.call(call)
             for name in self.names_out:
                 rr, cc = self.step.size_out(name)

@@ -1,16 +1,9 @@
 """Adaptive EKFs driven by a window of innovations (seed 000 eq 37), adapted inside the step.
 
-:class:`WindowedAdaptiveEKF` extends the EKF's fused step with the last ``window``
-innovations (a ``ny x window`` ring, part of the filter's state) and their covariance
-``C_I = (1/N) sum I_j I_j^T`` (eq 37), recomputed from the ring at every step (no
-running sum that could drift), and hands ``C_I`` to the subclass's
-:meth:`~WindowedAdaptiveEKF.adapt_noise`, which returns the next Q and R as CasADi
-expressions. The whole adaptation is compiled with the filter, so it runs batched, in
-the native :meth:`~estimators.base.KalmanBase.run` and as an FMU.
-
-Only complete, accepted measurement vectors enter the window (a step with a missing
-channel or a gated measurement leaves it, and Q and R, unchanged); until ``window``
-innovations are stored, Q and R keep their initial values.
+:class:`WindowedAdaptiveEKF` carries the last ``window`` complete, accepted innovations (a
+ring, part of the state), recomputes their covariance ``C_I`` (eq 37) at every step (no
+running sum that could drift) and hands it to the subclass's ``adapt_noise``; compiled with
+the filter, the adaptation runs batched, natively over a record and as an FMU.
 """
 from __future__ import annotations
 
@@ -32,9 +25,8 @@ BOUND_FACTOR = 1e4
 
 
 def bounds_around(initial: np.ndarray, given, what: str) -> tuple[float, float]:
-    """``(low, high)`` bounds for adapted variances: ``given``, or a factor
-    :data:`BOUND_FACTOR` below the smallest and above the largest ``initial`` variance
-    (``what`` names them in errors)."""
+    """``(low, high)`` bounds for adapted variances: ``given``, or a factor :data:`BOUND_FACTOR`
+    below the smallest and above the largest ``initial`` variance (``what`` names them)."""
     if given is None:
         return float(np.min(initial)) / BOUND_FACTOR, float(np.max(initial)) * BOUND_FACTOR
     b = float_array(given, what)
@@ -44,20 +36,17 @@ def bounds_around(initial: np.ndarray, given, what: str) -> tuple[float, float]:
 
 
 def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
-    """The step parameters ``q_bounds`` and ``r_bounds`` (FMU parameters ``q_min``, ``q_max``,
-    ``r_min``, ``r_max``) of an adaptive filter."""
-    return [Parameter("q_bounds", q_bounds, "positive", ("smallest adapted process variance",
-                                                          "largest adapted process variance"),
-                      ("q_min", "q_max"), increasing=True),
-            Parameter("r_bounds", r_bounds, "positive", ("smallest adapted measurement variance",
-                                                          "largest adapted measurement variance"),
-                      ("r_min", "r_max"), increasing=True)]
+    """The step parameters ``q_bounds``, ``r_bounds`` (FMU ``q_min``, ``q_max``, ``r_min``, ``r_max``)."""
+    return [Parameter(f"{c}_bounds", b, "positive", (f"smallest adapted {what} variance",
+                                                      f"largest adapted {what} variance"),
+                      (f"{c}_min", f"{c}_max"), increasing=True)
+            for c, b, what in (("q", q_bounds, "process"), ("r", r_bounds, "measurement"))]
 
 
 class AdaptationRecord:
     """Records Q and R in a filter's noise history whenever its step declares (output
-    ``adapted``) that it adapted them, from Python and after a native run. A mixin before
-    the filter class; call ``_init_adaptation_record`` at the end of ``__init__``."""
+    ``adapted``) that it adapted them. A mixin before the filter class; call
+    ``_init_adaptation_record`` at the end of ``__init__``."""
 
     def _init_adaptation_record(self) -> None:
         self._adapted_flag = memoryview(self._out("adapted"))
@@ -96,13 +85,9 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
     system, x0, P0, Q, R, gate, nan_is_missing, backend
         As :class:`~estimators.base.KalmanBase` (Q and R are the initial values).
     window : int
-        N, the number of innovations in ``C_I`` (eq 37). Until N are stored, Q and R
-        keep their initial values.
-
-    Notes
-    -----
-    A subclass implements :meth:`adapt_noise`; :meth:`on_adapted` runs after each step
-    from Python that adapted.
+        N, the number of innovations in ``C_I`` (eq 37). Until N are stored, Q and R keep
+        their initial values (a step with a missing channel or a gated measurement leaves
+        the window, and Q and R, unchanged).
     """
 
     adapts_noise = True
@@ -118,8 +103,7 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
         return (self.window,)
 
     def adapt_noise(self, ctx: StepContext, result: StepResult, C_I: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """Return ``(Q_new, R_new)`` expressions from the step's symbols ``ctx``, its
-        ``result`` and ``C_I`` (eq 37). Subclasses implement."""
+        """``(Q_new, R_new)`` from the step's symbols ``ctx``, its ``result`` and ``C_I`` (eq 37)."""
         raise NotImplementedError
 
     def extra_state(self) -> dict:

@@ -1,25 +1,11 @@
 """The base class of every filter: its public interface, and the defaults of the protocol.
 
-A filter (:class:`KalmanBase` subclass) implements the hooks of :mod:`estimators.protocol`;
-from them one CasADi Function is built per model and configuration, the fused ``step``,
-mapping the state and ``(u, y, mask)`` to the next state and the step's diagnostics. It is
-compiled to native code (``estimators._compiled``) and
-
-* bound to the filter's numpy arrays (:class:`~estimators.runtime.BoundStep`): :meth:`KalmanBase.step`
-  is one native call plus the copies of ``u`` and ``y``;
-* folded over a whole trajectory (:meth:`KalmanBase.run`: one native call, every step's
-  estimate, covariance and diagnostics; ``estimators._fold``);
-* mapped over Monte Carlo realisations (:class:`~estimators.batch.BatchFilter`);
-* exported as an FMU (:func:`estimators.filter_fmu.export_filter_fmu`).
-
-Missing measurements: the step takes a 0/1 ``mask`` per measurement channel; a NaN
-measurement counts as missing too (unless ``nan_is_missing=False``). The update then uses
-the valid channels only (exactly the update of the reduced measurement vector), and with
-no valid channel the step is a prediction. An optional chi-square gate refuses a
-measurement vector whose NIS exceeds ``gate`` (the step is then a prediction, and
-``accepted`` is 0). A step whose ``u`` or used ``y`` is NaN or inf, or whose result is not
-finite, raises and keeps the previous state. Finiteness is tested entry by entry, so no
-finite value can overflow the test.
+From a filter's hooks (:mod:`estimators.protocol`) one CasADi Function is built per model and
+configuration, the fused ``step``; compiled (``estimators._compiled``), it is bound to the
+filter's arrays (:meth:`KalmanBase.step`: one native call), folded over a record
+(:meth:`KalmanBase.run`, ``estimators._fold``), mapped over realisations
+(:class:`~estimators.batch.BatchFilter`) and exported as an FMU (``estimators.filter_fmu``).
+Missing channels, the gate and refused inputs are described in the manual's estimators page.
 """
 from __future__ import annotations
 
@@ -37,7 +23,7 @@ from ._compiled import compile_functions
 from ._fold import NativeFold, compile_with_fold
 from .discrete import DiscreteModel, checked_model
 from .linalg import BAD_RESULT, CSE, log_det, log_likelihood, status_flag, upper_entries, used_measurement
-from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step
+from .protocol import DIAGNOSTICS, Parameter, StepContext, StepResult, Update, build_step, per_name
 from .runs import FilterRun, NoiseHistory
 from .runtime import BoundStep, BufferedFunction, VectorInput, explain_status, lean_step, matrix
 
@@ -56,6 +42,10 @@ KEEP = ("all", "estimates")
 class KalmanBase:
     """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``.
 
+    The estimate and the last step's diagnostics are the properties below; a new filter
+    implements the hooks of :mod:`estimators.protocol` and registers itself with a class
+    keyword (``register="Name"``).
+
     Parameters
     ----------
     system : DiscreteModel
@@ -63,54 +53,26 @@ class KalmanBase:
     x0 : array_like, shape (nx,)
         Initial state estimate.
     P0, Q, R : array_like
-        Initial state covariance (nx, nx), process noise covariance (nx, nx) and
-        measurement noise covariance (ny, ny); each may also be a diagonal vector or a
-        scalar (times identity). Must be symmetric positive definite.
+        Initial state, process and measurement noise covariances (nx, nx), (nx, nx), (ny, ny),
+        symmetric positive definite, or a diagonal vector, or a scalar (times identity).
     gate : float, optional
-        Chi-square gate on the NIS: a measurement vector with ``nis > gate`` is refused
-        (the step predicts only). E.g. ``scipy.stats.chi2.ppf(0.999, ny)``. Default None
-        (no gate).
+        Chi-square gate on the NIS: a measurement vector with ``nis > gate`` is refused (the
+        step predicts only), e.g. ``scipy.stats.chi2.ppf(0.999, ny)``. Default None (no gate).
     nan_is_missing : bool
         A NaN measurement channel is missing (default True); with False it is an error.
     backend : {"compiled", "vm"}
-        Run the filter's CasADi Function as compiled native code (cached on disk, about
-        10x faster; needs a C compiler, else falls back to "vm") or in CasADi's VM.
+        Run the step as compiled native code (cached on disk, about 10x faster; needs a C
+        compiler, else falls back to "vm") or in CasADi's VM.
 
     Attributes
     ----------
-    x : ndarray, shape (nx,)
-        Current state estimate (after the last update, or the prior after ``predict``).
-    P : ndarray, shape (nx, nx)
-        Its covariance.
-    x_prior, P_prior : ndarray
-        Prediction of the last step.
-    Q, R : ndarray
-        Current noise covariances.
-    innovation : ndarray, shape (ny,)
-        Last innovation ``y - h(x_prior)`` (seed 000 eq 26; 0 in missing channels).
-    S : ndarray, shape (ny, ny)
-        Its predicted covariance.
-    K : ndarray, shape (nx, ny)
-        Last gain.
-    nis : float
-        Normalised innovation squared ``innovation^T S^{-1} innovation``.
-    accepted : bool
-        False if the gate refused the last measurement.
     backend : str
         The backend in use.
     k : int
         Number of steps done.
     history : NoiseHistory
-        Record of the diagonals of Q and R: the initial values, each :meth:`set_noise`,
-        and every adaptation of an adaptive filter; :meth:`noise_history` gives it as a
-        DataFrame.
-
-    Notes
-    -----
-    A new filter overrides the hooks of the protocol (:mod:`estimators.protocol`): at least
-    :meth:`predict_expr` and :meth:`update_expr`; :meth:`adapt_expr`, :meth:`extra_state`,
-    :meth:`step_parameters` and :meth:`config_key` to adapt and to carry more state; and
-    registers itself with a class keyword (``register="Name"``).
+        The diagonals of Q and R: the initial values, each :meth:`set_noise` and every
+        adaptation (:meth:`noise_history` gives a DataFrame).
     """
 
     name = "base"
@@ -134,7 +96,7 @@ class KalmanBase:
         noise = {"Q": checks.covariance(Q, n, "Q").ravel(order="F"),
                  "R": checks.covariance(R, p, "R").ravel(order="F")}
         self._start = (checks.vector(x0, n, "x0", ConfigurationError), checks.covariance(P0, n, "P0"))
-        extra = {k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}
+        extra = self._extra_arrays()
         params = list(self.step_parameters())
         state = {"x": self._start[0], "P": self._start[1].ravel(order="F"), **(noise if self.adapts_noise else {}),
                  **extra}
@@ -154,9 +116,7 @@ class KalmanBase:
         self._rt = BoundStep(step, state, self._fixed)
         ins = self._rt.inputs
         self._u, self._y, self._mask = ins["u"], ins["y"], ins["mask"]
-        self._fill_u = VectorInput(self._u, self.name, "u")
-        self._fill_y = VectorInput(self._y, self.name, "y")
-        self._fill_mask = VectorInput(self._mask, self.name, "mask")
+        self._fill_u, self._fill_y, self._fill_mask = (VectorInput(ins[k], self.name, k) for k in ("u", "y", "mask"))
         self._mask[:] = 1.0                    # between calls the mask buffer is all ones
         self._count = [0]                      # the step count k
         self._after = type(self).after_step is not KalmanBase.after_step
@@ -166,7 +126,6 @@ class KalmanBase:
         self.history = NoiseHistory(n, p)
         self._record()
 
-    # ================================================================ the protocol (defaults)
     @property
     def k(self) -> int:
         """Number of steps done."""
@@ -177,8 +136,7 @@ class KalmanBase:
         self._count[0] = int(value)
 
     def config_key(self) -> tuple:
-        """What identifies this configuration's compiled step beyond the class (e.g. a window
-        length); default none. Values that are step inputs (bounds, gains) do not belong here."""
+        """What identifies the compiled step beyond the class (a window length, not step inputs)."""
         return ()
 
     @property
@@ -188,18 +146,20 @@ class KalmanBase:
         return (cls.__module__, cls.__qualname__, *self.config_key())
 
     def extra_state(self) -> dict:
-        """Initial values of the filter's extra state arrays, by name (default none); the
-        state it starts from, ``(x0, P0)``, is ``self._start``."""
+        """Initial values of the extra state arrays, by name (default none); the filter starts
+        from ``self._start = (x0, P0)``."""
         return {}
 
+    def _extra_arrays(self) -> dict[str, np.ndarray]:
+        """:meth:`extra_state` flat (column-major)."""
+        return {k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}
+
     def wrap_step(self, step: ca.Function) -> ca.Function:
-        """The Function every form of the filter runs, from the fused ``step`` built from the
-        hooks (default: ``step`` itself; see :mod:`estimators.protocol`)."""
+        """The Function every form of the filter runs, from the fused ``step`` (default: itself)."""
         return step
 
     def step_parameters(self) -> list[Parameter]:
-        """The fixed inputs of the step beyond Q and R, with their values (default none); each
-        is also an FMU parameter."""
+        """The step's fixed inputs beyond Q and R, each also an FMU parameter (default none)."""
         return []
 
     def predict_expr(self, ctx: StepContext) -> tuple[ca.SX, ca.SX]:
@@ -207,21 +167,18 @@ class KalmanBase:
         raise NotImplementedError(f"{type(self).__name__} must implement predict_expr (see estimators.protocol)")
 
     def update_expr(self, ctx: StepContext, x_prior: ca.SX, P_prior: ca.SX) -> Update:
-        """The measurement update of the valid channels (required; see
-        :class:`~estimators.protocol.Update`)."""
+        """The measurement update of the valid channels from the prior (required)."""
         raise NotImplementedError(f"{type(self).__name__} must implement update_expr (see estimators.protocol)")
 
     def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
-        """New values of Q, R (if the filter adapts them) and of the extra state, from the
-        step's ``result`` (default: none change)."""
+        """New Q, R (if the filter adapts them) and extra state from the step's ``result`` (default none)."""
         return {}
 
     def after_step(self) -> None:
-        """Runtime hook after every :meth:`step` from Python, with the new state current
-        (default: nothing)."""
+        """Runtime hook after every :meth:`step` from Python, the new state current (default: nothing)."""
 
     def after_run(self, outputs: dict) -> None:
-        """Runtime hook after a native :meth:`run`, with every step's flat outputs by name
+        """Runtime hook after a native :meth:`run`, with every step's flat ``outputs`` by name
         (``x_new`` ... rows ``k = 1..N``); default: nothing."""
 
     def smoother_cross_covariance(self, x: ca.SX, P: ca.SX, u: ca.SX) -> ca.SX:
@@ -231,36 +188,29 @@ class KalmanBase:
         return ca.mtimes(P, F.T)
 
     def fmu_noise_parameters(self) -> list[Parameter]:
-        """The FMU parameters Q and R come from (default: their diagonals ``Q0_<state>`` and
-        ``R0_<measurement>``)."""
-        s = self.system
-        extra = " (initial)" if self.adapts_noise else ""
-        return [Parameter("Q0", _diagonal(self.Q, "Q", self.name), "positive", "process noise variance" + extra,
-                          tuple(f"Q0_{n}" for n in s.state_names), of=tuple(s.state_names)),
-                Parameter("R0", _diagonal(self.R, "R", self.name), "positive", "measurement noise variance" + extra,
-                          tuple(f"R0_{n}" for n in s.output_names), of=tuple(s.output_names))]
+        """The FMU parameters giving Q and R (default their diagonals ``Q0_<state>``, ``R0_<output>``)."""
+        s, extra = self.system, " (initial)" if self.adapts_noise else ""
+        return [per_name("Q0", _diagonal(self.Q, "Q", self.name), "positive", "process noise variance" + extra,
+                         s.state_names),
+                per_name("R0", _diagonal(self.R, "R", self.name), "positive", "measurement noise variance" + extra,
+                         s.output_names)]
 
     def fmu_noise(self, p: Mapping[str, ca.SX]) -> tuple[ca.SX, ca.SX]:
-        """``(Q, R)`` as expressions of the FMU parameters ``p`` (by parameter name, column
-        vectors) of :meth:`fmu_noise_parameters`."""
+        """``(Q, R)`` from the FMU parameters ``p`` (SX by name) of :meth:`fmu_noise_parameters`."""
         return ca.diag(p["Q0"]), ca.diag(p["R0"])
 
     def fmu_parameters(self) -> list[Parameter]:
-        """The parameters of this filter's FMU, with the filter's current values: ``x0``,
-        ``P0`` (diagonal), ``gate`` (0: none), :meth:`fmu_noise_parameters` and the
-        :meth:`step_parameters`."""
-        s = self.system
-        return [Parameter("x0", self.x, "real", "initial estimate", tuple(f"x0_{n}" for n in s.state_names),
-                          of=tuple(s.state_names)),
-                Parameter("P0", _diagonal(self.P, "P0", self.name), "positive", "initial variance",
-                          tuple(f"P0_{n}" for n in s.state_names), of=tuple(s.state_names)),
+        """The parameters of this filter's FMU at its current values: ``x0``, ``P0`` (diagonal),
+        ``gate`` (0: none), :meth:`fmu_noise_parameters` and :meth:`step_parameters`."""
+        names = self.system.state_names
+        return [per_name("x0", self.x, "real", "initial estimate", names),
+                per_name("P0", _diagonal(self.P, "P0", self.name), "positive", "initial variance", names),
                 Parameter("gate", self.gate if np.isfinite(self.gate) else 0.0, "nonnegative",
                           "chi-square gate on the NIS: a measurement with a larger NIS is refused (0: no gate)"),
                 *self.fmu_noise_parameters(), *self._params]
 
     def fmu_initial(self, p: Mapping[str, ca.SX]) -> dict[str, ca.SX]:
-        """The initial state arrays and the fixed step inputs as expressions of the FMU
-        parameters ``p`` (by parameter name, column vectors)."""
+        """The initial state arrays and the fixed step inputs from the FMU parameters ``p`` (SX by name)."""
         Q, R = self.fmu_noise(p)
         out = {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
                "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing))}
@@ -268,23 +218,20 @@ class KalmanBase:
         out.update({q.name: p[q.name] for q in self._params})
         return out
 
-    # ================================================================ state and settings
     def state_arrays(self) -> dict[str, np.ndarray]:
-        """Copies of the flat state arrays (CasADi column-major), by name: ``x, P``, and
-        ``Q, R`` with any other adaptive state; what :class:`~estimators.BatchFilter`
-        starts from."""
+        """Copies of the flat (column-major) state arrays by name: ``x, P`` and any adaptive
+        state (``Q, R``, ...); what :class:`~estimators.BatchFilter` starts from."""
         return {k: v[self._rt.cur].copy() for k, v in self._rt.pairs.items()}
 
     def parameter_arrays(self) -> dict[str, np.ndarray]:
-        """Copies of the step's fixed inputs, flat column-major: ``gate``,
-        ``nan_missing``, ``Q, R`` of a non-adaptive filter and the step parameters."""
+        """Copies of the step's flat fixed inputs (gate, nan_missing, a fixed Q and R, step parameters)."""
         return {k: v.copy() for k, v in self._fixed.items()}
 
     def bind_summary(self, out: np.ndarray, covariance: str = "diagonal"):
-        """A call that writes the current estimate ``x`` (nx), the variances ``diag P`` (nx),
-        with ``covariance="full"`` the upper off-diagonal entries of P (row by row, ``i < j``),
-        and the last NIS into the float array ``out`` (contiguous, bound once: a
-        co-simulation component's slice of the master's signals), in one native call.
+        """A call that writes, in one native call, the current estimate ``x`` (nx), the variances
+        ``diag P`` (nx), with ``covariance="full"`` the upper off-diagonal entries of P (row by
+        row, ``i < j``), and the last NIS into the contiguous float array ``out`` (bound once: a
+        co-simulation component's slice of the master's signals).
 
         Raises
         ------
@@ -293,7 +240,6 @@ class KalmanBase:
         ConfigurationError
             ``out`` has the wrong size or is not a contiguous float array.
         """
-
         if covariance not in ("diagonal", "full"):
             raise UnknownNameError(f"{self.name}: covariance must be 'diagonal' or 'full', got {covariance!r}")
         n = self.system.nx
@@ -311,8 +257,8 @@ class KalmanBase:
 
         fn = self.system.compiled("summary", (covariance, n), self.backend, build)
         rt = self._rt
-        nis = rt.outputs["nis"]
-        bound = [BufferedFunction(fn, {0: rt.pairs["x"][i], 1: rt.pairs["P"][i], 2: nis}, {0: out}) for i in (0, 1)]
+        bound = [BufferedFunction(fn, {0: rt.pairs["x"][i], 1: rt.pairs["P"][i], 2: rt.outputs["nis"]}, {0: out})
+                 for i in (0, 1)]
         triggers = tuple(b.trigger for b in bound)
         cell = rt.cell
 
@@ -344,7 +290,8 @@ class KalmanBase:
     x_prior = property(lambda self: self._out("x_prior").copy(), doc="Prediction of the last step, (nx,).")
     P_prior = property(lambda self: matrix(self._out("P_prior"), self.system.nx, self.system.nx).copy(),
                        doc="Covariance of the prediction, (nx, nx).")
-    innovation = property(lambda self: self._out("innov").copy(), doc="Last innovation, (ny,).")
+    innovation = property(lambda self: self._out("innov").copy(),
+                          doc="Last innovation ``y - h(x_prior)`` (seed 000 eq 26), (ny,).")
     S = property(lambda self: matrix(self._out("S"), self.system.ny, self.system.ny).copy(),
                  doc="Last innovation covariance, (ny, ny).")
     K = property(lambda self: matrix(self._out("K"), self.system.nx, self.system.ny).copy(),
@@ -353,36 +300,30 @@ class KalmanBase:
     accepted = property(lambda self: bool(self._out("accepted")[0]), doc="The gate passed the last measurement.")
 
     def reset(self, x0=None, P0=None) -> None:
-        """Start again from ``x0`` (nx,) and ``P0`` (default: keep the current ones), with
-        the current Q and R; the step count and an adaptive filter's extra state restart too."""
+        """Start again from ``x0`` (nx,) and ``P0`` (default: the current ones) with the current
+        Q and R; the step count and the extra state restart too."""
         n = self.system.nx
         x = self.x if x0 is None else checks.vector(x0, n, "x0", ConfigurationError)
         P = self.P if P0 is None else checks.covariance(P0, n, "P0")
         self._start = (x, P)
         rt = self._rt
-        values = {"x": x, "P": P.ravel(order="F"),
-                  **{k: np.array(v, float).ravel(order="F") for k, v in self.extra_state().items()}}
+        values = {"x": x, "P": P.ravel(order="F"), **self._extra_arrays()}
         for name in rt.pairs:
             rt.set_state(name, values.get(name, rt.now(name).copy()))
         rt.cur, self.k = 0, 0
         self._record()
 
     def snapshot(self) -> dict:
-        """The filter's whole state, for :meth:`restore`: copies of every array its step
-        reads or writes (state copies, outputs, inputs, fixed inputs, status), the current
-        state copy, the step count, the noise history's length and the attributes."""
-        rt, seen, arrays = self._rt, set(), []
-        for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(), *rt.inputs.values(),
-                  *self._fixed.values(), rt.status]:
-            if id(a) not in seen:
-                seen.add(id(a))
-                arrays.append((a, a.copy()))
-        return {"arrays": arrays, "cur": rt.cur, "k": self.k, "history": len(self.history),
-                "attributes": dict(self.__dict__)}
+        """The filter's whole state, for :meth:`restore`: copies of every array its step reads or
+        writes, the current state copy, the step count, the noise history's length, the attributes."""
+        rt = self._rt
+        unique = {id(a): a for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(),
+                                     *rt.inputs.values(), *self._fixed.values(), rt.status]}
+        return {"arrays": [(a, a.copy()) for a in unique.values()], "cur": rt.cur, "k": self.k,
+                "history": len(self.history), "attributes": dict(self.__dict__)}
 
     def restore(self, snapshot: dict) -> None:
-        """Return to the state :meth:`snapshot` took (of this filter): the same numbers as
-        a new filter built the same way, without building one."""
+        """Return to the state :meth:`snapshot` took of this filter (the numbers of a new one)."""
         for a, saved in snapshot["arrays"]:
             a[:] = saved
         self.__dict__.clear()
@@ -391,14 +332,11 @@ class KalmanBase:
         self.history.count[0] = snapshot["history"]
 
     def set_noise(self, Q=None, R=None) -> None:
-        """Replace Q and/or R (validated first: symmetric positive definite; on a refusal
-        nothing changes)."""
-        q = None if Q is None else checks.covariance(Q, self.system.nx, "Q").ravel(order="F")
-        r = None if R is None else checks.covariance(R, self.system.ny, "R").ravel(order="F")
-        if q is not None:
-            self._now("Q")[:] = q
-        if r is not None:
-            self._now("R")[:] = r
+        """Replace Q and/or R (both validated first: on a refusal nothing changes)."""
+        new = {k: checks.covariance(M, n, k).ravel(order="F")
+               for k, M, n in (("Q", Q, self.system.nx), ("R", R, self.system.ny)) if M is not None}
+        for k, flat in new.items():
+            self._now(k)[:] = flat
         self._record()
 
     def _record(self) -> None:
@@ -408,10 +346,8 @@ class KalmanBase:
         """How Q and R changed: DataFrame indexed by step with their diagonals."""
         return self.history.to_frame(self.system.state_names, self.system.output_names)
 
-    # ================================================================ stepping
     def _explain(self, what: str) -> None:
-        """Raise the error of a failed step (the state is unchanged): a non-finite result that
-        compiled code of the model caused (an FMU's failure) is its error."""
+        """Raise the error of a failed step (an FMU model's own, if it made a result non-finite)."""
         failure = self.system.take_failure()
         if failure is not None and self._rt.status[0] == BAD_RESULT:
             raise type(failure)(f"{self.name}: {failure}, at step {self.k} ({what}); filter state unchanged")
@@ -419,32 +355,27 @@ class KalmanBase:
                        what)
 
     def _used_channels(self, ys: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        """Which channels of ``ys`` (..., ny) an update uses: masked in and (unless NaN is an
-        error) not NaN."""
+        """Which channels of ``ys`` (..., ny) an update uses: masked in and (unless NaN is an error) not NaN."""
         return (masks != 0) & (~np.isnan(ys) if self.nan_is_missing else True)
 
     def step(self, u, y, mask=None) -> np.ndarray:
-        """Predict with ``u`` (nu,), then update with ``y`` (ny,).
-
-        ``y=None`` predicts only. NaN entries of ``y`` are missing channels (unless
-        ``nan_is_missing=False``); ``mask`` (ny,) of bool marks further channels as
-        missing (False). Returns a copy of the new state estimate, shape ``(nx,)``.
+        """Predict with ``u`` (nu,), then update with ``y`` (ny,); ``y=None`` predicts only.
+        NaN entries of ``y`` are missing channels (unless ``nan_is_missing=False``), and so are
+        those where ``mask`` (ny,) of bool is False. Returns a copy of the new estimate (nx,).
 
         Raises
         ------
         InputError
-            ``u`` or a used ``y`` entry is NaN or inf, or a shape is wrong (the state is
-            then unchanged).
+            ``u`` or a used ``y`` entry is NaN or inf, or a shape is wrong.
         TypeMismatchError
             ``u`` or ``y`` is not numbers.
         NumericalError
-            The estimate became non-finite (the state is unchanged).
+            The estimate became non-finite. After any error the state is unchanged.
         """
         return self._step(u, y, mask)
 
     def _step(self, u, y, mask=None) -> np.ndarray:
-        """:meth:`step` for every call; the instance's own ``step`` (runtime.lean_step) takes
-        the common one (a measurement, no mask) without the attribute lookups."""
+        """:meth:`step` for every call (``runtime.lean_step`` takes the common one faster)."""
         self._fill_u(u)
         try:
             if y is None:
@@ -467,11 +398,11 @@ class KalmanBase:
         return rt.pairs["x"][cur ^ 1].copy()
 
     def predict(self, u) -> np.ndarray:
-        """Time update with input ``u`` (nu,): a step without measurement; returns the
-        prior state estimate."""
+        """Time update with input ``u`` (nu,), a step without measurement; returns the prior estimate."""
         return self.step(u, None)
 
-    def _update_function(self):
+    def _update_function(self) -> ca.Function:
+        """The compiled measurement update of :meth:`update`."""
         s = self.system
         x, P, R = ca.SX.sym("x", s.nx), ca.SX.sym("P", s.nx, s.nx), ca.SX.sym("R", s.ny, s.ny)
         y, mask, gate, nan_missing = (ca.SX.sym("y", s.ny), ca.SX.sym("mask", s.ny), ca.SX.sym("gate"),
@@ -486,17 +417,14 @@ class KalmanBase:
         return compile_functions([fn], self.backend)[0][0]
 
     def update(self, y, mask=None) -> np.ndarray:
-        """Measurement update alone with ``y`` (ny,) (and ``mask``), taking the current
-        estimate as the prior: x and P are replaced by the update, and the diagnostics
-        (innovation, S, K, nis, accepted) describe it. Q and R do not adapt here. Returns
-        the posterior estimate."""
+        """Measurement update alone with ``y`` (ny,) (and ``mask``) from the current estimate:
+        x, P and the diagnostics describe it (Q and R do not adapt). Returns the posterior estimate."""
         s = self.system
         fn = s.compiled("update", self.cache_key, self.backend, self._update_function)
         self._fill_y.checked(y)
         try:
             if mask is not None:
                 self._fill_mask.checked(mask)
-            x_prior, P_prior = self._now("x").copy(), self._now("P").copy()
             res = fn(self._now("x"), matrix(self._now("P"), s.nx, s.nx), matrix(self._now("R"), s.ny, s.ny),
                      self._y, self._mask, self.gate, float(self.nan_is_missing))
             self._rt.status[0] = float(res[-1])
@@ -504,46 +432,35 @@ class KalmanBase:
                 self._explain("update")
         finally:
             self._mask[:] = 1.0
-        self._now("x")[:] = np.asarray(res[0]).ravel()
-        self._now("P")[:] = np.asarray(res[1]).ravel(order="F")
         out = self._rt.outputs
-        out["x_prior"][:], out["P_prior"][:] = x_prior, P_prior
-        for name, value in zip(("innov", "S", "K", "nis", "accepted", "logdet_S"), res[2:8]):
-            out[name][:] = np.asarray(value).ravel(order="F")
+        out["x_prior"][:], out["P_prior"][:] = self._now("x"), self._now("P")
+        for dest, value in zip((self._now("x"), self._now("P"), *(out[n] for n in DIAGNOSTICS[2:])), res):
+            dest[:] = np.asarray(value).ravel(order="F")
         return self.x
 
-    # ================================================================ whole trajectories
     def native_fold(self):
-        """The fused step folded over trajectories in native code
-        (``estimators._fold.NativeFold``), compiled and cached on the model: what
-        :meth:`fold_record` runs (:meth:`run`, :meth:`BatchFilter.run <estimators.BatchFilter.run>`),
-        and, one step at a time, :class:`~estimators.BatchFilter`."""
-
+        """The fused step folded over records in native code (a ``NativeFold``), cached on the model."""
         return self.system.compiled("fold", self.cache_key, self.backend,
                                     lambda: NativeFold(self._raw_step, len(self._rt.pairs), self.backend,
                                                        library=self._step_library))
 
     def fold_record(self, state: dict, us, ys, masks, params: dict, drop=()) -> tuple[dict, dict, dict]:
-        """Fold the fused step over the records of ``runs`` realisations in one native call
-        (:meth:`native_fold`).
+        """Fold the fused step over the records of ``runs`` realisations in one native call.
 
         Parameters
         ----------
-        state : dict of str to ndarray
-            The initial state arrays, shape (runs, nnz) each.
+        state, params : dict of str to ndarray
+            The initial state arrays and the step's fixed inputs, shape (runs, nnz) each.
         us, ys, masks : ndarray
             The records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny); contiguous.
-        params : dict of str to ndarray
-            The step's fixed inputs, shape (runs, nnz) each.
         drop : collection of str
             Outputs not kept (their views are scratch rows).
 
         Returns
         -------
         (stored, views, last)
-            The outputs and the arrays the fold wrote (``estimators._fold.NativeFold.outputs``;
-            the extra state, whose history is not kept, left out) and the state after the last
-            step by name, shape (runs, nnz) each.
+            The outputs and the arrays the fold wrote (``NativeFold.outputs``, without the
+            extra state's history) and the state after the last step, (runs, nnz) by name.
         """
         runs, N = ys.shape[:2]
         fold = self.native_fold()
@@ -554,10 +471,8 @@ class KalmanBase:
         return {n: a for n, a in outs.items() if n not in cycled}, views, last
 
     def check_record(self, us, ys, masks=None):
-        """A record ``(us, ys, masks)`` as contiguous float arrays of shapes (N, nu), (N, ny),
-        (N, ny), or :class:`InputError` / :class:`~fmu_models.errors.TypeMismatchError` naming the
-        problem."""
-
+        """A record ``(us, ys, masks)`` as contiguous float arrays (N, nu), (N, ny), (N, ny), or
+        :class:`InputError` / :class:`~fmu_models.errors.TypeMismatchError` naming the problem."""
         nu, ny = self.system.nu, self.system.ny
         us = checks.float_array(us, "us")
         ys = checks.float_array(ys, "ys")
@@ -583,8 +498,7 @@ class KalmanBase:
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
 
     def _check_run_fits(self, ys, keep: str) -> None:
-        """Refuse (ResourceError, with the sizes) a run whose record and outputs would not
-        fit in memory, before anything of it is allocated."""
+        """Refuse (ResourceError) a run whose record and outputs would not fit in memory."""
         try:
             n = len(ys)
         except TypeError:
@@ -596,8 +510,7 @@ class KalmanBase:
                    "filter the record in pieces (each run continues where the last ended), or keep='estimates'")
 
     def run(self, us, ys, masks=None, y0=None, keep: str = "all") -> FilterRun:
-        """Filter whole sequences in one native call: ``step(us[k], ys[k], masks[k])`` for
-        ``k = 0..N-1``.
+        """Filter whole sequences in one native call: ``step(us[k], ys[k], masks[k])``, ``k = 0..N-1``.
 
         Parameters
         ----------
@@ -609,14 +522,12 @@ class KalmanBase:
             False marks further missing channels.
         y0 : array_like, shape (ny,), optional
             A measurement of the initial state: ``update(y0)`` before the first step (the
-            model of pykalman and of EM over a record that starts with a measurement).
-            ``x[0]``, ``P[0]`` of the result are then the updated ones and the
-            log-likelihood includes it.
+            model of pykalman and of EM); ``x[0]``, ``P[0]`` are then the updated ones and
+            the log-likelihood includes it.
         keep : {"all", "estimates"}
-            Keep every diagnostic (default; what :func:`~estimators.rts_smooth` needs), or
-            only the estimates ``x``, ``P`` (and the NIS, the acceptance and the
-            log-likelihood): 192 instead of 464 bytes a step for the cart-pole EKF, for
-            long records; the other attributes of the result are then None.
+            Keep every diagnostic (default; what :func:`~estimators.rts_smooth` needs), or only
+            ``x``, ``P``, the NIS, the acceptance and the log-likelihood (192 instead of 464 bytes
+            a step for the cart-pole EKF); the other attributes of the result are then None.
 
         Returns
         -------
@@ -629,8 +540,7 @@ class KalmanBase:
         InputError, NumericalError
             As :meth:`step`, naming the step; the filter's state is then unchanged.
         ResourceError
-            The record and the run's outputs would not fit in memory (said before any of
-            it is allocated).
+            The record and the run's outputs would not fit in memory (said before allocating).
         """
         if keep not in KEEP:
             raise UnknownNameError(f"{self.name}: keep must be one of {KEEP}, got {keep!r}")
@@ -648,7 +558,6 @@ class KalmanBase:
 
     def _run_native(self, us, ys, masks, keep: str) -> FilterRun:
         """:meth:`run` of checked arrays in one native call; the filter is left at the last step."""
-        init = self._initial_for_run
         state = {k: v[None] for k, v in self.state_arrays().items()}
         params = {k: v[None] for k, v in self.parameter_arrays().items()}
         outs, views, last = self.fold_record(state, us[None], ys[None], masks[None], params,
@@ -657,7 +566,7 @@ class KalmanBase:
         if status.any():
             self._explain_run(int(np.flatnonzero(status)[0]), status, us, ys, masks)
         cat = {name: a[0] for name, a in outs.items()}
-        result = self._make_run(cat, us, ys, masks, init)
+        result = self._make_run(cat, us, ys, masks)
         rt = self._rt
         for name in rt.pairs:                      # the filter now stands at the last step
             rt.now(name)[:] = last[name][0]
@@ -669,8 +578,7 @@ class KalmanBase:
         return result
 
     def _explain_run(self, k: int, status: np.ndarray, us, ys, masks) -> None:
-        """Raise the error of a native run whose step ``k`` failed with ``status[k]`` (as
-        :meth:`step` would there; the filter's state is unchanged)."""
+        """Raise the error of a native run whose step ``k`` failed with ``status[k]``, as :meth:`step` would."""
         self._rt.status[0] = status[k]
         self._u[:], self._y[:], self._mask[:] = us[k], ys[k], masks[k]
         k_saved, self.k = self.k, self.k + k
@@ -680,9 +588,8 @@ class KalmanBase:
             self.k = k_saved
             self._mask[:] = 1.0
 
-    def _make_run(self, cat: dict, us, ys, masks, init: dict) -> FilterRun:
-        """A FilterRun from per-step outputs ``cat`` (row ``k``: step k's output, flat in
-        CasADi's column-major layout) and the state ``init`` before the first step."""
+    def _make_run(self, cat: dict, us, ys, masks) -> FilterRun:
+        """A FilterRun from the flat per-step outputs ``cat`` (the state's from the initial row)."""
         s = self.system
         nx, ny = s.nx, s.ny
 
@@ -694,48 +601,32 @@ class KalmanBase:
         acc = cat["accepted"].ravel() != 0
         nis = cat["nis"].ravel()
         used = self._used_channels(ys, masks)
-        loglik = log_likelihood(nis, cat["logdet_S"].ravel(), used.sum(axis=1), acc)
-        N = len(nis)
-
-        def with_initial(name, r, c, first):
-            """States over k = 0..N: the outputs of run() carry the initial row already."""
-            m = mats(name, r, c) if name != "x_new" else cat[name].reshape(-1, r)
-            if len(m) == N + 1:
-                return m
-            return np.concatenate([first[None], m])
-
         if "Q_new" in cat:
-            Qd = with_initial("Q_new", nx, nx, init["Q"]).diagonal(axis1=1, axis2=2)
-            Rd = with_initial("R_new", ny, ny, init["R"]).diagonal(axis1=1, axis2=2)
+            Qd, Rd = (mats(k, n, n).diagonal(axis1=1, axis2=2) for k, n in (("Q_new", nx), ("R_new", ny)))
         else:
-            Qd = np.broadcast_to(np.diag(init["Q"]), (N + 1, nx))
-            Rd = np.broadcast_to(np.diag(init["R"]), (N + 1, ny))
+            Qd, Rd = (np.broadcast_to(np.diag(M), (len(nis) + 1, len(M))) for M in (self.Q, self.R))
         kept = "x_prior" in cat
         return FilterRun(
-            x=with_initial("x_new", nx, 1, init["x"]), P=with_initial("P_new", nx, nx, init["P"]),
+            x=cat["x_new"].reshape(-1, nx), P=mats("P_new", nx, nx),
             x_prior=cat["x_prior"].reshape(-1, nx) if kept else None,
             P_prior=mats("P_prior", nx, nx) if kept else None,
             innovation=cat["innov"].reshape(-1, ny) if kept else None, S=mats("S", ny, ny) if kept else None,
-            K=mats("K", nx, ny) if kept else None, nis=nis,
-            accepted=acc, mask=used & acc[:, None], us=us, Q=Qd, R=Rd, log_likelihood=loglik,
+            K=mats("K", nx, ny) if kept else None, nis=nis, accepted=acc, mask=used & acc[:, None], us=us,
+            Q=Qd, R=Rd, log_likelihood=log_likelihood(nis, cat["logdet_S"].ravel(), used.sum(axis=1), acc),
             state_names=list(s.state_names), output_names=list(s.output_names), filter_name=self.name,
             model=s.identity, jacobians=s.jacobians)
 
-    @property
-    def _initial_for_run(self) -> dict:
-        return {"x": self.x, "P": self.P, "Q": self.Q, "R": self.R}
-
     def _run_by_steps(self, us, ys, masks) -> FilterRun:
-        """``run`` for a filter whose adaptation is not all in the fused step (a loop of
-        :meth:`step`)."""
-        init = self._initial_for_run
-        rec: dict = {k: [] for k in ("x_new", "P_new", "Q_new", "R_new", *DIAGNOSTICS)}
+        """``run`` as a loop of :meth:`step` (a filter whose adaptation is not all in the fused step)."""
+        def state() -> dict:
+            return {"x_new": self.x, "P_new": self.P, "Q_new": self.Q, "R_new": self.R}
+
+        rec: dict = {**{k: [v.ravel(order="F")] for k, v in state().items()}, **{k: [] for k in DIAGNOSTICS}}
         for k in range(len(ys)):
             self.step(us[k], ys[k], masks[k] != 0)
-            for key, val in (("x_new", self.x), ("P_new", self.P), ("Q_new", self.Q), ("R_new", self.R),
-                             *((name, self._out(name)) for name in DIAGNOSTICS)):
+            for key, val in (*state().items(), *((name, self._out(name)) for name in DIAGNOSTICS)):
                 rec[key].append(np.array(val, float).ravel(order="F"))
-        return self._make_run({k: np.array(v) for k, v in rec.items()}, us, ys, masks, init)
+        return self._make_run({k: np.array(v) for k, v in rec.items()}, us, ys, masks)
 
 
 def _diagonal(M: np.ndarray, what: str, owner: str) -> np.ndarray:

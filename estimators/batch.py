@@ -1,11 +1,9 @@
 """Run many realisations of one filter in lockstep: one native call per step for all, or one
 native call for whole trajectories of all.
 
-:meth:`BatchFilter.step` maps the filter's fused step over ``n_runs`` realisations
-(``casadi.Function.map``, compiled); :meth:`BatchFilter.run` folds it over whole
-trajectories of every realisation in native code (``estimators._fold``). A Monte
-Carlo campaign pays the Python overhead once per step, or once per campaign, not once per
-realisation.
+:meth:`BatchFilter.step` maps the filter's fused step over the realisations,
+:meth:`BatchFilter.run` folds it over their records (``estimators._fold``): a Monte Carlo
+campaign pays the Python overhead once per step, or once, not once per realisation.
 """
 from __future__ import annotations
 
@@ -27,21 +25,15 @@ ON_FAILURE = ("raise", "mark")
 
 
 class FoldedStep(StepArrays):
-    """One step of ``runs`` realisations through a filter's native fold (the step's own
-    compiled library, whatever the number of runs), with the interface of
-    :class:`~estimators.runtime.BoundStep`: the arrays of :class:`~estimators.runtime.StepArrays`,
-    flat run-major.
+    """One step of ``runs`` realisations through a filter's native fold (compiled: no code per
+    number of runs), with the interface of :class:`~estimators.runtime.BoundStep`.
 
     Parameters
     ----------
     fold : NativeFold
-        The filter's fold (compiled backend).
     runs : int
-        Number of realisations.
-    state : mapping of str to ndarray
-        Initial state arrays, flat run-major (copied).
-    shared : mapping of str to ndarray
-        Fixed inputs bound as they are (flat run-major; changed in place by the owner).
+    state, shared : mapping of str to ndarray
+        As :class:`~estimators.runtime.StepArrays`, flat run-major.
     """
 
     def __init__(self, fold, runs: int, state, shared):
@@ -58,8 +50,7 @@ class FoldedStep(StepArrays):
         self._calls = (bound(0), bound(1))
 
     def trigger(self) -> float:
-        """Step every realisation from the current state into the other copy; returns the
-        first status (the per-run statuses are in ``outputs["status"]``)."""
+        """Step every realisation into the other state copy; returns the first run's status."""
         if self._calls[self.cell[0]]():
             raise NumericalError("batched step: the compiled step failed to evaluate")
         return self.status[0]
@@ -77,16 +68,15 @@ class BatchFilter:
     x0 : array_like, shape (n_runs, nx), optional
         Per-realisation initial estimates (default: the template's x for all).
     on_failure : {"raise", "mark"}
-        What a realisation whose input or result is not finite does: raise (default),
-        or keep its previous state (in :meth:`step`), mark it in ``failed`` and go on
-        with the others (Monte Carlo campaigns count such runs as diverged).
+        What a realisation whose input or result is not finite does: raise (default), or
+        keep its previous state (in :meth:`step`), be marked in ``failed`` and let the others
+        go on (Monte Carlo campaigns count such runs as diverged).
 
     Attributes
     ----------
-    x : ndarray, shape (n_runs, nx)
-        Current estimates.
-    P : ndarray, shape (n_runs, nx, nx)
-    nis : ndarray, shape (n_runs,)
+    x, P, Q, R, nis, innovation : ndarray
+        The current estimates (n_runs, nx), covariances (n_runs, nx, nx), noise covariances
+        and last diagnostics of every realisation.
     failed : ndarray of bool, shape (n_runs,)
         Realisations that failed at least once (``on_failure="mark"``).
     """
@@ -127,14 +117,14 @@ class BatchFilter:
         """Current flat state array ``key`` (all realisations, run-major)."""
         return self._rt.now(key)
 
-    x = property(lambda self: self.now("x").reshape(self.n, self.nx).copy())
-    P = property(lambda self: self.now("P").reshape(self.n, self.nx, self.nx).transpose(0, 2, 1).copy())
-    Q = property(lambda self: self._cov("Q", self.nx), doc="Process noise covariances, (n_runs, nx, nx).")
-    R = property(lambda self: self._cov("R", self.ny), doc="Measurement noise covariances, (n_runs, ny, ny).")
-
     def _cov(self, key: str, n: int) -> np.ndarray:
         flat = self._rt.now(key) if key in self._rt.pairs else self._params[key]
         return flat.reshape(self.n, n, n).transpose(0, 2, 1).copy()
+
+    x = property(lambda self: self.now("x").reshape(self.n, self.nx).copy())
+    P = property(lambda self: self._cov("P", self.nx))
+    Q = property(lambda self: self._cov("Q", self.nx), doc="Process noise covariances, (n_runs, nx, nx).")
+    R = property(lambda self: self._cov("R", self.ny), doc="Measurement noise covariances, (n_runs, ny, ny).")
     nis = property(lambda self: self._rt.outputs["nis"].copy())
     innovation = property(lambda self: self._rt.outputs["innov"].reshape(self.n, self.ny).copy())
 
@@ -153,26 +143,18 @@ class BatchFilter:
                              f"({self.n}, {self.ny}); got {np.shape(u)} and {np.shape(y)}") from None
 
     def step(self, u, y, mask=None) -> np.ndarray:
-        """One step of every realisation: ``u`` (n_runs, nu) or (nu,), ``y`` (n_runs, ny)
-        (NaN entries missing), optional ``mask`` (n_runs, ny).
-
-        Returns the estimates, shape (n_runs, nx). Raises InputError / NumericalError
-        naming the realisation (with ``on_failure="raise"``); the state is then unchanged.
-        """
+        """One step of every realisation: ``u`` (n_runs, nu) or (nu,), ``y`` (n_runs, ny) (NaN
+        entries missing), optional ``mask`` (n_runs, ny). Returns the estimates (n_runs, nx).
+        Raises InputError / NumericalError naming the realisation (``on_failure="raise"``);
+        the state is then unchanged."""
         self._inputs_for(u, y, mask)
         rt = self._rt
         rt.trigger()
-        status = rt.status
-        failure = self.template.system.take_failure() if status.any() else None
-        if status.any() and self.on_failure == "mark":
-            bad = status != 0
+        bad = self._failures(rt.status, lambda: f"step {self.k}")
+        if bad.any():
             for pair in rt.pairs.values():     # failed runs keep their previous state
-                old, new = pair[rt.cur], pair[1 - rt.cur]
-                new.reshape(self.n, -1)[bad] = old.reshape(self.n, -1)[bad]
+                pair[1 - rt.cur].reshape(self.n, -1)[bad] = pair[rt.cur].reshape(self.n, -1)[bad]
             self.failed |= bad
-        elif status.any():
-            run = int(np.flatnonzero(status)[0])
-            self._refuse(status[run], run, f"step {self.k}", failure)
         rt.commit()
         self.k += 1
         return self.x
@@ -192,8 +174,8 @@ class BatchFilter:
         -------
         BatchRun
             Each realisation as :meth:`step` would give it (equal to 1e-12); the batch is
-            left at the last step. A realisation that fails is marked in ``failed`` (with
-            ``on_failure="mark"``) or raises, naming it and the step.
+            left at the last step. A failing realisation is marked in ``failed`` or raises
+            (``on_failure``), naming it and the step.
         """
         R, nx, ny = self.n, self.nx, self.ny
         us, ys, masks = self._record(us, ys, masks)
@@ -201,13 +183,8 @@ class BatchFilter:
         t = self.template
         state = {k: self._rt.now(k).reshape(R, -1) for k in self._rt.pairs}
         outs, _, last = t.fold_record(state, us, ys, masks, {k: v.reshape(R, -1) for k, v in self._params.items()})
-        status = outs["status"][:, :, 0]
-        bad = status != 0
-        failure = t.system.take_failure() if bad.any() else None
-        if bad.any() and self.on_failure == "raise":
-            run, k = map(int, np.argwhere(bad)[0])
-            self._refuse(status[run, k], run, f"index {k}", failure)
-        self.failed |= bad.any(axis=1)
+        bad = self._failures(outs["status"][:, :, 0], lambda k: f"index {k}").any(axis=1)
+        self.failed |= bad
 
         def diag(name, n, fixed):
             if name in outs:
@@ -218,7 +195,7 @@ class BatchFilter:
             x=outs["x_new"], P=outs["P_new"].reshape(R, N + 1, nx, nx).transpose(0, 1, 3, 2),
             nis=outs["nis"][:, :, 0], accepted=outs["accepted"][:, :, 0] != 0,
             Q=diag("Q_new", nx, self._params.get("Q")), R=diag("R_new", ny, self._params.get("R")),
-            failed=bad.any(axis=1), state_names=list(t.system.state_names), output_names=list(t.system.output_names),
+            failed=bad, state_names=list(t.system.state_names), output_names=list(t.system.output_names),
             innovation=outs["innov"].reshape(R, N, ny), S=outs["S"].reshape(R, N, ny, ny), jacobians=t.system.jacobians)
         for name, value in last.items():
             self._rt.now(name)[:] = value.ravel()
@@ -226,8 +203,7 @@ class BatchFilter:
         return out
 
     def _record(self, us, ys, masks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The records of :meth:`run` as contiguous float arrays (n_runs, N, nu), (n_runs, N, ny),
-        (n_runs, N, ny), or InputError naming the problem."""
+        """The records of :meth:`run` as contiguous float arrays, or InputError naming the problem."""
         R, ny, nu = self.n, self.ny, self.nu
         ys = np.ascontiguousarray(checks.float_array(ys, "ys"))
         if ys.ndim != 3 or ys.shape[0] != R or ys.shape[2] != ny:
@@ -238,9 +214,17 @@ class BatchFilter:
                  np.ascontiguousarray(np.broadcast_to(checks.float_array(masks, "masks"), (R, N, ny))))
         return us, ys, masks
 
-    def _refuse(self, status: float, run: int, where: str, failure: Exception | None) -> None:
-        """Raise the error of realisation ``run`` whose step ``where`` (``"step 3"``) ended with
-        ``status`` (``failure``: the model's, which made a result non-finite, or None)."""
+    def _failures(self, status: np.ndarray, where) -> np.ndarray:
+        """Where ``status`` (n_runs, ...) is not 0; with ``on_failure="raise"``, the error of the
+        first failure (at step ``where(k)``; the model's error if it made a result non-finite)."""
+        bad = status != 0
+        if not bad.any():
+            return bad
+        failure = self.template.system.take_failure()
+        if self.on_failure == "mark":
+            return bad
+        run, *k = map(int, np.argwhere(bad)[0])
+        status, where = status[(run, *k)], where(*k)
         bad_input = status == BAD_INPUT
         if failure is not None and not bad_input:
             raise type(failure)(f"batched {self.template.name}: realisation {run} at {where}: {failure}; state "

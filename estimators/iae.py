@@ -17,13 +17,9 @@ ADAPT = {"both": ("Q", "R"), "Q": ("Q",), "R": ("R",)}
 
 
 def project_pd(M: np.ndarray, low: float, high: float, form: str) -> np.ndarray:
-    """Nearest admissible covariance of the given form with eigenvalues in ``[low, high]``
-    (``M`` square, ``low < high``).
-
-    ``"diagonal"``: keep the diagonal, clip it; ``"scalar"``: ``sigma^2 I`` with
-    ``sigma^2 = trace/n`` clipped (the form of seed 000 eqs 24-25); ``"full"``: symmetrise
-    and clip the eigenvalues.
-    """
+    """Nearest covariance of the ``form`` to the square ``M`` with eigenvalues in ``[low, high]``:
+    ``"diagonal"`` clips the diagonal; ``"scalar"`` is ``sigma^2 I``, ``sigma^2 = trace/n``
+    clipped (seed 000 eqs 24-25); ``"full"`` symmetrises and clips the eigenvalues."""
     n = M.shape[0]
     if form == "diagonal":
         return np.diag(np.clip(np.diag(M), low, high))
@@ -44,18 +40,11 @@ def _project_sym(M, low, high, form):
 class IAE(WindowedAdaptiveEKF, register="IAE"):
     """EKF whose Q and R follow the innovation sequence (Mohamed and Schwarz, 1999).
 
-    After each update, with ``I_j`` the innovations of the last ``window`` steps:
-    ``C_I = (1/N) sum I_j I_j^T`` (eq 37), ``R = C_I - H P^- H^T`` (eq 35) and
-    ``Q = K C_I K^T`` (eq 36), each projected onto the chosen ``form`` with its variances
-    kept inside ``q_bounds`` / ``r_bounds``, so that they stay positive definite and
-    plausible. ``H P^- H^T`` is taken as ``S - R`` of the step. The new values apply from
-    the next step; until the window is full the initial Q and R are kept.
-
-    ``K C_I K^T`` has rank at most ny (2 for the cart-pole): it can only move Q in the
-    directions the gain reaches, and left unbounded it collapses Q in the others. Adapting
-    R only (``adapt="R"``, with Q as given) is the stable choice when Q is known to within
-    an order of magnitude; the seed 000 campaign uses ``adapt="both"`` as the paper
-    describes, with the default bounds.
+    After each update, from the last ``window`` innovations ``I_j``: ``C_I = (1/N) sum I_j I_j^T``
+    (eq 37), ``R = C_I - H P^- H^T`` (eq 35; ``H P^- H^T = S - R``) and ``Q = K C_I K^T``
+    (eq 36), each projected onto the ``form`` within ``q_bounds`` / ``r_bounds``, applied from
+    the next step. ``K C_I K^T`` has rank at most ny: unbounded, it collapses Q where the gain
+    does not reach, so ``adapt="R"`` is the stable choice when Q is known to an order of magnitude.
 
     Parameters
     ----------
@@ -66,12 +55,10 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
     adapt : {"both", "Q", "R"} or tuple of "Q", "R"
         Which covariances to adapt (default both).
     form : {"diagonal", "scalar", "full"}
-        Structure kept for the estimates (default "diagonal"; "scalar" is eqs 24-25).
-        "diagonal" and "scalar" adapt inside the compiled step; "full" projects the
-        eigenvalues in numpy after each step (no batched or native run: a loop of steps).
+        Structure kept for the estimates (default "diagonal"; "scalar" is eqs 24-25); "full"
+        projects the eigenvalues in numpy after each step (no batched or native run).
     q_bounds, r_bounds : (float, float), optional
-        Smallest and largest variance allowed in Q and R. Default: a factor 1e4 below the
-        smallest and above the largest initial variance.
+        Smallest and largest variance in Q and R (default a factor 1e4 beyond the initial ones).
     """
 
     name = "IAE"
@@ -101,8 +88,7 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
         return self.form != "full"
 
     def records_only(self) -> bool:
-        """Whether :meth:`on_adapted` only records Q and R: not with ``form="full"`` (its
-        projection runs in numpy)."""
+        """Whether :meth:`on_adapted` only records Q and R (not with ``form="full"``)."""
         return (self.form != "full" and type(self).on_adapted is IAE.on_adapted
                 and type(self).after_step is AdaptationRecord.after_step)
 

@@ -13,23 +13,17 @@ __all__ = ["KF"]
 
 
 class KF(EKF, register="KF"):
-    """Kalman filter on the affine model tangent to ``system`` at ``(x_op, u_op)``.
-
-    The model is :meth:`DiscreteModel.linearized`; with constant Jacobians the EKF
-    equations are exactly the Kalman filter's.
+    """Kalman filter on the affine model tangent to ``system`` at ``(x_op, u_op)``
+    (:meth:`DiscreteModel.linearized`: with constant Jacobians the EKF is the Kalman filter).
 
     Parameters
     ----------
     system : DiscreteModel
         Nonlinear model; it is linearised here.
-    x0, P0, Q, R, gate, nan_is_missing
+    x0, P0, Q, R, gate, nan_is_missing, backend
         As :class:`~estimators.base.KalmanBase`.
-    x_op : array_like, shape (nx,)
-        Operating point (default: zero, the cart-pole's upright equilibrium).
-    u_op : array_like, shape (nu,)
-        Operating input (default zero).
-    backend : {"compiled", "vm"}
-        As :class:`~estimators.base.KalmanBase`.
+    x_op, u_op : array_like, shapes (nx,), (nu,)
+        Operating point and input (default zero: the cart-pole's upright equilibrium).
     """
 
     name = "KF"
@@ -39,6 +33,5 @@ class KF(EKF, register="KF"):
         system = checked_model(system)
         x_op = np.zeros(system.nx) if x_op is None else vector(x_op, system.nx, "x_op", ConfigurationError)
         u_op = np.zeros(system.nu) if u_op is None else vector(u_op, system.nu, "u_op", ConfigurationError)
-        self.nonlinear_system = system
         self.x_op, self.u_op = x_op, u_op
         super().__init__(system.linearized(x_op, u_op), x0, P0, Q, R, gate, nan_is_missing, backend)

@@ -1,9 +1,6 @@
-"""Symbolic linear algebra of the filters: the CasADi SX building blocks every fused step is
-made of (symmetric products, Cholesky solves, the gated Joseph-form update, the masked
-measurement, finiteness tests), and the Gaussian log-likelihood of a run.
-
-Each function takes and returns CasADi SX expressions (except :func:`log_likelihood`,
-which sums numbers); none of them inverts a matrix.
+"""Symbolic linear algebra of the filters: the CasADi SX building blocks of every fused step
+(symmetric products, Cholesky solves, the gated Joseph-form update, the masked measurement,
+finiteness tests; none inverts a matrix), and the Gaussian log-likelihood of a run.
 """
 from __future__ import annotations
 
@@ -23,9 +20,8 @@ OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
 
 
 def symmetric(M: ca.SX) -> ca.SX:
-    """The symmetric matrix with ``M``'s upper triangle: a covariance exactly symmetric by
-    construction, and only the upper triangle of ``M`` is ever computed (the generated
-    code drops the other half; 16 % fewer operations in the cart-pole EKF step)."""
+    """The symmetric matrix with ``M``'s upper triangle: exactly symmetric, and the generated
+    code computes only that half (16 % fewer operations in the cart-pole EKF step)."""
     n = M.shape[0]
     out = ca.SX(n, n)
     for i in range(n):
@@ -47,10 +43,9 @@ def cholesky_lower(P: ca.SX) -> ca.SX:
 
 
 def spd_solve(A: ca.SX, B: ca.SX) -> ca.SX:
-    """``X`` with ``A X = B`` for a symmetric positive-definite ``A``, by its Cholesky
-    factor (forward and back substitution; about 40 % fewer operations than CasADi's
-    general symbolic solve for a 4 x 4 system). A matrix that is not positive definite
-    gives NaN, which the filters' status reports."""
+    """``X`` with ``A X = B`` for a symmetric positive-definite ``A``, by its Cholesky factor
+    (about 40 % fewer operations than CasADi's general symbolic solve for a 4 x 4 system); an
+    ``A`` that is not positive definite gives NaN, which the filters' status reports."""
     L = cholesky_lower(A)
     n, m = A.shape[0], B.shape[1]
     Y = ca.SX.zeros(n, m)
@@ -75,11 +70,9 @@ def log_det(S: ca.SX) -> ca.SX:
 
 
 def gated_gain(S: ca.SX, B: ca.SX, innov: ca.SX, gate) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """Gain ``K = B^T S^{-1}``, ``nis = innov^T S^{-1} innov`` and the gate's verdict
-    ``nis <= gate``, from one Cholesky solve ``S Z = [B, innov]`` (no inverse).
-
-    Parameters: ``S`` (ny, ny) symmetric positive definite, ``B`` (ny, nx) (``H P^-`` or
-    the cross-covariance transposed), ``innov`` (ny, 1), ``gate`` a scalar (``inf``: no gate)."""
+    """Gain ``K = B^T S^{-1}``, ``nis = innov^T S^{-1} innov`` and the verdict ``nis <= gate``
+    (``inf``: no gate) from one Cholesky solve ``S Z = [B, innov]``: ``S`` (ny, ny) SPD, ``B``
+    (ny, nx) (``H P^-`` or the cross-covariance transposed), ``innov`` (ny, 1)."""
     Z = spd_solve(S, ca.horzcat(B, innov))
     K = Z[:, : B.shape[1]].T
     nis = ca.dot(innov, Z[:, B.shape[1]])
@@ -87,23 +80,16 @@ def gated_gain(S: ca.SX, B: ca.SX, innov: ca.SX, gate) -> tuple[ca.SX, ca.SX, ca
 
 
 def mask_measurement(valid: ca.SX, S_raw: ca.SX, innov_raw: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """The update of the valid channels only, at fixed size.
+    """The update of the valid channels only, at fixed size: ``(S, innov, M)``, ``S_raw`` with
+    the rows and columns of missing channels those of the identity, ``innov_raw`` zero in them,
+    and ``M = diag(valid)``.
 
     Parameters
     ----------
     valid : SX, shape (ny, 1)
         1 for a channel used, 0 for a missing one.
-    S_raw : SX, shape (ny, ny)
-        The innovation covariance of all channels.
-    innov_raw : SX, shape (ny, 1)
-        The innovation of all channels.
-
-    Returns
-    -------
-    tuple
-        ``(S, innov, M)``: ``S`` with the rows and columns of missing channels replaced by
-        those of the identity, the innovation with those channels zeroed, and
-        ``M = diag(valid)``.
+    S_raw, innov_raw : SX, shapes (ny, ny), (ny, 1)
+        The innovation covariance and innovation of all channels.
     """
     M = ca.diag(valid)
     S = symmetric(ca.mtimes([M, S_raw, M]) + ca.diag(1 - valid))
@@ -111,15 +97,13 @@ def mask_measurement(valid: ca.SX, S_raw: ca.SX, innov_raw: ca.SX) -> tuple[ca.S
 
 
 def joseph_update(xp: ca.SX, Pp: ca.SX, innov: ca.SX, H: ca.SX, S: ca.SX, R: ca.SX, gate=ca.inf) -> tuple:
-    """Kalman gain and Joseph-form update (seed 002 eqs 13-16; stable for any gain).
-
-    ``K = Pp H^T S^{-1}`` (by a solve, no inverse); with ``Ka = K`` if the NIS passes the
-    ``gate``, else 0: ``x = xp + Ka innov``, ``P = (I - Ka H) Pp (I - Ka H)^T + Ka R Ka^T``.
-
-    Parameters: the prior ``xp`` (nx, 1) and ``Pp`` (nx, nx), the innovation ``innov``
-    (ny, 1), the (masked) measurement Jacobian ``H`` (ny, nx), the innovation covariance
-    ``S`` and the (masked) ``R`` (ny, ny), and the ``gate``. Returns
+    """Kalman gain and Joseph-form update (seed 002 eqs 13-16; stable for any gain):
     ``(x, P, K, nis, accepted)``.
+
+    ``K = Pp H^T S^{-1}`` (by a solve); with ``Ka = K`` if the NIS passes the ``gate``, else 0:
+    ``x = xp + Ka innov``, ``P = (I - Ka H) Pp (I - Ka H)^T + Ka R Ka^T``, from the prior ``xp``
+    (nx, 1), ``Pp`` (nx, nx), the innovation ``innov`` (ny, 1), the masked Jacobian ``H`` (ny,
+    nx), the innovation covariance ``S`` and the masked ``R`` (ny, ny).
     """
     n = xp.numel()
     K, nis, acc = gated_gain(S, ca.mtimes(H, Pp), innov, gate)
@@ -130,40 +114,33 @@ def joseph_update(xp: ca.SX, Pp: ca.SX, innov: ca.SX, H: ca.SX, S: ca.SX, R: ca.
 
 
 def finite_flag(expr_list) -> ca.SX:
-    """1 if every entry is finite, else 0. Each entry is tested on its own (``|e| < inf``
-    is 0 for NaN and inf) and the 0/1 results are counted, so nothing can overflow (a sum
-    of the entries would, for finite values such as 1.5e308). (``e - e == 0`` would not
-    do: CasADi simplifies ``e - e`` to 0.)
+    """1 if every entry is finite, else 0. Each entry is tested on its own (``|e| < inf``; CasADi
+    simplifies ``e - e`` to 0) and the results counted, so nothing can overflow (a sum of the
+    entries would, for finite values such as 1.5e308).
 
     Parameters
     ----------
-    expr_list
-        SX expressions whose entries are tested.
+    expr_list : sequence of SX
     """
     count = sum(ca.sum1(ca.vec(ca.fabs(e) < ca.inf)) for e in expr_list)
     return count == sum(e.numel() for e in expr_list)
 
 
 def not_nan(y: ca.SX) -> ca.SX:
-    """1 where ``y`` is not NaN (inf included), per entry (``y == y`` would be simplified
-    to 1 by CasADi)."""
+    """1 where ``y`` is not NaN (inf included), per entry (CasADi simplifies ``y == y`` to 1)."""
     return ca.fabs(y) <= ca.inf
 
 
 def used_measurement(y: ca.SX, mask: ca.SX, nan_missing: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """``(valid, y_used)``: a channel is used if its mask is set and (unless NaN is an error,
-    ``nan_missing`` 0) it is not NaN; ``y_used`` is 0 in the others, so that a NaN of an
-    unused channel stays out of every expression."""
+    """``(valid, y_used)``: a channel of ``y`` is used if its ``mask`` is set and (unless
+    ``nan_missing`` is 0) it is not NaN; ``y_used`` is 0 in the others (a NaN stays out)."""
     valid = mask * ca.if_else(nan_missing, not_nan(y), 1)
     return valid, ca.if_else(valid, y, 0)
 
 
 def log_likelihood(nis, logdet_S, n_used, accepted) -> float:
-    """``-1/2 sum (nis + log det S + n_used log 2 pi)`` over the accepted steps (a missing
-    channel contributes 1 to S's diagonal: log 1 = 0).
-
-    Parameters: per step the ``nis``, ``logdet_S``, the number of channels used
-    ``n_used`` and whether the measurement was ``accepted`` (arrays of one length)."""
+    """``-1/2 sum (nis + logdet_S + n_used log 2 pi)`` over the ``accepted`` steps, from arrays
+    of one length (``n_used``: channels used; a missing one contributes 1 to S's diagonal)."""
     terms = np.asarray(nis) + np.asarray(logdet_S) + np.asarray(n_used) * np.log(2 * np.pi)
     return -0.5 * float(np.sum(terms[np.asarray(accepted, bool)]))
 
@@ -173,14 +150,13 @@ def upper_entries(M: ca.SX) -> ca.SX:
 
     Parameters
     ----------
-    M
-        A square SX matrix.
+    M : SX, shape (n, n)
     """
     n = M.shape[0]
     return ca.vertcat(*[M[i, j] for j in range(n) for i in range(j + 1)])
 
 
 def status_flag(inputs, outputs) -> ca.SX:
-    """The step's status: :data:`OK` (0) if every entry of ``inputs`` and ``outputs`` is finite,
-    :data:`BAD_INPUT` (1) if an input is not, :data:`BAD_RESULT` (2) if only an output is not."""
+    """The step's status: :data:`OK` if every entry of ``inputs`` and ``outputs`` is finite,
+    :data:`BAD_INPUT` if an input is not, :data:`BAD_RESULT` if only an output is not."""
     return ca.if_else(finite_flag(inputs), ca.if_else(finite_flag(outputs), OK, BAD_RESULT), BAD_INPUT)

@@ -10,7 +10,7 @@ from fmu_models.infra import checks
 from .adaptive import WindowedAdaptiveEKF, bound_parameters, bounds_around
 from .discrete import DiscreteModel
 from .fuzzy import MamdaniFuzzy
-from .protocol import Parameter
+from .protocol import Parameter, per_name
 
 __all__ = ["MFIAE", "Q_MAPPINGS"]
 
@@ -21,32 +21,18 @@ Q_MAPPINGS = ("literal", "gain")
 class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     """EKF whose scalar Q and R are tuned online by a Mamdani fuzzy system (seed 000 sec. 4).
 
-    Each step, after the EKF update: ``C_I`` is the mean of ``I_j I_j^T`` over the last
-    ``window`` innovations (eq 37), ``C_T = H P^- H^T + R`` the theoretical innovation
-    covariance (eq 39, the step's S). The fuzzy system (:class:`MamdaniFuzzy`, Table 2)
-    maps ``(C_T, C_I)`` to a normalised adjustment ``m`` in [-1, 1], and
-    ``MAdj = m s`` with ``s = (C_T + C_I)/2`` is the fuzzy image of ``C_T - C_I``
-    (eq 38), in measurement-variance units. Then, with ``Q = sigma_q^2 I`` and
-    ``R = sigma_r^2 I`` (the scalar forms of eqs 24-25)::
+    Each step, after the EKF update, the fuzzy system (:class:`MamdaniFuzzy`, Table 2) maps
+    ``C_T = H P^- H^T + R`` (eq 39, the step's S) and ``C_I`` (eq 37) to ``m`` in [-1, 1];
+    ``MAdj = m (C_T + C_I)/2`` is the fuzzy image of ``C_T - C_I`` (eq 38). Then, with
+    ``Q = sigma_q^2 I`` and ``R = sigma_r^2 I`` (eqs 24-25)::
 
         sigma_r^2 <- sigma_r^2 - gain_r MAdj                     (eq 42)
         sigma_q^2 <- sigma_q^2 - gain_q MAdj                     (eq 41, q_mapping="literal")
         sigma_q^2 <- sigma_q^2 - gain_q trace(K MAdj K^T) / nx   (q_mapping="gain")
 
-    each clipped to its bounds. Too large innovations (``C_I > C_T``, ``m < 0``) raise Q
-    and R, too small ones lower them. ``q_mapping="literal"`` (default) is eqs 41-42 read as
-    printed: both variances move by the same fuzzy output (so their ratio changes
-    whenever they differ, and with it the filter's gain). ``"gain"`` maps MAdj into the
-    state space through the gain, as eq 36 maps ``C_I`` into ``Q = K C_I K^T``; Q then
-    moves by about ``|K|^2`` times less than R.
-
-    Choices the paper leaves open, each a parameter: the mapping above; the scalar summary
-    of the matrices (``trace/ny``, or one adjustment per measurement channel with
-    ``per_channel=True``, R diagonal and Q moved by their mean); the input normalisation
-    and membership functions (:class:`MamdaniFuzzy`); the gains and the bounds.
-
-    Until ``window`` innovations are stored Q and R stay at their initial values. The whole
-    step, fuzzy inference included, is one compiled CasADi Function.
+    each clipped to its bounds: too large innovations (``C_I > C_T``, ``m < 0``) raise Q and R.
+    ``"gain"`` maps MAdj through the gain as eq 36 maps ``C_I`` (Q moves about ``|K|^2`` times
+    less than R). The manual's estimators page lists the choices the paper leaves open.
 
     Parameters
     ----------
@@ -57,26 +43,18 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
     r0 : float or array_like (ny,)
         Initial measurement noise variance sigma_r^2 (R = r0 I), or one per channel.
     window : int
-        N of eq 37 (default 10: the paper does not give it; seed 000's Table 3 is matched
-        within 10 % for windows 6 to 15, see the experiments page of the documentation).
+        N of eq 37 (default 10: the paper gives none; Table 3 is matched within 10 % for 6 to 15).
     fuzzy : MamdaniFuzzy, optional
         The fuzzy system (default ``MamdaniFuzzy()``).
     gain_q, gain_r : float
         Step sizes in (0, 1] (default 1 both: eqs 41-42 subtract MAdj itself).
     q_mapping : {"literal", "gain"}
-        How MAdj reaches sigma_q^2 (default "literal", see above).
+        How MAdj reaches sigma_q^2 (default "literal": eqs 41-42 as printed).
     per_channel : bool
         One adjustment per measurement channel (default False: scalar R).
     q_bounds, r_bounds : (float, float), optional
-        Bounds kept on sigma_q^2 and on each sigma_r^2. Default: a factor 1e4 either side
-        of the initial value, so that a start wrong by up to four orders of magnitude can
-        be corrected and nothing collapses to a numerical floor.
-
-    Attributes
-    ----------
-    m : ndarray, shape (ny,)
-        The last normalised fuzzy adjustment per channel (all equal unless
-        ``per_channel``; 0 before the window is full).
+        Bounds on sigma_q^2 and each sigma_r^2 (default a factor 1e4 either side of the start:
+        a start wrong by four orders of magnitude is corrected, nothing collapses to a floor).
     """
 
     name = "MF-IAE"
@@ -123,12 +101,10 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
 
     def fmu_noise_parameters(self):
         """``q0`` and ``r0`` (one per channel with ``per_channel``): Q = q0 I, R = r0 I."""
-        s = self.system
         r = np.diag(self.R)
         q = Parameter("q0", self.Q[0, 0], "positive", "initial process noise variance sigma_q^2 (Q = q0 I)")
         if self.per_channel:
-            return [q, Parameter("r0", r, "positive", "initial measurement noise variance",
-                                 tuple(f"r0_{n}" for n in s.output_names), of=tuple(s.output_names))]
+            return [q, per_name("r0", r, "positive", "initial measurement noise variance", self.system.output_names)]
         return [q, Parameter("r0", r[0], "positive", "initial measurement noise variance sigma_r^2 (R = r0 I)")]
 
     def fmu_noise(self, p):
@@ -168,4 +144,5 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         ctx.outputs["m"] = ca.if_else(ctx.outputs["adapted"], ctx.outputs["m"], ca.SX.zeros(self.system.ny))
         return changes
 
-    m = property(lambda self: self._out("m").copy(), doc="The last normalised fuzzy adjustment, (ny,).")
+    m = property(lambda self: self._out("m").copy(),
+                 doc="The last normalised fuzzy adjustment per channel (0 before the window is full), (ny,).")

@@ -1,50 +1,8 @@
-"""The filter protocol: what a filter of this package declares, the hooks it implements, and
-how they become one compiled step.
+"""The filter protocol: what a filter declares, the hooks it implements, and how they become one
+compiled step.
 
-Every filter is a subclass of :class:`~estimators.base.KalmanBase` and is described by
-
-**Declarations** (class attributes)
-    ``name`` (for messages), ``adapts_noise`` (Q and R are part of the state and may be
-    changed by :meth:`~estimators.base.KalmanBase.adapt_expr`; otherwise they are fixed
-    inputs of the step that :meth:`~estimators.base.KalmanBase.set_noise` changes without a
-    rebuild), ``supports_batch`` (the whole filter is in the fused step, so it runs batched,
-    natively over a record and as an FMU). A filter registers itself for scenario files with
-    a class keyword: ``class MyEKF(EKF, register="MyEKF")`` (see :data:`estimators.FILTERS`).
-
-**Symbolic hooks** (called once per configuration, when the fused step is built, with a
-:class:`StepContext`; they return CasADi SX expressions and must not keep state)
-
-    * ``predict_expr(ctx) -> (x_prior, P_prior)`` (required): the time update from ``ctx.x``,
-      ``ctx.P``, ``ctx.u``, ``ctx.Q``;
-    * ``update_expr(ctx, x_prior, P_prior) -> Update`` (required): the measurement update
-      with ``ctx.y`` (0 in unused channels), ``ctx.valid`` (1 for a used channel),
-      ``ctx.R`` and ``ctx.gate`` (see :func:`~estimators.linalg.mask_measurement`,
-      :func:`~estimators.linalg.joseph_update`);
-    * ``adapt_expr(ctx, result) -> dict`` (optional): new values of ``Q``, ``R`` (if
-      ``adapts_noise``) and of the filter's extra state, from the :class:`StepResult`;
-      extra outputs of the step are declared with :meth:`StepContext.output`;
-    * ``extra_state() -> dict`` (optional): the initial values of extra state arrays (a
-      window of innovations, a counter), carried from step to step;
-    * ``step_parameters() -> list[Parameter]`` (optional): fixed inputs of the step
-      (bounds, gains) with their values; being inputs, not constants, changing them needs
-      no rebuild, and each becomes an FMU parameter;
-    * ``config_key() -> tuple`` (optional): what identifies the compiled step beyond the
-      class (window length, sigma-point parameters), for the cache of compiled functions.
-
-**Runtime hooks** (optional)
-
-    ``after_step()`` after every step from Python, once the new state is current;
-    ``after_run(outputs)`` after a native run with every step's outputs.
-
-**Smoothing and export hooks** (optional, with defaults for EKF-type filters)
-
-    ``smoother_cross_covariance(x, P, u)`` (the RTS smoother's ``D_k``);
-    ``fmu_noise_parameters()`` and ``fmu_noise(p)`` (how the FMU's parameters give Q and R).
-
-What a hook may assume: ``ctx.P`` (and ``ctx.Q``, ``ctx.R``) are symmetric (their lower
-triangles are their upper triangles), the system's ``fx``/``hx`` expressions are in
-``ctx.system``, and every non-finite result is caught by the step's status (the filter
-raises and keeps its previous state), so a hook need not test for NaN.
+The hooks and declarations are documented in the manual's page "Writing a filter";
+:func:`build_step` makes them one fused step Function.
 """
 from __future__ import annotations
 
@@ -62,7 +20,7 @@ from .discrete import DiscreteModel
 from .linalg import CSE, log_det, status_flag, symmetric, upper_entries, used_measurement
 
 __all__ = ["DIAGNOSTICS", "STEP_INPUTS", "Parameter", "StepContext", "StepResult", "Update", "build_step",
-           "renamed"]
+           "per_name", "renamed"]
 
 #: Outputs of every fused step after the new state, in order.
 DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
@@ -86,13 +44,11 @@ class Parameter:
     description : str or tuple of str
         One line for users (and the FMU's ``modelDescription.xml``), or one per entry.
     labels : tuple of str
-        The FMU parameter name of each entry (default: ``name`` for a scalar,
-        ``name_0``, ``name_1``, ... otherwise).
+        The FMU parameter name of each entry (default ``name``, or ``name_0``, ``name_1``, ...).
     increasing : bool
-        The entries must increase (e.g. ``(low, high)`` bounds); checked by the FMU too.
+        The entries must increase (``(low, high)`` bounds; the FMU checks it too).
     of : tuple of str
-        What each entry is of (a state or measurement name), for the FMU's descriptions
-        (``"<description> of <of[i]>"``); default: nothing.
+        What each entry is of (a state or measurement name): ``"<description> of <of[i]>"``.
     """
 
     name: str
@@ -127,10 +83,16 @@ class Parameter:
         return int(self.value.size)
 
 
+def per_name(name: str, value, domain: str, description: str, names) -> Parameter:
+    """The :class:`Parameter` ``name`` of ``value`` in ``domain`` with one entry ``<name>_<n>``,
+    described ``"<description> of <n>"``, for each ``n`` of ``names`` (states or measurements)."""
+    return Parameter(name, value, domain, description, tuple(f"{name}_{n}" for n in names), of=tuple(names))
+
+
 class Update(NamedTuple):
-    """What ``update_expr`` returns (SX expressions): the posterior ``x`` (nx, 1) and ``P``
-    (nx, nx), the ``innovation`` (ny, 1), its covariance ``S`` (ny, ny), the gain ``K``
-    (nx, ny), the ``nis`` and ``accepted`` (1: the gate passed the measurement)."""
+    """What ``update_expr`` returns (SX): the posterior ``x`` (nx, 1) and ``P`` (nx, nx), the
+    ``innovation`` (ny, 1), its covariance ``S`` (ny, ny), the gain ``K`` (nx, ny), the ``nis``
+    and ``accepted`` (1: the gate passed the measurement)."""
 
     x: ca.SX
     P: ca.SX
@@ -143,35 +105,28 @@ class Update(NamedTuple):
 
 StepResult = NamedTuple("StepResult", [(f, ca.SX) for f in ("x_prior", "P_prior", *Update._fields, "logdet_S")])
 StepResult.__doc__ = """The step so far, as ``adapt_expr`` sees it: the prior ``x_prior`` (nx, 1) and
-``P_prior`` (nx, nx), the fields of the :class:`Update` (``x``, ``P``, ``innovation``, ``S``,
-``K``, ``nis``, ``accepted``) and ``logdet_S``."""
+``P_prior`` (nx, nx), the fields of the :class:`Update` and ``logdet_S``."""
 
 
 @dataclass
 class StepContext:
-    """The symbols a filter's hooks build its step from (see the module documentation).
+    """The symbols (SX) a filter's hooks build its step from.
 
     Attributes
     ----------
     system : DiscreteModel
-    x, P : SX
-        The state estimate (nx, 1) and its covariance (nx, nx; symmetric).
-    Q, R : SX
-        The noise covariances (nx, nx), (ny, ny).
-    u : SX
-        The input (nu, 1) held over the prediction.
-    y : SX
-        The measurement (ny, 1), 0 in unused channels.
+    x, P, Q, R : SX
+        The state estimate (nx, 1), its covariance (nx, nx) and the noise covariances
+        (nx, nx), (ny, ny); the matrices symmetric (lower triangle = upper).
+    u, y : SX
+        The input (nu, 1) held over the prediction; the measurement (ny, 1), 0 in unused channels.
     valid : SX
         1 for a used channel (masked in, and not NaN unless NaN is an error), else 0.
     gate : SX
         The chi-square gate on the NIS (``inf``: none).
-    state : dict of str to SX
-        The extra state arrays (``extra_state``), by name.
-    params : dict of str to SX
-        The step parameters (``step_parameters``), by name, as column vectors.
-    outputs : dict of str to SX
-        Extra outputs declared with :meth:`output`.
+    state, params, outputs : dict of str to SX
+        The extra state arrays (``extra_state``), the step parameters (column vectors) and the
+        extra outputs declared with :meth:`output`, by name.
     """
 
     system: DiscreteModel
@@ -188,30 +143,20 @@ class StepContext:
     outputs: dict = field(default_factory=dict)
 
     def output(self, name: str, expr) -> None:
-        """Declare an extra output ``name`` of the step (a diagnostic the filter reads back,
-        e.g. whether it adapted); it must not collide with a state or diagnostic name."""
+        """Declare an extra output ``name`` of the step (not a state, diagnostic or reserved name)."""
         if not name.isidentifier() or name in DIAGNOSTICS or name == "status" or name.endswith("_new"):
             raise ConfigurationError(f"extra step output name {name!r} is reserved or not an identifier")
         self.outputs[name] = ca.SX(expr)
 
 
 def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parameter]) -> ca.Function:
-    """The fused step Function of ``filt`` from its hooks (see the module documentation).
+    """The fused step Function of the filter ``filt`` from its hooks.
 
     Inputs, in order: the state arrays (``x``, ``P``, ``Q`` and ``R`` if the filter adapts
-    them, then the extra state in ``extra_state`` order), ``u``, ``y``, ``mask``, ``gate``,
-    ``nan_missing``, ``Q`` and ``R`` of a non-adaptive filter, the step parameters. Outputs:
-    ``<state>_new`` for each state array, :data:`DIAGNOSTICS`, the extra outputs and
-    ``status`` (:func:`~estimators.linalg.status_flag`).
-
-    Parameters
-    ----------
-    filt
-        The filter (its hooks and declarations).
-    extra_state
-        Initial values of its extra state arrays, by name (``extra_state()``).
-    params
-        Its step parameters (``step_parameters()``).
+    them, then the extra state in ``extra_state`` order), :data:`STEP_INPUTS`, ``Q`` and ``R``
+    of a non-adaptive filter, the step parameters ``params``. Outputs: ``<state>_new`` for each
+    state array, :data:`DIAGNOSTICS`, the extra outputs and ``status``
+    (:func:`~estimators.linalg.status_flag`).
     """
     s, sym = filt.system, ca.SX.sym
     n, m, p = s.nx, s.nu, s.ny
@@ -226,8 +171,7 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     upd = Update(*filt.update_expr(ctx, xp, Pp))
     result = StepResult(xp, Pp, *upd, log_det(upd.S))
     state = {"x": x, "P": P, **({"Q": Q, "R": R} if filt.adapts_noise else {}), **extra}
-    new = {k: sym for k, sym in state.items()}
-    new.update(x=upd.x, P=upd.P)
+    new = {**state, "x": upd.x, "P": upd.P}
     changes = filt.adapt_expr(ctx, result) or {}
     unknown = sorted(set(changes) - (set(state) - {"x", "P"}))
     if unknown:
@@ -247,8 +191,7 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
 
 
 def renamed(fn: ca.Function, name: str) -> ca.Function:
-    """``fn`` (an SX or MX Function) under another ``name``, inputs and outputs named as in
-    ``fn`` (generated C code calls it by that name)."""
+    """``fn`` (SX or MX) under another ``name`` (generated C code calls it by that name)."""
     sym = ca.SX if fn.is_a("SXFunction") else ca.MX
     args = [sym.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
     return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],

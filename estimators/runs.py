@@ -1,9 +1,7 @@
-"""The results of the filters' whole-record operations, as plain data with their names attached:
-:class:`FilterRun` (:meth:`~estimators.base.KalmanBase.run`), :class:`BatchRun`
-(:meth:`~estimators.BatchFilter.run`), :class:`Smoothed` (:func:`~estimators.rts_smooth`)
-and :class:`EMResult` (:func:`~estimators.em_noise`). Each carries the state and output
-names of its model, so :meth:`FilterRun.to_frame` needs nothing else. A filter's growing
-record of how its Q and R changed is a :class:`NoiseHistory`.
+"""The results of the filters' whole-record operations, as plain data with their names attached.
+
+:class:`FilterRun`, :class:`BatchRun`, :class:`Smoothed`, :class:`EMResult`; and
+:class:`NoiseHistory`, a filter's growing record of its Q and R.
 """
 from __future__ import annotations
 
@@ -17,44 +15,32 @@ __all__ = ["BatchRun", "EMResult", "FilterRun", "NoiseHistory", "Smoothed"]
 
 @dataclass
 class FilterRun:
-    """Every step's estimate and diagnostics of a run of ``N`` steps (arrays indexed by step
-    ``k = 1..N`` in row ``k - 1``, except ``x``, ``P``, ``Q`` and ``R``, which also hold the
-    initial values in row 0).
+    """Every step's estimate and diagnostics of a run of ``N`` steps: row ``k - 1`` holds step
+    ``k = 1..N``, except in ``x``, ``P``, ``Q`` and ``R``, whose row 0 is the initial value.
 
     Attributes
     ----------
-    x : ndarray, shape (N + 1, nx)
-        Estimates, row 0 the initial one.
-    P : ndarray, shape (N + 1, nx, nx)
-        Their covariances.
-    x_prior, P_prior : ndarray, shapes (N, nx), (N, nx, nx), or None
-        Predictions (None with ``keep="estimates"``).
-    innovation : ndarray, shape (N, ny), or None
-        Innovations (0 in missing channels).
-    S : ndarray, shape (N, ny, ny), or None
-        Innovation covariances (1 on the diagonal of missing channels).
-    K : ndarray, shape (N, nx, ny), or None
-        Gains.
-    nis : ndarray, shape (N,)
-    accepted : ndarray of bool, shape (N,)
-        False where the gate refused the measurement.
+    x, P : ndarray, shapes (N + 1, nx), (N + 1, nx, nx)
+        Estimates and their covariances.
+    x_prior, P_prior, K : ndarray, shapes (N, nx), (N, nx, nx), (N, nx, ny), or None
+        Predictions and gains (None with ``keep="estimates"``, as ``innovation`` and ``S``).
+    innovation, S : ndarray, shapes (N, ny), (N, ny, ny), or None
+        Innovations and their covariances (0, and 1 on the diagonal, in missing channels).
+    nis, accepted : ndarray, shape (N,)
+        The NIS; False where the gate refused the measurement.
     mask : ndarray of bool, shape (N, ny)
         The channels used (valid, not NaN, accepted).
     us : ndarray, shape (N, nu)
         The inputs (the smoother needs them).
     Q, R : ndarray, shapes (N + 1, nx), (N + 1, ny)
-        Diagonals of Q and R in force after each step (row 0: initial).
+        Diagonals of Q and R in force after each step.
     log_likelihood : float
-        Gaussian log-likelihood of the measurements,
         ``-1/2 sum_k (nis_k + log det(2 pi S_k))`` over the valid channels.
     state_names, output_names : list of str
         The model's names (columns of :meth:`to_frame`).
-    filter_name : str
-        The filter that produced the run (its ``name``).
-    model : str
-        The :attr:`~estimators.DiscreteModel.identity` of the model it ran on.
-    jacobians : str
-        How that model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
+    filter_name, model, jacobians : str
+        The filter's ``name``, the model's :attr:`~estimators.DiscreteModel.identity` and
+        :attr:`~estimators.DiscreteModel.jacobians`.
     """
 
     x: np.ndarray
@@ -82,10 +68,8 @@ class FilterRun:
         return len(self.nis)
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy DataFrame indexed by step ``k`` (0..N) with the estimate, the covariance
-        diagonal, the innovation (if kept) and NIS (NaN at k = 0)."""
-        data = {name: self.x[:, i] for i, name in enumerate(self.state_names)}
-        data.update({f"P_{name}": self.P[:, i, i] for i, name in enumerate(self.state_names)})
+        """DataFrame by step ``k`` (0..N): estimate, variances, innovation (if kept), NIS (NaN at 0)."""
+        data = _estimates(self.x, self.P, self.state_names)
         if self.innovation is not None:
             for j, name in enumerate(self.output_names):
                 data[f"innovation_{name}"] = np.r_[np.nan, self.innovation[:, j]]
@@ -94,31 +78,24 @@ class FilterRun:
         return pd.DataFrame(data, index=pd.RangeIndex(len(self.x), name="k"))
 
 
+def _estimates(x: np.ndarray, P: np.ndarray, names) -> dict:
+    """The columns of the estimates ``x`` (N, nx) and of the variances ``P[:, i, i]``, by name."""
+    return {**{n: x[:, i] for i, n in enumerate(names)}, **{f"P_{n}": P[:, i, i] for i, n in enumerate(names)}}
+
+
 @dataclass
 class BatchRun:
-    """The result of :meth:`~estimators.BatchFilter.run` (``R`` realisations, ``N`` steps).
+    """The result of :meth:`~estimators.BatchFilter.run` (``R`` realisations, ``N`` steps);
+    the attributes of :class:`FilterRun`, with a leading axis of length R.
 
     Attributes
     ----------
-    x : ndarray, shape (R, N + 1, nx)
-        Estimates, with the initial one at index 0.
-    P : ndarray, shape (R, N + 1, nx, nx)
-        Their covariances.
-    nis : ndarray, shape (R, N)
-    accepted : ndarray of bool, shape (R, N)
-    Q, R : ndarray, shapes (R, N + 1, nx), (R, N + 1, ny)
-        Diagonals of Q and R after each step (row 0: initial).
+    x, P, nis, accepted, Q, R, state_names, output_names, innovation, S, jacobians
+        As :class:`FilterRun`, shapes (R, N + 1, nx), (R, N + 1, nx, nx), (R, N), (R, N),
+        (R, N + 1, nx), (R, N + 1, ny), -, -, (R, N, ny), (R, N, ny, ny).
     failed : ndarray of bool, shape (R,)
         Realisations whose input or estimate became non-finite (their values from that
         step on are not meaningful).
-    state_names, output_names : list of str
-        The model's names.
-    innovation : ndarray, shape (R, N, ny), or None
-        Innovations (0 in missing channels), for whiteness tests.
-    S : ndarray, shape (R, N, ny, ny), or None
-        Their predicted covariances (1 on the diagonal of missing channels).
-    jacobians : str
-        How the model's Jacobians were computed (:attr:`~estimators.DiscreteModel.jacobians`).
     """
 
     x: np.ndarray
@@ -141,14 +118,10 @@ class Smoothed:
 
     Attributes
     ----------
-    x : ndarray, shape (N + 1, nx)
-        Smoothed states ``E[x_k | all measurements]``, k = 0..N.
-    P : ndarray, shape (N + 1, nx, nx)
-        Their covariances.
-    P_lag : ndarray, shape (N, nx, nx)
-        ``Cov(x_{k+1}, x_k | all)`` for k = 0..N-1.
-    C : ndarray, shape (N, nx, nx)
-        Smoother gains.
+    x, P : ndarray, shapes (N + 1, nx), (N + 1, nx, nx)
+        Smoothed states ``E[x_k | all measurements]``, k = 0..N, and their covariances.
+    P_lag, C : ndarray, shape (N, nx, nx)
+        ``Cov(x_{k+1}, x_k | all)`` for k = 0..N-1, and the smoother gains.
     state_names : list of str
         The model's state names.
     """
@@ -161,9 +134,7 @@ class Smoothed:
 
     def to_frame(self) -> pd.DataFrame:
         """DataFrame indexed by step k with the smoothed states and variances."""
-        data = {n: self.x[:, i] for i, n in enumerate(self.state_names)}
-        data.update({f"P_{n}": self.P[:, i, i] for i, n in enumerate(self.state_names)})
-        return pd.DataFrame(data, index=pd.RangeIndex(len(self.x), name="k"))
+        return pd.DataFrame(_estimates(self.x, self.P, self.state_names), index=pd.RangeIndex(len(self.x), name="k"))
 
 
 @dataclass
@@ -175,8 +146,7 @@ class EMResult:
     Q, R, x0, P0 : ndarray
         The learned values (unlearned ones as given).
     log_likelihood : list of float
-        The log-likelihood of the record at each iteration's parameters (the first entry
-        at the starting values, the last at the returned ones).
+        The record's log-likelihood at each iteration's parameters (first: the start, last: the result).
     iterations : int
         M-steps done.
     converged : bool
@@ -201,48 +171,42 @@ class NoiseHistory:
         Sizes of Q and R.
     capacity : int
         Rows allocated at first (doubled when full).
+
+    Attributes
+    ----------
+    rows : ndarray, shape (capacity, 1 + nx + ny)
+        The allocated rows; the first ``count[0]`` are written (an array: compiled code appends too).
     """
 
     def __init__(self, nx: int, ny: int, capacity: int = 1024):
         self.nx, self.ny = nx, ny
-        self._rows = np.empty((capacity, 1 + nx + ny))
-        self.count = np.zeros(1, dtype=np.int64)      # rows written (an array: compiled code appends too)
-
-    @property
-    def rows(self) -> np.ndarray:
-        """The allocated rows (capacity, 1 + nx + ny); the first ``count`` are written."""
-        return self._rows
-
-    @property
-    def _n(self) -> int:
-        return int(self.count[0])
+        self.rows = np.empty((capacity, 1 + nx + ny))
+        self.count = np.zeros(1, dtype=np.int64)
 
     def append(self, k: int, qr_diag) -> None:
         """Add the row ``k, qr_diag`` where ``qr_diag = [diag Q, diag R]`` (nx + ny)."""
         self._row(k)[1:] = qr_diag
 
     def append_flat(self, k: int, Q: np.ndarray, R: np.ndarray) -> None:
-        """Add the row of step ``k`` from the flat (column-major) ``Q`` (nx*nx) and ``R``
-        (ny*ny), taking their diagonals without building an intermediate array."""
+        """Add the row of step ``k`` from the flat (column-major) ``Q`` (nx*nx) and ``R`` (ny*ny)."""
         row = self._row(k)
         row[1:1 + self.nx] = Q[:: self.nx + 1]
         row[1 + self.nx:] = R[:: self.ny + 1]
 
     def _row(self, k: int) -> np.ndarray:
-        n = self._n
-        if n == len(self._rows):
-            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
-        row = self._rows[n]
+        n = len(self)
+        if n == len(self.rows):
+            self.rows = np.concatenate([self.rows, np.empty_like(self.rows)])
+        row = self.rows[n]
         row[0] = k
         self.count[0] = n + 1
         return row
 
     def __len__(self):
-        return self._n
+        return int(self.count[0])
 
     def to_frame(self, state_names, output_names) -> pd.DataFrame:
         """DataFrame indexed by step k with columns ``Q_<state>`` and ``R_<output>``."""
         cols = [f"Q_{n}" for n in state_names] + [f"R_{n}" for n in output_names]
-        rows = self._rows[: self._n]
-        return pd.DataFrame(rows[:, 1:], index=pd.Index(rows[:, 0].astype(int), name="k"),
-                            columns=cols)
+        rows = self.rows[: len(self)]
+        return pd.DataFrame(rows[:, 1:], index=pd.Index(rows[:, 0].astype(int), name="k"), columns=cols)

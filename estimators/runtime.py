@@ -1,21 +1,9 @@
 """The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and
 the errors of a failed step.
 
-:class:`BufferedFunction` is a CasADi Function bound once to numpy arrays, then evaluated
-with no argument conversion.
-
-:class:`BoundStep` binds a fused step (one filter, or one mapped over realisations) to
-flat float arrays once (:class:`StepArrays`): the state in two copies (the step reads one
-and writes the other; :meth:`StepArrays.commit` makes the written copy current, so a failed
-step leaves the state as it was), the inputs, the diagnostics and the status. Evaluating it
-is one native call.
-
-:class:`VectorInput` puts a user's vector into an input buffer. The good path costs a
-length check and one assignment per entry (a list, a tuple or a float array of the right
-length); anything else (a scalar, a string, a wrong length, ``None``, something that is
-not numbers) goes through the full check, which names the problem. NaN and inf are not
-tested here: the compiled step reports them in its status, and :func:`explain_status`
-then says which entry it was.
+:class:`BufferedFunction` and :class:`BoundStep` bind a step once (evaluating it is one native
+call), :class:`VectorInput` and :func:`lean_step` convert a user's vectors, and
+:func:`explain_status` raises the error of a failed step.
 """
 from __future__ import annotations
 
@@ -36,75 +24,59 @@ __all__ = ["BoundStep", "BufferedFunction", "StepArrays", "VectorInput", "broadc
 class BufferedFunction:
     """Evaluate ``fn`` on preset arrays: ``trigger()`` costs about a microsecond.
 
-    Every input and output is a flat float array in CasADi's column-major layout;
-    :func:`matrix` gives a 2-D (Fortran-ordered) view of one. Arrays passed in
-    ``bind_args``/``bind_res`` are shared, not copied: several functions can read and
-    write the same arrays.
+    Every input and output is a flat float array in CasADi's column-major layout
+    (:func:`matrix` gives a 2-D view). Arrays passed in ``bind_args``/``bind_res`` (by
+    index) are shared, not copied: several functions can read and write the same arrays.
     """
 
     def __init__(self, fn: ca.Function, bind_args: dict[int, np.ndarray] | None = None,
                  bind_res: dict[int, np.ndarray] | None = None):
-        for i in range(fn.n_in()):
-            if not fn.sparsity_in(i).is_dense():
-                raise ValueError(f"{fn.name()}: input {fn.name_in(i)} must be dense")
-        for i in range(fn.n_out()):
-            if not fn.sparsity_out(i).is_dense():
-                raise ValueError(f"{fn.name()}: output {fn.name_out(i)} must be dense")
         self.fn = fn
         self.buffer, self.trigger = fn.buffer()
-        bind_args, bind_res = bind_args or {}, bind_res or {}
-        self.args = [bind_args.get(i, np.zeros(fn.nnz_in(i))) for i in range(fn.n_in())]
-        self.res = [bind_res.get(i, np.zeros(fn.nnz_out(i))) for i in range(fn.n_out())]
-        for i, a in enumerate(self.args):
-            if a.shape != (fn.nnz_in(i),) or a.dtype != np.float64 or not a.flags.c_contiguous:
-                raise ValueError(f"{fn.name()}: bad array bound to input {fn.name_in(i)}")
-            self.buffer.set_arg(i, memoryview(a))
-        for i, r in enumerate(self.res):
-            if r.shape != (fn.nnz_out(i),) or r.dtype != np.float64 or not r.flags.c_contiguous:
-                raise ValueError(f"{fn.name()}: bad array bound to output {fn.name_out(i)}")
-            self.buffer.set_res(i, memoryview(r))
+        self.args = self._bind("input", fn.n_in(), fn.sparsity_in, fn.name_in, bind_args, self.buffer.set_arg)
+        self.res = self._bind("output", fn.n_out(), fn.sparsity_out, fn.name_out, bind_res, self.buffer.set_res)
+
+    def _bind(self, kind: str, count: int, sparsity, name, bound, setter) -> list[np.ndarray]:
+        """The arrays of the inputs (or outputs), the ``bound`` ones shared, set in the buffer."""
+        arrays = []
+        for i in range(count):
+            nnz = sparsity(i).nnz()
+            if not sparsity(i).is_dense():
+                raise ValueError(f"{self.fn.name()}: {kind} {name(i)} must be dense")
+            a = (bound or {}).get(i, np.zeros(nnz))
+            if a.shape != (nnz,) or a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"{self.fn.name()}: bad array bound to {kind} {name(i)}")
+            setter(i, memoryview(a))
+            arrays.append(a)
+        return arrays
 
 
 def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """2-D view (column-major, shares memory) of a flat CasADi matrix array.
+    """2-D view (column-major, shared memory) of a flat CasADi matrix array.
 
     Parameters
     ----------
-    flat
-        The flat array (CasADi's column-major layout).
-    rows
-        Rows of the matrix.
-    cols
-        Columns of the matrix.
+    flat : ndarray
+    rows, cols : int
     """
     return flat.reshape((rows, cols), order="F")
 
 
 class StepArrays:
     """The flat arrays a step reads and writes: the state in two copies (``pairs``; the step
-    reads the current one and writes the other, :meth:`commit` makes that current), the
-    other inputs and the outputs (see the module documentation).
+    reads the current one and writes the other, :meth:`commit` makes that current, so a
+    failed step leaves the state as it was), the other ``inputs`` and the ``outputs``.
 
     Parameters
     ----------
     names_in, names_out : sequence of str
-        The step's input and output names; an input ``s`` with an output ``s_new`` is state,
-        carried from evaluation to evaluation.
+        The step's input and output names; an input ``s`` with an output ``s_new`` is state.
     size : callable
-        ``size(name, output) -> int``: the entries of the array of input (``output`` False)
-        or output ``name``.
+        ``size(name, output) -> int``: the entries of input (``output`` False) or output ``name``.
     state : mapping of str to ndarray
         Initial values of the state inputs (flat, column-major), copied.
     shared : mapping of str to ndarray
-        Arrays bound as they are (not copied) to inputs of these names: fixed inputs whose
-        values the owner changes in place (Q, R, bounds).
-
-    Attributes
-    ----------
-    inputs : dict of str to ndarray
-        The array bound to every non-state input (``u``, ``y``, ...).
-    outputs : dict of str to ndarray
-        The array bound to every output that is not state (diagnostics, ``status``).
+        Arrays bound as they are to inputs of these names (the owner changes them in place).
     """
 
     def __init__(self, names_in, names_out, size: Callable[[str, bool], int], state: Mapping[str, np.ndarray],
@@ -141,13 +113,12 @@ class StepArrays:
 
 
 class BoundStep(StepArrays):
-    """A step Function bound to arrays (see the module documentation and :class:`StepArrays`).
+    """A step Function bound to the arrays of :class:`StepArrays`.
 
     Parameters
     ----------
     fn : casadi.Function
-        The step: its inputs named ``s`` with an output ``s_new`` are state, carried from
-        evaluation to evaluation.
+        The step: an input ``s`` with an output ``s_new`` is state.
     state, shared : mapping of str to ndarray
         As :class:`StepArrays`.
     """
@@ -166,15 +137,13 @@ class BoundStep(StepArrays):
         return BufferedFunction(fn, args, res)
 
     def trigger(self) -> float:
-        """Evaluate the step from the current state into the other copy; returns the status
-        (0: fine; the state is then committed only by :meth:`commit`)."""
+        """Evaluate the step into the other state copy (made current by :meth:`commit`); the status."""
         self._steps[self.cur].trigger()
         return self.status[0]
 
 
 class VectorInput:
-    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into ``buffer`` (see the
-    module documentation).
+    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into a buffer.
 
     Parameters
     ----------
@@ -182,6 +151,12 @@ class VectorInput:
         The float buffer (length ``n``).
     owner, what : str
         For messages: the filter's name and the input's (``"u"``, ``"y"``, ``"mask"``).
+
+    Notes
+    -----
+    The good path costs a length check and one assignment per entry (a list, a tuple or a
+    float array of the right length); anything else goes through :meth:`checked`, which names
+    the problem. NaN and inf are left to the compiled step's status (:func:`explain_status`).
     """
 
     def __init__(self, buffer: np.ndarray, owner: str, what: str):
@@ -189,8 +164,7 @@ class VectorInput:
         self._entries = range(self.n)
 
     def __call__(self, value) -> None:
-        """Copy ``value`` into the buffer (raises InputError / TypeMismatchError naming the
-        problem; the buffer may then hold part of it)."""
+        """Copy ``value`` into the buffer, or raise InputError / TypeMismatchError naming the problem."""
         buf = self.buffer
         try:
             if value.__class__ is str or len(value) != self.n:
@@ -235,31 +209,27 @@ def _unpack(name: str, entries: list[str]) -> list[str]:
 
 def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: list, general: Callable,
               explain: Callable[[str], None], after: Callable[[], None] | None) -> Callable:
-    """A filter's ``step(u, y, mask=None)`` specialised for its sizes: for the common call (a
-    measurement, no mask) ``u`` and ``y`` (lists, tuples or float arrays) are unpacked into
-    their entries and these copied one by one (written out for the filter's ``nu`` and
-    ``ny``, as the standard library's dataclasses write their methods), the step is one
-    native call, and nothing else is checked unless the conversion fails (a wrong length or
-    a non-number: then ``fill_u``/``fill_y`` name the problem) or the step's status is not 0
-    (NaN or inf: then ``explain`` does); other calls (``y=None``, a mask) go to
-    ``general(u, y, mask)``, which leaves the mask buffer all ones again.
+    """A filter's ``step(u, y, mask=None)`` specialised for its sizes.
+
+    For the common call (a measurement, no mask) ``u`` and ``y`` (lists, tuples or float
+    arrays) are unpacked and copied entry by entry (written out for ``nu`` and ``ny``, as the
+    standard library's dataclasses write their methods) and the step is one native call;
+    nothing else is checked unless the conversion fails or the status is not 0.
 
     Parameters
     ----------
-    rt
+    rt : BoundStep
         The filter's bound step.
-    fill_u
-        The checked conversion of ``u``.
-    fill_y
-        The checked conversion of ``y``.
-    count
-        One-element list holding the step count.
-    general
-        The filter's general step, for the other calls.
-    explain
-        Raises the error of a failed step (given what ran).
-    after
-        The runtime hook after a step, or None.
+    fill_u, fill_y : VectorInput
+        The checked conversions (they name a problem of the conversion).
+    count : list
+        One element: the step count.
+    general : callable
+        ``general(u, y, mask)``, the step for the other calls (``y=None``, a mask).
+    explain : callable
+        ``explain(what)`` raises the error of a failed step.
+    after : callable or None
+        The runtime hook after a step.
     """
     scope = dict(general=general, ndarray=np.ndarray, SCALARS=_SCALARS, ub=memoryview(fill_u.buffer),
                  yb=memoryview(fill_y.buffer), SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked,
@@ -270,8 +240,7 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
 
 
 def _lean_source(nu: int, ny: int, after: bool) -> str:
-    """The source of the lean ``step`` for ``nu`` inputs and ``ny`` measurements (``after``:
-    it calls the runtime hook); the names it uses are those of :func:`lean_step`'s scope."""
+    """The source of the lean ``step`` for ``nu`` inputs, ``ny`` measurements, ``after`` a hook."""
     us, ys = [f"u{i}" for i in range(nu)], [f"y{j}" for j in range(ny)]
     # memoryviews: an entry that is not a number (a string, None, a sequence) is a TypeError,
     # and reading the status gives a float, both cheaper than through numpy; an array is
@@ -302,16 +271,13 @@ def _lean_source(nu: int, ny: int, after: bool) -> str:
 
 
 def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
-    """The inputs ``us`` of ``runs`` records of ``N`` steps, shared (shape (N, nu)) or one
-    sequence each (shape (runs, N, nu)), as a (runs, N, nu) float array (a broadcast view),
-    or InputError naming the problem (a wrong shape, NaN or inf).
+    """The inputs of ``runs`` records of ``N`` steps, shared or one sequence each, as a (runs, N,
+    nu) float array (a broadcast view), or InputError naming the problem (a shape, NaN or inf).
 
     Parameters
     ----------
-    us : array_like
-        The inputs.
+    us : array_like, shape (N, nu) or (runs, N, nu)
     runs, N, nu : int
-        Records, steps and inputs per step.
     """
     us = float_array(us, "inputs us")
     try:
@@ -325,12 +291,12 @@ def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
 
 def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarray, mask: np.ndarray,
                    nan_is_missing: bool, what: str) -> None:
-    """Raise the error of a step whose status is not 0 (the filter's state is unchanged).
+    """Raise the error of a step whose ``status`` is :data:`~estimators.linalg.BAD_INPUT`
+    (InputError: ``u`` or a used ``y`` entry was NaN or inf) or ``BAD_RESULT`` (NumericalError).
 
     Parameters
     ----------
     status : float
-        The step's status (:data:`~estimators.linalg.BAD_INPUT` or ``BAD_RESULT``).
     owner : str
         The filter's name.
     k : int
@@ -341,13 +307,6 @@ def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarr
         Whether a NaN measurement is a missing channel.
     what : str
         What was running (``"step"``, ``"run index 12"``).
-
-    Raises
-    ------
-    InputError
-        ``u`` or a used ``y`` entry was NaN or inf.
-    NumericalError
-        The estimate became non-finite.
     """
     if status == BAD_INPUT:
         bad_u = np.flatnonzero(~np.isfinite(u))

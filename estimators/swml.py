@@ -1,65 +1,12 @@
 """Sliding-window maximum-likelihood adaptive EKF (SWML), started from autocovariance least squares.
 
-Beyond the source papers. The EKF's noise is ``Q = q I``, ``R = r I`` (the form
-of seed 000 eqs 24-25), with ``theta = (ln q, ln r)``. Every step is an EKF step with the
-current Q, R; the filter keeps the input, measurement and valid channels of the last
-``window`` steps and its own state at every ``every``-th step. At update times (every
-``early_every`` steps up to step ``early_until``, then every ``every`` steps), over the
-window (the last ``window`` steps, or all steps so far), with the EKF re-run from the
-stored state at the window's start:
-
-1. the window's innovation log-likelihood ``l(theta) = -1/2 sum (ln det S_j + e_j^T S_j^-1
-   e_j)`` (the Gaussian likelihood of the innovations, Schweppe 1965);
-2. an autocovariance least-squares candidate (Odelson, Rajamani and Rawlings 2006, here
-   for time-varying gains and Jacobians): the innovation products ``e_{j+l} e_j^T``,
-   ``l = 0, 1, 2``, are fitted by least squares to their expectations, which are affine in
-   ``(q, r)`` through the linearised error recursion ``eps_{j+1} = F_{j+1} (I - K_j H_j)
-   eps_j + w_j - F_{j+1} K_j v_j`` (:meth:`SWML.als_step`); negative solutions are floored;
-3. the ALS point replaces the current one as the start if its likelihood is higher (and,
-   if it lowers r, higher by ``keep_r_nats``); around the start, one Newton step on ``l``
-   from a finite-difference gradient and Hessian in log space (step ``fd_step``; at most
-   a factor ``max_factor`` per variance; an uphill step of length ``fd_step`` where the
-   Hessian is not negative definite); of every point evaluated the one of highest
-   likelihood is kept;
-4. safeguards: r is never lowered unless the likelihood gains ``keep_r_nats`` over the
-   best point evaluated that keeps r (the current one among them); neither
-   variance falls by more than a factor ``max_fall`` per update (rises are free); both
-   stay within ``q_bounds``/``r_bounds`` (default 1e-4 to 1e4 times the start);
-5. the filter continues from the end of the window re-run with the kept ``(q, r)`` (the
-   window is re-filtered, not only Q and R replaced).
-
-Two named options (off by default; the campaigns use both), for short windows and
-consistency:
-
-- ``prior_sd`` (**MAP**): a Gaussian prior on ``theta`` of standard deviation ``prior_sd``
-  in each of ``ln q``, ``ln r``, centred at the initial values (the step parameter
-  ``noise_prior``); every likelihood of steps 1-4 becomes the log-posterior
-  ``l(theta) - |theta - theta_0|^2 / (2 prior_sd^2)``. A window of a few steps no longer
-  drives a variance to a bound (the maximum-likelihood estimate of a short window is often
-  on the boundary), so the safeguards of step 4 can be relaxed (``keep_r_nats = 0``, a
-  larger ``max_fall``).
-- ``posterior_average`` (needs the prior): the filter's state and covariance are averaged
-  over the posterior of ``theta`` (Laplace approximation: precision minus the
-  finite-difference Hessian of the log-posterior of step 3, at least the prior's on its
-  diagonal where it is not positive definite, centred at the kept point), represented by
-  five unscented points (the centre, weight 1/3, and ``theta +- sqrt(3) L e_i``, weight
-  1/6, ``L L^T`` the posterior covariance). At an update the window is re-run at the four
-  outer points too; between updates every step is one EKF step at each of the five points
-  from the shared state; the state is the mixture's mean ``x = sum w_i x_i`` and ``P =
-  sum w_i (P_i + (x_i - x)(x_i - x)^T)`` (the mixture collapsed to one Gaussian at every
-  step); an outer point whose window re-run diverged (log-posterior more than
-  ``DROP_NATS`` below the kept point's) is left out and the weights renormalised. Until
-  the first update the points are the prior's. The covariance thereby
-  accounts for what the window does not know about the noise, which the ML form ignores
-  (it is overconfident while ``(q, r)`` is still uncertain, e.g. when started far too
-  small).
-
-Everything is one compiled Function (:meth:`SWML.wrap_step`): the EKF step, then a
-conditional (CasADi's ``Function.conditional``: only the branch taken runs) whose
-update branches fold the EKF step over the window (``mapaccum``), so the update runs in
-``step``, ``run``, batched and in the FMU alike. The work of an update is not spread over
-the following steps: it is done at the update step (a burst; see the cost figures of the
-documentation's performance page).
+Beyond the source papers: the EKF's ``Q = q I``, ``R = r I`` (the form of seed 000 eqs
+24-25) re-estimated at update times by maximum likelihood (Schweppe 1965), or MAP, over a
+re-filtered window of innovations, from an ALS candidate (Odelson, Rajamani and Rawlings
+2006, for time-varying gains and Jacobians), with safeguards; optionally the state averaged
+over the posterior of ``(ln q, ln r)``. The method, step by step, is in the manual's
+estimators page; the whole filter, updates included, is one compiled Function
+(:meth:`SWML.wrap_step`).
 """
 from __future__ import annotations
 
@@ -82,9 +29,8 @@ __all__ = ["MAX_WINDOW", "SWML"]
 #: The unscented weights of the posterior average (the centre, then the four outer points).
 UT_WEIGHTS = (1.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0, 1.0 / 6.0)
 #: An outer point of the posterior average whose window log-posterior lies more than this
-#: many nats below the kept point's is left out, the other weights renormalised (its re-run
-#: has diverged). Measured on the seed 000 sweep: with 50 a cell loses its consistency
-#: (points that carry the noise's uncertainty left out), with 1000 a diverged re-run is kept.
+#: many nats below the kept point's is left out (its re-run has diverged). Measured on the
+#: seed 000 sweep: with 50 a cell loses its consistency, with 1000 a diverged re-run is kept.
 DROP_NATS = 200.0
 
 #: Longest window, whose re-runs are compiled into the step (about 1.7 s of C compilation per
@@ -104,8 +50,7 @@ def _scalar_variance(M, n: int, what: str) -> float:
 
 class SWML(AdaptationRecord, EKF, register="SWML"):
     """EKF whose ``Q = q I`` and ``R = r I`` are re-estimated by maximum likelihood over a
-    sliding window of innovations, started from an ALS estimate (see the module
-    documentation for the method and its sources).
+    sliding window of innovations, started from an ALS estimate (see the module documentation).
 
     Parameters
     ----------
@@ -114,36 +59,27 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
     Q, R : float or array_like
         The initial ``q I`` and ``r I`` (a scalar, or a multiple of the identity).
     window : int
-        W, the steps in the window (default 100); a multiple of ``every``, at most
-        :data:`MAX_WINDOW`.
+        W, the steps in the window (default 100); a multiple of ``every``, at most :data:`MAX_WINDOW`.
     every : int
         M, steps between updates after the start (default 50).
     early_until, early_every : int
-        Up to step ``early_until`` (default 20) an update every ``early_every`` steps
-        (default 2) over all steps so far; ``early_until = 0``: none.
+        Up to step ``early_until`` (default 20; 0: none) an update every ``early_every`` steps
+        (default 2) over all steps so far.
     fd_step : float
         Finite-difference step in ``ln q``, ``ln r`` (default 0.25).
-    max_factor : float
-        Largest change of a variance by the Newton step (default 10).
+    max_factor, max_fall : float
+        Largest change of a variance by the Newton step (default 10), and largest factor by
+        which it may fall in one update (default 2).
     keep_r_nats : float
         Likelihood gain [nats] a point must bring to lower r (default 2).
-    max_fall : float
-        Largest factor by which a variance may fall in one update (default 2).
     q_bounds, r_bounds : (float, float), optional
         Bounds of q and r (default 1e-4 and 1e4 times the initial values).
     prior_sd : float, optional
-        Standard deviation [nats] of a Gaussian prior on ``ln q`` and ``ln r`` centred at
-        the initial values: the updates maximise the window's posterior (MAP) instead of its
-        likelihood (default None: maximum likelihood).
+        Standard deviation [nats] of a Gaussian prior on ``ln q`` and ``ln r`` centred at the
+        initial values: the updates maximise the window's posterior (MAP; default None: ML).
     posterior_average : bool
-        Average the state and covariance over the posterior of ``(ln q, ln r)`` at every
-        step (five unscented points; needs ``prior_sd``; default False).
-
-    Attributes
-    ----------
-    Q, R : ndarray
-        The current estimates ``q I``, ``r I`` (and every attribute of
-        :class:`~estimators.base.KalmanBase`); :meth:`noise_history` lists every update.
+        Average the state and covariance over the posterior of ``(ln q, ln r)`` at every step
+        (five unscented points; needs ``prior_sd``; default False).
     """
 
     name = "SWML"
@@ -188,7 +124,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         super().__init__(system, x0, P0, q0, r0, gate, nan_is_missing, backend)
         self._init_adaptation_record()
 
-    # ------------------------------------------------------------------ configuration
     def config_key(self) -> tuple:
         """Window, schedule and the update's constants (the bounds are step inputs)."""
         return (self.window, self.every, self.early_until, self.early_every, self.fd_step, self.max_factor,
@@ -204,10 +139,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         return bound_parameters(self.q_bounds, self.r_bounds) + prior
 
     def extra_state(self) -> dict:
-        """The window (``wu``, ``wy``, ``wv``: inputs, measurements, valid channels; ``wa``:
-        1 for a slot holding a step), the stored states at every ``every``-th step
-        (``snap_x``, ``snap_P``, oldest first), the initial state (``x_init``, ``P_init``)
-        and the step count."""
+        """The window (``wu``, ``wy``, ``wv``: inputs, measurements, valid channels; ``wa``: 1 for
+        a slot holding a step), the states stored every ``every`` steps (``snap_x``, ``snap_P``,
+        oldest first), the initial state (``x_init``, ``P_init``) and the step count."""
         s, W, n_snap = self.system, self.window, self.window // self.every
         x0, P0 = self._start
         return {"wu": np.zeros(s.nu * W), "wy": np.zeros(s.ny * W), "wv": np.zeros(s.ny * W), "wa": np.zeros(W),
@@ -217,9 +151,8 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                    if self.posterior_average else {})}
 
     def _prior_points(self, lq, lr):
-        """The four outer unscented points of the prior of ``(ln q, ln r)`` centred at ``(lq,
-        lr)`` (floats or SX), ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights (centre
-        first: 1/3, 1/6, 1/6, 1/6, 1/6)."""
+        """The four outer unscented points of the prior centred at ``(lq, lr)`` (floats or SX),
+        ``(lq_1, lr_1, ..., lq_4, lr_4)``, then the five weights :data:`UT_WEIGHTS`."""
         d = math.sqrt(3.0) * self.prior_sd
         return [lq + d, lr, lq, lr + d, lq - d, lr, lq, lr - d, *UT_WEIGHTS]
 
@@ -243,7 +176,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             out["sigma"] = ca.vertcat(*self._prior_points(ca.log(p["q0"]), ca.log(p["r0"])))
         return out
 
-    # ------------------------------------------------------------------ the step
     def adapt_expr(self, ctx: StepContext, result: StepResult) -> dict:
         """Push the step into the window; store the state at every ``every``-th step.
         Declares the output ``adapted`` (set by the update, :meth:`wrap_step`)."""
@@ -266,8 +198,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                 "count": count + 1}
 
     def _window_step(self):
-        """One EKF step of a window re-run at ``theta``: ``(x, P, ll, u, y, valid, active,
-        lq, lr, gate) -> (x', P', ll')`` (an inactive slot changes nothing)."""
+        """One EKF step of a window re-run at ``theta`` (:meth:`_RerunStep.function`)."""
         return _RerunStep(self).function("swml_window_step")
 
     def als_step(self):
@@ -285,12 +216,10 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         """
         n, p = self.system.nx, self.system.ny
         st = _RerunStep(self)
-        c = ca.SX.sym("c", 3 * n * n + 6 * n * p + 2 * p + 2 + 5)
-        parts, o = [], 0
-        for shape in [(n, n)] * 3 + [(n, p)] * 6 + [(p, 1)] * 2 + [(1, 1)] * 2 + [(5, 1)]:
-            size = shape[0] * shape[1]
-            parts.append(ca.reshape(c[o:o + size], *shape))
-            o += size
+        shapes = [(n, n)] * 3 + [(n, p)] * 6 + [(p, 1)] * 2 + [(1, 1)] * 2 + [(5, 1)]
+        offsets = np.cumsum([0] + [rows * cols for rows, cols in shapes]).tolist()
+        c = ca.SX.sym("c", offsets[-1])
+        parts = [ca.reshape(piece, *shape) for piece, shape in zip(ca.vertsplit(c, offsets), shapes)]
         G, Nc, L, (e1, e2, f1, f2, sums) = parts[0:3], parts[3:6], parts[6:9], parts[9:]
         _, F = self.system.transition(st.x, st.u)
         upd = st.upd
@@ -323,13 +252,6 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
                          ca.vertcat(*acc))
         return st.function("swml_als_step", c, new)
 
-    def _branch(self, slots: int | None):
-        """The update over the last ``slots`` window slots from the initial state (the
-        early updates), or, with ``slots=None``, over the whole window from the oldest
-        stored state: an MX Function ``(x, P, Q, R, wu, wy, wv, wa, sx, sP, xi, Pi, gate,
-        qb, rb, pc, sg) -> (x, P, Q, R, adapted, sg)`` (:class:`_WindowUpdate`)."""
-        return _WindowUpdate(self, slots).function()
-
     def wrap_step(self, step: ca.Function) -> ca.Function:
         """The EKF step (with the window bookkeeping of :meth:`adapt_expr`), then the update
         at update times, as one MX Function with the step's inputs and outputs."""
@@ -343,7 +265,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         early = ca.logic_and(ca.logic_and(k <= self.early_until, ca.fmod(k, self.early_every) == 0), k > 0)
         regular = ca.logic_and(k > self.early_until, ca.fmod(k, self.every) == 0)
         index = ca.if_else(regular, 2, ca.if_else(early, 1, 0))
-        branches = [self._branch(0), self._branch(self.early_until), self._branch(None)]
+        branches = [_WindowUpdate(self, slots).function() for slots in (0, self.early_until, None)]
         cond = ca.Function.conditional("swml_update", branches, branches[0])
         sx = ca.reshape(out["snap_x_new"], n, n_snap)[:, 0]
         sP = ca.reshape(out["snap_P_new"], n * n, n_snap)[:, 0]
@@ -373,18 +295,16 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
 
 
 def _mixture(ends, w):
-    """Mean and covariance of the mixture of ``[(x_c, P_c), (x_1, P_1), ..., (x_4, P_4)]``
-    with weights ``w``."""
+    """Mean and covariance of the mixture of the ``(x_i, P_i)`` of ``ends`` with weights ``w``."""
     xm = sum(wi * xe for wi, (xe, _) in zip(w, ends))
     Pm = sum(wi * (Pe + ca.mtimes(xe - xm, (xe - xm).T)) for wi, (xe, Pe) in zip(w, ends))
     return xm, 0.5 * (Pm + Pm.T)
 
 
 class _RerunStep:
-    """One EKF step of a window re-run at ``theta = (ln q, ln r)`` (SX): the symbols ``x``,
-    ``P``, ``ll`` (the log-likelihood so far), the slot's ``u``, ``y``, ``v`` (the valid
-    channels) and ``a`` (1: the slot holds a step), ``lq``, ``lr`` and ``gate``, and the EKF
-    step of :class:`SWML` from them (``xp``, ``Pp``: the prior; ``upd``: the update)."""
+    """One EKF step of a window re-run at ``theta = (ln q, ln r)`` (SX): the symbols ``x``, ``P``,
+    ``ll`` (the log-likelihood so far), the slot's ``u``, ``y``, ``v`` (valid channels), ``a``
+    (1: the slot holds a step), ``lq``, ``lr``, ``gate``; the prior ``xp``, ``Pp``; the ``upd``."""
 
     def __init__(self, filt: SWML):
         s, sym = filt.system, ca.SX.sym
@@ -409,11 +329,9 @@ class _RerunStep:
 
 
 class _WindowUpdate:
-    """The update of :class:`SWML` at an update time as an MX Function (see the module
-    documentation, steps 1-5) over the last ``slots`` window slots from the initial state (the
-    early updates) or, with ``slots=None``, over the whole window from the oldest stored state
-    (``slots=0``: no update). Holds the inputs, the window's re-run at any ``theta = (ln q,
-    ln r)`` (:meth:`run`) and the bounds of ``theta``."""
+    """The update of :class:`SWML` (steps 1-5 of the manual's estimators page) as an MX Function
+    over the last ``slots`` window slots from the initial state (the early updates), or, with
+    ``slots=None``, over the whole window from the oldest stored state (``slots=0``: none)."""
 
     def __init__(self, filt: SWML, slots: int | None):
         s, W = filt.system, filt.window
@@ -494,8 +412,7 @@ class _WindowUpdate:
 
     def _als(self):
         """The window re-run at the current ``theta`` with the ALS sums (step 2): its objective,
-        its end ``(x, P)`` and the ALS solution ``(q, r)`` (the current one where the normal
-        equations are singular)."""
+        its end ``(x, P)`` and the ALS ``(q, r)`` (the current one if the equations are singular)."""
         n, q0, r0, lq0, lr0 = self.n, self.q0, self.r0, self.lq0, self.lr0
         als = self.filt.als_step()
         # G = P at the window start (its constant part), nothing else yet
@@ -514,10 +431,9 @@ class _WindowUpdate:
         return l0, end0, (qa, ra)
 
     def _candidates(self, l0, theta_als):
-        """The points evaluated (step 3) as ``((lq, lr), objective, (x, P) at the window's
-        end)``: the ALS point (floored, within the bounds), the finite-difference points
-        around the start (the ALS point if kept, else the current one) and the Newton step's;
-        and the finite-difference Hessian ``(H11, H12, H22)``."""
+        """The points evaluated (step 3), ``((lq, lr), objective, (x, P) at the window's end)``:
+        the ALS point, the finite-difference points and the Newton step's; and the Hessian
+        ``(H11, H12, H22)``."""
         tiny = 1e-300                                       # "negative parts floored" at the lower bounds
         lqa, lra = self.clamp(ca.log(ca.fmax(theta_als[0], tiny)), ca.log(ca.fmax(theta_als[1], tiny)))
         eva = self.run(lqa, lra)
@@ -547,9 +463,8 @@ class _WindowUpdate:
         return cands, (H11, H12, H22)
 
     def _best(self, cands, l0, end0):
-        """The point kept (steps 3-4): of the candidates ``cands`` and the current point
-        (objective ``l0``, end ``end0``), the best one that keeps r, or one lowering r that
-        beats it by ``keep_r_nats`` (also at the chosen q); ``(objective, theta, x, P)``."""
+        """The point kept (steps 3-4) of the candidates ``cands`` and the current point (objective
+        ``l0``, end ``end0``): ``(objective, theta, x, P)``."""
         keep, lr0 = self.filt.keep_r_nats, self.lr0
         best_l, best_t, best_x, best_P = l0, (self.lq0, lr0), end0[0], end0[1]
         # first the best point that keeps r; a point lowering r must beat it by keep_r_nats
@@ -570,18 +485,10 @@ class _WindowUpdate:
         return ca.if_else(back, evk[0], best_l), best_t, best_x, best_P
 
     def _posterior_average(self, theta, l_best, x_best, P_best, hess):
-        """The window's end state and covariance averaged over the Laplace approximation of
-        the posterior of ``theta = (ln q, ln r)``: precision ``Lambda = -H`` (the finite-difference
-        Hessian of the log-posterior; where it is not positive definite, its diagonal, each
-        entry at least the prior's precision ``1 / prior_sd^2``), centred at the kept point;
-        five unscented points (the centre with weight 1/3, ``theta +- sqrt(3) L e_i`` with
-        weight 1/6, ``L L^T = Lambda^-1``; clipped to the bounds), each a window re-run; the
-        weights renormalised without an outer point whose run is not finite or whose window
-        log-posterior ``l_i`` is more than ``DROP_NATS`` below the kept point's (a diverged
-        re-run; the Gaussian approximation puts it 3/2 below); the
-        mixture's mean ``x = sum w_i x_i`` and covariance ``P = sum w_i (P_i + d_i d_i^T)``,
-        ``d_i = x_i - x``. If the mixture is not finite, the kept point's alone. Returns the
-        state, covariance and the points and weights (13)."""
+        """The window's end state and covariance averaged over the Laplace approximation of the
+        posterior of ``theta`` (as the manual's estimators page describes; the points clipped to
+        the bounds, one not finite left out too; if the mixture is not finite, the kept point's
+        alone): the state, covariance and the points and weights (13)."""
         H11, H12, H22 = hess
         a, b, d = -H11, -H12, -H22
         pd = ca.logic_and(a > 0, a * d - b * b > 0)

@@ -17,29 +17,22 @@ __all__ = ["UKF"]
 class UKF(KalmanBase, register="UKF"):
     """Unscented Kalman filter (Julier; scaled sigma points of van der Merwe).
 
-    ``2n+1`` sigma points ``x``, ``x +/- sqrt(n + lambda) L_i`` with ``P = L L^T``
-    (Cholesky), ``lambda = alpha^2 (n + kappa) - n``; mean weights
-    ``Wm0 = lambda/(n + lambda)``, covariance weight ``Wc0 = Wm0 + 1 - alpha^2 + beta``,
-    others ``1/(2(n + lambda))``. The measurement sigma points are drawn anew from the
-    prior ``(x^-, P^-)``; update ``K = Pxy S^{-1}`` (by a solve), ``P = P^- - K S K^T``.
-    A covariance that is not positive definite makes the Cholesky factor NaN: the step
-    then raises FloatingPointError and keeps the previous state.
+    ``2n+1`` sigma points ``x``, ``x +/- sqrt(n + lambda) L_i`` with ``P = L L^T`` (Cholesky),
+    ``lambda = alpha^2 (n + kappa) - n``; weights ``Wm0 = lambda/(n + lambda)``, ``Wc0 = Wm0 + 1
+    - alpha^2 + beta``, others ``1/(2(n + lambda))``. A covariance that is not positive definite
+    makes the step raise (NumericalError) and keep the previous state.
 
     Parameters
     ----------
     system, x0, P0, Q, R, gate, nan_is_missing, backend
         As :class:`~estimators.base.KalmanBase`.
     alpha : float
-        Spread of the sigma points, 0 < alpha <= 1 (default 0.5, see Notes).
+        Spread of the sigma points, 0 < alpha <= 1 (default 0.5: the often quoted 1e-3 makes
+        ``Wc0`` about -1e6 and the covariance update fragile for nonlinear models).
     beta : float
         Prior knowledge of the distribution; 2 is optimal for a Gaussian (default 2).
     kappa : float
         Secondary scaling, commonly ``3 - n`` or 0 (default 0).
-
-    Notes
-    -----
-    ``alpha = 0.5`` is the default: the often quoted 1e-3 makes ``Wc0`` about -1e6 and
-    the covariance update numerically fragile for nonlinear models.
     """
 
     name = "UKF"
@@ -71,33 +64,23 @@ class UKF(KalmanBase, register="UKF"):
         L = cholesky_lower((n + self.lam) * P)
         return [x] + [x + L[:, i] for i in range(n)] + [x - L[:, i] for i in range(n)]
 
-    @staticmethod
-    def _mean_cov(points, Wm, Wc):
-        mean = sum((w * p for w, p in zip(Wm, points)), ca.SX.zeros(points[0].shape))
-        cov = sum((w * ca.mtimes(p - mean, (p - mean).T) for w, p in zip(Wc, points)),
-                  ca.SX.zeros(points[0].numel(), points[0].numel()))
-        return mean, cov
-
     def predict_expr(self, ctx: StepContext):
         """The unscented transform of ``(x, P)`` through ``f``, plus Q."""
         s = self.system
         f = ca.Function("f", [s.x, s.u], [s.fx])
-        xp, Pp = self._mean_cov([f(p, ctx.u) for p in self.sigma_points(ctx.x, ctx.P)], self.Wm, self.Wc)
-        return xp, symmetric(Pp + ctx.Q)
+        img = [f(p, ctx.u) for p in self.sigma_points(ctx.x, ctx.P)]
+        xp = _mean(self.Wm, img)
+        return xp, symmetric(_cross(self.Wc, img, xp, img, xp) + ctx.Q)
 
     def update_expr(self, ctx: StepContext, xp, Pp) -> Update:
-        """Sigma points redrawn from the prior; ``K = Pxy S^{-1}``, ``P = P^- - K S K^T``."""
-        s = self.system
-        y, R, valid, gate = ctx.y, ctx.R, ctx.valid, ctx.gate
-        h = ca.Function("h", [s.x], [s.hx])
-        # sigma points redrawn from the prior (x^-, P^-), so that Q is in S and Pxy
+        """Sigma points redrawn from the prior ``(x^-, P^-)``, so that Q is in S and Pxy;
+        ``K = Pxy S^{-1}``, ``P = P^- - K S K^T``."""
+        h = ca.Function("h", [self.system.x], [self.system.hx])
         sig = self.sigma_points(xp, Pp)
         sig_y = [h(p) for p in sig]
-        yp, S = self._mean_cov(sig_y, self.Wm, self.Wc)
-        S, innov, M = mask_measurement(valid, symmetric(S + R), y - yp)
-        Pxy = sum((w * ca.mtimes(p - xp, (q - yp).T) for w, p, q in zip(self.Wc, sig, sig_y)),
-                  ca.SX.zeros(s.nx, s.ny))
-        K, nis, acc = gated_gain(S, ca.mtimes(Pxy, M).T, innov, gate)
+        yp = _mean(self.Wm, sig_y)
+        S, innov, M = mask_measurement(ctx.valid, symmetric(_cross(self.Wc, sig_y, yp, sig_y, yp) + ctx.R), ctx.y - yp)
+        K, nis, acc = gated_gain(S, ca.mtimes(_cross(self.Wc, sig, xp, sig_y, yp), M).T, innov, ctx.gate)
         Ka = acc * K
         return Update(xp + ca.mtimes(Ka, innov), symmetric(Pp - ca.mtimes([Ka, S, Ka.T])), innov, S, K, nis, acc)
 
@@ -108,5 +91,15 @@ class UKF(KalmanBase, register="UKF"):
         f = ca.Function("f", [s.x, s.u], [s.fx])
         sig = self.sigma_points(x, P)
         img = [f(p, u) for p in sig]
-        m = sum((w * p for w, p in zip(self.Wm, img)), ca.SX.zeros(s.nx))
-        return sum((w * ca.mtimes(p - x, (q - m).T) for w, p, q in zip(self.Wc, sig, img)), ca.SX.zeros(s.nx, s.nx))
+        return _cross(self.Wc, sig, x, img, _mean(self.Wm, img))
+
+
+def _mean(W, points):
+    """``sum_i W_i p_i``."""
+    return sum((w * p for w, p in zip(W, points)), ca.SX.zeros(points[0].shape))
+
+
+def _cross(W, ps, p_mean, qs, q_mean):
+    """``sum_i W_i (p_i - p_mean) (q_i - q_mean)^T``."""
+    return sum((w * ca.mtimes(p - p_mean, (q - q_mean).T) for w, p, q in zip(W, ps, qs)),
+               ca.SX.zeros(ps[0].numel(), qs[0].numel()))
