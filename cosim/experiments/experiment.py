@@ -1,26 +1,6 @@
-"""The experiment protocol: what ``pendulum-cosim experiment NAME`` needs from an experiment.
-
-An experiment is a subclass of :class:`Experiment` registered by name with a class keyword
-(``class MyStudy(Experiment, register="my-study")``, in its own file; the command line then
-offers it, with the plugin mechanism of :mod:`fmu_models.infra.registry` for code outside the
-project). It declares
-
-* ``configs``: named configurations (frozen dataclasses of settings), ``default_config``;
-* ``paths``: the ways it can run (``"fast"``: vectorised; ``"master"``: through the
-  co-simulation master with the FMUs);
-
-and implements
-
-* :meth:`Experiment.run` ``(settings, path, backend, n_jobs, progress) -> result``, raising
-  :class:`~fmu_models.errors.Interrupted` with the result of what finished as ``partial``;
-* :meth:`Experiment.write_report` ``(result, settings, out_dir, path, config, partial)``,
-  writing its tables, figures, ``settings.toml`` and ``summary.md`` (returned);
-* :meth:`Experiment.summary` ``(result, settings, path, config) -> str``, what the command
-  line prints.
-
-:meth:`Experiment.settings` turns the command line's ``--config``, ``--settings FILE``,
-``--runs``, ``--seed`` and ``--set name=value`` into settings (a subclass with nested
-settings overrides it).
+"""The experiment protocol: what ``pendulum-cosim experiment NAME`` needs from an experiment
+(docs/guide/extending.md, "Writing an experiment"): a subclass of :class:`Experiment`
+registered by name with a class keyword, ``class MyStudy(Experiment, register="my-study")``.
 """
 from __future__ import annotations
 
@@ -41,7 +21,8 @@ PATHS = ("fast", "master")
 
 
 class Experiment:
-    """An experiment runnable from the command line (see the module documentation).
+    """An experiment runnable from the command line: its configurations and paths, and
+    :meth:`run`, :meth:`write_report` and :meth:`summary`.
 
     Attributes
     ----------
@@ -98,7 +79,9 @@ class Experiment:
     def run(self, settings, path: str = "fast", backend: str = "processes", n_jobs: int | None = None,
             progress: bool = True):
         """Run the experiment with ``settings`` on ``path`` (``backend``, ``n_jobs`` and
-        ``progress`` as :func:`~cosim.experiments.campaign.run_tasks`); returns its result."""
+        ``progress`` as :func:`~cosim.experiments.campaign.run_tasks`); returns its result.
+        Interrupted, it raises :class:`~fmu_models.errors.Interrupted` with the result of
+        what finished as ``partial``."""
         raise NotImplementedError
 
     def write_report(self, result, settings, out_dir: Path, path: str = "fast", config: str = "custom",

@@ -71,21 +71,17 @@ def consistency_rule(confidence: float, lags: int) -> str:
 def band_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95) -> tuple[dict, dict]:
     """Tests (1) and (2) of :func:`consistency_rule` for one filter: ``(row, per_step)``.
 
-    ``row``: ``runs``, ``anees``, ``anees_lo``, ``anees_hi``, ``anees_inside`` (share of the
-    steps inside their band), ``nees_ok``, and the same for ``anis`` / ``nis_ok``;
-    ``per_step``: the arrays (K,) ``anees``, ``anis`` and their bands ``nees_lo``,
-    ``nees_hi``, ``nis_lo``, ``nis_hi``.
+    ``row``: ``runs``, ``anees``, its band ``anees_lo``, ``anees_hi``, ``anees_inside`` (share
+    of the steps inside their band), ``nees_ok``, the same for ``anis`` / ``nis_ok``;
+    ``per_step``: the arrays (K,) ``anees``, ``anis`` and bands ``nees_lo``, ``nees_hi``,
+    ``nis_lo``, ``nis_hi``.
 
     Parameters
     ----------
-    nees
-        NEES of each run and step, shape (runs, K); NaN (a diverged run) counts as infinite.
-    nis
-        NIS, shape (runs, K); NaN counts as infinite.
-    nx
-        State dimension.
-    ny
-        Measured channels.
+    nees, nis
+        NEES and NIS of each run and step, shape (runs, K); NaN (a diverged run) counts as infinite.
+    nx, ny
+        State dimension and measured channels.
     confidence
         Probability of the bands.
     """
@@ -108,10 +104,8 @@ def whiteness_row(innovation: np.ndarray, S: np.ndarray, confidence: float = 0.9
 
     Parameters
     ----------
-    innovation
-        Innovations, shape (runs, K, ny).
-    S
-        Their covariances, shape (runs, K, ny, ny).
+    innovation, S
+        Innovations, shape (runs, K, ny), and their covariances, shape (runs, K, ny, ny).
     confidence
         Probability of the bands.
     lags
@@ -130,23 +124,11 @@ def no_whiteness() -> dict:
     return {"acf_max": np.nan, "acf_lag1": np.nan, "acf_band": np.nan, "acf_inside": np.nan, "white_ok": None}
 
 
-def verdict(row: dict) -> bool:
-    """``consistent`` of :func:`consistency_rule` from a row of :func:`band_row` and
-    :func:`whiteness_row` (a whiteness not tested, ``white_ok`` None, does not count).
-
-    Parameters
-    ----------
-    row
-        The merged row.
-    """
-    return bool(row["nees_ok"] and row["nis_ok"] and row.get("white_ok") in (True, None))
-
-
 def consistency_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float,
                     whiteness: dict | None) -> tuple[dict, dict]:
-    """All three tests of :func:`consistency_rule` with the whiteness already tested:
-    ``(row, per_step)`` of :func:`band_row`, the row with ``whiteness`` (a row of
-    :func:`whiteness_row`, or None: :func:`no_whiteness`) and ``consistent`` (:func:`verdict`).
+    """All three tests of :func:`consistency_rule`: ``(row, per_step)`` of :func:`band_row`,
+    the row with the ``whiteness`` columns and ``consistent`` (a whiteness not tested,
+    ``white_ok`` None, does not count).
 
     Parameters
     ----------
@@ -157,7 +139,7 @@ def consistency_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confide
     """
     row, per_step = band_row(nees, nis, nx, ny, confidence)
     row.update(no_whiteness() if whiteness is None else whiteness)
-    row["consistent"] = verdict(row)
+    row["consistent"] = bool(row["nees_ok"] and row["nis_ok"] and row["white_ok"] in (True, None))
     return row, per_step
 
 
@@ -178,11 +160,10 @@ def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence:
 
 
 def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
-    """The Monte Carlo standard error of :func:`pcrb_ratio`, shape (nx,): the realisations
-    are independent, so the mean-square error over them has the standard error
-    ``std_r(m_r) / sqrt(N)`` (``m_r`` a realisation's mean-square error over the steps), and
-    the ratio, its square root over the bound's, half that relative error (the bound's own
-    Monte Carlo error, from the Jacobians' spread only, is far smaller).
+    """The Monte Carlo standard error of :func:`pcrb_ratio`, shape (nx,): half the relative
+    standard error ``std_r(m_r) / sqrt(N) / mean_r(m_r)`` of the mean-square error over the
+    independent realisations (``m_r`` a realisation's over the steps; the bound's own Monte
+    Carlo error, from the Jacobians' spread only, is far smaller).
 
     Parameters
     ----------
@@ -223,10 +204,8 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
     ----------
     nees, nis, ny, confidence
         As :func:`band_row`.
-    mse
-        Each state's mean-square error over the runs at steps 1..K, shape (K, nx).
-    bound_mse
-        The PCRB on it at steps 1..K, shape (K, nx).
+    mse, bound_mse
+        Each state's mean-square error over the runs at steps 1..K, and its PCRB, shape (K, nx).
     start
         Steps left out (0 <= start < K).
     whiteness
@@ -240,15 +219,8 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
 
 
 def consistency_markdown(table, keys: list[str]) -> list[str]:
-    """Markdown lines of the consistency tests, one row per row of ``table`` (the rows of
-    :func:`consistency`, with the columns ``keys`` first and ``filter``).
-
-    Parameters
-    ----------
-    table
-        A DataFrame with the columns of :func:`consistency` and ``keys``.
-    keys
-        The identifying columns shown first (e.g. reading and scenario).
+    """Markdown lines of the consistency tests, a row per row of ``table`` (a DataFrame with the
+    columns of :func:`consistency`, ``filter`` and the identifying columns ``keys``, shown first).
     """
     def yes(v):
         return "n/a" if v is None or (isinstance(v, float) and np.isnan(v)) else ("yes" if v else "no")
@@ -257,8 +229,8 @@ def consistency_markdown(table, keys: list[str]) -> list[str]:
            "steps inside | NIS | max abs autocorr. (lag 1) [band] | white | consistent |",
            "|" + "---|" * (len(keys) + 11)]
     for _, r in table.iterrows():
-        tested = not (r["white_ok"] is None or (isinstance(r["white_ok"], float) and np.isnan(r["white_ok"])))
-        white = f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]" if tested else "not tested"
+        white = (f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]" if yes(r["white_ok"]) != "n/a"
+                 else "not tested")
         out.append("| " + " | ".join(str(r[k]) for k in keys) + f" | {r['filter']} | {r['runs']} | {r['anees']:.3g} "
                    f"[{r['anees_lo']:.2f}, {r['anees_hi']:.2f}] | {r['anees_inside']:.0%} | {yes(r['nees_ok'])} | "
                    f"{r['anis']:.3g} [{r['anis_lo']:.2f}, {r['anis_hi']:.2f}] | {r['anis_inside']:.0%} | "

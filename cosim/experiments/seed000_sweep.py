@@ -1,18 +1,11 @@
-"""Where adaptation pays: EKF, IAE, MF-IAE and SWML over a grid of wrong starting Q0 and R0.
+"""Where adaptation pays (beyond the paper): EKF, IAE, MF-IAE, the EM-learned EKF and SWML
+started at ``Q0 = fq q I``, ``R0 = fr r I`` over a grid of factors (``SweepSettings.factors``).
 
-Beyond the paper. Each cell of the grid starts the filters at ``Q0 = fq q I`` and
-``R0 = fr r I``, where ``(q, r)`` are the scenario's true variances and ``fq, fr`` run over
-``SweepSettings.factors`` (default 1e-3 ... 1e3, 7 x 7 cells), and runs the seed 000
-campaign of every scenario (eqs reading) with them: a cell is exactly
-``seed000.fast_task`` with ``q0_factor = fq, r0_factor = fr`` (same realisations, same
-numbers; the tests check it). Reported per cell and filter: eta (eq 44) over the eta of
-the EKF given the true Q and R (a filter, not a bound), each state's RMSE as a multiple of
-the posterior Cramér-Rao bound over the same realisations (the limit of any estimator; the
-same for every cell of a scenario, computed once per task), the consistency tests and
-verdict of :func:`~cosim.experiments.metrics.consistency_rule`, and for the adaptive
-filters (and the EKF whose Q and R EM learned from the same start on a training
-realisation) the fraction of realisations in which they are worse than the EKF started at
-the same Q0, R0. The goals are checked cell by cell and summarised in ``summary.md``.
+A cell is exactly ``seed000.fast_task`` (eqs reading) with ``q0_factor = fq, r0_factor = fr``:
+the same realisations and numbers. Reported per cell and filter: eta over the EKF given the
+true Q and R, RMSE / PCRB, the consistency verdicts, and how often an adaptive filter is worse
+than the EKF started at the same Q0, R0; the goals are checked cell by cell
+(docs/guide/experiments.md).
 """
 from __future__ import annotations
 
@@ -64,8 +57,8 @@ class SweepSettings:
 
 
 def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: seed000.Settings) -> list[dict]:
-    """The rows of several cells of one scenario (one process task): per cell, one row per
-    filter of :data:`FILTERS` and one for the EKF given the true Q and R.
+    """The rows of several cells of one scenario: per cell, a row per filter of :data:`FILTERS`
+    and one for the EKF given the true Q and R.
 
     Parameters
     ----------
@@ -110,9 +103,8 @@ class SweepResult(NamedTuple):
 
 def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n_jobs=None,
         progress: bool = True) -> SweepResult:
-    """Run the sweep; returns a :class:`SweepResult`: one row per scenario, cell and filter
-    (see the module documentation). Interrupted, it raises
-    :class:`~fmu_models.errors.Interrupted` with the rows of the finished tasks.
+    """Run the sweep; returns a :class:`SweepResult` (interrupted: the rows of the finished
+    tasks as ``partial`` of the :class:`~fmu_models.errors.Interrupted` raised).
 
     Parameters
     ----------
@@ -144,18 +136,16 @@ def _cells(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
-    """Per adaptive filter (and the EKF given the true noise, for reference): the cells
-    (eta averaged over the scenarios) within ``true_ekf_margin`` of the EKF given the true Q
-    and R, those more than ``ekf_margin`` worse than the EKF, the cells where every state of
-    every scenario is within ``pcrb_margin`` of the PCRB, the cells consistent in every
-    scenario and the (cell, scenario) pairs consistent (:func:`~cosim.experiments.metrics.consistency_rule`).
+    """Per adaptive filter (and the EKF given the true noise): the cells (eta averaged over
+    the scenarios) within ``true_ekf_margin`` of the EKF given the true Q and R, those more
+    than ``ekf_margin`` worse than the EKF, those with every state of every scenario within
+    ``pcrb_margin`` of the PCRB, those consistent in every scenario, and the consistent
+    (cell, scenario) pairs.
 
     Parameters
     ----------
-    table
-        The sweep's table.
-    settings
-        The sweep's settings (its goal margins).
+    table, settings
+        The sweep's table and settings (its goal margins).
     """
     cell = _cells(table)
     rows = []
@@ -181,16 +171,8 @@ def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
 
 
 def why_not_consistent(table: pd.DataFrame, name: str = "SWML") -> list[str]:
-    """Plain sentences on the (cell, scenario) pairs where ``name`` is not consistent: which
-    test fails, and by how much.
-
-    Parameters
-    ----------
-    table
-        The sweep's table.
-    name
-        The filter.
-    """
+    """Sentences on the (cell, scenario) pairs of the sweep's ``table`` where the filter
+    ``name`` is not consistent: which test fails, and by how much."""
     t = table[(table["filter"] == name) & ~table["consistent"].astype(bool)]
     lines = []
     for _, r in t.sort_values(["q_factor", "r_factor", "scenario"]).iterrows():
@@ -214,8 +196,8 @@ GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 facto
 
 
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
-    """``sweep.csv|parquet``, heat maps (``heatmap_<metric>.png``), ``settings.toml`` and
-    ``summary.md`` into ``out_dir``.
+    """``sweep.csv|parquet``, ``goals.csv``, heat maps, ``settings.toml`` and ``summary.md``
+    into ``out_dir``; returns ``summary.md``.
 
     Parameters
     ----------
@@ -307,9 +289,8 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
 
 
 class Sweep(Experiment, register="seed000-sweep"):
-    """The robustness map of EKF, IAE, MF-IAE and SWML over wrong starting Q0 and R0 (beyond the
-    paper; see the module documentation). ``--set`` names either a sweep setting
-    (``factors``, the goal margins) or a setting of every cell's seed 000 campaign."""
+    """The robustness map over wrong starting Q0 and R0. ``--set`` names either a sweep
+    setting (``factors``, the goal margins) or a setting of every cell's seed 000 campaign."""
 
     description = "beyond the paper: EKF, IAE, MF-IAE and SWML over a 7 x 7 map of wrong Q0, R0"
     configs = seed000.CONFIGS
