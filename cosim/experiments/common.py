@@ -62,26 +62,21 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
                    substeps=1):
     """Truth ``X`` (runs, N+1, nx) and measurements ``Y`` (runs, N+1, ny), drawing exactly the
     numbers the ProcessNoise and Sensor components draw on the master path (same seeds, same
-    order). ``Y`` picks the ``measured`` states; for a process model whose outputs
-    ``measured`` names, its measurement.
+    order).
 
     Parameters
     ----------
     model
         A plant model, or a process model (:class:`~estimators.DiscreteModel`, an FMU's too:
         its own map and period, ``method`` and ``substeps`` unused).
-    x0
-        Initial state.
-    us
-        Inputs, shape (N+1, nu).
+    x0, us
+        Initial state, and the inputs, shape (N+1, nu).
     T
         Sample period [s].
-    q
-        Process noise covariance (scalar, diagonal or matrix).
+    q, r_std
+        Process noise covariance (scalar, diagonal or matrix), measurement noise standard deviations.
     measured
-        The measured states.
-    r_std
-        Measurement noise standard deviations.
+        The measured states (``Y`` picks them; for a process model, its outputs if they are these).
     seeds
         (process, measurement) seed pairs, one per realisation.
     method, substeps
@@ -122,19 +117,9 @@ class BatchOutcome(NamedTuple):
 
 
 def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> BatchOutcome:
-    """Run one filter over all realisations in one native call; NEES from the full covariance.
-
-    Parameters
-    ----------
-    make
-        Returns a new filter (the template of every realisation).
-    X
-        Truth, shape (runs, N+1, nx).
-    Y
-        Measurements, shape (runs, N+1, ny); row 0 is not used.
-    us
-        Inputs, shape (N+1, nu): ``us[k]`` is held over step k -> k+1.
-    """
+    """Run the filter of ``make`` (a new one per call) over the realisations ``X`` (truth,
+    (runs, N+1, nx)) and ``Y`` (measurements, (runs, N+1, ny), row 0 unused) in one native
+    call, ``us[k]`` (inputs, (N+1, nu)) held over step k -> k+1; NEES from the full covariance."""
     out = BatchFilter(make(), X.shape[0], on_failure="mark").run(us[:-1], Y[:, 1:])
     with np.errstate(invalid="ignore", over="ignore"):
         nees = metrics.nees(out.x[:, 1:] - X[:, 1:], out.P[:, 1:])
@@ -143,23 +128,18 @@ def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> B
 
 def master_runs(model, x0, source, q, measured: Sequence[str], r_std, makers: dict, T: float, duration: float,
                 seeds: Sequence[tuple[int, int]], fmu_dir=None):
-    """Realisations through the co-simulation master, one per (process, measurement) seed pair
-    of ``seeds`` (:class:`MasterRealisations`, the plant FMU built once). Returns truth
-    (runs, N+1, nx), the estimates by filter (runs, N+1, nx), and NEES (from the full
-    covariance) and NIS by filter (runs, N).
+    """Realisations through the co-simulation master (:class:`MasterRealisations`), one per
+    seed pair of ``seeds``; returns truth (runs, N+1, nx), the estimates by filter (runs, N+1,
+    nx), and NEES (from the full covariance) and NIS by filter (runs, N).
 
     Parameters
     ----------
-    model, q, measured, r_std, T
+    model, x0, q, measured, r_std, T, seeds
         As :func:`simulate_truth` (``model`` a plant model).
-    x0
-        The plant's initial state.
     source, makers
         As :class:`MasterRealisations`.
     duration
         Simulated time [s].
-    seeds
-        (process, measurement) seed pairs, one per realisation.
     fmu_dir
         Where to build the plant FMU (default a temporary folder).
     """
@@ -181,27 +161,11 @@ def master_runs(model, x0, source, q, measured: Sequence[str], r_std, makers: di
 
 
 class MasterRealisations:
-    """One co-simulation built once for many realisations that differ only in the seeds of
-    the process noise and the sensor: plant FMU, sensor, the filters, the source and the
-    process noise (the order follows from the wiring). Each filter is built once and
-    restored to its initial state before each run
-    (:meth:`~estimators.base.KalmanBase.restore`, the numbers of a new filter).
-
-    Parameters
-    ----------
-    plant
-        The plant FMU component.
-    source
-        The input source component.
-    noise
-        The process-noise component.
-    sensor
-        The sensor component.
-    makers
-        Filter factories by name.
-    T
-        Sample period [s].
-    """
+    """One co-simulation of the ``plant`` FMU component, the ``sensor``, the filters, the input
+    ``source`` and the process ``noise`` components, built once for realisations that differ
+    only in the noise's and the sensor's seeds. Each filter (of the factories ``makers`` by
+    name, at period ``T`` [s]) is built once and restored to its initial state before each run
+    (:meth:`~estimators.base.KalmanBase.restore`: the numbers of a new filter)."""
 
     def __init__(self, plant, source, noise, sensor, makers: dict, T: float):
         states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]

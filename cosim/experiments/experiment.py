@@ -21,8 +21,7 @@ PATHS = ("fast", "master")
 
 
 class Experiment:
-    """An experiment runnable from the command line: its configurations and paths, and
-    :meth:`run`, :meth:`write_report` and :meth:`summary`.
+    """An experiment runnable from the command line (docs/guide/extending.md).
 
     Attributes
     ----------

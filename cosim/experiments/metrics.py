@@ -74,17 +74,9 @@ def band_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: fl
     ``row``: ``runs``, ``anees``, its band ``anees_lo``, ``anees_hi``, ``anees_inside`` (share
     of the steps inside their band), ``nees_ok``, the same for ``anis`` / ``nis_ok``;
     ``per_step``: the arrays (K,) ``anees``, ``anis`` and bands ``nees_lo``, ``nees_hi``,
-    ``nis_lo``, ``nis_hi``.
-
-    Parameters
-    ----------
-    nees, nis
-        NEES and NIS of each run and step, shape (runs, K); NaN (a diverged run) counts as infinite.
-    nx, ny
-        State dimension and measured channels.
-    confidence
-        Probability of the bands.
-    """
+    ``nis_lo``, ``nis_hi``. ``nees`` and ``nis``: shape (runs, K), NaN (a diverged run)
+    counting as infinite; ``nx``, ``ny``: state and measurement dimensions; ``confidence``:
+    probability of the bands."""
     ne = nees_test(np.where(np.isnan(nees), np.inf, nees), nx, confidence)
     ni = nis_test(np.where(np.isnan(nis), np.inf, nis), ny, confidence)
     row = {"runs": ne.runs, "anees": ne.average, "anees_lo": ne.band[0], "anees_hi": ne.band[1],
@@ -100,17 +92,8 @@ def whiteness_row(innovation: np.ndarray, S: np.ndarray, confidence: float = 0.9
     """Test (3) of :func:`consistency_rule` for one filter: ``acf_max`` and ``acf_lag1``
     (largest absolute pooled autocorrelation over the channels, at any lag and at lag 1),
     ``acf_band``, ``acf_inside`` (smallest share of steps inside, over channels and lags) and
-    ``white_ok``. Innovations that are not finite (a diverged run) are not white.
-
-    Parameters
-    ----------
-    innovation, S
-        Innovations, shape (runs, K, ny), and their covariances, shape (runs, K, ny, ny).
-    confidence
-        Probability of the bands.
-    lags
-        Whiteness at lags 1..lags.
-    """
+    ``white_ok``, at ``confidence`` and lags 1..``lags``, of the ``innovation`` (runs, K, ny)
+    with covariances ``S`` (runs, K, ny, ny). Innovations not finite (a diverged run) are not white."""
     if not (np.isfinite(innovation).all() and np.isfinite(S).all()):
         return {"acf_max": np.inf, "acf_lag1": np.inf, "acf_band": np.nan, "acf_inside": np.nan, "white_ok": False}
     w = whiteness_test(innovation, S, lags=range(1, lags + 1), confidence=confidence)
@@ -126,17 +109,9 @@ def no_whiteness() -> dict:
 
 def consistency_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float,
                     whiteness: dict | None) -> tuple[dict, dict]:
-    """All three tests of :func:`consistency_rule`: ``(row, per_step)`` of :func:`band_row`,
-    the row with the ``whiteness`` columns and ``consistent`` (a whiteness not tested,
-    ``white_ok`` None, does not count).
-
-    Parameters
-    ----------
-    nees, nis, nx, ny, confidence
-        As :func:`band_row`.
-    whiteness
-        The :func:`whiteness_row` of the innovations, or None (not tested).
-    """
+    """All three tests of :func:`consistency_rule`: ``(row, per_step)`` of :func:`band_row`
+    (``nees``, ``nis``, ``nx``, ``ny``, ``confidence``), the row with the ``whiteness`` columns
+    (:func:`whiteness_row`; None: not tested, which does not count) and ``consistent``."""
     row, per_step = band_row(nees, nis, nx, ny, confidence)
     row.update(no_whiteness() if whiteness is None else whiteness)
     row["consistent"] = bool(row["nees_ok"] and row["nis_ok"] and row["white_ok"] in (True, None))
@@ -145,31 +120,18 @@ def consistency_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confide
 
 def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95,
                 innovation: np.ndarray | None = None, S: np.ndarray | None = None, lags: int = 5) -> tuple[dict, dict]:
-    """:func:`consistency_row` with the whiteness of the innovations tested here
-    (:func:`whiteness_row`; not tested without innovations).
-
-    Parameters
-    ----------
-    nees, nis, nx, ny, confidence
-        As :func:`band_row`.
-    innovation, S, lags
-        As :func:`whiteness_row` (``innovation`` None: whiteness not tested).
-    """
+    """:func:`consistency_row` (``nees``, ``nis``, ``nx``, ``ny``, ``confidence`` as
+    :func:`band_row`) with the whiteness of ``innovation``, ``S`` at ``lags`` tested here
+    (:func:`whiteness_row`; not tested if ``innovation`` is None)."""
     return consistency_row(nees, nis, nx, ny, confidence,
                            None if innovation is None else whiteness_row(innovation, S, confidence, lags))
 
 
 def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
-    """The Monte Carlo standard error of :func:`pcrb_ratio`, shape (nx,): half the relative
-    standard error ``std_r(m_r) / sqrt(N) / mean_r(m_r)`` of the mean-square error over the
-    independent realisations (``m_r`` a realisation's over the steps; the bound's own Monte
-    Carlo error, from the Jacobians' spread only, is far smaller).
-
-    Parameters
-    ----------
-    rmse_runs, bound_mse
-        As :func:`pcrb_ratio`.
-    """
+    """The Monte Carlo standard error of :func:`pcrb_ratio` of ``rmse_runs`` and ``bound_mse``,
+    shape (nx,): half the relative standard error ``std_r(m_r) / sqrt(N) / mean_r(m_r)`` of
+    the mean-square error over the independent realisations (``m_r`` a realisation's over the
+    steps; the bound's own Monte Carlo error, from the Jacobians' spread only, is far smaller)."""
     m = np.square(rmse_runs)
     N = len(m)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
@@ -179,38 +141,20 @@ def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
 
 def pcrb_ratio(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
     """Each state's RMSE as a multiple of the posterior Cramér-Rao bound, shape (nx,):
-    ``sqrt(mean_r rmse_r^2 / mean_k PCRB_k)``, i.e. the RMSE over realisations and steps
-    over the root of the bound's mean over the same steps.
-
-    Parameters
-    ----------
-    rmse_runs
-        Each realisation's RMSE per state over steps 1..K, shape (runs, nx).
-    bound_mse
-        The bound on the MSE at steps 1..K, shape (K, nx).
-    """
+    ``sqrt(mean_r rmse_r^2 / mean_k PCRB_k)`` of each realisation's RMSE over steps 1..K
+    ``rmse_runs`` (runs, nx) and the bound on the MSE at steps 1..K ``bound_mse`` (K, nx)."""
     with np.errstate(invalid="ignore", over="ignore"):
         return np.sqrt(np.mean(np.square(rmse_runs), axis=0) / np.mean(bound_mse, axis=0))
 
 
 def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_mse: np.ndarray, ny: int, start: int,
                     whiteness: dict | None, confidence: float = 0.95) -> dict:
-    """A diagnostic beside the verdict (not part of :func:`consistency_rule`): the numbers
-    over the steps after the first ``start`` only, where an adaptive filter's start-up
-    no longer counts: ``pcrb_ratio_max_late`` (worst state's RMSE / PCRB), ``anees_late``,
-    ``anis_late`` and ``consistent_late`` (the three tests on those steps).
-
-    Parameters
-    ----------
-    nees, nis, ny, confidence
-        As :func:`band_row`.
-    mse, bound_mse
-        Each state's mean-square error over the runs at steps 1..K, and its PCRB, shape (K, nx).
-    start
-        Steps left out (0 <= start < K).
-    whiteness
-        :func:`whiteness_row` of the innovations after ``start`` (None: not tested).
-    """
+    """A diagnostic beside the verdict (not part of :func:`consistency_rule`): the numbers over
+    the steps after the first ``start``, where an adaptive filter's start-up no longer counts:
+    ``pcrb_ratio_max_late`` (worst state's RMSE / PCRB), ``anees_late``, ``anis_late`` and
+    ``consistent_late``. ``nees``, ``nis``, ``ny``, ``confidence`` as :func:`band_row`; ``mse``
+    and ``bound_mse``: each state's mean-square error over the runs and its PCRB at steps
+    1..K (K, nx); ``whiteness``: :func:`whiteness_row` after ``start`` (None: not tested)."""
     with np.errstate(invalid="ignore", over="ignore"):
         ratio = np.sqrt(mse[start:].mean(axis=0) / bound_mse[start:].mean(axis=0))
     row, _ = consistency_row(nees[:, start:], nis[:, start:], mse.shape[1], ny, confidence, whiteness)

@@ -174,19 +174,9 @@ def _system(T: float):
 
 def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, shared: dict | None = None
                 ) -> tuple[float, float]:
-    """(q, r) learned by EM from the nominal values on the scenario's training realisation.
-
-    Parameters
-    ----------
-    system
-        The discrete model.
-    s, q, r
-        The campaign's settings, the true process and measurement variances.
-    scenario_index
-        Which scenario (its training realisation).
-    shared
-        Keeps the training realisation between calls (default: simulated here).
-    """
+    """(q, r) learned by EM from the nominal values on the training realisation of scenario
+    ``scenario_index`` (``system``: the discrete model; ``s``, ``q``, ``r``: the settings and the
+    true variances; ``shared``: keeps the training realisation between calls)."""
     shared = {} if shared is None else shared
     if "training" not in shared:
         shared["training"] = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index, [TRAINING_RUN]))
@@ -197,15 +187,8 @@ def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, sh
 
 
 def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
-    """The constructors of :data:`FILTERS` by name; "EKF EM" only with ``learned``.
-
-    Parameters
-    ----------
-    system, s, q, r
-        As :func:`learn_noise`.
-    learned
-        The EM-learned (q, r), for the EM EKF.
-    """
+    """The constructors of :data:`FILTERS` by name (``system``, ``s``, ``q``, ``r`` as
+    :func:`learn_noise`); "EKF EM" only with EM's ``learned`` (q, r)."""
     x0 = np.array(s.x0)
     q0, r0 = nominal_noise(s, q, r)
     em = {} if learned is None else {"EKF EM": lambda: EKF(system, x0, s.P0, *learned)}
@@ -232,15 +215,8 @@ def figure2_prbs(s: Settings):
 
 def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]):
     """Truth ``X`` (runs, steps+1, 4), measurements ``Y`` (runs, steps+1, 2) and the input
-    sequence, drawing the same numbers as the components of the master path.
-
-    Parameters
-    ----------
-    s, q, r
-        The campaign's settings, the true process and measurement variances.
-    seeds
-        (process, measurement) seed pairs, one per realisation.
-    """
+    sequence of the settings ``s`` with the true variances ``q``, ``r``, one realisation per
+    (process, measurement) seed pair of ``seeds``: the numbers the master path's components draw."""
     src = figure2_prbs(s)
     src.reset(0.0)
     u = np.array([src.output(k * s.T, None)[0] for k in range(s.steps + 1)])
@@ -250,28 +226,16 @@ def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]
 
 def scenario_bound(s: Settings, X: np.ndarray, u: np.ndarray, q: float, r: float) -> np.ndarray:
     """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
-    realisations ``X`` (runs, N+1, 4) with inputs ``u`` (N+1,), under ``s.pcrb_prior``.
-
-    Parameters
-    ----------
-    s, q, r
-        As :func:`simulate_truth`.
-    X, u
-        The true trajectories and the input sequence.
-    """
+    realisations ``X`` (runs, N+1, 4) with inputs ``u`` (N+1,), under ``s.pcrb_prior``
+    (``s``, ``q``, ``r`` as :func:`simulate_truth`)."""
     P0 = None if s.pcrb_prior == "known" else s.P0
     return posterior_crb(_system(s.T), X, u[:-1, None], q, r, P0).mse
 
 
 def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndarray:
     """:func:`scenario_bound` over all realisations of one scenario and reading (the master
-    path's PCRB: the fast path's truth of the same seeds).
-
-    Parameters
-    ----------
-    scenario_index, reading, settings
-        As :func:`fast_task`.
-    """
+    path's PCRB: the fast path's truth of the same seeds); ``scenario_index``, ``reading``
+    and ``settings`` as :func:`fast_task`."""
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
     X, _, u = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index))
@@ -327,12 +291,8 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
 
     Parameters
     ----------
-    scenario_index
-        Which scenario (0-based).
-    reading
-        Which reading of the noise names (``eqs`` or ``prose``).
-    settings
-        The campaign's settings.
+    scenario_index, reading, settings
+        Which scenario (0-based), which reading of the noise names, the campaign's settings.
     runs
         Which realisations (default all).
     bound
@@ -361,17 +321,9 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
 
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None,
                 learned=None) -> dict:
-    """The same realisations, each through the co-simulation master with the plant FMU.
-
-    Parameters
-    ----------
-    scenario_index, reading, settings, runs
-        As :func:`fast_task`.
-    fmu_dir
-        Where to build the plant FMU (default a temporary folder).
-    learned
-        The EM-learned (q, r) of the scenario (default: learned here).
-    """
+    """:func:`fast_task` (``scenario_index``, ``reading``, ``settings``, ``runs``), each
+    realisation through the co-simulation master with the plant FMU built in ``fmu_dir``
+    (default a temporary folder); ``learned``: the scenario's EM-learned (q, r), if known."""
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
     system = _system(s.T)
@@ -407,16 +359,10 @@ MASTER_CHUNK = 50
 
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,
         backend: str = "processes", n_jobs=None, progress: bool = True) -> CampaignResult:
-    """Run the campaign; returns a :class:`CampaignResult` (interrupted: ``partial`` of the
-    :class:`~fmu_models.errors.Interrupted` raised holds the same for the finished tasks).
-
-    Parameters
-    ----------
-    settings, path, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    readings
-        The readings to run (default the settings').
-    """
+    """Run the campaign of ``readings`` (default the settings'); returns a :class:`CampaignResult`
+    (interrupted: ``partial`` of the :class:`~fmu_models.errors.Interrupted` raised holds the
+    same for the finished tasks). ``settings``, ``path``, ``backend``, ``n_jobs``, ``progress``
+    as :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`."""
     if path not in ("fast", "master"):
         raise UnknownNameError(f"path must be 'fast' or 'master', got {path!r}")
     readings = tuple(settings.readings if readings is None else readings)
@@ -516,15 +462,10 @@ def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list,
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
-    """eta (eq 44, mean over the realisations) per reading, scenario and filter beside the
-    paper's Table 3; ``diverged`` counts the flagged runs, ``(no div.)`` leaves them out,
-    ``<filter> / EKF true Q,R``: eta over that of the EKF given the true Q and R.
-
-    Parameters
-    ----------
-    per_run
-        The per-realisation table of :func:`run`.
-    """
+    """eta (eq 44, mean over the realisations) per reading, scenario and filter of ``per_run``
+    (the per-realisation table of :func:`run`) beside the paper's Table 3; ``diverged``
+    counts the flagged runs, ``(no div.)`` leaves them out, ``<filter> / EKF true Q,R``: eta
+    over that of the EKF given the true Q and R."""
     rows = []
     for (rd, sc), g in per_run.groupby(["reading", "scenario"], sort=True):
         row = {"reading": rd, "scenario": sc, "sigma_q2": g["sigma_q2"].iloc[0],
@@ -549,14 +490,13 @@ def _join(values) -> str:
     return ", ".join(f"{v:.2f}" for v in values)
 
 
-def agreement(table: pd.DataFrame) -> list[str]:
-    """Plain sentences on where the table agrees with the paper's Table 3 and where not.
+def _span(values, fmt: str) -> str:
+    """``min-max`` of ``values``, each in the format ``fmt``."""
+    return f"{values.min():{fmt}}-{values.max():{fmt}}"
 
-    Parameters
-    ----------
-    table
-        The table of :func:`summary_table`.
-    """
+
+def agreement(table: pd.DataFrame) -> list[str]:
+    """Sentences on where the ``table`` of :func:`summary_table` agrees with the paper's Table 3."""
     lines = []
     for rd, g in table.groupby("reading", sort=False):
         for label, ours, paper in (("EKF", "EKF", "paper EKF"), ("MF-IAE", "MF-IAE", "paper MF-IAE")):
@@ -577,14 +517,9 @@ def agreement(table: pd.DataFrame) -> list[str]:
 
 
 def pcrb_table(consistency: pd.DataFrame) -> pd.DataFrame:
-    """Each filter's RMSE / PCRB: a row per reading and filter, a column per scenario and
-    state (``s<scenario> <state>``), and the worst.
-
-    Parameters
-    ----------
-    consistency
-        The ``consistency`` table of :class:`CampaignResult`.
-    """
+    """Each filter's RMSE / PCRB from the ``consistency`` table of :class:`CampaignResult`: a
+    row per reading and filter, a column per scenario and state (``s<scenario> <state>``),
+    and the worst."""
     c = consistency[consistency["filter"] != "PCRB"]
     rows = []
     for (rd, name), g in c.groupby(["reading", "filter"], sort=False):
@@ -597,35 +532,24 @@ def pcrb_table(consistency: pd.DataFrame) -> pd.DataFrame:
 
 
 def limit_sentences(consistency: pd.DataFrame) -> list[str]:
-    """Sentences: how far the EKF given the true noise, SWML, MF-IAE and the EKF are from
-    the PCRB, per reading and state (range over the scenarios).
-
-    Parameters
-    ----------
-    consistency
-        The ``consistency`` table of :class:`CampaignResult`.
-    """
+    """Sentences from the ``consistency`` table of :class:`CampaignResult`: how far the EKF
+    given the true noise, SWML, MF-IAE and the EKF are from the PCRB, per reading and state
+    (range over the scenarios)."""
     lines = []
     for rd, g in consistency.groupby("reading", sort=False):
         for name in (TRUE_EKF, "SWML", "MF-IAE", "EKF"):
             f = g[g["filter"] == name]
             if not len(f) or f["pcrb_ratio_max"].isna().all():
                 continue
-            per_state = "; ".join(f"{x} {f[f'pcrb_ratio_{x}'].min():.3f}-{f[f'pcrb_ratio_{x}'].max():.3f}"
-                                  for x in STATES)
+            per_state = "; ".join(f"{x} {_span(f[f'pcrb_ratio_{x}'], '.3f')}" for x in STATES)
             lines.append(f"- {rd} reading, {name}: RMSE / sqrt(PCRB) over the {len(f)} scenarios: {per_state}.")
     return lines
 
 
 def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[str]:
-    """The diagnostic beside the verdicts (not the rule): each filter's worst RMSE / PCRB,
-    average NEES and verdict after the first ``settings.transient_steps`` steps.
-
-    Parameters
-    ----------
-    consistency, settings
-        The ``consistency`` table of :class:`CampaignResult`, the campaign's settings.
-    """
+    """The diagnostic beside the verdicts (not the rule), from the ``consistency`` table of
+    :class:`CampaignResult`: each filter's worst RMSE / PCRB, average NEES and verdict after
+    the first ``settings.transient_steps`` steps."""
     c = consistency[consistency["filter"] != "PCRB"]
     if "consistent_late" not in c or c["consistent_late"].isna().all():
         return [f"(The diagnostic after the first {settings.transient_steps} steps is not computed: the record has "
@@ -634,25 +558,19 @@ def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[s
              f"({settings.transient_steps * settings.T:g} s), where an adaptive filter's start-up no longer "
              "counts:", ""]
     for (rd, name), g in c.groupby(["reading", "filter"], sort=False):
-        lines.append(f"- {rd} reading, {name}: worst state's RMSE / PCRB {g['pcrb_ratio_max_late'].min():.3f}-"
-                     f"{g['pcrb_ratio_max_late'].max():.3f} (all steps: {g['pcrb_ratio_max'].min():.3f}-"
-                     f"{g['pcrb_ratio_max'].max():.3f}); average NEES {g['anees_late'].min():.3g}-"
-                     f"{g['anees_late'].max():.3g} (all steps: {g['anees'].min():.3g}-{g['anees'].max():.3g}); "
-                     f"consistent in {int(g['consistent_late'].astype(bool).sum())} of {len(g)} scenarios (all steps: "
+        lines.append(f"- {rd} reading, {name}: worst state's RMSE / PCRB {_span(g['pcrb_ratio_max_late'], '.3f')} "
+                     f"(all steps: {_span(g['pcrb_ratio_max'], '.3f')}); average NEES {_span(g['anees_late'], '.3g')} "
+                     f"(all steps: {_span(g['anees'], '.3g')}); consistent in "
+                     f"{int(g['consistent_late'].astype(bool).sum())} of {len(g)} scenarios (all steps: "
                      f"{int(g['consistent'].astype(bool).sum())}).")
     return lines + [""]
 
 
 def write_report(result: CampaignResult, settings: Settings, out_dir, path: str = "fast",
                  config: str = "custom", partial: bool = False) -> Path:
-    """Tables, figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
-
-    Parameters
-    ----------
-    result, settings, out_dir, path, config, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
-        (``result``: what :func:`run` returned).
-    """
+    """Tables, figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
+    ``summary.md`` (``result`` of :func:`run`; ``settings``, ``path``, ``config``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     per_run, eps, examples, wall, cons, bound = result
     table = summary_table(per_run) if len(per_run) else pd.DataFrame()
     out = common.report_folder(out_dir, to_toml(settings, "seed000"),

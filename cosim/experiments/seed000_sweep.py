@@ -48,7 +48,7 @@ class SweepSettings:
     pcrb_margin: float = 0.10
 
     def __post_init__(self):
-        if len(self.factors) < 1:
+        if not self.factors:
             raise ConfigurationError("factors must list at least one factor")
         for f in self.factors:
             positive(f, "a grid factor")
@@ -57,18 +57,9 @@ class SweepSettings:
 
 
 def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: seed000.Settings) -> list[dict]:
-    """The rows of several cells of one scenario: per cell, a row per filter of :data:`FILTERS`
-    and one for the EKF given the true Q and R.
-
-    Parameters
-    ----------
-    scenario_index
-        Which scenario (0-based).
-    cells
-        (Q0 factor, R0 factor) of each cell.
-    settings
-        The campaign settings of every cell.
-    """
+    """The rows of the ``cells`` ((Q0 factor, R0 factor) each) of scenario ``scenario_index``
+    (0-based) under the campaign ``settings``: per cell, a row per filter of :data:`FILTERS`
+    and one for the EKF given the true Q and R."""
     rows = []
     bound, shared = None, {}      # the truth, the PCRB and the EKF given the true Q, R: the same in every cell
     for fq, fr in cells:
@@ -103,14 +94,9 @@ class SweepResult(NamedTuple):
 
 def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n_jobs=None,
         progress: bool = True) -> SweepResult:
-    """Run the sweep; returns a :class:`SweepResult` (interrupted: the rows of the finished
-    tasks as ``partial`` of the :class:`~fmu_models.errors.Interrupted` raised).
-
-    Parameters
-    ----------
-    settings, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    """
+    """Run the sweep (``settings``, ``backend``, ``n_jobs``, ``progress`` as :meth:`Experiment.run
+    <cosim.experiments.experiment.Experiment.run>`); returns a :class:`SweepResult`
+    (interrupted: the rows of the finished tasks as ``partial`` of the Interrupted raised)."""
     s = settings.campaign
     cells = [(fq, fr) for fq in settings.factors for fr in settings.factors]
     chunks = [cells[i:i + len(settings.factors)] for i in range(0, len(cells), len(settings.factors))]
@@ -197,15 +183,9 @@ GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 facto
 
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
     """``sweep.csv|parquet``, ``goals.csv``, heat maps, ``settings.toml`` and ``summary.md``
-    into ``out_dir``; returns ``summary.md``.
-
-    Parameters
-    ----------
-    table, wall
-        The fields of :class:`SweepResult`.
-    settings, out_dir, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
-    """
+    into ``out_dir``; returns ``summary.md`` (``table``, ``wall``: the fields of
+    :class:`SweepResult`; ``settings``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     toml = to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"
     out = common.report_folder(out_dir, toml, {"sweep.csv": table, "sweep.parquet": table})
     lines = ["# Seed 000 robustness sweep: EKF, IAE, MF-IAE, the EM-learned EKF and SWML from wrong Q0 and R0", ""]
@@ -267,13 +247,12 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
                                     ("worse_than_ekf", "mean", "share of runs worse than the EKF", False)):
         fig, axes = common.new_figure(1, len(FILTERS), figsize=(4.6 * len(FILTERS), 4.4))
         grids = [_grid(table, name, metric, how).to_numpy() for name in FILTERS]
-        values = np.log10(np.concatenate([g.ravel() for g in grids]).clip(1e-3)) if log else \
-            np.concatenate([g.ravel() for g in grids])
+        scaled = [np.log10(g.clip(1e-3)) if log else g for g in grids]
+        values = np.concatenate([g.ravel() for g in scaled])
         vmin, vmax = np.nanmin(values), np.nanmax(values)
         if vmax == vmin:
             vmax = vmin + 1.0
-        for ax, name, g in zip(axes[0], FILTERS, grids):
-            shown = np.log10(g.clip(1e-3)) if log else g
+        for ax, name, g, shown in zip(axes[0], FILTERS, grids, scaled):
             im = ax.imshow(shown, origin="lower", cmap="viridis", vmin=vmin, vmax=vmax)
             ax.set_xticks(range(len(labels)), labels)
             ax.set_yticks(range(len(labels)), labels)

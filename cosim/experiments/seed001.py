@@ -71,15 +71,8 @@ class Settings(CommonSettings):
 
 
 def make_filters(s: Settings, case: str) -> dict:
-    """The KF (linearised at the case's initial state) and the EKF, started at the true state.
-
-    Parameters
-    ----------
-    s
-        The settings.
-    case
-        Which case (its initial state and KF linearisation point).
-    """
+    """The KF (linearised at the initial state of ``case``) and the EKF of the settings ``s``,
+    started at the true state."""
     system = discretize(get_model("cartpole"), s.T)
     x0 = np.array(CASES[case])
     x_op = x0 if case == "hanging" else np.zeros(4)
@@ -113,16 +106,8 @@ def _summary(errors: dict, s: Settings, nees: dict, nis: dict, white: dict, boun
 
 def case_bound(s: Settings, case: str, X: np.ndarray, us: np.ndarray) -> np.ndarray:
     """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
-    realisations ``X`` (runs, N+1, 4) of ``case`` with inputs ``us`` (N+1, 1), under
-    ``s.pcrb_prior``.
-
-    Parameters
-    ----------
-    s, case
-        The settings, the case.
-    X, us
-        The true trajectories and the inputs.
-    """
+    realisations ``X`` (runs, N+1, 4) of ``case`` with inputs ``us`` (N+1, 1), under the
+    settings' ``s.pcrb_prior``."""
     P0 = None if s.pcrb_prior == "known" else s.P0
     return posterior_crb(discretize(get_model("cartpole"), s.T), X, us[:-1], s.q, s.r_std**2, P0).mse
 
@@ -134,17 +119,8 @@ def _truth(case: str, s: Settings, seeds: list[tuple[int, int]]):
 
 
 def fast_task(case: str, settings: Settings, runs=None) -> dict:
-    """All realisations of one case, both filters batched, with the PCRB and the consistency tests.
-
-    Parameters
-    ----------
-    case
-        Which case (``hanging`` or ``upright``).
-    settings
-        The settings.
-    runs
-        Which realisations (default all).
-    """
+    """All realisations ``runs`` (default all) of ``case`` (``hanging`` or ``upright``), both
+    filters batched, with the PCRB and the consistency tests under the ``settings``."""
     s = settings
     X, Y, us = _truth(case, s, common.seed_pairs(s, list(CASES).index(case), runs))
     errors, nees, nis, white = {}, {}, {}, {}
@@ -156,14 +132,8 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
 
 
 def master_task(case: str, settings: Settings, runs=None) -> dict:
-    """The same realisations through the co-simulation master with the plant FMU (the PCRB
-    on the fast path's truth of the same seeds; no whiteness test).
-
-    Parameters
-    ----------
-    case, settings, runs
-        As :func:`fast_task`.
-    """
+    """:func:`fast_task` (``case``, ``settings``, ``runs``) through the co-simulation master
+    with the plant FMU (the PCRB on the fast path's truth of the same seeds; no whiteness)."""
     s = settings
     seeds, makers = common.seed_pairs(s, list(CASES).index(case), runs), make_filters(s, case)
     X, est, nees, nis = common.master_runs(get_model("cartpole"), CASES[case], Constant("force", s.T, s.force), s.q,
@@ -188,13 +158,8 @@ class Seed001Result(NamedTuple):
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True) -> Seed001Result:
-    """Both cases; returns a :class:`Seed001Result`.
-
-    Parameters
-    ----------
-    settings, path, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    """
+    """Both cases (``settings``, ``path``, ``backend``, ``n_jobs``, ``progress`` as
+    :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`); returns a :class:`Seed001Result`."""
     fn = fast_task if path == "fast" else master_task
     return common.run_campaign([(fn, dict(case=c, settings=settings)) for c in CASES],
                                lambda res, wall: _result(res, settings, wall), f"seed001 ({path})", backend, n_jobs,
@@ -216,14 +181,9 @@ def _result(res: list, s: Settings, wall: float) -> Seed001Result:
 
 
 def write_report(result: Seed001Result, settings: Settings, out_dir, path: str = "fast", partial: bool = False) -> Path:
-    """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
-
-    Parameters
-    ----------
-    result, settings, out_dir, path, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
-        (``result``: what :func:`run` returned).
-    """
+    """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
+    ``summary.md`` (``result`` of :func:`run`; ``settings``, ``path``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     table, summary, wall, cons = result
     s = settings
     out = common.report_folder(out_dir, to_toml(s, "seed001"), {"errors_at_times.csv": table, "consistency.csv": cons})

@@ -114,19 +114,9 @@ def _lag_and_gain(truth, est, T, max_lag=50):
 
 
 def realisations(case: str, settings: Settings, runs, path: str = "fast") -> list[dict]:
-    """The metrics of realisations ``runs`` of one case, a dict per realisation.
-
-    Parameters
-    ----------
-    case
-        Which case (noise setting of the EKF).
-    settings
-        The settings.
-    runs
-        Which realisations.
-    path
-        ``fast`` (plant model in Python) or ``master`` (plant FMU).
-    """
+    """The metrics of realisations ``runs`` of ``case`` (the EKF's noise setting) under the
+    ``settings``, a dict per realisation, on the ``path`` ``fast`` (plant model in Python) or
+    ``master`` (plant FMU)."""
     s = settings
     out = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -163,13 +153,9 @@ class Seed002Result(NamedTuple):
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True) -> Seed002Result:
-    """Both cases, each in two tasks; returns a :class:`Seed002Result`.
-
-    Parameters
-    ----------
-    settings, path, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    """
+    """Both cases, each in two tasks (``settings``, ``path``, ``backend``, ``n_jobs``,
+    ``progress`` as :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`);
+    returns a :class:`Seed002Result`."""
     chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
     tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
              for c in CASES for ch in chunks]
@@ -199,15 +185,10 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str, partial: bool = False) -> Path:
-    """The tables, the figure, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
-
-    Parameters
-    ----------
-    per_run, traces, wall
-        The fields of :class:`Seed002Result`.
-    settings, out_dir, path, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
-    """
+    """The tables, the figure, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
+    ``summary.md`` (``per_run``, ``traces``, ``wall``: the fields of :class:`Seed002Result`;
+    ``settings``, ``path``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     table = summary_table(per_run)
     out = common.report_folder(out_dir, to_toml(settings, "seed002"),
                                {"per_run.csv": per_run, "ekf_vs_inputs.csv": table})
