@@ -36,18 +36,17 @@ def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tu
 
 
 def run_campaign(tasks: Sequence[tuple[Callable, dict]], assemble: Callable, desc: str, backend: str = "processes",
-                 n_jobs: int | None = None, progress: bool = True, partial: bool = True):
+                 n_jobs: int | None = None, progress: bool = True):
     """``assemble(results, wall)`` of the results of ``tasks`` (run by
     :func:`~cosim.experiments.campaign.run_tasks` with ``desc``, ``backend``, ``n_jobs`` and
     ``progress``) and their wall time [s]. Interrupted, the
     :class:`~fmu_models.errors.Interrupted` raised carries as ``partial`` what ``assemble``
-    makes of the finished tasks (None for the others), or with ``partial`` False their results."""
+    makes of the finished tasks (None for the others)."""
     t0 = time.perf_counter()
     try:
         results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=desc)
     except Interrupted as e:
-        if partial:
-            e.partial = assemble(e.partial or [None] * len(tasks), time.perf_counter() - t0)
+        e.partial = assemble(e.partial or [None] * len(tasks), time.perf_counter() - t0)
         raise
     return assemble(results, time.perf_counter() - t0)
 
@@ -181,7 +180,6 @@ class MasterRealisations:
             conn.update({f"{t}.y_{m}": f"sensor.y_{m}" for m in sensor.input_names})
         self.noise, self.sensor, self.states = noise, sensor, states
         self.cosim = Cosimulation([plant, sensor, *ests, source, noise], conn)
-        self._columns = None
 
     def run(self, seed_w: int, seed_v: int, duration: float):
         """One realisation with process-noise seed ``seed_w`` and sensor seed ``seed_v``,
@@ -190,28 +188,18 @@ class MasterRealisations:
         self.noise.seed, self.sensor.seed = int(seed_w), int(seed_v)
         df = self.cosim.run(duration)
         data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
-        if self._columns is None:
-            self._columns = self._index(list(df.columns))
-        xi, ei, pi, ni = self._columns
-        n = len(self.states)
-        cov = {}
-        for name in self.tags:
-            cov[name] = P = np.empty((len(data), n, n))
-            for (i, j), c in pi[name].items():
-                P[:, i, j] = P[:, j, i] = data[:, c]
-        return data[:, xi], {m: data[:, ei[m]] for m in self.tags}, cov, {m: data[1:, ni[m]] for m in self.tags}
-
-    def _index(self, columns: list):
-        """Column positions: truth, estimates, covariance entries (i, j) and NIS by filter."""
-        col = {c: i for i, c in enumerate(columns)}
+        col = {c: i for i, c in enumerate(df.columns)}
         states, n = self.states, len(self.states)
-        xi = [col[f"plant.{x}"] for x in states]
-        ei = {nm: [col[f"{t}.{x}"] for x in states] for nm, t in self.tags.items()}
-        pi = {nm: {**{(i, i): col[f"{t}.P_{x}"] for i, x in enumerate(states)},
-                   **{(i, j): col[f"{t}.P_{i}_{j}"] for i in range(n) for j in range(i + 1, n)}}
-              for nm, t in self.tags.items()}
-        ni = {nm: col[f"{t}.nis"] for nm, t in self.tags.items()}
-        return xi, ei, pi, ni
+        est, cov, nis = {}, {}, {}
+        for name, t in self.tags.items():
+            est[name] = data[:, [col[f"{t}.{x}"] for x in states]]
+            cov[name] = P = np.empty((len(data), n, n))
+            for i, x in enumerate(states):
+                P[:, i, i] = data[:, col[f"{t}.P_{x}"]]
+                for j in range(i + 1, n):
+                    P[:, i, j] = P[:, j, i] = data[:, col[f"{t}.P_{i}_{j}"]]
+            nis[name] = data[1:, col[f"{t}.nis"]]
+        return data[:, [col[f"plant.{x}"] for x in states]], est, cov, nis
 
 
 def _restored(make):

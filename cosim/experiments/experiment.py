@@ -65,8 +65,7 @@ class Experiment:
         s = self.configs[config]
         if settings_file:
             s = load_settings(s, settings_file)
-        quick = [f"runs={runs}"] if runs is not None else []
-        quick += [f"seed={seed}"] if seed is not None else []
+        quick = [f"{name}={v}" for name, v in (("runs", runs), ("seed", seed)) if v is not None]
         return apply_overrides(s, quick + list(overrides or ()))
 
     def check_path(self, path: str) -> str:

@@ -1,9 +1,6 @@
-"""Estimation metrics of Monte Carlo campaigns (seed 000 eqs 43-45), divergence, the errors
-against the posterior Cramér-Rao bound and the consistency verdicts.
-
-The error metrics take ``err``, the errors ``err[r, k, a] = x_hat - x`` (eq 45) of shape
-(runs, steps, states).
-"""
+"""Estimation metrics of Monte Carlo campaigns (seed 000 eqs 43-45; ``err[r, k, a] = x_hat - x``
+of shape (runs, steps, states)), divergence, the errors over the posterior Cramér-Rao bound
+and the consistency verdicts."""
 from __future__ import annotations
 
 import numpy as np

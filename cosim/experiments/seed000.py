@@ -1,12 +1,7 @@
-"""Seed 000 section 5 (Table 3): EKF, IAE and MF-IAE on the cart-pole under four noise scenarios.
-
-Truth: seed 000 eqs 12-17 (the Euler map), driven by Figure 2's PRBS (:func:`figure2_prbs`);
-noise ``(sigma_q^2, sigma_r^2)`` per scenario under two readings of the names (:data:`READINGS`).
-Beside the paper's filters: the EKF with EM-learned Q and R, SWML, the EKF given the true
-noise, and the posterior Cramér-Rao bound (:func:`estimators.posterior_crb`) with the
-consistency tests of :func:`~cosim.experiments.metrics.consistency_rule`. The ``fast`` and
-``master`` paths give the same numbers. The regime, the choices and the results:
-docs/guide/experiments.md.
+"""Seed 000 section 5 (Table 3): EKF, IAE and MF-IAE on the cart-pole (eqs 12-17, the Euler map)
+under four noise scenarios and two readings of their names, beside the EM-learned and SWML
+EKFs, the EKF given the true noise and the posterior Cramér-Rao bound, with the consistency
+tests; the ``fast`` and ``master`` paths give the same numbers (docs/guide/experiments.md).
 """
 from __future__ import annotations
 

@@ -1,11 +1,6 @@
-"""Where adaptation pays (beyond the paper): EKF, IAE, MF-IAE, the EM-learned EKF and SWML
-started at ``Q0 = fq q I``, ``R0 = fr r I`` over a grid of factors (``SweepSettings.factors``).
-
-A cell is exactly ``seed000.fast_task`` (eqs reading) with ``q0_factor = fq, r0_factor = fr``:
-the same realisations and numbers. Reported per cell and filter: eta over the EKF given the
-true Q and R, RMSE / PCRB, the consistency verdicts, and how often an adaptive filter is worse
-than the EKF started at the same Q0, R0; the goals are checked cell by cell
-(docs/guide/experiments.md).
+"""Where adaptation pays (beyond the paper): the filters of seed 000 started at ``Q0 = fq q I``,
+``R0 = fr r I`` over a grid of factors; a cell is exactly ``seed000.fast_task`` (eqs reading)
+with ``q0_factor = fq, r0_factor = fr``, its goals checked cell by cell (docs/guide/experiments.md).
 """
 from __future__ import annotations
 

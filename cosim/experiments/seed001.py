@@ -1,13 +1,7 @@
 """Seed 001: the Kalman filter on the linearised cart-pole against the EKF, the cart driven by
-a constant force for 120 s.
-
-Seed 001's setting is garbled in its text; our reading (every choice in :class:`Settings`,
-discussed in docs/guide/experiments.md) has two cases (``CASES``): ``"hanging"``, the KF
-linearised at the hanging pendulum, and ``"upright"``, the KF linearised at the upright
-equilibrium (seed 000 eq 20) while the pendulum, released 0.1 rad from it, falls. Reported:
-the position errors at the report times, the RMSE, the KF's divergence time, the RMSE over
-the posterior Cramér-Rao bound (:func:`estimators.posterior_crb`) and the consistency verdicts
-of :func:`~cosim.experiments.metrics.consistency_rule` (without whiteness on the master path).
+a constant force for 120 s, in two cases (``CASES``): the KF linearised at the hanging
+pendulum, or at the upright equilibrium (seed 000 eq 20) while the pendulum falls from it.
+The paper's setting is garbled; our reading is in :class:`Settings` and docs/guide/experiments.md.
 """
 from __future__ import annotations
 

@@ -1,13 +1,7 @@
-"""Seed 002: the inertia-wheel pendulum's EKF fed by the sensor chain, balanced by LQR.
-
-The sensor chain of :mod:`cosim.components.imu` feeds the EKF (state augmented with the
-gyro offset, :func:`estimators.augment_rate_bias`) with ``[fused tilt, gyro rate, encoder
-speed]``; an LQR balances the pendulum on its estimate. The cases are seed 002's two noise
-settings (``CASES``); every other choice is in :class:`Settings`. Reported per state:
-the RMSE of the EKF and of its inputs, the lag and amplitude ratio of the estimated angle,
-the offset estimate, whether the loop stayed balanced. ``master`` steps the plant FMU,
-``fast`` the same CasADi model (:class:`cosim.components.plant_model.ModelComponent`): the
-same numbers. Results: docs/guide/experiments.md.
+"""Seed 002: the inertia-wheel pendulum balanced by LQR on the estimate of an EKF (augmented
+with the gyro offset, :func:`estimators.augment_rate_bias`) fed by the sensor chain of
+:mod:`cosim.components.imu`, under seed 002's two noise settings (``CASES``); ``master`` steps
+the plant FMU, ``fast`` the same CasADi model (docs/guide/experiments.md).
 """
 from __future__ import annotations
 
