@@ -93,10 +93,8 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
         extra; :func:`_dask_client` says which). The tasks share no file with the caller.
     n_jobs : int, optional
         Worker processes for ``"processes"`` and a local dask cluster (default: the cores).
-    progress : bool
-        Show a tqdm progress bar labelled ``desc``.
-    desc : str
-        Label of the progress bar.
+    progress, desc : bool, str
+        Show a tqdm progress bar, labelled ``desc``.
 
     Raises
     ------
