@@ -38,10 +38,7 @@ def rmse_per_state(err: np.ndarray) -> np.ndarray:
 def diverged(err: np.ndarray, threshold: float) -> np.ndarray:
     """Realisations whose error ``err`` (runs, steps, states) is not finite or exceeds
     ``threshold`` in any state at any step, shape (runs,) of bool."""
-    finite = np.isfinite(err).all(axis=(1, 2))
-    with np.errstate(invalid="ignore"):
-        big = np.nanmax(np.abs(np.where(np.isfinite(err), err, np.inf)), axis=(1, 2)) > threshold
-    return ~finite | big
+    return ~(np.abs(err) <= threshold).all(axis=(1, 2))
 
 
 def nees(err: np.ndarray, P: np.ndarray) -> np.ndarray:

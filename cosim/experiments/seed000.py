@@ -50,25 +50,21 @@ PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at
 class Settings(CommonSettings):
     """Every choice of the campaign, including those the paper leaves open.
 
-    Truth: ``runs`` realisations per scenario of ``duration`` [s], period ``T`` [s], from
-    ``x0``; the PRBS of ``input_amplitude`` [N], LFSR ``input_order`` and ``input_seed``,
-    ``input_bit_time`` [s] per bit; the ``scenarios`` and ``readings``. Filters start at
-    ``x0`` with ``P0`` (times I) and the nominal noise ``q0``, ``r0`` (times I), or
-    ``q0_factor`` / ``r0_factor`` times the scenario's true variance if set (the sweep).
-    IAE: ``iae_window``, ``iae_adapt`` ("both", "Q", "R"), ``iae_form``. MF-IAE:
-    ``mfiae_window``, ``mfiae_gain_q``, ``mfiae_gain_r``, ``mfiae_q_mapping`` ("literal",
-    "gain"), ``mfiae_per_channel``. "EKF EM" (:func:`estimators.em_noise`, scalar forms, on
-    one separate training realisation): ``em_iterations`` at most, relative tolerance
-    ``em_tol``. "SWML" (:class:`estimators.SWML`): ``swml_window``, an update every
-    ``swml_every`` steps (every ``swml_early_every`` over the first 20), the MAP prior
-    ``swml_prior_sd`` (none: maximum likelihood), ``swml_posterior_average``,
-    ``swml_keep_r_nats`` and ``swml_max_fall``. ``seed`` of all random streams;
-    ``divergence_threshold`` [state units]. Limit and consistency: ``pcrb_prior``
-    (:data:`PCRB_PRIORS`), the ``confidence`` of the chi-square bands, whiteness at lags
-    1..``whiteness_lags``; the diagnostic columns ``*_late`` leave out the first
-    ``transient_steps`` steps (not computed for a record of at most ``transient_steps +
-    whiteness_lags`` steps).
-    """
+    Truth: ``runs`` realisations per scenario of ``duration`` [s], period ``T`` [s], from ``x0``;
+    the PRBS of ``input_amplitude`` [N], LFSR ``input_order`` and ``input_seed``,
+    ``input_bit_time`` [s] per bit; the ``scenarios`` and ``readings``. Filters start at ``x0``
+    with ``P0`` (times I) and the nominal noise ``q0``, ``r0`` (times I), or ``q0_factor`` /
+    ``r0_factor`` times the true variance if set. IAE: ``iae_window``, ``iae_adapt`` ("both",
+    "Q", "R"), ``iae_form``. MF-IAE: ``mfiae_window``, ``mfiae_gain_q``, ``mfiae_gain_r``,
+    ``mfiae_q_mapping`` ("literal", "gain"), ``mfiae_per_channel``. "EKF EM"
+    (:func:`estimators.em_noise` on a separate training realisation): ``em_iterations``,
+    ``em_tol``. "SWML" (:class:`estimators.SWML`): ``swml_window``, ``swml_every``,
+    ``swml_early_every`` (over the first 20 steps), ``swml_prior_sd`` (none: maximum
+    likelihood), ``swml_posterior_average``, ``swml_keep_r_nats``, ``swml_max_fall``. ``seed``;
+    ``divergence_threshold`` [state units]; ``pcrb_prior`` (:data:`PCRB_PRIORS`); the
+    ``confidence`` of the chi-square bands; whiteness at lags 1..``whiteness_lags``; the
+    ``*_late`` diagnostics leave out the first ``transient_steps`` steps (not computed unless
+    more than ``whiteness_lags`` steps remain)."""
 
     runs: int = 100
     duration: float = 5.0

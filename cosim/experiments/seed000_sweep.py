@@ -117,17 +117,11 @@ def _cells(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
-    """Per adaptive filter (and the EKF given the true noise): the cells (eta averaged over
-    the scenarios) within ``true_ekf_margin`` of the EKF given the true Q and R, those more
-    than ``ekf_margin`` worse than the EKF, those with every state of every scenario within
-    ``pcrb_margin`` of the PCRB, those consistent in every scenario, and the consistent
-    (cell, scenario) pairs.
-
-    Parameters
-    ----------
-    table, settings
-        The sweep's table and settings (its goal margins).
-    """
+    """Per adaptive filter (and the EKF given the true noise), from the sweep's ``table`` and
+    the goal margins of its ``settings``: the cells (eta averaged over the scenarios) within
+    ``true_ekf_margin`` of the EKF given the true Q and R, those more than ``ekf_margin`` worse
+    than the EKF, those with every state of every scenario within ``pcrb_margin`` of the PCRB,
+    those consistent in every scenario, and the consistent (cell, scenario) pairs."""
     cell = _cells(table)
     rows = []
     for name in (*ADAPTIVE, TRUE_EKF):
