@@ -90,7 +90,8 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
         Module-level functions (picklable) and their keyword arguments.
     backend : {"processes", "serial", "dask"}
         Local worker processes, one process, or a dask.distributed cluster (the ``dask``
-        extra; :func:`_dask_client` says which). The tasks share no file with the caller.
+        extra: the scheduler dask's configuration names as ``scheduler-address``, else the
+        current client, else a local one). The tasks share no file with the caller.
     n_jobs : int, optional
         Worker processes for ``"processes"`` and a local dask cluster (default: the cores).
     progress, desc : bool, str

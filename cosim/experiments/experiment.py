@@ -1,6 +1,7 @@
-"""The experiment protocol: what ``pendulum-cosim experiment NAME`` needs from an experiment
-(docs/guide/extending.md, "Writing an experiment"): a subclass of :class:`Experiment`
-registered by name with a class keyword, ``class MyStudy(Experiment, register="my-study")``.
+"""The experiment protocol: what ``pendulum-cosim experiment NAME`` needs from an experiment.
+
+An experiment is a subclass of :class:`Experiment` registered by name with a class keyword,
+``class MyStudy(Experiment, register="my-study")`` (docs/guide/extending.md).
 """
 from __future__ import annotations
 
