@@ -1,20 +1,11 @@
 """Run campaign tasks in parallel: local processes (default), dask, or serially.
 
-A campaign is a list of independent tasks (e.g. one per scenario and noise reading), each
-a picklable ``(function, kwargs)``. Random streams are derived per (task, realisation)
-with :func:`realisation_seeds`, never from a shared generator, so results do not depend
-on the order, the partition into tasks or the backend.
-
-The local worker processes are started by ``spawn`` on every platform: a fresh interpreter
-each, never a ``fork`` of the caller, whose threads (numpy's, tqdm's, a user's) a forked
-child would inherit in whatever state they were. A worker imports the package once when it
-starts; the tasks carry everything else.
-
-Interruption: Ctrl-C (and SIGTERM, which the command line turns into the same) stops a
-campaign at once: the worker processes ignore SIGINT from their start, are terminated by
-the parent, and die with it if it is killed (Linux: ``PR_SET_PDEATHSIG``); :func:`run_tasks`
-then raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` is the list of results
-with ``None`` for the tasks that did not finish.
+A campaign is a list of independent, picklable ``(function, kwargs)`` tasks; random streams
+come from :func:`realisation_seeds` per (task, realisation), so results do not depend on the
+order, the partition into tasks or the backend. Ctrl-C (and SIGTERM, which the command line
+turns into the same) stops a campaign at once: :func:`run_tasks` terminates the workers and
+raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` holds the finished results
+(None for the others).
 """
 from __future__ import annotations
 
@@ -98,17 +89,13 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
     tasks : sequence of (callable, dict)
         Module-level functions (picklable) and their keyword arguments.
     backend : {"processes", "serial", "dask"}
-        Local worker processes (``n_jobs``, default: the machine's cores), one process,
-        or a dask.distributed cluster (the scheduler that dask's configuration names as
-        ``scheduler-address``, else the current client, else a local one; needs the
-        ``dask`` extra). The tasks share no file with the caller: a cluster's workers need
-        no folder in common with it.
+        Local worker processes, one process, or a dask.distributed cluster (the ``dask``
+        extra: the scheduler dask's configuration names as ``scheduler-address``, else the
+        current client, else a local one). The tasks share no file with the caller.
     n_jobs : int, optional
-        Worker processes for ``"processes"`` and a local dask cluster.
-    progress : bool
-        Show a tqdm progress bar.
-    desc : str
-        Label of the progress bar.
+        Worker processes for ``"processes"`` and a local dask cluster (default: the cores).
+    progress, desc : bool, str
+        Show a tqdm progress bar, labelled ``desc``.
 
     Raises
     ------
@@ -139,6 +126,8 @@ def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes"
 
 
 def _run_processes(tasks, results, n_jobs, bar) -> None:
+    # spawned, never forked: a forked child would inherit the caller's threads (numpy's,
+    # tqdm's, a user's) in whatever state they were; a worker imports the package once
     workers = min(n_jobs or os.cpu_count() or 1, len(tasks))
     pool = None
     try:

@@ -3,6 +3,7 @@ the master, vectorised truth, batched filters, realisations through the master, 
 campaign's plumbing, and the reports' tables, figures and files."""
 from __future__ import annotations
 
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict
@@ -35,74 +36,53 @@ def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tu
 
 
 def run_campaign(tasks: Sequence[tuple[Callable, dict]], assemble: Callable, desc: str, backend: str = "processes",
-                 n_jobs: int | None = None, progress: bool = True, partial: bool = True):
-    """``assemble(results, wall)``: the campaign's result from the results of its ``tasks``
-    (``(function, kwargs)``, run by :func:`~cosim.experiments.campaign.run_tasks` with
-    ``desc``, ``backend``, ``n_jobs`` and ``progress``) and their wall time [s]. Interrupted,
-    the :class:`~fmu_models.errors.Interrupted` raised carries as ``partial`` what
-    ``assemble`` makes of the finished tasks (None for the others), or if ``partial`` is
-    False their results as they are."""
+                 n_jobs: int | None = None, progress: bool = True):
+    """``assemble(results, wall)`` of the results of ``tasks`` (run by
+    :func:`~cosim.experiments.campaign.run_tasks` with ``desc``, ``backend``, ``n_jobs`` and
+    ``progress``) and their wall time [s]. Interrupted, the
+    :class:`~fmu_models.errors.Interrupted` raised carries as ``partial`` what ``assemble``
+    makes of the finished tasks (None for the others)."""
     t0 = time.perf_counter()
     try:
         results = run_tasks(tasks, backend=backend, n_jobs=n_jobs, progress=progress, desc=desc)
     except Interrupted as e:
-        if partial:
-            e.partial = assemble(e.partial or [None] * len(tasks), time.perf_counter() - t0)
+        e.partial = assemble(e.partial or [None] * len(tasks), time.perf_counter() - t0)
         raise
     return assemble(results, time.perf_counter() - t0)
 
 
-def noise_components(model, T: float, q, measured: Sequence[str], r_std, seed_w: int, seed_v: int):
-    """The ProcessNoise (covariance ``q`` on every state) and Sensor (``measured`` states,
-    standard deviations ``r_std``) components of one realisation.
-
-    Parameters
-    ----------
-    model
-        The plant model.
-    T
-        Sample period [s].
-    q
-        Process noise covariance (scalar, diagonal or matrix).
-    measured
-        The measured states.
-    r_std
-        Measurement noise standard deviations.
-    seed_w
-        Seed of the process noise.
-    seed_v
-        Seed of the measurement noise.
-    """
+def _noise_components(model, T: float, q, measured: Sequence[str], r_std, seed_w: int, seed_v: int):
+    """The ProcessNoise (covariance ``q`` on every state) and Sensor of one realisation."""
     return (ProcessNoise("noise", T, model.state_names, q, seed=seed_w),
             Sensor("sensor", T, list(measured), noise_std=r_std, seed=seed_v))
 
 
 def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seeds, method="euler",
                    substeps=1):
-    """Truth ``X`` (runs, N+1, nx) and measurements ``Y`` (runs, N+1, ny) for inputs ``us``
-    (N+1, nu), drawing exactly the numbers the ProcessNoise and Sensor components draw in
-    the master path (same seeds, same order). ``Y`` picks the named states; for a process
-    model whose outputs ``measured`` names, its measurement.
+    """Truth ``X`` (runs, N+1, nx) and measurements ``Y`` (runs, N+1, ny), drawing exactly the
+    numbers the ProcessNoise and Sensor components draw on the master path (same seeds, same
+    order).
 
     Parameters
     ----------
-    model, T, q, measured, r_std
-        As :func:`noise_components`; ``model`` a plant model, or a process model
-        (:class:`~estimators.DiscreteModel`, an FMU's too: its own map and period, ``method``
-        and ``substeps`` unused).
-    x0
-        Initial state.
-    us
-        Inputs, shape (N+1, nu).
+    model
+        A plant model, or a process model (:class:`~estimators.DiscreteModel`, an FMU's too:
+        its own map and period, ``method`` and ``substeps`` unused).
+    x0, us
+        Initial state, and the inputs, shape (N+1, nu).
+    T
+        Sample period [s].
+    q, r_std
+        Process noise covariance (scalar, diagonal or matrix), measurement noise standard deviations.
+    measured
+        The measured states (``Y`` picks them; for a process model, its outputs if they are these).
     seeds
         (process, measurement) seed pairs, one per realisation.
-    method
-        Integration method of the truth map.
-    substeps
-        Its substeps.
+    method, substeps
+        Integration method of the truth map, and its substeps.
     """
     R, N = len(seeds), len(us) - 1
-    noise, sensor = noise_components(model, T, q, measured, r_std, 0, 0)
+    noise, sensor = _noise_components(model, T, q, measured, r_std, 0, 0)
     W = np.stack([np.random.default_rng(sw).standard_normal((N + 1, model.nx)) @ noise.L.T
                   for sw, _ in seeds])
     V = np.stack([sensor.noise_std * np.random.default_rng(sv).standard_normal((N + 1, len(measured)))
@@ -136,109 +116,70 @@ class BatchOutcome(NamedTuple):
 
 
 def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> BatchOutcome:
-    """Run one filter over all realisations in one native call; NEES from the full
-    covariance. ``us`` (N+1, nu): ``us[k]`` is held over step k -> k+1.
-
-    Parameters
-    ----------
-    make
-        Returns a new filter (the template of every realisation).
-    X
-        Truth, shape (runs, N+1, nx).
-    Y
-        Measurements, shape (runs, N+1, ny); row 0 is not used.
-    us
-        Inputs, shape (N+1, nu).
-    """
-    R = X.shape[0]
-    out = BatchFilter(make(), R, on_failure="mark").run(us[:-1], Y[:, 1:])
+    """Run the filter of ``make`` (a new one per call) over the realisations ``X`` (truth,
+    (runs, N+1, nx)) and ``Y`` (measurements, (runs, N+1, ny), row 0 unused) in one native
+    call, ``us[k]`` (inputs, (N+1, nu)) held over step k -> k+1; NEES from the full covariance."""
+    out = BatchFilter(make(), X.shape[0], on_failure="mark").run(us[:-1], Y[:, 1:])
     with np.errstate(invalid="ignore", over="ignore"):
         nees = metrics.nees(out.x[:, 1:] - X[:, 1:], out.P[:, 1:])
     return BatchOutcome(out.x, nees, out.nis, out.failed.copy(), out.innovation, out.S)
 
 
-def nees_from_outputs(err: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """NEES ``e^T P^{-1} e`` for errors (steps, nx) and covariances (steps, nx, nx)."""
-    return np.einsum("ki,ki->k", err, np.linalg.solve(P, err[..., None])[..., 0])
-
-
-def master_runs(model, start: dict, source, noise, sensor, makers: dict, T: float, duration: float,
+def master_runs(model, x0, source, q, measured: Sequence[str], r_std, makers: dict, T: float, duration: float,
                 seeds: Sequence[tuple[int, int]], fmu_dir=None):
-    """Realisations through the co-simulation master, one per (process, measurement) seed pair
-    of ``seeds`` (:class:`MasterRealisations`, the plant FMU built once). Returns truth
-    (runs, N+1, nx), the estimates by filter (runs, N+1, nx), and NEES (from the full
-    covariance) and NIS by filter (runs, N).
+    """Realisations through the co-simulation master (:class:`MasterRealisations`), one per
+    seed pair of ``seeds``; returns truth (runs, N+1, nx), the estimates by filter (runs, N+1,
+    nx), and NEES (from the full covariance) and NIS by filter (runs, N).
 
     Parameters
     ----------
-    model
-        The plant model.
-    start
-        The plant's initial state by name.
-    source, noise, sensor, makers, T
+    model, x0, q, measured, r_std, T, seeds
+        As :func:`simulate_truth` (``model`` a plant model).
+    source, makers
         As :class:`MasterRealisations`.
     duration
         Simulated time [s].
-    seeds
-        (process, measurement) seed pairs, one per realisation.
     fmu_dir
         Where to build the plant FMU (default a temporary folder).
     """
-    import tempfile
-
     X = np.empty((len(seeds), round(duration / T) + 1, model.nx))
     est = {n: np.empty_like(X) for n in makers}
     nees = {n: np.empty((len(seeds), X.shape[1] - 1)) for n in makers}
     nis = {n: np.empty_like(nees[n]) for n in makers}
     with tempfile.TemporaryDirectory() as tmp:
-        plant = FMUComponent("plant", build_fmu(model, fmu_dir or tmp), T, start=start)
-        master = MasterRealisations(plant, source, noise, sensor, makers, T)
+        plant = FMUComponent("plant", build_fmu(model, fmu_dir or tmp), T, start=dict(zip(model.state_names, x0)))
+        master = MasterRealisations(plant, source, *_noise_components(model, T, q, measured, r_std, *seeds[0]),
+                                    makers, T)
         for i, (seed_w, seed_v) in enumerate(seeds):
             X[i], e, P, v = master.run(seed_w, seed_v, duration)
             for n in makers:
                 est[n][i], nis[n][i] = e[n], v[n]
                 with np.errstate(over="ignore", invalid="ignore"):
-                    nees[n][i] = nees_from_outputs(e[n][1:] - X[i][1:], P[n][1:])
+                    nees[n][i] = metrics.nees(e[n][None, 1:] - X[i][None, 1:], P[n][None, 1:])[0]
     return X, est, nees, nis
 
 
 class MasterRealisations:
-    """One co-simulation built once for many realisations that differ only in the seeds of
-    the process noise and the sensor: plant FMU, sensor, the filters, the source and the
-    process noise (the order follows from the wiring). Each filter is built once and
-    restored to its initial state before each run
-    (:meth:`~estimators.base.KalmanBase.restore`, the numbers of a new filter).
-
-    Parameters
-    ----------
-    plant
-        The plant FMU component.
-    source
-        The input source component.
-    noise
-        The process-noise component.
-    sensor
-        The sensor component.
-    makers
-        Filter factories by name.
-    T
-        Sample period [s].
-    """
+    """One co-simulation of the ``plant`` FMU component, the ``sensor``, the filters, the input
+    ``source`` and the process ``noise`` components, built once for realisations that differ
+    only in the noise's and the sensor's seeds. Each filter (of the factories ``makers`` by
+    name, at period ``T`` [s]) is built once and restored to its initial state before each run
+    (:meth:`~estimators.base.KalmanBase.restore`: the numbers of a new filter)."""
 
     def __init__(self, plant, source, noise, sensor, makers: dict, T: float):
         states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
-        inp = [p for p in plant.input_names if not p.startswith("w_")]
+        inputs = {u: f"{source.name}.{source.output_names[j]}"
+                  for j, u in enumerate(p for p in plant.input_names if not p.startswith("w_"))}
         self.tags = tags = {name: f"f{i}" for i, name in enumerate(makers)}
         ests = [EstimatorComponent(tags[n], _restored(makers[n]), T, covariance="full") for n in makers]
-        conn = {**{f"plant.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)},
+        conn = {**{f"plant.{u}": src for u, src in inputs.items()},
                 **{f"sensor.{m}": f"plant.{m}" for m in sensor.input_names},
                 **{f"plant.w_{x}": f"noise.w_{x}" for x in states}}
         for t in tags.values():
-            conn.update({f"{t}.{u}": f"{source.name}.{source.output_names[j]}" for j, u in enumerate(inp)})
+            conn.update({f"{t}.{u}": src for u, src in inputs.items()})
             conn.update({f"{t}.y_{m}": f"sensor.y_{m}" for m in sensor.input_names})
         self.noise, self.sensor, self.states = noise, sensor, states
         self.cosim = Cosimulation([plant, sensor, *ests, source, noise], conn)
-        self._columns = None
 
     def run(self, seed_w: int, seed_v: int, duration: float):
         """One realisation with process-noise seed ``seed_w`` and sensor seed ``seed_v``,
@@ -247,34 +188,18 @@ class MasterRealisations:
         self.noise.seed, self.sensor.seed = int(seed_w), int(seed_v)
         df = self.cosim.run(duration)
         data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
-        if self._columns is None:
-            self._columns = self._index(list(df.columns))
-        xi, ei, pi, ni = self._columns
-        n = len(self.states)
-        X = data[:, xi]
-        est, cov, nis = {}, {}, {}
-        for name in self.tags:
-            est[name] = data[:, ei[name]]
-            P = np.empty((len(data), n, n))
-            for (i, j), c in pi[name].items():
-                P[:, i, j] = data[:, c]
-                if i != j:
-                    P[:, j, i] = data[:, c]
-            cov[name] = P
-            nis[name] = data[1:, ni[name]]
-        return X, est, cov, nis
-
-    def _index(self, columns: list):
-        """Column positions: truth, estimates, covariance entries (i, j) and NIS by filter."""
-        col = {c: i for i, c in enumerate(columns)}
+        col = {c: i for i, c in enumerate(df.columns)}
         states, n = self.states, len(self.states)
-        xi = [col[f"plant.{x}"] for x in states]
-        ei = {nm: [col[f"{t}.{x}"] for x in states] for nm, t in self.tags.items()}
-        pi = {nm: {**{(i, i): col[f"{t}.P_{x}"] for i, x in enumerate(states)},
-                   **{(i, j): col[f"{t}.P_{i}_{j}"] for i in range(n) for j in range(i + 1, n)}}
-              for nm, t in self.tags.items()}
-        ni = {nm: col[f"{t}.nis"] for nm, t in self.tags.items()}
-        return xi, ei, pi, ni
+        est, cov, nis = {}, {}, {}
+        for name, t in self.tags.items():
+            est[name] = data[:, [col[f"{t}.{x}"] for x in states]]
+            cov[name] = P = np.empty((len(data), n, n))
+            for i, x in enumerate(states):
+                P[:, i, i] = data[:, col[f"{t}.P_{x}"]]
+                for j in range(i + 1, n):
+                    P[:, i, j] = P[:, j, i] = data[:, col[f"{t}.P_{i}_{j}"]]
+            nis[name] = data[1:, col[f"{t}.nis"]]
+        return data[:, [col[f"plant.{x}"] for x in states]], est, cov, nis
 
 
 def _restored(make):
@@ -301,6 +226,13 @@ def pcrb_columns(rmse_runs: np.ndarray, bound_mse: np.ndarray | None, states: Se
         ratio, se = metrics.pcrb_ratio(rmse_runs, bound_mse), metrics.pcrb_ratio_se(rmse_runs, bound_mse)
     return {**{f"pcrb_ratio_{x}": float(r) for x, r in zip(states, ratio)}, "pcrb_ratio_max": float(np.max(ratio)),
             **{f"pcrb_ratio_se_{x}": float(e) for x, e in zip(states, se)}}
+
+
+def error_columns(rmse_runs: np.ndarray, bound_mse: np.ndarray | None, states: Sequence[str]) -> dict:
+    """``rmse_<state>`` (the RMSE over all the realisations) of each of the ``states``, then
+    :func:`pcrb_columns` of ``rmse_runs`` and ``bound_mse``."""
+    return {**{f"rmse_{x}": float(np.sqrt(np.mean(rmse_runs[:, a] ** 2))) for a, x in enumerate(states)},
+            **pcrb_columns(rmse_runs, bound_mse, states)}
 
 
 def pcrb_row(ident: dict, bound_mse: np.ndarray, runs: int, states: Sequence[str]) -> dict:

@@ -1,26 +1,7 @@
 """The experiment protocol: what ``pendulum-cosim experiment NAME`` needs from an experiment.
 
-An experiment is a subclass of :class:`Experiment` registered by name with a class keyword
-(``class MyStudy(Experiment, register="my-study")``, in its own file; the command line then
-offers it, with the plugin mechanism of :mod:`fmu_models.infra.registry` for code outside the
-project). It declares
-
-* ``configs``: named configurations (frozen dataclasses of settings), ``default_config``;
-* ``paths``: the ways it can run (``"fast"``: vectorised; ``"master"``: through the
-  co-simulation master with the FMUs);
-
-and implements
-
-* :meth:`Experiment.run` ``(settings, path, backend, n_jobs, progress) -> result``, raising
-  :class:`~fmu_models.errors.Interrupted` with the result of what finished as ``partial``;
-* :meth:`Experiment.write_report` ``(result, settings, out_dir, path, config, partial)``,
-  writing its tables, figures, ``settings.toml`` and ``summary.md`` (returned);
-* :meth:`Experiment.summary` ``(result, settings, path, config) -> str``, what the command
-  line prints.
-
-:meth:`Experiment.settings` turns the command line's ``--config``, ``--settings FILE``,
-``--runs``, ``--seed`` and ``--set name=value`` into settings (a subclass with nested
-settings overrides it).
+An experiment is a subclass of :class:`Experiment` registered by name with a class keyword,
+``class MyStudy(Experiment, register="my-study")`` (docs/guide/extending.md).
 """
 from __future__ import annotations
 
@@ -41,7 +22,7 @@ PATHS = ("fast", "master")
 
 
 class Experiment:
-    """An experiment runnable from the command line (see the module documentation).
+    """An experiment runnable from the command line (docs/guide/extending.md).
 
     Attributes
     ----------
@@ -85,8 +66,7 @@ class Experiment:
         s = self.configs[config]
         if settings_file:
             s = load_settings(s, settings_file)
-        quick = [f"runs={runs}"] if runs is not None else []
-        quick += [f"seed={seed}"] if seed is not None else []
+        quick = [f"{name}={v}" for name, v in (("runs", runs), ("seed", seed)) if v is not None]
         return apply_overrides(s, quick + list(overrides or ()))
 
     def check_path(self, path: str) -> str:
@@ -98,7 +78,9 @@ class Experiment:
     def run(self, settings, path: str = "fast", backend: str = "processes", n_jobs: int | None = None,
             progress: bool = True):
         """Run the experiment with ``settings`` on ``path`` (``backend``, ``n_jobs`` and
-        ``progress`` as :func:`~cosim.experiments.campaign.run_tasks`); returns its result."""
+        ``progress`` as :func:`~cosim.experiments.campaign.run_tasks`); returns its result.
+        Interrupted, it raises :class:`~fmu_models.errors.Interrupted` with the result of
+        what finished as ``partial``."""
         raise NotImplementedError
 
     def write_report(self, result, settings, out_dir: Path, path: str = "fast", config: str = "custom",

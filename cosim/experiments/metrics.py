@@ -1,9 +1,6 @@
-"""Estimation metrics of Monte Carlo campaigns (seed 000 eqs 43-45), divergence, the errors
-against the posterior Cramér-Rao bound and the consistency verdicts.
-
-The error metrics take ``err``, the errors ``err[r, k, a] = x_hat - x`` (eq 45) of shape
-(runs, steps, states).
-"""
+"""Estimation metrics of Monte Carlo campaigns (seed 000 eqs 43-45; ``err[r, k, a] = x_hat - x``
+of shape (runs, steps, states)), divergence, the errors over the posterior Cramér-Rao bound
+and the consistency verdicts."""
 from __future__ import annotations
 
 import numpy as np
@@ -41,10 +38,7 @@ def rmse_per_state(err: np.ndarray) -> np.ndarray:
 def diverged(err: np.ndarray, threshold: float) -> np.ndarray:
     """Realisations whose error ``err`` (runs, steps, states) is not finite or exceeds
     ``threshold`` in any state at any step, shape (runs,) of bool."""
-    finite = np.isfinite(err).all(axis=(1, 2))
-    with np.errstate(invalid="ignore"):
-        big = np.nanmax(np.abs(np.where(np.isfinite(err), err, np.inf)), axis=(1, 2)) > threshold
-    return ~finite | big
+    return ~(np.abs(err) <= threshold).all(axis=(1, 2))
 
 
 def nees(err: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -71,24 +65,12 @@ def consistency_rule(confidence: float, lags: int) -> str:
 def band_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95) -> tuple[dict, dict]:
     """Tests (1) and (2) of :func:`consistency_rule` for one filter: ``(row, per_step)``.
 
-    ``row``: ``runs``, ``anees``, ``anees_lo``, ``anees_hi``, ``anees_inside`` (share of the
-    steps inside their band), ``nees_ok``, and the same for ``anis`` / ``nis_ok``;
-    ``per_step``: the arrays (K,) ``anees``, ``anis`` and their bands ``nees_lo``,
-    ``nees_hi``, ``nis_lo``, ``nis_hi``.
-
-    Parameters
-    ----------
-    nees
-        NEES of each run and step, shape (runs, K); NaN (a diverged run) counts as infinite.
-    nis
-        NIS, shape (runs, K); NaN counts as infinite.
-    nx
-        State dimension.
-    ny
-        Measured channels.
-    confidence
-        Probability of the bands.
-    """
+    ``row``: ``runs``, ``anees``, its band ``anees_lo``, ``anees_hi``, ``anees_inside`` (share
+    of the steps inside their band), ``nees_ok``, the same for ``anis`` / ``nis_ok``;
+    ``per_step``: the arrays (K,) ``anees``, ``anis`` and bands ``nees_lo``, ``nees_hi``,
+    ``nis_lo``, ``nis_hi``. ``nees`` and ``nis``: shape (runs, K), NaN (a diverged run)
+    counting as infinite; ``nx``, ``ny``: state and measurement dimensions; ``confidence``:
+    probability of the bands."""
     ne = nees_test(np.where(np.isnan(nees), np.inf, nees), nx, confidence)
     ni = nis_test(np.where(np.isnan(nis), np.inf, nis), ny, confidence)
     row = {"runs": ne.runs, "anees": ne.average, "anees_lo": ne.band[0], "anees_hi": ne.band[1],
@@ -104,19 +86,8 @@ def whiteness_row(innovation: np.ndarray, S: np.ndarray, confidence: float = 0.9
     """Test (3) of :func:`consistency_rule` for one filter: ``acf_max`` and ``acf_lag1``
     (largest absolute pooled autocorrelation over the channels, at any lag and at lag 1),
     ``acf_band``, ``acf_inside`` (smallest share of steps inside, over channels and lags) and
-    ``white_ok``. Innovations that are not finite (a diverged run) are not white.
-
-    Parameters
-    ----------
-    innovation
-        Innovations, shape (runs, K, ny).
-    S
-        Their covariances, shape (runs, K, ny, ny).
-    confidence
-        Probability of the bands.
-    lags
-        Whiteness at lags 1..lags.
-    """
+    ``white_ok``, at ``confidence`` and lags 1..``lags``, of the ``innovation`` (runs, K, ny)
+    with covariances ``S`` (runs, K, ny, ny). Innovations not finite (a diverged run) are not white."""
     if not (np.isfinite(innovation).all() and np.isfinite(S).all()):
         return {"acf_max": np.inf, "acf_lag1": np.inf, "acf_band": np.nan, "acf_inside": np.nan, "white_ok": False}
     w = whiteness_test(innovation, S, lags=range(1, lags + 1), confidence=confidence)
@@ -130,65 +101,31 @@ def no_whiteness() -> dict:
     return {"acf_max": np.nan, "acf_lag1": np.nan, "acf_band": np.nan, "acf_inside": np.nan, "white_ok": None}
 
 
-def verdict(row: dict) -> bool:
-    """``consistent`` of :func:`consistency_rule` from a row of :func:`band_row` and
-    :func:`whiteness_row` (a whiteness not tested, ``white_ok`` None, does not count).
-
-    Parameters
-    ----------
-    row
-        The merged row.
-    """
-    return bool(row["nees_ok"] and row["nis_ok"] and row.get("white_ok") in (True, None))
-
-
 def consistency_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float,
                     whiteness: dict | None) -> tuple[dict, dict]:
-    """All three tests of :func:`consistency_rule` with the whiteness already tested:
-    ``(row, per_step)`` of :func:`band_row`, the row with ``whiteness`` (a row of
-    :func:`whiteness_row`, or None: :func:`no_whiteness`) and ``consistent`` (:func:`verdict`).
-
-    Parameters
-    ----------
-    nees, nis, nx, ny, confidence
-        As :func:`band_row`.
-    whiteness
-        The :func:`whiteness_row` of the innovations, or None (not tested).
-    """
+    """All three tests of :func:`consistency_rule`: ``(row, per_step)`` of :func:`band_row`
+    (``nees``, ``nis``, ``nx``, ``ny``, ``confidence``), the row with the ``whiteness`` columns
+    (:func:`whiteness_row`; None: not tested, which does not count) and ``consistent``."""
     row, per_step = band_row(nees, nis, nx, ny, confidence)
     row.update(no_whiteness() if whiteness is None else whiteness)
-    row["consistent"] = verdict(row)
+    row["consistent"] = bool(row["nees_ok"] and row["nis_ok"] and row["white_ok"] in (True, None))
     return row, per_step
 
 
 def consistency(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95,
                 innovation: np.ndarray | None = None, S: np.ndarray | None = None, lags: int = 5) -> tuple[dict, dict]:
-    """:func:`consistency_row` with the whiteness of the innovations tested here
-    (:func:`whiteness_row`; not tested without innovations).
-
-    Parameters
-    ----------
-    nees, nis, nx, ny, confidence
-        As :func:`band_row`.
-    innovation, S, lags
-        As :func:`whiteness_row` (``innovation`` None: whiteness not tested).
-    """
+    """:func:`consistency_row` (``nees``, ``nis``, ``nx``, ``ny``, ``confidence`` as
+    :func:`band_row`) with the whiteness of ``innovation``, ``S`` at ``lags`` tested here
+    (:func:`whiteness_row`; not tested if ``innovation`` is None)."""
     return consistency_row(nees, nis, nx, ny, confidence,
                            None if innovation is None else whiteness_row(innovation, S, confidence, lags))
 
 
 def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
-    """The Monte Carlo standard error of :func:`pcrb_ratio`, shape (nx,): the realisations
-    are independent, so the mean-square error over them has the standard error
-    ``std_r(m_r) / sqrt(N)`` (``m_r`` a realisation's mean-square error over the steps), and
-    the ratio, its square root over the bound's, half that relative error (the bound's own
-    Monte Carlo error, from the Jacobians' spread only, is far smaller).
-
-    Parameters
-    ----------
-    rmse_runs, bound_mse
-        As :func:`pcrb_ratio`.
-    """
+    """The Monte Carlo standard error of :func:`pcrb_ratio` of ``rmse_runs`` and ``bound_mse``,
+    shape (nx,): half the relative standard error ``std_r(m_r) / sqrt(N) / mean_r(m_r)`` of
+    the mean-square error over the independent realisations (``m_r`` a realisation's over the
+    steps; the bound's own Monte Carlo error, from the Jacobians' spread only, is far smaller)."""
     m = np.square(rmse_runs)
     N = len(m)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
@@ -198,40 +135,20 @@ def pcrb_ratio_se(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
 
 def pcrb_ratio(rmse_runs: np.ndarray, bound_mse: np.ndarray) -> np.ndarray:
     """Each state's RMSE as a multiple of the posterior Cramér-Rao bound, shape (nx,):
-    ``sqrt(mean_r rmse_r^2 / mean_k PCRB_k)``, i.e. the RMSE over realisations and steps
-    over the root of the bound's mean over the same steps.
-
-    Parameters
-    ----------
-    rmse_runs
-        Each realisation's RMSE per state over steps 1..K, shape (runs, nx).
-    bound_mse
-        The bound on the MSE at steps 1..K, shape (K, nx).
-    """
+    ``sqrt(mean_r rmse_r^2 / mean_k PCRB_k)`` of each realisation's RMSE over steps 1..K
+    ``rmse_runs`` (runs, nx) and the bound on the MSE at steps 1..K ``bound_mse`` (K, nx)."""
     with np.errstate(invalid="ignore", over="ignore"):
         return np.sqrt(np.mean(np.square(rmse_runs), axis=0) / np.mean(bound_mse, axis=0))
 
 
 def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_mse: np.ndarray, ny: int, start: int,
                     whiteness: dict | None, confidence: float = 0.95) -> dict:
-    """A diagnostic beside the verdict (not part of :func:`consistency_rule`): the numbers
-    over the steps after the first ``start`` only, where an adaptive filter's start-up
-    no longer counts: ``pcrb_ratio_max_late`` (worst state's RMSE / PCRB), ``anees_late``,
-    ``anis_late`` and ``consistent_late`` (the three tests on those steps).
-
-    Parameters
-    ----------
-    nees, nis, ny, confidence
-        As :func:`band_row`.
-    mse
-        Each state's mean-square error over the runs at steps 1..K, shape (K, nx).
-    bound_mse
-        The PCRB on it at steps 1..K, shape (K, nx).
-    start
-        Steps left out (0 <= start < K).
-    whiteness
-        :func:`whiteness_row` of the innovations after ``start`` (None: not tested).
-    """
+    """A diagnostic beside the verdict (not part of :func:`consistency_rule`): the numbers over
+    the steps after the first ``start``, where an adaptive filter's start-up no longer counts:
+    ``pcrb_ratio_max_late`` (worst state's RMSE / PCRB), ``anees_late``, ``anis_late`` and
+    ``consistent_late``. ``nees``, ``nis``, ``ny``, ``confidence`` as :func:`band_row`; ``mse``
+    and ``bound_mse``: each state's mean-square error over the runs and its PCRB at steps
+    1..K (K, nx); ``whiteness``: :func:`whiteness_row` after ``start`` (None: not tested)."""
     with np.errstate(invalid="ignore", over="ignore"):
         ratio = np.sqrt(mse[start:].mean(axis=0) / bound_mse[start:].mean(axis=0))
     row, _ = consistency_row(nees[:, start:], nis[:, start:], mse.shape[1], ny, confidence, whiteness)
@@ -240,15 +157,8 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
 
 
 def consistency_markdown(table, keys: list[str]) -> list[str]:
-    """Markdown lines of the consistency tests, one row per row of ``table`` (the rows of
-    :func:`consistency`, with the columns ``keys`` first and ``filter``).
-
-    Parameters
-    ----------
-    table
-        A DataFrame with the columns of :func:`consistency` and ``keys``.
-    keys
-        The identifying columns shown first (e.g. reading and scenario).
+    """Markdown lines of the consistency tests, a row per row of ``table`` (a DataFrame with the
+    columns of :func:`consistency`, ``filter`` and the identifying columns ``keys``, shown first).
     """
     def yes(v):
         return "n/a" if v is None or (isinstance(v, float) and np.isnan(v)) else ("yes" if v else "no")
@@ -257,8 +167,8 @@ def consistency_markdown(table, keys: list[str]) -> list[str]:
            "steps inside | NIS | max abs autocorr. (lag 1) [band] | white | consistent |",
            "|" + "---|" * (len(keys) + 11)]
     for _, r in table.iterrows():
-        tested = not (r["white_ok"] is None or (isinstance(r["white_ok"], float) and np.isnan(r["white_ok"])))
-        white = f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]" if tested else "not tested"
+        white = (f"{r['acf_max']:.3f} ({r['acf_lag1']:.3f}) [{r['acf_band']:.3f}]" if yes(r["white_ok"]) != "n/a"
+                 else "not tested")
         out.append("| " + " | ".join(str(r[k]) for k in keys) + f" | {r['filter']} | {r['runs']} | {r['anees']:.3g} "
                    f"[{r['anees_lo']:.2f}, {r['anees_hi']:.2f}] | {r['anees_inside']:.0%} | {yes(r['nees_ok'])} | "
                    f"{r['anis']:.3g} [{r['anis_lo']:.2f}, {r['anis_hi']:.2f}] | {r['anis_inside']:.0%} | "

@@ -1,34 +1,7 @@
-"""Seed 000 section 5: EKF, IAE and MF-IAE on the cart-pole under four noise scenarios.
-
-Truth (seed 000 eqs 12-17): the Euler map, ``T = 0.01 s``, ``x0 = [0.5, 0, 1.8, 0.5]``, 500
-steps; process noise ``w ~ N(0, q I)`` added each step, measurement ``y = [x, theta] +
-v``, ``v ~ N(0, r I)``. Input: seed 000 Figure 2's PRBS of +/-0.5 N, -0.5 N until 2 s then
-+0.5 N: here the maximal-length LFSR sequence of order 7 (taps 7, 6) started from state
-28, one bit per second (:func:`figure2_prbs`), whose first five bits ``0 0 1 1 1`` are the
-figure. Scenarios ``(sigma_q^2, sigma_r^2)``: (0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2).
-Two readings of the names (section 5's prose swaps them): ``"eqs"`` (eqs 24-25: ``q = sigma_q^2``, ``r =
-sigma_r^2``) and ``"prose"`` (section 5's text: ``q = sigma_r^2``, ``r = sigma_q^2``).
-
-Filters: EKF, IAE and MF-IAE from the same nominal (wrong) noise setting, beside them
-the EKF with EM-learned Q and R and SWML (online, beyond the paper: :class:`estimators.SWML`),
-and the EKF given the true Q and R (what an adaptive filter tries to reach; itself a filter,
-not a bound). Below them all, the posterior Cramér-Rao bound (PCRB,
-:func:`estimators.posterior_crb`) over the same realisations: no estimator has a smaller
-mean-square error, and every filter's RMSE per state is reported as a multiple of it.
-Consistency: the chi-square bands of the NEES and the NIS and the whiteness of the
-innovations (:func:`~cosim.experiments.metrics.consistency_rule`). The paper gives no
-filter settings: every one is in :class:`Settings`, and two configurations are named
-(:data:`CONFIGS`): ``"default"`` (filters from Q = R = 0.01 I, both readings) and
-``"paper"`` (filters from Q0 = 1e-3 I, R0 = 10 I, eqs reading: the regime whose EKF row
-matches the paper's Table 3; MF-IAE as eqs 41-42 print it, unit gains, window 10).
-
-Two paths give the same numbers: ``fast`` (truth and all filters over all realisations in
-native calls) and ``master`` (each realisation through the co-simulation master with the
-plant FMU, process-noise and sensor components and the four filters as components). Both
-draw realisation ``r`` of scenario ``s`` from ``realisation_seeds(seed, s, r)`` and compute
-NEES from the full covariance. The master path's estimator components do not publish
-their innovations, so its whiteness test is not run (the fast path gives the same
-numbers); its PCRB is computed on the fast path's truth of the same seeds.
+"""Seed 000 section 5 (Table 3): EKF, IAE and MF-IAE on the cart-pole (eqs 12-17, the Euler map)
+under four noise scenarios and two readings of their names, beside the EM-learned and SWML
+EKFs, the EKF given the true noise and the posterior Cramér-Rao bound, with the consistency
+tests; the ``fast`` and ``master`` paths give the same numbers (docs/guide/experiments.md).
 """
 from __future__ import annotations
 
@@ -49,7 +22,7 @@ from fmu_models.infra.checks import positive, positive_int
 from ..components.sources import PRBS
 from . import common, metrics
 from .experiment import Experiment
-from .settings import check_common, check_consistency, to_toml
+from .settings import CommonSettings, check_consistency, to_toml
 
 SCENARIOS = ((0.2, 0.1), (0.2, 0.2), (0.3, 0.1), (0.3, 0.2))
 READINGS = {"eqs": "eqs 24-25: sigma_q^2 is the process variance (Q), sigma_r^2 the measurement variance (R)",
@@ -74,39 +47,24 @@ PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at
 
 
 @dataclass(frozen=True)
-class Settings:
+class Settings(CommonSettings):
     """Every choice of the campaign, including those the paper leaves open.
 
-    Truth: ``runs`` realisations per scenario of ``duration`` [s] with period ``T`` [s]
-    from ``x0``; input: the PRBS of ``input_amplitude`` [N], LFSR ``input_order`` and
-    ``input_seed``, ``input_bit_time`` [s] per bit; ``scenarios`` and ``readings``.
-    Filters: initial estimate ``x0``, ``P0`` (times I); nominal noise (what EKF, IAE and
-    MF-IAE start from) ``q0``, ``r0`` (times I), or, when ``q0_factor`` / ``r0_factor`` are
-    set, that factor times the scenario's true variance (the robustness sweep); IAE:
-    ``iae_window``, ``iae_adapt`` ("both", "Q", "R"), ``iae_form``; MF-IAE:
-    ``mfiae_window``, ``mfiae_gain_q``, ``mfiae_gain_r``, ``mfiae_q_mapping`` ("literal",
-    "gain"), ``mfiae_per_channel``. "EKF EM": an EKF with Q and R learned by EM
-    (:func:`estimators.em_noise`, scalar forms, from the nominal values) on one separate
-    training realisation of the scenario, ``em_iterations`` at most, relative tolerance
-    ``em_tol``. "SWML" (:class:`estimators.SWML`, beyond the paper): window ``swml_window``,
-    an update every ``swml_every`` steps (every ``swml_early_every`` steps over the first 20),
-    started from the nominal values; by default the MAP form with posterior averaging: a
-    Gaussian prior on ``(ln q, ln r)`` of standard deviation ``swml_prior_sd`` (default
-    ``ln 100``: a factor 100 either way) centred at the nominal values, the state and
-    covariance averaged over the posterior of the noise (``swml_posterior_average``), and
-    the safeguards ``swml_keep_r_nats`` (default 0) and ``swml_max_fall`` (default 10)
-    that the prior makes unnecessary relaxed (``swml_prior_sd = none``,
-    ``swml_posterior_average = false``, ``swml_early_every = 2``, ``swml_keep_r_nats = 2``,
-    ``swml_max_fall = 2``: the plain maximum-likelihood form, :class:`estimators.SWML`'s
-    defaults). ``seed`` of all
-    random streams; ``divergence_threshold`` [state units]. The limit and consistency:
-    ``pcrb_prior`` (:data:`PCRB_PRIORS`: ``"known"``, the truth's own start, or ``"P0"``,
-    the filters' prior), the ``confidence`` of the chi-square bands and the whiteness test
-    at lags 1..``whiteness_lags``; ``transient_steps``: the diagnostic columns ``*_late``
-    leave out the first this many steps (an adaptive filter's start-up; not part of the
-    verdicts; not computed for a record of at most ``transient_steps + whiteness_lags``
-    steps).
-    """
+    Truth: ``runs`` realisations per scenario of ``duration`` [s], period ``T`` [s], from ``x0``;
+    the PRBS of ``input_amplitude`` [N], LFSR ``input_order`` and ``input_seed``,
+    ``input_bit_time`` [s] per bit; the ``scenarios`` and ``readings``. Filters start at ``x0``
+    with ``P0`` (times I) and the nominal noise ``q0``, ``r0`` (times I), or ``q0_factor`` /
+    ``r0_factor`` times the true variance if set. IAE: ``iae_window``, ``iae_adapt`` ("both",
+    "Q", "R"), ``iae_form``. MF-IAE: ``mfiae_window``, ``mfiae_gain_q``, ``mfiae_gain_r``,
+    ``mfiae_q_mapping`` ("literal", "gain"), ``mfiae_per_channel``. "EKF EM"
+    (:func:`estimators.em_noise` on a separate training realisation): ``em_iterations``,
+    ``em_tol``. "SWML" (:class:`estimators.SWML`): ``swml_window``, ``swml_every``,
+    ``swml_early_every`` (over the first 20 steps), ``swml_prior_sd`` (none: maximum
+    likelihood), ``swml_posterior_average``, ``swml_keep_r_nats``, ``swml_max_fall``. ``seed``;
+    ``divergence_threshold`` [state units]; ``pcrb_prior`` (:data:`PCRB_PRIORS`); the
+    ``confidence`` of the chi-square bands; whiteness at lags 1..``whiteness_lags``; the
+    ``*_late`` diagnostics leave out the first ``transient_steps`` steps (not computed unless
+    more than ``whiteness_lags`` steps remain)."""
 
     runs: int = 100
     duration: float = 5.0
@@ -148,18 +106,16 @@ class Settings:
     transient_steps: int = 100
 
     def __post_init__(self):
-        check_common(self)
+        super().__post_init__()
         check_consistency(self, PCRB_PRIORS)
         positive_int(self.transient_steps, "transient_steps", minimum=0)
         for name in ("P0", "q0", "r0", "input_bit_time", "divergence_threshold", "mfiae_gain_q", "mfiae_gain_r"):
             positive(getattr(self, name), name)
-        for name in ("q0_factor", "r0_factor"):
+        for name in ("q0_factor", "r0_factor", "swml_prior_sd"):
             if getattr(self, name) is not None:
                 positive(getattr(self, name), name)
         for name in ("swml_window", "swml_every", "swml_early_every"):
             positive_int(getattr(self, name), name)
-        if self.swml_prior_sd is not None:
-            positive(self.swml_prior_sd, "swml_prior_sd")
         if self.swml_posterior_average and self.swml_prior_sd is None:
             raise ConfigurationError("swml_posterior_average needs a prior: set swml_prior_sd")
         if not self.swml_keep_r_nats >= 0:
@@ -178,13 +134,8 @@ class Settings:
             raise UnknownNameError(f"readings must be among {list(READINGS)}, got {self.readings}")
 
     @property
-    def steps(self) -> int:
-        return round(self.duration / self.T)
-
-    @property
     def has_late(self) -> bool:
-        """Whether the record is long enough for the diagnostic after ``transient_steps``
-        (more than ``whiteness_lags`` steps left)."""
+        """Whether more than ``whiteness_lags`` steps follow ``transient_steps``."""
         return self.transient_steps + self.whiteness_lags < self.steps
 
 
@@ -214,41 +165,21 @@ def _system(T: float):
 
 def learn_noise(system, s: Settings, scenario_index: int, q: float, r: float, shared: dict | None = None
                 ) -> tuple[float, float]:
-    """(q, r) learned by EM from the nominal values on the scenario's training realisation.
-
-    Parameters
-    ----------
-    system
-        The discrete model.
-    s, q, r
-        The campaign's settings, the true process and measurement variances.
-    scenario_index
-        Which scenario (its training realisation).
-    shared
-        Keeps the training realisation between the calls of :func:`fast_task` that share it
-        (default: simulated here).
-    """
+    """(q, r) learned by EM from the nominal values on the training realisation of scenario
+    ``scenario_index`` (``system``: the discrete model; ``s``, ``q``, ``r``: the settings and the
+    true variances; ``shared``: keeps the training realisation between calls)."""
     shared = {} if shared is None else shared
     if "training" not in shared:
         shared["training"] = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index, [TRAINING_RUN]))
     _X, Y, u = shared["training"]
-    q0, r0 = nominal_noise(s, q, r)
-    f = EKF(system, np.array(s.x0), s.P0, q0, r0)
+    f = EKF(system, np.array(s.x0), s.P0, *nominal_noise(s, q, r))
     res = em_noise(f, u[:-1, None], Y[0, 1:], n_iter=s.em_iterations, tol=s.em_tol, structure="scalar")
     return float(res.Q[0, 0]), float(res.R[0, 0])
 
 
 def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
-    """The filters of :data:`FILTERS`, by name, as constructors (called once per realisation
-    or batch); ``learned`` is EM's (q, r) for "EKF EM" (left out if None).
-
-    Parameters
-    ----------
-    system, s, q, r
-        As :func:`learn_noise`.
-    learned
-        The EM-learned (q, r), for the EM EKF.
-    """
+    """The constructors of :data:`FILTERS` by name (``system``, ``s``, ``q``, ``r`` as
+    :func:`learn_noise`); "EKF EM" only with EM's ``learned`` (q, r)."""
     x0 = np.array(s.x0)
     q0, r0 = nominal_noise(s, q, r)
     em = {} if learned is None else {"EKF EM": lambda: EKF(system, x0, s.P0, *learned)}
@@ -267,58 +198,35 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
 
 def figure2_prbs(s: Settings):
-    """The input source: Figure 2's PRBS (see the module documentation)."""
+    """The input source: Figure 2's PRBS of +/-``input_amplitude``, -0.5 N until 2 s, then
+    +0.5 N: the maximal-length LFSR of order 7 (taps 7, 6) from state 28, one bit per second,
+    whose first five bits ``0 0 1 1 1`` are the figure."""
     return PRBS("force", s.T, s.input_amplitude, s.input_bit_time, s.input_order, s.input_seed)
-
-
-def _inputs(s: Settings) -> np.ndarray:
-    src = figure2_prbs(s)
-    src.reset(0.0)
-    return np.array([src.output(k * s.T, None)[0] for k in range(s.steps + 1)])
 
 
 def simulate_truth(s: Settings, q: float, r: float, seeds: list[tuple[int, int]]):
     """Truth ``X`` (runs, steps+1, 4), measurements ``Y`` (runs, steps+1, 2) and the input
-    sequence, drawing the same numbers as the components of the master path.
-
-    Parameters
-    ----------
-    s, q, r
-        The campaign's settings, the true process and measurement variances.
-    seeds
-        (process, measurement) seed pairs, one per realisation.
-    """
-    u = _inputs(s)
+    sequence of the settings ``s`` with the true variances ``q``, ``r``, one realisation per
+    (process, measurement) seed pair of ``seeds``: the numbers the master path's components draw."""
+    src = figure2_prbs(s)
+    src.reset(0.0)
+    u = np.array([src.output(k * s.T, None)[0] for k in range(s.steps + 1)])
     X, Y = common.simulate_truth(get_model("cartpole"), s.x0, u[:, None], s.T, q, MEASURED, np.sqrt(r), seeds)
     return X, Y, u
 
 
 def scenario_bound(s: Settings, X: np.ndarray, u: np.ndarray, q: float, r: float) -> np.ndarray:
     """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
-    realisations ``X`` (runs, N+1, 4) with inputs ``u`` (N+1,), under ``s.pcrb_prior``.
-
-    Parameters
-    ----------
-    s, q, r
-        The campaign's settings, the true process and measurement variances.
-    X
-        The true trajectories.
-    u
-        The input sequence.
-    """
+    realisations ``X`` (runs, N+1, 4) with inputs ``u`` (N+1,), under ``s.pcrb_prior``
+    (``s``, ``q``, ``r`` as :func:`simulate_truth`)."""
     P0 = None if s.pcrb_prior == "known" else s.P0
     return posterior_crb(_system(s.T), X, u[:-1, None], q, r, P0).mse
 
 
 def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndarray:
     """:func:`scenario_bound` over all realisations of one scenario and reading (the master
-    path's PCRB: the fast path's truth of the same seeds).
-
-    Parameters
-    ----------
-    scenario_index, reading, settings
-        As :func:`fast_task`.
-    """
+    path's PCRB: the fast path's truth of the same seeds); ``scenario_index``, ``reading``
+    and ``settings`` as :func:`fast_task`."""
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
     X, _, u = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index))
@@ -326,9 +234,9 @@ def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndar
 
 
 class _FilterRun(NamedTuple):
-    """One filter over the realisations of a task: errors (runs, N+1, 4), NEES and NIS
-    (runs, N), the realisations that failed (runs,), and the whiteness rows of its
-    innovations over all steps and after the transient (None: not tested)."""
+    """One filter over a task's realisations: errors (runs, N+1, 4), NEES and NIS (runs, N),
+    the failed realisations (runs,), the whiteness rows over all steps and after the
+    transient (None: not tested)."""
 
     errors: np.ndarray
     nees: np.ndarray
@@ -350,9 +258,8 @@ def _fast_filter(make, X: np.ndarray, Y: np.ndarray, u: np.ndarray, s: Settings)
 
 def _summarise(filters: dict, s: Settings, example: dict, learned) -> dict:
     """A task's result from its :class:`_FilterRun` by filter (errors over k = 1..N): eps_k,
-    the per-realisation numbers, the per-step NEES, NIS and mean-square errors the
-    consistency tests and the figures need, the whiteness rows, the ``example`` realisation
-    and EM's ``learned`` (q, r)."""
+    the per-realisation and per-step numbers, the whiteness rows, the ``example``
+    realisation and EM's ``learned`` (q, r)."""
     out = {"eps_k": {}, "per_run": {}, "steps": {}, "example": example, "learned": learned,
            "whiteness": {n: f.whiteness for n, f in filters.items()},
            "whiteness_late": {n: f.whiteness_late for n, f in filters.items()}}
@@ -370,28 +277,21 @@ def _summarise(filters: dict, s: Settings, example: dict, learned) -> dict:
 
 def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None,
               shared: dict | None = None) -> dict:
-    """All realisations of one scenario and reading, every filter over all of them in
-    native calls, with the PCRB over the same realisations and the innovations' whiteness.
+    """All realisations of one scenario and reading, every filter batched in native calls,
+    with the PCRB over the same realisations and the innovations' whiteness.
 
     Parameters
     ----------
-    scenario_index
-        Which scenario (0-based).
-    reading
-        Which reading of the noise names (``eqs`` or ``prose``).
-    settings
-        The campaign's settings.
+    scenario_index, reading, settings
+        Which scenario (0-based), which reading of the noise names, the campaign's settings.
     runs
         Which realisations (default all).
     bound
-        The PCRB of these realisations (:func:`scenario_bound`), if the caller has it
-        (default: computed here).
+        The PCRB of these realisations (:func:`scenario_bound`; default: computed here).
     shared
-        A dict the caller keeps between calls that differ only in the nominal noise (``q0``,
-        ``r0`` and their factors, as the sweep's cells): the truth, the training realisation
-        and the results of the EKF given the true Q and R (which does not start from the
-        nominal noise) are computed at the first call and reused (the same numbers; default:
-        nothing kept).
+        A dict kept between calls that differ only in the nominal noise (the sweep's cells):
+        the truth, the training realisation and the EKF given the true Q and R are computed
+        once and reused (default: nothing kept).
     """
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
@@ -412,42 +312,29 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
 
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None,
                 learned=None) -> dict:
-    """The same realisations, each run through the co-simulation master with the plant FMU
-    (``learned``: the EM-learned ``(q, r)`` of the scenario, if the caller has them).
-
-    Parameters
-    ----------
-    scenario_index, reading, settings, runs
-        As :func:`fast_task`.
-    fmu_dir
-        Where to build the plant FMU (default a temporary folder).
-    learned
-        The EM-learned (q, r) (default: learned here).
-    """
+    """:func:`fast_task` (``scenario_index``, ``reading``, ``settings``, ``runs``), each
+    realisation through the co-simulation master with the plant FMU built in ``fmu_dir``
+    (default a temporary folder); ``learned``: the scenario's EM-learned (q, r), if known."""
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
-    system, model = _system(s.T), get_model("cartpole")
+    system = _system(s.T)
     learned = learn_noise(system, s, scenario_index, q, r) if learned is None else learned
     makers = make_filters(system, s, q, r, learned)
-    seeds = common.seed_pairs(s, scenario_index, runs)
-    X, est, nees, nis = common.master_runs(model, dict(zip(STATES, s.x0)), figure2_prbs(s),
-                                           *common.noise_components(model, s.T, q, MEASURED, np.sqrt(r), *seeds[0]),
-                                           makers, s.T, s.duration, seeds, fmu_dir)
-    filters = {n: _FilterRun(est[n] - X, nees[n], nis[n], np.zeros(len(seeds), dtype=bool), metrics.no_whiteness(),
+    X, est, nees, nis = common.master_runs(get_model("cartpole"), s.x0, figure2_prbs(s), q, MEASURED, np.sqrt(r),
+                                           makers, s.T, s.duration, common.seed_pairs(s, scenario_index, runs),
+                                           fmu_dir)
+    filters = {n: _FilterRun(est[n] - X, nees[n], nis[n], np.zeros(len(X), dtype=bool), metrics.no_whiteness(),
                              None) for n in makers}
     return _summarise(filters, s, {"truth": X[0], **{f"est {n}": est[n][0] for n in makers}}, learned)
 
 
-# ---------------------------------------------------------------------------- campaign
 class CampaignResult(NamedTuple):
-    """What :func:`run` returns: ``per_run`` (one row per reading, scenario, filter and
-    realisation), ``eps`` (per reading, scenario, filter and step k: eps_k of eq 43, the
-    average NEES and NIS over the realisations with their per-step bands, and each state's
-    mean-square error), the ``examples`` of Figure 3 by (reading, scenario), the ``wall``
-    time [s], ``consistency`` (one row per reading, scenario and filter, and one for the
-    PCRB: RMSE per state and as a multiple of the PCRB, the band and whiteness tests and the
-    verdicts of :func:`~cosim.experiments.metrics.consistency_rule`) and ``bound`` (the
-    PCRB on each state's mean-square error per reading, scenario and step)."""
+    """What :func:`run` returns: ``per_run`` (a row per reading, scenario, filter and
+    realisation), ``eps`` (per reading, scenario, filter and step: eps_k (eq 43), average
+    NEES and NIS with their bands, each state's mean-square error), the ``examples`` of
+    Figure 3 by (reading, scenario), the ``wall`` time [s], ``consistency`` (a row per
+    reading, scenario and filter, and the PCRB's: RMSE, RMSE / PCRB, the tests and verdicts)
+    and ``bound`` (the PCRB per reading, scenario and step)."""
 
     per_run: pd.DataFrame
     eps: pd.DataFrame
@@ -463,19 +350,10 @@ MASTER_CHUNK = 50
 
 def run(settings: Settings = Settings(), path: str = "fast", readings=None,
         backend: str = "processes", n_jobs=None, progress: bool = True) -> CampaignResult:
-    """Run the campaign; returns a :class:`CampaignResult`.
-
-    ``readings`` defaults to the settings' readings. Interrupted (Ctrl-C, SIGTERM), it
-    raises :class:`~fmu_models.errors.Interrupted` whose ``partial`` holds the same result
-    for the tasks that finished.
-
-    Parameters
-    ----------
-    settings, path, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    readings
-        The readings to run (default the settings').
-    """
+    """Run the campaign of ``readings`` (default the settings'); returns a :class:`CampaignResult`
+    (interrupted: ``partial`` of the :class:`~fmu_models.errors.Interrupted` raised holds the
+    same for the finished tasks). ``settings``, ``path``, ``backend``, ``n_jobs``, ``progress``
+    as :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`."""
     if path not in ("fast", "master"):
         raise UnknownNameError(f"path must be 'fast' or 'master', got {path!r}")
     readings = tuple(settings.readings if readings is None else readings)
@@ -490,10 +368,8 @@ def run(settings: Settings = Settings(), path: str = "fast", readings=None,
 
 
 def _master_tasks(s: Settings, keys: list) -> tuple[list, list]:
-    """The master path's chunks and tasks: one task per scenario and slice of at most
-    :data:`MASTER_CHUNK` realisations (every core stays busy, and an interrupted campaign
-    keeps all but the last few seconds), EM learned once per scenario, not once per task;
-    then one task per scenario for the PCRB over all its realisations."""
+    """The master path's chunks and tasks: per scenario, a task per slice of at most
+    :data:`MASTER_CHUNK` realisations (EM learned once per scenario), then a PCRB task."""
     n_chunks = max(2, -(-s.runs // MASTER_CHUNK))
     chunks = [c for c in np.array_split(np.arange(s.runs), min(s.runs, n_chunks)) if len(c)]
     system = _system(s.T)
@@ -504,8 +380,8 @@ def _master_tasks(s: Settings, keys: list) -> tuple[list, list]:
 
 
 def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult:
-    """The campaign's tables from the task results (None for tasks that did not finish):
-    ``len(keys) * len(chunks)`` filter tasks, then (master path) one PCRB task per key."""
+    """The campaign's tables from the task results (None: not finished): ``len(keys) *
+    len(chunks)`` filter tasks, then (master path) a PCRB task per key."""
     n = len(chunks)
     tables, examples = ([], [], [], []), {}
     for j, (rd, i) in enumerate(keys):
@@ -519,17 +395,14 @@ def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult
             table.extend(rows)
         examples[(rd, i + 1)] = parts[0][1]["example"]
     per_run, eps, cons, bounds = tables
-
-    def frame(parts):
-        return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
-
-    return CampaignResult(pd.DataFrame(per_run), frame(eps), examples, wall, pd.DataFrame(cons), frame(bounds))
+    frames = [pd.concat(t, ignore_index=True) if t else pd.DataFrame() for t in (eps, bounds)]
+    return CampaignResult(pd.DataFrame(per_run), frames[0], examples, wall, pd.DataFrame(cons), frames[1])
 
 
 def _scenario_tables(s: Settings, rd: str, i: int, parts: list, bound, whole: bool) -> tuple[list, list, list, list]:
-    """One reading and scenario's rows of the per-run and consistency tables and its frames
-    of eps_k and of the bound, from the results ``parts`` ((runs, result) of its tasks;
-    ``whole``: one task ran all realisations, so its whiteness tests hold)."""
+    """One reading and scenario's rows of the per-run and consistency tables, its eps_k and
+    bound frames, from ``parts`` ((runs, result) of its tasks; ``whole``: one task ran all
+    realisations, so its whiteness tests hold)."""
     q, r = true_noise(s.scenarios[i], rd)
     (q0, r0), (q_em, r_em) = nominal_noise(s, q, r), parts[0][1]["learned"]
     ident = {"reading": rd, "scenario": i + 1}
@@ -544,16 +417,19 @@ def _scenario_tables(s: Settings, rd: str, i: int, parts: list, bound, whole: bo
         eps.append(frame)
     if bound is not None:
         cons.append(common.pcrb_row(ident, bound, s.runs, STATES))
-        k = np.arange(s.steps + 1)
-        bounds.append(pd.DataFrame({**ident, "k": k, "time": k * s.T,
-                                    **{f"mse_{x}": bound[:, a] for a, x in enumerate(STATES)}}))
+        bounds.append(_step_frame(ident, np.arange(s.steps + 1), s, bound))
     return per_run, eps, cons, bounds
 
 
+def _step_frame(ident: dict, k: np.ndarray, s: Settings, mse: np.ndarray, **columns) -> pd.DataFrame:
+    """A frame per step ``k``: ``ident``, ``k``, ``time``, ``columns`` and each state's ``mse_<state>``."""
+    return pd.DataFrame({**ident, "k": k, "time": k * s.T, **columns,
+                         **{f"mse_{x}": mse[:, a] for a, x in enumerate(STATES)}})
+
+
 def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list, bound, whole: bool):
-    """One filter's rows of the per-run table (beginning with ``head``), its row of the
-    consistency table and its frame of eps_k, over the tasks' results ``parts``; ``bound``:
-    the PCRB of all the realisations (None: not known)."""
+    """One filter's per-run rows (after ``head``), consistency row and eps_k frame over the
+    tasks' results ``parts``; ``bound``: the PCRB of all the realisations (None: unknown)."""
     runs = np.concatenate([c for c, _ in parts])
     pr = {k: np.concatenate([res["per_run"][name][k] for _, res in parts])
           for k in ("eta", "diverged", "anees", "anis", "rmse")}
@@ -563,8 +439,7 @@ def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list,
     w = np.array([len(c) for c, _ in parts], float)
     eps = sum(res["eps_k"][name] * wi for (_, res), wi in zip(parts, w)) / w.sum()
     mse = sum(res["steps"][name]["mse"] * wi for (_, res), wi in zip(parts, w)) / w.sum()
-    nees = np.concatenate([res["steps"][name]["nees"] for _, res in parts])
-    nis = np.concatenate([res["steps"][name]["nis"] for _, res in parts])
+    nees, nis = (np.concatenate([res["steps"][name][k] for _, res in parts]) for k in ("nees", "nis"))
     first = parts[0][1]
     tests, per_step = metrics.consistency_row(nees, nis, 4, 2, s.confidence,
                                               first["whiteness"][name] if whole else None)
@@ -572,26 +447,16 @@ def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list,
                                     first["whiteness_late"][name] if whole else None, s.confidence)
             if bound is not None and s.has_late else {})
     row = {**ident, "filter": name, "eta": float(pr["eta"].mean()), "diverged": int(pr["diverged"].sum()),
-           **{f"rmse_{x}": float(np.sqrt(np.mean(pr["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
-           **common.pcrb_columns(pr["rmse"], None if bound is None else bound[1:], STATES), **tests, **late}
-    k = np.arange(1, s.steps + 1)
-    frame = pd.DataFrame({**ident, "filter": name, "k": k, "time": k * s.T, "eps": eps, **per_step,
-                          **{f"mse_{x}": mse[:, a] for a, x in enumerate(STATES)}})
+           **common.error_columns(pr["rmse"], None if bound is None else bound[1:], STATES), **tests, **late}
+    frame = _step_frame({**ident, "filter": name}, np.arange(1, s.steps + 1), s, mse, eps=eps, **per_step)
     return rows, row, frame
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
-    """eta (eq 44) per reading, scenario and filter, with the paper's Table 3 beside it.
-
-    eta is the mean over all realisations; ``diverged`` counts the runs flagged, and
-    ``(no div.)`` excludes them; ``<filter> / EKF true Q,R`` is eta over that of the EKF
-    given the true Q and R (a filter, not a bound: see :func:`pcrb_table` for the limit).
-
-    Parameters
-    ----------
-    per_run
-        The per-realisation table of :func:`run`.
-    """
+    """eta (eq 44, mean over the realisations) per reading, scenario and filter of ``per_run``
+    (the per-realisation table of :func:`run`) beside the paper's Table 3; ``diverged``
+    counts the flagged runs, ``(no div.)`` leaves them out, ``<filter> / EKF true Q,R``: eta
+    over that of the EKF given the true Q and R."""
     rows = []
     for (rd, sc), g in per_run.groupby(["reading", "scenario"], sort=True):
         row = {"reading": rd, "scenario": sc, "sigma_q2": g["sigma_q2"].iloc[0],
@@ -616,14 +481,13 @@ def _join(values) -> str:
     return ", ".join(f"{v:.2f}" for v in values)
 
 
-def agreement(table: pd.DataFrame) -> list[str]:
-    """Plain sentences on where the table agrees with the paper's Table 3 and where not.
+def _span(values, fmt: str) -> str:
+    """``min-max`` of ``values``, each in the format ``fmt``."""
+    return f"{values.min():{fmt}}-{values.max():{fmt}}"
 
-    Parameters
-    ----------
-    table
-        The table of :func:`summary_table`.
-    """
+
+def agreement(table: pd.DataFrame) -> list[str]:
+    """Sentences on where the ``table`` of :func:`summary_table` agrees with the paper's Table 3."""
     lines = []
     for rd, g in table.groupby("reading", sort=False):
         for label, ours, paper in (("EKF", "EKF", "paper EKF"), ("MF-IAE", "MF-IAE", "paper MF-IAE")):
@@ -644,14 +508,9 @@ def agreement(table: pd.DataFrame) -> list[str]:
 
 
 def pcrb_table(consistency: pd.DataFrame) -> pd.DataFrame:
-    """Each filter's RMSE per state as a multiple of the PCRB: one row per reading and
-    filter, one column per scenario and state (``s<scenario> <state>``), and the worst.
-
-    Parameters
-    ----------
-    consistency
-        The ``consistency`` table of :class:`CampaignResult`.
-    """
+    """Each filter's RMSE / PCRB from the ``consistency`` table of :class:`CampaignResult`: a
+    row per reading and filter, a column per scenario and state (``s<scenario> <state>``),
+    and the worst."""
     c = consistency[consistency["filter"] != "PCRB"]
     rows = []
     for (rd, name), g in c.groupby(["reading", "filter"], sort=False):
@@ -664,37 +523,24 @@ def pcrb_table(consistency: pd.DataFrame) -> pd.DataFrame:
 
 
 def limit_sentences(consistency: pd.DataFrame) -> list[str]:
-    """Plain sentences: how far the EKF given the true noise, SWML and MF-IAE are from the
-    PCRB, per reading (range over scenarios, per state).
-
-    Parameters
-    ----------
-    consistency
-        The ``consistency`` table of :class:`CampaignResult`.
-    """
+    """Sentences from the ``consistency`` table of :class:`CampaignResult`: how far the EKF
+    given the true noise, SWML, MF-IAE and the EKF are from the PCRB, per reading and state
+    (range over the scenarios)."""
     lines = []
     for rd, g in consistency.groupby("reading", sort=False):
         for name in (TRUE_EKF, "SWML", "MF-IAE", "EKF"):
             f = g[g["filter"] == name]
             if not len(f) or f["pcrb_ratio_max"].isna().all():
                 continue
-            per_state = "; ".join(f"{x} {f[f'pcrb_ratio_{x}'].min():.3f}-{f[f'pcrb_ratio_{x}'].max():.3f}"
-                                  for x in STATES)
+            per_state = "; ".join(f"{x} {_span(f[f'pcrb_ratio_{x}'], '.3f')}" for x in STATES)
             lines.append(f"- {rd} reading, {name}: RMSE / sqrt(PCRB) over the {len(f)} scenarios: {per_state}.")
     return lines
 
 
 def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[str]:
-    """The diagnostic beside the verdicts: each filter's worst RMSE / PCRB, average NEES and
-    verdict over the steps after the first ``settings.transient_steps`` (not the rule).
-
-    Parameters
-    ----------
-    consistency
-        The ``consistency`` table of :class:`CampaignResult`.
-    settings
-        The campaign's settings.
-    """
+    """The diagnostic beside the verdicts (not the rule), from the ``consistency`` table of
+    :class:`CampaignResult`: each filter's worst RMSE / PCRB, average NEES and verdict after
+    the first ``settings.transient_steps`` steps."""
     c = consistency[consistency["filter"] != "PCRB"]
     if "consistent_late" not in c or c["consistent_late"].isna().all():
         return [f"(The diagnostic after the first {settings.transient_steps} steps is not computed: the record has "
@@ -703,26 +549,19 @@ def transient_sentences(consistency: pd.DataFrame, settings: Settings) -> list[s
              f"({settings.transient_steps * settings.T:g} s), where an adaptive filter's start-up no longer "
              "counts:", ""]
     for (rd, name), g in c.groupby(["reading", "filter"], sort=False):
-        lines.append(f"- {rd} reading, {name}: worst state's RMSE / PCRB {g['pcrb_ratio_max_late'].min():.3f}-"
-                     f"{g['pcrb_ratio_max_late'].max():.3f} (all steps: {g['pcrb_ratio_max'].min():.3f}-"
-                     f"{g['pcrb_ratio_max'].max():.3f}); average NEES {g['anees_late'].min():.3g}-"
-                     f"{g['anees_late'].max():.3g} (all steps: {g['anees'].min():.3g}-{g['anees'].max():.3g}); "
-                     f"consistent in {int(g['consistent_late'].astype(bool).sum())} of {len(g)} scenarios (all steps: "
+        lines.append(f"- {rd} reading, {name}: worst state's RMSE / PCRB {_span(g['pcrb_ratio_max_late'], '.3f')} "
+                     f"(all steps: {_span(g['pcrb_ratio_max'], '.3f')}); average NEES {_span(g['anees_late'], '.3g')} "
+                     f"(all steps: {_span(g['anees'], '.3g')}); consistent in "
+                     f"{int(g['consistent_late'].astype(bool).sum())} of {len(g)} scenarios (all steps: "
                      f"{int(g['consistent'].astype(bool).sum())}).")
     return lines + [""]
 
 
 def write_report(result: CampaignResult, settings: Settings, out_dir, path: str = "fast",
                  config: str = "custom", partial: bool = False) -> Path:
-    """Tables (CSV, Parquet), figures (PNG), ``settings.toml`` and a markdown summary into
-    ``out_dir``; with ``partial`` the summary says the campaign was interrupted.
-
-    Parameters
-    ----------
-    result, settings, out_dir, path, config, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
-        (``result``: what :func:`run` returned).
-    """
+    """Tables, figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
+    ``summary.md`` (``result`` of :func:`run`; ``settings``, ``path``, ``config``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     per_run, eps, examples, wall, cons, bound = result
     table = summary_table(per_run) if len(per_run) else pd.DataFrame()
     out = common.report_folder(out_dir, to_toml(settings, "seed000"),
@@ -793,8 +632,7 @@ def _limit_section(cons: pd.DataFrame, settings: Settings) -> list[str]:
 
 
 def _scatter_sentence(cons: pd.DataFrame, runs: int) -> str:
-    """How precise the ratios are: the largest Monte Carlo standard error of a filter that
-    did not diverge (RMSE / PCRB below 2)."""
+    """The largest Monte Carlo standard error of a ratio of a filter within 2x of the PCRB."""
     near = cons[(cons["filter"] != "PCRB") & (cons["pcrb_ratio_max"] < 2)]
     se = near[[c for c in near.columns if c.startswith("pcrb_ratio_se_")]].to_numpy(float)
     if not np.isfinite(se).any():

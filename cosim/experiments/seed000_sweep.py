@@ -1,18 +1,6 @@
-"""Where adaptation pays: EKF, IAE, MF-IAE and SWML over a grid of wrong starting Q0 and R0.
-
-Beyond the paper. Each cell of the grid starts the filters at ``Q0 = fq q I`` and
-``R0 = fr r I``, where ``(q, r)`` are the scenario's true variances and ``fq, fr`` run over
-``SweepSettings.factors`` (default 1e-3 ... 1e3, 7 x 7 cells), and runs the seed 000
-campaign of every scenario (eqs reading) with them: a cell is exactly
-``seed000.fast_task`` with ``q0_factor = fq, r0_factor = fr`` (same realisations, same
-numbers; the tests check it). Reported per cell and filter: eta (eq 44) over the eta of
-the EKF given the true Q and R (a filter, not a bound), each state's RMSE as a multiple of
-the posterior Cramér-Rao bound over the same realisations (the limit of any estimator; the
-same for every cell of a scenario, computed once per task), the consistency tests and
-verdict of :func:`~cosim.experiments.metrics.consistency_rule`, and for the adaptive
-filters (and the EKF whose Q and R EM learned from the same start on a training
-realisation) the fraction of realisations in which they are worse than the EKF started at
-the same Q0, R0. The goals are checked cell by cell and summarised in ``summary.md``.
+"""Where adaptation pays (beyond the paper): the filters of seed 000 started at ``Q0 = fq q I``,
+``R0 = fr r I`` over a grid of factors; a cell is exactly ``seed000.fast_task`` (eqs reading)
+with ``q0_factor = fq, r0_factor = fr``, its goals checked cell by cell (docs/guide/experiments.md).
 """
 from __future__ import annotations
 
@@ -55,7 +43,7 @@ class SweepSettings:
     pcrb_margin: float = 0.10
 
     def __post_init__(self):
-        if len(self.factors) < 1:
+        if not self.factors:
             raise ConfigurationError("factors must list at least one factor")
         for f in self.factors:
             positive(f, "a grid factor")
@@ -64,18 +52,9 @@ class SweepSettings:
 
 
 def cell_task(scenario_index: int, cells: list[tuple[float, float]], settings: seed000.Settings) -> list[dict]:
-    """The rows of several cells of one scenario (one process task): per cell, one row per
-    filter of :data:`FILTERS` and one for the EKF given the true Q and R.
-
-    Parameters
-    ----------
-    scenario_index
-        Which scenario (0-based).
-    cells
-        (Q0 factor, R0 factor) of each cell.
-    settings
-        The campaign settings of every cell.
-    """
+    """The rows of the ``cells`` ((Q0 factor, R0 factor) each) of scenario ``scenario_index``
+    (0-based) under the campaign ``settings``: per cell, a row per filter of :data:`FILTERS`
+    and one for the EKF given the true Q and R."""
     rows = []
     bound, shared = None, {}      # the truth, the PCRB and the EKF given the true Q, R: the same in every cell
     for fq, fr in cells:
@@ -110,15 +89,9 @@ class SweepResult(NamedTuple):
 
 def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n_jobs=None,
         progress: bool = True) -> SweepResult:
-    """Run the sweep; returns a :class:`SweepResult`: one row per scenario, cell and filter
-    (see the module documentation). Interrupted, it raises
-    :class:`~fmu_models.errors.Interrupted` with the rows of the finished tasks.
-
-    Parameters
-    ----------
-    settings, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    """
+    """Run the sweep (``settings``, ``backend``, ``n_jobs``, ``progress`` as :meth:`Experiment.run
+    <cosim.experiments.experiment.Experiment.run>`); returns a :class:`SweepResult`
+    (interrupted: the rows of the finished tasks as ``partial`` of the Interrupted raised)."""
     s = settings.campaign
     cells = [(fq, fr) for fq in settings.factors for fr in settings.factors]
     chunks = [cells[i:i + len(settings.factors)] for i in range(0, len(cells), len(settings.factors))]
@@ -144,19 +117,11 @@ def _cells(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
-    """Per adaptive filter (and the EKF given the true noise, for reference): the cells
-    (eta averaged over the scenarios) within ``true_ekf_margin`` of the EKF given the true Q
-    and R, those more than ``ekf_margin`` worse than the EKF, the cells where every state of
-    every scenario is within ``pcrb_margin`` of the PCRB, the cells consistent in every
-    scenario and the (cell, scenario) pairs consistent (:func:`~cosim.experiments.metrics.consistency_rule`).
-
-    Parameters
-    ----------
-    table
-        The sweep's table.
-    settings
-        The sweep's settings (its goal margins).
-    """
+    """Per adaptive filter (and the EKF given the true noise), from the sweep's ``table`` and
+    the goal margins of its ``settings``: the cells (eta averaged over the scenarios) within
+    ``true_ekf_margin`` of the EKF given the true Q and R, those more than ``ekf_margin`` worse
+    than the EKF, those with every state of every scenario within ``pcrb_margin`` of the PCRB,
+    those consistent in every scenario, and the consistent (cell, scenario) pairs."""
     cell = _cells(table)
     rows = []
     for name in (*ADAPTIVE, TRUE_EKF):
@@ -181,16 +146,8 @@ def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
 
 
 def why_not_consistent(table: pd.DataFrame, name: str = "SWML") -> list[str]:
-    """Plain sentences on the (cell, scenario) pairs where ``name`` is not consistent: which
-    test fails, and by how much.
-
-    Parameters
-    ----------
-    table
-        The sweep's table.
-    name
-        The filter.
-    """
+    """Sentences on the (cell, scenario) pairs of the sweep's ``table`` where the filter
+    ``name`` is not consistent: which test fails, and by how much."""
     t = table[(table["filter"] == name) & ~table["consistent"].astype(bool)]
     lines = []
     for _, r in t.sort_values(["q_factor", "r_factor", "scenario"]).iterrows():
@@ -214,16 +171,10 @@ GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 facto
 
 
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
-    """``sweep.csv|parquet``, heat maps (``heatmap_<metric>.png``), ``settings.toml`` and
-    ``summary.md`` into ``out_dir``.
-
-    Parameters
-    ----------
-    table, wall
-        The fields of :class:`SweepResult`.
-    settings, out_dir, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
-    """
+    """``sweep.csv|parquet``, ``goals.csv``, heat maps, ``settings.toml`` and ``summary.md``
+    into ``out_dir``; returns ``summary.md`` (``table``, ``wall``: the fields of
+    :class:`SweepResult`; ``settings``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     toml = to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"
     out = common.report_folder(out_dir, toml, {"sweep.csv": table, "sweep.parquet": table})
     lines = ["# Seed 000 robustness sweep: EKF, IAE, MF-IAE, the EM-learned EKF and SWML from wrong Q0 and R0", ""]
@@ -285,13 +236,12 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
                                     ("worse_than_ekf", "mean", "share of runs worse than the EKF", False)):
         fig, axes = common.new_figure(1, len(FILTERS), figsize=(4.6 * len(FILTERS), 4.4))
         grids = [_grid(table, name, metric, how).to_numpy() for name in FILTERS]
-        values = np.log10(np.concatenate([g.ravel() for g in grids]).clip(1e-3)) if log else \
-            np.concatenate([g.ravel() for g in grids])
+        scaled = [np.log10(g.clip(1e-3)) if log else g for g in grids]
+        values = np.concatenate([g.ravel() for g in scaled])
         vmin, vmax = np.nanmin(values), np.nanmax(values)
         if vmax == vmin:
             vmax = vmin + 1.0
-        for ax, name, g in zip(axes[0], FILTERS, grids):
-            shown = np.log10(g.clip(1e-3)) if log else g
+        for ax, name, g, shown in zip(axes[0], FILTERS, grids, scaled):
             im = ax.imshow(shown, origin="lower", cmap="viridis", vmin=vmin, vmax=vmax)
             ax.set_xticks(range(len(labels)), labels)
             ax.set_yticks(range(len(labels)), labels)
@@ -307,9 +257,8 @@ def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
 
 
 class Sweep(Experiment, register="seed000-sweep"):
-    """The robustness map of EKF, IAE, MF-IAE and SWML over wrong starting Q0 and R0 (beyond the
-    paper; see the module documentation). ``--set`` names either a sweep setting
-    (``factors``, the goal margins) or a setting of every cell's seed 000 campaign."""
+    """The robustness map over wrong starting Q0 and R0. ``--set`` names either a sweep
+    setting (``factors``, the goal margins) or a setting of every cell's seed 000 campaign."""
 
     description = "beyond the paper: EKF, IAE, MF-IAE and SWML over a 7 x 7 map of wrong Q0, R0"
     configs = seed000.CONFIGS

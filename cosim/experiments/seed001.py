@@ -1,26 +1,7 @@
-"""Seed 001: Kalman filter on the linearised cart-pole against the EKF, cart driven by a
-constant force, 120 s.
-
-Seed 001's setting is garbled in its text: it claims that the KF
-on the linearised model tracks the cart until about 100 s and then diverges while the
-EKF holds, with position errors at 1, 30, 60, 90 and 100 s. Our reading, every choice in
-:class:`Settings`:
-
-* ``"hanging"``: the pendulum hangs (the configuration in which a cart can be pushed for
-  100 s), the KF is linearised there, and a constant force of 0.05 N drives the cart;
-* ``"upright"``: the pendulum starts 0.1 rad from upright, the KF is linearised at the
-  upright equilibrium (seed 000 eq 20's model); the pendulum falls and swings through
-  the hanging position, far from the KF's linearisation.
-
-Both filters measure ``[x, theta]`` with noise of standard deviation 0.01, process noise
-variance 1e-8 per step, T = 0.01 s (the Euler truth map), 20 realisations. Reported:
-mean absolute position error at 1, 30, 60, 90, 100 and 120 s, per-state RMSE, the
-first time the KF's error (RMS over the states) exceeds ``divergence_error`` for good,
-each filter's RMSE per state as a multiple of the posterior Cramér-Rao bound over the same
-realisations (:func:`estimators.posterior_crb`: the limit of any estimator), and the
-consistency verdicts of :func:`~cosim.experiments.metrics.consistency_rule` (on the
-master path without the whiteness test: the estimator components do not publish their
-innovations).
+"""Seed 001: the Kalman filter on the linearised cart-pole against the EKF, the cart driven by
+a constant force for 120 s, in two cases (``CASES``): the KF linearised at the hanging
+pendulum, or at the upright equilibrium (seed 000 eq 20) while the pendulum falls from it.
+The paper's setting is garbled; our reading is in :class:`Settings` and docs/guide/experiments.md.
 """
 from __future__ import annotations
 
@@ -37,7 +18,7 @@ from fmu_models import get_model
 from ..components.sources import Constant
 from . import common, metrics
 from .experiment import Experiment
-from .settings import check_common, check_consistency, to_toml
+from .settings import CommonSettings, check_consistency, to_toml
 
 CASES = {"hanging": (0.0, 0.0, np.pi, 0.0), "upright": (0.0, 0.0, 0.1, 0.0)}
 REPORT_TIMES = (1.0, 30.0, 60.0, 90.0, 100.0, 120.0)
@@ -53,7 +34,7 @@ PCRB_PRIORS = {"known": "the initial state is known exactly (the truth starts at
 
 
 @dataclass(frozen=True)
-class Settings:
+class Settings(CommonSettings):
     """Choices of the seed 001 reproduction (the paper's are not recoverable).
 
     ``runs`` realisations of ``duration`` [s] with period ``T`` [s]; constant ``force``
@@ -79,24 +60,13 @@ class Settings:
     whiteness_lags: int = 5
 
     def __post_init__(self):
-        check_common(self)
+        super().__post_init__()
         check_consistency(self, PCRB_PRIORS)
-
-    @property
-    def steps(self) -> int:
-        return round(self.duration / self.T)
 
 
 def make_filters(s: Settings, case: str) -> dict:
-    """The KF (linearised at the case's initial state) and the EKF, started at the true state.
-
-    Parameters
-    ----------
-    s
-        The settings.
-    case
-        Which case (its initial state and KF linearisation point).
-    """
+    """The KF (linearised at the initial state of ``case``) and the EKF of the settings ``s``,
+    started at the true state."""
     system = discretize(get_model("cartpole"), s.T)
     x0 = np.array(CASES[case])
     x_op = x0 if case == "hanging" else np.zeros(4)
@@ -105,50 +75,33 @@ def make_filters(s: Settings, case: str) -> dict:
             "EKF": lambda: EKF(system, x0, s.P0, s.q, R)}
 
 
-def _source(s: Settings):
-    return Constant("force", s.T, s.force)
-
-
-def _summary(errors: dict, s: Settings, nees: dict, nis: dict, white: dict, bound: np.ndarray | None) -> dict:
+def _summary(errors: dict, s: Settings, nees: dict, nis: dict, white: dict, bound: np.ndarray) -> dict:
     """Per filter: the errors at the report times, the RMSE, the divergence time, the RMS
-    error over the states, the RMSE per state over the PCRB (``bound``: its mean-square
-    error per step, k = 0..N) and the consistency tests (``white``: the whiteness rows)."""
-    out = {}
+    error over the states, the RMSE / PCRB (``bound``: its mean-square error per step,
+    k = 0..N) and the consistency tests (``white``: the whiteness rows)."""
+    out = {"bound": bound}
     t = np.arange(s.steps + 1) * s.T
+    idx = [round(tr / s.T) for tr in REPORT_TIMES if tr <= s.duration]
     for name, err in errors.items():
         rms = metrics.rms_over_states(err)                      # (runs, steps+1)
-        above = rms > s.divergence_error
         # diverged from the first step after which the error stays above the threshold
-        stays = np.flip(np.logical_and.accumulate(np.flip(above, axis=1), axis=1), axis=1)
-        t_div = np.where(stays.any(axis=1), t[np.argmax(stays, axis=1)], np.nan)
-        idx = [round(tr / s.T) for tr in REPORT_TIMES if tr <= s.duration]
+        stays = np.flip(np.logical_and.accumulate(np.flip(rms > s.divergence_error, axis=1), axis=1), axis=1)
         rmse = np.sqrt(np.mean(err[:, 1:] ** 2, axis=1))
         row, per_step = metrics.consistency_row(nees[name], nis[name], 4, 2, s.confidence, white[name])
         with np.errstate(over="ignore", invalid="ignore"):
-            mse = np.mean(err[:, 1:] ** 2, axis=0)
-        out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": rmse, "t_div": t_div, "rms_mean": rms.mean(axis=0),
+            rmse_k = np.sqrt(np.mean(err[:, 1:] ** 2, axis=0))
+        out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": rmse, "rms_mean": rms.mean(axis=0),
+                     "t_div": np.where(stays.any(axis=1), t[np.argmax(stays, axis=1)], np.nan),
                      "pcrb_ratio": metrics.pcrb_ratio(rmse, bound[1:]),
                      "pcrb_ratio_se": metrics.pcrb_ratio_se(rmse, bound[1:]), "tests": row, "anees": per_step["anees"],
-                     "nees_band": (per_step["nees_lo"], per_step["nees_hi"]), "rmse_k": np.sqrt(mse)}
-    out["bound"] = bound
+                     "nees_band": (per_step["nees_lo"], per_step["nees_hi"]), "rmse_k": rmse_k}
     return out
 
 
 def case_bound(s: Settings, case: str, X: np.ndarray, us: np.ndarray) -> np.ndarray:
     """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
-    realisations ``X`` of ``case`` with inputs ``us`` (N+1, 1), under ``s.pcrb_prior``.
-
-    Parameters
-    ----------
-    s
-        The settings.
-    case
-        Which case.
-    X
-        The true trajectories (runs, N+1, 4).
-    us
-        The inputs.
-    """
+    realisations ``X`` (runs, N+1, 4) of ``case`` with inputs ``us`` (N+1, 1), under the
+    settings' ``s.pcrb_prior``."""
     P0 = None if s.pcrb_prior == "known" else s.P0
     return posterior_crb(discretize(get_model("cartpole"), s.T), X, us[:-1], s.q, s.r_std**2, P0).mse
 
@@ -160,18 +113,8 @@ def _truth(case: str, s: Settings, seeds: list[tuple[int, int]]):
 
 
 def fast_task(case: str, settings: Settings, runs=None) -> dict:
-    """All realisations of one case, both filters batched, with the PCRB and the
-    consistency tests.
-
-    Parameters
-    ----------
-    case
-        Which case (``hanging`` or ``upright``).
-    settings
-        The settings.
-    runs
-        Which realisations (default all).
-    """
+    """All realisations ``runs`` (default all) of ``case`` (``hanging`` or ``upright``), both
+    filters batched, with the PCRB and the consistency tests under the ``settings``."""
     s = settings
     X, Y, us = _truth(case, s, common.seed_pairs(s, list(CASES).index(case), runs))
     errors, nees, nis, white = {}, {}, {}, {}
@@ -183,20 +126,12 @@ def fast_task(case: str, settings: Settings, runs=None) -> dict:
 
 
 def master_task(case: str, settings: Settings, runs=None) -> dict:
-    """The same realisations through the co-simulation master with the plant FMU (the
-    PCRB on the fast path's truth of the same seeds; no whiteness test).
-
-    Parameters
-    ----------
-    case, settings, runs
-        As :func:`fast_task`.
-    """
+    """:func:`fast_task` (``case``, ``settings``, ``runs``) through the co-simulation master
+    with the plant FMU (the PCRB on the fast path's truth of the same seeds; no whiteness)."""
     s = settings
-    model, seeds = get_model("cartpole"), common.seed_pairs(s, list(CASES).index(case), runs)
-    makers = make_filters(s, case)
-    X, est, nees, nis = common.master_runs(model, dict(zip(model.state_names, CASES[case])), _source(s),
-                                           *common.noise_components(model, s.T, s.q, MEASURED, s.r_std, *seeds[0]),
-                                           makers, s.T, s.duration, seeds)
+    seeds, makers = common.seed_pairs(s, list(CASES).index(case), runs), make_filters(s, case)
+    X, est, nees, nis = common.master_runs(get_model("cartpole"), CASES[case], Constant("force", s.T, s.force), s.q,
+                                           MEASURED, s.r_std, makers, s.T, s.duration, seeds)
     truth, _, us = _truth(case, s, seeds)
     return _summary({n: est[n] - X for n in makers}, s, nees, nis, {n: metrics.no_whiteness() for n in makers},
                     case_bound(s, case, truth, us))
@@ -205,10 +140,9 @@ def master_task(case: str, settings: Settings, runs=None) -> dict:
 class Seed001Result(NamedTuple):
     """What :func:`run` returns: the ``table`` of mean position errors at the report times,
     the ``summary`` per case (per filter: errors, divergence times, RMSE, RMSE / PCRB, the
-    consistency tests; and the PCRB per step under ``"bound"``), the ``wall`` time [s], and
-    ``consistency``: one row per case and filter (and one for the PCRB) with each state's
-    RMSE, its ratio to the PCRB and the tests of
-    :func:`~cosim.experiments.metrics.consistency_rule`."""
+    tests; the PCRB per step under ``"bound"``), the ``wall`` time [s], and ``consistency``:
+    a row per case and filter (and the PCRB's) with each state's RMSE, RMSE / PCRB and the
+    tests of :func:`~cosim.experiments.metrics.consistency_rule`."""
 
     table: pd.DataFrame
     summary: dict
@@ -218,13 +152,8 @@ class Seed001Result(NamedTuple):
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True) -> Seed001Result:
-    """Both cases; returns a :class:`Seed001Result`.
-
-    Parameters
-    ----------
-    settings, path, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    """
+    """Both cases (``settings``, ``path``, ``backend``, ``n_jobs``, ``progress`` as
+    :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`); returns a :class:`Seed001Result`."""
     fn = fast_task if path == "fast" else master_task
     return common.run_campaign([(fn, dict(case=c, settings=settings)) for c in CASES],
                                lambda res, wall: _result(res, settings, wall), f"seed001 ({path})", backend, n_jobs,
@@ -233,34 +162,26 @@ def run(settings: Settings = Settings(), path: str = "fast", backend="processes"
 
 def _result(res: list, s: Settings, wall: float) -> Seed001Result:
     """The campaign's result from its tasks' (one per case; None: a case that did not finish)."""
-    cases = [c for c, r in zip(CASES, res) if r is not None]
-    res = [r for r in res if r is not None]
+    summary = {c: r for c, r in zip(CASES, res) if r is not None}
     times = [tr for tr in REPORT_TIMES if tr <= s.duration]
     rows = [{"case": case, "time": tr, **{f"{n} |x error| [m]": r[n]["pos_err"][:, j].mean() for n in FILTERS}}
-            for case, r in zip(cases, res) for j, tr in enumerate(times)]
+            for case, r in summary.items() for j, tr in enumerate(times)]
     cons = []
-    for case, r in zip(cases, res):
-        cons += [{"case": case, "filter": n,
-                  **{f"rmse_{x}": float(np.sqrt(np.mean(r[n]["rmse"][:, a] ** 2))) for a, x in enumerate(STATES)},
-                  **common.pcrb_columns(r[n]["rmse"], r["bound"][1:], STATES), **r[n]["tests"]} for n in FILTERS]
+    for case, r in summary.items():
+        cons += [{"case": case, "filter": n, **common.error_columns(r[n]["rmse"], r["bound"][1:], STATES),
+                  **r[n]["tests"]} for n in FILTERS]
         cons.append(common.pcrb_row({"case": case}, r["bound"], s.runs, STATES))
-    return Seed001Result(pd.DataFrame(rows), dict(zip(cases, res)), wall, pd.DataFrame(cons))
+    return Seed001Result(pd.DataFrame(rows), summary, wall, pd.DataFrame(cons))
 
 
 def write_report(result: Seed001Result, settings: Settings, out_dir, path: str = "fast", partial: bool = False) -> Path:
-    """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns ``summary.md``.
-
-    Parameters
-    ----------
-    result, settings, out_dir, path, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`
-        (``result``: what :func:`run` returned).
-    """
+    """The tables, the figures, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
+    ``summary.md`` (``result`` of :func:`run`; ``settings``, ``path``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     table, summary, wall, cons = result
     s = settings
     out = common.report_folder(out_dir, to_toml(s, "seed001"), {"errors_at_times.csv": table, "consistency.csv": cons})
-    _error_figure(summary, s, out)
-    _limit_figures(summary, s, out)
+    _figures(summary, s, out)
     shown = cons[["case", "filter", *[f"rmse_{x}" for x in STATES], *[f"pcrb_ratio_{x}" for x in STATES]]]
     lines = ["# Seed 001: KF on the linearised model against the EKF", "",
              f"Regime: both filters given the true noise (q = {s.q:g} per step, r = {s.r_std:g}^2), started at the "
@@ -283,8 +204,8 @@ def write_report(result: Seed001Result, settings: Settings, out_dir, path: str =
 
 
 def _divergence_rows(summary: dict):
-    """Per case and filter: the realisations that diverged, their median time of divergence,
-    and the RMSE per state (mean over the realisations)."""
+    """Per case and filter: the diverged realisations, their median time of divergence, and
+    the RMSE per state (mean over the realisations)."""
     for case, res in summary.items():
         for n in FILTERS:
             td = res[n]["t_div"]
@@ -293,38 +214,31 @@ def _divergence_rows(summary: dict):
                    *(f"{v:.3g}" for v in res[n]["rmse"].mean(axis=0))]
 
 
-def _error_figure(summary: dict, settings: Settings, out: Path) -> None:
-    """The RMS error over the states, mean over the realisations, per case."""
-    t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
-    for (case, res), ax in zip(summary.items(), axes[:, 0]):
+def _figures(summary: dict, s: Settings, out: Path) -> None:
+    """Per case: the RMS error over the states (mean over the realisations), the average NEES
+    with its band, and the RMSE per state against the PCRB."""
+    t = np.arange(s.steps + 1) * s.T
+    figs = {name: common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary))) for name in ("errors", "nees")}
+    for (case, res), ax, ax_nees in zip(summary.items(), figs["errors"][1][:, 0], figs["nees"][1][:, 0]):
         for n in FILTERS:
             ax.semilogy(t, res[n]["rms_mean"], label=n)
-        ax.axhline(settings.divergence_error, color="k", ls=":", lw=0.8, label="divergence threshold")
-        common.style_axes(ax, "time [s]", legend=8,
-                          title=f"{case}: RMS error over the states, mean of {settings.runs} realisations")
-    common.save_figure(fig, out / "errors.png")
-
-
-def _limit_figures(summary: dict, settings: Settings, out: Path) -> None:
-    """Average NEES with its band, and RMSE against the PCRB, per case."""
-    t = np.arange(settings.steps + 1) * settings.T
-    fig, axes = common.new_figure(len(summary), 1, figsize=(8, 3 * len(summary)))
-    for (case, res), ax in zip(summary.items(), axes[:, 0]):
-        lo, hi = res[FILTERS[0]]["nees_band"]
-        ax.fill_between(t[1:], lo, hi, color="0.85", label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
+        ax.axhline(s.divergence_error, color="k", ls=":", lw=0.8, label="divergence threshold")
+        common.style_axes(ax, "time [s]", legend=8, title=f"{case}: RMS error over the states, mean of {s.runs} "
+                          "realisations")
+        ax_nees.fill_between(t[1:], *res[FILTERS[0]]["nees_band"], color="0.85",
+                             label=f"{s.confidence:.0%} band ({s.runs} runs)")
         for n in FILTERS:
-            ax.semilogy(t[1:], res[n]["anees"], lw=0.8, label=n)
-        common.style_axes(ax, "time [s]", title=f"{case}: average NEES over {settings.runs} realisations", legend=8)
-    common.save_figure(fig, out / "nees.png")
+            ax_nees.semilogy(t[1:], res[n]["anees"], lw=0.8, label=n)
+        common.style_axes(ax_nees, "time [s]", title=f"{case}: average NEES over {s.runs} realisations", legend=8)
+    for name, (fig, _) in figs.items():
+        common.save_figure(fig, out / f"{name}.png")
     fig, axes = common.new_figure(4, len(summary), figsize=(5 * len(summary), 9), sharex=True)
     for j, (case, res) in enumerate(summary.items()):
         for a, x in enumerate(STATES):
-            ax = axes[a, j]
             for n in FILTERS:
-                ax.semilogy(t[1:], res[n]["rmse_k"][:, a], lw=0.8, label=n)
-            ax.semilogy(t[1:], np.sqrt(res["bound"][1:, a]), "k-", lw=1.2, label="sqrt(PCRB)")
-            common.style_axes(ax, ylabel=f"RMSE {x}")
+                axes[a, j].semilogy(t[1:], res[n]["rmse_k"][:, a], lw=0.8, label=n)
+            axes[a, j].semilogy(t[1:], np.sqrt(res["bound"][1:, a]), "k-", lw=1.2, label="sqrt(PCRB)")
+            common.style_axes(axes[a, j], ylabel=f"RMSE {x}")
         axes[0, j].set_title(case)
         axes[0, j].legend(fontsize=7)
         axes[-1, j].set_xlabel("time [s]")

@@ -1,23 +1,11 @@
-"""Seed 002: the inertia-wheel pendulum's EKF fed by the sensor chain, balanced by LQR.
-
-The sensor chain (:mod:`cosim.components.imu`): accelerometer and gyroscope on the
-pendulum, fused by a Kalman filter into the tilt; the gyroscope's rate goes on with its
-offset; an incremental encoder gives the wheel speed. The EKF (state augmented with the
-gyro offset, :func:`estimators.augment_rate_bias`) takes ``[fused tilt, gyro rate,
-encoder speed]``; an LQR balances the pendulum on the EKF's estimate. Seed 002's two
-settings: ``Q = R = 0.01 I`` and ``Q = 0.01 I, R = 0.1 I`` (the second should make the
-estimate lag and shrink). Seed 002 gives no other number: every choice is in
-:class:`Settings`.
-
-Per state we report the RMSE of the EKF's estimate, of what it was fed (fusion output,
-raw gyro, raw encoder), the lag (cross-correlation) and amplitude ratio of the
-estimated angle, the offset estimate, and whether the loop stayed balanced.
-
-Paths: ``master`` steps the plant FMU; ``fast`` steps the same CasADi model in Python
-(:class:`cosim.components.plant_model.ModelComponent`); they give the same numbers.
+"""Seed 002: the inertia-wheel pendulum balanced by LQR on the estimate of an EKF (augmented
+with the gyro offset, :func:`estimators.augment_rate_bias`) fed by the sensor chain of
+:mod:`cosim.components.imu`, under seed 002's two noise settings (``CASES``); ``master`` steps
+the plant FMU, ``fast`` the same CasADi model (docs/guide/experiments.md).
 """
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar, NamedTuple
@@ -37,14 +25,14 @@ from ..fmi.fmu_component import FMUComponent
 from . import common
 from .campaign import realisation_seeds
 from .experiment import Experiment
-from .settings import check_common, to_toml
+from .settings import CommonSettings, to_toml
 
 CASES = {"Q = R = 0.01": (0.01, 0.01), "Q = 0.01, R = 0.1": (0.01, 0.1)}
 STATES = ("alpha", "alpha_dot", "phi_dot")
 
 
 @dataclass(frozen=True)
-class Settings:
+class Settings(CommonSettings):
     """Choices of the seed 002 reproduction.
 
     Plant: RK4 with ``substeps`` internal steps per ``T`` [s], ``alpha0`` [rad] initial
@@ -77,9 +65,6 @@ class Settings:
     i_max: float = 5.0
     balanced_within: float = 0.05
     seed: int = 3
-
-    def __post_init__(self):
-        check_common(self)
 
 
 def _components(s: Settings, case: str, run: int, path: str, fmu_path=None):
@@ -123,21 +108,9 @@ def _lag_and_gain(truth, est, T, max_lag=50):
 
 
 def realisations(case: str, settings: Settings, runs, path: str = "fast") -> list[dict]:
-    """Run realisations ``runs`` of one case; returns one dict of metrics per realisation.
-
-    Parameters
-    ----------
-    case
-        Which case (noise setting of the EKF).
-    settings
-        The settings.
-    runs
-        Which realisations.
-    path
-        ``fast`` (plant model in Python) or ``master`` (plant FMU).
-    """
-    import tempfile
-
+    """The metrics of realisations ``runs`` of ``case`` (the EKF's noise setting) under the
+    ``settings``, a dict per realisation, on the ``path`` ``fast`` (plant model in Python) or
+    ``master`` (plant FMU)."""
     s = settings
     out = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -174,13 +147,9 @@ class Seed002Result(NamedTuple):
 
 def run(settings: Settings = Settings(), path: str = "fast", backend="processes", n_jobs=None,
         progress=True) -> Seed002Result:
-    """Both cases, each in two tasks; returns a :class:`Seed002Result`.
-
-    Parameters
-    ----------
-    settings, path, backend, n_jobs, progress
-        As :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`.
-    """
+    """Both cases, each in two tasks (``settings``, ``path``, ``backend``, ``n_jobs``,
+    ``progress`` as :meth:`Experiment.run <cosim.experiments.experiment.Experiment.run>`);
+    returns a :class:`Seed002Result`."""
     chunks = [c for c in np.array_split(np.arange(settings.runs), 2) if len(c)]
     tasks = [(realisations, dict(case=c, settings=settings, runs=[int(r) for r in ch], path=path))
              for c in CASES for ch in chunks]
@@ -198,13 +167,8 @@ def _result(res: list, wall: float) -> Seed002Result:
 
 
 def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
-    """Per case and state: RMSE of the EKF and of its input, and what the EKF adds.
-
-    Parameters
-    ----------
-    per_run
-        The per-realisation table of :func:`run`.
-    """
+    """Per case and state: RMSE of the EKF and of its input (``per_run``: the per-realisation
+    table of :func:`run`), and what the EKF adds."""
     rows = []
     for case, g in per_run.groupby("case", sort=False):
         for x, fed in zip(STATES, ("fused tilt", "raw gyro (with offset)", "raw encoder")):
@@ -215,16 +179,10 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str, partial: bool = False) -> Path:
-    """The tables, the figure of the estimates, ``settings.toml`` and ``summary.md`` into
-    ``out_dir``; returns ``summary.md``.
-
-    Parameters
-    ----------
-    per_run, traces, wall
-        The fields of :class:`Seed002Result`.
-    settings, out_dir, path, partial
-        As :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`.
-    """
+    """The tables, the figure, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
+    ``summary.md`` (``per_run``, ``traces``, ``wall``: the fields of :class:`Seed002Result`;
+    ``settings``, ``path``, ``partial`` as
+    :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     table = summary_table(per_run)
     out = common.report_folder(out_dir, to_toml(settings, "seed002"),
                                {"per_run.csv": per_run, "ekf_vs_inputs.csv": table})

@@ -1,14 +1,11 @@
-"""Experiment settings from the command line and files, and back into the output.
-
-Every experiment keeps its choices in a frozen dataclass (``Settings``). A user changes
-any of them without editing code, from the command line (``--set q0=1e-3 --set
-r0=10``, repeatable) or from a TOML file (``--settings FILE``), and every run writes the
-settings it used to ``settings.toml`` beside its results, so that any table cell can be
-rerun with ``--settings out/.../settings.toml``.
-"""
+"""Experiment settings (frozen dataclasses) from the command line (``--set name=value``) and
+TOML files (``--settings FILE``), and back into the output's ``settings.toml``
+(docs/guide/experiments.md)."""
 from __future__ import annotations
 
 import dataclasses
+import math
+import types
 import typing
 from collections.abc import Iterable
 
@@ -18,8 +15,8 @@ from fmu_models.infra.memory import check_fits
 
 from .. import tomlfile
 
-__all__ = ["RECORD_BYTES_PER_STEP", "apply_overrides", "check_common", "check_consistency", "from_mapping",
-           "load_settings", "to_toml"]
+__all__ = ["RECORD_BYTES_PER_STEP", "CommonSettings", "apply_overrides", "check_common", "check_consistency",
+           "from_mapping", "load_settings", "to_toml"]
 
 
 #: Bytes an experiment keeps per realisation and step (truth, measurements, each filter's
@@ -46,8 +43,6 @@ def check_common(settings) -> None:
     integer >= 0, ``duration`` and ``T`` positive with at least one step, the records of
     ``runs x steps`` within memory (:data:`RECORD_BYTES_PER_STEP` each), and every other
     number finite."""
-    import math
-
     positive_int(settings.runs, "runs")
     positive_int(settings.seed, "seed", minimum=0)
     positive(settings.duration, "duration")
@@ -55,7 +50,6 @@ def check_common(settings) -> None:
     steps = round(settings.duration / settings.T)
     if steps < 1:
         raise ConfigurationError("duration must be at least one period T")
-
     check_fits(RECORD_BYTES_PER_STEP * settings.runs * (steps + 1),
                f"the records of {settings.runs} realisations x {steps} steps (duration {settings.duration:g} s / "
                f"T {settings.T:g} s)", "fewer runs or a shorter duration")
@@ -65,15 +59,22 @@ def check_common(settings) -> None:
             raise ConfigurationError(f"setting {f.name} must be finite, got {v}")
 
 
-def _field_types(cls) -> dict:
-    hints = typing.get_type_hints(cls)
-    return {f.name: hints.get(f.name, type(f.default)) for f in dataclasses.fields(cls)}
+class CommonSettings:
+    """The base of the experiments' settings dataclasses (fields ``runs``, ``seed``,
+    ``duration`` [s] and ``T`` [s]): :func:`check_common` after construction, and ``steps``."""
+
+    def __post_init__(self):
+        check_common(self)
+
+    @property
+    def steps(self) -> int:
+        """Steps of a realisation, ``duration / T``."""
+        return round(self.duration / self.T)
 
 
 def _parse(text: str):
     """A value from its command-line text: TOML syntax (``1e-3``, ``[1, 2]``, ``"eqs"``,
     ``true``), else the bare text as a string."""
-
     try:
         return tomlfile.loads(f"v = {text}", "--set value")["v"]
     except ConfigurationError as e:
@@ -85,11 +86,10 @@ def _parse(text: str):
 def _convert(name: str, value, kind, default):
     """``value`` as the type of the field ``name`` (its annotation, else its default's)."""
     origin = typing.get_origin(kind)
-    args = typing.get_args(kind)
-    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+    if origin in (typing.Union, types.UnionType):
         if value is None or (isinstance(value, str) and value.lower() == "none"):
             return None
-        kind = next(a for a in args if a is not type(None))
+        kind = next(a for a in typing.get_args(kind) if a is not type(None))
     if kind is tuple or origin is tuple or isinstance(default, tuple):
         if not isinstance(value, (list, tuple)):
             value = [value]
@@ -104,19 +104,18 @@ def _convert(name: str, value, kind, default):
         if kind is int and float(value) != int(value):
             raise ConfigurationError(f"setting {name} must be an integer, got {value!r}")
         return kind(value)
-    if kind is str:
-        return str(value)
-    return value
+    return str(value) if kind is str else value
 
 
 def from_mapping(settings, values: dict):
     """A copy of the dataclass ``settings`` with the fields in ``values`` replaced
     (converted to each field's type); unknown names are refused, listing the valid ones."""
-    types = _field_types(type(settings))
-    unknown = sorted(set(values) - set(types))
+    hints = typing.get_type_hints(type(settings))
+    types_ = {f.name: hints.get(f.name, type(f.default)) for f in dataclasses.fields(settings)}
+    unknown = sorted(set(values) - set(types_))
     if unknown:
-        raise UnknownNameError(f"unknown setting(s) {', '.join(unknown)}; valid: {', '.join(types)}")
-    new = {k: _convert(k, v, types[k], getattr(settings, k)) for k, v in values.items()}
+        raise UnknownNameError(f"unknown setting(s) {', '.join(unknown)}; valid: {', '.join(types_)}")
+    new = {k: _convert(k, v, types_[k], getattr(settings, k)) for k, v in values.items()}
     try:
         return dataclasses.replace(settings, **new)
     except PendulumCosimError:
@@ -135,17 +134,16 @@ def apply_overrides(settings, overrides: Iterable[str]):
     for item in overrides:
         if "=" not in item:
             raise ConfigurationError(f"--set needs name=value, got {item!r}")
-        name, text = item.split("=", 1)
+        name, text = (part.strip() for part in item.split("=", 1))
         try:
-            values[name.strip()] = _parse(text.strip())
+            values[name] = _parse(text)
         except ConfigurationError as e:          # too deep or too long: say which setting
-            raise ConfigurationError(f"--set {name.strip()}=...: {e}") from None
+            raise ConfigurationError(f"--set {name}=...: {e}") from None
     return from_mapping(settings, values)
 
 
 def load_settings(settings, path):
     """``settings`` with the values of the TOML file ``path`` (a flat table of fields)."""
-
     data = tomlfile.read(path, "settings file")
     data.pop("experiment", None)
     return from_mapping(settings, data)
@@ -158,9 +156,7 @@ def _toml_value(v) -> str:
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (tuple, list)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if v is None:
-        return '"none"'
-    return repr(v)
+    return '"none"' if v is None else repr(v)
 
 
 def to_toml(settings, experiment: str) -> str:
