@@ -1,5 +1,6 @@
 """Writing and plotting co-simulation results, and guarding an output folder
-(:class:`OutputFolder`); every file is written whole or not at all (:func:`atomic_write`).
+(:class:`~cosim.output.OutputFolder`); every file is written whole or not at all
+(:func:`~fmu_models.infra.files.atomic_write`).
 """
 from __future__ import annotations
 
@@ -57,7 +58,8 @@ def _files_below(folder: Path) -> list[str]:
 class OutputFolder:
     """An output folder held for one run (a context manager): created (and removed again,
     parents included, if the run wrote nothing), checked, optionally cleared, locked
-    (``flock``); only the files a previous run listed in its :data:`MARKER` are ever cleared.
+    (``flock``); only the files a previous run listed in its marker file
+    (``.pendulum-cosim-output``) are ever cleared.
 
     Parameters
     ----------

@@ -60,7 +60,7 @@ class DiscreteModel:
 
     @cached_property
     def identity(self) -> str:
-        """A digest of the model's equations, period and names: two models with the same
+        """A digest of the model's equations, period and names; two models with the same
         identity step identically."""
         text = "\n".join([str(self.fx), str(self.hx), repr(self.dt), *self.state_names, *self.input_names,
                           *self.output_names])

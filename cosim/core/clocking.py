@@ -1,8 +1,9 @@
 """Clocks in the master (FMI 3.0 clocks): what a clocked component declares
-(:class:`ClockInfo`), the clock connections and timing checked before a run
-(:class:`ClockPlan`), a run's activations and their log (:class:`ClockBoard`), and the
-clock source :class:`ClockTicks`. The timing on the base grid, the clock connections and
-what is refused are on the clocks page of the documentation.
+(:class:`~cosim.core.clocking.ClockInfo`), the clock connections and timing checked before
+a run (:class:`~cosim.core.clocking.ClockPlan`), a run's activations and their log
+(:class:`~cosim.core.clocking.ClockBoard`), and the clock source :class:`ClockTicks`. The
+timing on the base grid, the clock connections and what is refused are on the clocks page
+of the documentation.
 """
 from __future__ import annotations
 
@@ -104,8 +105,8 @@ class ClockInfo:
 
 @runtime_checkable
 class ClockedComponent(Protocol):
-    """A component with clocks (a :class:`ClockInfo` each); one whose ``clock_infos`` is
-    empty takes no part in clocks."""
+    """A component with clocks (a :class:`~cosim.core.clocking.ClockInfo` each); one whose
+    ``clock_infos`` is empty takes no part in clocks."""
 
     clock_infos: tuple
 

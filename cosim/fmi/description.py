@@ -1,4 +1,4 @@
-"""What an FMU declares, read once (:class:`FMUDescription`), and a component's choices
+"""What an FMU declares, read once (:class:`~cosim.fmi.description.FMUDescription`), and a component's choices
 checked against it: the interface, clock intervals, parameter and start values, ports
 (:mod:`cosim.fmi.ports`) and their direct dependencies.
 """
@@ -82,7 +82,7 @@ class FMUDescription:
 
     @property
     def prefix(self) -> str:
-        """The FMI functions' prefix in messages: ``fmi`` (FMI 1.0), ``fmi2`` or ``fmi3``."""
+        """The prefix of the FMI functions in messages, ``fmi`` (FMI 1.0), ``fmi2`` or ``fmi3``."""
         return "fmi" if self.version == 1 else f"fmi{self.version}"
 
     # ------------------------------------------------------------------ the interface
