@@ -1,9 +1,5 @@
-"""`PlantModel`: one CasADi definition of a plant, feeding every numeric use of it.
-
-The symbolic expressions built here are the single source of the Python functions, the
-exact Jacobians (CasADi's algorithmic differentiation), the discrete maps, the C code
-and the FMUs (`fmu_models.fmu`).
-"""
+"""`PlantModel`: one CasADi definition of a plant, the single source of its Python functions,
+exact Jacobians (algorithmic differentiation), discrete maps, C code and FMUs."""
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
@@ -64,9 +60,9 @@ class _Symbolic:
 
     def step_expr(self, method: str, substeps: int) -> ca.SX:
         """x_{k+1} as an expression of (x, u, p, dt): `substeps` equal steps of `method`."""
-        x, u, p = self.x, self.u, self.p
+        u, p = self.u, self.p
         h = self.dt / substeps
-        xk = x
+        xk = self.x
         for _ in range(substeps):
             if method == "euler":
                 xk = xk + h * self.f(xk, u, p)
@@ -117,15 +113,7 @@ class PlantModel:
 
     Attributes
     ----------
-    name : str
-        Registry name (``"cartpole"``, ``"iwp"``).
-    fmu_name : str
-        Model name of the generated FMU (``"CartPole"``, ...).
-    states, inputs, outputs, parameters : tuple of Variable
-        Descriptors with names, units, descriptions and defaults.
     state_names, input_names, output_names : list of str
-    params : dict
-        Current parameter values by name (a copy; use :meth:`with_params` to change).
     nx, nu, ny : int
         Numbers of states, inputs and outputs.
     """
@@ -149,7 +137,6 @@ class PlantModel:
         self._p = (np.array([v.check(v.start) for v in self.parameters]) if _values is None
                    else _values)
 
-    # ------------------------------------------------------------------ description
     state_names = property(lambda self: [v.name for v in self.states])
     input_names = property(lambda self: [v.name for v in self.inputs])
     output_names = property(lambda self: [v.name for v in self.outputs])
@@ -199,7 +186,6 @@ class PlantModel:
         return (f"PlantModel({self.name!r}, states={self.state_names}, "
                 f"inputs={self.input_names}, outputs={self.output_names})")
 
-    # ------------------------------------------------------------------ numeric calls
     def _xu(self, x, u):
         return checks.vector(x, self.nx, "state x"), checks.vector(u, self.nu, "input u")
 
@@ -269,7 +255,6 @@ class PlantModel:
         ``u`` is either one input vector held throughout, an array of shape
         ``(n_steps, nu)``, or a callable ``u(t) -> (nu,)`` evaluated at each step start.
         """
-
         substeps = check_method(method, substeps)
         n_steps = checks.positive_int(n_steps, "n_steps", minimum=0)
         check_fits(8.0 * n_steps * (2 * self.nx + self.nu), f"simulating {n_steps} steps of {self.name}",

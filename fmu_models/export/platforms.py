@@ -1,28 +1,6 @@
-"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources.
-
-:func:`add_platforms` compiles the ``sources/`` an FMU of this project ships (the files its
-``modelDescription.xml`` or ``buildDescription.xml`` lists) for each requested platform
-with zig's clang (the ``ziglang`` package, ``pip install -e '.[cross]'``), checks every
-binary (:func:`check_binary`) and adds them to the FMU, laid out as the standard asks:
-
-============== ============================== =====================================
-platform       FMI 2.0                        FMI 3.0
-============== ============================== =====================================
-linux64        ``binaries/linux64/*.so``      ``binaries/x86_64-linux/*.so``
-win64          ``binaries/win64/*.dll``       ``binaries/x86_64-windows/*.dll``
-darwin         ``binaries/darwin64/*.dylib``  ``binaries/x86_64-darwin/*.dylib`` and
-               (one universal Intel +         ``binaries/aarch64-darwin/*.dylib``
-               Apple-silicon file)
-aarch64-linux  (FMI 2.0 has no folder: left   ``binaries/aarch64-linux/*.so``
-               out with a note)
-============== ============================== =====================================
-
-The platform the FMU was built on keeps its native binary. Flags: ``-O3 -fno-math-errno
--std=c99 -fvisibility=hidden -ffp-contract=off`` (no fused multiply-add: the results equal the
-x86-64 build's), Linux targets against glibc 2.17, macOS 11.0 and later, Windows against
-the Universal C runtime; CasADi's ``CASADI_SYMBOL_EXPORT`` is emptied so that only the FMI
-functions are exported. zig's Apple-silicon code carries zig's ad-hoc signature: the
-universal file keeps each slice's bytes unchanged, so the signature holds.
+"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources
+with zig's clang (the ``cross`` extra) and checked with lief; the layout per FMI version, the
+flags and the checks are on the user guide's page "Taking the estimator to another tool".
 """
 from __future__ import annotations
 
@@ -55,13 +33,16 @@ _COMMON = ("-shared", "-O3", "-fno-math-errno", "-std=c99", "-fvisibility=hidden
 
 @dataclass(frozen=True)
 class _Target:
-    zig: str                      # zig's -target
-    flags: tuple[str, ...]        # besides _COMMON
+    """One zig target: its ``-target``, flags besides ``_COMMON``, library suffix, FMI 3.0 and
+    2.0 binaries folders (None: FMI 2.0 has none), binary format and architecture."""
+
+    zig: str
+    flags: tuple[str, ...]
     suffix: str
-    fmi3: str                     # the FMI 3.0 binaries folder
-    fmi2: str | None              # the FMI 2.0 folder (None: the standard has none)
-    fmt: str                      # what check_binary expects: ELF, PE or MachO
-    arch: str                     # x86_64 or aarch64
+    fmi3: str
+    fmi2: str | None
+    fmt: str
+    arch: str
 
 
 _LINUX = ("-fPIC", "-s", "-lm")
@@ -97,9 +78,8 @@ def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
     if text is None:
         return ()
     names = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
-    names = [] if not any(names) else names
-    bad = [n for n in names if n not in PLATFORMS]
-    if bad or not names:
+    bad = [n for n in names if n not in PLATFORMS] if any(names) else []
+    if bad or not any(names):
         raise ConfigurationError(f"unknown platform(s) {', '.join(map(repr, bad)) or '(none given)'}: "
                                  f"choose from {', '.join(PLATFORMS)} (comma-separated)")
     if len(set(names)) != len(names):
@@ -125,7 +105,6 @@ def zig_command() -> list[str]:
     return [sys.executable, "-m", "ziglang", "cc"]
 
 
-# ---------------------------------------------------------------------------- checks
 @dataclass(frozen=True)
 class BinaryCheck:
     """What :func:`check_binary` found in one binary.
@@ -229,23 +208,22 @@ def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence
     return BinaryCheck(fmt, tuple(archs), frozenset(exports), tuple(libraries), tuple(problems))
 
 
-# ---------------------------------------------------------------------------- building
 def _universal(slices: Sequence[tuple[Path, str]], out: Path) -> None:
     """Write a universal (fat) Mach-O file of the thin ``(file, arch)`` slices (fat header:
     big-endian magic 0xcafebabe, then cputype, cpusubtype, offset, size, align of each,
-    slices 2^14-aligned)."""
+    slices 2^14-aligned); each slice's bytes are kept, so zig's ad-hoc signature holds."""
     cpu = {"x86_64": (0x01000007, 3), "aarch64": (0x0100000C, 0)}
     align = 14
     header = struct.pack(">II", 0xCAFEBABE, len(slices))
     offset = 1 << align
-    entries, blobs = b"", []
+    blobs = []
     for f, arch in slices:
         data = f.read_bytes()
-        entries += struct.pack(">iiIII", *cpu[arch], offset, len(data), align)
+        header += struct.pack(">iiIII", *cpu[arch], offset, len(data), align)
         blobs.append((offset, data))
         offset = (offset + len(data) + (1 << align) - 1) // (1 << align) * (1 << align)
     with open(out, "wb") as o:
-        o.write(header + entries)
+        o.write(header)
         for off, data in blobs:
             o.seek(off)
             o.write(data)
@@ -337,7 +315,6 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     BuildError
         The cross-compiler failed (its output in the message).
     """
-
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)
     try:
