@@ -1,17 +1,9 @@
-"""Compile and pack an FMU from generated C code, one of the model cores and the shared FMI
-wrappers: the machinery every FMU of the project goes through (plants, estimators,
-signals).
+"""Compile and pack an FMU (plant, estimator or signal) from generated C code, one of the model
+cores and the shared FMI wrappers of ``c/`` (the developer guide lists them).
 
-An FMU's C sources are the generic files in ``fmu_models/export/c`` (the headers every FMU
-includes, :data:`SHARED_HEADERS`: the core API ``core_api.h`` and what the cores share,
-``core_common.h``; what the wrappers share, ``wrapper_modes.h``, ``wrapper_common.h`` and
-``wrapper_functions.h``; then the wrapper ``fmi<version>_wrapper.c`` and the core
-``<core>_core.h/.c``), a ``core.h`` selecting the core, and the files the caller generates
-(``model_config.h``, :mod:`fmu_models.export.config`, and CasADi's code). They are compiled
-into the FMU's shared library and shipped in ``sources/`` so that another platform can
-rebuild it. The GUID is a hash of a fingerprint of the model and of every source file, so
-equal FMUs get equal GUIDs. The ``.fmu`` is written beside its target and renamed
-atomically.
+The sources are compiled into the FMU's library and shipped in ``sources/`` so that another
+platform can rebuild it; the GUID is a hash of the model's fingerprint and of every source,
+so equal FMUs get equal GUIDs; the ``.fmu`` is written beside its target and renamed atomically.
 """
 from __future__ import annotations
 
@@ -71,9 +63,7 @@ _CFLAGS = ("-shared", "-fPIC", "-O3", "-fno-math-errno", "-fvisibility=hidden", 
 
 
 def _compile_library(cc: str, src: Path, c_files: list[str], lib: Path, identifier: str) -> None:
-    """Compile the FMU's library ``lib`` from the sources in ``src``, through the
-    compiled-code cache (:mod:`fmu_models.infra.cache`): an FMU built before from the same sources,
-    compiler and flags is not compiled again."""
+    """Compile the FMU's library ``lib`` from the sources in ``src`` through the compiled-code cache."""
     def build(out: Path) -> None:
         run_compiler([cc, *_CFLAGS, f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o",
                       str(out), "-lm"], identifier)
@@ -107,9 +97,8 @@ def _output_folder(out_dir) -> Path:
 
 def _write_sources(src: Path, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
                    identity: str) -> tuple[str, list[str]]:
-    """Write the FMU's sources into ``src``: the generic files, ``core.h`` and the generated
-    ones; returns the GUID (a hash of ``identity`` and of every source) and the C files to
-    compile."""
+    """Write the FMU's sources into ``src``; returns the GUID (a hash of ``identity`` and of every
+    source) and the C files to compile."""
     generic = [*SHARED_HEADERS, f"{core}_core.h", f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
     for g, path in zip(generic, shipped_files(__package__, "c", generic)):
         shutil.copy(path, src / g)

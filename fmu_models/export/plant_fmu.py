@@ -1,14 +1,10 @@
-"""The plant FMUs: variables, C sources and model description of a :class:`~fmu_models.PlantModel`,
-compiled and packed by :func:`fmu_models.export.pack.pack_fmu` with the plant core
-(``c/plant_core.c``).
+"""The plant FMUs (Model Exchange and Co-Simulation, FMI 2.0 or 3.0) of a :class:`~fmu_models.PlantModel`,
+packed by :func:`fmu_models.export.pack.pack_fmu` with ``c/plant_core.c``; the C code of f, h and
+their Jacobians is CasADi's, the ModelStructure the structural sparsity of its expressions.
 
-Variables, in value-reference order (group in brackets, see :mod:`fmu_models.export.config`):
-the parameters [P], ``step_size`` [STEP], the states [X], ``der(state)`` [DX], the inputs
-[U], one process-noise input ``w_<state>`` per state [W], the measured outputs [Y], the
-Enumeration ``integrator`` and the Integer ``substeps`` [IP], and ``time`` [TIME]. The
-ModelStructure comes from the structural sparsity of the CasADi expressions; the C code
-of the model's f, h and Jacobians is CasADi's. Each FMU holds Model Exchange and
-Co-Simulation, in FMI 2.0 or 3.0, and its C sources (``sources/``).
+Variables in value-reference order, by group (:mod:`fmu_models.export.config`): the parameters
+[P], ``step_size`` [STEP], the states [X], ``der(state)`` [DX], the inputs [U], the process
+noises ``w_<state>`` [W], the measured outputs [Y], ``integrator`` and ``substeps`` [IP], ``time``.
 """
 from __future__ import annotations
 
@@ -118,14 +114,12 @@ def _description(model: PlantModel, variables: VariableList, guid: str, source_f
     params = [index[p.name] for p in model.parameters]
     Jf, Jh = ca.jacobian(s.xdot, ca.vertcat(s.x, s.u)), ca.jacobian(s.y, s.x)
     Jfp, Jhp = ca.jacobian(s.xdot, s.p), ca.jacobian(s.y, s.p)
-    outputs = [Unknown(k, [k], ["constant"]) for k in states]
-    outputs += [Unknown(index[n], *_dependencies(model, Jh, j, states)) for j, n in enumerate(model.output_names)]
+    measured = [Unknown(index[n], *_dependencies(model, Jh, j, states)) for j, n in enumerate(model.output_names)]
     derivatives = [Unknown(index[f"der({n})"], *_dependencies(model, Jf, i, states + inputs))
                    for i, n in enumerate(model.state_names)]
-    initial = [Unknown(index[f"der({n})"], _dependencies(model, Jf, i, states + inputs)[0]
-                       + _dependencies(model, Jfp, i, params)[0]) for i, n in enumerate(model.state_names)]
-    initial += [Unknown(index[n], _dependencies(model, Jh, j, states)[0] + _dependencies(model, Jhp, j, params)[0])
-                for j, n in enumerate(model.output_names)]
+    initial = [Unknown(u.index, u.deps + _dependencies(model, J, i, params)[0])
+               for J, unknowns in ((Jfp, derivatives), (Jhp, measured)) for i, u in enumerate(unknowns)]
+    outputs = [Unknown(k, [k], ["constant"]) for k in states] + measured
     return Description(model_name=model.fmu_name, identifier=model.fmu_name, guid=guid,
                        description=model.description, variables=variables.variables, outputs=outputs,
                        derivatives=derivatives, initial_unknowns=initial, model_exchange=True,

@@ -1,27 +1,10 @@
 """Signal FMUs: the sources, the process noise and the noisy sensor as native Co-Simulation
-FMUs (FMI 2.0 or 3.0), built by the same machinery as the plant and estimator FMUs
-(:func:`fmu_models.export.pack.pack_fmu` with ``c/signal_core.c``).
+FMUs (FMI 2.0 or 3.0), packed by :func:`fmu_models.export.pack.pack_fmu` with ``c/signal_core.c``.
 
-A :class:`SignalSpec` describes one FMU: its kind, its channels and its parameters (with
-the component's values as defaults). The components of :mod:`cosim.components.sources` and
-:mod:`cosim.components.sensors` build theirs in ``export_fmu`` (see :class:`cosim.core.component.Component`);
-:func:`build_signal_fmu` compiles and packs it.
-
-Kinds and variables (``period`` [s] is a parameter of every kind; noise is drawn at sample
-``round(t / period)``, see :mod:`cosim.components.noise`):
-
-* ``constant``: parameter ``value``; output ``out``;
-* ``step``: ``t_step``, ``before``, ``after``; output ``out``;
-* ``sine``: ``amplitude``, ``frequency``, ``phase``, ``offset``; output ``out``;
-* ``prbs``: ``amplitude``, ``bit_time``, ``offset``, Integer ``order`` (2..16), ``seed``;
-  output ``out``;
-* ``noise``: ``std_<port>`` per channel, Integer ``seed``; outputs ``w_<state>``;
-* ``sensor``: ``std_<signal>``, ``bias_<signal>``, ``quantization_<signal>`` per channel,
-  Integer ``seed``; inputs ``<signal>``, outputs ``y_<signal>``.
-
-The kinds are a registry (:data:`SIGNAL_KINDS`): the six above are built into
-``signal_core.c``; :func:`register_signal_kind` adds one whose output is a C expression
-(see there), so a new signal FMU is one definition in Python.
+A :class:`SignalSpec` describes one FMU (kind, channels, parameters with the component's
+values as defaults); the kinds are the registry :data:`SIGNAL_KINDS` (their variables are
+listed in the guide's page "Taking the estimator to another tool"); noise is drawn at sample
+``round(t / period)`` (:mod:`cosim.components.noise`).
 """
 from __future__ import annotations
 
@@ -182,10 +165,9 @@ def _description(spec: SignalSpec, kind: SignalKind, variables: VariableList, id
     p_idx = variables.indices(["P", "IP"])
     outs = variables.indices(["OUT"])
     clk = variables.indices(["CLOCK"])
-    if kind.inputs:                 # channel j depends on input j only (and the clock)
-        o_unknowns = [Unknown(o, [i] + clk, ["dependent"] * (1 + len(clk))) for o, i in zip(outs, in_idx, strict=True)]
-    else:
-        o_unknowns = [Unknown(o, clk, ["dependent"] * len(clk) if clk else None) for o in outs]
+    # channel j depends on input j only (if the kind has inputs), and on the clock
+    deps = [[i] + clk for i in in_idx] if kind.inputs else [clk] * len(outs)
+    o_unknowns = [Unknown(o, dep, ["dependent"] * len(dep) if dep else None) for o, dep in zip(outs, deps, strict=True)]
     return Description(model_name=identifier, identifier=identifier, guid=guid,
                        description=spec.description or f"{spec.kind} signal (pendulum-cosim)",
                        variables=variables.variables, outputs=o_unknowns,
@@ -235,12 +217,8 @@ def channel_params(prefix: str, names: Sequence[str], values, domain: str, what:
 
     Parameters
     ----------
-    prefix
-        Name prefix (``std``, ``bias``, ...).
-    names
-        Channel names.
-    values
-        One value per channel.
+    prefix, names, values
+        Name prefix (``std``, ``bias``, ...), channel names and one value per channel.
     domain
         Domain of every value (:data:`fmu_models.variables.DOMAINS`).
     what
