@@ -37,27 +37,18 @@ __all__ = ["c_array", "c_strings", "config_header", "work_sizes"]
 
 def c_array(ctype: str, name: str, values: Iterable) -> str:
     """``static const <ctype> <name>[] = {values};`` (values as C literals; ``{0}`` if none)."""
-    values = [str(v) for v in values]
-    body = ", ".join(values) if values else "0"
+    body = ", ".join(str(v) for v in values) or "0"
     return f"static const {ctype} {name}[] = {{{body}}};"
 
 
 def c_strings(name: str, strings: Iterable[str]) -> str:
-    """``static const char *const <name>[] = {"a", ...};``: a table of names for messages.
-
-    Parameters
-    ----------
-    name
-        Name of the C table.
-    strings
-        The strings (printable, without quotes or backslashes).
-    """
+    """``static const char *const <name>[] = {"a", ...};``: the C table ``name`` of ``strings``
+    (printable, without quotes or backslashes), names for messages."""
     strings = list(strings)
     for s in strings:
         if '"' in s or "\\" in s or not s.isprintable():
             raise ConfigurationError(f"name {s!r} cannot be written into C code")
-    body = ", ".join(f'"{s}"' for s in strings) if strings else "0"
-    return f"static const char *const {name}[] = {{{body}}};"
+    return c_array("char *const", name, [f'"{s}"' for s in strings])
 
 
 def work_sizes(functions: Sequence[ca.Function], minimum_arg: int = 1, minimum_res: int = 1) -> dict[str, int]:
@@ -83,10 +74,8 @@ def config_header(variables: VariableList, identifier: str, guid: str, source: s
     ----------
     variables : VariableList
         The FMU's variables in value-reference order.
-    identifier, guid : str
-        Model identifier and GUID (instantiation token).
-    source : str
-        What generated the header (a module name, for the comment at its top).
+    identifier, guid, source : str
+        Model identifier, GUID (instantiation token) and what generated the header (a module name).
     groups : sequence of str
         Groups the core reads even when they are empty (``P`` and ``IP`` always are;
         ``VR_<G>`` is then the number of variables, ``N_<G>`` 0).

@@ -1,16 +1,12 @@
 """The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under
 concurrency and damage.
 
-The folder is ``$PENDULUM_COSIM_CACHE``, else ``$XDG_CACHE_HOME/pendulum-cosim``, else
-``~/.cache/pendulum-cosim``; where there is no home folder (a container with an arbitrary
-user id and no ``HOME``), ``<temp>/pendulum-cosim-<uid>``. Entries are named by a hash of
-everything that went into them (code, compiler, flags, CPU), so a stale entry is never
-found. An entry is written in a private temporary folder inside the cache, checked, and
-renamed into place atomically; a ``.sha256`` sidecar written after it marks it complete.
-An entry whose hash does not match (truncated, zero-length, overwritten) is reported and
-rebuilt; an entry is never deleted (another process may be loading it), only replaced
-atomically. A cache that cannot be written is reported once, and the callers fall back
-(the filters to CasADi's virtual machine, the FMU builder to building without caching).
+Entries are named by a hash of everything that went into them (code, compiler, flags, CPU),
+written in a private temporary folder inside the cache, checked, renamed into place, and
+marked complete by a ``.sha256`` sidecar written after them. A damaged entry is reported and
+rebuilt, never deleted (another process may be loading it); a cache that cannot be written is
+reported once and the callers fall back (the filters to CasADi's virtual machine, the FMU
+builder to building without caching).
 """
 from __future__ import annotations
 
@@ -26,21 +22,21 @@ __all__ = ["build_cached", "cache_dir", "cached_file", "file_digest", "writable_
 
 
 def cache_dir() -> Path:
-    """The cache folder (see the module documentation); not created here."""
-    env = os.environ.get("PENDULUM_COSIM_CACHE")
-    if env:
+    """The cache folder, not created here: ``$PENDULUM_COSIM_CACHE``, else
+    ``$XDG_CACHE_HOME/pendulum-cosim``, else ``~/.cache/pendulum-cosim``; where there is no home
+    folder (a container with an arbitrary user id and no ``HOME``), ``<temp>/pendulum-cosim-<uid>``."""
+    if env := os.environ.get("PENDULUM_COSIM_CACHE"):
         return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    if xdg:
+    if xdg := os.environ.get("XDG_CACHE_HOME"):
         return Path(xdg) / "pendulum-cosim"
     try:
-        home = Path.home()
+        home = str(Path.home())
     except (RuntimeError, KeyError, OSError):       # no HOME and no passwd entry for this uid
-        home = None
-    if home is None or str(home) in ("", "/"):
+        home = ""
+    if home in ("", "/"):
         uid = os.getuid() if hasattr(os, "getuid") else "user"
         return Path(tempfile.gettempdir()) / f"pendulum-cosim-{uid}"
-    return home / ".cache" / "pendulum-cosim"
+    return Path(home) / ".cache" / "pendulum-cosim"
 
 
 def writable_cache(purpose: str) -> Path | None:
@@ -83,17 +79,15 @@ def _state(entry: Path) -> bool | None:
 
 def cached_file(entry: Path, build: Callable[[Path], None], check: Callable[[Path], None] | None = None) -> Path:
     """The cache entry ``entry`` (a file in the cache folder), built by ``build(path)`` into a
-    private temporary path if it is absent or damaged, checked by ``check(path)`` (which
-    raises if the file is unusable), then renamed into place with its sidecar. Returns
-    ``entry``.
+    private temporary path if it is absent or damaged, checked by ``check(path)`` (which raises
+    if the file is unusable), then renamed into place with its sidecar.
 
     Raises
     ------
     OSError
         The cache cannot be written (full disk, the folder vanished): the caller falls back.
     """
-    state = _state(entry)
-    if state is True:
+    if (state := _state(entry)) is True:
         return entry
     if state is False:
         warnings.warn(f"damaged entry {entry.name} in the compiled-code cache {entry.parent} (truncated or "
