@@ -68,13 +68,7 @@ _SYSTEM_LIBRARIES = {
 
 def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
     """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of
-    names), checked; ``()`` for None.
-
-    Raises
-    ------
-    ConfigurationError
-        An unknown or repeated name (the known ones are listed).
-    """
+    names), checked (ConfigurationError for an unknown or repeated name); ``()`` for None."""
     if text is None:
         return ()
     names = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
@@ -88,14 +82,8 @@ def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
 
 
 def zig_command() -> list[str]:
-    """The cross-compiler command (``python -m ziglang cc``).
-
-    Raises
-    ------
-    CompilerNotFoundError
-        The ``ziglang`` package (or ``lief``, which checks the binaries) is not installed;
-        the message says what to install.
-    """
+    """The cross-compiler command (``python -m ziglang cc``); CompilerNotFoundError saying what to
+    install if the ``ziglang`` package (or ``lief``, which checks the binaries) is missing."""
     import importlib.util
 
     missing = [m for m in ("ziglang", "lief") if importlib.util.find_spec(m) is None]
@@ -111,14 +99,10 @@ class BinaryCheck:
 
     Attributes
     ----------
-    format : str
-        ``ELF``, ``PE`` or ``MachO``.
-    architectures : tuple of str
-        ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
-    exports : frozenset of str
-        The exported function names (Mach-O's leading underscore removed).
-    libraries : tuple of str
-        The shared libraries it imports.
+    format, architectures : str, tuple of str
+        ``ELF``, ``PE`` or ``MachO``; ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
+    exports, libraries : frozenset of str, tuple of str
+        The exported function names (Mach-O's leading underscore removed); the imported libraries.
     problems : tuple of str
         Empty when the binary is what an FMU of this FMI version needs.
     """
@@ -153,15 +137,10 @@ def _arch_name(value) -> str:
 
 
 def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence[str]) -> BinaryCheck:
-    """Check the FMU binary ``path``: its format ``fmt`` and ``architectures``, that it
-    exports every function of FMI ``fmi_version`` (fmpy loads them all) and nothing else,
-    and that it imports only the system's C library (and, on Windows, the C runtime).
-
-    Raises
-    ------
-    FMUError
-        The file cannot be read as a binary at all.
-    """
+    """Check the FMU binary ``path``: its format ``fmt`` and ``architectures``, that it exports
+    every function of FMI ``fmi_version`` (fmpy loads them all) and nothing else, and that it
+    imports only the system's C library (and, on Windows, the C runtime). FMUError if it cannot
+    be read as a binary at all."""
     import lief
 
     lief.logging.disable()
@@ -271,13 +250,13 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
                  "cross-built FMU binaries are compiled without caching")
 
 
-def _compile_all(builds, src: Path, c_files: list[str]) -> None:
-    """Compile every ``(identifier, target, library)`` in worker threads; Ctrl-C (or any
+def _compile_all(libs: dict[tuple[str, _Target], Path], src: Path, c_files: list[str]) -> None:
+    """Compile every library ``libs[identifier, target]`` in worker threads; Ctrl-C (or any
     error) in the main thread ends every running compiler before it goes on."""
     cancel = threading.Event()
-    pool = ThreadPoolExecutor(max_workers=min(len(builds), os.cpu_count() or 1))
+    pool = ThreadPoolExecutor(max_workers=min(len(libs), os.cpu_count() or 1))
     try:
-        futures = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for ident, t, lib in builds]
+        futures = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for (ident, t), lib in libs.items()]
         pending = set(futures)
         while pending:                              # short waits: the main thread sees Ctrl-C
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_EXCEPTION)
@@ -322,11 +301,21 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     except (OSError, zipfile.BadZipFile) as e:
         raise FMUError(f"{fmu}: not a readable FMU ({e})") from None
     with z, private_tempdir("pendulum_cosim_platforms_") as tmp:
-        build = _CrossBuild(z, fmu.name, Path(tmp))
-        notes, jobs = build.jobs(platforms)
-        added = build.binaries(jobs)
+        tmp = Path(tmp)
+        fmi_version, identifiers, c_files = _read_fmu(z, fmu.name, tmp / "sources")
+        notes, jobs = [], []
+        for plat in platforms:
+            targets = _TARGETS[plat]
+            folders = {_folder(t, fmi_version) for t in targets}
+            if None in folders:
+                notes.append(f"{fmu.name}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
+                             "(--fmi-version 3) for it")
+                continue
+            jobs += [(plat, ident, targets) for ident in identifiers
+                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in z.namelist() for f in folders)]
+        added = _binaries(jobs, fmi_version, tmp, c_files, fmu.name)
         if added:
-            out = Path(tmp) / "with-platforms.fmu"
+            out = tmp / "with-platforms.fmu"
             with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as o:
                 for info in z.infolist():
                     if info.filename not in added:
@@ -337,65 +326,45 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     return notes
 
 
-class _CrossBuild:
-    """The binaries for other platforms of the FMU ``z`` (``where`` names it in messages),
-    built in the folder ``tmp`` from its C sources (extracted to ``tmp/sources``)."""
+def _folder(t: _Target, fmi_version: int) -> str | None:
+    return t.fmi2 if fmi_version == 2 else t.fmi3
 
-    def __init__(self, z: zipfile.ZipFile, where: str, tmp: Path):
-        self.where, self.tmp = where, tmp
-        try:
-            md = ET.fromstring(z.read("modelDescription.xml"))
-        except (KeyError, ET.ParseError) as e:
-            raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
-        self.fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
-        self.identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
-        if not self.identifiers:
-            raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
-        self.c_files = _source_files(z, md, self.fmi_version, where)
-        self.src = tmp / "sources"
-        self.src.mkdir()
-        for name in z.namelist():
-            if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
-                (self.src / name[len("sources/"):]).write_bytes(z.read(name))
-        self.present = set(z.namelist())
 
-    def _folder(self, t: _Target) -> str | None:
-        return t.fmi2 if self.fmi_version == 2 else t.fmi3
+def _read_fmu(z: zipfile.ZipFile, where: str, src: Path) -> tuple[int, list[str], list[str]]:
+    """The FMI version, model identifiers and C files of the FMU ``z``, its sources extracted to ``src``."""
+    try:
+        md = ET.fromstring(z.read("modelDescription.xml"))
+    except (KeyError, ET.ParseError) as e:
+        raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
+    fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
+    identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
+    if not identifiers:
+        raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
+    c_files = _source_files(z, md, fmi_version, where)
+    src.mkdir()
+    for name in z.namelist():
+        if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
+            (src / name[len("sources/"):]).write_bytes(z.read(name))
+    return fmi_version, identifiers, c_files
 
-    def jobs(self, platforms: Sequence[str]) -> tuple[list[str], list[tuple]]:
-        """Notes on the ``platforms`` left out, and ``(platform, identifier, targets)`` of each
-        binary the FMU lacks."""
-        notes, jobs = [], []
-        for plat in platforms:
-            targets = _TARGETS[plat]
-            folders = {self._folder(t) for t in targets}
-            if None in folders:
-                notes.append(f"{self.where}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
-                             "(--fmi-version 3) for it")
-                continue
-            jobs += [(plat, ident, targets) for ident in self.identifiers
-                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in self.present for f in folders)]
-        return notes, jobs
 
-    def binaries(self, jobs: list[tuple]) -> dict[str, Path]:
-        """The binaries of ``jobs`` compiled (in parallel) and checked, by their path in the FMU
-        (one universal file for FMI 2.0's darwin64)."""
-        tmp = self.tmp
-        builds = [(ident, t, tmp / f"{ident}-{t.zig}{t.suffix}") for _, ident, targets in jobs for t in targets]
-        if builds:
-            zig_command()                           # the missing extra named before anything starts
-            _compile_all(builds, self.src, self.c_files)
-        added: dict[str, Path] = {}
-        for plat, ident, targets in jobs:
-            built = [(t, tmp / f"{ident}-{t.zig}{t.suffix}") for t in targets]
-            archs = None
-            if self.fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
-                lib = tmp / f"{ident}-universal{targets[0].suffix}"
-                _universal([(b, t.arch) for t, b in built], lib)
-                built, archs = [(targets[0], lib)], [t.arch for t in targets]
-            for t, lib in built:
-                check = check_binary(lib, self.fmi_version, t.fmt, archs or [t.arch])
-                if check.problems:
-                    raise FMUError(f"the {plat} binary of {self.where} fails its check: " + "; ".join(check.problems))
-                added[f"binaries/{self._folder(t)}/{ident}{t.suffix}"] = lib
-        return added
+def _binaries(jobs: list[tuple], fmi_version: int, tmp: Path, c_files: list[str], where: str) -> dict[str, Path]:
+    """The binaries of ``jobs`` (``(platform, identifier, targets)``) compiled in parallel from
+    ``tmp/sources`` and checked, by their path in the FMU (one universal file for FMI 2.0's darwin64)."""
+    libs = {(ident, t): tmp / f"{ident}-{t.zig}{t.suffix}" for _, ident, targets in jobs for t in targets}
+    if libs:
+        zig_command()                           # the missing extra named before anything starts
+        _compile_all(libs, tmp / "sources", c_files)
+    added: dict[str, Path] = {}
+    for plat, ident, targets in jobs:
+        built = [(t, libs[ident, t], [t.arch]) for t in targets]
+        if fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
+            universal = tmp / f"{ident}-universal{targets[0].suffix}"
+            _universal([(lib, t.arch) for t, lib, _ in built], universal)
+            built = [(targets[0], universal, [t.arch for t in targets])]
+        for t, lib, archs in built:
+            check = check_binary(lib, fmi_version, t.fmt, archs)
+            if check.problems:
+                raise FMUError(f"the {plat} binary of {where} fails its check: " + "; ".join(check.problems))
+            added[f"binaries/{_folder(t, fmi_version)}/{ident}{t.suffix}"] = lib
+    return added
