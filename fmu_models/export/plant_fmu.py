@@ -8,6 +8,7 @@ noises ``w_<state>`` [W], the measured outputs [Y], ``integrator`` and ``substep
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -75,7 +76,7 @@ def _functions(model: PlantModel) -> list[ca.Function]:
             ca.Function("mdl_jac_h", [x, p], [d(ca.jacobian(s.y, x))])]
 
 
-def _write_sources(model: PlantModel, variables: VariableList, guid: str, folder: Path) -> list[str]:
+def _write_sources(model: PlantModel, variables: VariableList, folder: Path, guid: str) -> list[str]:
     funcs = _functions(model)
     cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
     for f in funcs:
@@ -132,8 +133,7 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     Parameters
     ----------
     model : PlantModel or str
-        The model (its current parameter values become the FMU's start values) or a name
-        for :func:`fmu_models.get_model`.
+        The model (its current parameter values become the FMU's start values) or its name.
     out_dir : path
         Directory to write ``<fmu_name>.fmu`` into (created if missing).
     fmi_version : int
@@ -150,27 +150,22 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
         model = get_model(model)
     variables = plant_variables(model)
 
-    def generate(folder: Path, guid: str) -> list[str]:
-        return _write_sources(model, variables, guid, folder)
-
     def xml(guid: str, c_files: list[str]) -> str:
         d = _description(model, variables, guid, c_files if fmi_version == 2 else ())
         return fmi2(d) if fmi_version == 2 else fmi3(d)
 
-    return pack_fmu(model.fmu_name, "plant", fmi_version, generate, xml, out_dir, fingerprint=f"{model.p.tolist()}")
+    return pack_fmu(model.fmu_name, "plant", fmi_version, partial(_write_sources, model, variables), xml, out_dir,
+                    fingerprint=f"{model.p.tolist()}")
 
 
 def build_fmus(out_dir: str | Path = ".", fmi_version: int = 2, models: tuple[str, ...] | None = None) -> list[Path]:
-    """Build the FMUs of the registered plant models (default: all, see
-    :func:`fmu_models.model_names`) into ``out_dir``.
+    """Build the FMUs of the registered plant models into ``out_dir``, as :func:`build_fmu`.
 
     Parameters
     ----------
-    out_dir : path
-        Output directory (created if missing).
-    fmi_version : int
-        2 or 3 (see :func:`build_fmu`).
+    out_dir, fmi_version : path, int
+        Output directory (created if missing); 2 or 3.
     models : tuple of str, optional
-        Registry names of the models to build.
+        Registry names of the models to build (default: all).
     """
     return [build_fmu(get_model(name), out_dir, fmi_version) for name in (models or model_names())]

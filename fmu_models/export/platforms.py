@@ -68,7 +68,13 @@ _SYSTEM_LIBRARIES = {
 
 def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
     """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of
-    names), checked (ConfigurationError for an unknown or repeated name); ``()`` for None."""
+    names), checked; ``()`` for None.
+
+    Raises
+    ------
+    ConfigurationError
+        An unknown or repeated name (the known ones are listed).
+    """
     if text is None:
         return ()
     names = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
@@ -82,8 +88,13 @@ def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
 
 
 def zig_command() -> list[str]:
-    """The cross-compiler command (``python -m ziglang cc``); CompilerNotFoundError saying what to
-    install if the ``ziglang`` package (or ``lief``, which checks the binaries) is missing."""
+    """The cross-compiler command (``python -m ziglang cc``).
+
+    Raises
+    ------
+    CompilerNotFoundError
+        The ``ziglang`` package (or ``lief``, which checks the binaries) is missing; says what to install.
+    """
     import importlib.util
 
     missing = [m for m in ("ziglang", "lief") if importlib.util.find_spec(m) is None]
@@ -139,8 +150,13 @@ def _arch_name(value) -> str:
 def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence[str]) -> BinaryCheck:
     """Check the FMU binary ``path``: its format ``fmt`` and ``architectures``, that it exports
     every function of FMI ``fmi_version`` (fmpy loads them all) and nothing else, and that it
-    imports only the system's C library (and, on Windows, the C runtime). FMUError if it cannot
-    be read as a binary at all."""
+    imports only the system's C library (and, on Windows, the C runtime).
+
+    Raises
+    ------
+    FMUError
+        The file cannot be read as a binary at all.
+    """
     import lief
 
     lief.logging.disable()

@@ -35,14 +35,12 @@ class SignalKind:
 
     Attributes
     ----------
-    name : str
-    code : int
-        Its ``SIGNAL_KIND`` in ``signal_core.c`` (:data:`KIND_CUSTOM` for a C expression).
+    name, code : str, int
+        The name and ``SIGNAL_KIND`` in ``signal_core.c`` (:data:`KIND_CUSTOM` for a C expression).
     c_output : str
-        For a custom kind: the C expression of output channel ``j`` at time ``t``, from the
-        Real parameters ``p[P_<NAME>]`` (``P_`` and the upper-cased parameter name), the
-        Integer parameters ``d->ip[IP_<NAME>]`` and the inputs ``d->in[j]``; ``<math.h>``
-        is available.
+        For a custom kind: the C expression of output channel ``j`` at time ``t``, from the Real
+        parameters ``p[P_<NAME>]``, the Integer parameters ``d->ip[IP_<NAME>]`` and the inputs
+        ``d->in[j]`` (``<math.h>`` is available).
     inputs : bool
         The kind has one input per output channel (a sensor).
     """
@@ -78,21 +76,16 @@ class SignalSpec:
 
     Attributes
     ----------
-    kind : str
-        A registered kind (:data:`SIGNAL_KINDS`).
+    kind, description : str
+        A registered kind (:data:`SIGNAL_KINDS`); the FMU's description.
     period : float
         Sample period [s] (the FMU's default communication step and the noise's sample).
-    outputs : list of str
-        Output names, one per channel.
-    inputs : list of str
-        Input names (the sensor's measured signals), one per channel; else empty.
+    outputs, inputs : list of str
+        One name per channel; inputs only for a kind with inputs (the sensor's measured signals).
     reals : list of (name, value, domain, description)
-        Real parameters after ``period``, in the order ``signal_core.c`` reads them
-        (domain ``"real"``, ``"positive"`` or ``"nonnegative"``).
+        Real parameters after ``period``, in the order ``signal_core.c`` reads them.
     ints : list of (name, value, min, max, description)
         Integer parameters.
-    description : str
-        The FMU's description.
     """
 
     kind: str
@@ -110,8 +103,7 @@ class SignalSpec:
 
 def _check(spec: SignalSpec) -> SignalKind:
     kind = SIGNAL_KINDS.get(spec.kind)
-    if not spec.outputs or (kind.inputs and len(spec.inputs) != len(spec.outputs)) or \
-            (not kind.inputs and spec.inputs):
+    if not spec.outputs or len(spec.inputs) != (len(spec.outputs) if kind.inputs else 0):
         raise ConfigurationError(f"{spec.kind} FMU: needs outputs (and, for a kind with inputs, one input per output)")
     for name, value, lo, hi, _ in spec.ints:
         if not lo <= value <= hi or hi > _INT32_MAX:
@@ -140,8 +132,7 @@ def _variables(spec: SignalSpec, clocked: bool) -> VariableList:
 
 def _write_sources(spec: SignalSpec, kind: SignalKind, variables: VariableList, identifier: str, folder: Path,
                    guid: str) -> list[str]:
-    """``model_config.h`` (with the per-channel parameter blocks after ``period`` of the noise
-    and the sensor) and ``signal_custom.h`` (a custom kind's output)."""
+    """``model_config.h`` (with the noise's and sensor's per-channel parameter blocks) and ``signal_custom.h``."""
     n = len(spec.outputs)
     defines = [("SIGNAL_KIND", kind.code)]
     if spec.kind in ("noise", "sensor"):
@@ -181,17 +172,12 @@ def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier
 
     Parameters
     ----------
-    spec : SignalSpec
-    out_dir : path
-    fmi_version : {2, 3}
-    identifier : str
-        Model identifier (a C identifier).
-    file_name : str, optional
-        Default ``<identifier>.fmu``.
+    spec, out_dir, fmi_version : SignalSpec, path, {2, 3}
+    identifier, file_name : str
+        Model identifier (a C identifier); FMU file name (default ``<identifier>.fmu``).
     clocked : bool
-        The clocked form (FMI 3.0 only, :mod:`fmu_models.export.clocked`): the input clock
-        ``sample`` (interval ``spec.period``, first activation at the start time) clocks the
-        inputs and outputs; an activation samples the signal (``period`` must keep its value).
+        The clocked form (FMI 3.0 only, :mod:`fmu_models.export.clocked`), the clock's interval
+        ``spec.period``: an activation samples the signal (``period`` must keep its value).
 
     Raises
     ------

@@ -115,8 +115,13 @@ class Registry(Generic[T]):
         return item
 
     def get(self, name: str) -> T:
-        """The item ``name`` (or an alias of it); an unknown name (after loading the entry-point
-        plugins) raises UnknownNameError listing the valid ones."""
+        """The item ``name`` (or an alias of it).
+
+        Raises
+        ------
+        UnknownNameError
+            No such name (after loading the entry-point plugins); the valid ones are listed.
+        """
         if not isinstance(name, str):
             raise UnknownNameError(f"a {self.kind} name must be a string, got {name!r}; valid {self.kind}s: "
                                    f"{', '.join(self.names())}")
