@@ -52,5 +52,4 @@ def get_model(name: str, **params: float) -> PlantModel:
             raise ConfigurationError(f"model {name!r}: its build function returned {type(model).__name__}, "
                                      "not a PlantModel")
         _BASE[name] = model
-    model = _BASE[name]
-    return model.with_params(**params) if params else model.with_params()
+    return _BASE[name].with_params(**params)

@@ -1,26 +1,6 @@
 """``model_config.h``: the one schema by which every FMU the project writes configures its C
-core (plant, filter or signal; ``fmu_models/export/c``).
-
-The header is derived from the FMU's variable list (:class:`~fmu_models.export.variable_list.VariableList`,
-the same list that writes the ``modelDescription.xml``) and holds, for every core:
-
-=================================  ================================================================
-macro or table                     meaning
-=================================  ================================================================
-``MODEL_IDENTIFIER_STR``,          the model identifier and GUID / instantiation token
-``MODEL_GUID``
-``VR_<G>``, ``N_<G>``              first value reference and size of each variable group ``G``
-``NP``, ``PARAM_DEFAULT[]``,       the Real parameters (group ``P``): count, defaults, domains
-``PARAM_DOMAIN[]``, ``P_<NAME>``   (codes of :data:`fmu_models.variables.DOMAINS`), index by name
-``NIP``, ``IP_DEFAULT[]``,         the Integer and Enumeration parameters (group ``IP``): count,
-``IP_MIN[]``, ``IP_MAX[]``,        defaults, ranges, the FMI 3.0 width (32 or 64: Enumerations
-``IP_WIDTH[]``, ``IP_<NAME>``      use the Int64 functions), index by name
-``N_VARS``, ``VAR_NAMES[]``        every variable's name by value reference (for messages)
-``WORK_ARG`` ... ``WORK_W``        CasADi work-vector sizes of the generated functions
-=================================  ================================================================
-
-followed by the core's own constants and tables (``defines``, ``tables``), which each
-core documents in its header.
+core (plant, filter or signal; ``fmu_models/export/c``), derived from the FMU's variable list;
+its macros and tables are listed in the developer guide.
 """
 from __future__ import annotations
 
@@ -68,7 +48,7 @@ def _macro(name: str) -> str:
 def config_header(variables: VariableList, identifier: str, guid: str, source: str, groups: Sequence[str] = (),
                   defines: Sequence[tuple[str, object]] = (), tables: Sequence[str] = (),
                   work: dict[str, int] | None = None) -> str:
-    """The text of ``model_config.h`` (see the module documentation).
+    """The text of ``model_config.h``.
 
     Parameters
     ----------

@@ -1,13 +1,9 @@
-"""``modelDescription.xml`` for FMI 2.0 and 3.0 from one description of an FMU, shared by
-the plant, estimator and signal FMUs.
-
-An FMU is described by its variables (:class:`~fmu_models.export.variable_list.FmuVariable`, in
-ModelVariables order with value reference = index - 1), its ModelStructure
-(:class:`Unknown` entries), its interfaces and capabilities (:class:`Description`).
-"""
+"""``modelDescription.xml`` for FMI 2.0 and 3.0 from one :class:`Description` of an FMU (plant,
+estimator or signal): its variables, ModelStructure, interfaces and capabilities."""
 from __future__ import annotations
 
-import datetime as _dt
+import re
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import quoteattr
@@ -29,25 +25,22 @@ def base_units(unit: str) -> dict | None:
     """The SI base-unit exponents of ``unit`` written as symbols of :data:`SYMBOLS` joined by
     ``.`` and one ``/`` with integer powers (``"N.m.s/rad"``, ``"m/s2"``, ``"kg.m2"``), or
     None for a unit this does not read (it is then declared without a ``<BaseUnit>``)."""
-    import re
-
     num, _, den = unit.partition("/")
-    total: dict[str, int] = {}
+    if not num:
+        return None
+    total: Counter[str] = Counter()
     for part, sign in ((num, 1), (den, -1)):
-        if not part and sign == 1:
-            return None
         for token in part.split(".") if part else []:
             m = re.fullmatch(r"([A-Za-z]+|1)(-?\d+)?", token)
             if not m or m.group(1) not in SYMBOLS:
                 return None
-            power = sign * int(m.group(2) or 1)
             for base, e in SYMBOLS[m.group(1)].items():
-                total[base] = total.get(base, 0) + e * power
+                total[base] += e * sign * int(m.group(2) or 1)
     return {k: v for k, v in total.items() if v}
 
 
 _GENERATION = dict(generationTool=f"pendulum-cosim {VERSION} (CasADi code generation)",
-                   generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"))
+                   generationDateAndTime="2026-01-01T00:00:00Z")
 _LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description="errors"/>'
                    '<Category name="logAll" description="everything"/></LogCategories>')
 
@@ -70,31 +63,24 @@ class Unknown:
 
 @dataclass
 class Description:
-    """Everything the XML states about an FMU (see the module documentation).
+    """Everything the XML states about an FMU.
 
     Attributes
     ----------
     model_name, identifier, guid, description : str
         ``modelName``, ``modelIdentifier``, ``guid`` / ``instantiationToken``, ``description``.
     variables : sequence of FmuVariable
-        In ModelVariables order.
+        In ModelVariables order (value reference = index - 1).
     outputs, derivatives, initial_unknowns : sequence of Unknown
         The ModelStructure.
-    model_exchange : bool
-        Also a Model Exchange interface (Co-Simulation is always there).
-    directional : bool
-        Provides directional derivatives.
-    variable_step : bool
-        ``canHandleVariableCommunicationStepSize``.
+    model_exchange, directional, variable_step : bool
+        A Model Exchange interface too; directional derivatives; ``canHandleVariableCommunicationStepSize``.
     default_step, stop_time : float
         The DefaultExperiment [s].
-    enumerations : dict
-        Enumeration types: name -> [(item, value, description)].
-    source_files : sequence of str
-        The C files of ``sources/`` to compile.
+    enumerations, source_files : dict, sequence of str
+        Enumeration types (name -> [(item, value, description)]); the C files of ``sources/`` to compile.
     clocked : bool
-        FMI 3.0: the FMU has clocks (``Clock`` variables): its Co-Simulation interface has
-        Event Mode (``hasEventMode``) and it has a Scheduled Execution interface.
+        FMI 3.0 clocks: Co-Simulation with Event Mode, and a Scheduled Execution interface.
     """
 
     model_name: str

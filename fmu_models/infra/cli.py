@@ -18,14 +18,12 @@ EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:
-    errors: list[type[BaseException]] = [PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError]
+    errors: tuple[type[BaseException], ...] = (PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError)
     try:
         from lxml.etree import XMLSyntaxError  # optional here: fmpy reads XML with it
     except ImportError:
-        pass
-    else:
-        errors.append(XMLSyntaxError)
-    return tuple(errors)
+        return errors
+    return (*errors, XMLSyntaxError)
 
 
 #: The exceptions printed as one line (the project's family, bad zip and XML, OS errors).

@@ -28,8 +28,7 @@ def find_compiler() -> str:
     """
     candidates = [os.environ["CC"]] if os.environ.get("CC") else ["cc", "gcc", "clang"]
     for cand in candidates:
-        path = shutil.which(cand)
-        if path:
+        if path := shutil.which(cand):
             return path
     raise CompilerNotFoundError(
         "no C compiler found (looked for " + ", ".join(candidates) + "). Building an FMU "
@@ -42,11 +41,9 @@ def _end_group(proc: subprocess.Popen) -> None:
     for sig, wait in ((signal.SIGTERM, 2.0), (signal.SIGKILL, 5.0)):
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(proc.pid, sig)
-        try:
+        with contextlib.suppress(subprocess.TimeoutExpired):
             proc.wait(timeout=wait)
             return
-        except subprocess.TimeoutExpired:
-            continue
 
 
 def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, timeout: float = 600.0,
