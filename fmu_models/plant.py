@@ -2,6 +2,7 @@
 exact Jacobians (algorithmic differentiation), discrete maps, C code and FMUs."""
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping, Sequence
 from functools import cache
 
@@ -122,8 +123,7 @@ class PlantModel:
                  states: Sequence[Variable], inputs: Sequence[Variable],
                  outputs: Sequence[Variable], parameters: Sequence[Variable],
                  dynamics: Dynamics | None = None, measurement: Measurement | None = None,
-                 example_x0=None, example_input: Callable[[float], Sequence[float]] | None = None,
-                 *, _symbolic: _Symbolic | None = None, _values: np.ndarray | None = None):
+                 example_x0=None, example_input: Callable[[float], Sequence[float]] | None = None):
         self.name, self.fmu_name, self.description = name, fmu_name, description
         self.example_x0, self.example_input = example_x0, example_input
         self.states, self.inputs = tuple(states), tuple(inputs)
@@ -132,10 +132,8 @@ class PlantModel:
         dup = {n for n in names if names.count(n) > 1}
         if dup:
             raise ConfigurationError(f"model {name!r}: duplicate variable names {sorted(dup)}")
-        self.sym = _symbolic or _Symbolic(self.states, self.inputs, self.outputs,
-                                          self.parameters, dynamics, measurement)
-        self._p = (np.array([v.check(v.start) for v in self.parameters]) if _values is None
-                   else _values)
+        self.sym = _Symbolic(self.states, self.inputs, self.outputs, self.parameters, dynamics, measurement)
+        self._p = np.array([v.check(v.start) for v in self.parameters])
 
     state_names = property(lambda self: [v.name for v in self.states])
     input_names = property(lambda self: [v.name for v in self.inputs])
@@ -171,16 +169,15 @@ class PlantModel:
         ConfigurationError
             For a value outside the parameter's domain (e.g. a non-positive mass).
         """
-        values = self._p.copy()
+        variant = copy.copy(self)           # the symbolic part is shared
+        variant._p = self._p.copy()
         index = {n: i for i, n in enumerate(self.param_names)}
         for key, val in params.items():
             if key not in index:
                 raise UnknownNameError(f"model {self.name!r} has no parameter {key!r}; "
-                               f"valid parameters: {', '.join(self.param_names)}")
-            values[index[key]] = self.parameters[index[key]].check(val)
-        return PlantModel(self.name, self.fmu_name, self.description, self.states, self.inputs,
-                          self.outputs, self.parameters, example_x0=self.example_x0,
-                          example_input=self.example_input, _symbolic=self.sym, _values=values)
+                                       f"valid parameters: {', '.join(self.param_names)}")
+            variant._p[index[key]] = self.parameters[index[key]].check(val)
+        return variant
 
     def __repr__(self) -> str:
         return (f"PlantModel({self.name!r}, states={self.state_names}, "

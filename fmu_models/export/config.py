@@ -59,10 +59,8 @@ def config_header(variables: VariableList, identifier: str, guid: str, source: s
     groups : sequence of str
         Groups the core reads even when they are empty (``P`` and ``IP`` always are;
         ``VR_<G>`` is then the number of variables, ``N_<G>`` 0).
-    defines : sequence of (name, value)
-        The core's own defines (``#define name value``).
-    tables : sequence of str
-        The core's own tables (from :func:`c_array`, :func:`c_strings`).
+    defines, tables : sequence of (name, value), sequence of str
+        The core's own defines and tables (from :func:`c_array`, :func:`c_strings`).
     work : dict, optional
         CasADi work sizes (:func:`work_sizes`), written as ``WORK_ARG`` ... ``WORK_W``.
 

@@ -119,22 +119,16 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
 
     Parameters
     ----------
-    identifier : str
-        The model identifier (library name, C-identifier).
-    core : {"plant", "filter", "signal"}
-        The model core.
+    identifier, core : str
+        The model identifier (library name, a C identifier); the model core (plant, filter, signal).
     fmi_version : {2, 3}
-    write_generated : callable
-        ``write_generated(folder, guid) -> [generated C files to compile]``: writes
-        ``model_config.h`` and the generated code into ``folder``.
-    model_description : callable
-        ``model_description(guid, c_files) -> XML text``.
-    out_dir : path
-        Where to write the FMU (created if missing).
+    write_generated, model_description : callable
+        ``write_generated(folder, guid) -> [generated C files to compile]`` writes ``model_config.h``
+        and the generated code into ``folder``; ``model_description(guid, c_files) -> XML text``.
+    out_dir, file_name : path, str
+        Where to write the FMU (created if missing); its file name (default ``<identifier>.fmu``).
     fingerprint : str
         What identifies the model's content beyond its sources (names, values).
-    file_name : str, optional
-        The FMU file name (default ``<identifier>.fmu``).
 
     Raises
     ------

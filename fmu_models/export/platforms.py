@@ -5,6 +5,7 @@ flags and the checks are on the user guide's page "Taking the estimator to anoth
 from __future__ import annotations
 
 import functools
+import importlib.util
 import os
 import re
 import shutil
@@ -15,8 +16,11 @@ import zipfile
 from collections.abc import Sequence
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from xml.etree import ElementTree as ET
+
+import fmpy
 
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
 from ..infra.cache import build_cached
@@ -28,6 +32,7 @@ __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_p
 #: The platforms ``--platforms`` accepts.
 PLATFORMS = ("linux64", "win64", "darwin", "aarch64-linux")
 _INSTALL = "pip install -e '.[cross]' (or: pip install 'ziglang>=0.11' lief)"
+_FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 _COMMON = ("-shared", "-O3", "-fno-math-errno", "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
 
 
@@ -95,8 +100,6 @@ def zig_command() -> list[str]:
     CompilerNotFoundError
         The ``ziglang`` package (or ``lief``, which checks the binaries) is missing; says what to install.
     """
-    import importlib.util
-
     missing = [m for m in ("ziglang", "lief") if importlib.util.find_spec(m) is None]
     if missing:
         raise CompilerNotFoundError(f"building for other platforms needs the package(s) {', '.join(missing)} "
@@ -129,9 +132,7 @@ class BinaryCheck:
 def fmi_functions(fmi_version: int) -> frozenset:
     """Every function of the FMI ``fmi_version`` C API, read from the standard's header
     ``fmi<v>Functions.h`` (fmpy ships it)."""
-    import fmpy
-
-    header = Path(fmpy.__file__).parent / "c-code" / f"fmi{fmi_version}Functions.h"
+    header = _FMI_HEADERS / f"fmi{fmi_version}Functions.h"
     names = re.findall(rf"FMI{fmi_version}_Export\s+\w+TYPE\s+(\w+);", header.read_text())
     if not names:
         raise FMUError(f"no FMI {fmi_version} functions found in {header}")
@@ -246,9 +247,6 @@ def _source_files(z: zipfile.ZipFile, md: ET.Element, fmi_version: int, where: s
 def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path,
              cancel: threading.Event | None = None) -> None:
     """Cross-compile the library ``out`` through the compiled-code cache."""
-    import fmpy
-
-    headers = Path(fmpy.__file__).parent / "c-code"
     flags = [*_COMMON, *target.flags]
     if target.fmt == "MachO":
         flags.append(f"-Wl,-install_name,@rpath/{identifier}.dylib")
@@ -257,7 +255,7 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
     def build(dst: Path) -> None:
         with private_tempdir("pendulum_cosim_zig_") as scratch:   # zig's .lib/.pdb
             lib = Path(scratch) / f"{identifier}{target.suffix}"
-            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{headers}",
+            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{_FMI_HEADERS}",
                           *[str(src / f) for f in c_files], "-o", str(lib)],
                          f"{identifier} for {target.zig}", cwd=scratch, cancel=cancel)
             shutil.copyfile(lib, dst)
@@ -272,8 +270,7 @@ def _compile_all(libs: dict[tuple[str, _Target], Path], src: Path, c_files: list
     cancel = threading.Event()
     pool = ThreadPoolExecutor(max_workers=min(len(libs), os.cpu_count() or 1))
     try:
-        futures = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for (ident, t), lib in libs.items()]
-        pending = set(futures)
+        pending = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for (ident, t), lib in libs.items()]
         while pending:                              # short waits: the main thread sees Ctrl-C
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_EXCEPTION)
             for f in done:
@@ -287,8 +284,6 @@ def _compile_all(libs: dict[tuple[str, _Target], Path], src: Path, c_files: list
 
 def zig_version() -> str:
     """The installed ziglang package's version ("" if absent)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version("ziglang")
     except PackageNotFoundError:

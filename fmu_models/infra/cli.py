@@ -58,14 +58,11 @@ def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callab
 
     Parameters
     ----------
-    command
-        The work of the command line; returns its exit status (0 on success).
-    debug
-        Let errors through with their traceback instead of one line.
-    cleanup
-        Called on every failure before the message is printed.
-    interrupted
-        The line printed for Ctrl-C or SIGTERM.
+    command, cleanup
+        The work of the command line, returning its exit status (0 on success); what is called
+        on every failure before the message is printed.
+    debug, interrupted
+        Let errors through with their traceback instead of one line; the line printed for Ctrl-C or SIGTERM.
     """
     try:
         with terminate_as_interrupt(), warnings.catch_warnings():
