@@ -35,15 +35,14 @@ def model_names() -> list[str]:
 
 
 def get_model(name: str, **params: float) -> PlantModel:
-    """Return the plant model ``name`` (e.g. "cartpole" or "iwp") with parameters overridden by name.
+    """Return the plant model ``name`` (e.g. "cartpole" or "iwp") with ``params`` overridden by name.
 
     Raises
     ------
     UnknownNameError
         Unknown model name or parameter name (the message lists the valid ones).
     ConfigurationError
-        A parameter value outside its domain, or a registered build function that does not
-        return a PlantModel.
+        A parameter value outside its domain, or a build function that does not return a PlantModel.
     """
     build = MODELS.get(name)
     if name not in _BASE:

@@ -1,15 +1,14 @@
 """The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under
 concurrency and damage.
 
-Entries are named by a hash of everything that went into them (code, compiler, flags, CPU),
-written in a private temporary folder inside the cache, checked, renamed into place, and
-marked complete by a ``.sha256`` sidecar written after them. A damaged entry is reported and
-rebuilt, never deleted (another process may be loading it); a cache that cannot be written is
-reported once and the callers fall back (the filters to CasADi's virtual machine, the FMU
-builder to building without caching).
+Entries are named by a hash of everything that went into them, written privately, checked,
+renamed into place and marked complete by a ``.sha256`` sidecar written last; a damaged entry
+is rebuilt, never deleted (another process may be loading it); an unwritable cache is reported
+once and the callers fall back (to CasADi's virtual machine, or to building without caching).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -57,11 +56,8 @@ def writable_cache(purpose: str) -> Path | None:
 
 def file_digest(path: Path) -> str:
     """The SHA-256 of the file at ``path`` (hex)."""
-    h = hashlib.sha256()
     with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            h.update(chunk)
-    return h.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def _state(entry: Path) -> bool | None:
@@ -117,11 +113,8 @@ def build_cached(name: str, key: str, sources: Path, build: Callable[[Path], Non
     h = hashlib.sha256(key.encode())
     for f in sorted(Path(sources).iterdir()):
         h.update(f.name.encode() + b"\0" + f.read_bytes())
-    directory = writable_cache(purpose)
-    if directory is not None:
-        try:
+    if (directory := writable_cache(purpose)) is not None:
+        with contextlib.suppress(OSError):      # a full or vanished cache: build without it
             shutil.copyfile(cached_file(directory / f"{name}_{h.hexdigest()[:24]}{Path(out).suffix}", build), out)
             return
-        except OSError:             # a full or vanished cache: build without it
-            pass
     build(out)
