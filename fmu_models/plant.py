@@ -186,6 +186,12 @@ class PlantModel:
     def _xu(self, x, u):
         return checks.vector(x, self.nx, "state x"), checks.vector(u, self.nu, "input u")
 
+    def _discrete(self, which: str, x, u, dt, method: str, substeps: int):
+        """The discrete map (``which="step"``) or its Jacobians (``"step_jac"``) at checked arguments."""
+        substeps = check_method(method, substeps)
+        x, u = self._xu(x, u)
+        return getattr(self.sym, which)(method, substeps)(x, u, self._p, _check_dt(dt))
+
     def f(self, x, u) -> np.ndarray:
         """Continuous dynamics x' = f(x, u), shape ``(nx,)``; x in state units, u in input units."""
         x, u = self._xu(x, u)
@@ -212,17 +218,12 @@ class PlantModel:
         eqs 14-17, without the noise w); ``"rk4"`` is the classical Runge-Kutta scheme
         with ``substeps`` equal substeps.
         """
-        substeps = check_method(method, substeps)
-        x, u = self._xu(x, u)
-        dt = _check_dt(dt)
-        return np.asarray(self.sym.step(method, substeps)(x, u, self._p, dt)).reshape(self.nx)
+        return np.asarray(self._discrete("step", x, u, dt, method, substeps)).reshape(self.nx)
 
     def jacobians(self, x, u, dt: float, method: str = "euler",
                   substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Exact Jacobians of :meth:`step`: ``F = dx_next/dx`` (nx, nx), ``G = dx_next/du`` (nx, nu)."""
-        substeps = check_method(method, substeps)
-        x, u = self._xu(x, u)
-        F, G = self.sym.step_jac(method, substeps)(x, u, self._p, _check_dt(dt))
+        F, G = self._discrete("step_jac", x, u, dt, method, substeps)
         return np.asarray(F), np.asarray(G)
 
     def discretize(self, x0, u0, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:

@@ -55,8 +55,8 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
         raise ConfigurationError(f"the interval of the clock {CLOCK_NAME!r} must be > 0, got {period!r}")
     vr = len(variables.variables)
     out = VariableList()
-    for v in variables.variables:
-        out.variables.append(dataclasses.replace(v, clocks=(vr,), variability="discrete") if v.group in groups else v)
+    out.variables = [dataclasses.replace(v, clocks=(vr,), variability="discrete") if v.group in groups else v
+                     for v in variables.variables]
     out.add(name=CLOCK_NAME, type="Clock", causality="input", variability="discrete", description=description,
             group="CLOCK", clock=dict(intervalVariability="constant", intervalDecimal=repr(float(period)), priority=0))
     return out
