@@ -186,11 +186,11 @@ class PlantModel:
     def _xu(self, x, u):
         return checks.vector(x, self.nx, "state x"), checks.vector(u, self.nu, "input u")
 
-    def _discrete(self, which: str, x, u, dt, method: str, substeps: int):
-        """The discrete map (``which="step"``) or its Jacobians (``"step_jac"``) at checked arguments."""
+    def _discrete(self, build: Callable[[str, int], ca.Function], x, u, dt, method: str, substeps: int):
+        """``build(method, substeps)``, the discrete map or its Jacobians, called on checked arguments."""
         substeps = check_method(method, substeps)
         x, u = self._xu(x, u)
-        return getattr(self.sym, which)(method, substeps)(x, u, self._p, _check_dt(dt))
+        return build(method, substeps)(x, u, self._p, _check_dt(dt))
 
     def f(self, x, u) -> np.ndarray:
         """Continuous dynamics x' = f(x, u), shape ``(nx,)``; x in state units, u in input units."""
@@ -218,12 +218,12 @@ class PlantModel:
         eqs 14-17, without the noise w); ``"rk4"`` is the classical Runge-Kutta scheme
         with ``substeps`` equal substeps.
         """
-        return np.asarray(self._discrete("step", x, u, dt, method, substeps)).reshape(self.nx)
+        return np.asarray(self._discrete(self.sym.step, x, u, dt, method, substeps)).reshape(self.nx)
 
     def jacobians(self, x, u, dt: float, method: str = "euler",
                   substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Exact Jacobians of :meth:`step`: ``F = dx_next/dx`` (nx, nx), ``G = dx_next/du`` (nx, nu)."""
-        F, G = self._discrete("step_jac", x, u, dt, method, substeps)
+        F, G = self._discrete(self.sym.step_jac, x, u, dt, method, substeps)
         return np.asarray(F), np.asarray(G)
 
     def discretize(self, x0, u0, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
