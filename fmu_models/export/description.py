@@ -1,5 +1,6 @@
-"""``modelDescription.xml`` for FMI 2.0 and 3.0 from one :class:`Description` of an FMU (plant,
-estimator or signal): its variables, ModelStructure, interfaces and capabilities."""
+"""``modelDescription.xml`` for FMI 2.0 and 3.0 of an FMU (plant, estimator or signal) from one
+:class:`~fmu_models.export.description.Description`: its variables, ModelStructure, interfaces
+and capabilities."""
 from __future__ import annotations
 
 import re
