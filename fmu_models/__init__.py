@@ -4,10 +4,8 @@
 >>> cp = get_model("cartpole", Bc=0.3)
 >>> A, B = cp.linearize([0, 0, 0, 0], [0])
 
-A plant model is registered by name where it is defined (:func:`register_model`), so a new
-one is one file: :func:`get_model` and every entry point (scenario files, the command
-line, the FMU builder) find it. The exceptions of the whole project are in
-:mod:`fmu_models.errors`.
+A plant model is registered by name where it is defined (:func:`register_model`); the
+exceptions of the whole project are in :mod:`fmu_models.errors`.
 """
 from __future__ import annotations
 

@@ -49,12 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     def build() -> int:
         notes: list[str] = []
         platforms = parse_platforms(args.platforms)
-        if platforms:
-            zig_command()                          # a missing extra is named before anything is built
         models = tuple(args.model or model_names())
         if not platforms:
             paths = build_fmus(args.out, args.fmi_version, models)
         else:                                      # complete FMUs only: built and extended aside, then moved
+            zig_command()                          # a missing extra is named before anything is built
             out.mkdir(parents=True, exist_ok=True)
             with private_tempdir(".build-", dir=out) as tmp:
                 staged = build_fmus(tmp, args.fmi_version, models)

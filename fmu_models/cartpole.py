@@ -1,16 +1,8 @@
-"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1 with the errata of the papers below).
-
-State ``x = [x, x_dot, theta, theta_dot]`` (the paper's x1..x4): cart position [m], cart
-velocity [m/s], pole angle from UPRIGHT [rad] (positive leaning towards +x), pole rate
-[rad/s]. Input ``F``: force on the cart [N]. Measurement ``y = [x, theta]`` (eqs 13, 23).
-
-Errata applied (each checked against Lagrange's equations in
-``tests/test_cartpole_lagrange.py``):
-
-* Table 1 prints ``M3 = M1 M2 - mc^2 l^2 cos^2 x3``; the mass must be ``mp``.
-* Table 1 gives ``Bc`` the unit N m s/rad; cart friction is linear, N s/m.
-* Eq 22's "linearised" A, B are not the Jacobian of eqs 8-11: the model never uses
-  them; :meth:`PlantModel.linearize` gives the exact Jacobian.
+"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1), with the papers' errata fixed: ``M3``
+uses the pole mass ``mp``, ``Bc`` is in N s/m, and eq 22's "linearised" A, B are never used
+(:meth:`PlantModel.linearize` gives the exact Jacobian); each erratum is checked against
+Lagrange's equations in ``tests/test_cartpole_lagrange.py``. State, equations and errata: the
+user guide's page "Plant models and their equations".
 """
 from __future__ import annotations
 
@@ -47,10 +39,8 @@ def dynamics(x, u, p):
 
     Parameters
     ----------
-    x
-        The state (x, x_dot, theta, theta_dot), SX column.
-    u
-        The input (force F), SX column.
+    x, u
+        The state (x, x_dot, theta, theta_dot) and the input (force F), SX columns.
     p
         The parameter symbols by name.
     """
@@ -73,10 +63,8 @@ def measurement(x, p):
 
     Parameters
     ----------
-    x
-        The state, SX column.
-    p
-        The parameter symbols by name (unused).
+    x, p
+        The state (SX column) and the parameter symbols by name (unused).
     """
     return ca.vertcat(x[0], x[2])
 

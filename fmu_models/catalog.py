@@ -35,15 +35,14 @@ def model_names() -> list[str]:
 
 
 def get_model(name: str, **params: float) -> PlantModel:
-    """Return the plant model ``name`` (e.g. "cartpole" or "iwp") with parameters overridden by name.
+    """Return the plant model ``name`` (e.g. "cartpole" or "iwp") with ``params`` overridden by name.
 
     Raises
     ------
     UnknownNameError
         Unknown model name or parameter name (the message lists the valid ones).
     ConfigurationError
-        A parameter value outside its domain, or a registered build function that does not
-        return a PlantModel.
+        A parameter value outside its domain, or a build function that does not return a PlantModel.
     """
     build = MODELS.get(name)
     if name not in _BASE:
@@ -52,5 +51,4 @@ def get_model(name: str, **params: float) -> PlantModel:
             raise ConfigurationError(f"model {name!r}: its build function returned {type(model).__name__}, "
                                      "not a PlantModel")
         _BASE[name] = model
-    model = _BASE[name]
-    return model.with_params(**params) if params else model.with_params()
+    return _BASE[name].with_params(**params)

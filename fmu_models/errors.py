@@ -1,50 +1,15 @@
 """The exception family of pendulum-cosim (``fmu_models``, ``estimators`` and ``cosim``).
 
-Every error the project raises on purpose derives from :class:`PendulumCosimError`, so a
-caller can catch them all with one ``except``; each also derives from the built-in
-exception a Python user would expect (``ValueError`` for a bad value, ``KeyError`` for an
-unknown name, ...), so code written against the built-ins keeps working. The command line
-prints any of them as one line and exits with status 2 (``--debug`` keeps the traceback).
-
-========================  ==========================================================
-class                     raised when
-========================  ==========================================================
-ConfigurationError        a setting, argument or file describing what to build or run
-                          is invalid (a negative mass, a non-PD covariance, a bad
-                          scenario, incommensurate periods)
-UnknownNameError          a name is not one of the valid ones (the message lists them)
-TypeMismatchError         a value or port has the wrong type (strings as a measurement,
-                          a Float output wired to a Boolean input)
-ResourceError             a run would not fit (memory, disk, schedule size)
-InputError                data fed to a running object is invalid (inf in a measurement)
-NumericalError            a result became non-finite (a filter diverged)
-FMUError                  an FMU file is unusable or an FMU call failed
-BuildError                generating or compiling C code failed
-CompilerNotFoundError     no C compiler is available
-InstallationError         a file the package ships is missing (a broken installation)
-RunError                  a run failed
-CosimError                a co-simulation failed; keeps the rows recorded so far
-Interrupted               a run was stopped by Ctrl-C or SIGTERM (partial results saved)
-========================  ==========================================================
+Every error raised on purpose derives from :class:`PendulumCosimError` (one ``except``
+catches them all) and from the built-in a Python user would expect (``ValueError`` for a
+bad value, ``KeyError`` for an unknown name, ...); the command lines print one as one line
+and exit with status 2 (see the reliability page of the user guide).
 """
 from __future__ import annotations
 
-__all__ = [
-    "BuildError",
-    "CompilerNotFoundError",
-    "ConfigurationError",
-    "CosimError",
-    "FMUError",
-    "InputError",
-    "InstallationError",
-    "Interrupted",
-    "NumericalError",
-    "PendulumCosimError",
-    "ResourceError",
-    "RunError",
-    "TypeMismatchError",
-    "UnknownNameError",
-]
+__all__ = ["BuildError", "CompilerNotFoundError", "ConfigurationError", "CosimError", "FMUError", "InputError",
+           "InstallationError", "Interrupted", "NumericalError", "PendulumCosimError", "ResourceError", "RunError",
+           "TypeMismatchError", "UnknownNameError"]
 
 
 class PendulumCosimError(Exception):
@@ -110,16 +75,11 @@ class CosimError(RunError):
     ----------
     message : str
         What failed, when and why.
-    component, time, results
-        As the attributes.
-
-    Attributes
-    ----------
-    component : str
-        Name of the failing component.
-    time : float
+    component : str, optional
+        Name of the failing component (kept as an attribute, as are ``time`` and ``results``).
+    time : float, optional
         Simulation time [s] of the failure.
-    results : pandas.DataFrame or None
+    results : pandas.DataFrame, optional
         The signals recorded up to the failure (None when they were streamed to a file).
     """
 
@@ -137,12 +97,8 @@ class Interrupted(RunError):
     message : str
         Where the run stopped and where the partial results are.
     partial : object
-        As the attribute.
-
-    Attributes
-    ----------
-    partial : object
-        Whatever the interrupted function had finished (its documentation says what).
+        Whatever the interrupted function had finished (its documentation says what); kept
+        as an attribute.
     """
 
     def __init__(self, message: str, partial=None):

@@ -1,24 +1,10 @@
-"""Inertia-wheel pendulum of seed 002 (eqs 1-2).
+"""Inertia-wheel pendulum of seed 002 (eqs 1-2), all three states measured (``C = I``).
 
-State ``x = [alpha, alpha_dot, phi_dot]``: pendulum angle from the upright vertical
-[rad], its rate [rad/s] and the wheel speed relative to the body [rad/s]. Input ``i``:
-motor current [A]. All three states are measured (``C = I``).
-
-Equations (seed 002 eqs 1-2)::
-
-    phi''   = (k i - b_phi phi') / I_k
-    alpha'' = (s I_k phi'' + m_c g l_p sin(alpha) - b_alpha alpha') / (I_r + I_k)
-
-Coupling sign ``s``: seed 002 prints ``s = +1``. With the denominator
-``I_r + I_k``, ``phi`` is the wheel angle relative to the body and the reaction torque
-on the body opposes the torque that spins the wheel, so the physical sign is ``s = -1``,
-the default here. Simplification kept from the paper: for a relative wheel angle the
-exact wheel equation is ``I_k (alpha'' + phi'') = k i - b_phi phi'``; eq 1 neglects the
-body's acceleration ``alpha''`` in it.
-
-Default parameters: the 1-D Cubli (Gajamohan et al., IROS 2012; seed 002 gives no
-numbers), mapped as ``I_k = Iw``, ``I_r = Ib + mw lw^2``, ``m_c = mb + mw``,
-``l_p = (mb lb + mw lw)/(mb + mw)``, ``b_alpha = Cb``, ``b_phi = Cw``, ``k = Km``.
+Kept from the paper: eq 1 neglects the body's acceleration in the wheel equation. Changed:
+the coupling sign ``s`` is -1 (physical, for a wheel angle relative to the body), where the
+paper prints +1. Default parameters: the 1-D Cubli (Gajamohan et al., IROS 2012), mapped in
+:func:`dynamics`. State, equations and reasons: the user guide's page "Plant models and their
+equations".
 """
 from __future__ import annotations
 
@@ -57,14 +43,14 @@ PARAMETERS = (
 
 
 def dynamics(x, u, p):
-    """Seed 002 eqs 1-2 with the Cubli parameters mapped as in the module docstring.
+    """Seed 002 eqs 1-2, ``phi'' = (k i - b_phi phi') / I_k`` and
+    ``alpha'' = (s I_k phi'' + m_c g l_p sin(alpha) - b_alpha alpha') / (I_r + I_k)``,
+    with the Cubli parameters mapped as below (``b_alpha = Cb``, ``b_phi = Cw``, ``k = Km``).
 
     Parameters
     ----------
-    x
-        The state (alpha, alpha_dot, phi_dot), SX column.
-    u
-        The input (motor current i), SX column.
+    x, u
+        The state (alpha, alpha_dot, phi_dot) and the input (motor current i), SX columns.
     p
         The parameter symbols by name.
     """
@@ -84,10 +70,8 @@ def measurement(x, p):
 
     Parameters
     ----------
-    x
-        The state, SX column.
-    p
-        The parameter symbols by name (unused).
+    x, p
+        The state (SX column) and the parameter symbols by name (unused).
     """
     return ca.vertcat(x[0], x[1], x[2])
 

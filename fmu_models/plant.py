@@ -1,11 +1,8 @@
-"""`PlantModel`: one CasADi definition of a plant, feeding every numeric use of it.
-
-The symbolic expressions built here are the single source of the Python functions, the
-exact Jacobians (CasADi's algorithmic differentiation), the discrete maps, the C code
-and the FMUs (`fmu_models.fmu`).
-"""
+"""`PlantModel`: one CasADi definition of a plant, the single source of its Python functions,
+exact Jacobians (algorithmic differentiation), discrete maps, C code and FMUs."""
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping, Sequence
 from functools import cache
 
@@ -64,9 +61,9 @@ class _Symbolic:
 
     def step_expr(self, method: str, substeps: int) -> ca.SX:
         """x_{k+1} as an expression of (x, u, p, dt): `substeps` equal steps of `method`."""
-        x, u, p = self.x, self.u, self.p
+        u, p = self.u, self.p
         h = self.dt / substeps
-        xk = x
+        xk = self.x
         for _ in range(substeps):
             if method == "euler":
                 xk = xk + h * self.f(xk, u, p)
@@ -117,15 +114,7 @@ class PlantModel:
 
     Attributes
     ----------
-    name : str
-        Registry name (``"cartpole"``, ``"iwp"``).
-    fmu_name : str
-        Model name of the generated FMU (``"CartPole"``, ...).
-    states, inputs, outputs, parameters : tuple of Variable
-        Descriptors with names, units, descriptions and defaults.
     state_names, input_names, output_names : list of str
-    params : dict
-        Current parameter values by name (a copy; use :meth:`with_params` to change).
     nx, nu, ny : int
         Numbers of states, inputs and outputs.
     """
@@ -134,8 +123,7 @@ class PlantModel:
                  states: Sequence[Variable], inputs: Sequence[Variable],
                  outputs: Sequence[Variable], parameters: Sequence[Variable],
                  dynamics: Dynamics | None = None, measurement: Measurement | None = None,
-                 example_x0=None, example_input: Callable[[float], Sequence[float]] | None = None,
-                 *, _symbolic: _Symbolic | None = None, _values: np.ndarray | None = None):
+                 example_x0=None, example_input: Callable[[float], Sequence[float]] | None = None):
         self.name, self.fmu_name, self.description = name, fmu_name, description
         self.example_x0, self.example_input = example_x0, example_input
         self.states, self.inputs = tuple(states), tuple(inputs)
@@ -144,12 +132,9 @@ class PlantModel:
         dup = {n for n in names if names.count(n) > 1}
         if dup:
             raise ConfigurationError(f"model {name!r}: duplicate variable names {sorted(dup)}")
-        self.sym = _symbolic or _Symbolic(self.states, self.inputs, self.outputs,
-                                          self.parameters, dynamics, measurement)
-        self._p = (np.array([v.check(v.start) for v in self.parameters]) if _values is None
-                   else _values)
+        self.sym = _Symbolic(self.states, self.inputs, self.outputs, self.parameters, dynamics, measurement)
+        self._p = np.array([v.check(v.start) for v in self.parameters])
 
-    # ------------------------------------------------------------------ description
     state_names = property(lambda self: [v.name for v in self.states])
     input_names = property(lambda self: [v.name for v in self.inputs])
     output_names = property(lambda self: [v.name for v in self.outputs])
@@ -184,24 +169,28 @@ class PlantModel:
         ConfigurationError
             For a value outside the parameter's domain (e.g. a non-positive mass).
         """
-        values = self._p.copy()
+        variant = copy.copy(self)           # the symbolic part is shared
+        variant._p = self._p.copy()
         index = {n: i for i, n in enumerate(self.param_names)}
         for key, val in params.items():
             if key not in index:
                 raise UnknownNameError(f"model {self.name!r} has no parameter {key!r}; "
-                               f"valid parameters: {', '.join(self.param_names)}")
-            values[index[key]] = self.parameters[index[key]].check(val)
-        return PlantModel(self.name, self.fmu_name, self.description, self.states, self.inputs,
-                          self.outputs, self.parameters, example_x0=self.example_x0,
-                          example_input=self.example_input, _symbolic=self.sym, _values=values)
+                                       f"valid parameters: {', '.join(self.param_names)}")
+            variant._p[index[key]] = self.parameters[index[key]].check(val)
+        return variant
 
     def __repr__(self) -> str:
         return (f"PlantModel({self.name!r}, states={self.state_names}, "
                 f"inputs={self.input_names}, outputs={self.output_names})")
 
-    # ------------------------------------------------------------------ numeric calls
     def _xu(self, x, u):
         return checks.vector(x, self.nx, "state x"), checks.vector(u, self.nu, "input u")
+
+    def _discrete(self, build: Callable[[str, int], ca.Function], x, u, dt, method: str, substeps: int):
+        """``build(method, substeps)``, the discrete map or its Jacobians, called on checked arguments."""
+        substeps = check_method(method, substeps)
+        x, u = self._xu(x, u)
+        return build(method, substeps)(x, u, self._p, _check_dt(dt))
 
     def f(self, x, u) -> np.ndarray:
         """Continuous dynamics x' = f(x, u), shape ``(nx,)``; x in state units, u in input units."""
@@ -229,17 +218,12 @@ class PlantModel:
         eqs 14-17, without the noise w); ``"rk4"`` is the classical Runge-Kutta scheme
         with ``substeps`` equal substeps.
         """
-        substeps = check_method(method, substeps)
-        x, u = self._xu(x, u)
-        dt = _check_dt(dt)
-        return np.asarray(self.sym.step(method, substeps)(x, u, self._p, dt)).reshape(self.nx)
+        return np.asarray(self._discrete(self.sym.step, x, u, dt, method, substeps)).reshape(self.nx)
 
     def jacobians(self, x, u, dt: float, method: str = "euler",
                   substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Exact Jacobians of :meth:`step`: ``F = dx_next/dx`` (nx, nx), ``G = dx_next/du`` (nx, nu)."""
-        substeps = check_method(method, substeps)
-        x, u = self._xu(x, u)
-        F, G = self.sym.step_jac(method, substeps)(x, u, self._p, _check_dt(dt))
+        F, G = self._discrete(self.sym.step_jac, x, u, dt, method, substeps)
         return np.asarray(F), np.asarray(G)
 
     def discretize(self, x0, u0, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
@@ -269,7 +253,6 @@ class PlantModel:
         ``u`` is either one input vector held throughout, an array of shape
         ``(n_steps, nu)``, or a callable ``u(t) -> (nu,)`` evaluated at each step start.
         """
-
         substeps = check_method(method, substeps)
         n_steps = checks.positive_int(n_steps, "n_steps", minimum=0)
         check_fits(8.0 * n_steps * (2 * self.nx + self.nu), f"simulating {n_steps} steps of {self.name}",

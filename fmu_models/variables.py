@@ -11,9 +11,8 @@ DOMAINS = ("real", "positive", "nonnegative", "unit", "sign")
 
 
 def check_declaration(kind: str, name: str, domain: str) -> None:
-    """Refuse (:class:`~fmu_models.errors.ConfigurationError`) a declared ``kind`` of thing
-    (``"variable"``, ``"parameter"``) whose ``name`` is not a legal identifier or whose
-    ``domain`` is not one of :data:`DOMAINS`."""
+    """Refuse (ConfigurationError) a declared ``kind`` of thing (``"variable"``, ``"parameter"``)
+    whose ``name`` is not a legal identifier or whose ``domain`` is not one of :data:`DOMAINS`."""
     if not name.isidentifier():
         raise ConfigurationError(f"{kind} name {name!r} is not a legal identifier")
     if domain not in DOMAINS:
@@ -48,13 +47,12 @@ class Variable:
         check_declaration("variable", self.name, self.domain)
 
     def measured(self, description: str) -> Variable:
-        """The output measuring this variable: ``y_<name>``, in its unit, described by
-        ``description``."""
+        """The output ``y_<name>`` measuring this variable, in its unit, described by ``description``."""
         return Variable(f"y_{self.name}", self.unit, description)
 
     def check(self, value: float) -> float:
-        """Return ``value`` as float if it lies in this variable's domain, else raise
-        :class:`~fmu_models.errors.ConfigurationError` (TypeMismatchError for a non-number)."""
+        """``value`` as float if it lies in this variable's domain, else ConfigurationError
+        (TypeMismatchError for a non-number)."""
         if isinstance(value, (str, bytes, bool)) or value is None:
             raise TypeMismatchError(f"parameter {self.name!r} must be a number, got {value!r}")
         try:

@@ -1,9 +1,6 @@
-"""Every FMU the project writes goes through this package: the plant FMUs
-(:mod:`.plant_fmu`) and the signal FMUs (:mod:`.signal_fmu`) here, the estimator FMUs
-(:mod:`estimators.filter_fmu`) built on it, all through one packer (:mod:`.pack`), one
-model-description writer (:mod:`.description`), one variable list
-(:mod:`.variable_list`) and one ``model_config.h`` schema (:mod:`.config`) for the three
-C cores in ``c/``; :mod:`.platforms` cross-compiles their binaries for other platforms.
+"""Every FMU the project writes goes through this package (the estimator FMUs of
+:mod:`estimators.filter_fmu` too): one packer, one model-description writer, one variable
+list and one ``model_config.h`` schema for the three C cores in ``c/``.
 
 >>> from fmu_models.export import build_fmu
 >>> path = build_fmu("cartpole", "fmus")            # doctest: +SKIP

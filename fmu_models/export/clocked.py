@@ -1,13 +1,8 @@
-"""The clocked form of the project's FMUs (FMI 3.0): an input clock ``sample`` whose
-activations are the component's sample instants.
-
-A clocked FMU has one Clock variable ``sample`` (``causality="input"``,
-``intervalVariability="constant"``, ``intervalDecimal`` the sample period, shift 0: the first
-activation is at the start time; ``priority="0"`` for Scheduled Execution), and its inputs
-and outputs carry ``clocks="<sample's value reference>"``: they are set and got only while
-the clock is active. The C side is in ``c/core_api.h`` and ``c/fmi3_wrapper.c``
-(``CLOCK_VR`` and ``CLOCK_INTERVAL`` in ``model_config.h`` select it); the FMU offers
-Co-Simulation with Event Mode and Scheduled Execution (one model partition, the clock's).
+"""The clocked form of the project's FMUs (FMI 3.0): one input Clock ``sample`` (constant
+interval, the sample period; shift 0; priority 0) whose activations are the component's
+sample instants; it clocks the inputs and outputs, set and got only while it is active.
+The FMU offers Co-Simulation with Event Mode and Scheduled Execution; the C side is in
+``c/core_api.h`` and ``c/fmi3_wrapper.c``, selected by ``CLOCK_VR`` and ``CLOCK_INTERVAL``.
 """
 from __future__ import annotations
 
@@ -28,10 +23,8 @@ def check_clocked(clocked: bool, fmi_version: int, what: str) -> None:
 
     Parameters
     ----------
-    clocked
-        The clocked form is asked.
-    fmi_version
-        2 or 3.
+    clocked, fmi_version
+        The clocked form is asked; the FMI version, 2 or 3.
     what
         What is exported (for the message).
 
@@ -53,38 +46,24 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
 
     Parameters
     ----------
-    variables
-        The unclocked FMU's variables (value references kept).
-    groups
-        The groups whose variables the clock clocks.
-    period
-        The clock's constant interval [s] (> 0).
-    description
-        What the activations are (the clock's description).
+    variables, groups
+        The unclocked FMU's variables (value references kept), the groups the clock clocks.
+    period, description
+        The clock's constant interval [s] (> 0), what its activations are.
     """
     if not period > 0:
         raise ConfigurationError(f"the interval of the clock {CLOCK_NAME!r} must be > 0, got {period!r}")
     vr = len(variables.variables)
     out = VariableList()
-    for v in variables.variables:
-        out.variables.append(dataclasses.replace(v, clocks=(vr,), variability="discrete") if v.group in groups else v)
+    out.variables = [dataclasses.replace(v, clocks=(vr,), variability="discrete") if v.group in groups else v
+                     for v in variables.variables]
     out.add(name=CLOCK_NAME, type="Clock", causality="input", variability="discrete", description=description,
             group="CLOCK", clock=dict(intervalVariability="constant", intervalDecimal=repr(float(period)), priority=0))
     return out
 
 
 def clock_defines(variables: VariableList, period: float) -> list[tuple[str, object]]:
-    """The ``model_config.h`` defines of the clocked form (``CLOCK_VR``, ``CLOCK_INTERVAL``
-    [s]); none for an FMU without the clock.
-
-    Parameters
-    ----------
-    variables
-        The FMU's variables (with the clock from :func:`clock_variables`, or without).
-    period
-        The clock's interval [s].
-    """
+    """The ``model_config.h`` defines ``CLOCK_VR`` and ``CLOCK_INTERVAL`` of the clock of
+    ``variables`` (from :func:`clock_variables`) of interval ``period`` [s]; none without it."""
     clock = variables.group("CLOCK")
-    if not clock:
-        return []
-    return [("CLOCK_VR", clock[0].vr), ("CLOCK_INTERVAL", repr(float(period)))]
+    return [("CLOCK_VR", clock[0].vr), ("CLOCK_INTERVAL", repr(float(period)))] if clock else []

@@ -1,26 +1,6 @@
 """``model_config.h``: the one schema by which every FMU the project writes configures its C
-core (plant, filter or signal; ``fmu_models/export/c``).
-
-The header is derived from the FMU's variable list (:class:`~fmu_models.export.variable_list.VariableList`,
-the same list that writes the ``modelDescription.xml``) and holds, for every core:
-
-=================================  ================================================================
-macro or table                     meaning
-=================================  ================================================================
-``MODEL_IDENTIFIER_STR``,          the model identifier and GUID / instantiation token
-``MODEL_GUID``
-``VR_<G>``, ``N_<G>``              first value reference and size of each variable group ``G``
-``NP``, ``PARAM_DEFAULT[]``,       the Real parameters (group ``P``): count, defaults, domains
-``PARAM_DOMAIN[]``, ``P_<NAME>``   (codes of :data:`fmu_models.variables.DOMAINS`), index by name
-``NIP``, ``IP_DEFAULT[]``,         the Integer and Enumeration parameters (group ``IP``): count,
-``IP_MIN[]``, ``IP_MAX[]``,        defaults, ranges, the FMI 3.0 width (32 or 64: Enumerations
-``IP_WIDTH[]``, ``IP_<NAME>``      use the Int64 functions), index by name
-``N_VARS``, ``VAR_NAMES[]``        every variable's name by value reference (for messages)
-``WORK_ARG`` ... ``WORK_W``        CasADi work-vector sizes of the generated functions
-=================================  ================================================================
-
-followed by the core's own constants and tables (``defines``, ``tables``), which each
-core documents in its header.
+core (plant, filter or signal; ``fmu_models/export/c``), derived from the FMU's variable list;
+its macros and tables are listed in the developer guide.
 """
 from __future__ import annotations
 
@@ -37,27 +17,18 @@ __all__ = ["c_array", "c_strings", "config_header", "work_sizes"]
 
 def c_array(ctype: str, name: str, values: Iterable) -> str:
     """``static const <ctype> <name>[] = {values};`` (values as C literals; ``{0}`` if none)."""
-    values = [str(v) for v in values]
-    body = ", ".join(values) if values else "0"
+    body = ", ".join(str(v) for v in values) or "0"
     return f"static const {ctype} {name}[] = {{{body}}};"
 
 
 def c_strings(name: str, strings: Iterable[str]) -> str:
-    """``static const char *const <name>[] = {"a", ...};``: a table of names for messages.
-
-    Parameters
-    ----------
-    name
-        Name of the C table.
-    strings
-        The strings (printable, without quotes or backslashes).
-    """
+    """``static const char *const <name>[] = {"a", ...};``: the C table ``name`` of ``strings``
+    (printable, without quotes or backslashes), names for messages."""
     strings = list(strings)
     for s in strings:
         if '"' in s or "\\" in s or not s.isprintable():
             raise ConfigurationError(f"name {s!r} cannot be written into C code")
-    body = ", ".join(f'"{s}"' for s in strings) if strings else "0"
-    return f"static const char *const {name}[] = {{{body}}};"
+    return c_array("char *const", name, [f'"{s}"' for s in strings])
 
 
 def work_sizes(functions: Sequence[ca.Function], minimum_arg: int = 1, minimum_res: int = 1) -> dict[str, int]:
@@ -77,23 +48,19 @@ def _macro(name: str) -> str:
 def config_header(variables: VariableList, identifier: str, guid: str, source: str, groups: Sequence[str] = (),
                   defines: Sequence[tuple[str, object]] = (), tables: Sequence[str] = (),
                   work: dict[str, int] | None = None) -> str:
-    """The text of ``model_config.h`` (see the module documentation).
+    """The text of ``model_config.h``.
 
     Parameters
     ----------
     variables : VariableList
         The FMU's variables in value-reference order.
-    identifier, guid : str
-        Model identifier and GUID (instantiation token).
-    source : str
-        What generated the header (a module name, for the comment at its top).
+    identifier, guid, source : str
+        Model identifier, GUID (instantiation token) and what generated the header (a module name).
     groups : sequence of str
         Groups the core reads even when they are empty (``P`` and ``IP`` always are;
         ``VR_<G>`` is then the number of variables, ``N_<G>`` 0).
-    defines : sequence of (name, value)
-        The core's own defines (``#define name value``).
-    tables : sequence of str
-        The core's own tables (from :func:`c_array`, :func:`c_strings`).
+    defines, tables : sequence of (name, value), sequence of str
+        The core's own defines and tables (from :func:`c_array`, :func:`c_strings`).
     work : dict, optional
         CasADi work sizes (:func:`work_sizes`), written as ``WORK_ARG`` ... ``WORK_W``.
 

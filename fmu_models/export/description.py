@@ -1,13 +1,10 @@
-"""``modelDescription.xml`` for FMI 2.0 and 3.0 from one description of an FMU, shared by
-the plant, estimator and signal FMUs.
-
-An FMU is described by its variables (:class:`~fmu_models.export.variable_list.FmuVariable`, in
-ModelVariables order with value reference = index - 1), its ModelStructure
-(:class:`Unknown` entries), its interfaces and capabilities (:class:`Description`).
-"""
+"""``modelDescription.xml`` for FMI 2.0 and 3.0 of an FMU (plant, estimator or signal) from one
+:class:`~fmu_models.export.description.Description`: its variables, ModelStructure, interfaces
+and capabilities."""
 from __future__ import annotations
 
-import datetime as _dt
+import re
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import quoteattr
@@ -29,28 +26,24 @@ def base_units(unit: str) -> dict | None:
     """The SI base-unit exponents of ``unit`` written as symbols of :data:`SYMBOLS` joined by
     ``.`` and one ``/`` with integer powers (``"N.m.s/rad"``, ``"m/s2"``, ``"kg.m2"``), or
     None for a unit this does not read (it is then declared without a ``<BaseUnit>``)."""
-    import re
-
     num, _, den = unit.partition("/")
-    total: dict[str, int] = {}
+    if not num:
+        return None
+    total: Counter[str] = Counter()
     for part, sign in ((num, 1), (den, -1)):
-        if not part and sign == 1:
-            return None
         for token in part.split(".") if part else []:
             m = re.fullmatch(r"([A-Za-z]+|1)(-?\d+)?", token)
             if not m or m.group(1) not in SYMBOLS:
                 return None
-            power = sign * int(m.group(2) or 1)
             for base, e in SYMBOLS[m.group(1)].items():
-                total[base] = total.get(base, 0) + e * power
+                total[base] += e * sign * int(m.group(2) or 1)
     return {k: v for k, v in total.items() if v}
 
 
 _GENERATION = dict(generationTool=f"pendulum-cosim {VERSION} (CasADi code generation)",
-                   generationDateAndTime=_dt.datetime(2026, 1, 1).strftime("%Y-%m-%dT%H:%M:%SZ"))
+                   generationDateAndTime="2026-01-01T00:00:00Z")
 _LOG_CATEGORIES = ('  <LogCategories><Category name="logStatusError" description="errors"/>'
                    '<Category name="logAll" description="everything"/></LogCategories>')
-_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Enumeration": "Enumeration", "Boolean": "Boolean"}
 
 
 def xml_attrs(**kw) -> str:
@@ -71,31 +64,24 @@ class Unknown:
 
 @dataclass
 class Description:
-    """Everything the XML states about an FMU (see the module documentation).
+    """Everything the XML states about an FMU.
 
     Attributes
     ----------
     model_name, identifier, guid, description : str
         ``modelName``, ``modelIdentifier``, ``guid`` / ``instantiationToken``, ``description``.
     variables : sequence of FmuVariable
-        In ModelVariables order.
+        In ModelVariables order (value reference = index - 1).
     outputs, derivatives, initial_unknowns : sequence of Unknown
         The ModelStructure.
-    model_exchange : bool
-        Also a Model Exchange interface (Co-Simulation is always there).
-    directional : bool
-        Provides directional derivatives.
-    variable_step : bool
-        ``canHandleVariableCommunicationStepSize``.
+    model_exchange, directional, variable_step : bool
+        A Model Exchange interface too; directional derivatives; ``canHandleVariableCommunicationStepSize``.
     default_step, stop_time : float
         The DefaultExperiment [s].
-    enumerations : dict
-        Enumeration types: name -> [(item, value, description)].
-    source_files : sequence of str
-        The C files of ``sources/`` to compile.
+    enumerations, source_files : dict, sequence of str
+        Enumeration types (name -> [(item, value, description)]); the C files of ``sources/`` to compile.
     clocked : bool
-        FMI 3.0: the FMU has clocks (``Clock`` variables): its Co-Simulation interface has
-        Event Mode (``hasEventMode``) and it has a Scheduled Execution interface.
+        FMI 3.0 clocks: Co-Simulation with Event Mode, and a Scheduled Execution interface.
     """
 
     model_name: str
@@ -140,111 +126,95 @@ def _unknown(tag: str, u: Unknown, key: str, shift: int, indent: int) -> str:
     return f"{' ' * indent}<{tag}{xml_attrs(**a)}/>"
 
 
+def _bool(flag: bool) -> str:
+    return "true" if flag else "false"
+
+
+def _typed(v, fmi3: bool) -> tuple[str, dict]:
+    """The type element of the variable ``v``: its tag and attributes, in FMI 3.0's or 2.0's names and order."""
+    start = v.start
+    if v.start is not None and v.type in ("Real", "Boolean"):
+        start = repr(v.start) if v.type == "Real" else _bool(v.start)
+    if v.type == "Real" and fmi3:
+        derivative = None if v.derivative_of is None else v.derivative_of - 1
+        return "Float64", dict(start=start, unit=v.unit, derivative=derivative)
+    if v.type == "Real":
+        return "Real", dict(unit=v.unit, derivative=v.derivative_of, start=start)
+    if v.type in ("Enumeration", "Boolean"):
+        return v.type, dict(declaredType=v.declared_type, start=start)
+    return "Int32" if fmi3 else "Integer", dict(start=start, min=v.min, max=v.max)
+
+
+def _document(d: Description, version: int, interfaces: list[str], types: list[str], variables: list[str],
+              structure: list[str]) -> str:
+    """The text of the FMI ``version`` (2 or 3) model description made of these parts."""
+    root = xml_attrs(fmiVersion=f"{version}.0", modelName=d.model_name,
+                     **{"guid" if version == 2 else "instantiationToken": d.guid}, description=d.description,
+                     **_GENERATION, variableNamingConvention="structured",
+                     numberOfEventIndicators=0 if version == 2 else None)
+    experiment = xml_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)
+    return "\n".join(['<?xml version="1.0" encoding="UTF-8"?>', f"<fmiModelDescription{root}>", *interfaces,
+                      *_units(d.variables), *types, _LOG_CATEGORIES, f"  <DefaultExperiment{experiment}/>",
+                      "  <ModelVariables>", *variables, "  </ModelVariables>", "  <ModelStructure>", *structure,
+                      "  </ModelStructure>", "</fmiModelDescription>", ""])
+
+
 def fmi2(d: Description) -> str:
     """The FMI 2.0 model description."""
     if d.clocked or any(v.type == "Clock" for v in d.variables):
         raise ConfigurationError(f"{d.identifier}: clocks are FMI 3.0 only; an FMI 2.0 FMU cannot have them")
     caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUstate="true", canSerializeFMUstate="true",
-                providesDirectionalDerivative="true" if d.directional else "false",
-                canNotUseMemoryManagementFunctions="false")
-    srcs = "".join(f"<File{xml_attrs(name=f)}/>" for f in d.source_files)
-    out = ['<?xml version="1.0" encoding="UTF-8"?>',
-           "<fmiModelDescription" + xml_attrs(fmiVersion="2.0", modelName=d.model_name, guid=d.guid,
-                                           description=d.description, **_GENERATION,
-                                           variableNamingConvention="structured", numberOfEventIndicators=0) + ">"]
-    if d.model_exchange:
-        out.append(f"  <ModelExchange{xml_attrs(**caps, completedIntegratorStepNotNeeded='true')}>"
-                   f"<SourceFiles>{srcs}</SourceFiles></ModelExchange>")
-    variable = "true" if d.variable_step else "false"
-    cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=variable, canInterpolateInputs="false",
-                maxOutputDerivativeOrder=0)
-    out.append(f"  <CoSimulation{cs}>"
-               f"<SourceFiles>{srcs}</SourceFiles></CoSimulation>")
-    out += _units(d.variables)
-    if d.enumerations:
-        out.append("  <TypeDefinitions>")
-        out += [f'    <SimpleType{xml_attrs(name=n)}><Enumeration>{_items(items)}</Enumeration></SimpleType>'
-                for n, items in d.enumerations.items()]
-        out.append("  </TypeDefinitions>")
-    out += [_LOG_CATEGORIES,
-            f"  <DefaultExperiment{xml_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
-            "  <ModelVariables>"]
+                providesDirectionalDerivative=_bool(d.directional), canNotUseMemoryManagementFunctions="false")
+    srcs = f"<SourceFiles>{''.join(f'<File{xml_attrs(name=f)}/>' for f in d.source_files)}</SourceFiles>"
+    interfaces = [f"  <ModelExchange{xml_attrs(**caps, completedIntegratorStepNotNeeded='true')}>{srcs}</ModelExchange>"
+                  ] if d.model_exchange else []
+    cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=_bool(d.variable_step), canInterpolateInputs="false",
+                   maxOutputDerivativeOrder=0)
+    interfaces.append(f"  <CoSimulation{cs}>{srcs}</CoSimulation>")
+    types = ["  <TypeDefinitions>",
+             *[f'    <SimpleType{xml_attrs(name=n)}><Enumeration>{_items(items)}</Enumeration></SimpleType>'
+               for n, items in d.enumerations.items()],
+             "  </TypeDefinitions>"] if d.enumerations else []
+    variables = []
     for v in d.variables:
         head = xml_attrs(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
-                      variability=v.variability, initial=v.initial)
-        start = None if v.start is None else (repr(v.start) if v.type == "Real" else
-                                              ("true" if v.start else "false") if v.type == "Boolean" else v.start)
-        if v.type == "Real":
-            inner = f"<Real{xml_attrs(unit=v.unit, derivative=v.derivative_of, start=start)}/>"
-        elif v.type == "Enumeration":
-            inner = f"<Enumeration{xml_attrs(declaredType=v.declared_type, start=start)}/>"
-        elif v.type == "Boolean":
-            inner = f"<Boolean{xml_attrs(start=start)}/>"
-        else:
-            inner = f"<Integer{xml_attrs(start=start, min=v.min, max=v.max)}/>"
-        out.append(f"    <ScalarVariable{head}>{inner}</ScalarVariable>")
-    out += ["  </ModelVariables>", "  <ModelStructure>"]
+                         variability=v.variability, initial=v.initial)
+        tag, attrs = _typed(v, fmi3=False)
+        variables.append(f"    <ScalarVariable{head}><{tag}{xml_attrs(**attrs)}/></ScalarVariable>")
+    structure = []
     for tag, entries in (("Outputs", d.outputs), ("Derivatives", d.derivatives),
                          ("InitialUnknowns", sorted(d.initial_unknowns, key=lambda u: u.index))):
         if entries:
-            out.append(f"    <{tag}>")
-            out += [_unknown("Unknown", u, "index", 0, 6) for u in entries]
-            out.append(f"    </{tag}>")
-    out += ["  </ModelStructure>", "</fmiModelDescription>"]
-    return "\n".join(out) + "\n"
+            structure += [f"    <{tag}>", *[_unknown("Unknown", u, "index", 0, 6) for u in entries], f"    </{tag}>"]
+    return _document(d, 2, interfaces, types, variables, structure)
 
 
 def fmi3(d: Description) -> str:
     """The FMI 3.0 model description (dependencies are value references, index - 1)."""
     caps = dict(modelIdentifier=d.identifier, canGetAndSetFMUState="true", canSerializeFMUState="true",
-                providesDirectionalDerivatives="true" if d.directional else "false",
-                providesAdjointDerivatives="true" if d.directional else "false")
-    out = ['<?xml version="1.0" encoding="UTF-8"?>',
-           "<fmiModelDescription" + xml_attrs(fmiVersion="3.0", modelName=d.model_name, instantiationToken=d.guid,
-                                           description=d.description, **_GENERATION,
-                                           variableNamingConvention="structured") + ">"]
-    if d.model_exchange:
-        out.append(f"  <ModelExchange{xml_attrs(**caps, needsCompletedIntegratorStep='false')}/>")
-    variable = "true" if d.variable_step else "false"
-    cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=variable, maxOutputDerivativeOrder=0,
-                hasEventMode="true" if d.clocked else "false", providesIntermediateUpdate="false")
-    out.append(f"  <CoSimulation{cs}/>")
+                providesDirectionalDerivatives=_bool(d.directional), providesAdjointDerivatives=_bool(d.directional))
+    interfaces = [f"  <ModelExchange{xml_attrs(**caps, needsCompletedIntegratorStep='false')}/>"
+                  ] if d.model_exchange else []
+    cs = xml_attrs(**caps, canHandleVariableCommunicationStepSize=_bool(d.variable_step), maxOutputDerivativeOrder=0,
+                   hasEventMode=_bool(d.clocked), providesIntermediateUpdate="false")
+    interfaces.append(f"  <CoSimulation{cs}/>")
     if d.clocked:
         se = {k: v for k, v in caps.items() if k != "providesDirectionalDerivatives"}
-        out.append(f"  <ScheduledExecution{xml_attrs(**se)}/>")
-    out += _units(d.variables)
-    if d.enumerations:
-        types = "".join(f"<EnumerationType{xml_attrs(name=n)}>{_items(items)}</EnumerationType>"
-                        for n, items in d.enumerations.items())
-        out.append(f"  <TypeDefinitions>{types}</TypeDefinitions>")
-    out += [_LOG_CATEGORIES,
-            f"  <DefaultExperiment{xml_attrs(startTime=0.0, stopTime=d.stop_time, stepSize=d.default_step)}/>",
-            "  <ModelVariables>"]
+        interfaces.append(f"  <ScheduledExecution{xml_attrs(**se)}/>")
+    types = "".join(f"<EnumerationType{xml_attrs(name=n)}>{_items(items)}</EnumerationType>"
+                    for n, items in d.enumerations.items())
+    variables = []
     # FMI 3.0 wants the independent variable first; value references stay those of the layout
     for v in sorted(d.variables, key=lambda v: v.causality != "independent"):
         a = dict(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
                  variability=v.variability, initial=v.initial)
         if v.clocks:
             a["clocks"] = " ".join(str(k) for k in v.clocks)
-        if v.type == "Clock":
-            out.append(f"    <Clock{xml_attrs(**a, **(v.clock or {}))}/>")
-            continue
-        tag = _FMI3_TYPES[v.type]
-        if v.type == "Real":
-            deriv = None if v.derivative_of is None else v.derivative_of - 1
-            start = None if v.start is None else repr(v.start)
-            out.append(f"    <Float64{xml_attrs(**a, start=start, unit=v.unit, derivative=deriv)}/>")
-        elif v.type == "Enumeration":
-            out.append(f"    <Enumeration{xml_attrs(**a, declaredType=v.declared_type, start=v.start)}/>")
-        elif v.type == "Boolean":
-            start = None if v.start is None else ("true" if v.start else "false")
-            out.append(f"    <Boolean{xml_attrs(**a, start=start)}/>")
-        else:
-            out.append(f"    <{tag}{xml_attrs(**a, start=v.start, min=v.min, max=v.max)}/>")
-    out += ["  </ModelVariables>", "  <ModelStructure>"]
-    out += [_unknown("Output", u, "valueReference", 1, 4) for u in d.outputs]
-    out += [_unknown("ContinuousStateDerivative", u, "valueReference", 1, 4) for u in d.derivatives]
-    out += [_unknown("InitialUnknown", Unknown(u.index, u.deps, None), "valueReference", 1, 4)
-            for u in sorted(d.initial_unknowns, key=lambda u: u.index)]
-    out += ["  </ModelStructure>", "</fmiModelDescription>"]
-    return "\n".join(out) + "\n"
+        tag, attrs = ("Clock", v.clock or {}) if v.type == "Clock" else _typed(v, fmi3=True)
+        variables.append(f"    <{tag}{xml_attrs(**a, **attrs)}/>")
+    structure = [_unknown("Output", u, "valueReference", 1, 4) for u in d.outputs]
+    structure += [_unknown("ContinuousStateDerivative", u, "valueReference", 1, 4) for u in d.derivatives]
+    structure += [_unknown("InitialUnknown", Unknown(u.index, u.deps, None), "valueReference", 1, 4)
+                  for u in sorted(d.initial_unknowns, key=lambda u: u.index)]
+    return _document(d, 3, interfaces,
+                     [f"  <TypeDefinitions>{types}</TypeDefinitions>"] if types else [], variables, structure)

@@ -1,17 +1,9 @@
-"""Compile and pack an FMU from generated C code, one of the model cores and the shared FMI
-wrappers: the machinery every FMU of the project goes through (plants, estimators,
-signals).
+"""Compile and pack an FMU (plant, estimator or signal) from generated C code, one of the model
+cores and the shared FMI wrappers of ``c/`` (the developer guide lists them).
 
-An FMU's C sources are the generic files in ``fmu_models/export/c`` (the headers every FMU
-includes, :data:`SHARED_HEADERS`: the core API ``core_api.h`` and what the cores share,
-``core_common.h``; what the wrappers share, ``wrapper_modes.h``, ``wrapper_common.h`` and
-``wrapper_functions.h``; then the wrapper ``fmi<version>_wrapper.c`` and the core
-``<core>_core.h/.c``), a ``core.h`` selecting the core, and the files the caller generates
-(``model_config.h``, :mod:`fmu_models.export.config`, and CasADi's code). They are compiled
-into the FMU's shared library and shipped in ``sources/`` so that another platform can
-rebuild it. The GUID is a hash of a fingerprint of the model and of every source file, so
-equal FMUs get equal GUIDs. The ``.fmu`` is written beside its target and renamed
-atomically.
+The sources are compiled into the FMU's library and shipped in ``sources/`` so that another
+platform can rebuild it; the GUID is a hash of the model's fingerprint and of every source,
+so equal FMUs get equal GUIDs; the ``.fmu`` is written beside its target and renamed atomically.
 """
 from __future__ import annotations
 
@@ -71,9 +63,7 @@ _CFLAGS = ("-shared", "-fPIC", "-O3", "-fno-math-errno", "-fvisibility=hidden", 
 
 
 def _compile_library(cc: str, src: Path, c_files: list[str], lib: Path, identifier: str) -> None:
-    """Compile the FMU's library ``lib`` from the sources in ``src``, through the
-    compiled-code cache (:mod:`fmu_models.infra.cache`): an FMU built before from the same sources,
-    compiler and flags is not compiled again."""
+    """Compile the FMU's library ``lib`` from the sources in ``src`` through the compiled-code cache."""
     def build(out: Path) -> None:
         run_compiler([cc, *_CFLAGS, f"-I{src}", f"-I{_FMI_HEADERS}", *[str(src / f) for f in c_files], "-o",
                       str(out), "-lm"], identifier)
@@ -107,9 +97,8 @@ def _output_folder(out_dir) -> Path:
 
 def _write_sources(src: Path, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
                    identity: str) -> tuple[str, list[str]]:
-    """Write the FMU's sources into ``src``: the generic files, ``core.h`` and the generated
-    ones; returns the GUID (a hash of ``identity`` and of every source) and the C files to
-    compile."""
+    """Write the FMU's sources into ``src``; returns the GUID (a hash of ``identity`` and of every
+    source) and the C files to compile."""
     generic = [*SHARED_HEADERS, f"{core}_core.h", f"{core}_core.c", f"fmi{fmi_version}_wrapper.c"]
     for g, path in zip(generic, shipped_files(__package__, "c", generic)):
         shutil.copy(path, src / g)
@@ -130,22 +119,16 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
 
     Parameters
     ----------
-    identifier : str
-        The model identifier (library name, C-identifier).
-    core : {"plant", "filter", "signal"}
-        The model core.
+    identifier, core : str
+        The model identifier (library name, a C identifier); the model core (plant, filter, signal).
     fmi_version : {2, 3}
-    write_generated : callable
-        ``write_generated(folder, guid) -> [generated C files to compile]``: writes
-        ``model_config.h`` and the generated code into ``folder``.
-    model_description : callable
-        ``model_description(guid, c_files) -> XML text``.
-    out_dir : path
-        Where to write the FMU (created if missing).
+    write_generated, model_description : callable
+        ``write_generated(folder, guid) -> [generated C files to compile]`` writes ``model_config.h``
+        and the generated code into ``folder``; ``model_description(guid, c_files) -> XML text``.
+    out_dir, file_name : path, str
+        Where to write the FMU (created if missing); its file name (default ``<identifier>.fmu``).
     fingerprint : str
         What identifies the model's content beyond its sources (names, values).
-    file_name : str, optional
-        The FMU file name (default ``<identifier>.fmu``).
 
     Raises
     ------

@@ -1,17 +1,14 @@
-"""The plant FMUs: variables, C sources and model description of a :class:`~fmu_models.PlantModel`,
-compiled and packed by :func:`fmu_models.export.pack.pack_fmu` with the plant core
-(``c/plant_core.c``).
+"""The plant FMUs (Model Exchange and Co-Simulation, FMI 2.0 or 3.0) of a :class:`~fmu_models.PlantModel`,
+packed by :func:`fmu_models.export.pack.pack_fmu` with ``c/plant_core.c``; the C code of f, h and
+their Jacobians is CasADi's, the ModelStructure the structural sparsity of its expressions.
 
-Variables, in value-reference order (group in brackets, see :mod:`fmu_models.export.config`):
-the parameters [P], ``step_size`` [STEP], the states [X], ``der(state)`` [DX], the inputs
-[U], one process-noise input ``w_<state>`` per state [W], the measured outputs [Y], the
-Enumeration ``integrator`` and the Integer ``substeps`` [IP], and ``time`` [TIME]. The
-ModelStructure comes from the structural sparsity of the CasADi expressions; the C code
-of the model's f, h and Jacobians is CasADi's. Each FMU holds Model Exchange and
-Co-Simulation, in FMI 2.0 or 3.0, and its C sources (``sources/``).
+Variables in value-reference order, by group (:mod:`fmu_models.export.config`): the parameters
+[P], ``step_size`` [STEP], the states [X], ``der(state)`` [DX], the inputs [U], the process
+noises ``w_<state>`` [W], the measured outputs [Y], ``integrator`` and ``substeps`` [IP], ``time``.
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -79,7 +76,7 @@ def _functions(model: PlantModel) -> list[ca.Function]:
             ca.Function("mdl_jac_h", [x, p], [d(ca.jacobian(s.y, x))])]
 
 
-def _write_sources(model: PlantModel, variables: VariableList, guid: str, folder: Path) -> list[str]:
+def _write_sources(model: PlantModel, variables: VariableList, folder: Path, guid: str) -> list[str]:
     funcs = _functions(model)
     cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
     for f in funcs:
@@ -118,14 +115,12 @@ def _description(model: PlantModel, variables: VariableList, guid: str, source_f
     params = [index[p.name] for p in model.parameters]
     Jf, Jh = ca.jacobian(s.xdot, ca.vertcat(s.x, s.u)), ca.jacobian(s.y, s.x)
     Jfp, Jhp = ca.jacobian(s.xdot, s.p), ca.jacobian(s.y, s.p)
-    outputs = [Unknown(k, [k], ["constant"]) for k in states]
-    outputs += [Unknown(index[n], *_dependencies(model, Jh, j, states)) for j, n in enumerate(model.output_names)]
+    measured = [Unknown(index[n], *_dependencies(model, Jh, j, states)) for j, n in enumerate(model.output_names)]
     derivatives = [Unknown(index[f"der({n})"], *_dependencies(model, Jf, i, states + inputs))
                    for i, n in enumerate(model.state_names)]
-    initial = [Unknown(index[f"der({n})"], _dependencies(model, Jf, i, states + inputs)[0]
-                       + _dependencies(model, Jfp, i, params)[0]) for i, n in enumerate(model.state_names)]
-    initial += [Unknown(index[n], _dependencies(model, Jh, j, states)[0] + _dependencies(model, Jhp, j, params)[0])
-                for j, n in enumerate(model.output_names)]
+    initial = [Unknown(u.index, u.deps + _dependencies(model, J, i, params)[0])
+               for J, unknowns in ((Jfp, derivatives), (Jhp, measured)) for i, u in enumerate(unknowns)]
+    outputs = [Unknown(k, [k], ["constant"]) for k in states] + measured
     return Description(model_name=model.fmu_name, identifier=model.fmu_name, guid=guid,
                        description=model.description, variables=variables.variables, outputs=outputs,
                        derivatives=derivatives, initial_unknowns=initial, model_exchange=True,
@@ -138,8 +133,7 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     Parameters
     ----------
     model : PlantModel or str
-        The model (its current parameter values become the FMU's start values) or a name
-        for :func:`fmu_models.get_model`.
+        The model (its current parameter values become the FMU's start values) or its name.
     out_dir : path
         Directory to write ``<fmu_name>.fmu`` into (created if missing).
     fmi_version : int
@@ -156,27 +150,22 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
         model = get_model(model)
     variables = plant_variables(model)
 
-    def generate(folder: Path, guid: str) -> list[str]:
-        return _write_sources(model, variables, guid, folder)
-
     def xml(guid: str, c_files: list[str]) -> str:
         d = _description(model, variables, guid, c_files if fmi_version == 2 else ())
         return fmi2(d) if fmi_version == 2 else fmi3(d)
 
-    return pack_fmu(model.fmu_name, "plant", fmi_version, generate, xml, out_dir, fingerprint=f"{model.p.tolist()}")
+    return pack_fmu(model.fmu_name, "plant", fmi_version, partial(_write_sources, model, variables), xml, out_dir,
+                    fingerprint=f"{model.p.tolist()}")
 
 
 def build_fmus(out_dir: str | Path = ".", fmi_version: int = 2, models: tuple[str, ...] | None = None) -> list[Path]:
-    """Build the FMUs of the registered plant models (default: all, see
-    :func:`fmu_models.model_names`) into ``out_dir``.
+    """Build the FMUs of the registered plant models into ``out_dir``, as :func:`build_fmu`.
 
     Parameters
     ----------
-    out_dir : path
-        Output directory (created if missing).
-    fmi_version : int
-        2 or 3 (see :func:`build_fmu`).
+    out_dir, fmi_version : path, int
+        Output directory (created if missing); 2 or 3.
     models : tuple of str, optional
-        Registry names of the models to build.
+        Registry names of the models to build (default: all).
     """
     return [build_fmu(get_model(name), out_dir, fmi_version) for name in (models or model_names())]

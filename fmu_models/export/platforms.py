@@ -1,32 +1,11 @@
-"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources.
-
-:func:`add_platforms` compiles the ``sources/`` an FMU of this project ships (the files its
-``modelDescription.xml`` or ``buildDescription.xml`` lists) for each requested platform
-with zig's clang (the ``ziglang`` package, ``pip install -e '.[cross]'``), checks every
-binary (:func:`check_binary`) and adds them to the FMU, laid out as the standard asks:
-
-============== ============================== =====================================
-platform       FMI 2.0                        FMI 3.0
-============== ============================== =====================================
-linux64        ``binaries/linux64/*.so``      ``binaries/x86_64-linux/*.so``
-win64          ``binaries/win64/*.dll``       ``binaries/x86_64-windows/*.dll``
-darwin         ``binaries/darwin64/*.dylib``  ``binaries/x86_64-darwin/*.dylib`` and
-               (one universal Intel +         ``binaries/aarch64-darwin/*.dylib``
-               Apple-silicon file)
-aarch64-linux  (FMI 2.0 has no folder: left   ``binaries/aarch64-linux/*.so``
-               out with a note)
-============== ============================== =====================================
-
-The platform the FMU was built on keeps its native binary. Flags: ``-O3 -fno-math-errno
--std=c99 -fvisibility=hidden -ffp-contract=off`` (no fused multiply-add: the results equal the
-x86-64 build's), Linux targets against glibc 2.17, macOS 11.0 and later, Windows against
-the Universal C runtime; CasADi's ``CASADI_SYMBOL_EXPORT`` is emptied so that only the FMI
-functions are exported. zig's Apple-silicon code carries zig's ad-hoc signature: the
-universal file keeps each slice's bytes unchanged, so the signature holds.
+"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources
+with zig's clang (the ``cross`` extra) and checked with lief; the layout per FMI version, the
+flags and the checks are on the user guide's page "Taking the estimator to another tool".
 """
 from __future__ import annotations
 
 import functools
+import importlib.util
 import os
 import re
 import shutil
@@ -37,8 +16,11 @@ import zipfile
 from collections.abc import Sequence
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from xml.etree import ElementTree as ET
+
+import fmpy
 
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
 from ..infra.cache import build_cached
@@ -50,18 +32,22 @@ __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_p
 #: The platforms ``--platforms`` accepts.
 PLATFORMS = ("linux64", "win64", "darwin", "aarch64-linux")
 _INSTALL = "pip install -e '.[cross]' (or: pip install 'ziglang>=0.11' lief)"
+_FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 _COMMON = ("-shared", "-O3", "-fno-math-errno", "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
 
 
 @dataclass(frozen=True)
 class _Target:
-    zig: str                      # zig's -target
-    flags: tuple[str, ...]        # besides _COMMON
+    """One zig target: its ``-target``, flags besides ``_COMMON``, library suffix, FMI 3.0 and
+    2.0 binaries folders (None: FMI 2.0 has none), binary format and architecture."""
+
+    zig: str
+    flags: tuple[str, ...]
     suffix: str
-    fmi3: str                     # the FMI 3.0 binaries folder
-    fmi2: str | None              # the FMI 2.0 folder (None: the standard has none)
-    fmt: str                      # what check_binary expects: ELF, PE or MachO
-    arch: str                     # x86_64 or aarch64
+    fmi3: str
+    fmi2: str | None
+    fmt: str
+    arch: str
 
 
 _LINUX = ("-fPIC", "-s", "-lm")
@@ -97,9 +83,8 @@ def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
     if text is None:
         return ()
     names = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
-    names = [] if not any(names) else names
-    bad = [n for n in names if n not in PLATFORMS]
-    if bad or not names:
+    bad = [n for n in names if n not in PLATFORMS] if any(names) else []
+    if bad or not any(names):
         raise ConfigurationError(f"unknown platform(s) {', '.join(map(repr, bad)) or '(none given)'}: "
                                  f"choose from {', '.join(PLATFORMS)} (comma-separated)")
     if len(set(names)) != len(names):
@@ -113,11 +98,8 @@ def zig_command() -> list[str]:
     Raises
     ------
     CompilerNotFoundError
-        The ``ziglang`` package (or ``lief``, which checks the binaries) is not installed;
-        the message says what to install.
+        The ``ziglang`` package (or ``lief``, which checks the binaries) is missing; says what to install.
     """
-    import importlib.util
-
     missing = [m for m in ("ziglang", "lief") if importlib.util.find_spec(m) is None]
     if missing:
         raise CompilerNotFoundError(f"building for other platforms needs the package(s) {', '.join(missing)} "
@@ -125,21 +107,16 @@ def zig_command() -> list[str]:
     return [sys.executable, "-m", "ziglang", "cc"]
 
 
-# ---------------------------------------------------------------------------- checks
 @dataclass(frozen=True)
 class BinaryCheck:
     """What :func:`check_binary` found in one binary.
 
     Attributes
     ----------
-    format : str
-        ``ELF``, ``PE`` or ``MachO``.
-    architectures : tuple of str
-        ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
-    exports : frozenset of str
-        The exported function names (Mach-O's leading underscore removed).
-    libraries : tuple of str
-        The shared libraries it imports.
+    format, architectures : str, tuple of str
+        ``ELF``, ``PE`` or ``MachO``; ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
+    exports, libraries : frozenset of str, tuple of str
+        The exported function names (Mach-O's leading underscore removed); the imported libraries.
     problems : tuple of str
         Empty when the binary is what an FMU of this FMI version needs.
     """
@@ -155,9 +132,7 @@ class BinaryCheck:
 def fmi_functions(fmi_version: int) -> frozenset:
     """Every function of the FMI ``fmi_version`` C API, read from the standard's header
     ``fmi<v>Functions.h`` (fmpy ships it)."""
-    import fmpy
-
-    header = Path(fmpy.__file__).parent / "c-code" / f"fmi{fmi_version}Functions.h"
+    header = _FMI_HEADERS / f"fmi{fmi_version}Functions.h"
     names = re.findall(rf"FMI{fmi_version}_Export\s+\w+TYPE\s+(\w+);", header.read_text())
     if not names:
         raise FMUError(f"no FMI {fmi_version} functions found in {header}")
@@ -174,9 +149,9 @@ def _arch_name(value) -> str:
 
 
 def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence[str]) -> BinaryCheck:
-    """Check the FMU binary ``path``: its format ``fmt`` and ``architectures``, that it
-    exports every function of FMI ``fmi_version`` (fmpy loads them all) and nothing else,
-    and that it imports only the system's C library (and, on Windows, the C runtime).
+    """Check the FMU binary ``path``: its format ``fmt`` and ``architectures``, that it exports
+    every function of FMI ``fmi_version`` (fmpy loads them all) and nothing else, and that it
+    imports only the system's C library (and, on Windows, the C runtime).
 
     Raises
     ------
@@ -229,23 +204,22 @@ def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence
     return BinaryCheck(fmt, tuple(archs), frozenset(exports), tuple(libraries), tuple(problems))
 
 
-# ---------------------------------------------------------------------------- building
 def _universal(slices: Sequence[tuple[Path, str]], out: Path) -> None:
     """Write a universal (fat) Mach-O file of the thin ``(file, arch)`` slices (fat header:
     big-endian magic 0xcafebabe, then cputype, cpusubtype, offset, size, align of each,
-    slices 2^14-aligned)."""
+    slices 2^14-aligned); each slice's bytes are kept, so zig's ad-hoc signature holds."""
     cpu = {"x86_64": (0x01000007, 3), "aarch64": (0x0100000C, 0)}
     align = 14
     header = struct.pack(">II", 0xCAFEBABE, len(slices))
     offset = 1 << align
-    entries, blobs = b"", []
+    blobs = []
     for f, arch in slices:
         data = f.read_bytes()
-        entries += struct.pack(">iiIII", *cpu[arch], offset, len(data), align)
+        header += struct.pack(">iiIII", *cpu[arch], offset, len(data), align)
         blobs.append((offset, data))
         offset = (offset + len(data) + (1 << align) - 1) // (1 << align) * (1 << align)
     with open(out, "wb") as o:
-        o.write(header + entries)
+        o.write(header)
         for off, data in blobs:
             o.seek(off)
             o.write(data)
@@ -273,9 +247,6 @@ def _source_files(z: zipfile.ZipFile, md: ET.Element, fmi_version: int, where: s
 def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path,
              cancel: threading.Event | None = None) -> None:
     """Cross-compile the library ``out`` through the compiled-code cache."""
-    import fmpy
-
-    headers = Path(fmpy.__file__).parent / "c-code"
     flags = [*_COMMON, *target.flags]
     if target.fmt == "MachO":
         flags.append(f"-Wl,-install_name,@rpath/{identifier}.dylib")
@@ -284,7 +255,7 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
     def build(dst: Path) -> None:
         with private_tempdir("pendulum_cosim_zig_") as scratch:   # zig's .lib/.pdb
             lib = Path(scratch) / f"{identifier}{target.suffix}"
-            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{headers}",
+            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{_FMI_HEADERS}",
                           *[str(src / f) for f in c_files], "-o", str(lib)],
                          f"{identifier} for {target.zig}", cwd=scratch, cancel=cancel)
             shutil.copyfile(lib, dst)
@@ -293,14 +264,13 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
                  "cross-built FMU binaries are compiled without caching")
 
 
-def _compile_all(builds, src: Path, c_files: list[str]) -> None:
-    """Compile every ``(identifier, target, library)`` in worker threads; Ctrl-C (or any
+def _compile_all(libs: dict[tuple[str, _Target], Path], src: Path, c_files: list[str]) -> None:
+    """Compile every library ``libs[identifier, target]`` in worker threads; Ctrl-C (or any
     error) in the main thread ends every running compiler before it goes on."""
     cancel = threading.Event()
-    pool = ThreadPoolExecutor(max_workers=min(len(builds), os.cpu_count() or 1))
+    pool = ThreadPoolExecutor(max_workers=min(len(libs), os.cpu_count() or 1))
     try:
-        futures = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for ident, t, lib in builds]
-        pending = set(futures)
+        pending = [pool.submit(_compile, t, src, c_files, ident, lib, cancel) for (ident, t), lib in libs.items()]
         while pending:                              # short waits: the main thread sees Ctrl-C
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_EXCEPTION)
             for f in done:
@@ -314,8 +284,6 @@ def _compile_all(builds, src: Path, c_files: list[str]) -> None:
 
 def zig_version() -> str:
     """The installed ziglang package's version ("" if absent)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version("ziglang")
     except PackageNotFoundError:
@@ -337,7 +305,6 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     BuildError
         The cross-compiler failed (its output in the message).
     """
-
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)
     try:
@@ -345,11 +312,21 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     except (OSError, zipfile.BadZipFile) as e:
         raise FMUError(f"{fmu}: not a readable FMU ({e})") from None
     with z, private_tempdir("pendulum_cosim_platforms_") as tmp:
-        build = _CrossBuild(z, fmu.name, Path(tmp))
-        notes, jobs = build.jobs(platforms)
-        added = build.binaries(jobs)
+        tmp = Path(tmp)
+        fmi_version, identifiers, c_files = _read_fmu(z, fmu.name, tmp / "sources")
+        notes, jobs = [], []
+        for plat in platforms:
+            targets = _TARGETS[plat]
+            folders = {_folder(t, fmi_version) for t in targets}
+            if None in folders:
+                notes.append(f"{fmu.name}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
+                             "(--fmi-version 3) for it")
+                continue
+            jobs += [(plat, ident, targets) for ident in identifiers
+                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in z.namelist() for f in folders)]
+        added = _binaries(jobs, fmi_version, tmp, c_files, fmu.name)
         if added:
-            out = Path(tmp) / "with-platforms.fmu"
+            out = tmp / "with-platforms.fmu"
             with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as o:
                 for info in z.infolist():
                     if info.filename not in added:
@@ -360,65 +337,45 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     return notes
 
 
-class _CrossBuild:
-    """The binaries for other platforms of the FMU ``z`` (``where`` names it in messages),
-    built in the folder ``tmp`` from its C sources (extracted to ``tmp/sources``)."""
+def _folder(t: _Target, fmi_version: int) -> str | None:
+    return t.fmi2 if fmi_version == 2 else t.fmi3
 
-    def __init__(self, z: zipfile.ZipFile, where: str, tmp: Path):
-        self.where, self.tmp = where, tmp
-        try:
-            md = ET.fromstring(z.read("modelDescription.xml"))
-        except (KeyError, ET.ParseError) as e:
-            raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
-        self.fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
-        self.identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
-        if not self.identifiers:
-            raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
-        self.c_files = _source_files(z, md, self.fmi_version, where)
-        self.src = tmp / "sources"
-        self.src.mkdir()
-        for name in z.namelist():
-            if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
-                (self.src / name[len("sources/"):]).write_bytes(z.read(name))
-        self.present = set(z.namelist())
 
-    def _folder(self, t: _Target) -> str | None:
-        return t.fmi2 if self.fmi_version == 2 else t.fmi3
+def _read_fmu(z: zipfile.ZipFile, where: str, src: Path) -> tuple[int, list[str], list[str]]:
+    """The FMI version, model identifiers and C files of the FMU ``z``, its sources extracted to ``src``."""
+    try:
+        md = ET.fromstring(z.read("modelDescription.xml"))
+    except (KeyError, ET.ParseError) as e:
+        raise FMUError(f"{where}: no readable modelDescription.xml ({e})") from None
+    fmi_version = 3 if md.get("fmiVersion", "").startswith("3") else 2
+    identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
+    if not identifiers:
+        raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
+    c_files = _source_files(z, md, fmi_version, where)
+    src.mkdir()
+    for name in z.namelist():
+        if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
+            (src / name[len("sources/"):]).write_bytes(z.read(name))
+    return fmi_version, identifiers, c_files
 
-    def jobs(self, platforms: Sequence[str]) -> tuple[list[str], list[tuple]]:
-        """Notes on the ``platforms`` left out, and ``(platform, identifier, targets)`` of each
-        binary the FMU lacks."""
-        notes, jobs = [], []
-        for plat in platforms:
-            targets = _TARGETS[plat]
-            folders = {self._folder(t) for t in targets}
-            if None in folders:
-                notes.append(f"{self.where}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
-                             "(--fmi-version 3) for it")
-                continue
-            jobs += [(plat, ident, targets) for ident in self.identifiers
-                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in self.present for f in folders)]
-        return notes, jobs
 
-    def binaries(self, jobs: list[tuple]) -> dict[str, Path]:
-        """The binaries of ``jobs`` compiled (in parallel) and checked, by their path in the FMU
-        (one universal file for FMI 2.0's darwin64)."""
-        tmp = self.tmp
-        builds = [(ident, t, tmp / f"{ident}-{t.zig}{t.suffix}") for _, ident, targets in jobs for t in targets]
-        if builds:
-            zig_command()                           # the missing extra named before anything starts
-            _compile_all(builds, self.src, self.c_files)
-        added: dict[str, Path] = {}
-        for plat, ident, targets in jobs:
-            built = [(t, tmp / f"{ident}-{t.zig}{t.suffix}") for t in targets]
-            archs = None
-            if self.fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
-                lib = tmp / f"{ident}-universal{targets[0].suffix}"
-                _universal([(b, t.arch) for t, b in built], lib)
-                built, archs = [(targets[0], lib)], [t.arch for t in targets]
-            for t, lib in built:
-                check = check_binary(lib, self.fmi_version, t.fmt, archs or [t.arch])
-                if check.problems:
-                    raise FMUError(f"the {plat} binary of {self.where} fails its check: " + "; ".join(check.problems))
-                added[f"binaries/{self._folder(t)}/{ident}{t.suffix}"] = lib
-        return added
+def _binaries(jobs: list[tuple], fmi_version: int, tmp: Path, c_files: list[str], where: str) -> dict[str, Path]:
+    """The binaries of ``jobs`` (``(platform, identifier, targets)``) compiled in parallel from
+    ``tmp/sources`` and checked, by their path in the FMU (one universal file for FMI 2.0's darwin64)."""
+    libs = {(ident, t): tmp / f"{ident}-{t.zig}{t.suffix}" for _, ident, targets in jobs for t in targets}
+    if libs:
+        zig_command()                           # the missing extra named before anything starts
+        _compile_all(libs, tmp / "sources", c_files)
+    added: dict[str, Path] = {}
+    for plat, ident, targets in jobs:
+        built = [(t, libs[ident, t], [t.arch]) for t in targets]
+        if fmi_version == 2 and len(built) > 1:        # darwin64: one universal file
+            universal = tmp / f"{ident}-universal{targets[0].suffix}"
+            _universal([(lib, t.arch) for t, lib, _ in built], universal)
+            built = [(targets[0], universal, [t.arch for t in targets])]
+        for t, lib, archs in built:
+            check = check_binary(lib, fmi_version, t.fmt, archs)
+            if check.problems:
+                raise FMUError(f"the {plat} binary of {where} fails its check: " + "; ".join(check.problems))
+            added[f"binaries/{_folder(t, fmi_version)}/{ident}{t.suffix}"] = lib
+    return added

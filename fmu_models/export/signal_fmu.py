@@ -1,27 +1,10 @@
 """Signal FMUs: the sources, the process noise and the noisy sensor as native Co-Simulation
-FMUs (FMI 2.0 or 3.0), built by the same machinery as the plant and estimator FMUs
-(:func:`fmu_models.export.pack.pack_fmu` with ``c/signal_core.c``).
+FMUs (FMI 2.0 or 3.0), packed by :func:`fmu_models.export.pack.pack_fmu` with ``c/signal_core.c``.
 
-A :class:`SignalSpec` describes one FMU: its kind, its channels and its parameters (with
-the component's values as defaults). The components of :mod:`cosim.components.sources` and
-:mod:`cosim.components.sensors` build theirs in ``export_fmu`` (see :class:`cosim.core.component.Component`);
-:func:`build_signal_fmu` compiles and packs it.
-
-Kinds and variables (``period`` [s] is a parameter of every kind; noise is drawn at sample
-``round(t / period)``, see :mod:`cosim.components.noise`):
-
-* ``constant``: parameter ``value``; output ``out``;
-* ``step``: ``t_step``, ``before``, ``after``; output ``out``;
-* ``sine``: ``amplitude``, ``frequency``, ``phase``, ``offset``; output ``out``;
-* ``prbs``: ``amplitude``, ``bit_time``, ``offset``, Integer ``order`` (2..16), ``seed``;
-  output ``out``;
-* ``noise``: ``std_<port>`` per channel, Integer ``seed``; outputs ``w_<state>``;
-* ``sensor``: ``std_<signal>``, ``bias_<signal>``, ``quantization_<signal>`` per channel,
-  Integer ``seed``; inputs ``<signal>``, outputs ``y_<signal>``.
-
-The kinds are a registry (:data:`SIGNAL_KINDS`): the six above are built into
-``signal_core.c``; :func:`register_signal_kind` adds one whose output is a C expression
-(see there), so a new signal FMU is one definition in Python.
+A :class:`SignalSpec` describes one FMU (kind, channels, parameters with the component's
+values as defaults); the kinds are the registry :data:`SIGNAL_KINDS` (their variables are
+listed in the guide's page "Taking the estimator to another tool"); noise is drawn at sample
+``round(t / period)`` (:mod:`cosim.components.noise`).
 """
 from __future__ import annotations
 
@@ -52,14 +35,12 @@ class SignalKind:
 
     Attributes
     ----------
-    name : str
-    code : int
-        Its ``SIGNAL_KIND`` in ``signal_core.c`` (:data:`KIND_CUSTOM` for a C expression).
+    name, code : str, int
+        The name and ``SIGNAL_KIND`` in ``signal_core.c`` (:data:`KIND_CUSTOM` for a C expression).
     c_output : str
-        For a custom kind: the C expression of output channel ``j`` at time ``t``, from the
-        Real parameters ``p[P_<NAME>]`` (``P_`` and the upper-cased parameter name), the
-        Integer parameters ``d->ip[IP_<NAME>]`` and the inputs ``d->in[j]``; ``<math.h>``
-        is available.
+        For a custom kind: the C expression of output channel ``j`` at time ``t``, from the Real
+        parameters ``p[P_<NAME>]``, the Integer parameters ``d->ip[IP_<NAME>]`` and the inputs
+        ``d->in[j]`` (``<math.h>`` is available).
     inputs : bool
         The kind has one input per output channel (a sensor).
     """
@@ -95,21 +76,16 @@ class SignalSpec:
 
     Attributes
     ----------
-    kind : str
-        A registered kind (:data:`SIGNAL_KINDS`).
+    kind, description : str
+        A registered kind (:data:`SIGNAL_KINDS`); the FMU's description.
     period : float
         Sample period [s] (the FMU's default communication step and the noise's sample).
-    outputs : list of str
-        Output names, one per channel.
-    inputs : list of str
-        Input names (the sensor's measured signals), one per channel; else empty.
+    outputs, inputs : list of str
+        One name per channel; inputs only for a kind with inputs (the sensor's measured signals).
     reals : list of (name, value, domain, description)
-        Real parameters after ``period``, in the order ``signal_core.c`` reads them
-        (domain ``"real"``, ``"positive"`` or ``"nonnegative"``).
+        Real parameters after ``period``, in the order ``signal_core.c`` reads them.
     ints : list of (name, value, min, max, description)
         Integer parameters.
-    description : str
-        The FMU's description.
     """
 
     kind: str
@@ -127,8 +103,7 @@ class SignalSpec:
 
 def _check(spec: SignalSpec) -> SignalKind:
     kind = SIGNAL_KINDS.get(spec.kind)
-    if not spec.outputs or (kind.inputs and len(spec.inputs) != len(spec.outputs)) or \
-            (not kind.inputs and spec.inputs):
+    if not spec.outputs or len(spec.inputs) != (len(spec.outputs) if kind.inputs else 0):
         raise ConfigurationError(f"{spec.kind} FMU: needs outputs (and, for a kind with inputs, one input per output)")
     for name, value, lo, hi, _ in spec.ints:
         if not lo <= value <= hi or hi > _INT32_MAX:
@@ -157,8 +132,7 @@ def _variables(spec: SignalSpec, clocked: bool) -> VariableList:
 
 def _write_sources(spec: SignalSpec, kind: SignalKind, variables: VariableList, identifier: str, folder: Path,
                    guid: str) -> list[str]:
-    """``model_config.h`` (with the per-channel parameter blocks after ``period`` of the noise
-    and the sensor) and ``signal_custom.h`` (a custom kind's output)."""
+    """``model_config.h`` (with the noise's and sensor's per-channel parameter blocks) and ``signal_custom.h``."""
     n = len(spec.outputs)
     defines = [("SIGNAL_KIND", kind.code)]
     if spec.kind in ("noise", "sensor"):
@@ -182,10 +156,9 @@ def _description(spec: SignalSpec, kind: SignalKind, variables: VariableList, id
     p_idx = variables.indices(["P", "IP"])
     outs = variables.indices(["OUT"])
     clk = variables.indices(["CLOCK"])
-    if kind.inputs:                 # channel j depends on input j only (and the clock)
-        o_unknowns = [Unknown(o, [i] + clk, ["dependent"] * (1 + len(clk))) for o, i in zip(outs, in_idx, strict=True)]
-    else:
-        o_unknowns = [Unknown(o, clk, ["dependent"] * len(clk) if clk else None) for o in outs]
+    # channel j depends on input j only (if the kind has inputs), and on the clock
+    deps = [[i] + clk for i in in_idx] if kind.inputs else [clk] * len(outs)
+    o_unknowns = [Unknown(o, dep, ["dependent"] * len(dep) if dep else None) for o, dep in zip(outs, deps, strict=True)]
     return Description(model_name=identifier, identifier=identifier, guid=guid,
                        description=spec.description or f"{spec.kind} signal (pendulum-cosim)",
                        variables=variables.variables, outputs=o_unknowns,
@@ -199,17 +172,12 @@ def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier
 
     Parameters
     ----------
-    spec : SignalSpec
-    out_dir : path
-    fmi_version : {2, 3}
-    identifier : str
-        Model identifier (a C identifier).
-    file_name : str, optional
-        Default ``<identifier>.fmu``.
+    spec, out_dir, fmi_version : SignalSpec, path, {2, 3}
+    identifier, file_name : str
+        Model identifier (a C identifier); FMU file name (default ``<identifier>.fmu``).
     clocked : bool
-        The clocked form (FMI 3.0 only, :mod:`fmu_models.export.clocked`): the input clock
-        ``sample`` (interval ``spec.period``, first activation at the start time) clocks the
-        inputs and outputs; an activation samples the signal (``period`` must keep its value).
+        The clocked form (FMI 3.0 only, :mod:`fmu_models.export.clocked`), the clock's interval
+        ``spec.period``: an activation samples the signal (``period`` must keep its value).
 
     Raises
     ------
@@ -235,12 +203,8 @@ def channel_params(prefix: str, names: Sequence[str], values, domain: str, what:
 
     Parameters
     ----------
-    prefix
-        Name prefix (``std``, ``bias``, ...).
-    names
-        Channel names.
-    values
-        One value per channel.
+    prefix, names, values
+        Name prefix (``std``, ``bias``, ...), channel names and one value per channel.
     domain
         Domain of every value (:data:`fmu_models.variables.DOMAINS`).
     what

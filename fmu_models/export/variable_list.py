@@ -1,18 +1,13 @@
 """The variables of an FMU the project writes: one list feeds both the ``modelDescription.xml``
 (:mod:`fmu_models.export.description`) and the C core's ``model_config.h``
-(:mod:`fmu_models.export.config`).
-
-Every variable belongs to a *group* (``group``): the consecutive value references a core
-reads as one array (``"P"`` the Real parameters, ``"X"`` the states, ``"OUT"`` the outputs,
-...). A group becomes ``VR_<group>`` (its first value reference) and ``N_<group>`` (its
-size) in ``model_config.h``.
+(:mod:`fmu_models.export.config`), in which each *group* of consecutive value references
+(``"P"`` the Real parameters, ``"X"`` the states, ...) becomes ``VR_<group>`` (its first value
+reference) and ``N_<group>`` (its size).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-
-from ..errors import ConfigurationError
 
 __all__ = ["FmuVariable", "VariableList"]
 
@@ -23,34 +18,24 @@ class FmuVariable:
 
     Attributes
     ----------
-    name : str
-        FMI name.
-    vr : int
-        Value reference (the ModelVariables index is ``vr + 1``).
+    name, vr : str, int
+        FMI name and value reference (the ModelVariables index is ``vr + 1``).
     type : {"Real", "Integer", "Enumeration", "Boolean", "Clock"}
         FMI 2.0 type name (FMI 3.0: Float64, Int32, Enumeration, Boolean; Clock: FMI 3.0 only).
-    causality, variability, initial : str
-        As the FMI standard (``initial`` may be None).
-    start : float, int, bool or None
-        Start value.
-    unit : str or None
-    description : str
+    causality, variability, initial, start, unit, description
+        As the FMI standard (None: not written).
     group : str
         The value-reference group of the C core (see the module documentation).
     domain : str
         Admissible values of a Real parameter (:data:`fmu_models.variables.DOMAINS`).
     derivative_of : int, optional
         1-based index of the state this variable is the derivative of.
-    declared_type : str, optional
-        The type of an Enumeration.
-    min, max : int, optional
-        Range of an Integer or Enumeration.
+    declared_type, min, max : optional
+        The type of an Enumeration; the range of an Integer or Enumeration.
     clocks : tuple of int
-        Value references of the clocks of a clocked variable (FMI 3.0 ``clocks``); empty:
-        not clocked.
+        Value references of the clocks of a clocked variable (empty: not clocked).
     clock : dict, optional
-        For ``type="Clock"`` (FMI 3.0 only): its attributes (``intervalVariability``,
-        ``intervalDecimal`` [s], ``shiftDecimal`` [s], ``priority``, ...).
+        A Clock's attributes (``intervalVariability``, ``intervalDecimal`` [s], ``priority``, ...).
     """
 
     name: str
@@ -73,13 +58,8 @@ class FmuVariable:
 
 
 class VariableList:
-    """Variables added in value-reference order (``vr`` = position), grouped.
-
-    Use :meth:`add` with the :class:`FmuVariable` fields except ``vr`` (or :meth:`parameter`,
-    :meth:`input`, :meth:`output`, :meth:`time` for the common kinds); then ``variables`` is
-    the list, :meth:`group` the variables of a group and :meth:`first` the value reference
-    of a group's first variable.
-    """
+    """The list ``variables``, added in value-reference order (``vr`` = position) by :meth:`add`
+    (or :meth:`parameter`, :meth:`input`, :meth:`output`, :meth:`time` for the common kinds)."""
 
     def __init__(self):
         self.variables: list[FmuVariable] = []
@@ -92,22 +72,19 @@ class VariableList:
 
     def parameter(self, name: str, start, description: str, group: str = "P", **fields) -> FmuVariable:
         """Append the fixed parameter ``name`` of exact ``start`` value, ``description``, in
-        ``group``; ``fields``: more :class:`FmuVariable` fields (``type``, default Real,
-        ``domain``, ``unit``, ``min``, ``max``)."""
+        ``group``; ``fields``: more :class:`FmuVariable` fields (``type`` default Real)."""
         return self.add(**{"type": "Real", **fields}, name=name, causality="parameter", variability="fixed",
                         initial="exact", start=start, description=description, group=group)
 
     def input(self, name: str, start, description: str, group: str, **fields) -> FmuVariable:
-        """Append the input ``name`` with ``start`` value, ``description``, in ``group``;
-        ``fields``: more :class:`FmuVariable` fields (``type``, default Real; ``variability``,
-        default continuous; ``unit``)."""
+        """Append the input ``name`` with ``start`` value, ``description``, in ``group``; ``fields``:
+        more :class:`FmuVariable` fields (``type`` default Real, ``variability`` continuous)."""
         return self.add(**{"type": "Real", "variability": "continuous", **fields}, name=name, causality="input",
                         start=start, description=description, group=group)
 
     def output(self, name: str, description: str, group: str, **fields) -> FmuVariable:
-        """Append the calculated Real output ``name`` with ``description`` in ``group``;
-        ``fields``: more :class:`FmuVariable` fields (``variability``, default continuous;
-        ``unit``)."""
+        """Append the calculated Real output ``name`` with ``description`` in ``group``; ``fields``:
+        more :class:`FmuVariable` fields (``variability`` default continuous)."""
         return self.add(**{"variability": "continuous", **fields}, name=name, type="Real", causality="output",
                         initial="calculated", description=description, group=group)
 
@@ -119,23 +96,6 @@ class VariableList:
     def group(self, name: str) -> list[FmuVariable]:
         """The variables of group ``name``, in order."""
         return [v for v in self.variables if v.group == name]
-
-    def first(self, name: str, default: int | None = None) -> int:
-        """Value reference of the first variable of group ``name`` (``default`` if the group
-        is empty; an empty group without a default is an error)."""
-        members = self.group(name)
-        if members:
-            return members[0].vr
-        if default is None:
-            raise ConfigurationError(f"no FMU variable in group {name!r}")
-        return default
-
-    def index(self, name: str) -> int:
-        """The 1-based ModelVariables index of the variable ``name``."""
-        for v in self.variables:
-            if v.name == name:
-                return v.vr + 1
-        raise ConfigurationError(f"no FMU variable {name!r}")
 
     def indices(self, groups: Sequence[str]) -> list[int]:
         """1-based ModelVariables indices of every variable in ``groups``."""

@@ -1,19 +1,14 @@
 """The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under
 concurrency and damage.
 
-The folder is ``$PENDULUM_COSIM_CACHE``, else ``$XDG_CACHE_HOME/pendulum-cosim``, else
-``~/.cache/pendulum-cosim``; where there is no home folder (a container with an arbitrary
-user id and no ``HOME``), ``<temp>/pendulum-cosim-<uid>``. Entries are named by a hash of
-everything that went into them (code, compiler, flags, CPU), so a stale entry is never
-found. An entry is written in a private temporary folder inside the cache, checked, and
-renamed into place atomically; a ``.sha256`` sidecar written after it marks it complete.
-An entry whose hash does not match (truncated, zero-length, overwritten) is reported and
-rebuilt; an entry is never deleted (another process may be loading it), only replaced
-atomically. A cache that cannot be written is reported once, and the callers fall back
-(the filters to CasADi's virtual machine, the FMU builder to building without caching).
+Entries are named by a hash of everything that went into them, written privately, checked,
+renamed into place and marked complete by a ``.sha256`` sidecar written last; a damaged entry
+is rebuilt, never deleted (another process may be loading it); an unwritable cache is reported
+once and the callers fall back (to CasADi's virtual machine, or to building without caching).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -26,21 +21,21 @@ __all__ = ["build_cached", "cache_dir", "cached_file", "file_digest", "writable_
 
 
 def cache_dir() -> Path:
-    """The cache folder (see the module documentation); not created here."""
-    env = os.environ.get("PENDULUM_COSIM_CACHE")
-    if env:
+    """The cache folder, not created here: ``$PENDULUM_COSIM_CACHE``, else
+    ``$XDG_CACHE_HOME/pendulum-cosim``, else ``~/.cache/pendulum-cosim``; where there is no home
+    folder (a container with an arbitrary user id and no ``HOME``), ``<temp>/pendulum-cosim-<uid>``."""
+    if env := os.environ.get("PENDULUM_COSIM_CACHE"):
         return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    if xdg:
+    if xdg := os.environ.get("XDG_CACHE_HOME"):
         return Path(xdg) / "pendulum-cosim"
     try:
-        home = Path.home()
+        home = str(Path.home())
     except (RuntimeError, KeyError, OSError):       # no HOME and no passwd entry for this uid
-        home = None
-    if home is None or str(home) in ("", "/"):
+        home = ""
+    if home in ("", "/"):
         uid = os.getuid() if hasattr(os, "getuid") else "user"
         return Path(tempfile.gettempdir()) / f"pendulum-cosim-{uid}"
-    return home / ".cache" / "pendulum-cosim"
+    return Path(home) / ".cache" / "pendulum-cosim"
 
 
 def writable_cache(purpose: str) -> Path | None:
@@ -61,11 +56,8 @@ def writable_cache(purpose: str) -> Path | None:
 
 def file_digest(path: Path) -> str:
     """The SHA-256 of the file at ``path`` (hex)."""
-    h = hashlib.sha256()
     with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            h.update(chunk)
-    return h.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def _state(entry: Path) -> bool | None:
@@ -83,17 +75,15 @@ def _state(entry: Path) -> bool | None:
 
 def cached_file(entry: Path, build: Callable[[Path], None], check: Callable[[Path], None] | None = None) -> Path:
     """The cache entry ``entry`` (a file in the cache folder), built by ``build(path)`` into a
-    private temporary path if it is absent or damaged, checked by ``check(path)`` (which
-    raises if the file is unusable), then renamed into place with its sidecar. Returns
-    ``entry``.
+    private temporary path if it is absent or damaged, checked by ``check(path)`` (which raises
+    if the file is unusable), then renamed into place with its sidecar.
 
     Raises
     ------
     OSError
         The cache cannot be written (full disk, the folder vanished): the caller falls back.
     """
-    state = _state(entry)
-    if state is True:
+    if (state := _state(entry)) is True:
         return entry
     if state is False:
         warnings.warn(f"damaged entry {entry.name} in the compiled-code cache {entry.parent} (truncated or "
@@ -123,11 +113,8 @@ def build_cached(name: str, key: str, sources: Path, build: Callable[[Path], Non
     h = hashlib.sha256(key.encode())
     for f in sorted(Path(sources).iterdir()):
         h.update(f.name.encode() + b"\0" + f.read_bytes())
-    directory = writable_cache(purpose)
-    if directory is not None:
-        try:
+    if (directory := writable_cache(purpose)) is not None:
+        with contextlib.suppress(OSError):      # a full or vanished cache: build without it
             shutil.copyfile(cached_file(directory / f"{name}_{h.hexdigest()[:24]}{Path(out).suffix}", build), out)
             return
-        except OSError:             # a full or vanished cache: build without it
-            pass
     build(out)

@@ -1,10 +1,8 @@
 """Validation of numbers, vectors and covariances, shared by models, filters and components.
 
-Each check names what it checked in its message and raises from the package's exception
-family (:mod:`fmu_models.errors`): a value that cannot be a number raises
-:class:`TypeMismatchError`; a wrong shape or a non-finite entry raises the ``error`` class
-the caller chose (:class:`InputError` for run-time data, :class:`ConfigurationError` for
-settings). Finiteness is tested entry by entry, so huge finite values such as 1.5e308 pass.
+A value that cannot be a number raises :class:`TypeMismatchError`; a wrong shape or a
+non-finite entry (tested entry by entry: 1.5e308 passes) raises the ``error`` class the caller
+chose (:class:`InputError` for run-time data, :class:`ConfigurationError` for settings).
 """
 from __future__ import annotations
 
@@ -41,21 +39,14 @@ def float_array(value, what: str) -> np.ndarray:
     if isinstance(value, (str, bytes)):
         raise TypeMismatchError(f"{what} must be numbers, got the string {_describe(value)}")
     try:
-        a = np.asarray(value, dtype=float)
+        return np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise TypeMismatchError(f"{what} must be numbers, got {_describe(value)}") from None
-    if a.dtype != np.float64:   # pragma: no cover - asarray(dtype=float) guarantees it
-        a = a.astype(float)
-    return a
 
 
 def vector(value, n: int, what: str, error: type[Exception] = InputError) -> np.ndarray:
-    """``value`` as a finite float vector of shape ``(n,)``.
-
-    Scalars are accepted when ``n == 1`` and ``(n, 1)`` columns are flattened. A wrong
-    shape or a NaN/inf entry raises ``error`` (default :class:`InputError`) with a message
-    naming ``what`` (e.g. ``"EKF: y"``).
-    """
+    """``value`` as a finite float vector of shape ``(n,)`` (a scalar when ``n == 1``, an ``(n, 1)``
+    column flattened); a wrong shape or a NaN/inf entry raises ``error`` naming ``what`` (``"EKF: y"``)."""
     a = float_array(value, what)
     if a.ndim == 0 and n == 1:
         a = a.reshape(1)
@@ -72,13 +63,9 @@ def vector(value, n: int, what: str, error: type[Exception] = InputError) -> np.
 
 def covariance(value, n: int, what: str, allow_scalar: bool = True,
                error: type[Exception] = ConfigurationError) -> np.ndarray:
-    """A symmetric positive-definite ``(n, n)`` matrix from ``value``: a matrix, a vector
-    (the diagonal) or, with ``allow_scalar``, a scalar (times identity).
-
-    Raises ``error`` (default :class:`ConfigurationError`) naming ``what`` if the shape is
-    wrong, an entry is not finite, the matrix is not symmetric (relative 1e-9) or not
-    positive definite (Cholesky fails).
-    """
+    """A symmetric positive-definite ``(n, n)`` matrix from ``value``: a matrix, a vector (the
+    diagonal) or, with ``allow_scalar``, a scalar (times identity); else ``error`` naming ``what``
+    (a wrong shape, a non-finite entry, asymmetry beyond 1e-9 relative, a failed Cholesky)."""
     a = float_array(value, what)
     if a.ndim == 0 and allow_scalar:
         a = np.full(n, float(a))       # the diagonal: no inf * 0 off it
@@ -121,8 +108,7 @@ def positive(value, what: str, error: type[Exception] = ConfigurationError) -> f
 
 def positive_int(value, what: str, error: type[Exception] = ConfigurationError,
                  minimum: int = 1) -> int:
-    """``value`` as an int ``>= minimum`` (integral floats such as 3.0 accepted); else
-    ``error`` (default :class:`ConfigurationError`) naming ``what``."""
+    """``value`` as an int ``>= minimum`` (integral floats such as 3.0 accepted); else ``error`` naming ``what``."""
     v = _number(value, what, "an integer")
     if not (math.isfinite(v) and v == int(v) and v >= minimum):
         raise error(f"{what} must be an integer >= {minimum}, got {value!r}")

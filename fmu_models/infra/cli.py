@@ -1,18 +1,5 @@
-"""The one error handler of the project's command lines (``pendulum-cosim`` and
-``python -m fmu_models``): what an error, Ctrl-C or SIGTERM becomes on the terminal and in
-the exit status.
-
-* every error of the project's family (:mod:`fmu_models.errors`) and the known library and
-  system errors (a bad zip, bad XML, an OS error, a file that is not UTF-8) print one line
-  ``error: ...`` and exit with :data:`EXIT_ERROR`;
-* Ctrl-C and SIGTERM (raised as KeyboardInterrupt inside the block, see
-  :func:`~fmu_models.infra.interrupts.terminate_as_interrupt`) print one line and exit with
-  :data:`EXIT_INTERRUPTED`, also when a native extension wrapped the KeyboardInterrupt in a
-  SystemError (CasADi's callbacks do);
-* ``debug=True`` lets the exception through with its traceback;
-* ``cleanup`` runs before the line is printed on every failure (folders a refused run made);
-* warnings are printed as one line ``warning: ...`` each (once per message), not as
-  Python's source-quoting form.
+"""The one error handler of the project's command lines (``pendulum-cosim`` and ``python -m
+fmu_models``): what an error, Ctrl-C or SIGTERM becomes on the terminal and in the exit status.
 """
 from __future__ import annotations
 
@@ -31,14 +18,12 @@ EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:
-    errors: list[type[BaseException]] = [PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError]
+    errors: tuple[type[BaseException], ...] = (PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError)
     try:
         from lxml.etree import XMLSyntaxError  # optional here: fmpy reads XML with it
     except ImportError:
-        pass
-    else:
-        errors.append(XMLSyntaxError)
-    return tuple(errors)
+        return errors
+    return (*errors, XMLSyntaxError)
 
 
 #: The exceptions printed as one line (the project's family, bad zip and XML, OS errors).
@@ -63,19 +48,21 @@ def _failure(e: BaseException, interrupted: str) -> tuple[str | None, int]:
 
 def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callable[[], None] | None = None,
                 interrupted: str = "interrupted (Ctrl-C or SIGTERM)") -> int:
-    """Run ``command()`` with SIGTERM as Ctrl-C and return its exit status, or the status
-    of its failure (see the module documentation).
+    """Run ``command()`` with SIGTERM as Ctrl-C and return its exit status, or the status of its failure.
+
+    An error of the project's family or a known library or system error (:data:`KNOWN_ERRORS`)
+    prints one line ``error: ...`` and returns :data:`EXIT_ERROR`; Ctrl-C and SIGTERM print one
+    line and return :data:`EXIT_INTERRUPTED`, also when a native extension wrapped the
+    KeyboardInterrupt in a SystemError (CasADi's callbacks do). Warnings print as one line
+    ``warning: ...`` each.
 
     Parameters
     ----------
-    command
-        The work of the command line; returns its exit status (0 on success).
-    debug
-        Let errors through with their traceback instead of one line.
-    cleanup
-        Called on every failure before the message is printed.
-    interrupted
-        The line printed for Ctrl-C or SIGTERM.
+    command, cleanup
+        The work of the command line, returning its exit status (0 on success); what is called
+        on every failure before the message is printed.
+    debug, interrupted
+        Let errors through with their traceback instead of one line; the line printed for Ctrl-C or SIGTERM.
     """
     try:
         with terminate_as_interrupt(), warnings.catch_warnings():

@@ -1,12 +1,5 @@
-"""The C compiler, run safely: found or named, interruptible, leaving nothing behind.
-
-:func:`find_compiler` returns ``$CC`` or the first of ``cc``, ``gcc``, ``clang`` on the
-``PATH``. :func:`run_compiler` runs one compiler command in its own process group with
-``TMPDIR`` pointed at a private folder: Ctrl-C, SIGTERM or any other error ends the
-compiler and its children (``cc1``, ``as``, ``ld``) and removes their temporary files; a
-failure is a :class:`~fmu_models.errors.BuildError` that quotes the compiler's output, or
-says it printed nothing.
-"""
+"""The C compiler, run safely: found or named, interruptible, leaving nothing behind (its
+process group ended and its temporary files removed, whatever stops it)."""
 from __future__ import annotations
 
 import contextlib
@@ -35,8 +28,7 @@ def find_compiler() -> str:
     """
     candidates = [os.environ["CC"]] if os.environ.get("CC") else ["cc", "gcc", "clang"]
     for cand in candidates:
-        path = shutil.which(cand)
-        if path:
+        if path := shutil.which(cand):
             return path
     raise CompilerNotFoundError(
         "no C compiler found (looked for " + ", ".join(candidates) + "). Building an FMU "
@@ -49,38 +41,33 @@ def _end_group(proc: subprocess.Popen) -> None:
     for sig, wait in ((signal.SIGTERM, 2.0), (signal.SIGKILL, 5.0)):
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(proc.pid, sig)
-        try:
+        with contextlib.suppress(subprocess.TimeoutExpired):
             proc.wait(timeout=wait)
             return
-        except subprocess.TimeoutExpired:
-            continue
 
 
 def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, timeout: float = 600.0,
                  cancel: threading.Event | None = None) -> str:
-    """Run the compiler command ``cmd`` (``what`` it builds, for messages); returns its
-    output. Interrupted or failing, the compiler's process group is ended and its temporary
-    files removed before the exception goes on.
-
-    Raises
-    ------
-    BuildError
-        The compiler failed, timed out (``timeout`` [s]) or could not be started; the
-        message has its output.
+    """Run the compiler command ``cmd`` in its own process group with ``TMPDIR`` a private folder;
+    returns its output. Interrupted or failing, the group is ended and its temporary files removed
+    before the exception goes on.
 
     Parameters
     ----------
-    cmd
-        The command: the compiler and its arguments.
-    what
-        What it builds (for messages).
+    cmd, what
+        The compiler and its arguments; what it builds (for messages).
     cwd
         Working directory (default: the current one).
     timeout
         Longest time [s] the compiler may take.
     cancel
-        An event another thread sets to end the compiler (e.g. the main thread on Ctrl-C
-        while compilers run in worker threads); then BuildError ("cancelled").
+        An event another thread sets to end the compiler (the main thread on Ctrl-C while
+        compilers run in worker threads); then BuildError ("cancelled").
+
+    Raises
+    ------
+    BuildError
+        The compiler failed, timed out or could not be started; the message has its output.
     """
     with private_tempdir("pendulum_cosim_cc_") as tmp:
         env = {**os.environ, "TMPDIR": tmp, "TMP": tmp, "TEMP": tmp}

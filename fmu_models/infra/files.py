@@ -1,11 +1,6 @@
-"""Files written whole or not at all, and private temporary folders.
-
-Every file the project writes where a user may look (FMUs, results, reports, cache
-entries) goes through :func:`atomic_write`: it is written under a temporary name in its
-own folder and renamed into place, so that at every instant the target is absent, the old
-file or the new one, never half of either; a failure (a full disk, Ctrl-C) removes the
-temporary file. :func:`private_tempdir` is a temporary folder that is removed even when
-Ctrl-C arrives while it is being created.
+"""Files written whole or not at all (every file the project writes where a user may look:
+at every instant the target is absent, the old file or the new one), and private temporary
+folders removed whatever happens.
 """
 from __future__ import annotations
 

@@ -2,6 +2,8 @@
 (recordings, batches, campaigns, simulations) is derived from."""
 from __future__ import annotations
 
+import contextlib
+
 from ..errors import ResourceError
 
 __all__ = ["MEMORY_FRACTION", "available_memory", "check_fits"]
@@ -12,13 +14,10 @@ MEMORY_FRACTION = 0.5
 
 def _system_available() -> int:
     """The machine's available memory (Linux: MemAvailable; elsewhere a conservative 2 GiB)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
+    with contextlib.suppress(OSError, ValueError, IndexError), open("/proc/meminfo") as f:
+        for line in f:
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
     return 2 * 1024**3
 
 
@@ -26,7 +25,7 @@ def _process_limits() -> list[int]:
     """What the process may still take under its limits: the address-space limit (``ulimit
     -v``) less what it maps, and a cgroup v2 memory limit less the group's usage."""
     out = []
-    try:
+    with contextlib.suppress(ImportError, OSError, ValueError, IndexError):
         import resource
 
         soft = resource.getrlimit(resource.RLIMIT_AS)[0]
@@ -34,16 +33,12 @@ def _process_limits() -> list[int]:
             with open("/proc/self/statm") as f:
                 mapped = int(f.read().split()[0]) * resource.getpagesize()
             out.append(max(soft - mapped, 0))
-    except (ImportError, OSError, ValueError, IndexError):
-        pass
-    try:
+    with contextlib.suppress(OSError, ValueError):
         with open("/sys/fs/cgroup/memory.max") as f:
             limit = f.read().strip()
         if limit != "max":
             with open("/sys/fs/cgroup/memory.current") as f:
                 out.append(max(int(limit) - int(f.read()), 0))
-    except (OSError, ValueError):
-        pass
     return out
 
 

@@ -1,10 +1,6 @@
-"""A small C library of the project's own, compiled once and kept in the compiled-code cache.
-
-One helper for every such library (the co-simulation master's crash guard, and any other
-piece of native support code): the source is keyed by its text, the compiler and the flags;
-the build goes through :func:`~fmu_models.infra.cache.cached_file` (private temporary path,
-checked to load, renamed into place), so concurrent processes and damaged entries are
-handled as for every cached build.
+"""A small C library of the project's own (the master's crash guard, ...), compiled once and kept
+in the compiled-code cache (:func:`~fmu_models.infra.cache.cached_file`: built privately, checked
+to load, renamed into place).
 """
 from __future__ import annotations
 
@@ -28,20 +24,14 @@ def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, wh
 
     Parameters
     ----------
-    code : str
-        The C source.
-    stem : str
-        The cache entry's name prefix.
-    flags : sequence of str
-        Compiler flags (``-shared -fPIC`` among them).
+    code, stem : str
+        The C source; the cache entry's name prefix.
+    flags, link : sequence of str
+        Compiler flags (``-shared -fPIC`` among them); libraries to link after the source (``-lm``).
     symbol : str
         A function the library must export (checked before the entry is kept).
-    what : str
-        What the library is, in messages.
-    fallback : str
-        What happens without it, in the warning.
-    link : sequence of str
-        Libraries to link, after the source (e.g. ``-lm``).
+    what, fallback : str
+        What the library is, and what happens without it, for messages.
 
     Returns
     -------

@@ -1,28 +1,16 @@
-"""Registries: the extension points of the project, by name.
-
-Every kind of thing a user can add has one registry, filled where each thing is defined:
-
-* :data:`fmu_models.MODELS`: :func:`fmu_models.register_model` on a model's build function;
-* :data:`estimators.FILTERS`: ``class MyFilter(EKF, register="MyFilter")``;
-* :data:`cosim.COMPONENTS`: ``class MySensor(Component, kind="my_sensor")``;
-* :data:`fmu_models.export.SIGNAL_KINDS`: :func:`fmu_models.export.signal_fmu.register_signal_kind`;
-* :data:`cosim.experiments.EXPERIMENTS`: ``class MyStudy(Experiment, register="my-study")``.
-
-So adding a model, a filter, a component or an experiment is one file: its definition
-registers it, and every entry point (scenario files, the command line, FMU export) finds
-it by name. An unknown name is refused with the valid ones listed.
-
-Code outside the project registers the same way once its module is imported: name the
-module (or a ``.py`` file) in a scenario's ``plugins`` list or with the command line's
-``--plugin``, or declare it as an entry point of the group ``pendulum_cosim.plugins``
-in its package (loaded the first time a registry misses a name).
+"""Registries: the extension points of the project by name (models, filters, components,
+signal FMU kinds, experiments), filled where each thing is defined, and the loading of
+plugins that register more (the user guide's page "Extending it" lists them).
 """
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import sys
+import warnings
 from collections.abc import Callable, Iterator
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Generic, TypeVar
 
@@ -33,40 +21,32 @@ __all__ = ["ENTRY_POINT_GROUP", "Registry", "load_plugin"]
 T = TypeVar("T")
 #: The entry-point group whose modules are imported when a registry misses a name.
 ENTRY_POINT_GROUP = "pendulum_cosim.plugins"
-_entry_points_loaded = False
 
 
+@functools.cache
 def _load_entry_points() -> None:
-    global _entry_points_loaded
-    if _entry_points_loaded:
-        return
-    _entry_points_loaded = True
-    from importlib.metadata import entry_points
-
+    """Import the modules of the entry-point group (once)."""
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         try:
             ep.load()
         except Exception as e:  # noqa: BLE001 - a broken plugin must not break the project
-            import warnings
-
             warnings.warn(f"plugin entry point {ep.name!r} ({ep.value}) failed to load: {e}", stacklevel=3)
 
 
 def load_plugin(spec: str, base_dir: str | Path | None = None):
-    """Import a plugin: a module name (``"my_package.filters"``) or the path of a ``.py`` file
-    (relative to ``base_dir``); its definitions register themselves. Returns the module.
+    """Import a plugin, whose definitions register themselves; returns the module.
+
+    Parameters
+    ----------
+    spec
+        A module name (``"my_package.filters"``) or the path of a ``.py`` file.
+    base_dir
+        The folder a relative .py path refers to (default: the working directory).
 
     Raises
     ------
     ConfigurationError
         The module cannot be found or fails to import (the message says why).
-
-    Parameters
-    ----------
-    spec
-        A module name or the path of a .py file.
-    base_dir
-        The folder a relative .py path refers to (default: the working directory).
     """
     if not isinstance(spec, str) or not spec:
         raise ConfigurationError(f"a plugin must be a module name or a .py file, got {spec!r}")
@@ -95,7 +75,7 @@ def load_plugin(spec: str, base_dir: str | Path | None = None):
 
 
 class Registry(Generic[T]):
-    """Named things of one kind (see the module documentation).
+    """Named things of one kind.
 
     Parameters
     ----------
@@ -145,13 +125,11 @@ class Registry(Generic[T]):
         if not isinstance(name, str):
             raise UnknownNameError(f"a {self.kind} name must be a string, got {name!r}; valid {self.kind}s: "
                                    f"{', '.join(self.names())}")
-        key = self._aliases.get(name, name)
-        if key not in self._items:
+        if name not in self:
             _load_entry_points()
-            key = self._aliases.get(name, name)
-        if key not in self._items:
+        if name not in self:
             raise UnknownNameError(f"unknown {self.kind} {name!r}; valid {self.kind}s: {', '.join(self.names())}")
-        return self._items[key]
+        return self._items[self._aliases.get(name, name)]
 
     def names(self) -> list[str]:
         """The registered names, in registration order."""

@@ -1,9 +1,6 @@
-"""Files the package ships beside its code (the FMUs' C sources and headers, the
-scenarios), found where the installed package is, with a named error when one is missing.
-
-An installation built from a wheel that left them out, or a folder someone pruned, is
-reported as :class:`~fmu_models.errors.InstallationError` naming the file and how to mend
-it, before anything is built from it.
+"""Files the package ships beside its code (the FMUs' C sources, the scenarios), found where
+the installed package is; a missing one (a broken installation) is a named error before
+anything is built from it.
 """
 from __future__ import annotations
 
@@ -33,6 +30,5 @@ def shipped(package: str, *parts: str) -> Path:
 
 
 def shipped_files(package: str, folder: str, names: list[str]) -> list[Path]:
-    """The paths of the files ``names`` in the shipped ``folder`` of ``package``, every
-    one checked (the first missing one is named, see :func:`shipped`)."""
+    """The paths of the files ``names`` in the shipped ``folder`` of ``package``, each checked by :func:`shipped`."""
     return [shipped(package, folder, n) for n in names]

@@ -1,7 +1,5 @@
-"""The one version string of pendulum-cosim, read from the installed package's metadata
-(set in ``pyproject.toml``): ``fmu_models.__version__``, ``estimators.__version__``,
-``cosim.__version__``, ``pendulum-cosim --version`` and the FMUs' ``generationTool``
-all show it."""
+"""The one version string of pendulum-cosim, read from the installed package's metadata (set
+in ``pyproject.toml``): the packages' ``__version__``, ``--version`` and the FMUs show it."""
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
