@@ -7,9 +7,11 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 from testkit.fmu_helpers import Instance
 
-from fmu_models import get_model, model_names
+from fmu_models import get_model
 
-CASES = [(name, v) for v in (2, 3) for name in model_names()]
+# The project's two plants by name: a model another test module registers (a user's own)
+# must not become a case here when that module happens to be imported first.
+CASES = [(name, v) for v in (2, 3) for name in ("cartpole", "iwp")]
 
 
 def x0_of(name):
