@@ -29,6 +29,7 @@ from fmu_models.errors import (
     TypeMismatchError,
     UnknownNameError,
 )
+from fmu_models.export.pack import FMI_HEADERS
 from fmu_models.infra import checks
 from fmu_models.infra.native_library import compiled_library
 from fmu_models.infra.resources import shipped
@@ -318,12 +319,9 @@ class FMUProcessModel(DiscreteModel):
 
     def _runtime(self, d: _Description, digest: str, dt: float, states, ins, meas, pars, directional) -> _Runtime:
         """The compiled model of this configuration, its FMU unpacked and instantiated."""
-        import fmpy
-
         prefix = f"fmumodel_{digest}_"
-        headers = Path(fmpy.__file__).parent / "c-code"
         lib, why = compiled_library(shipped("estimators", "c", "fmu_process.c").read_text(), "fmu_process",
-                                    ["-O2", "-std=gnu99", "-shared", "-fPIC", "-fvisibility=hidden", f"-I{headers}",
+                                    ["-O2", "-std=gnu99", "-shared", "-fPIC", "-fvisibility=hidden", f"-I{FMI_HEADERS}",
                                      f"-DFP_PREFIX={prefix}"],
                                     f"{prefix}open", "the compiled process model of an FMU",
                                     "the FMU cannot be a process model", link=["-ldl", "-lm"])

@@ -20,20 +20,18 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-import fmpy
-
 from ..errors import CompilerNotFoundError, ConfigurationError, FMUError
 from ..infra.cache import build_cached
 from ..infra.compiler import run_compiler
 from ..infra.files import atomic_copy, private_tempdir
+from .pack import FMI_HEADERS, OPT_FLAGS
 
 __all__ = ["PLATFORMS", "BinaryCheck", "add_platforms", "check_binary", "parse_platforms", "zig_command"]
 
 #: The platforms ``--platforms`` accepts.
 PLATFORMS = ("linux64", "win64", "darwin", "aarch64-linux")
 _INSTALL = "pip install -e '.[cross]' (or: pip install 'ziglang>=0.11' lief)"
-_FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
-_COMMON = ("-shared", "-O3", "-fno-math-errno", "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
+_COMMON = ("-shared", *OPT_FLAGS, "-std=c99", "-fvisibility=hidden", "-ffp-contract=off")
 
 
 @dataclass(frozen=True)
@@ -132,7 +130,7 @@ class BinaryCheck:
 def fmi_functions(fmi_version: int) -> frozenset:
     """Every function of the FMI ``fmi_version`` C API, read from the standard's header
     ``fmi<v>Functions.h`` (fmpy ships it)."""
-    header = _FMI_HEADERS / f"fmi{fmi_version}Functions.h"
+    header = FMI_HEADERS / f"fmi{fmi_version}Functions.h"
     names = re.findall(rf"FMI{fmi_version}_Export\s+\w+TYPE\s+(\w+);", header.read_text())
     if not names:
         raise FMUError(f"no FMI {fmi_version} functions found in {header}")
@@ -255,7 +253,7 @@ def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, ou
     def build(dst: Path) -> None:
         with private_tempdir("pendulum_cosim_zig_") as scratch:   # zig's .lib/.pdb
             lib = Path(scratch) / f"{identifier}{target.suffix}"
-            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{_FMI_HEADERS}",
+            run_compiler([*zig, "-target", target.zig, *flags, f"-I{src}", f"-I{FMI_HEADERS}",
                           *[str(src / f) for f in c_files], "-o", str(lib)],
                          f"{identifier} for {target.zig}", cwd=scratch, cancel=cancel)
             shutil.copyfile(lib, dst)
@@ -314,7 +312,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     with z, private_tempdir("pendulum_cosim_platforms_") as tmp:
         tmp = Path(tmp)
         fmi_version, identifiers, c_files = _read_fmu(z, fmu.name, tmp / "sources")
-        notes, jobs = [], []
+        notes, jobs, present = [], [], set(z.namelist())
         for plat in platforms:
             targets = _TARGETS[plat]
             folders = {_folder(t, fmi_version) for t in targets}
@@ -323,7 +321,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
                              "(--fmi-version 3) for it")
                 continue
             jobs += [(plat, ident, targets) for ident in identifiers
-                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in z.namelist() for f in folders)]
+                     if not all(f"binaries/{f}/{ident}{targets[0].suffix}" in present for f in folders)]
         added = _binaries(jobs, fmi_version, tmp, c_files, fmu.name)
         if added:
             out = tmp / "with-platforms.fmu"
