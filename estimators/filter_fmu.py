@@ -35,9 +35,9 @@ __all__ = ["export_filter_fmu", "filter_parameters"]
 
 #: The step's measurement inputs, set by the FMU from its variables.
 _FED = ("u", "y", "mask")
-#: The step's outputs the FMU uses besides the new state: what the others take (the
-#: log-determinant of S, the gain, ...) is left out of its generated step.
-_SHOWN = ("innov", "nis", "status")
+#: The diagnostics the FMU shows (as outputs ``innov_*`` and ``nis``); with the new state and
+#: the status they are all its generated step computes (no log-determinant of S, no gain, ...).
+_SHOWN = ("innov", "nis")
 
 
 def _is_filter(filt) -> bool:
@@ -58,8 +58,8 @@ def _flat_parameters(filt) -> list[tuple]:
 
 
 def filter_parameters(filt) -> dict[str, float]:
-    """The parameters of ``filt``'s FMU with the filter's current values, by FMU name (see
-    the module documentation)."""
+    """The parameters of ``filt``'s FMU with the filter's current values, by FMU name (the
+    manual's page "Taking the estimator to another tool" lists them)."""
     return {r[0]: r[1] for r in _flat_parameters(filt)}
 
 
@@ -95,7 +95,8 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
     file_name : str, optional
         The FMU file name (default ``<name>.fmu``).
     clocked : bool
-        Write the clocked form (FMI 3.0 only; see the module documentation).
+        Write the clocked form (FMI 3.0 only; see the manual's page "Taking the estimator to
+        another tool").
 
     Raises
     ------
@@ -154,17 +155,16 @@ class _FilterCore:
         self.filt, self.rows = filt, _flat_parameters(filt)
         step = filt.step_function()
         self.names_in = [step.name_in(i) for i in range(step.n_in())]
-        self.names_out = [step.name_out(i) for i in range(step.n_out())]
+        full = [step.name_out(i) for i in range(step.n_out())]
+        keep = [i for i, n in enumerate(full) if n.endswith("_new") or n in _SHOWN or n == "status"]
+        self.names_out = [full[i] for i in keep]
         self.state_names = list(filt.state_arrays())
         self.fixed_names = [n for n in self.names_in if n not in self.state_names and n not in _FED]
         self.init = self._init_function(step)
-        keep = [i for i, n in enumerate(self.names_out) if n.endswith("_new") or n in _SHOWN]
-        self.names_out = [self.names_out[i] for i in keep]
         self.step = step.slice("flt_step", list(range(step.n_in())), keep)
         st_off, self.nstate = _offsets(self.state_names, step.nnz_in)
         fx_off, self.nfixed = _offsets(self.fixed_names, step.nnz_in)
-        dg_off, self.ndiag = _offsets([n for n in self.names_out if not n.endswith("_new") and n != "status"],
-                                      step.nnz_out)
+        dg_off, self.ndiag = _offsets([n for n in self.names_out if n in _SHOWN], step.nnz_out)
         self.init_off = [st_off[n] for n in self.state_names] + [fx_off[n] for n in self.fixed_names]
         src = {"u": (1, 0), "y": (2, 0), "mask": (3, 0)}
         self.step_src = [(0, st_off[n]) if n in st_off else src.get(n, (4, fx_off.get(n, 0))) for n in self.names_in]
@@ -197,7 +197,7 @@ class _FilterCore:
         return ca.Function("flt_init", [psym], init_out + [bad])
 
     def variables(self, clocked: bool) -> VariableList:
-        """The FMU's variables (see the module documentation)."""
+        """The FMU's variables (listed on the manual's page "Taking the estimator to another tool")."""
         s = self.filt.system
         v = VariableList()
         for label, value, domain, descr, _, _ in self.rows:

@@ -50,7 +50,8 @@ def _scalar_variance(M, n: int, what: str) -> float:
 
 class SWML(AdaptationRecord, EKF, register="SWML"):
     """EKF whose ``Q = q I`` and ``R = r I`` are re-estimated by maximum likelihood over a
-    sliding window of innovations, started from an ALS estimate (see the module documentation).
+    sliding window of innovations, started from an ALS estimate (the manual's estimators page
+    gives the method step by step).
 
     Parameters
     ----------
