@@ -11,9 +11,16 @@
 #ifndef CORE_API_H
 #define CORE_API_H
 
+#include <math.h>
 #include <stddef.h>
 
 #define ERRLEN 400
+
+/* 1 if the communication point t is not the FMU's time: more than 1e-9 relative to
+ * max(1, |t|) apart (fabs(t) compared by hand: no library call for fmax on every step). */
+static inline int off_time(double t, double time) {
+    return fabs(t - time) > 1e-9 * (fabs(t) > 1.0 ? fabs(t) : 1.0);
+}
 
 /* The clocked form (FMI 3.0 only): model_config.h defines CLOCK_VR, the value reference of
  * the input clock `sample` (constant interval: the core's period, shift 0), which clocks the

@@ -78,7 +78,7 @@ static inline int check_step(double t, double h, double time, char *err) {
         snprintf(err, ERRLEN, "currentCommunicationPoint + communicationStepSize = %g + %g is not finite", t, h);
         return 1;
     }
-    if (fabs(t - time) > 1e-9 * (fabs(t) > 1.0 ? fabs(t) : 1.0)) {      /* fmax(1, |t|) without a library call */
+    if (off_time(t, time)) {
         snprintf(err, ERRLEN, "currentCommunicationPoint %.17g differs from the FMU time %.17g", t, time);
         return 1;
     }

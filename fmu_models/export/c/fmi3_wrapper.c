@@ -540,7 +540,7 @@ fmi3Status fmi3DoStep(fmi3Instance inst, fmi3Float64 t, fmi3Float64 h, fmi3Boole
     *last = core_time(&c->d);
     if (!isfinite(t) || !(h > 0) || !isfinite(h) || !isfinite(t + h))
         return fail(c, fn, "currentCommunicationPoint %g and communicationStepSize %g must be finite, the step > 0", t, h);
-    if (fabs(t - core_time(&c->d)) > 1e-9 * fmax(1.0, fabs(t)))
+    if (off_time(t, core_time(&c->d)))
         return fail(c, fn, "currentCommunicationPoint %.17g differs from the FMU time %.17g", t, core_time(&c->d));
     if (core_clock_due(&c->d, t))
         return fail(c, fn, "the activation of the clock sample at %.17g s was not made: enter Event Mode and activate "
