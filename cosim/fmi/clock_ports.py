@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.clocking import ClockBoard
-from .exchange import Exchange, no_exchange
+from .exchange import no_exchange
 from .ports import parse_start
 
 __all__ = ["ClockPorts", "InputSetters", "Plan"]
@@ -55,8 +55,8 @@ class Plan:
         The clocks' value references.
     """
 
-    __slots__ = ("args", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_ft_d",
-                 "set_rest_d", "short", "vrs")
+    __slots__ = ("args", "get", "get_d", "intervals", "labels", "names", "set_all", "set_ft", "set_ft_d", "set_rest_d",
+                 "short", "vrs")
 
     def __init__(self, ports: ClockPorts, vrs: tuple[int, ...]):
         by_vr, n = ports.model.by_vr, len(vrs)
@@ -103,11 +103,12 @@ class ClockPorts:
     """
 
     # a run's state, as slots: the hot paths' attribute and method look-ups stay fast
-    __slots__ = ("_ft", "_get_clock", "_logged", "_n_out", "_out_val", "_out_vr", "_outbox", "_plans", "_raw", "board",
-                 "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k", "get_kd", "get_u",
-                 "get_ud", "idx_in", "iin", "iin_base", "in_ft", "inst", "integers", "labels", "log_id", "log_t",
-                 "model", "n_in", "name", "out", "out_clock_pos", "out_clocks", "out_counts", "own", "own_i",
-                 "port_clock", "priority", "publishers", "sources", "unclocked_in", "values", "vin", "vin_base")
+    __slots__ = ("_ft", "_get_clock", "_in_srcs", "_in_starts", "_logged", "_n_out", "_out_val", "_out_vr", "_outbox",
+                 "_plans", "_raw", "board", "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k",
+                 "get_kd", "get_u", "get_ud", "idx_in", "iin", "iin_base", "in_ft", "inst", "integers", "labels",
+                 "log_id", "log_t", "model", "n_in", "name", "out", "out_clock_pos", "out_clocks", "out_counts", "own",
+                 "own_i", "port_clock", "priority", "publishers", "sources", "unclocked_in", "values", "vin",
+                 "vin_base")
     #: Whether discrete inputs without clock are set apart, in Event Mode only (Co-Simulation).
     discrete_apart = False
 
@@ -127,6 +128,9 @@ class ClockPorts:
         self._outbox: list = []                      # output clock activations to send
         self._raw: dict = {}
         self._plans: dict = {}
+        self._in_starts = comp._input_starts()        # the connected inputs' start values and sources
+        self._in_srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type)
+                                               for n in comp.connected_inputs]
         self._build_clocks()
         self._build_inputs(comp)
         self._build_outputs(comp)
@@ -229,12 +233,9 @@ class ClockPorts:
         the master's signals); ``changes``: it returns whether a value changed."""
         if not positions:
             return no_exchange
-        comp = self.comp
-        names, starts = comp.connected_inputs, comp._input_starts()
-        srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type) for n in names]
-        ex = Exchange(self.inst.dll, self.inst.handle, 3, [comp.element_ports[names[i]] for i in positions], "set",
-                      self._fail, self.name, [srcs[i] for i in positions])
-        ex.preset({comp.element_ports[names[i]].name: starts[i] for i in positions})
+        ports, names = self.comp.element_ports, self.comp.connected_inputs
+        ex = self.inst.exchange([ports[names[i]] for i in positions], "set", [self._in_srcs[i] for i in positions])
+        ex.preset({ports[names[i]].name: self._in_starts[i] for i in positions})
         if direct:
             return ex.bind(self.values, _index(self.idx_in[positions]), self.integers, changes)
         return ex.bind(self.vin, _index(positions), self.iin, changes)
@@ -246,8 +247,7 @@ class ClockPorts:
             return None
         own, own_i, base = (self.values, self.integers, self.out.start) if direct else (self.own, self.own_i, 0)
         ports = [self.comp.element_ports[self.comp.output_names[j]] for j in positions]
-        ex = Exchange(self.inst.dll, self.inst.handle, 3, ports, "get", self._fail, self.name)
-        return ex.bind(own, _index(np.asarray(positions) + base), own_i)
+        return self.inst.exchange(ports, "get").bind(own, _index(np.asarray(positions) + base), own_i)
 
     # ------------------------------------------------------------------ plans
     def interval_read(self, k) -> bool:

@@ -25,6 +25,7 @@ from .archive import Extraction
 from .clock_run import clocked_run
 from .clock_timing import ClockedRun, initialise
 from .description import FMUDescription
+from .exchange import no_exchange
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
 from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
@@ -422,6 +423,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
         def exchange(positions, direction, changes=False):
+            if not positions:
+                return no_exchange
             ex = inst.exchange([ports[i] for i in positions], direction, [sources[i] for i in positions])
             ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
             return ex.bind(values, idx[positions], integers, changes)
