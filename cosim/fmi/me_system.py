@@ -321,15 +321,20 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                 buf, np.array([slot[s] for s in mine], np.intp), ints)
             early.append((setters[True, False], setters[True, True], get))
             late.append((setters[False, False], setters[False, True], no_exchange))
+        # the calls that do nothing as None: the loop below runs at every derivative evaluation
+        early, late = ([tuple(None if f is no_exchange else f for f in calls) for calls in phase]
+                       for phase in (early, late))
 
         def propagate(discrete: bool) -> bool:
             changed = False
             for phase in (early, late):
                 for set_cont, set_disc, get in phase:
-                    changed |= bool(set_cont())
-                    if discrete:
+                    if set_cont is not None:
+                        changed |= bool(set_cont())
+                    if discrete and set_disc is not None:
                         changed |= bool(set_disc())
-                    get()
+                    if get is not None:
+                        get()
             return changed
 
         return _Coupled(self.name, [FMUModel(m.instance, m.unit_nominals) for m in self.order], propagate)
