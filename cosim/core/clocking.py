@@ -186,9 +186,9 @@ class ClockPlan:
                 if k.causality != "input" or k.variability not in PERIODIC or k.interval is None:
                     continue
                 shift = k.shift or Fraction(0)
-                g = fraction_gcd(p, k.interval, shift)
                 for what, v in (("interval", k.interval), ("shift", shift)):
                     if (v / p).denominator != 1:
+                        g = fraction_gcd(p, k.interval, shift)
                         raise ConfigurationError(
                             f"component {c.name!r}: clock {k.name!r} ({k.variability}) ticks every "
                             f"{float(k.interval):g} s from {float(shift):g} s, but its {what} {float(v):g} s is not a "

@@ -221,6 +221,8 @@ class ParquetSink(_Rows):
         target = partial_path(self.path)
         os.replace(self.tmp, target)
         return target
+
+
 class RowWriter:
     """Writes the recorded signals' current values as the next row of a sink's buffer, flushing it
     when full: the Python loop's rows and a stopped run's last row (the native kernel writes its own).
