@@ -201,9 +201,10 @@ def _start_values(items: list[str] | None) -> dict:
 
 
 def _demo(args) -> int:
-    """``demo``: ``run`` of the shipped seed 000 scenario."""
-    args.scenario = str(shipped("cosim", "scenarios", "seed000_cartpole.toml"))
-    return _run(args)
+    """``demo``: ``run`` of the shipped seed 000 scenario into ``--out``, replaced, with
+    ``run``'s own defaults for every other option."""
+    scenario = str(shipped("cosim", "scenarios", "seed000_cartpole.toml"))
+    return _run(build_parser().parse_args(["run", scenario, "--out", args.out, "--overwrite"]))
 
 
 def _run(args) -> int:
@@ -446,8 +447,7 @@ def build_parser() -> argparse.ArgumentParser:
                                        "results table, CSV/Parquet and a truth-vs-estimate plot")
     demo.add_argument("--out", default="out/demo", help="output directory (default out/demo; "
                                                           "replaced on every demo run)")
-    demo.set_defaults(handler=_demo, overwrite=True, dry_run=False, stream=None, no_progress=False, engine=None,
-                      threads=None)
+    demo.set_defaults(handler=_demo)
     _add_run(sub)
     sub.add_parser("scenarios", help="list the shipped scenario files").set_defaults(handler=_scenarios)
     models = sub.add_parser("models", help="simulate both plant models, print trajectories and Jacobians")
