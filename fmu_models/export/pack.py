@@ -56,9 +56,9 @@ def library_suffix() -> str:
     return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
-#: Optimisation of every FMU build, native and cross: -O3 and -fno-math-errno (the C code
-#: reads no errno) change no bit of the results and took the seed 000 SSP's serial step
-#: from 2.60 to 2.48 µs (measured; -O3 alone 2.51).
+#: The optimisation flags of every FMU build, native and cross. -O3 and -fno-math-errno (the
+#: C code reads no errno) change no bit of the results and took the seed 000 SSP's serial
+#: step from 2.60 to 2.48 µs (measured; -O3 alone 2.51).
 OPT_FLAGS = ("-O3", "-fno-math-errno")
 #: Flags of the native build (the binary for this machine's platform).
 _CFLAGS = ("-shared", "-fPIC", *OPT_FLAGS, "-fvisibility=hidden", "-std=c99", "-D_POSIX_C_SOURCE=200809L")
