@@ -85,18 +85,6 @@ def _build_description(identifier: str, c_files: list[str]) -> str:
             "</fmiBuildDescription>\n")
 
 
-def _output_folder(out_dir) -> Path:
-    """``out_dir`` as a folder that exists (created if missing)."""
-    out_dir = Path(out_dir)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
-                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
-                                 ) from None
-    return out_dir
-
-
 def _write_sources(src: Path, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
                    identity: str) -> tuple[str, list[str]]:
     """Write the FMU's sources into ``src``; returns the GUID (a hash of ``identity`` and of every
@@ -124,6 +112,7 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
     identifier, core : str
         The model identifier (library name, a C identifier); the model core (plant, filter, signal).
     fmi_version : {2, 3}
+        FMI version.
     write_generated, model_description : callable
         ``write_generated(folder, guid) -> [generated C files to compile]`` writes ``model_config.h``
         and the generated code into ``folder``; ``model_description(guid, c_files) -> XML text``.
@@ -144,7 +133,13 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
     if core not in CORES:
         raise ConfigurationError(f"core must be one of {CORES}, got {core!r}")
     cc = find_compiler()
-    out_dir = _output_folder(out_dir)
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
+                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
+                                 ) from None
     with private_tempdir(f"{identifier}_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"

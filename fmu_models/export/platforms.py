@@ -47,6 +47,9 @@ class _Target:
     fmt: str
     arch: str
 
+    def folder(self, fmi_version: int) -> str | None:
+        return self.fmi2 if fmi_version == 2 else self.fmi3
+
 
 _LINUX = ("-fPIC", "-s", "-lm")
 _TARGETS = {
@@ -170,19 +173,17 @@ def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence
             problems.append(f"{path.name}: a {kind} file, expected {fmt}")
             continue
         if kind == "ELF":
-            archs.append(_arch_name(b.header.machine_type))
-            names = {s.name for s in b.exported_symbols if s.is_function}
+            arch, names = b.header.machine_type, {s.name for s in b.exported_symbols if s.is_function}
             libs = list(b.libraries)
         elif kind == "PE":
-            archs.append(_arch_name(b.header.machine))
-            names = {e.name for e in b.get_export().entries} if b.has_exports else set()
+            arch, names = b.header.machine, {e.name for e in b.get_export().entries} if b.has_exports else set()
             libs = [i.name for i in b.imports]
         else:
-            archs.append(_arch_name(b.header.cpu_type))
-            names = {s.name[1:] if s.name.startswith("_") else s.name for s in b.exported_symbols} - _MACHO_LINKER
+            arch, names = b.header.cpu_type, {s.name.removeprefix("_") for s in b.exported_symbols} - _MACHO_LINKER
             libs = [lib.name for lib in b.libraries if lib.command != lief.MachO.LoadCommand.TYPE.ID_DYLIB]
-            if archs[-1] == "aarch64" and not b.has_code_signature:
-                problems.append(f"{path.name} (aarch64): no code signature (macOS refuses to load it)")
+        archs.append(_arch_name(arch))
+        if kind == "MachO" and archs[-1] == "aarch64" and not b.has_code_signature:
+            problems.append(f"{path.name} (aarch64): no code signature (macOS refuses to load it)")
         exports |= names
         libraries += [lib for lib in libs if lib not in libraries]
     if sorted(archs) != sorted(architectures):
@@ -315,7 +316,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
         notes, jobs, present = [], [], set(z.namelist())
         for plat in platforms:
             targets = _TARGETS[plat]
-            folders = {_folder(t, fmi_version) for t in targets}
+            folders = {t.folder(fmi_version) for t in targets}
             if None in folders:
                 notes.append(f"{fmu.name}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
                              "(--fmi-version 3) for it")
@@ -333,10 +334,6 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
                     o.write(lib, name)
             atomic_copy(out, fmu)
     return notes
-
-
-def _folder(t: _Target, fmi_version: int) -> str | None:
-    return t.fmi2 if fmi_version == 2 else t.fmi3
 
 
 def _read_fmu(z: zipfile.ZipFile, where: str, src: Path) -> tuple[int, list[str], list[str]]:
@@ -375,5 +372,5 @@ def _binaries(jobs: list[tuple], fmi_version: int, tmp: Path, c_files: list[str]
             check = check_binary(lib, fmi_version, t.fmt, archs)
             if check.problems:
                 raise FMUError(f"the {plat} binary of {where} fails its check: " + "; ".join(check.problems))
-            added[f"binaries/{_folder(t, fmi_version)}/{ident}{t.suffix}"] = lib
+            added[f"binaries/{t.folder(fmi_version)}/{ident}{t.suffix}"] = lib
     return added
