@@ -26,10 +26,8 @@ def check_method(method: str, substeps: int) -> int:
 
     Raises
     ------
-    UnknownNameError
-        ``method`` is not one of :data:`METHODS`.
-    ConfigurationError
-        ``substeps`` is not a positive integer.
+    UnknownNameError, ConfigurationError
+        ``method`` is not one of :data:`METHODS`; ``substeps`` is not a positive integer.
     """
     if method not in METHODS:
         raise UnknownNameError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
@@ -95,22 +93,17 @@ class PlantModel:
         Registry name, FMU model name and one-line description.
     states, inputs, outputs, parameters : sequence of Variable
         The model's variables (parameters carry their default values and domains).
-    dynamics : callable
-        ``dynamics(x, u, p) -> xdot``: CasADi SX column ``x`` (nx), ``u`` (nu) and a dict
-        of parameter symbols by name; returns the nx time derivatives.
-    measurement : callable
-        ``measurement(x, p) -> y`` (ny entries).
-    example_x0 : array_like, optional
-        An initial state that shows the model's behaviour (default: the states' starts).
-    example_input : callable, optional
-        ``example_input(t) -> u``: an input that shows it (default: zero); what
-        ``pendulum-cosim models`` simulates.
+    dynamics, measurement : callable
+        ``dynamics(x, u, p) -> xdot`` (nx) of CasADi SX columns ``x`` (nx), ``u`` (nu) and a dict of
+        parameter symbols by name; ``measurement(x, p) -> y`` (ny).
+    example_x0, example_input : array_like, callable, optional
+        An initial state and an input ``u(t)`` that show the model's behaviour (default: the states'
+        starts, zero): what ``pendulum-cosim models`` simulates.
 
     Attributes
     ----------
-    state_names, input_names, output_names : list of str
-    nx, nu, ny : int
-        Numbers of states, inputs and outputs.
+    state_names, input_names, output_names, nx, nu, ny
+        The names, and the numbers, of the states, inputs and outputs.
     """
 
     def __init__(self, name: str, fmu_name: str, description: str,
@@ -156,10 +149,8 @@ class PlantModel:
 
         Raises
         ------
-        UnknownNameError
-            For an unknown name; the message lists the valid ones.
-        ConfigurationError
-            For a value outside the parameter's domain (e.g. a non-positive mass).
+        UnknownNameError, ConfigurationError
+            An unknown name (the message lists the valid ones); a value outside the parameter's domain.
         """
         variant = copy.copy(self)           # the symbolic part is shared
         variant._p = self._p.copy()

@@ -31,13 +31,10 @@ class SSPSystem:
 
     Attributes
     ----------
-    cosim : Cosimulation
-        The system's FMUs, connections and parameters in the project's master.
-    name : str
-    start_time, stop_time : float or None
-        From the SSD's ``DefaultExperiment``.
-    step_size : float or None
-        The communication step of OMSimulator's annotation (``oms:FixedStepMaster``), if any.
+    cosim, name : Cosimulation, str
+        The system's FMUs, connections and parameters in the project's master; the system's name.
+    start_time, stop_time, step_size : float or None
+        [s] The SSD's ``DefaultExperiment``; the step of OMSimulator's ``oms:FixedStepMaster``, if any.
     names : dict of str to str
         Each FMU component's SSD path (element names joined by dots) -> its component name.
     """
@@ -175,8 +172,7 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
     path : str or Path
         A ``.ssp`` archive, its unpacked folder, or its ``.ssd`` file.
     communication_step : float, optional
-        [s] Every FMU steps with this one step instead of its own period, as a tool with a
-        single fixed-step master does.
+        [s] One step for every FMU instead of its own period (as a single fixed-step master).
     step_size : float, optional
         [s] The step of the FMUs whose period the SSP does not give (its own annotation, the
         FMU's ``DefaultExperiment``, OMSimulator's ``FixedStepMaster``, first given first).
@@ -189,13 +185,10 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
     FMUError
         A missing, damaged or hostile archive or file.
     ConfigurationError
-        What this reader does not support, or a name, unit or value it cannot resolve, named
-        with the SSP element.
+        What this reader does not support, or a name, unit or value it cannot resolve.
     """
-    if communication_step is not None:
-        communication_step = positive(communication_step, "open_ssp: communication_step [s]")
-    if step_size is not None:
-        step_size = positive(step_size, "open_ssp: step_size [s]")
+    communication_step, step_size = (None if v is None else positive(v, f"open_ssp: {what} [s]") for what, v in
+                                     (("communication_step", communication_step), ("step_size", step_size)))
     path = Path(path)
     if not path.exists():
         raise FMUError(f"no SSP file {path}")

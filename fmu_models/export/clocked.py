@@ -19,20 +19,8 @@ CLOCK_NAME = "sample"
 
 
 def check_clocked(clocked: bool, fmi_version: int, what: str) -> None:
-    """Refuse ``clocked`` with an FMI version that has no clocks.
-
-    Parameters
-    ----------
-    clocked, fmi_version
-        The clocked form is asked; the FMI version, 2 or 3.
-    what
-        What is exported (for the message).
-
-    Raises
-    ------
-    ConfigurationError
-        ``clocked`` with ``fmi_version`` other than 3.
-    """
+    """Refuse (ConfigurationError) ``clocked`` (True if the clocked form is asked) with an ``fmi_version``
+    (2 or 3) that has no clocks; ``what`` is exported (for the message)."""
     if not isinstance(clocked, bool):
         raise ConfigurationError(f"clocked must be True or False, got {clocked!r}")
     if clocked and fmi_version != 3:
@@ -46,10 +34,9 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
 
     Parameters
     ----------
-    variables, groups
-        The unclocked FMU's variables (value references kept), the groups the clock clocks.
-    period, description
-        The clock's constant interval [s] (> 0), what its activations are.
+    variables, groups, period, description
+        The unclocked FMU's variables (value references kept), the groups the clock clocks, its
+        constant interval [s] (> 0) and what its activations are.
     """
     if not period > 0:
         raise ConfigurationError(f"the interval of the clock {CLOCK_NAME!r} must be > 0, got {period!r}")

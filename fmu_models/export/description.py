@@ -70,18 +70,15 @@ class Description:
     ----------
     model_name, identifier, guid, description : str
         ``modelName``, ``modelIdentifier``, ``guid`` / ``instantiationToken``, ``description``.
-    variables : sequence of FmuVariable
-        In ModelVariables order (value reference = index - 1).
-    outputs, derivatives, initial_unknowns : sequence of Unknown
-        The ModelStructure.
-    model_exchange, directional, variable_step : bool
-        A Model Exchange interface too; directional derivatives; ``canHandleVariableCommunicationStepSize``.
+    variables, outputs, derivatives, initial_unknowns : sequence of FmuVariable, sequence of Unknown
+        In ModelVariables order (value reference = index - 1); the ModelStructure.
+    model_exchange, directional, variable_step, clocked : bool
+        A Model Exchange interface too; directional derivatives; ``canHandleVariableCommunicationStepSize``;
+        FMI 3.0 clocks (Co-Simulation with Event Mode, and a Scheduled Execution interface).
     default_step, stop_time : float
         The DefaultExperiment [s].
     enumerations, source_files : dict, sequence of str
         Enumeration types (name -> [(item, value, description)]); the C files of ``sources/`` to compile.
-    clocked : bool
-        FMI 3.0 clocks: Co-Simulation with Event Mode, and a Scheduled Execution interface.
     """
 
     model_name: str
