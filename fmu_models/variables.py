@@ -26,12 +26,9 @@ class Variable:
 
     Parameters
     ----------
-    name : str
-        Identifier, also used as the FMI variable name (must be a legal C identifier).
-    unit : str
-        SI unit string, e.g. ``"m"``, ``"rad/s"``, ``"N.s/m"``; ``"1"`` if dimensionless.
-    description : str
-        One line shown to users and written into ``modelDescription.xml``.
+    name, unit, description : str
+        Identifier, also the FMI variable name (a legal C identifier); SI unit string (``"m"``,
+        ``"N.s/m"``; ``"1"`` if dimensionless); one line shown to users and in ``modelDescription.xml``.
     start : float
         Default value (parameter value, state start value, input start value).
     domain : str

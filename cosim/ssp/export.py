@@ -119,11 +119,9 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
 
     Parameters
     ----------
-    system : Scenario or Cosimulation
-        What to export (a :class:`cosim.scenario.Scenario` brings its times and title).
-    out_dir : path
-        Folder for ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if missing;
-        only those are replaced).
+    system, out_dir : Scenario or Cosimulation, path
+        What to export (a :class:`cosim.scenario.Scenario` brings its times and title); the folder for
+        ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if missing; only those are replaced).
     fmi_version : {2, 3}
         FMI version of the FMUs it builds (those of ``fmu`` components are copied as they are).
     name, stop_time : str, float, optional

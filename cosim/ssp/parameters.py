@@ -1,8 +1,5 @@
-"""Parameter bindings of an SSP 1.0 system: parameter sets (``ParameterValues`` inline or an
-``.ssv`` file), parameter mappings (inline or an ``.ssm`` file) with their transformations,
-the binding's ``prefix``, and the units of the values; which variable a name reaches is for
-:mod:`cosim.ssp.system` to say.
-"""
+"""Parameter bindings of an SSP 1.0 system: parameter sets (inline or ``.ssv`` files), parameter
+mappings (inline or ``.ssm`` files) with their transformations, the ``prefix``, the values' units."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -29,15 +26,12 @@ class Value:
 
     Attributes
     ----------
-    name : str
-        Its hierarchical name, the prefix and mapping applied.
-    value, kind
-        The value and its kind: "real", "integer", "boolean", "string" or "enumeration".
-    unit : Unit or None
-        The unit the value is given in (reals), if the parameter set names one.
-    convert : bool
-        Whether it is converted to the unit of the variable it sets (not where a mapping
-        entry says ``suppressUnitConversion``).
+    name, value, kind
+        Its hierarchical name (the prefix and mapping applied), the value and its kind: "real",
+        "integer", "boolean", "string" or "enumeration".
+    unit, convert : Unit or None, bool
+        The unit the value is given in (reals), if the parameter set names one; whether it is converted
+        to the unit of the variable it sets (not where a mapping entry says ``suppressUnitConversion``).
     where : str
         Where it was read (for messages).
     """
@@ -131,13 +125,10 @@ def binding_values(binding, base: Path, root: Path, where: str) -> list[Value]:
 
     Parameters
     ----------
-    binding : Element
-        The ``ssd:ParameterBinding``.
+    binding, where : Element, str
+        The ``ssd:ParameterBinding``; its place, for messages.
     base, root : Path
-        The SSD's folder (relative sources are resolved against it) and the SSP's (no
-        source may leave it).
-    where : str
-        The binding's place, for messages.
+        The SSD's folder (relative sources are resolved against it) and the SSP's (no source may leave it).
     """
     doc, where = _document(binding, "ssv:ParameterSet", "ssd:ParameterValues/ssv:ParameterSet", PARAMETER_SET,
                            base, root, where)

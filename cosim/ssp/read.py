@@ -226,12 +226,11 @@ def run_ssp(path, stop_time: float | None = None, *, step_size: float | None = N
     ----------
     path, step_size, communication_step, start
         As :func:`open_ssp` takes them.
-    stop_time : float, optional
-        [s] Default: the SSD's ``DefaultExperiment`` stop time.
+    stop_time, output_interval : float, optional
+        [s] Default: the SSD's ``DefaultExperiment`` stop time; record every this many seconds (a multiple
+        of the base step).
     outputs : sequence of str, optional
         Glob patterns of the signals to record (``component.port``); default all.
-    output_interval : float, optional
-        [s] Record every this many seconds (a multiple of the base step).
     """
     with open_ssp(path, communication_step, step_size, start) as system:
         return system.run(stop_time, signals=outputs, output_interval=output_interval, progress=False)

@@ -57,10 +57,8 @@ class Unit:
 
     Attributes
     ----------
-    name : str
-    exponents : tuple of int
-        Empty for a unit known by name only (no definition).
-    factor, offset : float
+    name, exponents, factor, offset : str, tuple of int, float
+        The exponents are empty for a unit known by name only (no definition).
     """
 
     name: str
@@ -123,11 +121,9 @@ class Transformation:
 
     Attributes
     ----------
-    kind : {"linear", "boolean", "integer", "enumeration"}
-    factor, offset : float
-        ``target = factor * source + offset`` (kind ``"linear"``).
-    table : tuple of (source, target)
-        The mapping entries (the other kinds; enumeration entries are item names).
+    kind, factor, offset, table
+        ``"linear"`` (``target = factor * source + offset``), or ``"boolean"``, ``"integer"``,
+        ``"enumeration"`` with the mapping entries ``table``, (source, target) pairs (enumerations: item names).
     """
 
     kind: str

@@ -19,8 +19,14 @@ CLOCK_NAME = "sample"
 
 
 def check_clocked(clocked: bool, fmi_version: int, what: str) -> None:
-    """Refuse (ConfigurationError) ``clocked`` (True if the clocked form is asked) with an ``fmi_version``
-    (2 or 3) that has no clocks; ``what`` is exported (for the message)."""
+    """Refuse ``clocked`` (the clocked form is asked) with an ``fmi_version`` (2 or 3) that has no clocks;
+    ``what`` is exported (for the message).
+
+    Raises
+    ------
+    ConfigurationError
+        ``clocked`` with ``fmi_version`` other than 3.
+    """
     if not isinstance(clocked, bool):
         raise ConfigurationError(f"clocked must be True or False, got {clocked!r}")
     if clocked and fmi_version != 3:

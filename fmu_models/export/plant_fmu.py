@@ -124,17 +124,14 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     ----------
     model : PlantModel or str
         The model (its current parameter values become the FMU's start values) or its name.
-    out_dir : path
-        Directory to write ``<fmu_name>.fmu`` into (created if missing).
-    fmi_version : int
-        2 or 3; either way Model Exchange and Co-Simulation in one FMU.
+    out_dir, fmi_version : path, int
+        Directory to write ``<fmu_name>.fmu`` into (created if missing); 2 or 3, either way Model
+        Exchange and Co-Simulation in one FMU.
 
     Raises
     ------
-    CompilerNotFoundError
-        No C compiler is available.
-    BuildError
-        The compiler failed (its output is in the message).
+    CompilerNotFoundError, BuildError
+        No C compiler is available; the compiler failed (its output is in the message).
     """
     if isinstance(model, str):
         model = get_model(model)

@@ -73,8 +73,8 @@ _SYSTEM_LIBRARIES = {
 
 
 def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
-    """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of
-    names), checked; ``()`` for None.
+    """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of names),
+    checked; ``()`` for None.
 
     Raises
     ------
@@ -114,12 +114,10 @@ class BinaryCheck:
 
     Attributes
     ----------
-    format, architectures : str, tuple of str
-        ``ELF``, ``PE`` or ``MachO``; ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
-    exports, libraries : frozenset of str, tuple of str
-        The exported function names (Mach-O's leading underscore removed); the imported libraries.
-    problems : tuple of str
-        Empty when the binary is what an FMU of this FMI version needs.
+    format, architectures, exports, libraries, problems
+        ``ELF``, ``PE`` or ``MachO``; ``x86_64`` / ``aarch64`` (two for a universal Mach-O file); the
+        exported function names (Mach-O's leading underscore removed); the imported libraries; what is
+        wrong (empty when the binary is what an FMU of this FMI version needs).
     """
 
     format: str
@@ -224,25 +222,6 @@ def _universal(slices: Sequence[tuple[Path, str]], out: Path) -> None:
             o.write(data)
 
 
-def _source_files(z: zipfile.ZipFile, md: ET.Element, fmi_version: int, where: str) -> list[str]:
-    if fmi_version == 2:
-        names = [f.get("name") for f in md.iter("File") if f.get("name")]
-    else:
-        try:
-            build = ET.fromstring(z.read("sources/buildDescription.xml"))
-        except KeyError:
-            raise FMUError(f"{where}: no sources/buildDescription.xml (an FMI 3.0 FMU lists its C sources there)"
-                           ) from None
-        names = [f.get("name") for f in build.iter("SourceFile") if f.get("name")]
-    names = list(dict.fromkeys(names))
-    if not names:
-        raise FMUError(f"{where}: lists no C source files; it cannot be rebuilt for another platform")
-    for n in names:
-        if f"sources/{n}" not in z.namelist() or "/" in n or "\\" in n or n.startswith("."):
-            raise FMUError(f"{where}: source file {n!r} is not in its sources/ folder")
-    return names
-
-
 def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path,
              cancel: threading.Event | None = None) -> None:
     """Cross-compile the library ``out`` through the compiled-code cache."""
@@ -297,12 +276,10 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
 
     Raises
     ------
-    CompilerNotFoundError
-        The ``cross`` extra is not installed (the message says what to install).
+    CompilerNotFoundError, BuildError
+        The ``cross`` extra is not installed (the message says what to install); the cross-compiler failed.
     FMUError
         The FMU has no (complete) sources, or a built binary fails its check.
-    BuildError
-        The cross-compiler failed (its output in the message).
     """
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)
@@ -346,7 +323,21 @@ def _read_fmu(z: zipfile.ZipFile, where: str, src: Path) -> tuple[int, list[str]
     identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
     if not identifiers:
         raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
-    c_files = _source_files(z, md, fmi_version, where)
+    if fmi_version == 2:
+        c_files = [f.get("name") for f in md.iter("File") if f.get("name")]
+    else:
+        try:
+            build = ET.fromstring(z.read("sources/buildDescription.xml"))
+        except KeyError:
+            raise FMUError(f"{where}: no sources/buildDescription.xml (an FMI 3.0 FMU lists its C sources there)"
+                           ) from None
+        c_files = [f.get("name") for f in build.iter("SourceFile") if f.get("name")]
+    c_files = list(dict.fromkeys(c_files))
+    if not c_files:
+        raise FMUError(f"{where}: lists no C source files; it cannot be rebuilt for another platform")
+    for n in c_files:
+        if f"sources/{n}" not in z.namelist() or "/" in n or "\\" in n or n.startswith("."):
+            raise FMUError(f"{where}: source file {n!r} is not in its sources/ folder")
     src.mkdir()
     for name in z.namelist():
         if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:

@@ -72,16 +72,13 @@ class SignalSpec:
 
     Attributes
     ----------
-    kind, description : str
-        A registered kind (:data:`SIGNAL_KINDS`); the FMU's description.
-    period : float
-        Sample period [s] (the FMU's default communication step and the noise's sample).
+    kind, description, period : str, str, float
+        A registered kind (:data:`SIGNAL_KINDS`); the FMU's description; the sample period [s] (the FMU's
+        default communication step and the noise's sample).
     outputs, inputs : list of str
         One name per channel; inputs only for a kind with inputs (the sensor's measured signals).
-    reals : list of (name, value, domain, description)
-        Real parameters after ``period``, in the order ``signal_core.c`` reads them.
-    ints : list of (name, value, min, max, description)
-        Integer parameters.
+    reals, ints : list of (name, value, domain, description), list of (name, value, min, max, description)
+        Real parameters after ``period``, in the order ``signal_core.c`` reads them; Integer parameters.
     """
 
     kind: str
