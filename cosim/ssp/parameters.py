@@ -8,7 +8,7 @@ from pathlib import Path
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.infra.checks import finite
 
-from .schema import NS, Transformation, Unit, parse_xml, q, read_units
+from .schema import NS, Transformation, Unit, parse_bool, parse_int, parse_xml, q, read_units
 
 __all__ = ["Value", "binding_values"]
 
@@ -51,21 +51,11 @@ def _parse_value(p, units: dict[str, Unit], where: str) -> Value:
         if kind is None:
             continue
         text, what = child.get("value"), f"{where}: parameter {name!r}"
-        if kind == "real":
-            unit = child.get("unit")
-            if unit is not None and unit not in units:
-                raise ConfigurationError(f"{what} names the unit {unit!r}, which its parameter set does not define")
-            return Value(name, finite(text, what), kind, units.get(unit), True, where)
-        if kind == "integer":
-            try:
-                return Value(name, int(text), kind, None, True, where)
-            except (TypeError, ValueError):
-                raise ConfigurationError(f"{what} has the value {text!r}, not an integer") from None
-        if kind == "boolean":
-            if text not in ("true", "false", "1", "0"):
-                raise ConfigurationError(f"{what} has the value {text!r}, not true or false")
-            return Value(name, text in ("true", "1"), kind, None, True, where)
-        return Value(name, text, kind, None, True, where)
+        unit = child.get("unit") if kind == "real" else None
+        if unit is not None and unit not in units:
+            raise ConfigurationError(f"{what} names the unit {unit!r}, which its parameter set does not define")
+        parse = {"real": finite, "integer": parse_int, "boolean": parse_bool}.get(kind)
+        return Value(name, text if parse is None else parse(text, what), kind, units.get(unit), True, where)
     raise ConfigurationError(f"{where}: parameter {name!r} has no value of a known type "
                              f"({', '.join(sorted(set(_KINDS)))})")
 

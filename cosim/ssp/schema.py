@@ -11,7 +11,8 @@ from xml.etree import ElementTree as ET
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.infra.checks import finite
 
-__all__ = ["MAX_XML_BYTES", "NS", "Transformation", "Unit", "parse_xml", "q", "read_units", "unit_factor"]
+__all__ = ["MAX_XML_BYTES", "NS", "Transformation", "Unit", "parse_bool", "parse_int", "parse_xml", "q", "read_units",
+           "unit_factor"]
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
       "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
@@ -100,19 +101,19 @@ def unit_factor(src: Unit, dst: Unit, where: str) -> tuple[float, float]:
     return src.factor / dst.factor, (src.offset - dst.offset) / dst.factor
 
 
-def _bool(text: str | None, where: str) -> bool:
-    if text in ("true", "1"):
-        return True
-    if text in ("false", "0"):
-        return False
-    raise ConfigurationError(f"{where}: {text!r} is not a Boolean (true or false)")
+def parse_bool(text: str | None, what: str) -> bool:
+    """The xs:boolean ``text`` (``true``, ``false``, ``1``, ``0``) of ``what``, else ConfigurationError."""
+    if text not in ("true", "false", "1", "0"):
+        raise ConfigurationError(f"{what} has the value {text!r}, not true or false")
+    return text in ("true", "1")
 
 
-def _int(text: str | None, where: str) -> int:
+def parse_int(text: str | None, what: str) -> int:
+    """The integer ``text`` of ``what``, else ConfigurationError."""
     try:
         return int(text)
     except (TypeError, ValueError):
-        raise ConfigurationError(f"{where}: {text!r} is not an integer") from None
+        raise ConfigurationError(f"{what} has the value {text!r}, not an integer") from None
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,7 @@ class Transformation:
         if e is not None:
             return cls("linear", finite(e.get("factor", "1"), f"{where}: LinearTransformation factor"),
                        finite(e.get("offset", "0"), f"{where}: LinearTransformation offset"))
-        for kind, conv in (("boolean", _bool), ("integer", _int), ("enumeration", lambda text, _: text)):
+        for kind, conv in (("boolean", parse_bool), ("integer", parse_int), ("enumeration", lambda text, _: text)):
             tag = f"{kind.capitalize()}MappingTransformation"
             e = parent.find(f"ssc:{tag}", NS)
             if e is None:

@@ -101,12 +101,9 @@ class Description:
 
 def _units(variables) -> list[str]:
     units = sorted({v.unit for v in variables if v.unit})
-    out = ["  <UnitDefinitions>"]
-    for u in units:
-        base = base_units(u)
-        out.append(f"    <Unit{xml_attrs(name=u)}>" + (f"<BaseUnit{xml_attrs(**base)}/>" if base else "") + "</Unit>")
-    out.append("  </UnitDefinitions>")
-    return out if units else []
+    rows = [f"    <Unit{xml_attrs(name=u)}>{f'<BaseUnit{xml_attrs(**b)}/>' if (b := base_units(u)) else ''}</Unit>"
+            for u in units]
+    return ["  <UnitDefinitions>", *rows, "  </UnitDefinitions>"] if units else []
 
 
 def _items(items) -> str:
