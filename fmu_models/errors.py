@@ -1,10 +1,6 @@
-"""The exception family of pendulum-cosim (``fmu_models``, ``estimators`` and ``cosim``).
-
-Every error raised on purpose derives from :class:`PendulumCosimError` (one ``except``
-catches them all) and from the built-in a Python user would expect (``ValueError`` for a
-bad value, ``KeyError`` for an unknown name, ...); the command lines print one as one line
-and exit with status 2 (see the reliability page of the user guide).
-"""
+"""The exception family of pendulum-cosim: every error raised on purpose derives from
+:class:`PendulumCosimError` and from the built-in a Python user would expect (``ValueError`` for a bad
+value, ``KeyError`` for an unknown name, ...); the user guide's reliability page says how they show."""
 from __future__ import annotations
 
 __all__ = ["BuildError", "CompilerNotFoundError", "ConfigurationError", "CosimError", "FMUError", "InputError",

@@ -1,7 +1,5 @@
-"""An SSP 1.0 opened in the project's master (:func:`open_ssp`) and run in one call
-(:func:`run_ssp`); what is read and what is refused is listed in the documentation's page
-on third-party FMUs.
-"""
+"""An SSP 1.0 opened in the project's master (:func:`open_ssp`) and run in one call (:func:`run_ssp`);
+what is read and what is refused: the user guide's page on third-party FMUs."""
 from __future__ import annotations
 
 import contextlib

@@ -1,7 +1,5 @@
-"""The XML of SSP 1.0 files as this project reads them: namespaces, size-limited parsing, and
-of ``SystemStructureCommon`` the unit definitions with their conversions and the linear and
-mapping transformations of connections and parameter mappings.
-"""
+"""The XML of SSP 1.0 files as this project reads them: namespaces, size-limited parsing, the unit
+definitions and the linear and mapping transformations of ``SystemStructureCommon``."""
 from __future__ import annotations
 
 from dataclasses import dataclass

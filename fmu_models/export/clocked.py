@@ -1,9 +1,7 @@
-"""The clocked form of the project's FMUs (FMI 3.0): one input Clock ``sample`` (constant
-interval, the sample period; shift 0; priority 0) whose activations are the component's
-sample instants; it clocks the inputs and outputs, set and got only while it is active.
-The FMU offers Co-Simulation with Event Mode and Scheduled Execution; the C side is in
-``c/core_api.h`` and ``c/fmi3_wrapper.c``, selected by ``CLOCK_VR`` and ``CLOCK_INTERVAL``.
-"""
+"""The clocked form of the project's FMUs (FMI 3.0): one input Clock ``sample`` of constant interval (the
+sample period) that clocks the inputs and outputs; Co-Simulation with Event Mode and Scheduled Execution,
+the C side selected by ``CLOCK_VR`` and ``CLOCK_INTERVAL`` (the user guide's page "Taking the estimator to
+another tool")."""
 from __future__ import annotations
 
 import dataclasses

@@ -1,7 +1,6 @@
-"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources
-with zig's clang (the ``cross`` extra) and checked with lief; the layout per FMI version, the
-flags and the checks are on the user guide's page "Taking the estimator to another tool".
-"""
+"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources with
+zig's clang (the ``cross`` extra) and checked with lief (layout, flags and checks: the user guide's page
+"Taking the estimator to another tool")."""
 from __future__ import annotations
 
 import functools

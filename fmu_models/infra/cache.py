@@ -1,8 +1,6 @@
-"""The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under concurrency
-and damage: entries named by a hash of all that went into them, written privately, checked, renamed
-into place and marked complete by a ``.sha256`` sidecar written last; a damaged entry is rebuilt,
-never deleted (another process may be loading it).
-"""
+"""The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under concurrency and
+damage: entries named by a hash of all that went into them, renamed into place and marked complete by a
+``.sha256`` sidecar written last; a damaged entry is rebuilt, never deleted (another process may load it)."""
 from __future__ import annotations
 
 import contextlib

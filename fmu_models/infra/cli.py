@@ -1,6 +1,5 @@
-"""The one error handler of the project's command lines (``pendulum-cosim`` and ``python -m
-fmu_models``): what an error, Ctrl-C or SIGTERM becomes on the terminal and in the exit status.
-"""
+"""The one error handler of the project's command lines (``pendulum-cosim`` and ``python -m fmu_models``):
+what an error, Ctrl-C or SIGTERM becomes on the terminal and in the exit status."""
 from __future__ import annotations
 
 import sys

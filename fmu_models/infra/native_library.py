@@ -1,7 +1,5 @@
-"""A small C library of the project's own (the master's crash guard, ...), compiled once and kept
-in the compiled-code cache (:func:`~fmu_models.infra.cache.cached_file`: built privately, checked
-to load, renamed into place).
-"""
+"""A small C library of the project's own (the master's crash guard, ...), compiled once and kept in the
+compiled-code cache (:func:`~fmu_models.infra.cache.cached_file`)."""
 from __future__ import annotations
 
 import ctypes
@@ -53,8 +51,7 @@ def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, wh
 
         def check(p: Path) -> None:
             try:
-                if not hasattr(ctypes.CDLL(str(p)), symbol):
-                    raise AttributeError(f"no {symbol}")
+                getattr(ctypes.CDLL(str(p)), symbol)
             except (OSError, AttributeError) as e:
                 raise BuildError(f"{what}: the compiled library does not load: {e}") from None
 
