@@ -48,9 +48,7 @@ def load_plugin(spec: str, base_dir: str | Path | None = None):
     if not isinstance(spec, str) or not spec:
         raise ConfigurationError(f"a plugin must be a module name or a .py file, got {spec!r}")
     if spec.endswith(".py"):
-        path = Path(spec)
-        if not path.is_absolute() and base_dir is not None:
-            path = Path(base_dir) / path
+        path = Path(base_dir or ".", spec)        # an absolute spec stays itself
         if not path.is_file():
             raise ConfigurationError(f"plugin file {path} does not exist")
         name = f"pendulum_cosim_plugin_{path.stem}_{abs(hash(str(path.resolve()))):x}"
