@@ -1,4 +1,4 @@
-"""The exception family of pendulum-cosim: every error raised on purpose derives from
+"""The exception family of pendulum-cosim. Every error raised on purpose derives from
 :class:`PendulumCosimError` and from the built-in a Python user would expect (``ValueError`` for a bad
 value, ``KeyError`` for an unknown name, ...); the user guide's reliability page says how they show."""
 from __future__ import annotations

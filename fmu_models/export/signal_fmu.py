@@ -1,6 +1,6 @@
 """Signal FMUs: the sources, the process noise and the noisy sensor as native Co-Simulation FMUs
-(FMI 2.0 or 3.0) with ``c/signal_core.c``, one per :class:`SignalSpec`, of the kinds
-:data:`SIGNAL_KINDS` (their variables: the user guide's page "Taking the estimator to another tool")."""
+(FMI 2.0 or 3.0) with ``c/signal_core.c``. One per :class:`SignalSpec`, of the kinds :data:`SIGNAL_KINDS`
+(their variables: the user guide's page "Taking the estimator to another tool")."""
 from __future__ import annotations
 
 from collections.abc import Sequence

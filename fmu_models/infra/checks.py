@@ -1,4 +1,4 @@
-"""Validation of numbers, vectors and covariances, shared by models, filters and components: a value that
+"""Validation of numbers, vectors and covariances, shared by models, filters and components. A value that
 cannot be a number raises :class:`TypeMismatchError`; a wrong shape or a non-finite entry (1.5e308 passes)
 the ``error`` class the caller chose (:class:`InputError` for run-time data, :class:`ConfigurationError`)."""
 from __future__ import annotations
