@@ -4,6 +4,7 @@ binaries, see :mod:`fmu_models.export.platforms`)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import time
@@ -19,11 +20,9 @@ from .infra.files import private_tempdir
 
 def _remove_empty(folders: list[Path]) -> None:
     """Remove the folders a failed build created, deepest first, if they are empty."""
-    for d in folders:
-        try:
+    with contextlib.suppress(OSError):
+        for d in folders:
             d.rmdir()
-        except OSError:
-            return
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,9 +1,5 @@
-"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1), with the papers' errata fixed: ``M3``
-uses the pole mass ``mp``, ``Bc`` is in N s/m, and eq 22's "linearised" A, B are never used
-(:meth:`PlantModel.linearize` gives the exact Jacobian); each erratum is checked against
-Lagrange's equations in ``tests/test_cartpole_lagrange.py``. State, equations and errata: the
-user guide's page "Plant models and their equations".
-"""
+"""Cart-inverted pendulum of seed 000 (eqs 8-11, Table 1) with the papers' errata fixed (``M3`` uses
+``mp``, ``Bc`` in N s/m; the errata and their checks: the user guide's page "Plant models and their equations")."""
 from __future__ import annotations
 
 import casadi as ca
@@ -35,14 +31,8 @@ PARAMETERS = (
 
 
 def dynamics(x, u, p):
-    """Seed 000 eqs 8-11 with ``M3 = M1 M2 - mp^2 l^2 cos^2 x3`` (Table 1 erratum fixed).
-
-    Parameters
-    ----------
-    x, u
-        The state (x, x_dot, theta, theta_dot) and the input (force F), SX columns.
-    p
-        The parameter symbols by name.
+    """Seed 000 eqs 8-11 with ``M3 = M1 M2 - mp^2 l^2 cos^2 x3`` (Table 1 erratum fixed) of the state ``x``
+    (x, x_dot, theta, theta_dot) and the input ``u`` (force F), SX columns, and ``p`` the parameter symbols by name.
     """
     mc, mp, l, Bc, Bp, g = (p[k] for k in ("mc", "mp", "l", "Bc", "Bp", "g"))
     x2, x3, x4, F = x[1], x[2], x[3], u[0]
@@ -59,13 +49,8 @@ def dynamics(x, u, p):
 
 
 def measurement(x, p):
-    """Eq 23: cart position and pole angle (``y_k = [x1_k, x3_k]``; eqs 18-19 print ``x_{k-1}``, an index slip).
-
-    Parameters
-    ----------
-    x, p
-        The state (SX column) and the parameter symbols by name (unused).
-    """
+    """Eq 23: cart position and pole angle (``y_k = [x1_k, x3_k]``; eqs 18-19 print ``x_{k-1}``, an index
+    slip) of the state ``x`` (SX column); ``p``, the parameter symbols, unused."""
     return ca.vertcat(x[0], x[2])
 
 

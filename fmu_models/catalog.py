@@ -3,6 +3,7 @@ model is defined, and read by :func:`get_model` (parameters overridden by name).
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import cache
 
 from .errors import ConfigurationError
 from .infra.registry import Registry
@@ -12,7 +13,6 @@ __all__ = ["MODELS", "get_model", "model_names", "register_model"]
 
 #: The plant models by name, each a function returning the model with its default parameters.
 MODELS: Registry[Callable[[], PlantModel]] = Registry("model")
-_BASE: dict[str, PlantModel] = {}
 
 
 def register_model(name: str) -> Callable:
@@ -22,11 +22,7 @@ def register_model(name: str) -> Callable:
     ... def build():
     ...     return PlantModel(...)
     """
-    def decorate(build: Callable[[], PlantModel]) -> Callable[[], PlantModel]:
-        MODELS.register(name, build)
-        _BASE.pop(name, None)
-        return build
-    return decorate
+    return MODELS.register(name)
 
 
 def model_names() -> list[str]:
@@ -44,11 +40,14 @@ def get_model(name: str, **params: float) -> PlantModel:
     ConfigurationError
         A parameter value outside its domain, or a build function that does not return a PlantModel.
     """
-    build = MODELS.get(name)
-    if name not in _BASE:
-        model = build()
-        if not isinstance(model, PlantModel):
-            raise ConfigurationError(f"model {name!r}: its build function returned {type(model).__name__}, "
-                                     "not a PlantModel")
-        _BASE[name] = model
-    return _BASE[name].with_params(**params)
+    return _built(name, MODELS.get(name)).with_params(**params)
+
+
+@cache
+def _built(name: str, build: Callable[[], PlantModel]) -> PlantModel:
+    """The model ``build()`` returns, built once per registered function."""
+    model = build()
+    if not isinstance(model, PlantModel):
+        raise ConfigurationError(f"model {name!r}: its build function returned {type(model).__name__}, "
+                                 "not a PlantModel")
+    return model

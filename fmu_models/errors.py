@@ -1,10 +1,6 @@
-"""The exception family of pendulum-cosim (``fmu_models``, ``estimators`` and ``cosim``).
-
-Every error raised on purpose derives from :class:`PendulumCosimError` (one ``except``
-catches them all) and from the built-in a Python user would expect (``ValueError`` for a
-bad value, ``KeyError`` for an unknown name, ...); the command lines print one as one line
-and exit with status 2 (see the reliability page of the user guide).
-"""
+"""The exception family of pendulum-cosim. Every error raised on purpose derives from
+:class:`PendulumCosimError` and from the built-in a Python user would expect (``ValueError`` for a bad
+value, ``KeyError`` for an unknown name, ...); the user guide's reliability page says how they show."""
 from __future__ import annotations
 
 __all__ = ["BuildError", "CompilerNotFoundError", "ConfigurationError", "CosimError", "FMUError", "InputError",
@@ -21,10 +17,8 @@ class ConfigurationError(PendulumCosimError, ValueError):
 
 
 class UnknownNameError(ConfigurationError, KeyError):
-    """A name (model, parameter, port, variable, ...) is not one of the valid ones.
-
-    Printed as its plain message (a bare ``KeyError`` would print its repr).
-    """
+    """A name (model, parameter, port, variable, ...) is not one of the valid ones; printed as its
+    plain message (a bare ``KeyError`` would print its repr)."""
 
     def __str__(self) -> str:
         return str(self.args[0]) if self.args else ""
@@ -35,8 +29,7 @@ class TypeMismatchError(ConfigurationError, TypeError):
 
 
 class ResourceError(ConfigurationError):
-    """A run would not fit in memory, on disk or in a reasonable schedule (the message
-    gives the numbers)."""
+    """A run would not fit in memory, on disk or in a reasonable schedule (the message gives the numbers)."""
 
 
 class InputError(PendulumCosimError, ValueError):
@@ -60,8 +53,7 @@ class CompilerNotFoundError(BuildError):
 
 
 class InstallationError(PendulumCosimError, FileNotFoundError):
-    """A file the package ships (C sources, headers, scenarios) is missing: the
-    installation is incomplete; reinstalling the package mends it."""
+    """A file the package ships (C sources, headers, scenarios) is missing: reinstalling the package mends it."""
 
 
 class RunError(PendulumCosimError, RuntimeError):
@@ -75,12 +67,9 @@ class CosimError(RunError):
     ----------
     message : str
         What failed, when and why.
-    component : str, optional
-        Name of the failing component (kept as an attribute, as are ``time`` and ``results``).
-    time : float, optional
-        Simulation time [s] of the failure.
-    results : pandas.DataFrame, optional
-        The signals recorded up to the failure (None when they were streamed to a file).
+    component, time, results : str, float, pandas.DataFrame, optional
+        Kept as attributes: the failing component's name, the simulation time [s] of the failure and
+        the signals recorded up to it (None when they were streamed to a file).
     """
 
     def __init__(self, message: str, component: str | None = None, time: float | None = None,
@@ -94,11 +83,9 @@ class Interrupted(RunError):
 
     Parameters
     ----------
-    message : str
-        Where the run stopped and where the partial results are.
-    partial : object
-        Whatever the interrupted function had finished (its documentation says what); kept
-        as an attribute.
+    message, partial : str, object
+        Where the run stopped and where the partial results are; whatever the interrupted function had
+        finished (its documentation says what), kept as an attribute.
     """
 
     def __init__(self, message: str, partial=None):

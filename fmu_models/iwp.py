@@ -1,11 +1,6 @@
-"""Inertia-wheel pendulum of seed 002 (eqs 1-2), all three states measured (``C = I``).
-
-Kept from the paper: eq 1 neglects the body's acceleration in the wheel equation. Changed:
-the coupling sign ``s`` is -1 (physical, for a wheel angle relative to the body), where the
-paper prints +1. Default parameters: the 1-D Cubli (Gajamohan et al., IROS 2012), mapped in
-:func:`dynamics`. State, equations and reasons: the user guide's page "Plant models and their
-equations".
-"""
+"""Inertia-wheel pendulum of seed 002 (eqs 1-2), all three states measured (``C = I``), coupling sign
+-1 where the paper prints +1, defaults of the 1-D Cubli; the reasons: the user guide's page "Plant models
+and their equations"."""
 from __future__ import annotations
 
 import math
@@ -45,14 +40,8 @@ PARAMETERS = (
 def dynamics(x, u, p):
     """Seed 002 eqs 1-2, ``phi'' = (k i - b_phi phi') / I_k`` and
     ``alpha'' = (s I_k phi'' + m_c g l_p sin(alpha) - b_alpha alpha') / (I_r + I_k)``,
-    with the Cubli parameters mapped as below (``b_alpha = Cb``, ``b_phi = Cw``, ``k = Km``).
-
-    Parameters
-    ----------
-    x, u
-        The state (alpha, alpha_dot, phi_dot) and the input (motor current i), SX columns.
-    p
-        The parameter symbols by name.
+    with the Cubli parameters mapped as below (``b_alpha = Cb``, ``b_phi = Cw``, ``k = Km``), of the state
+    ``x`` (alpha, alpha_dot, phi_dot) and input ``u`` (motor current i), SX columns; ``p`` the parameter symbols.
     """
     alpha, alpha_dot, phi_dot, i = x[0], x[1], x[2], u[0]
     I_k = p["Iw"]
@@ -66,13 +55,7 @@ def dynamics(x, u, p):
 
 
 def measurement(x, p):
-    """C = I: all three states are measured (seed 002).
-
-    Parameters
-    ----------
-    x, p
-        The state (SX column) and the parameter symbols by name (unused).
-    """
+    """C = I: all three states of ``x`` (SX column) are measured (seed 002); ``p``, the parameter symbols, unused."""
     return ca.vertcat(x[0], x[1], x[2])
 
 

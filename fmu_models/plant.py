@@ -26,10 +26,8 @@ def check_method(method: str, substeps: int) -> int:
 
     Raises
     ------
-    UnknownNameError
-        ``method`` is not one of :data:`METHODS`.
-    ConfigurationError
-        ``substeps`` is not a positive integer.
+    UnknownNameError, ConfigurationError
+        ``method`` is not one of :data:`METHODS`; ``substeps`` is not a positive integer.
     """
     if method not in METHODS:
         raise UnknownNameError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
@@ -47,10 +45,9 @@ class _Symbolic:
         pd = {v.name: self.p[i] for i, v in enumerate(params)}
         self.xdot = ca.vertcat(dynamics(self.x, self.u, pd))
         self.y = ca.vertcat(measurement(self.x, pd))
-        if self.xdot.shape != (len(states), 1):
-            raise ConfigurationError(f"dynamics returned shape {self.xdot.shape}, expected ({len(states)}, 1)")
-        if self.y.shape != (len(outputs), 1):
-            raise ConfigurationError(f"measurement returned shape {self.y.shape}, expected ({len(outputs)}, 1)")
+        for what, expr, n in (("dynamics", self.xdot, len(states)), ("measurement", self.y, len(outputs))):
+            if expr.shape != (n, 1):
+                raise ConfigurationError(f"{what} returned shape {expr.shape}, expected ({n}, 1)")
         x, u, p = self.x, self.u, self.p
         self.f = ca.Function("f", [x, u, p], [self.xdot], ["x", "u", "p"], ["xdot"])
         self.h = ca.Function("h", [x, p], [self.y], ["x", "p"], ["y"])
@@ -59,31 +56,26 @@ class _Symbolic:
                                  ["x", "u", "p"], ["A", "B"])
         self.jac_h = ca.Function("jac_h", [x, p], [ca.jacobian(self.y, x)], ["x", "p"], ["H"])
 
-    def step_expr(self, method: str, substeps: int) -> ca.SX:
-        """x_{k+1} as an expression of (x, u, p, dt): `substeps` equal steps of `method`."""
-        u, p = self.u, self.p
+    @cache  # noqa: B019 - one symbolic model per PlantModel, kept as long as it
+    def step(self, method: str, substeps: int) -> ca.Function:
+        """x_{k+1} of (x, u, p, dt): ``substeps`` equal steps of ``method``."""
         h = self.dt / substeps
         xk = self.x
         for _ in range(substeps):
+            k1 = self.f(xk, self.u, self.p)
             if method == "euler":
-                xk = xk + h * self.f(xk, u, p)
+                xk = xk + h * k1
             else:
-                k1 = self.f(xk, u, p)
-                k2 = self.f(xk + h / 2 * k1, u, p)
-                k3 = self.f(xk + h / 2 * k2, u, p)
-                k4 = self.f(xk + h * k3, u, p)
+                k2 = self.f(xk + h / 2 * k1, self.u, self.p)
+                k3 = self.f(xk + h / 2 * k2, self.u, self.p)
+                k4 = self.f(xk + h * k3, self.u, self.p)
                 xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return xk
-
-    @cache  # noqa: B019 - one symbolic model per PlantModel, kept as long as it
-    def step(self, method: str, substeps: int) -> ca.Function:
-        xn = self.step_expr(method, substeps)
-        return ca.Function(f"step_{method}_{substeps}", [self.x, self.u, self.p, self.dt], [xn],
+        return ca.Function(f"step_{method}_{substeps}", [self.x, self.u, self.p, self.dt], [xk],
                            ["x", "u", "p", "dt"], ["x_next"])
 
     @cache  # noqa: B019 - as step
     def step_jac(self, method: str, substeps: int) -> ca.Function:
-        xn = self.step_expr(method, substeps)
+        xn = self.step(method, substeps)(self.x, self.u, self.p, self.dt)
         return ca.Function(f"step_jac_{method}_{substeps}", [self.x, self.u, self.p, self.dt],
                            [ca.jacobian(xn, self.x), ca.jacobian(xn, self.u)],
                            ["x", "u", "p", "dt"], ["F", "G"])
@@ -101,22 +93,17 @@ class PlantModel:
         Registry name, FMU model name and one-line description.
     states, inputs, outputs, parameters : sequence of Variable
         The model's variables (parameters carry their default values and domains).
-    dynamics : callable
-        ``dynamics(x, u, p) -> xdot``: CasADi SX column ``x`` (nx), ``u`` (nu) and a dict
-        of parameter symbols by name; returns the nx time derivatives.
-    measurement : callable
-        ``measurement(x, p) -> y`` (ny entries).
-    example_x0 : array_like, optional
-        An initial state that shows the model's behaviour (default: the states' starts).
-    example_input : callable, optional
-        ``example_input(t) -> u``: an input that shows it (default: zero); what
-        ``pendulum-cosim models`` simulates.
+    dynamics, measurement : callable
+        ``dynamics(x, u, p) -> xdot`` (nx) of CasADi SX columns ``x`` (nx), ``u`` (nu) and a dict of
+        parameter symbols by name; ``measurement(x, p) -> y`` (ny).
+    example_x0, example_input : array_like, callable, optional
+        An initial state and an input ``u(t)`` that show the model's behaviour (default: the states'
+        starts, zero): what ``pendulum-cosim models`` simulates.
 
     Attributes
     ----------
-    state_names, input_names, output_names : list of str
-    nx, nu, ny : int
-        Numbers of states, inputs and outputs.
+    state_names, input_names, output_names, nx, nu, ny
+        The names, and the numbers, of the states, inputs and outputs.
     """
 
     def __init__(self, name: str, fmu_name: str, description: str,
@@ -128,10 +115,8 @@ class PlantModel:
         self.example_x0, self.example_input = example_x0, example_input
         self.states, self.inputs = tuple(states), tuple(inputs)
         self.outputs, self.parameters = tuple(outputs), tuple(parameters)
-        names = [v.name for v in self.states + self.inputs + self.outputs + self.parameters]
-        dup = {n for n in names if names.count(n) > 1}
-        if dup:
-            raise ConfigurationError(f"model {name!r}: duplicate variable names {sorted(dup)}")
+        checks.check_unique([v.name for v in self.states + self.inputs + self.outputs + self.parameters],
+                            f"model {name!r}: duplicate variable names")
         self.sym = _Symbolic(self.states, self.inputs, self.outputs, self.parameters, dynamics, measurement)
         self._p = np.array([v.check(v.start) for v in self.parameters])
 
@@ -164,10 +149,8 @@ class PlantModel:
 
         Raises
         ------
-        UnknownNameError
-            For an unknown name; the message lists the valid ones.
-        ConfigurationError
-            For a value outside the parameter's domain (e.g. a non-positive mass).
+        UnknownNameError, ConfigurationError
+            An unknown name (the message lists the valid ones); a value outside the parameter's domain.
         """
         variant = copy.copy(self)           # the symbolic part is shared
         variant._p = self._p.copy()

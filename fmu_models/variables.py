@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass
 
 from .errors import ConfigurationError, TypeMismatchError
+from .infra.checks import finite
 
 #: Admissible value sets for a parameter; checked in Python and in the generated FMU.
 DOMAINS = ("real", "positive", "nonnegative", "unit", "sign")
@@ -25,12 +26,9 @@ class Variable:
 
     Parameters
     ----------
-    name : str
-        Identifier, also used as the FMI variable name (must be a legal C identifier).
-    unit : str
-        SI unit string, e.g. ``"m"``, ``"rad/s"``, ``"N.s/m"``; ``"1"`` if dimensionless.
-    description : str
-        One line shown to users and written into ``modelDescription.xml``.
+    name, unit, description : str
+        Identifier, also the FMI variable name (a legal C identifier); SI unit string (``"m"``,
+        ``"N.s/m"``; ``"1"`` if dimensionless); one line shown to users and in ``modelDescription.xml``.
     start : float
         Default value (parameter value, state start value, input start value).
     domain : str
@@ -53,20 +51,20 @@ class Variable:
     def check(self, value: float) -> float:
         """``value`` as float if it lies in this variable's domain, else ConfigurationError
         (TypeMismatchError for a non-number)."""
-        if isinstance(value, (str, bytes, bool)) or value is None:
+        if isinstance(value, (str, bytes)):
             raise TypeMismatchError(f"parameter {self.name!r} must be a number, got {value!r}")
-        try:
-            v = float(value)
-        except (TypeError, ValueError):
-            raise TypeMismatchError(f"parameter {self.name!r} must be a number, got {value!r}") from None
-        if not math.isfinite(v):
-            raise ConfigurationError(f"parameter {self.name!r} must be finite, got {value!r}")
-        if self.domain == "positive" and not v > 0.0:
-            raise ConfigurationError(f"parameter {self.name!r} [{self.unit}] must be > 0, got {v}")
-        if self.domain == "nonnegative" and not v >= 0.0:
-            raise ConfigurationError(f"parameter {self.name!r} [{self.unit}] must be >= 0, got {v}")
-        if self.domain == "unit" and not 0.0 < v <= 1.0:
-            raise ConfigurationError(f"parameter {self.name!r} must be in (0, 1], got {v}")
-        if self.domain == "sign" and v not in (-1.0, 1.0):
-            raise ConfigurationError(f"parameter {self.name!r} must be -1 or +1, got {v}")
+        v = finite(value, f"parameter {self.name!r}")
+        test, rule = _RULES[self.domain]
+        if not test(v):
+            raise ConfigurationError(f"parameter {self.name!r}{rule.format(unit=self.unit)}, got {v}")
         return v
+
+
+#: Each domain's test and the rule its message states (``real``: finite, already checked).
+_RULES = {
+    "real": (math.isfinite, ""),
+    "positive": (lambda v: v > 0.0, " [{unit}] must be > 0"),
+    "nonnegative": (lambda v: v >= 0.0, " [{unit}] must be >= 0"),
+    "unit": (lambda v: 0.0 < v <= 1.0, " must be in (0, 1]"),
+    "sign": (lambda v: v in (-1.0, 1.0), " must be -1 or +1"),
+}

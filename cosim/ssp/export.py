@@ -1,8 +1,5 @@
-"""A co-simulation written as an SSP 1.0 (:func:`export_ssp`): the SSD, an FMU per component
-in ``resources/`` and both as a ``.ssp`` archive; what the SSD holds (the periods in the
-``org.pendulum-cosim`` annotation, the step in OMSimulator's) is told in the documentation's
-page on running the loop in another tool.
-"""
+"""A co-simulation written as an SSP 1.0 (:func:`export_ssp`): the SSD, an FMU per component in
+``resources/`` and both as a ``.ssp`` archive (the user guide's page "Taking the estimator to another tool")."""
 from __future__ import annotations
 
 import inspect
@@ -43,12 +40,9 @@ class SSPExport:
 
     Attributes
     ----------
-    ssd, archive : Path
-        ``SystemStructure.ssd`` and the ``.ssp`` file.
-    fmus : dict of str to Path
-        Each component's FMU.
-    notes : list of str
-        Where the SSP differs from the scenario (e.g. the noise generator).
+    ssd, archive, fmus, notes
+        ``SystemStructure.ssd``, the ``.ssp`` file, each component's FMU by name, and where the SSP
+        differs from the scenario (e.g. the noise generator).
     """
 
     ssd: Path
@@ -125,25 +119,18 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
 
     Parameters
     ----------
-    system : Scenario or Cosimulation
-        What to export (a :class:`cosim.scenario.Scenario` brings its times and title).
-    out_dir : path
-        Folder for ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if
-        missing; those files are replaced, nothing else is touched).
+    system, out_dir : Scenario or Cosimulation, path
+        What to export (a :class:`cosim.scenario.Scenario` brings its times and title); the folder for
+        ``SystemStructure.ssd``, ``resources/`` and ``<name>.ssp`` (created if missing; only those are replaced).
     fmi_version : {2, 3}
-        FMI version of the FMUs the export builds (FMU files of ``fmu`` components are
-        copied as they are).
-    name : str, optional
-        System name and archive name (default ``system``).
-    stop_time : float, optional
-        The ``DefaultExperiment`` stop time (default the scenario's).
+        FMI version of the FMUs it builds (those of ``fmu`` components are copied as they are).
+    name, stop_time : str, float, optional
+        System and archive name (default ``system``); ``DefaultExperiment`` stop time [s] (default the scenario's).
     platforms : sequence of str, optional
-        Platforms to cross-compile every FMU for besides this one
-        (:func:`fmu_models.export.platforms.add_platforms`; needs the ``cross`` extra).
+        Platforms to cross-compile every FMU for (:func:`fmu_models.export.platforms.add_platforms`).
     clocked : bool
-        Write the estimators and signal FMUs in their clocked form (FMI 3.0 only,
-        :mod:`fmu_models.export.clocked`: an input clock ``sample`` at the sample period, which
-        the importer schedules, no clock connection in the SSD); others unclocked, with a note.
+        Estimators and signal FMUs in their clocked form (FMI 3.0 only, :mod:`fmu_models.export.clocked`;
+        the importer schedules the clock ``sample``); others unclocked, with a note.
 
     Raises
     ------
@@ -164,7 +151,12 @@ def export_ssp(system, out_dir, fmi_version: int = 2, name: str | None = None,
         resources = tmp / "resources"
         resources.mkdir()
         exported = _export_all(cosim.components, resources, fmi_version, clocked)
-        notes = [e.note for e in exported.values() if e.note] + _platforms(exported, platforms)
+        notes = [e.note for e in exported.values() if e.note]
+        for n, e in exported.items() if platforms else ():
+            try:
+                notes += add_platforms(e.path, platforms)
+            except FMUError as err:
+                raise FMUError(f"component {n!r}: {err}") from None
         variables = {n: {v.name: v for v in read_description(e.path).modelVariables} for n, e in exported.items()}
         _check_connections(cosim.connections, variables)
         step = float(base_step({c.name: c.period for c in cosim.components})[0])
@@ -189,17 +181,6 @@ def _export_all(components, resources: Path, fmi_version: int, clocked: bool) ->
     if refused:
         raise ConfigurationError("cannot export as an SSP: " + "; ".join(refused))
     return exported
-
-
-def _platforms(exported: dict[str, ExportedFMU], platforms: Sequence[str]) -> list[str]:
-    """Every exported FMU's binaries for ``platforms`` besides this one; the notes."""
-    notes = []
-    for n, e in exported.items() if platforms else ():
-        try:
-            notes += add_platforms(e.path, platforms)
-        except FMUError as err:
-            raise FMUError(f"component {n!r}: {err}") from None
-    return notes
 
 
 def _check_connections(connections: dict, variables: dict) -> None:

@@ -1,8 +1,5 @@
-"""Parameter bindings of an SSP 1.0 system: parameter sets (``ParameterValues`` inline or an
-``.ssv`` file), parameter mappings (inline or an ``.ssm`` file) with their transformations,
-the binding's ``prefix``, and the units of the values; which variable a name reaches is for
-:mod:`cosim.ssp.system` to say.
-"""
+"""Parameter bindings of an SSP 1.0 system: parameter sets (inline or ``.ssv`` files), parameter
+mappings (inline or ``.ssm`` files) with their transformations, the ``prefix``, the values' units."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -11,7 +8,7 @@ from pathlib import Path
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.infra.checks import finite
 
-from .schema import NS, Transformation, Unit, parse_xml, q, read_units
+from .schema import NS, Transformation, Unit, parse_bool, parse_int, parse_xml, q, read_units
 
 __all__ = ["Value", "binding_values"]
 
@@ -29,15 +26,12 @@ class Value:
 
     Attributes
     ----------
-    name : str
-        Its hierarchical name, the prefix and mapping applied.
-    value, kind
-        The value and its kind: "real", "integer", "boolean", "string" or "enumeration".
-    unit : Unit or None
-        The unit the value is given in (reals), if the parameter set names one.
-    convert : bool
-        Whether it is converted to the unit of the variable it sets (not where a mapping
-        entry says ``suppressUnitConversion``).
+    name, value, kind
+        Its hierarchical name (the prefix and mapping applied), the value and its kind: "real",
+        "integer", "boolean", "string" or "enumeration".
+    unit, convert : Unit or None, bool
+        The unit the value is given in (reals), if the parameter set names one; whether it is converted
+        to the unit of the variable it sets (not where a mapping entry says ``suppressUnitConversion``).
     where : str
         Where it was read (for messages).
     """
@@ -57,21 +51,11 @@ def _parse_value(p, units: dict[str, Unit], where: str) -> Value:
         if kind is None:
             continue
         text, what = child.get("value"), f"{where}: parameter {name!r}"
-        if kind == "real":
-            unit = child.get("unit")
-            if unit is not None and unit not in units:
-                raise ConfigurationError(f"{what} names the unit {unit!r}, which its parameter set does not define")
-            return Value(name, finite(text, what), kind, units.get(unit), True, where)
-        if kind == "integer":
-            try:
-                return Value(name, int(text), kind, None, True, where)
-            except (TypeError, ValueError):
-                raise ConfigurationError(f"{what} has the value {text!r}, not an integer") from None
-        if kind == "boolean":
-            if text not in ("true", "false", "1", "0"):
-                raise ConfigurationError(f"{what} has the value {text!r}, not true or false")
-            return Value(name, text in ("true", "1"), kind, None, True, where)
-        return Value(name, text, kind, None, True, where)
+        unit = child.get("unit") if kind == "real" else None
+        if unit is not None and unit not in units:
+            raise ConfigurationError(f"{what} names the unit {unit!r}, which its parameter set does not define")
+        parse = {"real": finite, "integer": parse_int, "boolean": parse_bool}.get(kind)
+        return Value(name, text if parse is None else parse(text, what), kind, units.get(unit), True, where)
     raise ConfigurationError(f"{where}: parameter {name!r} has no value of a known type "
                              f"({', '.join(sorted(set(_KINDS)))})")
 
@@ -131,13 +115,10 @@ def binding_values(binding, base: Path, root: Path, where: str) -> list[Value]:
 
     Parameters
     ----------
-    binding : Element
-        The ``ssd:ParameterBinding``.
+    binding, where : Element, str
+        The ``ssd:ParameterBinding``; its place, for messages.
     base, root : Path
-        The SSD's folder (relative sources are resolved against it) and the SSP's (no
-        source may leave it).
-    where : str
-        The binding's place, for messages.
+        The SSD's folder (relative sources are resolved against it) and the SSP's (no source may leave it).
     """
     doc, where = _document(binding, "ssv:ParameterSet", "ssd:ParameterValues/ssv:ParameterSet", PARAMETER_SET,
                            base, root, where)

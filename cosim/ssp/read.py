@@ -1,7 +1,5 @@
-"""An SSP 1.0 opened in the project's master (:func:`open_ssp`) and run in one call
-(:func:`run_ssp`); what is read and what is refused is listed in the documentation's page
-on third-party FMUs.
-"""
+"""An SSP 1.0 opened in the project's master (:func:`open_ssp`) and run in one call (:func:`run_ssp`);
+what is read and what is refused: the user guide's page on third-party FMUs."""
 from __future__ import annotations
 
 import contextlib
@@ -31,13 +29,10 @@ class SSPSystem:
 
     Attributes
     ----------
-    cosim : Cosimulation
-        The system's FMUs, connections and parameters in the project's master.
-    name : str
-    start_time, stop_time : float or None
-        From the SSD's ``DefaultExperiment``.
-    step_size : float or None
-        The communication step of OMSimulator's annotation (``oms:FixedStepMaster``), if any.
+    cosim, name : Cosimulation, str
+        The system's FMUs, connections and parameters in the project's master; the system's name.
+    start_time, stop_time, step_size : float or None
+        [s] The SSD's ``DefaultExperiment``; the step of OMSimulator's ``oms:FixedStepMaster``, if any.
     names : dict of str to str
         Each FMU component's SSD path (element names joined by dots) -> its component name.
     """
@@ -175,8 +170,7 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
     path : str or Path
         A ``.ssp`` archive, its unpacked folder, or its ``.ssd`` file.
     communication_step : float, optional
-        [s] Every FMU steps with this one step instead of its own period, as a tool with a
-        single fixed-step master does.
+        [s] One step for every FMU instead of its own period (as a single fixed-step master).
     step_size : float, optional
         [s] The step of the FMUs whose period the SSP does not give (its own annotation, the
         FMU's ``DefaultExperiment``, OMSimulator's ``FixedStepMaster``, first given first).
@@ -189,13 +183,10 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
     FMUError
         A missing, damaged or hostile archive or file.
     ConfigurationError
-        What this reader does not support, or a name, unit or value it cannot resolve, named
-        with the SSP element.
+        What this reader does not support, or a name, unit or value it cannot resolve.
     """
-    if communication_step is not None:
-        communication_step = positive(communication_step, "open_ssp: communication_step [s]")
-    if step_size is not None:
-        step_size = positive(step_size, "open_ssp: step_size [s]")
+    communication_step, step_size = (None if v is None else positive(v, f"open_ssp: {what} [s]") for what, v in
+                                     (("communication_step", communication_step), ("step_size", step_size)))
     path = Path(path)
     if not path.exists():
         raise FMUError(f"no SSP file {path}")
@@ -233,12 +224,11 @@ def run_ssp(path, stop_time: float | None = None, *, step_size: float | None = N
     ----------
     path, step_size, communication_step, start
         As :func:`open_ssp` takes them.
-    stop_time : float, optional
-        [s] Default: the SSD's ``DefaultExperiment`` stop time.
+    stop_time, output_interval : float, optional
+        [s] Default: the SSD's ``DefaultExperiment`` stop time; record every this many seconds (a multiple
+        of the base step).
     outputs : sequence of str, optional
         Glob patterns of the signals to record (``component.port``); default all.
-    output_interval : float, optional
-        [s] Record every this many seconds (a multiple of the base step).
     """
     with open_ssp(path, communication_step, step_size, start) as system:
         return system.run(stop_time, signals=outputs, output_interval=output_interval, progress=False)

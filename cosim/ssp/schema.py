@@ -1,7 +1,5 @@
-"""The XML of SSP 1.0 files as this project reads them: namespaces, size-limited parsing, and
-of ``SystemStructureCommon`` the unit definitions with their conversions and the linear and
-mapping transformations of connections and parameter mappings.
-"""
+"""The XML of SSP 1.0 files as this project reads them: namespaces, size-limited parsing, the unit
+definitions and the linear and mapping transformations of ``SystemStructureCommon``."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -11,7 +9,8 @@ from xml.etree import ElementTree as ET
 from fmu_models.errors import ConfigurationError, FMUError
 from fmu_models.infra.checks import finite
 
-__all__ = ["MAX_XML_BYTES", "NS", "Transformation", "Unit", "parse_xml", "q", "read_units", "unit_factor"]
+__all__ = ["MAX_XML_BYTES", "NS", "Transformation", "Unit", "parse_bool", "parse_int", "parse_xml", "q", "read_units",
+           "unit_factor"]
 
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
       "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
@@ -57,10 +56,8 @@ class Unit:
 
     Attributes
     ----------
-    name : str
-    exponents : tuple of int
-        Empty for a unit known by name only (no definition).
-    factor, offset : float
+    name, exponents, factor, offset : str, tuple of int, float
+        The exponents are empty for a unit known by name only (no definition).
     """
 
     name: str
@@ -102,19 +99,19 @@ def unit_factor(src: Unit, dst: Unit, where: str) -> tuple[float, float]:
     return src.factor / dst.factor, (src.offset - dst.offset) / dst.factor
 
 
-def _bool(text: str | None, where: str) -> bool:
-    if text in ("true", "1"):
-        return True
-    if text in ("false", "0"):
-        return False
-    raise ConfigurationError(f"{where}: {text!r} is not a Boolean (true or false)")
+def parse_bool(text: str | None, what: str) -> bool:
+    """The xs:boolean ``text`` (``true``, ``false``, ``1``, ``0``) of ``what``, else ConfigurationError."""
+    if text not in ("true", "false", "1", "0"):
+        raise ConfigurationError(f"{what} has the value {text!r}, not true or false")
+    return text in ("true", "1")
 
 
-def _int(text: str | None, where: str) -> int:
+def parse_int(text: str | None, what: str) -> int:
+    """The integer ``text`` of ``what``, else ConfigurationError."""
     try:
         return int(text)
     except (TypeError, ValueError):
-        raise ConfigurationError(f"{where}: {text!r} is not an integer") from None
+        raise ConfigurationError(f"{what} has the value {text!r}, not an integer") from None
 
 
 @dataclass(frozen=True)
@@ -123,11 +120,9 @@ class Transformation:
 
     Attributes
     ----------
-    kind : {"linear", "boolean", "integer", "enumeration"}
-    factor, offset : float
-        ``target = factor * source + offset`` (kind ``"linear"``).
-    table : tuple of (source, target)
-        The mapping entries (the other kinds; enumeration entries are item names).
+    kind, factor, offset, table
+        ``"linear"`` (``target = factor * source + offset``), or ``"boolean"``, ``"integer"``,
+        ``"enumeration"`` with the mapping entries ``table``, (source, target) pairs (enumerations: item names).
     """
 
     kind: str
@@ -142,7 +137,7 @@ class Transformation:
         if e is not None:
             return cls("linear", finite(e.get("factor", "1"), f"{where}: LinearTransformation factor"),
                        finite(e.get("offset", "0"), f"{where}: LinearTransformation offset"))
-        for kind, conv in (("boolean", _bool), ("integer", _int), ("enumeration", lambda text, _: text)):
+        for kind, conv in (("boolean", parse_bool), ("integer", parse_int), ("enumeration", lambda text, _: text)):
             tag = f"{kind.capitalize()}MappingTransformation"
             e = parent.find(f"ssc:{tag}", NS)
             if e is None:

@@ -1,11 +1,6 @@
-"""An SSP 1.0 system structure flattened for the master: nested systems dissolved into their
-FMU components, each FMU input followed back to the FMU output that drives it (with the
-unit conversions and transformations met on the way), and the parameter bindings of every
-level resolved to component variables with the standard's precedence (a later binding over
-an earlier one, a system's over its elements'; a name that reaches no variable is logged
-and ignored). A component is named by its SSD path made an identifier (``Drive Train`` in
-``Vehicle``: ``Vehicle_Drive_Train``).
-"""
+"""An SSP 1.0 system structure flattened for the master: nested systems dissolved into their FMU
+components, each FMU input followed back to the FMU output that drives it, and the parameter bindings
+resolved to component variables (the rules: the user guide's page on third-party FMUs)."""
 from __future__ import annotations
 
 import logging
@@ -33,10 +28,8 @@ class Element:
 
     Attributes
     ----------
-    path : tuple of str
-        Its SSD element names from the top system down.
-    name : str
-        Its component name in the master.
+    path, name : tuple of str, str
+        Its SSD element names from the top system down; its component name in the master.
     fmu, node, md
         Its FMU file, its ``ssd:Component`` and the FMU's fmpy model description.
     connectors, parameters : dict
@@ -108,10 +101,8 @@ class FlatSystem:
     ----------
     document : Element
         The ``ssd:SystemStructureDescription``.
-    base : Path
-        The SSD's folder (relative sources are resolved against it).
-    root : Path
-        The SSP's folder (no source may leave it).
+    base, root : Path
+        The SSD's folder (relative sources are resolved against it); the SSP's (no source may leave it).
     where : str
         The SSD's name, for messages.
 
@@ -209,10 +200,8 @@ class FlatSystem:
 
     @staticmethod
     def _label(c) -> str:
-        def end(side):
-            e = c.get(f"{side}Element")
-            return f"{e}.{c.get(f'{side}Connector')}" if e else str(c.get(f"{side}Connector"))
-        return f"{end('start')} -> {end('end')}"
+        return " -> ".join(".".join(filter(None, (c.get(f"{side}Element"), str(c.get(f"{side}Connector")))))
+                           for side in ("start", "end"))
 
     def _unit(self, node) -> Unit | None:
         name = self.connectors[node][1]

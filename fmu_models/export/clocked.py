@@ -1,9 +1,7 @@
-"""The clocked form of the project's FMUs (FMI 3.0): one input Clock ``sample`` (constant
-interval, the sample period; shift 0; priority 0) whose activations are the component's
-sample instants; it clocks the inputs and outputs, set and got only while it is active.
-The FMU offers Co-Simulation with Event Mode and Scheduled Execution; the C side is in
-``c/core_api.h`` and ``c/fmi3_wrapper.c``, selected by ``CLOCK_VR`` and ``CLOCK_INTERVAL``.
-"""
+"""The clocked form of the project's FMUs (FMI 3.0): one input Clock ``sample`` of constant interval (the
+sample period) that clocks the inputs and outputs; Co-Simulation with Event Mode and Scheduled Execution,
+the C side selected by ``CLOCK_VR`` and ``CLOCK_INTERVAL`` (the user guide's page "Taking the estimator to
+another tool")."""
 from __future__ import annotations
 
 import dataclasses
@@ -19,14 +17,8 @@ CLOCK_NAME = "sample"
 
 
 def check_clocked(clocked: bool, fmi_version: int, what: str) -> None:
-    """Refuse ``clocked`` with an FMI version that has no clocks.
-
-    Parameters
-    ----------
-    clocked, fmi_version
-        The clocked form is asked; the FMI version, 2 or 3.
-    what
-        What is exported (for the message).
+    """Refuse ``clocked`` (the clocked form is asked) with an ``fmi_version`` (2 or 3) that has no clocks;
+    ``what`` is exported (for the message).
 
     Raises
     ------
@@ -46,10 +38,9 @@ def clock_variables(variables: VariableList, groups: Sequence[str], period: floa
 
     Parameters
     ----------
-    variables, groups
-        The unclocked FMU's variables (value references kept), the groups the clock clocks.
-    period, description
-        The clock's constant interval [s] (> 0), what its activations are.
+    variables, groups, period, description
+        The unclocked FMU's variables (value references kept), the groups the clock clocks, its
+        constant interval [s] (> 0) and what its activations are.
     """
     if not period > 0:
         raise ConfigurationError(f"the interval of the clock {CLOCK_NAME!r} must be > 0, got {period!r}")

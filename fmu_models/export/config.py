@@ -1,7 +1,5 @@
-"""``model_config.h``: the one schema by which every FMU the project writes configures its C
-core (plant, filter or signal; ``fmu_models/export/c``), derived from the FMU's variable list;
-its macros and tables are listed in the developer guide.
-"""
+"""``model_config.h``: the one schema by which every FMU the project writes configures its C core
+(plant, filter or signal), from the FMU's variable list (its macros: the developer guide)."""
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
@@ -52,17 +50,14 @@ def config_header(variables: VariableList, identifier: str, guid: str, source: s
 
     Parameters
     ----------
-    variables : VariableList
-        The FMU's variables in value-reference order.
-    identifier, guid, source : str
-        Model identifier, GUID (instantiation token) and what generated the header (a module name).
+    variables, identifier, guid, source : VariableList, str
+        The FMU's variables; its model identifier, GUID (instantiation token) and what generated it (a module).
     groups : sequence of str
-        Groups the core reads even when they are empty (``P`` and ``IP`` always are;
-        ``VR_<G>`` is then the number of variables, ``N_<G>`` 0).
-    defines, tables : sequence of (name, value), sequence of str
-        The core's own defines and tables (from :func:`c_array`, :func:`c_strings`).
-    work : dict, optional
-        CasADi work sizes (:func:`work_sizes`), written as ``WORK_ARG`` ... ``WORK_W``.
+        Groups the core reads even when empty (``P`` and ``IP`` always; ``VR_<G>`` is then the number of
+        variables, ``N_<G>`` 0).
+    defines, tables, work : sequence of (name, value), sequence of str, dict
+        The core's own defines and tables (from :func:`c_array`, :func:`c_strings`); CasADi work sizes
+        (:func:`work_sizes`) written as ``WORK_ARG`` ... ``WORK_W``.
 
     Raises
     ------

@@ -70,18 +70,15 @@ class Description:
     ----------
     model_name, identifier, guid, description : str
         ``modelName``, ``modelIdentifier``, ``guid`` / ``instantiationToken``, ``description``.
-    variables : sequence of FmuVariable
-        In ModelVariables order (value reference = index - 1).
-    outputs, derivatives, initial_unknowns : sequence of Unknown
-        The ModelStructure.
-    model_exchange, directional, variable_step : bool
-        A Model Exchange interface too; directional derivatives; ``canHandleVariableCommunicationStepSize``.
+    variables, outputs, derivatives, initial_unknowns : sequence of FmuVariable, sequence of Unknown
+        In ModelVariables order (value reference = index - 1); the ModelStructure.
+    model_exchange, directional, variable_step, clocked : bool
+        A Model Exchange interface too; directional derivatives; ``canHandleVariableCommunicationStepSize``;
+        FMI 3.0 clocks (Co-Simulation with Event Mode, and a Scheduled Execution interface).
     default_step, stop_time : float
         The DefaultExperiment [s].
     enumerations, source_files : dict, sequence of str
         Enumeration types (name -> [(item, value, description)]); the C files of ``sources/`` to compile.
-    clocked : bool
-        FMI 3.0 clocks: Co-Simulation with Event Mode, and a Scheduled Execution interface.
     """
 
     model_name: str
@@ -104,12 +101,9 @@ class Description:
 
 def _units(variables) -> list[str]:
     units = sorted({v.unit for v in variables if v.unit})
-    out = ["  <UnitDefinitions>"]
-    for u in units:
-        base = base_units(u)
-        out.append(f"    <Unit{xml_attrs(name=u)}>" + (f"<BaseUnit{xml_attrs(**base)}/>" if base else "") + "</Unit>")
-    out.append("  </UnitDefinitions>")
-    return out if units else []
+    rows = [f"    <Unit{xml_attrs(name=u)}>{f'<BaseUnit{xml_attrs(**b)}/>' if (b := base_units(u)) else ''}</Unit>"
+            for u in units]
+    return ["  <UnitDefinitions>", *rows, "  </UnitDefinitions>"] if units else []
 
 
 def _items(items) -> str:
@@ -130,19 +124,27 @@ def _bool(flag: bool) -> str:
     return "true" if flag else "false"
 
 
-def _typed(v, fmi3: bool) -> tuple[str, dict]:
-    """The type element of the variable ``v``: its tag and attributes, in FMI 3.0's or 2.0's names and order."""
+def _variable(v, fmi3: bool) -> str:
+    """The ModelVariables element of the variable ``v``, in FMI 3.0's or 2.0's names and order."""
+    head = xml_attrs(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
+                     variability=v.variability, initial=v.initial)
     start = v.start
     if v.start is not None and v.type in ("Real", "Boolean"):
         start = repr(v.start) if v.type == "Real" else _bool(v.start)
-    if v.type == "Real" and fmi3:
+    if v.type == "Clock":
+        tag, attrs = "Clock", v.clock or {}
+    elif v.type == "Real" and fmi3:
         derivative = None if v.derivative_of is None else v.derivative_of - 1
-        return "Float64", dict(start=start, unit=v.unit, derivative=derivative)
-    if v.type == "Real":
-        return "Real", dict(unit=v.unit, derivative=v.derivative_of, start=start)
-    if v.type in ("Enumeration", "Boolean"):
-        return v.type, dict(declaredType=v.declared_type, start=start)
-    return "Int32" if fmi3 else "Integer", dict(start=start, min=v.min, max=v.max)
+        tag, attrs = "Float64", dict(start=start, unit=v.unit, derivative=derivative)
+    elif v.type == "Real":
+        tag, attrs = "Real", dict(unit=v.unit, derivative=v.derivative_of, start=start)
+    elif v.type in ("Enumeration", "Boolean"):
+        tag, attrs = v.type, dict(declaredType=v.declared_type, start=start)
+    else:
+        tag, attrs = "Int32" if fmi3 else "Integer", dict(start=start, min=v.min, max=v.max)
+    if fmi3:
+        return f"    <{tag}{head}{xml_attrs(clocks=' '.join(map(str, v.clocks)) or None, **attrs)}/>"
+    return f"    <ScalarVariable{head}><{tag}{xml_attrs(**attrs)}/></ScalarVariable>"
 
 
 def _document(d: Description, version: int, interfaces: list[str], types: list[str], variables: list[str],
@@ -175,12 +177,7 @@ def fmi2(d: Description) -> str:
              *[f'    <SimpleType{xml_attrs(name=n)}><Enumeration>{_items(items)}</Enumeration></SimpleType>'
                for n, items in d.enumerations.items()],
              "  </TypeDefinitions>"] if d.enumerations else []
-    variables = []
-    for v in d.variables:
-        head = xml_attrs(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
-                         variability=v.variability, initial=v.initial)
-        tag, attrs = _typed(v, fmi3=False)
-        variables.append(f"    <ScalarVariable{head}><{tag}{xml_attrs(**attrs)}/></ScalarVariable>")
+    variables = [_variable(v, fmi3=False) for v in d.variables]
     structure = []
     for tag, entries in (("Outputs", d.outputs), ("Derivatives", d.derivatives),
                          ("InitialUnknowns", sorted(d.initial_unknowns, key=lambda u: u.index))):
@@ -203,15 +200,8 @@ def fmi3(d: Description) -> str:
         interfaces.append(f"  <ScheduledExecution{xml_attrs(**se)}/>")
     types = "".join(f"<EnumerationType{xml_attrs(name=n)}>{_items(items)}</EnumerationType>"
                     for n, items in d.enumerations.items())
-    variables = []
     # FMI 3.0 wants the independent variable first; value references stay those of the layout
-    for v in sorted(d.variables, key=lambda v: v.causality != "independent"):
-        a = dict(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
-                 variability=v.variability, initial=v.initial)
-        if v.clocks:
-            a["clocks"] = " ".join(str(k) for k in v.clocks)
-        tag, attrs = ("Clock", v.clock or {}) if v.type == "Clock" else _typed(v, fmi3=True)
-        variables.append(f"    <{tag}{xml_attrs(**a, **attrs)}/>")
+    variables = [_variable(v, fmi3=True) for v in sorted(d.variables, key=lambda v: v.causality != "independent")]
     structure = [_unknown("Output", u, "valueReference", 1, 4) for u in d.outputs]
     structure += [_unknown("ContinuousStateDerivative", u, "valueReference", 1, 4) for u in d.derivatives]
     structure += [_unknown("InitialUnknown", Unknown(u.index, u.deps, None), "valueReference", 1, 4)

@@ -1,10 +1,6 @@
-"""Compile and pack an FMU (plant, estimator or signal) from generated C code, one of the model
-cores and the shared FMI wrappers of ``c/`` (the developer guide lists them).
-
-The sources are compiled into the FMU's library and shipped in ``sources/`` so that another
-platform can rebuild it; the GUID is a hash of the model's fingerprint and of every source,
-so equal FMUs get equal GUIDs; the ``.fmu`` is written beside its target and renamed atomically.
-"""
+"""Compile and pack an FMU (plant, estimator or signal) from generated C code, one of the model cores
+and the shared FMI wrappers of ``c/``, its sources shipped in ``sources/``; the GUID is a hash of the
+model's fingerprint and of every source, so equal FMUs get equal GUIDs."""
 from __future__ import annotations
 
 import contextlib
@@ -85,18 +81,6 @@ def _build_description(identifier: str, c_files: list[str]) -> str:
             "</fmiBuildDescription>\n")
 
 
-def _output_folder(out_dir) -> Path:
-    """``out_dir`` as a folder that exists (created if missing)."""
-    out_dir = Path(out_dir)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
-                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
-                                 ) from None
-    return out_dir
-
-
 def _write_sources(src: Path, core: str, fmi_version: int, write_generated: Callable[[Path, str], list[str]],
                    identity: str) -> tuple[str, list[str]]:
     """Write the FMU's sources into ``src``; returns the GUID (a hash of ``identity`` and of every
@@ -121,9 +105,8 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
 
     Parameters
     ----------
-    identifier, core : str
-        The model identifier (library name, a C identifier); the model core (plant, filter, signal).
-    fmi_version : {2, 3}
+    identifier, core, fmi_version : str, str, {2, 3}
+        The model identifier (library name, a C identifier); the model core (plant, filter, signal); the FMI version.
     write_generated, model_description : callable
         ``write_generated(folder, guid) -> [generated C files to compile]`` writes ``model_config.h``
         and the generated code into ``folder``; ``model_description(guid, c_files) -> XML text``.
@@ -134,17 +117,21 @@ def pack_fmu(identifier: str, core: str, fmi_version: int, write_generated: Call
 
     Raises
     ------
-    CompilerNotFoundError
-        No C compiler.
-    BuildError
-        The compiler failed (its output is in the message).
+    CompilerNotFoundError, BuildError
+        No C compiler; the compiler failed (its output is in the message).
     """
     if fmi_version not in FMI_VERSIONS:
         raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
     if core not in CORES:
         raise ConfigurationError(f"core must be one of {CORES}, got {core!r}")
     cc = find_compiler()
-    out_dir = _output_folder(out_dir)
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigurationError(f"cannot create the output folder {out_dir}: "
+                                 f"{'a file is in the way' if isinstance(e, FileExistsError) else e.strerror or e}"
+                                 ) from None
     with private_tempdir(f"{identifier}_") as tmp:
         tmp = Path(tmp)
         src = tmp / "sources"

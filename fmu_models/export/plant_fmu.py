@@ -65,19 +65,15 @@ def plant_variables(model: PlantModel) -> VariableList:
     return v
 
 
-def _functions(model: PlantModel) -> list[ca.Function]:
-    """The four functions the plant core calls, with dense outputs (column-major arrays in C)."""
-    s = model.sym
-    x, u, p = s.x, s.u, s.p
-    d = ca.densify
-    return [ca.Function("mdl_f", [x, u, p], [d(s.xdot)]),
-            ca.Function("mdl_h", [x, p], [d(s.y)]),
-            ca.Function("mdl_jac_f", [x, u, p], [d(ca.jacobian(s.xdot, x)), d(ca.jacobian(s.xdot, u))]),
-            ca.Function("mdl_jac_h", [x, p], [d(ca.jacobian(s.y, x))])]
-
-
 def _write_sources(model: PlantModel, variables: VariableList, folder: Path, guid: str) -> list[str]:
-    funcs = _functions(model)
+    """``model_funcs.c``: the four functions the plant core calls, with dense outputs (column-major
+    arrays in C); and ``model_config.h``."""
+    s = model.sym
+    x, u, p, d = s.x, s.u, s.p, ca.densify
+    funcs = [ca.Function("mdl_f", [x, u, p], [d(s.xdot)]),
+             ca.Function("mdl_h", [x, p], [d(s.y)]),
+             ca.Function("mdl_jac_f", [x, u, p], [d(ca.jacobian(s.xdot, x)), d(ca.jacobian(s.xdot, u))]),
+             ca.Function("mdl_jac_h", [x, p], [d(ca.jacobian(s.y, x))])]
     cg = ca.CodeGenerator("model_funcs.c", {"with_header": True})
     for f in funcs:
         cg.add(f)
@@ -90,20 +86,14 @@ def _write_sources(model: PlantModel, variables: VariableList, folder: Path, gui
     return ["model_funcs.c"]
 
 
-def _dependency_kind(entry: ca.SX, model: PlantModel) -> str:
-    """FMI 2.0 dependenciesKind of one Jacobian entry."""
-    s = model.sym
-    if ca.depends_on(entry, ca.vertcat(s.x, s.u)):
-        return "dependent"
-    return "fixed" if ca.depends_on(entry, s.p) else "constant"
-
-
 def _dependencies(model: PlantModel, J: ca.SX, row: int, known: list[int]) -> tuple[list[int], list[str]]:
-    deps, kinds = [], []
+    """The indices ``known`` that row ``row`` of ``J`` depends on, and the FMI 2.0 dependenciesKind of each."""
+    s, deps, kinds = model.sym, [], []
     for col, k in enumerate(known):
-        if J.sparsity().has_nz(row, col) and not J[row, col].is_zero():
+        if J.sparsity().has_nz(row, col) and not (e := J[row, col]).is_zero():
             deps.append(k)
-            kinds.append(_dependency_kind(J[row, col], model))
+            kinds.append("dependent" if ca.depends_on(e, ca.vertcat(s.x, s.u))
+                         else "fixed" if ca.depends_on(e, s.p) else "constant")
     return deps, kinds
 
 
@@ -134,17 +124,14 @@ def build_fmu(model: PlantModel | str, out_dir: str | Path = ".", fmi_version: i
     ----------
     model : PlantModel or str
         The model (its current parameter values become the FMU's start values) or its name.
-    out_dir : path
-        Directory to write ``<fmu_name>.fmu`` into (created if missing).
-    fmi_version : int
-        2 or 3; either way Model Exchange and Co-Simulation in one FMU.
+    out_dir, fmi_version : path, int
+        Directory to write ``<fmu_name>.fmu`` into (created if missing); 2 or 3, either way Model
+        Exchange and Co-Simulation in one FMU.
 
     Raises
     ------
-    CompilerNotFoundError
-        No C compiler is available.
-    BuildError
-        The compiler failed (its output is in the message).
+    CompilerNotFoundError, BuildError
+        No C compiler is available; the compiler failed (its output is in the message).
     """
     if isinstance(model, str):
         model = get_model(model)

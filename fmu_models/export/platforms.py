@@ -1,7 +1,6 @@
-"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources
-with zig's clang (the ``cross`` extra) and checked with lief; the layout per FMI version, the
-flags and the checks are on the user guide's page "Taking the estimator to another tool".
-"""
+"""Binaries for other platforms, cross-compiled on one Linux machine from the FMU's own C sources with
+zig's clang (the ``cross`` extra) and checked with lief (layout, flags and checks: the user guide's page
+"Taking the estimator to another tool")."""
 from __future__ import annotations
 
 import functools
@@ -47,6 +46,9 @@ class _Target:
     fmt: str
     arch: str
 
+    def folder(self, fmi_version: int) -> str | None:
+        return self.fmi2 if fmi_version == 2 else self.fmi3
+
 
 _LINUX = ("-fPIC", "-s", "-lm")
 _TARGETS = {
@@ -70,8 +72,8 @@ _SYSTEM_LIBRARIES = {
 
 
 def parse_platforms(text: str | Sequence[str] | None) -> tuple[str, ...]:
-    """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of
-    names), checked; ``()`` for None.
+    """The platforms named by ``text`` (``--platforms``: ``"linux64,win64"``, or a sequence of names),
+    checked; ``()`` for None.
 
     Raises
     ------
@@ -111,12 +113,10 @@ class BinaryCheck:
 
     Attributes
     ----------
-    format, architectures : str, tuple of str
-        ``ELF``, ``PE`` or ``MachO``; ``x86_64`` / ``aarch64`` (two for a universal Mach-O file).
-    exports, libraries : frozenset of str, tuple of str
-        The exported function names (Mach-O's leading underscore removed); the imported libraries.
-    problems : tuple of str
-        Empty when the binary is what an FMU of this FMI version needs.
+    format, architectures, exports, libraries, problems
+        ``ELF``, ``PE`` or ``MachO``; ``x86_64`` / ``aarch64`` (two for a universal Mach-O file); the
+        exported function names (Mach-O's leading underscore removed); the imported libraries; what is
+        wrong (empty when the binary is what an FMU of this FMI version needs).
     """
 
     format: str
@@ -170,19 +170,17 @@ def check_binary(path: Path, fmi_version: int, fmt: str, architectures: Sequence
             problems.append(f"{path.name}: a {kind} file, expected {fmt}")
             continue
         if kind == "ELF":
-            archs.append(_arch_name(b.header.machine_type))
-            names = {s.name for s in b.exported_symbols if s.is_function}
+            arch, names = b.header.machine_type, {s.name for s in b.exported_symbols if s.is_function}
             libs = list(b.libraries)
         elif kind == "PE":
-            archs.append(_arch_name(b.header.machine))
-            names = {e.name for e in b.get_export().entries} if b.has_exports else set()
+            arch, names = b.header.machine, {e.name for e in b.get_export().entries} if b.has_exports else set()
             libs = [i.name for i in b.imports]
         else:
-            archs.append(_arch_name(b.header.cpu_type))
-            names = {s.name[1:] if s.name.startswith("_") else s.name for s in b.exported_symbols} - _MACHO_LINKER
+            arch, names = b.header.cpu_type, {s.name.removeprefix("_") for s in b.exported_symbols} - _MACHO_LINKER
             libs = [lib.name for lib in b.libraries if lib.command != lief.MachO.LoadCommand.TYPE.ID_DYLIB]
-            if archs[-1] == "aarch64" and not b.has_code_signature:
-                problems.append(f"{path.name} (aarch64): no code signature (macOS refuses to load it)")
+        archs.append(_arch_name(arch))
+        if kind == "MachO" and archs[-1] == "aarch64" and not b.has_code_signature:
+            problems.append(f"{path.name} (aarch64): no code signature (macOS refuses to load it)")
         exports |= names
         libraries += [lib for lib in libs if lib not in libraries]
     if sorted(archs) != sorted(architectures):
@@ -221,25 +219,6 @@ def _universal(slices: Sequence[tuple[Path, str]], out: Path) -> None:
         for off, data in blobs:
             o.seek(off)
             o.write(data)
-
-
-def _source_files(z: zipfile.ZipFile, md: ET.Element, fmi_version: int, where: str) -> list[str]:
-    if fmi_version == 2:
-        names = [f.get("name") for f in md.iter("File") if f.get("name")]
-    else:
-        try:
-            build = ET.fromstring(z.read("sources/buildDescription.xml"))
-        except KeyError:
-            raise FMUError(f"{where}: no sources/buildDescription.xml (an FMI 3.0 FMU lists its C sources there)"
-                           ) from None
-        names = [f.get("name") for f in build.iter("SourceFile") if f.get("name")]
-    names = list(dict.fromkeys(names))
-    if not names:
-        raise FMUError(f"{where}: lists no C source files; it cannot be rebuilt for another platform")
-    for n in names:
-        if f"sources/{n}" not in z.namelist() or "/" in n or "\\" in n or n.startswith("."):
-            raise FMUError(f"{where}: source file {n!r} is not in its sources/ folder")
-    return names
 
 
 def _compile(target: _Target, src: Path, c_files: list[str], identifier: str, out: Path,
@@ -296,12 +275,10 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
 
     Raises
     ------
-    CompilerNotFoundError
-        The ``cross`` extra is not installed (the message says what to install).
+    CompilerNotFoundError, BuildError
+        The ``cross`` extra is not installed (the message says what to install); the cross-compiler failed.
     FMUError
         The FMU has no (complete) sources, or a built binary fails its check.
-    BuildError
-        The cross-compiler failed (its output in the message).
     """
     fmu = Path(fmu)
     platforms = parse_platforms(platforms)
@@ -315,7 +292,7 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
         notes, jobs, present = [], [], set(z.namelist())
         for plat in platforms:
             targets = _TARGETS[plat]
-            folders = {_folder(t, fmi_version) for t in targets}
+            folders = {t.folder(fmi_version) for t in targets}
             if None in folders:
                 notes.append(f"{fmu.name}: FMI 2.0 defines no binaries folder for {plat}; build an FMI 3.0 FMU "
                              "(--fmi-version 3) for it")
@@ -335,10 +312,6 @@ def add_platforms(fmu: Path, platforms: Sequence[str]) -> list[str]:
     return notes
 
 
-def _folder(t: _Target, fmi_version: int) -> str | None:
-    return t.fmi2 if fmi_version == 2 else t.fmi3
-
-
 def _read_fmu(z: zipfile.ZipFile, where: str, src: Path) -> tuple[int, list[str], list[str]]:
     """The FMI version, model identifiers and C files of the FMU ``z``, its sources extracted to ``src``."""
     try:
@@ -349,7 +322,21 @@ def _read_fmu(z: zipfile.ZipFile, where: str, src: Path) -> tuple[int, list[str]
     identifiers = sorted({e.get("modelIdentifier") for e in md if e.get("modelIdentifier")})
     if not identifiers:
         raise FMUError(f"{where}: its modelDescription.xml names no modelIdentifier")
-    c_files = _source_files(z, md, fmi_version, where)
+    if fmi_version == 2:
+        c_files = [f.get("name") for f in md.iter("File") if f.get("name")]
+    else:
+        try:
+            build = ET.fromstring(z.read("sources/buildDescription.xml"))
+        except KeyError:
+            raise FMUError(f"{where}: no sources/buildDescription.xml (an FMI 3.0 FMU lists its C sources there)"
+                           ) from None
+        c_files = [f.get("name") for f in build.iter("SourceFile") if f.get("name")]
+    c_files = list(dict.fromkeys(c_files))
+    if not c_files:
+        raise FMUError(f"{where}: lists no C source files; it cannot be rebuilt for another platform")
+    for n in c_files:
+        if f"sources/{n}" not in z.namelist() or "/" in n or "\\" in n or n.startswith("."):
+            raise FMUError(f"{where}: source file {n!r} is not in its sources/ folder")
     src.mkdir()
     for name in z.namelist():
         if name.startswith("sources/") and not name.endswith("/") and "/" not in name[len("sources/"):]:
@@ -375,5 +362,5 @@ def _binaries(jobs: list[tuple], fmi_version: int, tmp: Path, c_files: list[str]
             check = check_binary(lib, fmi_version, t.fmt, archs)
             if check.problems:
                 raise FMUError(f"the {plat} binary of {where} fails its check: " + "; ".join(check.problems))
-            added[f"binaries/{_folder(t, fmi_version)}/{ident}{t.suffix}"] = lib
+            added[f"binaries/{t.folder(fmi_version)}/{ident}{t.suffix}"] = lib
     return added

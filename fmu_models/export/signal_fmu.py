@@ -1,11 +1,6 @@
-"""Signal FMUs: the sources, the process noise and the noisy sensor as native Co-Simulation
-FMUs (FMI 2.0 or 3.0), packed by :func:`fmu_models.export.pack.pack_fmu` with ``c/signal_core.c``.
-
-A :class:`SignalSpec` describes one FMU (kind, channels, parameters with the component's
-values as defaults); the kinds are the registry :data:`SIGNAL_KINDS` (their variables are
-listed in the guide's page "Taking the estimator to another tool"); noise is drawn at sample
-``round(t / period)`` (:mod:`cosim.components.noise`).
-"""
+"""Signal FMUs: the sources, the process noise and the noisy sensor as native Co-Simulation FMUs
+(FMI 2.0 or 3.0) with ``c/signal_core.c``. One per :class:`SignalSpec`, of the kinds :data:`SIGNAL_KINDS`
+(their variables: the user guide's page "Taking the estimator to another tool")."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -27,6 +22,8 @@ __all__ = ["KINDS", "SIGNAL_KINDS", "SignalKind", "SignalSpec", "build_signal_fm
 _INT32_MAX = 2**31 - 1
 #: ``SIGNAL_KIND`` of a kind defined by its C expression (``signal_custom.h``).
 KIND_CUSTOM = 99
+#: The per-channel parameter blocks of a kind, each ``n`` parameters after ``period``.
+_BLOCKS = {"noise": ("SIG_STD",), "sensor": ("SIG_STD", "SIG_BIAS", "SIG_QUANT")}
 
 
 @dataclass(frozen=True)
@@ -38,9 +35,8 @@ class SignalKind:
     name, code : str, int
         The name and ``SIGNAL_KIND`` in ``signal_core.c`` (:data:`KIND_CUSTOM` for a C expression).
     c_output : str
-        For a custom kind: the C expression of output channel ``j`` at time ``t``, from the Real
-        parameters ``p[P_<NAME>]``, the Integer parameters ``d->ip[IP_<NAME>]`` and the inputs
-        ``d->in[j]`` (``<math.h>`` is available).
+        For a custom kind: the C expression of output channel ``j`` at time ``t`` from ``p[P_<NAME>]``
+        (Real parameters), ``d->ip[IP_<NAME>]`` (Integer ones), ``d->in[j]`` (inputs) and ``<math.h>``.
     inputs : bool
         The kind has one input per output channel (a sensor).
     """
@@ -76,16 +72,13 @@ class SignalSpec:
 
     Attributes
     ----------
-    kind, description : str
-        A registered kind (:data:`SIGNAL_KINDS`); the FMU's description.
-    period : float
-        Sample period [s] (the FMU's default communication step and the noise's sample).
+    kind, description, period : str, str, float
+        A registered kind (:data:`SIGNAL_KINDS`); the FMU's description; the sample period [s] (the FMU's
+        default communication step and the noise's sample).
     outputs, inputs : list of str
         One name per channel; inputs only for a kind with inputs (the sensor's measured signals).
-    reals : list of (name, value, domain, description)
-        Real parameters after ``period``, in the order ``signal_core.c`` reads them.
-    ints : list of (name, value, min, max, description)
-        Integer parameters.
+    reals, ints : list of (name, value, domain, description), list of (name, value, min, max, description)
+        Real parameters after ``period``, in the order ``signal_core.c`` reads them; Integer parameters.
     """
 
     kind: str
@@ -134,11 +127,7 @@ def _write_sources(spec: SignalSpec, kind: SignalKind, variables: VariableList, 
                    guid: str) -> list[str]:
     """``model_config.h`` (with the noise's and sensor's per-channel parameter blocks) and ``signal_custom.h``."""
     n = len(spec.outputs)
-    defines = [("SIGNAL_KIND", kind.code)]
-    if spec.kind in ("noise", "sensor"):
-        defines.append(("SIG_STD", 1))
-        if spec.kind == "sensor":
-            defines += [("SIG_BIAS", 1 + n), ("SIG_QUANT", 1 + 2 * n)]
+    defines = [("SIGNAL_KIND", kind.code)] + [(b, 1 + k * n) for k, b in enumerate(_BLOCKS.get(spec.kind, ()))]
     (folder / "model_config.h").write_text(config_header(variables, identifier, guid, "fmu_models.export.signal_fmu",
                                                          groups=("IN", "OUT", "TIME"),
                                                          defines=defines + clock_defines(variables, spec.period)))
@@ -152,10 +141,7 @@ def _write_sources(spec: SignalSpec, kind: SignalKind, variables: VariableList, 
 
 def _description(spec: SignalSpec, kind: SignalKind, variables: VariableList, identifier: str, guid: str,
                  c_files: list[str], clocked: bool) -> Description:
-    in_idx = variables.indices(["IN"])
-    p_idx = variables.indices(["P", "IP"])
-    outs = variables.indices(["OUT"])
-    clk = variables.indices(["CLOCK"])
+    in_idx, p_idx, outs, clk = (variables.indices(g) for g in (["IN"], ["P", "IP"], ["OUT"], ["CLOCK"]))
     # channel j depends on input j only (if the kind has inputs), and on the clock
     deps = [[i] + clk for i in in_idx] if kind.inputs else [clk] * len(outs)
     o_unknowns = [Unknown(o, dep, ["dependent"] * len(dep) if dep else None) for o, dep in zip(outs, deps, strict=True)]
@@ -173,6 +159,7 @@ def build_signal_fmu(spec: SignalSpec, out_dir, fmi_version: int = 2, identifier
     Parameters
     ----------
     spec, out_dir, fmi_version : SignalSpec, path, {2, 3}
+        The FMU, the folder to write it into, the FMI version.
     identifier, file_name : str
         Model identifier (a C identifier); FMU file name (default ``<identifier>.fmu``).
     clocked : bool
@@ -205,9 +192,7 @@ def channel_params(prefix: str, names: Sequence[str], values, domain: str, what:
     ----------
     prefix, names, values
         Name prefix (``std``, ``bias``, ...), channel names and one value per channel.
-    domain
-        Domain of every value (:data:`fmu_models.variables.DOMAINS`).
-    what
-        What the values are, for the descriptions.
+    domain, what
+        Domain of every value (:data:`fmu_models.variables.DOMAINS`); what the values are, for the descriptions.
     """
     return [(f"{prefix}_{n}", float(v), domain, f"{what} of {n}") for n, v in zip(names, values, strict=True)]

@@ -1,9 +1,6 @@
-"""The variables of an FMU the project writes: one list feeds both the ``modelDescription.xml``
-(:mod:`fmu_models.export.description`) and the C core's ``model_config.h``
-(:mod:`fmu_models.export.config`), in which each *group* of consecutive value references
-(``"P"`` the Real parameters, ``"X"`` the states, ...) becomes ``VR_<group>`` (its first value
-reference) and ``N_<group>`` (its size).
-"""
+"""The variables of an FMU the project writes, the one list behind its ``modelDescription.xml`` and its
+``model_config.h``, where each *group* of consecutive value references (``"P"`` the Real parameters, ...)
+becomes ``VR_<group>`` (its first value reference) and ``N_<group>`` (its size)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -24,18 +21,13 @@ class FmuVariable:
         FMI 2.0 type name (FMI 3.0: Float64, Int32, Enumeration, Boolean; Clock: FMI 3.0 only).
     causality, variability, initial, start, unit, description
         As the FMI standard (None: not written).
-    group : str
-        The value-reference group of the C core (see the module documentation).
-    domain : str
-        Admissible values of a Real parameter (:data:`fmu_models.variables.DOMAINS`).
-    derivative_of : int, optional
-        1-based index of the state this variable is the derivative of.
-    declared_type, min, max : optional
-        The type of an Enumeration; the range of an Integer or Enumeration.
-    clocks : tuple of int
-        Value references of the clocks of a clocked variable (empty: not clocked).
-    clock : dict, optional
-        A Clock's attributes (``intervalVariability``, ``intervalDecimal`` [s], ``priority``, ...).
+    group, domain : str
+        The value-reference group of the C core; the admissible values of a Real parameter
+        (:data:`~fmu_models.variables.DOMAINS`).
+    derivative_of, declared_type, min, max : optional
+        1-based index of the state it is the derivative of; the type of an Enumeration; an Integer's range.
+    clocks, clock : tuple of int, dict
+        Value references of its clocks (empty: not clocked); a Clock's attributes (``intervalDecimal`` [s], ...).
     """
 
     name: str

@@ -1,11 +1,6 @@
-"""The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under
-concurrency and damage.
-
-Entries are named by a hash of everything that went into them, written privately, checked,
-renamed into place and marked complete by a ``.sha256`` sidecar written last; a damaged entry
-is rebuilt, never deleted (another process may be loading it); an unwritable cache is reported
-once and the callers fall back (to CasADi's virtual machine, or to building without caching).
-"""
+"""The on-disk cache of compiled code (filters' native steps, FMU binaries), safe under concurrency and
+damage: entries named by a hash of all that went into them, renamed into place and marked complete by a
+``.sha256`` sidecar written last; a damaged entry is rebuilt, never deleted (another process may load it)."""
 from __future__ import annotations
 
 import contextlib
@@ -67,16 +62,15 @@ def _state(entry: Path) -> bool | None:
         want = entry.with_name(entry.name + ".sha256").read_text().strip()
     except OSError:
         return None
-    try:
+    with contextlib.suppress(OSError):
         return want == file_digest(entry)
-    except OSError:
-        return False
+    return False
 
 
 def cached_file(entry: Path, build: Callable[[Path], None], check: Callable[[Path], None] | None = None) -> Path:
-    """The cache entry ``entry`` (a file in the cache folder), built by ``build(path)`` into a
-    private temporary path if it is absent or damaged, checked by ``check(path)`` (which raises
-    if the file is unusable), then renamed into place with its sidecar.
+    """The cache entry ``entry`` (a file in the cache folder), built by ``build(path)`` into a private
+    temporary path if it is absent or damaged, checked by ``check(path)`` (which raises if the file is
+    unusable), then renamed into place with its sidecar.
 
     Raises
     ------

@@ -1,18 +1,17 @@
-"""Validation of numbers, vectors and covariances, shared by models, filters and components.
-
-A value that cannot be a number raises :class:`TypeMismatchError`; a wrong shape or a
-non-finite entry (tested entry by entry: 1.5e308 passes) raises the ``error`` class the caller
-chose (:class:`InputError` for run-time data, :class:`ConfigurationError` for settings).
-"""
+"""Validation of numbers, vectors and covariances, shared by models, filters and components. A value that
+cannot be a number raises :class:`TypeMismatchError`; a wrong shape or a non-finite entry (1.5e308 passes)
+the ``error`` class the caller chose (:class:`InputError` for run-time data, :class:`ConfigurationError`)."""
 from __future__ import annotations
 
 import math
+from collections import Counter
+from collections.abc import Iterable
 
 import numpy as np
 
 from ..errors import ConfigurationError, InputError, TypeMismatchError
 
-__all__ = ["covariance", "finite", "float_array", "positive", "positive_int", "vector"]
+__all__ = ["check_unique", "covariance", "finite", "float_array", "positive", "positive_int", "vector"]
 
 
 def _describe(value) -> str:
@@ -113,3 +112,11 @@ def positive_int(value, what: str, error: type[Exception] = ConfigurationError,
     if not (math.isfinite(v) and v == int(v) and v >= minimum):
         raise error(f"{what} must be an integer >= {minimum}, got {value!r}")
     return int(v)
+
+
+def check_unique(names: Iterable[str], what: str) -> None:
+    """Refuse (ConfigurationError) repeated ``names``: the message is ``what`` then the repeated
+    names, sorted (``check_unique(names, "duplicate component names:")``)."""
+    dup = sorted(n for n, k in Counter(names).items() if k > 1)
+    if dup:
+        raise ConfigurationError(f"{what} {dup}")

@@ -1,6 +1,5 @@
-"""The one error handler of the project's command lines (``pendulum-cosim`` and ``python -m
-fmu_models``): what an error, Ctrl-C or SIGTERM becomes on the terminal and in the exit status.
-"""
+"""The one error handler of the project's command lines (``pendulum-cosim`` and ``python -m fmu_models``):
+what an error, Ctrl-C or SIGTERM becomes on the terminal and in the exit status."""
 from __future__ import annotations
 
 import sys
@@ -17,33 +16,18 @@ __all__ = ["EXIT_ERROR", "EXIT_INTERRUPTED", "KNOWN_ERRORS", "one_line", "run_co
 EXIT_ERROR, EXIT_INTERRUPTED = 2, 130
 
 
-def _known_errors() -> tuple[type[BaseException], ...]:
-    errors: tuple[type[BaseException], ...] = (PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError)
-    try:
-        from lxml.etree import XMLSyntaxError  # optional here: fmpy reads XML with it
-    except ImportError:
-        return errors
-    return (*errors, XMLSyntaxError)
-
-
+try:
+    from lxml.etree import XMLSyntaxError  # optional here: fmpy reads XML with it
+    _XML_ERRORS: tuple[type[BaseException], ...] = (XMLSyntaxError,)
+except ImportError:
+    _XML_ERRORS = ()
 #: The exceptions printed as one line (the project's family, bad zip and XML, OS errors).
-KNOWN_ERRORS = _known_errors()
+KNOWN_ERRORS = (PendulumCosimError, zipfile.BadZipFile, OSError, UnicodeDecodeError, *_XML_ERRORS)
 
 
 def one_line(error: BaseException) -> str:
     """The message of ``error`` on one line (its type name if it has none)."""
     return " ".join(str(error).split()) or type(error).__name__
-
-
-def _failure(e: BaseException, interrupted: str) -> tuple[str | None, int]:
-    """The line printed for the failure ``e`` and the exit status (None: not one the command
-    line reports, it goes on)."""
-    if isinstance(e, (KeyboardInterrupt, SystemError)):      # a native extension may wrap Ctrl-C
-        wrapped = isinstance(e, KeyboardInterrupt) or isinstance(e.__cause__ or e.__context__, KeyboardInterrupt)
-        return (interrupted if wrapped else None), EXIT_INTERRUPTED
-    if isinstance(e, Interrupted):
-        return f"interrupted: {one_line(e)}", EXIT_INTERRUPTED
-    return f"error: {one_line(e)}", EXIT_ERROR
 
 
 def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callable[[], None] | None = None,
@@ -59,10 +43,10 @@ def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callab
     Parameters
     ----------
     command, cleanup
-        The work of the command line, returning its exit status (0 on success); what is called
-        on every failure before the message is printed.
+        The work of the command line, returning its exit status (0 on success); what is called on
+        every failure before the message is printed.
     debug, interrupted
-        Let errors through with their traceback instead of one line; the line printed for Ctrl-C or SIGTERM.
+        Let errors through with their traceback; the line printed for Ctrl-C or SIGTERM.
     """
     try:
         with terminate_as_interrupt(), warnings.catch_warnings():
@@ -70,8 +54,14 @@ def run_command(command: Callable[[], int], debug: bool = False, cleanup: Callab
             warnings.showwarning = _show_warning
             return command()
     except (KeyboardInterrupt, SystemError, *KNOWN_ERRORS) as e:
-        line, status = _failure(e, interrupted)
-        if line is None or debug:
+        line, status = f"error: {one_line(e)}", EXIT_ERROR
+        if isinstance(e, (KeyboardInterrupt, SystemError)):      # a native extension may wrap Ctrl-C
+            if not isinstance(e, KeyboardInterrupt) and not isinstance(e.__cause__ or e.__context__, KeyboardInterrupt):
+                raise
+            line, status = interrupted, EXIT_INTERRUPTED
+        elif isinstance(e, Interrupted):
+            line, status = f"interrupted: {one_line(e)}", EXIT_INTERRUPTED
+        if debug:
             raise
         if cleanup is not None:
             cleanup()

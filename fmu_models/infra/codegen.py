@@ -1,17 +1,5 @@
-"""CasADi's generated C, with its ``fmin`` and ``fmax`` helpers inlined.
-
-CasADi's code generator writes ``casadi_fmin`` and ``casadi_fmax`` as external functions that
-call the C library's ``fmin`` and ``fmax``: every use is two calls, one of them through the
-library's procedure linkage table, and the MF-IAE filter's step makes over two hundred of
-them (its fuzzy system's centroid). :func:`inline_min_max` rewrites both helpers as static
-inline functions of the same values: the C99 rules (F.10.9.2) for a NaN (the other argument
-is returned; NaN if both are), and, for equal arguments (``-0.0`` and ``+0.0``), the first,
-as glibc's ``fmin``/``fmax`` and CasADi's own evaluation return it, so that the compiled
-code and CasADi's virtual machine keep giving the same bits (tests/test_codegen.py checks
-it on the special values). A signalling NaN comes back as itself rather than quietened.
-Written as ``y < x ? y : x`` (``>`` for fmax), the comparison is one x86-64 ``minsd``
-(``maxsd``) instruction, with one well-predicted test for a NaN ``x``; the performance page
-of the manual gives what it saves.
+"""CasADi's generated C with its ``fmin`` and ``fmax`` helpers inlined, bit for bit as the C library
+computes them (why and how: the user guide's page "Plant FMUs", section "What is inside").
 """
 from __future__ import annotations
 
@@ -41,17 +29,11 @@ def inline_min_max(code: str) -> str:
     Parameters
     ----------
     code : str
-        The text of a C file written by ``casadi.CodeGenerator``.
-
-    Returns
-    -------
-    str
-        The same text, each helper that is present replaced (one that is absent: nothing).
+        The text of a C file written by ``casadi.CodeGenerator``; each helper that is present is replaced.
     """
     return _HELPER.sub(_inline, code)
 
 
 def inline_min_max_file(path: Path) -> None:
     """Rewrite the generated C file ``path`` in place with :func:`inline_min_max`."""
-    text = path.read_text()
-    path.write_text(inline_min_max(text))
+    path.write_text(inline_min_max(path.read_text()))

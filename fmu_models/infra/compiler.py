@@ -54,15 +54,11 @@ def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, t
 
     Parameters
     ----------
-    cmd, what
-        The compiler and its arguments; what it builds (for messages).
-    cwd
-        Working directory (default: the current one).
-    timeout
-        Longest time [s] the compiler may take.
-    cancel
-        An event another thread sets to end the compiler (the main thread on Ctrl-C while
-        compilers run in worker threads); then BuildError ("cancelled").
+    cmd, what, cwd
+        The compiler and its arguments; what it builds (for messages); working directory (default: the current one).
+    timeout, cancel
+        Longest time [s] the compiler may take; an event another thread sets to end the compiler (the main
+        thread on Ctrl-C while compilers run in worker threads), which then raises BuildError ("cancelled").
 
     Raises
     ------
@@ -80,8 +76,7 @@ def run_compiler(cmd: Sequence[str], what: str, cwd: str | Path | None = None, t
         try:
             while True:
                 try:
-                    out, _ = proc.communicate(timeout=min(0.2, max(deadline - time.monotonic(), 0.0))
-                                              if cancel is not None else timeout)
+                    out, _ = proc.communicate(timeout=min(0.2, max(deadline - time.monotonic(), 0.0)))
                     break
                 except subprocess.TimeoutExpired:
                     if time.monotonic() >= deadline:

@@ -1,7 +1,5 @@
-"""Files written whole or not at all (every file the project writes where a user may look:
-at every instant the target is absent, the old file or the new one), and private temporary
-folders removed whatever happens.
-"""
+"""Files written whole or not at all (at every instant the target is absent, the old file or the new one),
+and private temporary folders removed whatever happens."""
 from __future__ import annotations
 
 import contextlib
@@ -23,10 +21,8 @@ def temp_beside(dst: Path) -> tuple[int, str]:
     would, since it is renamed into place."""
     for _ in range(100):
         tmp = str(dst.parent / f".{dst.name}.{secrets.token_hex(6)}.tmp")
-        try:
+        with contextlib.suppress(FileExistsError):
             return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), tmp
-        except FileExistsError:
-            continue
     raise FileExistsError(f"no free temporary name beside {dst}")
 
 

@@ -1,7 +1,5 @@
-"""Signals: SIGTERM handled as Ctrl-C by the command lines, so that a killed build or run
-cleans up (temporary folders, compiler processes, partial outputs) through the same
-``finally`` blocks as an interrupted one; and Ctrl-C/SIGTERM deferred over a few
-statements that must not be cut in two (:class:`~fmu_models.infra.interrupts.Deferred`)."""
+"""Signals: SIGTERM handled as Ctrl-C by the command lines, so that a killed build or run cleans up as an
+interrupted one; and Ctrl-C/SIGTERM deferred over statements that must not be cut in two."""
 from __future__ import annotations
 
 import contextlib

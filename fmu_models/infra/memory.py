@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+from pathlib import Path
 
 from ..errors import ResourceError
 
@@ -30,15 +31,12 @@ def _process_limits() -> list[int]:
 
         soft = resource.getrlimit(resource.RLIMIT_AS)[0]
         if soft != resource.RLIM_INFINITY:
-            with open("/proc/self/statm") as f:
-                mapped = int(f.read().split()[0]) * resource.getpagesize()
+            mapped = int(Path("/proc/self/statm").read_text().split()[0]) * resource.getpagesize()
             out.append(max(soft - mapped, 0))
     with contextlib.suppress(OSError, ValueError):
-        with open("/sys/fs/cgroup/memory.max") as f:
-            limit = f.read().strip()
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
         if limit != "max":
-            with open("/sys/fs/cgroup/memory.current") as f:
-                out.append(max(int(limit) - int(f.read()), 0))
+            out.append(max(int(limit) - int(Path("/sys/fs/cgroup/memory.current").read_text()), 0))
     return out
 
 

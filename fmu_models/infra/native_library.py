@@ -1,7 +1,5 @@
-"""A small C library of the project's own (the master's crash guard, ...), compiled once and kept
-in the compiled-code cache (:func:`~fmu_models.infra.cache.cached_file`: built privately, checked
-to load, renamed into place).
-"""
+"""A small C library of the project's own (the master's crash guard, ...), compiled once and kept in the
+compiled-code cache (:func:`~fmu_models.infra.cache.cached_file`)."""
 from __future__ import annotations
 
 import ctypes
@@ -24,20 +22,19 @@ def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, wh
 
     Parameters
     ----------
-    code, stem : str
-        The C source; the cache entry's name prefix.
+    code, stem, symbol : str
+        The C source; the cache entry's name prefix; a function the library must export (checked
+        before the entry is kept).
     flags, link : sequence of str
         Compiler flags (``-shared -fPIC`` among them); libraries to link after the source (``-lm``).
-    symbol : str
-        A function the library must export (checked before the entry is kept).
     what, fallback : str
         What the library is, and what happens without it, for messages.
 
     Returns
     -------
     (library or None, reason)
-        None, with the reason, where there is no C compiler, the cache cannot be written or
-        the build fails; a warning says so once per call.
+        None, with the reason (and a warning), where there is no C compiler, the cache cannot be
+        written or the build fails.
     """
     try:
         cc = find_compiler()
@@ -54,8 +51,7 @@ def compiled_library(code: str, stem: str, flags: Sequence[str], symbol: str, wh
 
         def check(p: Path) -> None:
             try:
-                if not hasattr(ctypes.CDLL(str(p)), symbol):
-                    raise AttributeError(f"no {symbol}")
+                getattr(ctypes.CDLL(str(p)), symbol)
             except (OSError, AttributeError) as e:
                 raise BuildError(f"{what}: the compiled library does not load: {e}") from None
 

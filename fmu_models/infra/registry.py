@@ -1,7 +1,5 @@
-"""Registries: the extension points of the project by name (models, filters, components,
-signal FMU kinds, experiments), filled where each thing is defined, and the loading of
-plugins that register more (the user guide's page "Extending it" lists them).
-"""
+"""Registries: the extension points of the project by name, filled where each thing is defined, and
+the loading of plugins that register more (the user guide's page "Extending it" lists them)."""
 from __future__ import annotations
 
 import functools
@@ -38,10 +36,9 @@ def load_plugin(spec: str, base_dir: str | Path | None = None):
 
     Parameters
     ----------
-    spec
-        A module name (``"my_package.filters"``) or the path of a ``.py`` file.
-    base_dir
-        The folder a relative .py path refers to (default: the working directory).
+    spec, base_dir
+        A module name (``"my_package.filters"``) or the path of a ``.py`` file; the folder a relative
+        ``.py`` path refers to (default: the working directory).
 
     Raises
     ------
@@ -51,9 +48,7 @@ def load_plugin(spec: str, base_dir: str | Path | None = None):
     if not isinstance(spec, str) or not spec:
         raise ConfigurationError(f"a plugin must be a module name or a .py file, got {spec!r}")
     if spec.endswith(".py"):
-        path = Path(spec)
-        if not path.is_absolute() and base_dir is not None:
-            path = Path(base_dir) / path
+        path = Path(base_dir or ".", spec)        # an absolute spec stays itself
         if not path.is_file():
             raise ConfigurationError(f"plugin file {path} does not exist")
         name = f"pendulum_cosim_plugin_{path.stem}_{abs(hash(str(path.resolve()))):x}"
@@ -90,10 +85,8 @@ class Registry(Generic[T]):
 
     def register(self, name: str, item: T | None = None, *, aliases: tuple[str, ...] = (),
                  replace: bool = False) -> T | Callable[[T], T]:
-        """Register ``item`` under ``name`` (and ``aliases``); without ``item``, a decorator.
-
-        Re-registering a name with another item is refused unless ``replace`` (the same
-        item again, as when a module is reloaded, is accepted).
+        """Register ``item`` under ``name`` (and ``aliases``); without ``item``, a decorator. Re-registering
+        a name with another item is refused unless ``replace`` (the same item again, as on a reload, is not).
 
         Raises
         ------

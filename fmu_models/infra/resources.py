@@ -1,7 +1,5 @@
-"""Files the package ships beside its code (the FMUs' C sources, the scenarios), found where
-the installed package is; a missing one (a broken installation) is a named error before
-anything is built from it.
-"""
+"""Files the package ships beside its code (the FMUs' C sources, the scenarios); a missing one (a broken
+installation) is a named error before anything is built from it."""
 from __future__ import annotations
 
 from importlib import resources
