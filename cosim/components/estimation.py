@@ -13,13 +13,13 @@ from estimators.filter_fmu import export_filter_fmu, filter_parameters
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import positive
 
-from ..core.component import Component, ExportedFMU
+from ..core.component import BoundCalls, Component, ExportedFMU
 from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_RECORD, OP_SUMMARY, Op
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
 
-class EstimatorComponent(Component, kind="estimator"):
+class EstimatorComponent(BoundCalls, Component, kind="estimator"):
     """Runs a filter of :mod:`estimators` at its model's sample period.
 
     Input ports: the model's inputs and outputs (the measurements). Output ports: the state
@@ -64,7 +64,7 @@ class EstimatorComponent(Component, kind="estimator"):
                          feedthrough={o: sys_.output_names for o in outputs})
         self.make_filter, self.filter = make_filter, probe
         self._nu, self._nx = sys_.nu, n
-        self._u_prev = None
+        self.connected_inputs = self.input_names
         self.estimated_states = list(sys_.state_names)
 
     def _upper(self, n: int) -> tuple:
@@ -227,19 +227,7 @@ class EstimatorComponent(Component, kind="estimator"):
         super().reset(t0)
         if self.filter.k:
             self.filter = self.make_filter()
-        self._u_prev = None
-
-    def output(self, t, u):
-        """The estimate at ``t``: the initial one, then ``step(u_prev, y)``."""
-        if self._u_prev is not None:
-            self.filter.step(self._u_prev, u[self._nu:])
-        out = np.empty(len(self.output_ports))
-        self.filter.bind_summary(out, self.covariance)()
-        return out
-
-    def update(self, t, u):
-        """Keep the input read at ``t`` for the next prediction."""
-        self._u_prev = np.array(u[: self._nu])
+        self._private = None
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """The filter as an estimator FMU (:func:`estimators.filter_fmu.export_filter_fmu`;

@@ -145,8 +145,7 @@ class Sensor(_Noisy, kind="sensor"):
                                        yb=self.noise_std.ctypes.data), (uidx, self.bias, self.noise_std)
 
     def output(self, t, u):
-        """The measurement at ``t``: the sample ``delay`` instants old (the first one until
-        that many exist)."""
+        """The sample ``delay`` instants old (the first one until that many exist)."""
         y = self._measure(t, u)                    # drawn at every instant, delayed or not
         return self._queue[0] if self.delay and self._queue else y
 
@@ -202,8 +201,9 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         w, V = np.linalg.eigh(c)
         if w.min() < -1e-12 * max(1.0, w.max()):
             raise ConfigurationError(f"{name}: cov is not positive semi-definite (eigenvalues {w})")
-        if np.count_nonzero(c - np.diag(np.diag(c))) == 0:
-            self.L = np.diag(np.sqrt(np.diag(c)))      # diagonal: channel i scales draw i
+        self._diagonal = not np.count_nonzero(c - np.diag(np.diag(c)))
+        if self._diagonal:
+            self.L = np.diag(np.sqrt(np.diag(c)))      # channel i scales draw i
         else:
             self.L = V * np.sqrt(np.clip(w, 0, None))  # L L^T = cov, also for singular cov
         self.cov = c
@@ -225,7 +225,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         d = np.diag(L).copy()
         # a diagonal L with d > 0: L v is d v exactly (each entry one non-zero product plus
         # exact zeros, in any order), except for the sign of a zero draw's entry
-        diagonal = not np.count_nonzero(L - np.diag(d)) and bool(np.all(d > 0))
+        diagonal = self._diagonal and bool(np.all(d > 0))
 
         def derive() -> None:
             block = noise.block
@@ -244,7 +244,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
         drawing from the counter generator (``clocked``: its clocked form, FMI 3.0); refused for a
         non-diagonal ``cov``."""
-        if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
+        if not self._diagonal:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "
                                      "off-diagonal entries")
         reals = channel_params("std", self.output_names, np.sqrt(np.diag(self.cov)), "nonnegative",
