@@ -13,6 +13,7 @@ from fmu_models.infra import checks
 
 from ._fold import NativeFold
 from .base import KalmanBase
+from .iae import project_pd
 from .runs import EMResult
 from .smoother import rts_smooth
 
@@ -20,17 +21,6 @@ __all__ = ["STRUCTURES", "EMResult", "em_noise"]
 
 STRUCTURES = ("full", "diagonal", "scalar")
 LEARNABLE = ("Q", "R", "x0", "P0")
-
-
-def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
-    """``M`` in ``structure``, symmetric with eigenvalues at least ``floor``."""
-    n = M.shape[0]
-    if structure == "scalar":
-        return max(float(np.trace(M)) / n, floor) * np.eye(n)
-    if structure == "diagonal":
-        return np.diag(np.maximum(np.diag(M), floor))
-    w, V = np.linalg.eigh(0.5 * (M + M.T))
-    return (V * np.maximum(w, floor)) @ V.T
 
 
 def _terms(filt: KalmanBase):
@@ -159,7 +149,7 @@ class _EM:
         if "x0" in self.learn:
             self.x0 = sm.x[0].copy()
         if "P0" in self.learn:
-            self.P0 = _project(sm.P[0], self.structure, self.floor)
+            self.P0 = project_pd(sm.P[0], self.floor, np.inf, self.structure)
 
     def _process_noise(self, xs, Ps, lag) -> np.ndarray:
         """The M-step's Q from the smoothed ``xs`` (N + 1, nx), ``Ps`` and ``lag`` (column-major rows)."""
@@ -167,7 +157,7 @@ class _EM:
         qt = np.empty((1, N, nx * nx))
         self.trans(1, N, {"xs": xs[:-1][None], "xs1": xs[1:][None], "Ps": Ps[:-1][None], "Ps1": Ps[1:][None],
                           "Plag": lag[None], "u": self.us[None]}, {}, {"q": qt})
-        return _project(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, self.structure, self.floor)
+        return project_pd(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, self.floor, np.inf, self.structure)
 
     def _measurement_noise(self, xs, Ps) -> np.ndarray:
         """The M-step's R (entries over the valid channels; the others keep their value)."""
@@ -178,4 +168,5 @@ class _EM:
                          "mask": self.m_all[None]}, {}, {"r": rt, "count": ct})
         counts = ct[0].sum(axis=0).reshape(ny, ny, order="F")
         total = rt[0].sum(axis=0).reshape(ny, ny, order="F")
-        return _project(np.where(counts > 0, total / np.maximum(counts, 1), self.R), self.structure, self.floor)
+        return project_pd(np.where(counts > 0, total / np.maximum(counts, 1), self.R), self.floor, np.inf,
+                          self.structure)

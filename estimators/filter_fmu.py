@@ -1,22 +1,13 @@
 """A configured filter as a native Co-Simulation FMU (FMI 2.0 or 3.0), no Python inside.
 
-:func:`export_filter_fmu` generates C code for the filter's compiled fused step (the very
-CasADi Function the filter's ``step`` runs, with only the outputs the FMU shows) and for a
-function mapping the FMU's parameters to the filter's initial state, and packs them with the
-estimator core (``c/filter_core.c``) and the project's FMI wrappers
-(:mod:`fmu_models.export.pack`), the machinery of the plant FMUs. It works on any filter of
-the protocol of :mod:`estimators.protocol`: the FMU's parameters are the filter's
-``fmu_parameters()``, its initial state ``fmu_initial(p)``.
-
-The manual's page "Taking the estimator to another tool" gives the FMU's variables, its
-timing (an update at each sample instant ``t0 + k period`` whatever the communication step,
-direct feedthrough at an instant) and the clocked form (``clocked=True``, FMI 3.0: an input
-clock ``sample``, Co-Simulation with Event Mode and Scheduled Execution); ``c/filter_core.h``
-the C side.
-"""
+C code generated for the filter's compiled fused step and for ``fmu_initial`` (the protocol of
+:mod:`estimators.protocol`), packed with the estimator core (``c/filter_core.c``) by
+:mod:`fmu_models.export.pack`; the manual's page "Taking the estimator to another tool" gives
+the FMU's variables, timing and clocked form."""
 from __future__ import annotations
 
 from functools import partial
+from itertools import accumulate
 from pathlib import Path
 
 import casadi as ca
@@ -38,11 +29,6 @@ _FED = ("u", "y", "mask")
 #: The diagnostics the FMU shows (as outputs ``innov_*`` and ``nis``); with the new state and
 #: the status they are all its generated step computes (no log-determinant of S, no gain, ...).
 _SHOWN = ("innov", "nis")
-
-
-def _is_filter(filt) -> bool:
-    return all(hasattr(filt, a) for a in ("fmu_parameters", "fmu_initial", "step_function", "state_arrays",
-                                          "system", "supports_batch"))
 
 
 def _flat_parameters(filt) -> list[tuple]:
@@ -67,7 +53,8 @@ def _check_exportable(filt) -> None:
     """Refuse what cannot become a filter FMU: not a filter (TypeMismatchError), a filter
     whose adaptation is not all in its step (TypeMismatchError), a model whose map calls
     compiled code outside the filter, an FMU's (ConfigurationError)."""
-    if not _is_filter(filt):
+    if not all(hasattr(filt, a) for a in ("fmu_parameters", "fmu_initial", "step_function", "state_arrays",
+                                          "system", "supports_batch")):
         raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
     if not filt.supports_batch:
         raise TypeMismatchError(f"{filt.name} adapts part of its state in numpy and cannot be exported"
@@ -138,10 +125,8 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
 def _offsets(names: list[str], size) -> tuple[dict[str, int], int]:
     """Where each array ``names[i]`` of ``size(name)`` entries starts in one flat buffer, and
     the buffer's size."""
-    offsets, total = {}, 0
-    for n in names:
-        offsets[n], total = total, total + size(n)
-    return offsets, total
+    starts = list(accumulate(map(size, names), initial=0))
+    return dict(zip(names, starts)), starts[-1]
 
 
 class _FilterCore:

@@ -69,7 +69,7 @@ class ModelComponent(Component, kind="plant_model"):
             x0[k] = finite(v, f"{name}: start value of {k}")
         self.x0 = np.array(list(x0.values()))
         self._step = model.sym.step(method, self.substeps)
-        self.connected_inputs = list(self.input_names)
+        self.use_inputs(self.input_names)
 
     def timing(self) -> str:
         return (f"plant model in Python ({self.method}, {self.substeps} substep(s)): outputs at t; "
@@ -90,11 +90,8 @@ class ModelComponent(Component, kind="plant_model"):
     def reset(self, t0: float) -> None:
         super().reset(t0)
         self.x, self.u, self.w = self.x0.copy(), np.zeros(self.model.nu), np.zeros(self.model.nx)
-        if not hasattr(self, "_in_index"):
-            self.use_inputs(self.connected_inputs)
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
-        """States, measured outputs and derivatives at ``t``."""
         m = self.model
         vals = dict(zip(m.state_names, self.x))
         if any(p in m.output_names for p in self.output_names):

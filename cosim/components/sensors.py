@@ -150,7 +150,6 @@ class Sensor(_Noisy, kind="sensor"):
         return self._queue[0] if self.delay and self._queue else y
 
     def update(self, t, u):
-        """Store this instant's sample for the delay line."""
         if self.delay:
             self._queue.append(self._measure(t, u))
 
@@ -210,7 +209,6 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         self._noise_setup(seed, generator, n)
 
     def output(self, t, u):
-        """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
         return self.L @ self._noise.at(t)
 
     def native_reason(self) -> str | None:
