@@ -391,16 +391,11 @@ class FMUProcessModel(DiscreteModel):
             raise self.take_failure() or FMUError(f"{self.path.name}: one period from the start values failed")
         return out
 
-    @property
-    def _nominal_x(self) -> np.ndarray:
-        """The states' nominal values."""
-        return self._rt.keep[0]["nominal_x"]
-
     def _check_accuracy(self, tol: float | None) -> None:
         """Refuse an integration whose error by step doubling at the start values is above ``tol``."""
         n, x, u = self.substeps, self.start, self._u_start
         coarse, fine = self._advance(x, u, n), self._advance(x, u, 2 * n)
-        scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._nominal_x)
+        scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._rt.keep[0]["nominal_x"])
         order = 4 if self.method == "rk4" else 1
         err = np.abs(coarse - fine) / scale * (2**order / (2**order - 1))
         i = int(np.argmax(err))
@@ -416,7 +411,7 @@ class FMUProcessModel(DiscreteModel):
     def _check_directional(self, tol: float) -> None:
         """Refuse directional derivatives that disagree with the FMU's central differences."""
         x, u = self.start, self._u_start
-        steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._nominal_x)
+        steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._rt.keep[0]["nominal_x"])
         for what, exact, fn in (("f", self.F(x, u), lambda z: self.f(z, u)), ("h", self.H(x), self.h)):
             fd = np.column_stack([(fn(x + s * e) - fn(x - s * e)) / (2 * s) for s, e in zip(steps, np.eye(self.nx))])
             bad = np.abs(exact - fd) > tol * max(1.0, np.abs(fd).max())
@@ -429,19 +424,16 @@ class FMUProcessModel(DiscreteModel):
                                f"tolerance {tol:g}); pass jacobian='fd' to use differences")
 
     def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)`` at the symbols ``x`` (nx, 1) and ``u`` (nu, 1): one call of the compiled
-        map and its tangent."""
+        """One call of the compiled map and its tangent."""
         return self._ext["fF"](x, u)
 
     def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)`` at the symbol ``x`` (nx, 1): one call of the compiled measurement and its
-        Jacobian."""
+        """One call of the compiled measurement and its Jacobian."""
         return self._ext["hH"](x)
 
     def take_failure(self) -> Exception | None:
-        """The first failure of the FMU's evaluations since the last call (NumericalError: a
-        non-finite derivative or measurement; FMUError: a failed call, an event inside a
-        period), or None; taking it clears it."""
+        """NumericalError (a non-finite derivative or measurement) or FMUError (a failed call, an
+        event inside a period)."""
         if not self._rt.call("failures"):
             return None
         error = NumericalError if self._rt.call("numerical") else FMUError
@@ -450,7 +442,6 @@ class FMUProcessModel(DiscreteModel):
         return error(f"{self.path.name}: {message}")
 
     def describe(self) -> str:
-        """What the model is and how it is computed, in a few lines."""
         d = self._description
         restore = ("restored with SetFMUState before every evaluation" if d.can_restore else
                    "not restorable (no SetFMUState): every evaluation is a trial step from the start time, "

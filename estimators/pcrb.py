@@ -1,15 +1,9 @@
 """The posterior Cramér-Rao bound (PCRB): the lowest mean-square error any estimator can reach.
 
-The Fisher information recursion of Tichavský, Muravchik and Nehorai (IEEE Trans. Signal
-Processing 46(5), 1998) for additive Gaussian noise, ``w_k ~ N(0, Q)``, ``v_k ~ N(0, R)``,
-``x_0 ~ N(m_0, P_0)``::
-
-    J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
-    D11 = E[F^T Q^-1 F],  D12 = D21^T = -E[F^T] Q^-1,  D22 = Q^-1 + E[H^T R^-1 H],
-
-``J_0 = P_0^-1``, computed in covariance form with expectations by Monte Carlo over true
-trajectories; the form, and the bound with missing measurements, are in the guide's page
-on the experiments (docs/guide/experiments.md).
+The information recursion of Tichavský, Muravchik and Nehorai (1998) for additive Gaussian noise,
+``J_{k+1} = D22 - D21 (J_k + D11)^-1 D12``, ``D11 = E[F^T Q^-1 F]``, ``D12 = D21^T = -E[F^T] Q^-1``,
+``D22 = Q^-1 + E[H^T R^-1 H]``, ``J_0 = P_0^-1``, in covariance form with expectations by Monte
+Carlo over true trajectories (the guide's page on the experiments, docs/guide/experiments.md).
 """
 from __future__ import annotations
 

@@ -83,16 +83,13 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
 
     X, P = np.ascontiguousarray(run.x), flat(run.P)
     xp, Pp = np.ascontiguousarray(run.x_prior), flat(run.P_prior)
-    us = np.ascontiguousarray(run.us)
-    xs = np.empty((N + 1, nx))
-    Ps = np.empty((N + 1, nx * nx))
-    C = np.empty((N, nx * nx))
-    lag = np.empty((N, nx * nx))
+    xs, Ps = np.empty((N + 1, nx)), np.empty((N + 1, nx * nx))
+    C, lag = np.empty((N, nx * nx)), np.empty((N, nx * nx))
     xs[N], Ps[N] = X[N], P[N]
     if N:
         # backward: step j handles k = N-1-j; reversed views have negative strides
         args = {"x": X[N - 1::-1][None], "P": P[N - 1::-1][None], "xp": xp[::-1][None], "Pp": Pp[::-1][None],
-                "u": us[::-1][None]}
+                "u": np.ascontiguousarray(run.us)[::-1][None]}
         outs = {"xs_new": xs[N - 1::-1][None], "Ps_new": Ps[N - 1::-1][None], "C": C[::-1][None],
                 "Plag": lag[::-1][None]}
         _fold(filt)(1, N, args, {"xs": xs[N][None], "Ps": Ps[N][None]}, outs)

@@ -1,11 +1,9 @@
 """Sliding-window maximum-likelihood adaptive EKF (SWML), started from autocovariance least squares.
 
-Beyond the source papers: the EKF's ``Q = q I``, ``R = r I`` (the form of seed 000 eqs
-24-25) re-estimated at update times by maximum likelihood (Schweppe 1965), or MAP, over a
-re-filtered window of innovations, from an ALS candidate (Odelson, Rajamani and Rawlings
-2006, for time-varying gains and Jacobians), with safeguards; optionally the state averaged
-over the posterior of ``(ln q, ln r)``. The method, step by step, is in the manual's
-estimators page; the whole filter, updates included, is one compiled Function
+Beyond the source papers: the EKF's ``Q = q I``, ``R = r I`` (seed 000 eqs 24-25) re-estimated by
+maximum likelihood (Schweppe 1965) or MAP over a re-filtered window, from an ALS candidate (Odelson,
+Rajamani and Rawlings 2006), optionally averaging the state over the posterior of ``(ln q, ln r)``;
+the manual's estimators page gives the method. The whole filter is one compiled Function
 (:meth:`SWML.wrap_step`).
 """
 from __future__ import annotations
