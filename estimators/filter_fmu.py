@@ -7,7 +7,7 @@ the FMU's variables, timing and clocked form."""
 from __future__ import annotations
 
 from functools import partial
-from itertools import accumulate
+from itertools import accumulate, groupby
 from pathlib import Path
 
 import casadi as ca
@@ -163,10 +163,8 @@ class _FilterCore:
         flag (1: one is not finite; the gate may be inf, no gate)."""
         filt, rows = self.filt, self.rows
         psym = ca.SX.sym("p", len(rows))
-        by_param: dict[str, list] = {}
-        for k, r in enumerate(rows):
-            by_param.setdefault(r[4], []).append(psym[k])
-        initial = filt.fmu_initial({n: ca.vertcat(*entries) for n, entries in by_param.items()})
+        initial = filt.fmu_initial({name: ca.vertcat(*(psym[k] for k, _ in group))
+                                    for name, group in groupby(enumerate(rows), key=lambda kr: kr[1][4])})
         names = self.state_names + self.fixed_names
         missing = [n for n in names if n not in initial]
         if missing:
@@ -209,12 +207,10 @@ class _FilterCore:
 
     def _ordered_pairs(self) -> list[tuple[int, int]]:
         """The parameter pairs ``(lo, hi)`` (indices) that must increase."""
-        less, first = [], {}
-        for k, r in enumerate(self.rows):
-            first.setdefault(r[4], k)
+        less, names = [], [r[4] for r in self.rows]
         for prm in self.filt.fmu_parameters():
             if prm.increasing:
-                k0 = first[prm.name]
+                k0 = names.index(prm.name)
                 less += [(k0 + i, k0 + i + 1) for i in range(prm.size - 1)]
         return less
 
@@ -250,15 +246,14 @@ def _outputs(s, st_off: dict[str, int], dg_off: dict[str, int]) -> list[tuple[st
     """The FMU's outputs ``(name, buffer (0: state, 1: diagnostics), offset, description)`` of
     a filter on the model ``s``: the estimate, the diagonal of P, the innovation, the NIS and,
     for a filter that adapts Q and R, their diagonals."""
-    nx, ny = s.nx, s.ny
+    def diagonal(key: str, names: list[str], what: str) -> list[tuple]:
+        return [(f"{key}_{n}", 0, st_off[key] + i * (len(names) + 1), f"{what} of {n}") for i, n in enumerate(names)]
+
     outs = [(n, 0, st_off["x"] + i, f"estimate of {n}") for i, n in enumerate(s.state_names)]
-    outs += [(f"P_{n}", 0, st_off["P"] + i * (nx + 1), f"variance of the estimate of {n}")
-             for i, n in enumerate(s.state_names)]
+    outs += diagonal("P", s.state_names, "variance of the estimate")
     outs += [(f"innov_{n}", 1, dg_off["innov"] + j, f"innovation of {n}") for j, n in enumerate(s.output_names)]
     outs += [("nis", 1, dg_off["nis"], "normalised innovation squared")]
     if "Q" in st_off:
-        outs += [(f"Q_{n}", 0, st_off["Q"] + i * (nx + 1), f"adapted process variance of {n}")
-                 for i, n in enumerate(s.state_names)]
-        outs += [(f"R_{n}", 0, st_off["R"] + j * (ny + 1), f"adapted measurement variance of {n}")
-                 for j, n in enumerate(s.output_names)]
+        outs += diagonal("Q", s.state_names, "adapted process variance")
+        outs += diagonal("R", s.output_names, "adapted measurement variance")
     return outs

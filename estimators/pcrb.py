@@ -87,7 +87,7 @@ def _trajectories(X, nx: int) -> np.ndarray:
 
 def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
     """The used channels (runs, N, ny) of bool, or None if all are used."""
-    valid = None
+    valid = np.ones((runs, N, ny), dtype=bool)
     if masks is not None:
         m = checks.float_array(masks, "masks")
         try:
@@ -96,16 +96,15 @@ def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
             raise InputError(f"masks must have shape ({runs}, {N}, {ny}), got {m.shape}") from None
         if not np.isin(m, (0.0, 1.0)).all():
             raise InputError("masks must hold 0/1 (or False/True) only")
-        valid = m != 0
+        valid &= m != 0
     if ys is not None:
         y = checks.float_array(ys, "measurements ys")
         if y.shape != (runs, N, ny):
             raise InputError(f"measurements ys must have shape ({runs}, {N}, {ny}), got {y.shape}")
         if np.isinf(y).any():
             raise InputError("measurements ys contain inf (a missing channel is NaN)")
-        ok = ~np.isnan(y)
-        valid = ok if valid is None else valid & ok
-    return None if valid is None or valid.all() else valid
+        valid &= ~np.isnan(y)
+    return None if valid.all() else valid
 
 
 def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: int) -> np.ndarray | None:
@@ -157,11 +156,6 @@ class _Jacobians:
             F[i0:i1] = res[0].reshape(b, nx, nx)[:i1 - i0].transpose(0, 2, 1)
             H[i0:i1] = res[1].reshape(b, nx, ny)[:i1 - i0].transpose(0, 2, 1)
         return F, H
-
-
-def _jacobians(system: DiscreteModel) -> _Jacobians:
-    """The :class:`_Jacobians` of ``system``, built once per model."""
-    return system.compiled("pcrb", (JACOBIAN_BLOCK,), "compiled", lambda: _Jacobians(system))
 
 
 def _root(M: np.ndarray) -> np.ndarray:
@@ -264,7 +258,8 @@ class _Recursion:
         ``Z`` of the spread ``V`` (None for one realisation) and of ``E[H^T R^-1 H]``."""
         X, runs = self.X, self.X.shape[0]
         nx, ny = self.system.nx, self.system.ny
-        F, H = _jacobians(self.system)(X[:, k0:k0 + n], self.us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
+        jacobians = self.system.compiled("pcrb", (JACOBIAN_BLOCK,), "compiled", lambda: _Jacobians(self.system))
+        F, H = jacobians(X[:, k0:k0 + n], self.us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
         F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
         if not (np.isfinite(F).all() and np.isfinite(H).all()):
             r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])
