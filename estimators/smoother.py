@@ -77,12 +77,8 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
                                  "its period, parameters or equations differ; smooth it with the filter "
                                  "that made it")
     N, nx = len(run.x) - 1, filt.system.nx
-
-    def flat(a):                                    # (K, nx, nx) symmetric -> (K, nx*nx) rows
-        return np.ascontiguousarray(a).reshape(len(a), -1)
-
-    X, P = np.ascontiguousarray(run.x), flat(run.P)
-    xp, Pp = np.ascontiguousarray(run.x_prior), flat(run.P_prior)
+    X, xp = np.ascontiguousarray(run.x), np.ascontiguousarray(run.x_prior)
+    P, Pp = (np.ascontiguousarray(a).reshape(len(a), -1) for a in (run.P, run.P_prior))    # symmetric: rows
     xs, Ps = np.empty((N + 1, nx)), np.empty((N + 1, nx * nx))
     C, lag = np.empty((N, nx * nx)), np.empty((N, nx * nx))
     xs[N], Ps[N] = X[N], P[N]
@@ -99,9 +95,5 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
             raise type(failure)(f"{filt.name}: the smoothed estimate became non-finite: {failure}")
         raise NumericalError(f"{filt.name}: the smoothed estimate became non-finite (singular predicted "
                              "covariance?)")
-
-    def mats(a):                                    # column-major rows -> (K, nx, nx)
-        return a.reshape(len(a), nx, nx).transpose(0, 2, 1)
-
-    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), mats(lag), mats(C),   # Ps is symmetric
-                    list(filt.system.state_names))
+    lag, C = (a.reshape(N, nx, nx).transpose(0, 2, 1) for a in (lag, C))         # column-major rows
+    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), lag, C, list(filt.system.state_names))   # Ps is symmetric

@@ -257,9 +257,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         s, W = self.system, self.window
         n, n_snap = s.nx, W // self.every
         ins = [ca.MX.sym(step.name_in(i), step.sparsity_in(i)) for i in range(step.n_in())]
-        names_out = [step.name_out(i) for i in range(step.n_out())]
+        names_out = step.name_out()
         out = dict(zip(names_out, step.call(ins)))
-        by = dict(zip([step.name_in(i) for i in range(step.n_in())], ins))
+        by = dict(zip(step.name_in(), ins))
         k = out["count_new"]
         early = ca.logic_and(ca.logic_and(k <= self.early_until, ca.fmod(k, self.early_every) == 0), k > 0)
         regular = ca.logic_and(k > self.early_until, ca.fmod(k, self.every) == 0)
@@ -289,8 +289,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             out[key] = ca.densify(ca.reshape(val, out[key].shape))
         out["status"] = ca.if_else(out["status"] != 0, out["status"],
                                    ca.if_else(finite_flag([out["x_new"], out["P_new"]]), OK, BAD_RESULT))
-        return ca.Function("step", ins, [out[nm] for nm in names_out], [step.name_in(i) for i in range(step.n_in())],
-                           names_out)
+        return ca.Function("step", ins, [out[nm] for nm in names_out], step.name_in(), names_out)
 
 
 def _mixture(ends, w):
@@ -398,9 +397,9 @@ class _WindowUpdate:
                                  self._rep(self.gate))
         return self.objective(lls[-1], lq, lr), xs[:, -1], Ps[:, -self.n:]
 
-    def clamp(self, lq, lr):
-        """``theta`` within its bounds."""
-        lo_q, hi_q, lo_r, hi_r = self.bounds
+    def clamp(self, lq, lr, bounds=None):
+        """``theta`` within its bounds (or within ``bounds``, ``(lo_q, hi_q, lo_r, hi_r)``)."""
+        lo_q, hi_q, lo_r, hi_r = bounds or self.bounds
         return ca.fmin(ca.fmax(lq, lo_q), hi_q), ca.fmin(ca.fmax(lr, lo_r), hi_r)
 
     def inside(self, lq, lr):
@@ -435,8 +434,7 @@ class _WindowUpdate:
         ``(H11, H12, H22)``."""
         tiny = 1e-300                                       # "negative parts floored" at the lower bounds
         lqa, lra = self.clamp(ca.log(ca.fmax(theta_als[0], tiny)), ca.log(ca.fmax(theta_als[1], tiny)))
-        eva = self.run(lqa, lra)
-        la, endA = eva[0], eva[1:]
+        la, *endA = self.run(lqa, lra)
         keep, lq0, lr0 = self.filt.keep_r_nats, self.lq0, self.lr0
         use_a = ca.logic_and(ca.logic_and(finite_flag([la]), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
         lqs, lrs = ca.if_else(use_a, lqa, lq0), ca.if_else(use_a, lra, lr0)
@@ -499,13 +497,9 @@ class _WindowUpdate:
         l21 = s12 / l11
         l22 = ca.sqrt(ca.fmax(s22 - l21 * l21, 0))
         c = math.sqrt(3.0)
-        qb, rb = self.qb, self.rb
-        lo_q, hi_q, lo_r, hi_r = ca.log(qb[0]), ca.log(qb[1]), ca.log(rb[0]), ca.log(rb[1])
-        pts = []
-        for sign in (1.0, -1.0):
-            for dq, dr in ((l11, l21), (0, l22)):
-                pts.append((ca.fmin(ca.fmax(theta[0] + sign * c * dq, lo_q), hi_q),
-                            ca.fmin(ca.fmax(theta[1] + sign * c * dr, lo_r), hi_r)))
+        given = (ca.log(self.qb[0]), ca.log(self.qb[1]), ca.log(self.rb[0]), ca.log(self.rb[1]))
+        pts = [self.clamp(theta[0] + sign * c * dq, theta[1] + sign * c * dr, given)
+               for sign in (1.0, -1.0) for dq, dr in ((l11, l21), (0, l22))]
         ends, raw = [(x_best, P_best)], [ca.MX(UT_WEIGHTS[0])]
         for pt, w0 in zip(pts, UT_WEIGHTS[1:]):
             li, xe, Pe = self.run(*pt)
