@@ -66,6 +66,7 @@ class _Description:
     md: object
     version: int
     identifier: str
+    platform: str                   # the folder of this platform's binary
     directional: bool
     can_restore: bool
     needs_completed_step: bool
@@ -86,7 +87,7 @@ def _flag(xml: bytes, *names: str) -> bool:
 
 def _read(path: Path) -> tuple[_Description, bytes]:
     """The FMU at ``path`` described, and its bytes (for the model's identity)."""
-    from fmpy import read_model_description
+    from fmpy import platform, platform_tuple, read_model_description
 
     try:
         data = path.read_bytes()
@@ -110,11 +111,10 @@ def _read(path: Path) -> tuple[_Description, bytes]:
     # fmpy reads FMI 3.0's providesDirectionalDerivatives under its FMI 2.0 name only; that
     # spelling is read too, since some FMI 3.0 FMUs carry it (their derivatives are checked anyway)
     directional = _flag(xml, "providesDirectionalDerivative", *(("providesDirectionalDerivatives",) * (version == 3)))
-    states = [d.variable.derivative for d in md.derivatives]
-    return _Description(md, version, me.modelIdentifier, directional,
+    return _Description(md, version, me.modelIdentifier, platform if version == 2 else platform_tuple, directional,
                         _flag(xml, "canGetAndSetFMUstate" if version == 2 else "canGetAndSetFMUState"),
                         bool(me.needsCompletedIntegratorStep), {v.name: v for v in md.modelVariables},
-                        states, [d.variable for d in md.derivatives],
+                        [d.variable.derivative for d in md.derivatives], [d.variable for d in md.derivatives],
                         {o.variable.name: o.dependencies for o in md.outputs}), data
 
 
@@ -185,13 +185,6 @@ _RUNTIMES: dict[str, _Runtime] = {}
 def _close_all() -> None:
     for rt in _RUNTIMES.values():
         rt.close()
-
-
-def _platform(version: int) -> str:
-    """The folder of this platform's binary in an FMU of FMI ``version``."""
-    import fmpy
-
-    return fmpy.platform if version == 2 else fmpy.platform_tuple
 
 
 class FMUProcessModel(DiscreteModel):
@@ -332,7 +325,7 @@ class FMUProcessModel(DiscreteModel):
         folder = tempfile.mkdtemp(prefix="pendulum_cosim_fmumodel_")
         try:
             with zipfile.ZipFile(self.path) as z:  # its binary for this platform and its resources only
-                z.extractall(folder, [n for n in z.namelist() if n.startswith((f"binaries/{_platform(d.version)}/",
+                z.extractall(folder, [n for n in z.namelist() if n.startswith((f"binaries/{d.platform}/",
                                                                                 "resources/"))])
         except (OSError, zipfile.BadZipFile) as e:
             shutil.rmtree(folder, ignore_errors=True)
@@ -355,7 +348,7 @@ class FMUProcessModel(DiscreteModel):
         import fmpy
 
         version, md = d.version, d.md
-        library = Path(folder, "binaries", _platform(version), d.identifier + fmpy.sharedLibraryExtension)
+        library = Path(folder, "binaries", d.platform, d.identifier + fmpy.sharedLibraryExtension)
         resources = Path(folder, "resources")
         names = [s.name for s in states]
         y_state = np.array([names.index(m) if m in names else -1 for m in meas], np.int64)
