@@ -61,10 +61,9 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
         the learned values, reset to the start of the record.
     us, ys, masks, y0
         The record, as :meth:`~estimators.base.KalmanBase.run` takes it.
-    n_iter : int
-        Most iterations (default 50).
-    tol : float
-        Stop when ``|LL_i - LL_{i-1}| <= tol |LL_i|`` (default 1e-6).
+    n_iter, tol : int, float
+        At most ``n_iter`` iterations (default 50), stopping when ``|LL_i - LL_{i-1}| <= tol |LL_i|``
+        (default 1e-6).
     learn : sequence of {"Q", "R", "x0", "P0"}
         What to learn (default Q and R).
     structure : {"full", "diagonal", "scalar"}

@@ -6,6 +6,7 @@ C code generated for the filter's compiled fused step and for ``fmu_initial`` (t
 the FMU's variables, timing and clocked form."""
 from __future__ import annotations
 
+from collections import Counter
 from functools import partial
 from itertools import accumulate, groupby
 from pathlib import Path
@@ -77,10 +78,9 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
     out_dir : path
         Folder to write ``<name>.fmu`` into.
     fmi_version : {2, 3}
-    name : str, optional
-        Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``).
-    file_name : str, optional
-        The FMU file name (default ``<name>.fmu``).
+    name, file_name : str, optional
+        Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``) and file name
+        (default ``<name>.fmu``).
     clocked : bool
         Write the clocked form (FMI 3.0 only; see the manual's page "Taking the estimator to
         another tool").
@@ -198,9 +198,8 @@ class _FilterCore:
         if clocked:
             v = clock_variables(v, ("U", "Y", "OUT", "VALID"), s.dt,
                                 f"the filter's sample instants (every {s.dt:g} s from the start time)")
-        names = [x.name for x in v.variables]
-        if len(set(names)) != len(names):
-            dup = sorted({x for x in names if names.count(x) > 1})
+        dup = sorted(name for name, count in Counter(x.name for x in v.variables).items() if count > 1)
+        if dup:
             raise ConfigurationError(f"{self.filt.name}: FMU variable names collide: {dup} (rename the model's "
                                      "variables or the filter's parameters)")
         return v

@@ -202,10 +202,8 @@ class FMUProcessModel(DiscreteModel):
         The FMU's continuous Float64 inputs the filters set, held over each period (default none).
     parameters : mapping of str to float, optional
         FMU parameters (Float64, fixed or tunable) set by name before initialisation.
-    method : {"rk4", "euler"}
-        The integrator over one period (default ``"rk4"``).
-    substeps : int
-        Integrator steps per period (default 1).
+    method, substeps : {"rk4", "euler"}, int
+        The integrator over one period (default ``"rk4"``) and its steps per period (default 1).
     jacobian : {"auto", "directional", "fd"}
         The Jacobians' source (:data:`JACOBIANS`; default ``"auto"``).
     tolerance : float, optional

@@ -194,15 +194,13 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     P0 : array_like, optional
         Covariance of the prior of ``x_0`` (``J_0 = P0^-1``); None (default): ``x_0`` known
         exactly (the first prediction's covariance is ``Q``).
-    masks : array_like of bool, shape (runs, N, ny), optional
-        ``masks[r, k, j]`` False: channel ``j`` of ``y_{k+1}`` of realisation ``r`` is missing.
-    ys : array_like, shape (runs, N, ny), optional
-        Measurements ``y_1 .. y_N``; only where they are NaN (missing channels) is used.
+    masks, ys : array_like, shape (runs, N, ny), optional
+        The missing channels: channel ``j`` of ``y_{k+1}`` of realisation ``r`` is missing where
+        ``masks[r, k, j]`` is False or the measurement ``ys[r, k, j]`` is NaN (only that is used).
 
     Returns
     -------
     PCRB
-        The bound matrices ``J_k^-1``, k = 0..N.
 
     Raises
     ------

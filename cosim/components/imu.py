@@ -67,10 +67,8 @@ class Gyroscope(Component, kind="gyroscope"):
     ----------
     name : str
     period : float
-    noise_std : float
-        White noise standard deviation [rad/s] (default 0).
-    bias : float
-        Initial offset [rad/s] (default 0).
+    noise_std, bias : float
+        White noise standard deviation and initial offset [rad/s] (default 0).
     drift_std : float
         Random-walk intensity of the offset [rad/s/sqrt(s)] (default 0: constant).
     seed : int
@@ -160,10 +158,8 @@ class TiltFusion(Component, kind="tilt_fusion"):
     name : str
     period : float
         Sample period [s] (the filter's T).
-    q_angle : float
-        Process variance of the tilt per step [rad^2] (default 1e-6).
-    q_bias : float
-        Process variance of the offset per step [(rad/s)^2] (default 1e-8).
+    q_angle, q_bias : float
+        Process variances per step of the tilt [rad^2] and the offset [(rad/s)^2] (default 1e-6, 1e-8).
     r_tilt : float
         Variance of the accelerometer tilt [rad^2] (default 1e-3).
     correct_rate : bool

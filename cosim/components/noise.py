@@ -45,10 +45,8 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
     ndarray, shape ``np.shape(k) + (n,)``
     """
     kk = np.asarray(k, dtype=np.int64).astype(np.uint64)      # two's complement for k < 0
-    c = np.arange(n, dtype=np.uint64)
-    i = np.uint64(2) * (kk[..., None] * np.uint64(n) + c)
-    s = np.uint64(seed)
-    a, b = _splitmix64(s, i), _splitmix64(s, i + np.uint64(1))
+    i = np.uint64(2) * (kk[..., None] * np.uint64(n) + np.arange(n, dtype=np.uint64))
+    a, b = (_splitmix64(np.uint64(seed), j) for j in (i, i + np.uint64(1)))
     u1 = ((a >> np.uint64(11)) + np.uint64(1)).astype(float) * 2.0**-53
     u2 = (b >> np.uint64(11)).astype(float) * 2.0**-53
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(2 * np.pi * u2)

@@ -25,10 +25,9 @@ class ModelComponent(Component, kind="plant_model"):
     model : PlantModel
     period : float
         Communication step [s].
-    method : {"euler", "rk4"}
-        Integrator (as the FMU's ``integrator``).
-    substeps : int
-        Internal steps per period (the FMU's ``substeps`` with ``step_size = period``).
+    method, substeps : {"euler", "rk4"}, int
+        Integrator and its steps per period (the FMU's ``integrator``, and ``substeps`` with
+        ``step_size = period``).
     start : mapping, optional
         Initial states by name (default: the model's ``x0``).
     outputs : sequence of str, optional

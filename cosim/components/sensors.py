@@ -101,11 +101,9 @@ class Sensor(_Noisy, kind="sensor"):
         (default 0).
     delay : int
         Delay in samples (default 0); until filled, the first measurement is repeated.
-    seed : int
-        Seed of the noise generator (default 0).
-    generator : {"pcg64", "counter"}
-        numpy's PCG64 drawn sequentially (default), or the counter-based generator the
-        signal FMUs use (:mod:`cosim.components.noise`).
+    seed, generator : int, {"pcg64", "counter"}
+        Seed (default 0) and generator of the noise: numpy's PCG64 drawn sequentially (default),
+        or the counter-based generator the signal FMUs use (:mod:`cosim.components.noise`).
     """
 
     def __init__(self, name: str, period: float, signals: Sequence[str], noise_std=0.0,
@@ -181,9 +179,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         Covariance: scalar (times identity), diagonal, or full matrix. For a diagonal one,
         channel ``i`` is draw ``i`` times its standard deviation; for a full one,
         ``L v`` with ``L = V sqrt(Lambda)`` from its eigendecomposition.
-    seed : int
-        Seed of the generator (default 0).
-    generator : {"pcg64", "counter"}
+    seed, generator
         As for :class:`Sensor`.
     """
 

@@ -142,12 +142,8 @@ class Sine(_Source, kind="sine"):
     ----------
     name : str
     period : float
-    amplitude, offset : float
-        (default offset 0)
-    frequency : float
-        [Hz]
-    phase : float
-        [rad] (default 0)
+    amplitude, frequency, phase, offset : float
+        Frequency [Hz], phase [rad] (default phase and offset 0).
     """
 
     def __init__(self, name, period, amplitude, frequency, phase=0.0, offset=0.0):
@@ -193,10 +189,8 @@ class PRBS(_Source, kind="prbs"):
         The levels ``offset +/- amplitude`` (default offset 0).
     bit_time : float
         Duration of one bit [s].
-    order : int
-        LFSR length, 2..16 (default 7: 127 bits).
-    seed : int
-        Non-zero LFSR start state (default 1).
+    order, seed : int
+        LFSR length, 2..16 (default 7: 127 bits), and its non-zero start state (default 1).
     """
 
     def __init__(self, name, period, amplitude, bit_time, order=7, seed=1, offset=0.0):
