@@ -51,9 +51,7 @@ def filter_parameters(filt) -> dict[str, float]:
 
 
 def _check_exportable(filt) -> None:
-    """Refuse what cannot become a filter FMU: not a filter (TypeMismatchError), a filter
-    whose adaptation is not all in its step (TypeMismatchError), a model whose map calls
-    compiled code outside the filter, an FMU's (ConfigurationError)."""
+    """Refuse what cannot become a filter FMU (the errors :func:`export_filter_fmu` names)."""
     if not all(hasattr(filt, a) for a in ("fmu_parameters", "fmu_initial", "step_function", "state_arrays",
                                           "system", "supports_batch")):
         raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
@@ -130,11 +128,10 @@ def _offsets(names: list[str], size) -> tuple[dict[str, int], int]:
 
 
 class _FilterCore:
-    """What the filter core (``c/filter_core.h``) is told about the filter ``filt``: its
-    parameters (``rows``), three flat buffers (the state arrays, the step's fixed inputs, the
-    diagnostics) with each array's offset, the Functions ``flt_init`` (the parameters to the
-    initial buffers) and ``flt_step``, where each argument of the step comes from and each
-    result goes, and the FMU's outputs."""
+    """What the filter core (``c/filter_core.h``) is told about ``filt``: its parameters (``rows``),
+    three flat buffers (state arrays, fixed step inputs, diagnostics) with each array's offset,
+    ``flt_init`` (parameters to initial buffers) and ``flt_step`` with where each of its arguments
+    comes from and each result goes, and the FMU's outputs."""
 
     def __init__(self, filt):
         self.filt, self.rows = filt, _flat_parameters(filt)
@@ -242,9 +239,8 @@ class _FilterCore:
 
 
 def _outputs(s, st_off: dict[str, int], dg_off: dict[str, int]) -> list[tuple[str, int, int, str]]:
-    """The FMU's outputs ``(name, buffer (0: state, 1: diagnostics), offset, description)`` of
-    a filter on the model ``s``: the estimate, the diagonal of P, the innovation, the NIS and,
-    for a filter that adapts Q and R, their diagonals."""
+    """The FMU's outputs ``(name, buffer (0: state, 1: diagnostics), offset, description)``: the
+    estimate, the diagonal of P, the innovation, the NIS and, if adapted, the diagonals of Q, R."""
     def diagonal(key: str, names: list[str], what: str) -> list[tuple]:
         return [(f"{key}_{n}", 0, st_off[key] + i * (len(names) + 1), f"{what} of {n}") for i, n in enumerate(names)]
 

@@ -368,9 +368,8 @@ class FMUProcessModel(DiscreteModel):
                     library=str(library).encode(), instance_name=d.identifier.encode(), token=md.guid.encode(),
                     resources=(resources.as_uri() if version == 2 else str(resources) + "/").encode()
                     if resources.is_dir() else None,
-                    **{k: v.ctypes.data_as(_P(ctypes.c_uint32 if v.dtype == np.uint32 else
-                                                ctypes.c_int64 if v.dtype == np.int64 else ctypes.c_double))
-                       for k, v in keep.items()}, **strings)
+                    **{k: v.ctypes.data_as(_P(np.ctypeslib.as_ctypes_type(v.dtype))) for k, v in keep.items()},
+                    **strings)
         return c, (keep, strings)
 
     def _advance(self, x: np.ndarray, u: np.ndarray, substeps: int) -> np.ndarray:

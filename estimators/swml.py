@@ -48,8 +48,7 @@ def _scalar_variance(M, n: int, what: str) -> float:
 
 class SWML(AdaptationRecord, EKF, register="SWML"):
     """EKF whose ``Q = q I`` and ``R = r I`` are re-estimated by maximum likelihood over a
-    sliding window of innovations, started from an ALS estimate (the manual's estimators page
-    gives the method step by step).
+    sliding window of innovations, started from an ALS estimate.
 
     Parameters
     ----------
@@ -57,10 +56,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         As :class:`~estimators.base.KalmanBase`.
     Q, R : float or array_like
         The initial ``q I`` and ``r I`` (a scalar, or a multiple of the identity).
-    window : int
-        W, the steps in the window (default 100); a multiple of ``every``, at most :data:`MAX_WINDOW`.
-    every : int
-        M, steps between updates after the start (default 50).
+    window, every : int
+        W, the steps in the window (default 100; a multiple of ``every``, at most :data:`MAX_WINDOW`),
+        and M, the steps between updates after the start (default 50).
     early_until, early_every : int
         Up to step ``early_until`` (default 20; 0: none) an update every ``early_every`` steps
         (default 2) over all steps so far.
@@ -483,9 +481,8 @@ class _WindowUpdate:
 
     def _posterior_average(self, theta, l_best, x_best, P_best, hess):
         """The window's end state and covariance averaged over the Laplace approximation of the
-        posterior of ``theta`` (as the manual's estimators page describes; the points clipped to
-        the bounds, one not finite left out too; if the mixture is not finite, the kept point's
-        alone): the state, covariance and the points and weights (13)."""
+        posterior of ``theta`` (the manual's estimators page; a point not finite left out, a mixture
+        not finite replaced by the kept point), and the points and weights (13)."""
         H11, H12, H22 = hess
         a, b, d = -H11, -H12, -H22
         pd = ca.logic_and(a > 0, a * d - b * b > 0)

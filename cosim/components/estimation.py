@@ -201,7 +201,6 @@ class EstimatorComponent(BoundCalls, Component, kind="estimator"):
     def _after_op(self, cur, ny: int, sync_in, sync_out) -> Op:
         """The kernel's operation after an adaptive filter's step (its ``after_step``, or its records)."""
         f = self.filter
-        rt = f._rt
         flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
         after = f.after_step
 
@@ -210,10 +209,10 @@ class EstimatorComponent(BoundCalls, Component, kind="estimator"):
             after()
             sync_in()
         records = getattr(f, "records_only", None)
-        if flag is None or not callable(records) or not records() or "Q" not in rt.pairs or "R" not in rt.pairs:
+        if flag is None or not callable(records) or not records() or "Q" not in f._rt.pairs or "R" not in f._rt.pairs:
             return Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data), (cur, flag),
                       hook=hook)
-        history, Qs, Rs = f.history, rt.pairs["Q"], rt.pairs["R"]
+        history, Qs, Rs = f.history, f._rt.pairs["Q"], f._rt.pairs["R"]
 
         def rebind(op) -> None:
             op.out, op.n = history.rows.ctypes.data, len(history.rows)

@@ -21,7 +21,7 @@ class _Source(Component):
     #: The ``_value`` methods whose arithmetic the native kernel has (as :meth:`_native_op`).
     _native_values: tuple = ()
     #: The Real parameters of the signal FMU of the source's ``kind``, ``(attribute, domain,
-    #: description)``; none: no FMU form.
+    #: description)``, empty for a source without an FMU form.
     _fmu_reals: tuple = ()
 
     def _value(self, t):
