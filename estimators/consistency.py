@@ -1,8 +1,6 @@
-"""Consistency tests of a filter over Monte Carlo runs: chi-square bands of the NEES and NIS,
-and the whiteness of the innovations (Bar-Shalom, Li and Kirubarajan, *Estimation with
-Applications to Tracking and Navigation*, 2001, section 5.4); the rules and the verdicts are
-described in the guide's page on the experiments (docs/guide/experiments.md).
-"""
+"""Consistency tests of a filter over Monte Carlo runs: chi-square bands of the NEES and NIS, and
+the whiteness of the innovations (Bar-Shalom, Li and Kirubarajan 2001, section 5.4); the rules and
+verdicts are in the guide's page on the experiments (docs/guide/experiments.md)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

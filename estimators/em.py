@@ -1,8 +1,6 @@
-"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record
-(Shumway and Stoffer, 1982; Ghahramani and Hinton, 1996): the filter's pass and its RTS
-smoothing, then the M-step's closed forms (in the guide's page on offline estimation,
-docs/guide/offline.md); a scalar structure is seed 000 eqs 24-25's ``sigma^2 I``.
-"""
+"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record (Shumway
+and Stoffer 1982; Ghahramani and Hinton 1996): the filter's pass, its RTS smoothing, the M-step's
+closed forms (docs/guide/offline.md); a scalar structure is seed 000 eqs 24-25's ``sigma^2 I``."""
 from __future__ import annotations
 
 import casadi as ca

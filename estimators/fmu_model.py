@@ -1,11 +1,9 @@
 """A Model Exchange FMU (FMI 2.0 or 3.0) as the process model of the filters.
 
-:class:`FMUProcessModel` is a :class:`~estimators.DiscreteModel` whose map (a fixed-step
-integrator over the FMU's right-hand side, with exact Jacobians through its stages) and
-measurement are the FMU's, compiled C (``estimators/c/fmu_process.c``) that calls the FMU's
-own functions through its Model Exchange calls only; how, and what is refused, is in the
-FMU tutorial (docs/tutorial-fmu.md).
-"""
+:class:`FMUProcessModel`'s map (a fixed-step integrator over the FMU's right-hand side, exact
+Jacobians through its stages) and measurement are compiled C (``estimators/c/fmu_process.c``)
+calling the FMU's Model Exchange functions; the FMU tutorial (docs/tutorial-fmu.md) says how and
+what is refused."""
 from __future__ import annotations
 
 import atexit

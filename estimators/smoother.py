@@ -1,8 +1,6 @@
-"""Rauch-Tung-Striebel smoothing of a stored filter pass (Rauch, Tung and Striebel, 1965; for
-the UKF, Särkkä, 2008), one compiled step per time step folded in native code, with the
-filter's own predictions; the equations are in the guide's page on offline estimation
-(docs/guide/offline.md).
-"""
+"""Rauch-Tung-Striebel smoothing of a stored filter pass (Rauch, Tung and Striebel 1965; for the UKF,
+Särkkä 2008), one compiled step per time step folded in native code with the filter's own
+predictions; the equations are in the guide's page on offline estimation (docs/guide/offline.md)."""
 from __future__ import annotations
 
 import casadi as ca

@@ -1,8 +1,7 @@
-"""Gaussian noise streams for the sensor and process-noise components: numpy's PCG64 drawn
-per instant (``"pcg64"``), or the counter-based generator of the signal FMUs (``"counter"``,
-SplitMix64 and Box-Muller, :func:`counter_normal`), described in the guide's page on
-co-simulation (docs/guide/cosimulation.md).
-"""
+"""Gaussian noise streams for the sensor and process-noise components: numpy's PCG64 drawn per
+instant (``"pcg64"``), or the counter-based generator of the signal FMUs (``"counter"``,
+:func:`~cosim.components.noise.counter_normal`), described in the guide's page on co-simulation
+(docs/guide/cosimulation.md)."""
 from __future__ import annotations
 
 import numpy as np
@@ -54,13 +53,10 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
 
 class PerInstantNoise:
     """``n`` standard normal numbers per instant from a seeded PCG64 stream (a repeated call at
-    the same instant returns the same draw).
-
-    They are drawn :data:`BLOCK` instants at a time into ``block`` (the same numbers as one
-    vector at a time), so the native kernel reads the rows :meth:`at` reads: ``state`` holds
-    the current row and the rows drawn, ``last`` the instant of the current row (NaN before
-    the first); ``on_refill`` callables run after every new block.
-    """
+    the same instant returns the same draw), drawn :data:`BLOCK` instants at a time into ``block``
+    (the same numbers as one vector at a time) so that the native kernel reads the rows :meth:`at`
+    reads: ``state`` holds the current row and the rows drawn, ``last`` the instant of the current
+    row (NaN before the first); ``on_refill`` callables run after every new block."""
 
     #: Instants drawn at a time.
     BLOCK = 256

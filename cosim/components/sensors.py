@@ -1,7 +1,5 @@
-"""Sensor and process-noise components: seeded Gaussian noise drawn once per sample instant
-(a repeated ``output`` call at the same instant, as in an iterated loop, reuses it), so they
-are reentrant.
-"""
+"""Sensor and process-noise components: seeded Gaussian noise drawn once per sample instant (a
+repeated ``output`` call at the same instant, as in an iterated loop, reuses it), so reentrant."""
 from __future__ import annotations
 
 from collections import deque
