@@ -1,8 +1,6 @@
-"""Consistency tests of a filter over Monte Carlo runs: chi-square bands of the NEES and NIS,
-and the whiteness of the innovations (Bar-Shalom, Li and Kirubarajan, *Estimation with
-Applications to Tracking and Navigation*, 2001, section 5.4); the rules and the verdicts are
-described in the guide's page on the experiments (docs/guide/experiments.md).
-"""
+"""Consistency tests of a filter over Monte Carlo runs: chi-square bands of the NEES and NIS, and
+the whiteness of the innovations (Bar-Shalom, Li and Kirubarajan 2001, section 5.4); the rules and
+verdicts are in the guide's page on the experiments (docs/guide/experiments.md)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -120,19 +118,16 @@ def _band_test(statistic: str, values, dof, confidence: float) -> BandTest:
     has = total > 0
     # the quantiles once per distinct number of degrees of freedom (one without missing data)
     levels, where = np.unique(np.where(has, total, 1), return_inverse=True)
-    q_lo, q_hi = (chi2.ppf(p, levels) / N for p in (a / 2, 1 - a / 2))
     with np.errstate(invalid="ignore"):
         per_step = np.where(has, v.mean(axis=0), np.nan)
-        lower = np.where(has, q_lo[where.ravel()], np.nan)
-        upper = np.where(has, q_hi[where.ravel()], np.nan)
+        lower, upper = (np.where(has, (chi2.ppf(p, levels) / N)[where.ravel()], np.nan) for p in (a / 2, 1 - a / 2))
     inside = (per_step >= lower) & (per_step <= upper)
     mean_dof = float(total[has].mean() / N)
     average = float(per_step[has].mean())
     band = chi2_band(N, mean_dof, c)
-    n_all = int(has.sum()) * N
-    strict = tuple(float(x) for x in chi2.ppf([a / 2, 1 - a / 2], n_all * mean_dof) / n_all)
-    return BandTest(statistic, c, N, mean_dof, per_step, lower, upper, average, band, strict,
-                    float(inside[has].mean()), bool(band[0] <= average <= band[1]))
+    return BandTest(statistic, c, N, mean_dof, per_step, lower, upper, average, band,
+                    chi2_band(int(has.sum()) * N, mean_dof, c), float(inside[has].mean()),
+                    bool(band[0] <= average <= band[1]))
 
 
 def nees_test(nees, nx: int, confidence: float = 0.95) -> BandTest:

@@ -1,8 +1,6 @@
-"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record
-(Shumway and Stoffer, 1982; Ghahramani and Hinton, 1996): the filter's pass and its RTS
-smoothing, then the M-step's closed forms (in the guide's page on offline estimation,
-docs/guide/offline.md); a scalar structure is seed 000 eqs 24-25's ``sigma^2 I``.
-"""
+"""Expectation-maximisation of the noise covariances Q and R (and x0, P0) from a record (Shumway
+and Stoffer 1982; Ghahramani and Hinton 1996): the filter's pass, its RTS smoothing, the M-step's
+closed forms (docs/guide/offline.md); a scalar structure is seed 000 eqs 24-25's ``sigma^2 I``."""
 from __future__ import annotations
 
 import casadi as ca
@@ -13,6 +11,7 @@ from fmu_models.infra import checks
 
 from ._fold import NativeFold
 from .base import KalmanBase
+from .iae import project_pd
 from .runs import EMResult
 from .smoother import rts_smooth
 
@@ -20,17 +19,6 @@ __all__ = ["STRUCTURES", "EMResult", "em_noise"]
 
 STRUCTURES = ("full", "diagonal", "scalar")
 LEARNABLE = ("Q", "R", "x0", "P0")
-
-
-def _project(M: np.ndarray, structure: str, floor: float) -> np.ndarray:
-    """``M`` in ``structure``, symmetric with eigenvalues at least ``floor``."""
-    n = M.shape[0]
-    if structure == "scalar":
-        return max(float(np.trace(M)) / n, floor) * np.eye(n)
-    if structure == "diagonal":
-        return np.diag(np.maximum(np.diag(M), floor))
-    w, V = np.linalg.eigh(0.5 * (M + M.T))
-    return (V * np.maximum(w, floor)) @ V.T
 
 
 def _terms(filt: KalmanBase):
@@ -71,10 +59,9 @@ def em_noise(filt: KalmanBase, us, ys, masks=None, y0=None, n_iter: int = 50, to
         the learned values, reset to the start of the record.
     us, ys, masks, y0
         The record, as :meth:`~estimators.base.KalmanBase.run` takes it.
-    n_iter : int
-        Most iterations (default 50).
-    tol : float
-        Stop when ``|LL_i - LL_{i-1}| <= tol |LL_i|`` (default 1e-6).
+    n_iter, tol : int, float
+        At most ``n_iter`` iterations (default 50), stopping when ``|LL_i - LL_{i-1}| <= tol |LL_i|``
+        (default 1e-6).
     learn : sequence of {"Q", "R", "x0", "P0"}
         What to learn (default Q and R).
     structure : {"full", "diagonal", "scalar"}
@@ -159,7 +146,7 @@ class _EM:
         if "x0" in self.learn:
             self.x0 = sm.x[0].copy()
         if "P0" in self.learn:
-            self.P0 = _project(sm.P[0], self.structure, self.floor)
+            self.P0 = project_pd(sm.P[0], self.floor, np.inf, self.structure)
 
     def _process_noise(self, xs, Ps, lag) -> np.ndarray:
         """The M-step's Q from the smoothed ``xs`` (N + 1, nx), ``Ps`` and ``lag`` (column-major rows)."""
@@ -167,7 +154,7 @@ class _EM:
         qt = np.empty((1, N, nx * nx))
         self.trans(1, N, {"xs": xs[:-1][None], "xs1": xs[1:][None], "Ps": Ps[:-1][None], "Ps1": Ps[1:][None],
                           "Plag": lag[None], "u": self.us[None]}, {}, {"q": qt})
-        return _project(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, self.structure, self.floor)
+        return project_pd(qt[0].sum(axis=0).reshape(nx, nx, order="F") / N, self.floor, np.inf, self.structure)
 
     def _measurement_noise(self, xs, Ps) -> np.ndarray:
         """The M-step's R (entries over the valid channels; the others keep their value)."""
@@ -178,4 +165,5 @@ class _EM:
                          "mask": self.m_all[None]}, {}, {"r": rt, "count": ct})
         counts = ct[0].sum(axis=0).reshape(ny, ny, order="F")
         total = rt[0].sum(axis=0).reshape(ny, ny, order="F")
-        return _project(np.where(counts > 0, total / np.maximum(counts, 1), self.R), self.structure, self.floor)
+        return project_pd(np.where(counts > 0, total / np.maximum(counts, 1), self.R), self.floor, np.inf,
+                          self.structure)

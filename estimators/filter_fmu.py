@@ -1,22 +1,14 @@
 """A configured filter as a native Co-Simulation FMU (FMI 2.0 or 3.0), no Python inside.
 
-:func:`export_filter_fmu` generates C code for the filter's compiled fused step (the very
-CasADi Function the filter's ``step`` runs, with only the outputs the FMU shows) and for a
-function mapping the FMU's parameters to the filter's initial state, and packs them with the
-estimator core (``c/filter_core.c``) and the project's FMI wrappers
-(:mod:`fmu_models.export.pack`), the machinery of the plant FMUs. It works on any filter of
-the protocol of :mod:`estimators.protocol`: the FMU's parameters are the filter's
-``fmu_parameters()``, its initial state ``fmu_initial(p)``.
-
-The manual's page "Taking the estimator to another tool" gives the FMU's variables, its
-timing (an update at each sample instant ``t0 + k period`` whatever the communication step,
-direct feedthrough at an instant) and the clocked form (``clocked=True``, FMI 3.0: an input
-clock ``sample``, Co-Simulation with Event Mode and Scheduled Execution); ``c/filter_core.h``
-the C side.
-"""
+C code generated for the filter's compiled fused step and for ``fmu_initial`` (the protocol of
+:mod:`estimators.protocol`), packed with the estimator core (``c/filter_core.c``) by
+:mod:`fmu_models.export.pack`; the manual's page "Taking the estimator to another tool" gives
+the FMU's variables, timing and clocked form."""
 from __future__ import annotations
 
+from collections import Counter
 from functools import partial
+from itertools import accumulate, groupby
 from pathlib import Path
 
 import casadi as ca
@@ -40,11 +32,6 @@ _FED = ("u", "y", "mask")
 _SHOWN = ("innov", "nis")
 
 
-def _is_filter(filt) -> bool:
-    return all(hasattr(filt, a) for a in ("fmu_parameters", "fmu_initial", "step_function", "state_arrays",
-                                          "system", "supports_batch"))
-
-
 def _flat_parameters(filt) -> list[tuple]:
     """``(label, value, domain, description, parameter name, entry)`` of every FMU parameter."""
     rows, seen = [], set()
@@ -64,10 +51,9 @@ def filter_parameters(filt) -> dict[str, float]:
 
 
 def _check_exportable(filt) -> None:
-    """Refuse what cannot become a filter FMU: not a filter (TypeMismatchError), a filter
-    whose adaptation is not all in its step (TypeMismatchError), a model whose map calls
-    compiled code outside the filter, an FMU's (ConfigurationError)."""
-    if not _is_filter(filt):
+    """Refuse what cannot become a filter FMU (the errors :func:`export_filter_fmu` names)."""
+    if not all(hasattr(filt, a) for a in ("fmu_parameters", "fmu_initial", "step_function", "state_arrays",
+                                          "system", "supports_batch")):
         raise TypeMismatchError(f"export_filter_fmu needs a filter of estimators, got {type(filt).__name__}")
     if not filt.supports_batch:
         raise TypeMismatchError(f"{filt.name} adapts part of its state in numpy and cannot be exported"
@@ -90,10 +76,9 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
     out_dir : path
         Folder to write ``<name>.fmu`` into.
     fmi_version : {2, 3}
-    name : str, optional
-        Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``).
-    file_name : str, optional
-        The FMU file name (default ``<name>.fmu``).
+    name, file_name : str, optional
+        Model identifier (default ``<Filter><Model>``, e.g. ``EKFCartpole``) and file name
+        (default ``<name>.fmu``).
     clocked : bool
         Write the clocked form (FMI 3.0 only; see the manual's page "Taking the estimator to
         another tool").
@@ -138,18 +123,15 @@ def export_filter_fmu(filt, out_dir=".", fmi_version: int = 2, name: str | None 
 def _offsets(names: list[str], size) -> tuple[dict[str, int], int]:
     """Where each array ``names[i]`` of ``size(name)`` entries starts in one flat buffer, and
     the buffer's size."""
-    offsets, total = {}, 0
-    for n in names:
-        offsets[n], total = total, total + size(n)
-    return offsets, total
+    starts = list(accumulate(map(size, names), initial=0))
+    return dict(zip(names, starts)), starts[-1]
 
 
 class _FilterCore:
-    """What the filter core (``c/filter_core.h``) is told about the filter ``filt``: its
-    parameters (``rows``), three flat buffers (the state arrays, the step's fixed inputs, the
-    diagnostics) with each array's offset, the Functions ``flt_init`` (the parameters to the
-    initial buffers) and ``flt_step``, where each argument of the step comes from and each
-    result goes, and the FMU's outputs."""
+    """What the filter core (``c/filter_core.h``) is told about ``filt``: its parameters (``rows``),
+    three flat buffers (state arrays, fixed step inputs, diagnostics) with each array's offset,
+    ``flt_init`` (parameters to initial buffers) and ``flt_step`` with where each of its arguments
+    comes from and each result goes, and the FMU's outputs."""
 
     def __init__(self, filt):
         self.filt, self.rows = filt, _flat_parameters(filt)
@@ -178,10 +160,8 @@ class _FilterCore:
         flag (1: one is not finite; the gate may be inf, no gate)."""
         filt, rows = self.filt, self.rows
         psym = ca.SX.sym("p", len(rows))
-        by_param: dict[str, list] = {}
-        for k, r in enumerate(rows):
-            by_param.setdefault(r[4], []).append(psym[k])
-        initial = filt.fmu_initial({n: ca.vertcat(*entries) for n, entries in by_param.items()})
+        initial = filt.fmu_initial({name: ca.vertcat(*(psym[k] for k, _ in group))
+                                    for name, group in groupby(enumerate(rows), key=lambda kr: kr[1][4])})
         names = self.state_names + self.fixed_names
         missing = [n for n in names if n not in initial]
         if missing:
@@ -215,21 +195,18 @@ class _FilterCore:
         if clocked:
             v = clock_variables(v, ("U", "Y", "OUT", "VALID"), s.dt,
                                 f"the filter's sample instants (every {s.dt:g} s from the start time)")
-        names = [x.name for x in v.variables]
-        if len(set(names)) != len(names):
-            dup = sorted({x for x in names if names.count(x) > 1})
+        dup = sorted(name for name, count in Counter(x.name for x in v.variables).items() if count > 1)
+        if dup:
             raise ConfigurationError(f"{self.filt.name}: FMU variable names collide: {dup} (rename the model's "
                                      "variables or the filter's parameters)")
         return v
 
     def _ordered_pairs(self) -> list[tuple[int, int]]:
         """The parameter pairs ``(lo, hi)`` (indices) that must increase."""
-        less, first = [], {}
-        for k, r in enumerate(self.rows):
-            first.setdefault(r[4], k)
+        less, names = [], [r[4] for r in self.rows]
         for prm in self.filt.fmu_parameters():
             if prm.increasing:
-                k0 = first[prm.name]
+                k0 = names.index(prm.name)
                 less += [(k0 + i, k0 + i + 1) for i in range(prm.size - 1)]
         return less
 
@@ -262,18 +239,16 @@ class _FilterCore:
 
 
 def _outputs(s, st_off: dict[str, int], dg_off: dict[str, int]) -> list[tuple[str, int, int, str]]:
-    """The FMU's outputs ``(name, buffer (0: state, 1: diagnostics), offset, description)`` of
-    a filter on the model ``s``: the estimate, the diagonal of P, the innovation, the NIS and,
-    for a filter that adapts Q and R, their diagonals."""
-    nx, ny = s.nx, s.ny
+    """The FMU's outputs ``(name, buffer (0: state, 1: diagnostics), offset, description)``: the
+    estimate, the diagonal of P, the innovation, the NIS and, if adapted, the diagonals of Q, R."""
+    def diagonal(key: str, names: list[str], what: str) -> list[tuple]:
+        return [(f"{key}_{n}", 0, st_off[key] + i * (len(names) + 1), f"{what} of {n}") for i, n in enumerate(names)]
+
     outs = [(n, 0, st_off["x"] + i, f"estimate of {n}") for i, n in enumerate(s.state_names)]
-    outs += [(f"P_{n}", 0, st_off["P"] + i * (nx + 1), f"variance of the estimate of {n}")
-             for i, n in enumerate(s.state_names)]
+    outs += diagonal("P", s.state_names, "variance of the estimate")
     outs += [(f"innov_{n}", 1, dg_off["innov"] + j, f"innovation of {n}") for j, n in enumerate(s.output_names)]
     outs += [("nis", 1, dg_off["nis"], "normalised innovation squared")]
     if "Q" in st_off:
-        outs += [(f"Q_{n}", 0, st_off["Q"] + i * (nx + 1), f"adapted process variance of {n}")
-                 for i, n in enumerate(s.state_names)]
-        outs += [(f"R_{n}", 0, st_off["R"] + j * (ny + 1), f"adapted measurement variance of {n}")
-                 for j, n in enumerate(s.output_names)]
+        outs += diagonal("Q", s.state_names, "adapted process variance")
+        outs += diagonal("R", s.output_names, "adapted measurement variance")
     return outs

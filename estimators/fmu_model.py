@@ -1,11 +1,9 @@
 """A Model Exchange FMU (FMI 2.0 or 3.0) as the process model of the filters.
 
-:class:`FMUProcessModel` is a :class:`~estimators.DiscreteModel` whose map (a fixed-step
-integrator over the FMU's right-hand side, with exact Jacobians through its stages) and
-measurement are the FMU's, compiled C (``estimators/c/fmu_process.c``) that calls the FMU's
-own functions through its Model Exchange calls only; how, and what is refused, is in the
-FMU tutorial (docs/tutorial-fmu.md).
-"""
+:class:`FMUProcessModel`'s map (a fixed-step integrator over the FMU's right-hand side, exact
+Jacobians through its stages) and measurement are compiled C (``estimators/c/fmu_process.c``)
+calling the FMU's Model Exchange functions; the FMU tutorial (docs/tutorial-fmu.md) says how and
+what is refused."""
 from __future__ import annotations
 
 import atexit
@@ -66,6 +64,7 @@ class _Description:
     md: object
     version: int
     identifier: str
+    platform: str                   # the folder of this platform's binary
     directional: bool
     can_restore: bool
     needs_completed_step: bool
@@ -86,7 +85,7 @@ def _flag(xml: bytes, *names: str) -> bool:
 
 def _read(path: Path) -> tuple[_Description, bytes]:
     """The FMU at ``path`` described, and its bytes (for the model's identity)."""
-    from fmpy import read_model_description
+    from fmpy import platform, platform_tuple, read_model_description
 
     try:
         data = path.read_bytes()
@@ -110,11 +109,10 @@ def _read(path: Path) -> tuple[_Description, bytes]:
     # fmpy reads FMI 3.0's providesDirectionalDerivatives under its FMI 2.0 name only; that
     # spelling is read too, since some FMI 3.0 FMUs carry it (their derivatives are checked anyway)
     directional = _flag(xml, "providesDirectionalDerivative", *(("providesDirectionalDerivatives",) * (version == 3)))
-    states = [d.variable.derivative for d in md.derivatives]
-    return _Description(md, version, me.modelIdentifier, directional,
+    return _Description(md, version, me.modelIdentifier, platform if version == 2 else platform_tuple, directional,
                         _flag(xml, "canGetAndSetFMUstate" if version == 2 else "canGetAndSetFMUState"),
                         bool(me.needsCompletedIntegratorStep), {v.name: v for v in md.modelVariables},
-                        states, [d.variable for d in md.derivatives],
+                        [d.variable.derivative for d in md.derivatives], [d.variable for d in md.derivatives],
                         {o.variable.name: o.dependencies for o in md.outputs}), data
 
 
@@ -187,13 +185,6 @@ def _close_all() -> None:
         rt.close()
 
 
-def _platform(version: int) -> str:
-    """The folder of this platform's binary in an FMU of FMI ``version``."""
-    import fmpy
-
-    return fmpy.platform if version == 2 else fmpy.platform_tuple
-
-
 class FMUProcessModel(DiscreteModel):
     """``x_{k+1} = f(x_k, u_k)``, ``y_k = h(x_k)`` of a Model Exchange FMU.
 
@@ -209,10 +200,8 @@ class FMUProcessModel(DiscreteModel):
         The FMU's continuous Float64 inputs the filters set, held over each period (default none).
     parameters : mapping of str to float, optional
         FMU parameters (Float64, fixed or tunable) set by name before initialisation.
-    method : {"rk4", "euler"}
-        The integrator over one period (default ``"rk4"``).
-    substeps : int
-        Integrator steps per period (default 1).
+    method, substeps : {"rk4", "euler"}, int
+        The integrator over one period (default ``"rk4"``) and its steps per period (default 1).
     jacobian : {"auto", "directional", "fd"}
         The Jacobians' source (:data:`JACOBIANS`; default ``"auto"``).
     tolerance : float, optional
@@ -332,7 +321,7 @@ class FMUProcessModel(DiscreteModel):
         folder = tempfile.mkdtemp(prefix="pendulum_cosim_fmumodel_")
         try:
             with zipfile.ZipFile(self.path) as z:  # its binary for this platform and its resources only
-                z.extractall(folder, [n for n in z.namelist() if n.startswith((f"binaries/{_platform(d.version)}/",
+                z.extractall(folder, [n for n in z.namelist() if n.startswith((f"binaries/{d.platform}/",
                                                                                 "resources/"))])
         except (OSError, zipfile.BadZipFile) as e:
             shutil.rmtree(folder, ignore_errors=True)
@@ -355,7 +344,7 @@ class FMUProcessModel(DiscreteModel):
         import fmpy
 
         version, md = d.version, d.md
-        library = Path(folder, "binaries", _platform(version), d.identifier + fmpy.sharedLibraryExtension)
+        library = Path(folder, "binaries", d.platform, d.identifier + fmpy.sharedLibraryExtension)
         resources = Path(folder, "resources")
         names = [s.name for s in states]
         y_state = np.array([names.index(m) if m in names else -1 for m in meas], np.int64)
@@ -377,9 +366,8 @@ class FMUProcessModel(DiscreteModel):
                     library=str(library).encode(), instance_name=d.identifier.encode(), token=md.guid.encode(),
                     resources=(resources.as_uri() if version == 2 else str(resources) + "/").encode()
                     if resources.is_dir() else None,
-                    **{k: v.ctypes.data_as(_P(ctypes.c_uint32 if v.dtype == np.uint32 else
-                                                ctypes.c_int64 if v.dtype == np.int64 else ctypes.c_double))
-                       for k, v in keep.items()}, **strings)
+                    **{k: v.ctypes.data_as(_P(np.ctypeslib.as_ctypes_type(v.dtype))) for k, v in keep.items()},
+                    **strings)
         return c, (keep, strings)
 
     def _advance(self, x: np.ndarray, u: np.ndarray, substeps: int) -> np.ndarray:
@@ -391,16 +379,11 @@ class FMUProcessModel(DiscreteModel):
             raise self.take_failure() or FMUError(f"{self.path.name}: one period from the start values failed")
         return out
 
-    @property
-    def _nominal_x(self) -> np.ndarray:
-        """The states' nominal values."""
-        return self._rt.keep[0]["nominal_x"]
-
     def _check_accuracy(self, tol: float | None) -> None:
         """Refuse an integration whose error by step doubling at the start values is above ``tol``."""
         n, x, u = self.substeps, self.start, self._u_start
         coarse, fine = self._advance(x, u, n), self._advance(x, u, 2 * n)
-        scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._nominal_x)
+        scale = np.maximum(np.maximum(np.abs(fine), np.abs(x)), self._rt.keep[0]["nominal_x"])
         order = 4 if self.method == "rk4" else 1
         err = np.abs(coarse - fine) / scale * (2**order / (2**order - 1))
         i = int(np.argmax(err))
@@ -416,7 +399,7 @@ class FMUProcessModel(DiscreteModel):
     def _check_directional(self, tol: float) -> None:
         """Refuse directional derivatives that disagree with the FMU's central differences."""
         x, u = self.start, self._u_start
-        steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._nominal_x)
+        steps = np.cbrt(np.finfo(float).eps) * np.maximum(np.abs(x), self._rt.keep[0]["nominal_x"])
         for what, exact, fn in (("f", self.F(x, u), lambda z: self.f(z, u)), ("h", self.H(x), self.h)):
             fd = np.column_stack([(fn(x + s * e) - fn(x - s * e)) / (2 * s) for s, e in zip(steps, np.eye(self.nx))])
             bad = np.abs(exact - fd) > tol * max(1.0, np.abs(fd).max())
@@ -429,19 +412,16 @@ class FMUProcessModel(DiscreteModel):
                                f"tolerance {tol:g}); pass jacobian='fd' to use differences")
 
     def transition(self, x: ca.SX, u: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(f(x, u), F)`` at the symbols ``x`` (nx, 1) and ``u`` (nu, 1): one call of the compiled
-        map and its tangent."""
+        """One call of the compiled map and its tangent."""
         return self._ext["fF"](x, u)
 
     def measurement(self, x: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(h(x), H)`` at the symbol ``x`` (nx, 1): one call of the compiled measurement and its
-        Jacobian."""
+        """One call of the compiled measurement and its Jacobian."""
         return self._ext["hH"](x)
 
     def take_failure(self) -> Exception | None:
-        """The first failure of the FMU's evaluations since the last call (NumericalError: a
-        non-finite derivative or measurement; FMUError: a failed call, an event inside a
-        period), or None; taking it clears it."""
+        """NumericalError (a non-finite derivative or measurement) or FMUError (a failed call, an
+        event inside a period)."""
         if not self._rt.call("failures"):
             return None
         error = NumericalError if self._rt.call("numerical") else FMUError
@@ -450,7 +430,6 @@ class FMUProcessModel(DiscreteModel):
         return error(f"{self.path.name}: {message}")
 
     def describe(self) -> str:
-        """What the model is and how it is computed, in a few lines."""
         d = self._description
         restore = ("restored with SetFMUState before every evaluation" if d.can_restore else
                    "not restorable (no SetFMUState): every evaluation is a trial step from the start time, "

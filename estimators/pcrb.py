@@ -1,15 +1,9 @@
 """The posterior Cramér-Rao bound (PCRB): the lowest mean-square error any estimator can reach.
 
-The Fisher information recursion of Tichavský, Muravchik and Nehorai (IEEE Trans. Signal
-Processing 46(5), 1998) for additive Gaussian noise, ``w_k ~ N(0, Q)``, ``v_k ~ N(0, R)``,
-``x_0 ~ N(m_0, P_0)``::
-
-    J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
-    D11 = E[F^T Q^-1 F],  D12 = D21^T = -E[F^T] Q^-1,  D22 = Q^-1 + E[H^T R^-1 H],
-
-``J_0 = P_0^-1``, computed in covariance form with expectations by Monte Carlo over true
-trajectories; the form, and the bound with missing measurements, are in the guide's page
-on the experiments (docs/guide/experiments.md).
+The information recursion of Tichavský, Muravchik and Nehorai (1998) for additive Gaussian noise,
+``J_{k+1} = D22 - D21 (J_k + D11)^-1 D12``, ``D11 = E[F^T Q^-1 F]``, ``D12 = D21^T = -E[F^T] Q^-1``,
+``D22 = Q^-1 + E[H^T R^-1 H]``, ``J_0 = P_0^-1``, in covariance form with expectations by Monte
+Carlo over true trajectories (the guide's page on the experiments, docs/guide/experiments.md).
 """
 from __future__ import annotations
 
@@ -93,7 +87,7 @@ def _trajectories(X, nx: int) -> np.ndarray:
 
 def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
     """The used channels (runs, N, ny) of bool, or None if all are used."""
-    valid = None
+    valid = np.ones((runs, N, ny), dtype=bool)
     if masks is not None:
         m = checks.float_array(masks, "masks")
         try:
@@ -102,16 +96,15 @@ def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
             raise InputError(f"masks must have shape ({runs}, {N}, {ny}), got {m.shape}") from None
         if not np.isin(m, (0.0, 1.0)).all():
             raise InputError("masks must hold 0/1 (or False/True) only")
-        valid = m != 0
+        valid &= m != 0
     if ys is not None:
         y = checks.float_array(ys, "measurements ys")
         if y.shape != (runs, N, ny):
             raise InputError(f"measurements ys must have shape ({runs}, {N}, {ny}), got {y.shape}")
         if np.isinf(y).any():
             raise InputError("measurements ys contain inf (a missing channel is NaN)")
-        ok = ~np.isnan(y)
-        valid = ok if valid is None else valid & ok
-    return None if valid is None or valid.all() else valid
+        valid &= ~np.isnan(y)
+    return None if valid.all() else valid
 
 
 def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: int) -> np.ndarray | None:
@@ -165,11 +158,6 @@ class _Jacobians:
         return F, H
 
 
-def _jacobians(system: DiscreteModel) -> _Jacobians:
-    """The :class:`_Jacobians` of ``system``, built once per model."""
-    return system.compiled("pcrb", (JACOBIAN_BLOCK,), "compiled", lambda: _Jacobians(system))
-
-
 def _root(M: np.ndarray) -> np.ndarray:
     """``Z`` with ``Z^T Z = M`` (..., n, n) by eigendecomposition (negative eigenvalues become 0)."""
     lam, U = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
@@ -206,15 +194,13 @@ def posterior_crb(system: DiscreteModel, X, us, Q, R, P0=None, masks=None, ys=No
     P0 : array_like, optional
         Covariance of the prior of ``x_0`` (``J_0 = P0^-1``); None (default): ``x_0`` known
         exactly (the first prediction's covariance is ``Q``).
-    masks : array_like of bool, shape (runs, N, ny), optional
-        ``masks[r, k, j]`` False: channel ``j`` of ``y_{k+1}`` of realisation ``r`` is missing.
-    ys : array_like, shape (runs, N, ny), optional
-        Measurements ``y_1 .. y_N``; only where they are NaN (missing channels) is used.
+    masks, ys : array_like, shape (runs, N, ny), optional
+        The missing channels: channel ``j`` of ``y_{k+1}`` of realisation ``r`` is missing where
+        ``masks[r, k, j]`` is False or the measurement ``ys[r, k, j]`` is NaN (only that is used).
 
     Returns
     -------
     PCRB
-        The bound matrices ``J_k^-1``, k = 0..N.
 
     Raises
     ------
@@ -270,7 +256,8 @@ class _Recursion:
         ``Z`` of the spread ``V`` (None for one realisation) and of ``E[H^T R^-1 H]``."""
         X, runs = self.X, self.X.shape[0]
         nx, ny = self.system.nx, self.system.ny
-        F, H = _jacobians(self.system)(X[:, k0:k0 + n], self.us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
+        jacobians = self.system.compiled("pcrb", (JACOBIAN_BLOCK,), "compiled", lambda: _Jacobians(self.system))
+        F, H = jacobians(X[:, k0:k0 + n], self.us[:, k0:k0 + n], X[:, k0 + 1:k0 + n + 1])
         F, H = F.reshape(runs, n, nx, nx), H.reshape(runs, n, ny, nx)
         if not (np.isfinite(F).all() and np.isfinite(H).all()):
             r, k = map(int, np.argwhere(~(np.isfinite(F).all(axis=(2, 3)) & np.isfinite(H).all(axis=(2, 3))))[0])

@@ -1,8 +1,6 @@
-"""Rauch-Tung-Striebel smoothing of a stored filter pass (Rauch, Tung and Striebel, 1965; for
-the UKF, Särkkä, 2008), one compiled step per time step folded in native code, with the
-filter's own predictions; the equations are in the guide's page on offline estimation
-(docs/guide/offline.md).
-"""
+"""Rauch-Tung-Striebel smoothing of a stored filter pass (Rauch, Tung and Striebel 1965; for the UKF,
+Särkkä 2008), one compiled step per time step folded in native code with the filter's own
+predictions; the equations are in the guide's page on offline estimation (docs/guide/offline.md)."""
 from __future__ import annotations
 
 import casadi as ca
@@ -77,22 +75,15 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
                                  "its period, parameters or equations differ; smooth it with the filter "
                                  "that made it")
     N, nx = len(run.x) - 1, filt.system.nx
-
-    def flat(a):                                    # (K, nx, nx) symmetric -> (K, nx*nx) rows
-        return np.ascontiguousarray(a).reshape(len(a), -1)
-
-    X, P = np.ascontiguousarray(run.x), flat(run.P)
-    xp, Pp = np.ascontiguousarray(run.x_prior), flat(run.P_prior)
-    us = np.ascontiguousarray(run.us)
-    xs = np.empty((N + 1, nx))
-    Ps = np.empty((N + 1, nx * nx))
-    C = np.empty((N, nx * nx))
-    lag = np.empty((N, nx * nx))
+    X, xp = np.ascontiguousarray(run.x), np.ascontiguousarray(run.x_prior)
+    P, Pp = (np.ascontiguousarray(a).reshape(len(a), -1) for a in (run.P, run.P_prior))    # symmetric: rows
+    xs, Ps = np.empty((N + 1, nx)), np.empty((N + 1, nx * nx))
+    C, lag = np.empty((N, nx * nx)), np.empty((N, nx * nx))
     xs[N], Ps[N] = X[N], P[N]
     if N:
         # backward: step j handles k = N-1-j; reversed views have negative strides
         args = {"x": X[N - 1::-1][None], "P": P[N - 1::-1][None], "xp": xp[::-1][None], "Pp": Pp[::-1][None],
-                "u": us[::-1][None]}
+                "u": np.ascontiguousarray(run.us)[::-1][None]}
         outs = {"xs_new": xs[N - 1::-1][None], "Ps_new": Ps[N - 1::-1][None], "C": C[::-1][None],
                 "Plag": lag[::-1][None]}
         _fold(filt)(1, N, args, {"xs": xs[N][None], "Ps": Ps[N][None]}, outs)
@@ -102,9 +93,5 @@ def rts_smooth(filt: KalmanBase, run: FilterRun) -> Smoothed:
             raise type(failure)(f"{filt.name}: the smoothed estimate became non-finite: {failure}")
         raise NumericalError(f"{filt.name}: the smoothed estimate became non-finite (singular predicted "
                              "covariance?)")
-
-    def mats(a):                                    # column-major rows -> (K, nx, nx)
-        return a.reshape(len(a), nx, nx).transpose(0, 2, 1)
-
-    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), mats(lag), mats(C),   # Ps is symmetric
-                    list(filt.system.state_names))
+    lag, C = (a.reshape(N, nx, nx).transpose(0, 2, 1) for a in (lag, C))         # column-major rows
+    return Smoothed(xs, Ps.reshape(N + 1, nx, nx), lag, C, list(filt.system.state_names))   # Ps is symmetric

@@ -1,11 +1,9 @@
 """Sliding-window maximum-likelihood adaptive EKF (SWML), started from autocovariance least squares.
 
-Beyond the source papers: the EKF's ``Q = q I``, ``R = r I`` (the form of seed 000 eqs
-24-25) re-estimated at update times by maximum likelihood (Schweppe 1965), or MAP, over a
-re-filtered window of innovations, from an ALS candidate (Odelson, Rajamani and Rawlings
-2006, for time-varying gains and Jacobians), with safeguards; optionally the state averaged
-over the posterior of ``(ln q, ln r)``. The method, step by step, is in the manual's
-estimators page; the whole filter, updates included, is one compiled Function
+Beyond the source papers: the EKF's ``Q = q I``, ``R = r I`` (seed 000 eqs 24-25) re-estimated by
+maximum likelihood (Schweppe 1965) or MAP over a re-filtered window, from an ALS candidate (Odelson,
+Rajamani and Rawlings 2006), optionally averaging the state over the posterior of ``(ln q, ln r)``;
+the manual's estimators page gives the method. The whole filter is one compiled Function
 (:meth:`SWML.wrap_step`).
 """
 from __future__ import annotations
@@ -50,8 +48,7 @@ def _scalar_variance(M, n: int, what: str) -> float:
 
 class SWML(AdaptationRecord, EKF, register="SWML"):
     """EKF whose ``Q = q I`` and ``R = r I`` are re-estimated by maximum likelihood over a
-    sliding window of innovations, started from an ALS estimate (the manual's estimators page
-    gives the method step by step).
+    sliding window of innovations, started from an ALS estimate.
 
     Parameters
     ----------
@@ -59,10 +56,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         As :class:`~estimators.base.KalmanBase`.
     Q, R : float or array_like
         The initial ``q I`` and ``r I`` (a scalar, or a multiple of the identity).
-    window : int
-        W, the steps in the window (default 100); a multiple of ``every``, at most :data:`MAX_WINDOW`.
-    every : int
-        M, steps between updates after the start (default 50).
+    window, every : int
+        W, the steps in the window (default 100; a multiple of ``every``, at most :data:`MAX_WINDOW`),
+        and M, the steps between updates after the start (default 50).
     early_until, early_every : int
         Up to step ``early_until`` (default 20; 0: none) an update every ``early_every`` steps
         (default 2) over all steps so far.
@@ -259,9 +255,9 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
         s, W = self.system, self.window
         n, n_snap = s.nx, W // self.every
         ins = [ca.MX.sym(step.name_in(i), step.sparsity_in(i)) for i in range(step.n_in())]
-        names_out = [step.name_out(i) for i in range(step.n_out())]
+        names_out = step.name_out()
         out = dict(zip(names_out, step.call(ins)))
-        by = dict(zip([step.name_in(i) for i in range(step.n_in())], ins))
+        by = dict(zip(step.name_in(), ins))
         k = out["count_new"]
         early = ca.logic_and(ca.logic_and(k <= self.early_until, ca.fmod(k, self.early_every) == 0), k > 0)
         regular = ca.logic_and(k > self.early_until, ca.fmod(k, self.every) == 0)
@@ -291,8 +287,7 @@ class SWML(AdaptationRecord, EKF, register="SWML"):
             out[key] = ca.densify(ca.reshape(val, out[key].shape))
         out["status"] = ca.if_else(out["status"] != 0, out["status"],
                                    ca.if_else(finite_flag([out["x_new"], out["P_new"]]), OK, BAD_RESULT))
-        return ca.Function("step", ins, [out[nm] for nm in names_out], [step.name_in(i) for i in range(step.n_in())],
-                           names_out)
+        return ca.Function("step", ins, [out[nm] for nm in names_out], step.name_in(), names_out)
 
 
 def _mixture(ends, w):
@@ -400,9 +395,9 @@ class _WindowUpdate:
                                  self._rep(self.gate))
         return self.objective(lls[-1], lq, lr), xs[:, -1], Ps[:, -self.n:]
 
-    def clamp(self, lq, lr):
-        """``theta`` within its bounds."""
-        lo_q, hi_q, lo_r, hi_r = self.bounds
+    def clamp(self, lq, lr, bounds=None):
+        """``theta`` within its bounds (or within ``bounds``, ``(lo_q, hi_q, lo_r, hi_r)``)."""
+        lo_q, hi_q, lo_r, hi_r = bounds or self.bounds
         return ca.fmin(ca.fmax(lq, lo_q), hi_q), ca.fmin(ca.fmax(lr, lo_r), hi_r)
 
     def inside(self, lq, lr):
@@ -437,8 +432,7 @@ class _WindowUpdate:
         ``(H11, H12, H22)``."""
         tiny = 1e-300                                       # "negative parts floored" at the lower bounds
         lqa, lra = self.clamp(ca.log(ca.fmax(theta_als[0], tiny)), ca.log(ca.fmax(theta_als[1], tiny)))
-        eva = self.run(lqa, lra)
-        la, endA = eva[0], eva[1:]
+        la, *endA = self.run(lqa, lra)
         keep, lq0, lr0 = self.filt.keep_r_nats, self.lq0, self.lr0
         use_a = ca.logic_and(ca.logic_and(finite_flag([la]), la > l0), ca.logic_or(lra >= lr0, la >= l0 + keep))
         lqs, lrs = ca.if_else(use_a, lqa, lq0), ca.if_else(use_a, lra, lr0)
@@ -487,9 +481,8 @@ class _WindowUpdate:
 
     def _posterior_average(self, theta, l_best, x_best, P_best, hess):
         """The window's end state and covariance averaged over the Laplace approximation of the
-        posterior of ``theta`` (as the manual's estimators page describes; the points clipped to
-        the bounds, one not finite left out too; if the mixture is not finite, the kept point's
-        alone): the state, covariance and the points and weights (13)."""
+        posterior of ``theta`` (the manual's estimators page; a point not finite left out, a mixture
+        not finite replaced by the kept point), and the points and weights (13)."""
         H11, H12, H22 = hess
         a, b, d = -H11, -H12, -H22
         pd = ca.logic_and(a > 0, a * d - b * b > 0)
@@ -501,13 +494,9 @@ class _WindowUpdate:
         l21 = s12 / l11
         l22 = ca.sqrt(ca.fmax(s22 - l21 * l21, 0))
         c = math.sqrt(3.0)
-        qb, rb = self.qb, self.rb
-        lo_q, hi_q, lo_r, hi_r = ca.log(qb[0]), ca.log(qb[1]), ca.log(rb[0]), ca.log(rb[1])
-        pts = []
-        for sign in (1.0, -1.0):
-            for dq, dr in ((l11, l21), (0, l22)):
-                pts.append((ca.fmin(ca.fmax(theta[0] + sign * c * dq, lo_q), hi_q),
-                            ca.fmin(ca.fmax(theta[1] + sign * c * dr, lo_r), hi_r)))
+        given = (ca.log(self.qb[0]), ca.log(self.qb[1]), ca.log(self.rb[0]), ca.log(self.rb[1]))
+        pts = [self.clamp(theta[0] + sign * c * dq, theta[1] + sign * c * dr, given)
+               for sign in (1.0, -1.0) for dq, dr in ((l11, l21), (0, l22))]
         ends, raw = [(x_best, P_best)], [ca.MX(UT_WEIGHTS[0])]
         for pt, w0 in zip(pts, UT_WEIGHTS[1:]):
             li, xe, Pe = self.run(*pt)

@@ -78,7 +78,6 @@ class LQRController(Component, kind="lqr"):
             self.u_limits = (float(lim[0]), float(lim[1]))
 
     def output(self, t, u):
-        """The command ``u_op - K (x_hat - x_op)``, saturated."""
         cmd = self.u_op - self.K @ (u - self.x_op)
         if self.u_limits is not None:
             cmd = np.clip(cmd, *self.u_limits)

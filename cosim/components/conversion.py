@@ -45,13 +45,11 @@ class Conversion(Component, kind="conversion"):
                                                   for k, v in dict(table).items()}
 
     def timing(self) -> str:
-        """What an output at ``t`` means."""
         if self.table is None:
             return f"y = {self.factor:g} * u + {self.offset:g}, at t from u at t"
         return "y = table[u], at t from u at t"
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
-        """``y`` at ``t`` [s] from ``u`` (shape ``(1,)``)."""
         if self.table is None:
             return np.array([self.factor * u[0] + self.offset])
         key = int(u[0])

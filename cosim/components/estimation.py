@@ -13,13 +13,13 @@ from estimators.filter_fmu import export_filter_fmu, filter_parameters
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import positive
 
-from ..core.component import Component, ExportedFMU
+from ..core.component import BoundCalls, Component, ExportedFMU
 from ..core.native import OP_FILTER, OP_HOLD, OP_HOOK, OP_RECORD, OP_SUMMARY, Op
 
 COVARIANCE_OUTPUTS = ("diagonal", "full")
 
 
-class EstimatorComponent(Component, kind="estimator"):
+class EstimatorComponent(BoundCalls, Component, kind="estimator"):
     """Runs a filter of :mod:`estimators` at its model's sample period.
 
     Input ports: the model's inputs and outputs (the measurements). Output ports: the state
@@ -64,7 +64,7 @@ class EstimatorComponent(Component, kind="estimator"):
                          feedthrough={o: sys_.output_names for o in outputs})
         self.make_filter, self.filter = make_filter, probe
         self._nu, self._nx = sys_.nu, n
-        self._u_prev = None
+        self.connected_inputs = self.input_names
         self.estimated_states = list(sys_.state_names)
 
     def _upper(self, n: int) -> tuple:
@@ -201,7 +201,6 @@ class EstimatorComponent(Component, kind="estimator"):
     def _after_op(self, cur, ny: int, sync_in, sync_out) -> Op:
         """The kernel's operation after an adaptive filter's step (its ``after_step``, or its records)."""
         f = self.filter
-        rt = f._rt
         flag = f._out("adapted") if type(f).after_step is AdaptationRecord.after_step else None
         after = f.after_step
 
@@ -210,10 +209,10 @@ class EstimatorComponent(Component, kind="estimator"):
             after()
             sync_in()
         records = getattr(f, "records_only", None)
-        if flag is None or not callable(records) or not records() or "Q" not in rt.pairs or "R" not in rt.pairs:
+        if flag is None or not callable(records) or not records() or "Q" not in f._rt.pairs or "R" not in f._rt.pairs:
             return Op(OP_HOOK, dict(cur=cur.ctypes.data, buf=0 if flag is None else flag.ctypes.data), (cur, flag),
                       hook=hook)
-        history, Qs, Rs = f.history, rt.pairs["Q"], rt.pairs["R"]
+        history, Qs, Rs = f.history, f._rt.pairs["Q"], f._rt.pairs["R"]
 
         def rebind(op) -> None:
             op.out, op.n = history.rows.ctypes.data, len(history.rows)
@@ -227,19 +226,7 @@ class EstimatorComponent(Component, kind="estimator"):
         super().reset(t0)
         if self.filter.k:
             self.filter = self.make_filter()
-        self._u_prev = None
-
-    def output(self, t, u):
-        """The estimate at ``t``: the initial one, then ``step(u_prev, y)``."""
-        if self._u_prev is not None:
-            self.filter.step(self._u_prev, u[self._nu:])
-        out = np.empty(len(self.output_ports))
-        self.filter.bind_summary(out, self.covariance)()
-        return out
-
-    def update(self, t, u):
-        """Keep the input read at ``t`` for the next prediction."""
-        self._u_prev = np.array(u[: self._nu])
+        self._private = None
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """The filter as an estimator FMU (:func:`estimators.filter_fmu.export_filter_fmu`;

@@ -1,14 +1,6 @@
 """The wheel pendulum's sensor chain (seed 002): accelerometer, gyroscope, encoder and the
-accelerometer-gyroscope fusion filter.
-
-The accelerometer sits at distance ``r`` from the pivot; ``alpha`` is measured from the
-upright vertical, the body axes are ``t`` (towards increasing alpha), ``r`` (from the pivot
-to the sensor) and ``z`` (the pivot axis). It measures the specific force ``a - g``::
-
-    a_t = r alpha'' - g sin(alpha),    a_r = g cos(alpha) - r alpha'^2,    a_z = 0
-
-so at rest ``atan2(-a_t, a_r)`` is the tilt.
-"""
+accelerometer-gyroscope fusion filter; their equations are in the guide's page on
+co-simulation (docs/guide/cosimulation.md)."""
 from __future__ import annotations
 
 import numpy as np
@@ -61,7 +53,6 @@ class Accelerometer(Component, kind="accelerometer"):
         self._noise = PerInstantNoise(self.seed, 3)
 
     def output(self, t, u):
-        """Specific force in body axes at ``t``."""
         alpha, alpha_dot, alpha_ddot = u
         a = np.array([self.r * alpha_ddot - self.g * np.sin(alpha),
                       self.g * np.cos(alpha) - self.r * alpha_dot**2, 0.0])
@@ -76,10 +67,8 @@ class Gyroscope(Component, kind="gyroscope"):
     ----------
     name : str
     period : float
-    noise_std : float
-        White noise standard deviation [rad/s] (default 0).
-    bias : float
-        Initial offset [rad/s] (default 0).
+    noise_std, bias : float
+        White noise standard deviation and initial offset [rad/s] (default 0).
     drift_std : float
         Random-walk intensity of the offset [rad/s/sqrt(s)] (default 0: constant).
     seed : int
@@ -93,7 +82,7 @@ class Gyroscope(Component, kind="gyroscope"):
         for what, v in (("noise_std", noise_std), ("drift_std", drift_std)):
             if finite(v, f"{name}: {what}") < 0:
                 raise ConfigurationError(f"{name}: {what} must be >= 0, got {v!r}")
-        self.noise_std, self.drift_std = float(noise_std), float(drift_std)
+            setattr(self, what, float(v))
         self.bias0 = finite(bias, f"{name}: bias")
         self.seed = positive_int(seed, f"{name}: seed", minimum=0)
 
@@ -111,8 +100,7 @@ class Gyroscope(Component, kind="gyroscope"):
         return self._v
 
     def output(self, t, u):
-        """Measured rate at ``t``: ``alpha_dot + b + v``."""
-        v = self._draw(t)
+        v = self._draw(t)                           # first: it moves the offset b
         return np.array([u[0] + self.b + self.noise_std * v])
 
 
@@ -149,12 +137,10 @@ class Encoder(Component, kind="encoder"):
         return int(np.floor(self.phi * self.cpr / (2 * np.pi) + 1e-9))
 
     def output(self, t, u):
-        """Speed from the increments counted over the last period."""
         rate = (self._counts() - self.counts) * 2 * np.pi / (self.cpr * self.period)
         return np.array([rate + self.offset])
 
     def update(self, t, u):
-        """Integrate the wheel angle with the speed held over the next period."""
         self.counts = self._counts()
         self.phi += float(u[0]) * self.period
 
@@ -172,10 +158,8 @@ class TiltFusion(Component, kind="tilt_fusion"):
     name : str
     period : float
         Sample period [s] (the filter's T).
-    q_angle : float
-        Process variance of the tilt per step [rad^2] (default 1e-6).
-    q_bias : float
-        Process variance of the offset per step [(rad/s)^2] (default 1e-8).
+    q_angle, q_bias : float
+        Process variances per step of the tilt [rad^2] and the offset [(rad/s)^2] (default 1e-6, 1e-8).
     r_tilt : float
         Variance of the accelerometer tilt [rad^2] (default 1e-3).
     correct_rate : bool
@@ -194,20 +178,14 @@ class TiltFusion(Component, kind="tilt_fusion"):
                                    ["alpha", "bias"], ["omega"], ["tilt"])
         self.q_angle, self.q_bias, self.r_tilt = float(q_angle), float(q_bias), float(r_tilt)
         self.correct_rate = bool(correct_rate)
-        self._make()
-
-    def _make(self):
-        """A new filter (checks the covariances)."""
-        self.filter = KF(self.system, [0.0, 0.0], [1.0, 0.1], [self.q_angle, self.q_bias],
-                         [[self.r_tilt]])
+        self.reset(0.0)                             # a first filter checks the covariances
 
     def reset(self, t0):
         super().reset(t0)
-        self._make()
+        self.filter = KF(self.system, [0.0, 0.0], [1.0, 0.1], [self.q_angle, self.q_bias], [[self.r_tilt]])
         self.omega_prev = None
 
     def output(self, t, u):
-        """Fused tilt, rate and offset at ``t``: one filter step with the previous rate."""
         a_t, a_r, omega = u
         tilt = np.arctan2(-a_t, a_r)
         x = self.filter.update([tilt]) if self.omega_prev is None else self.filter.step([self.omega_prev], [tilt])
@@ -215,5 +193,4 @@ class TiltFusion(Component, kind="tilt_fusion"):
         return np.array([x[0], rate, x[1]])
 
     def update(self, t, u):
-        """Keep the gyro rate for the next prediction."""
         self.omega_prev = float(u[2])

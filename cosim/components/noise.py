@@ -1,8 +1,7 @@
-"""Gaussian noise streams for the sensor and process-noise components: numpy's PCG64 drawn
-per instant (``"pcg64"``), or the counter-based generator of the signal FMUs (``"counter"``,
-SplitMix64 and Box-Muller, :func:`counter_normal`), described in the guide's page on
-co-simulation (docs/guide/cosimulation.md).
-"""
+"""Gaussian noise streams for the sensor and process-noise components: numpy's PCG64 drawn per
+instant (``"pcg64"``), or the counter-based generator of the signal FMUs (``"counter"``,
+:func:`~cosim.components.noise.counter_normal`), described in the guide's page on co-simulation
+(docs/guide/cosimulation.md)."""
 from __future__ import annotations
 
 import numpy as np
@@ -45,10 +44,8 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
     ndarray, shape ``np.shape(k) + (n,)``
     """
     kk = np.asarray(k, dtype=np.int64).astype(np.uint64)      # two's complement for k < 0
-    c = np.arange(n, dtype=np.uint64)
-    i = np.uint64(2) * (kk[..., None] * np.uint64(n) + c)
-    s = np.uint64(seed)
-    a, b = _splitmix64(s, i), _splitmix64(s, i + np.uint64(1))
+    i = np.uint64(2) * (kk[..., None] * np.uint64(n) + np.arange(n, dtype=np.uint64))
+    a, b = (_splitmix64(np.uint64(seed), j) for j in (i, i + np.uint64(1)))
     u1 = ((a >> np.uint64(11)) + np.uint64(1)).astype(float) * 2.0**-53
     u2 = (b >> np.uint64(11)).astype(float) * 2.0**-53
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(2 * np.pi * u2)
@@ -56,13 +53,10 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
 
 class PerInstantNoise:
     """``n`` standard normal numbers per instant from a seeded PCG64 stream (a repeated call at
-    the same instant returns the same draw).
-
-    They are drawn :data:`BLOCK` instants at a time into ``block`` (the same numbers as one
-    vector at a time), so the native kernel reads the rows :meth:`at` reads: ``state`` holds
-    the current row and the rows drawn, ``last`` the instant of the current row (NaN before
-    the first); ``on_refill`` callables run after every new block.
-    """
+    the same instant returns the same draw), drawn :data:`BLOCK` instants at a time into ``block``
+    (the same numbers as one vector at a time) so that the native kernel reads the rows :meth:`at`
+    reads: ``state`` holds the current row and the rows drawn, ``last`` the instant of the current
+    row (NaN before the first); ``on_refill`` callables run after every new block."""
 
     #: Instants drawn at a time.
     BLOCK = 256

@@ -25,10 +25,9 @@ class ModelComponent(Component, kind="plant_model"):
     model : PlantModel
     period : float
         Communication step [s].
-    method : {"euler", "rk4"}
-        Integrator (as the FMU's ``integrator``).
-    substeps : int
-        Internal steps per period (the FMU's ``substeps`` with ``step_size = period``).
+    method, substeps : {"euler", "rk4"}, int
+        Integrator and its steps per period (the FMU's ``integrator``, and ``substeps`` with
+        ``step_size = period``).
     start : mapping, optional
         Initial states by name (default: the model's ``x0``).
     outputs : sequence of str, optional
@@ -69,7 +68,7 @@ class ModelComponent(Component, kind="plant_model"):
             x0[k] = finite(v, f"{name}: start value of {k}")
         self.x0 = np.array(list(x0.values()))
         self._step = model.sym.step(method, self.substeps)
-        self.connected_inputs = list(self.input_names)
+        self.use_inputs(self.input_names)
 
     def timing(self) -> str:
         return (f"plant model in Python ({self.method}, {self.substeps} substep(s)): outputs at t; "
@@ -90,11 +89,8 @@ class ModelComponent(Component, kind="plant_model"):
     def reset(self, t0: float) -> None:
         super().reset(t0)
         self.x, self.u, self.w = self.x0.copy(), np.zeros(self.model.nu), np.zeros(self.model.nx)
-        if not hasattr(self, "_in_index"):
-            self.use_inputs(self.connected_inputs)
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
-        """States, measured outputs and derivatives at ``t``."""
         m = self.model
         vals = dict(zip(m.state_names, self.x))
         if any(p in m.output_names for p in self.output_names):

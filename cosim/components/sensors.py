@@ -1,7 +1,5 @@
-"""Sensor and process-noise components: seeded Gaussian noise drawn once per sample instant
-(a repeated ``output`` call at the same instant, as in an iterated loop, reuses it), so they
-are reentrant.
-"""
+"""Sensor and process-noise components: seeded Gaussian noise drawn once per sample instant (a
+repeated ``output`` call at the same instant, as in an iterated loop, reuses it), so reentrant."""
 from __future__ import annotations
 
 from collections import deque
@@ -101,11 +99,9 @@ class Sensor(_Noisy, kind="sensor"):
         (default 0).
     delay : int
         Delay in samples (default 0); until filled, the first measurement is repeated.
-    seed : int
-        Seed of the noise generator (default 0).
-    generator : {"pcg64", "counter"}
-        numpy's PCG64 drawn sequentially (default), or the counter-based generator the
-        signal FMUs use (:mod:`cosim.components.noise`).
+    seed, generator : int, {"pcg64", "counter"}
+        Seed (default 0) and generator of the noise: numpy's PCG64 drawn sequentially (default),
+        or the counter-based generator the signal FMUs use (:mod:`cosim.components.noise`).
     """
 
     def __init__(self, name: str, period: float, signals: Sequence[str], noise_std=0.0,
@@ -145,13 +141,11 @@ class Sensor(_Noisy, kind="sensor"):
                                        yb=self.noise_std.ctypes.data), (uidx, self.bias, self.noise_std)
 
     def output(self, t, u):
-        """The measurement at ``t``: the sample ``delay`` instants old (the first one until
-        that many exist)."""
+        """The sample ``delay`` instants old (the first one until that many exist)."""
         y = self._measure(t, u)                    # drawn at every instant, delayed or not
         return self._queue[0] if self.delay and self._queue else y
 
     def update(self, t, u):
-        """Store this instant's sample for the delay line."""
         if self.delay:
             self._queue.append(self._measure(t, u))
 
@@ -183,9 +177,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         Covariance: scalar (times identity), diagonal, or full matrix. For a diagonal one,
         channel ``i`` is draw ``i`` times its standard deviation; for a full one,
         ``L v`` with ``L = V sqrt(Lambda)`` from its eigendecomposition.
-    seed : int
-        Seed of the generator (default 0).
-    generator : {"pcg64", "counter"}
+    seed, generator
         As for :class:`Sensor`.
     """
 
@@ -202,15 +194,15 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         w, V = np.linalg.eigh(c)
         if w.min() < -1e-12 * max(1.0, w.max()):
             raise ConfigurationError(f"{name}: cov is not positive semi-definite (eigenvalues {w})")
-        if np.count_nonzero(c - np.diag(np.diag(c))) == 0:
-            self.L = np.diag(np.sqrt(np.diag(c)))      # diagonal: channel i scales draw i
+        self._diagonal = not np.count_nonzero(c - np.diag(np.diag(c)))
+        if self._diagonal:
+            self.L = np.diag(np.sqrt(np.diag(c)))      # channel i scales draw i
         else:
             self.L = V * np.sqrt(np.clip(w, 0, None))  # L L^T = cov, also for singular cov
         self.cov = c
         self._noise_setup(seed, generator, n)
 
     def output(self, t, u):
-        """The noise sample of instant ``t``, ``L v`` with ``L L^T = cov``."""
         return self.L @ self._noise.at(t)
 
     def native_reason(self) -> str | None:
@@ -225,7 +217,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         d = np.diag(L).copy()
         # a diagonal L with d > 0: L v is d v exactly (each entry one non-zero product plus
         # exact zeros, in any order), except for the sign of a zero draw's entry
-        diagonal = not np.count_nonzero(L - np.diag(d)) and bool(np.all(d > 0))
+        diagonal = self._diagonal and bool(np.all(d > 0))
 
         def derive() -> None:
             block = noise.block
@@ -244,7 +236,7 @@ class ProcessNoise(_Noisy, kind="process_noise"):
         """This noise source as a signal FMU (kind ``noise``, :mod:`fmu_models.export.signal_fmu`)
         drawing from the counter generator (``clocked``: its clocked form, FMI 3.0); refused for a
         non-diagonal ``cov``."""
-        if np.abs(self.cov - np.diag(np.diag(self.cov))).max() > 0:
+        if not self._diagonal:
             raise ConfigurationError(f"{self.name}: the noise FMU takes a diagonal cov; this one has "
                                      "off-diagonal entries")
         reals = channel_params("std", self.output_names, np.sqrt(np.diag(self.cov)), "nonnegative",

@@ -20,26 +20,35 @@ class _Source(Component):
     reentrant = True
     #: The ``_value`` methods whose arithmetic the native kernel has (as :meth:`_native_op`).
     _native_values: tuple = ()
+    #: The Real parameters of the signal FMU of the source's ``kind``, ``(attribute, domain,
+    #: description)``, empty for a source without an FMU form.
+    _fmu_reals: tuple = ()
 
     def _value(self, t):
         """The outputs at ``t`` [s]."""
         raise NotImplementedError
 
-    def _signal(self) -> tuple[str, list[tuple], list[tuple]]:
-        """(kind, Real parameters, Integer parameters) of the signal FMU."""
-        raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
+    def _set_finite(self, **values) -> None:
+        """Each of ``values`` checked finite, as the attribute of its name."""
+        for key, value in values.items():
+            setattr(self, key, finite(value, f"{self.name}: {key}"))
+
+    def _fmu_ints(self) -> list[tuple]:
+        """The Integer parameters of the signal FMU."""
+        return []
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
         """This source as a signal FMU (:mod:`fmu_models.export.signal_fmu`) with output ``out``
         (``clocked``: its clocked form, FMI 3.0)."""
-        kind, reals, ints = self._signal()
-        spec = SignalSpec(kind, self.period, ["out"], reals=reals, ints=ints,
+        if not self._fmu_reals:
+            raise ConfigurationError(f"{self.name}: a {type(self).__name__} source has no FMU form")
+        reals = [(key, getattr(self, key), domain, text) for key, domain, text in self._fmu_reals]
+        spec = SignalSpec(self.kind, self.period, ["out"], reals=reals, ints=self._fmu_ints(),
                           description=f"{type(self).__name__} source {self.name} (pendulum-cosim)")
         path = build_signal_fmu(spec, folder, fmi_version, self._fmu_identifier(), f"{self.name}.fmu", clocked)
         return ExportedFMU(path, spec.parameters())
 
     def output(self, t, u):
-        """Outputs at ``t`` [s] (``u`` is empty)."""
         return np.atleast_1d(self._value(t))
 
     def native_reason(self) -> str | None:
@@ -82,7 +91,7 @@ class Constant(_Source, kind="constant"):
 
     def __init__(self, name: str, period: float, value: float):
         super().__init__(name, period, outputs=["out"])
-        self.value = finite(value, f"{name}: value")
+        self._set_finite(value=value)
 
     def _value(self, t):
         return self.value
@@ -92,8 +101,7 @@ class Constant(_Source, kind="constant"):
     def _native_op(self, outputs: slice) -> Op:
         return Op(OP_CONST, dict(slot=outputs.start, a=self.value))
 
-    def _signal(self):
-        return "constant", [("value", self.value, "real", "the output")], []
+    _fmu_reals = (("value", "real", "the output"),)
 
 
 class Step(Constant, kind="step"):
@@ -112,8 +120,8 @@ class Step(Constant, kind="step"):
 
     def __init__(self, name: str, period: float, t_step: float, before: float, after: float):
         super().__init__(name, period, before)
-        self.t_step = finite(t_step, f"{name}: t_step")
-        self.before, self.after = self.value, finite(after, f"{name}: after")
+        self._set_finite(t_step=t_step, after=after)
+        self.before = self.value
 
     def _value(self, t):
         return self.after if t >= self.t_step - 1e-12 else self.before
@@ -123,10 +131,8 @@ class Step(Constant, kind="step"):
     def _native_op(self, outputs: slice) -> Op:
         return Op(OP_SWITCH, dict(slot=outputs.start, a=self.t_step - 1e-12, b=self.before, c=self.after))
 
-    def _signal(self):
-        return "step", [("t_step", self.t_step, "real", "switching time [s]"),
-                        ("before", self.before, "real", "output before t_step"),
-                        ("after", self.after, "real", "output from t_step on")], []
+    _fmu_reals = (("t_step", "real", "switching time [s]"), ("before", "real", "output before t_step"),
+                  ("after", "real", "output from t_step on"))
 
 
 class Sine(_Source, kind="sine"):
@@ -136,25 +142,19 @@ class Sine(_Source, kind="sine"):
     ----------
     name : str
     period : float
-    amplitude, offset : float
-        (default offset 0)
-    frequency : float
-        [Hz]
-    phase : float
-        [rad] (default 0)
+    amplitude, frequency, phase, offset : float
+        Frequency [Hz], phase [rad] (default phase and offset 0).
     """
 
     def __init__(self, name, period, amplitude, frequency, phase=0.0, offset=0.0):
         super().__init__(name, period, outputs=["out"])
-        self.a, self.f, self.ph, self.off = (finite(v, f"{name}: {w}") for v, w in (
-            (amplitude, "amplitude"), (frequency, "frequency"), (phase, "phase"), (offset, "offset")))
+        self._set_finite(amplitude=amplitude, frequency=frequency, phase=phase, offset=offset)
 
     def _value(self, t):
-        return self.off + self.a * np.sin(2 * np.pi * self.f * t + self.ph)
+        return self.offset + self.amplitude * np.sin(2 * np.pi * self.frequency * t + self.phase)
 
-    def _signal(self):
-        return "sine", [("amplitude", self.a, "real", "amplitude"), ("frequency", self.f, "real", "frequency [Hz]"),
-                        ("phase", self.ph, "real", "phase [rad]"), ("offset", self.off, "real", "offset")], []
+    _fmu_reals = (("amplitude", "real", "amplitude"), ("frequency", "real", "frequency [Hz]"),
+                  ("phase", "real", "phase [rad]"), ("offset", "real", "offset"))
 
 
 #: The taps of a maximal-length Fibonacci LFSR by its order.
@@ -189,15 +189,13 @@ class PRBS(_Source, kind="prbs"):
         The levels ``offset +/- amplitude`` (default offset 0).
     bit_time : float
         Duration of one bit [s].
-    order : int
-        LFSR length, 2..16 (default 7: 127 bits).
-    seed : int
-        Non-zero LFSR start state (default 1).
+    order, seed : int
+        LFSR length, 2..16 (default 7: 127 bits), and its non-zero start state (default 1).
     """
 
     def __init__(self, name, period, amplitude, bit_time, order=7, seed=1, offset=0.0):
         super().__init__(name, period, outputs=["out"])
-        self.amplitude, self.offset = finite(amplitude, f"{name}: amplitude"), finite(offset, f"{name}: offset")
+        self._set_finite(amplitude=amplitude, offset=offset)
         self.bit_time = positive(bit_time, f"{name}: bit_time")
         self.order = positive_int(order, f"{name}: order")
         self.seed = positive_int(seed, f"{name}: seed", minimum=0)
@@ -214,13 +212,12 @@ class PRBS(_Source, kind="prbs"):
         return Op(OP_PRBS, dict(slot=outputs.start, a=self.bit_time, b=self.offset, c=self.amplitude,
                                 buf=bits.ctypes.data, n=len(bits)), (bits,))
 
-    def _signal(self):
-        reals = [("amplitude", self.amplitude, "real", "output levels offset +/- amplitude"),
-                 ("bit_time", self.bit_time, "positive", "duration of one bit [s]"),
-                 ("offset", self.offset, "real", "offset")]
-        ints = [("order", self.order, 2, 16, "LFSR length"),
+    _fmu_reals = (("amplitude", "real", "output levels offset +/- amplitude"),
+                  ("bit_time", "positive", "duration of one bit [s]"), ("offset", "real", "offset"))
+
+    def _fmu_ints(self):
+        return [("order", self.order, 2, 16, "LFSR length"),
                 ("seed", self.seed % 2**self.order, 0, 2**31 - 1, "LFSR start state (the same sequence)")]
-        return "prbs", reals, ints
 
 
 class Table(_Source, kind="table"):
