@@ -15,15 +15,18 @@ from fmu_models.errors import FMUError, InputError, TypeMismatchError
 from ..core.native import OP_GET, OP_SET, Op
 from .ports import INTEGER_RANGES, REAL_TYPES, ElementPort, integer_range
 
-__all__ = ["Exchange", "raw_function"]
+__all__ = ["FMI_TYPES", "Exchange", "raw_function"]
 
-# FMI type name -> (ctypes element type, FMI function suffix)
 _FMI2 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
          "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int, "Boolean")}
-_FMI1 = {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")}          # fmiBoolean is a char
-_FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
-         **{t: (getattr(ctypes, f"c_{t.lower()}"), t) for t in INTEGER_RANGES if t not in ("Integer", "Boolean")},
-         "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")}
+#: By FMI version, by FMI type name: the ctypes element type and the FMI function suffix.
+FMI_TYPES = {
+    1: {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")},          # fmiBoolean is a char
+    2: _FMI2,
+    3: {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
+        **{t: (getattr(ctypes, f"c_{t.lower()}"), t) for t in INTEGER_RANGES if t not in ("Integer", "Boolean")},
+        "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")},
+}
 
 
 def raw_function(dll, name: str):
@@ -93,7 +96,7 @@ class Exchange:
 
     def __init__(self, dll, instance, version: int, ports: Sequence[ElementPort], direction: str,
                  fail: Callable[[str, int], None], owner: str = "", sources: Sequence[tuple[str, str]] | None = None):
-        table = {1: _FMI1, 2: _FMI2}.get(version, _FMI3)
+        table = FMI_TYPES[version]
         by_suffix: dict[str, tuple] = {}
         for pos, p in enumerate(ports):
             if p.type not in table:
@@ -219,24 +222,21 @@ class Exchange:
 
     def _range_plan(self, g: _Group):
         """What a set of group ``g`` must check: None if every source's range fits the
-        destination's, else ``(signed positions, lo, hi, unsigned positions, hi_u)``."""
+        destination's, else ``(checks, lo, hi)``: each group position whose source may not fit
+        and whether that source is a UInt64 (its bit pattern in int64), signed ones first."""
         if g.real:
             return None
-        lo_d, hi_d = integer_range(g.type_name, self.version)
-        signed, unsigned = [], []
+        lo, hi = integer_range(g.type_name, self.version)
+        checks = []
         for k, pos in enumerate(g.positions):
             _, src_type = self.sources[pos]
             try:
                 lo_s, hi_s = integer_range(src_type, self.version)
             except KeyError:            # a source of another kind (a Python component's float)
                 lo_s, hi_s = -2**63, 2**63 - 1
-            if lo_d <= lo_s and hi_s <= hi_d:
-                continue
-            (unsigned if src_type == "UInt64" else signed).append(k)
-        if not signed and not unsigned:
-            return None
-        return (np.array(signed, np.intp), np.int64(lo_d), np.int64(min(hi_d, 2**63 - 1)),
-                np.array(unsigned, np.intp), np.uint64(hi_d), lo_d, hi_d)
+            if not (lo <= lo_s and hi_s <= hi):
+                checks.append((k, src_type == "UInt64"))
+        return (sorted(checks, key=lambda c: c[1]), lo, hi) if checks else None
 
 
 def no_exchange() -> bool:
@@ -249,20 +249,10 @@ no_exchange.native = []
 
 
 def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:
-    signed, lo, hi, unsigned, hi_u, lo_d, hi_d = plan
-    bad = None
-    if len(signed):
-        s = src[signed]
-        out = np.flatnonzero((s < lo) | (s > hi))
-        if len(out):
-            bad = (int(signed[out[0]]), int(s[out[0]]))
-    if bad is None and len(unsigned):
-        u = src[unsigned].view(np.uint64)
-        out = np.flatnonzero(u > hi_u)
-        if len(out):
-            bad = (int(unsigned[out[0]]), int(u[out[0]]))
-    if bad is not None:
-        k, value = bad
-        src_name, src_type = sources[g.positions[k]]
-        raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
-                         f"{src_name} ({src_type}): it does not fit (a value is never wrapped)")
+    checks, lo, hi = plan
+    for k, unsigned in checks:
+        value = int(src[k].view(np.uint64) if unsigned else src[k])
+        if not lo <= value <= hi:
+            src_name, src_type = sources[g.positions[k]]
+            raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo}, {hi}]) cannot take {value} "
+                             f"from {src_name} ({src_type}): it does not fit (a value is never wrapped)")

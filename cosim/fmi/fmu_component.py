@@ -19,13 +19,13 @@ from fmu_models.export.plant_fmu import build_fmu
 from fmu_models.infra.files import atomic_copy, private_tempdir
 
 from ..core.clocking import ClockBoard
-from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, StopRequest, port_kind
+from ..core.component import BoundCalls, Component, ExportedFMU, StopRequest, port_kind
 from ..core.native import OP_STEP1, OP_STEP2, OP_STEP3, Op, native_ops
 from .archive import Extraction
 from .clock_run import clocked_run
 from .clock_timing import ClockedRun, initialise
 from .description import FMUDescription
-from .exchange import no_exchange
+from .exchange import FMI_TYPES, no_exchange
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
 from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
@@ -57,7 +57,6 @@ class HeldInputs:
     _sources: list | None = None
 
     def required_inputs(self) -> list[str]:
-        """None: unconnected inputs keep their start values."""
         return []
 
     def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
@@ -113,11 +112,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     Attributes
     ----------
     description : FMUDescription
-        What the FMU declares (:mod:`cosim.fmi.description`); ``md``, ``version`` are its.
+        What the FMU declares (:mod:`cosim.fmi.description`); ``path``, ``md``, ``version`` and
+        ``clock_model`` (its clocks, :mod:`cosim.fmi.clocks`) are its.
     interface : str
         ``"cs"``, ``"me"`` or ``"se"``, as resolved.
-    clock_model : FMIClocks or None
-        The FMU's clocks (:mod:`cosim.fmi.clocks`).
     messages : collections.deque of (int, str)
         The last 200 log messages of the FMU (status, text), quoted in errors.
     integrator : MEIntegrator or None
@@ -125,8 +123,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     unit_nominals : bool
         Model Exchange: the states' nominal values are 1 (:mod:`cosim.fmi.model_exchange`).
     arguments : dict
-        The constructor's arguments but ``isolate`` (what an isolating child process builds
-        its copy from).
+        The constructor's arguments but ``isolate`` (an isolating child process builds its copy from them).
+    plant_model : object or None
+        The project's plant model this FMU was built from (a scenario's ``model``).
     """
 
     def __init__(self, name: str, path, period: float, inputs: Sequence[str] | None = None,
@@ -150,7 +149,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
         self.feedthrough_mode, self.logging, self.isolate = feedthrough, bool(logging), isolate
         d.check_binary(self.interface)
-        #: The project's plant model this FMU was built from (a scenario's ``model``), or None.
         self.plant_model = None
         self.settings, structural = d.settings(parameters or {}, start or {})
         self.element_ports = element_ports(d.md, structural)
@@ -162,16 +160,13 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             self.reentrant = False              # a partition is activated once per time
         self._board: ClockBoard | None = None
         self._run: ClockedRun | None = None
-        self._clock_schedule = None
+        self._clock_schedule = self._remote = self._extraction = None
         self.instance: FMUInstance | None = None
         self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
-        self._extraction: Extraction | None = None
-        # the library of the last Co-Simulation instance, reused by the next
-        self._library_box: list = [None]
+        self._library_box: list = [None]        # the last Co-Simulation instance's library, reused by the next
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
-        self._remote = None
         self.unit_nominals = False
 
     @classmethod
@@ -217,24 +212,23 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         dst = folder / f"{self.name}.fmu"
-        note = ""
+        notes = []
         if fmi_version != self.version and self.plant_model is not None:
             with private_tempdir(f"pendulum_cosim_export_{self.name}_") as tmp:
                 atomic_copy(build_fmu(self.plant_model, tmp, fmi_version=fmi_version), dst)
-            note = (f"{self.name}: built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run "
-                    f"used the FMI {self.version}.0 FMU of the same model)")
+            notes.append(f"built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run used the "
+                         f"FMI {self.version}.0 FMU of the same model)")
         else:
             atomic_copy(self.path, dst)
             if fmi_version != self.version:
-                note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
-                        f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
+                notes.append(f"copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; for FMI "
+                             f"{fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
             elif self.interface == "me":
-                note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
-                        "importer may use its Co-Simulation interface")
+                notes.append(f"the master ran this FMU through Model Exchange ({self.solver}); an SSP importer may "
+                             "use its Co-Simulation interface")
         if clocked:
-            unclocked = f"{self.name}: an FMU component has no clocked form; written unclocked"
-            note = f"{note}; {unclocked}" if note else unclocked
-        return ExportedFMU(dst, dict(self.settings), note)
+            notes.append("an FMU component has no clocked form; written unclocked")
+        return ExportedFMU(dst, dict(self.settings), "; ".join(f"{self.name}: {n}" for n in notes))
 
     def timing(self) -> str:
         if self.clock_model is not None:
@@ -294,13 +288,11 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     def check_run(self, start_time: float, stop_time: float) -> None:
         """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`
         (e.g. Roberts in Co-Simulation: steps of 1e-3 s over 1e8 s)."""
-        if self.interface == "se":
-            return
         if self.interface == "cs":
             h, what = self.md.coSimulation.fixedInternalStepSize, "its fixedInternalStepSize"
             hint = "; its Model Exchange interface (interface = 'me') integrates with CVODE" if \
-                self.md.modelExchange is not None else ""
-        elif self.solver != "cvode":
+                "me" in self.description.interfaces else ""
+        elif self.interface == "me" and self.solver != "cvode":
             h, what, hint = self.solver_step or self.period, f"solver_step ({self.solver})", "; use solver = 'cvode'"
         else:
             return
@@ -395,14 +387,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     def _set_setting(self, name: str, value) -> None:
         v, inst = self.description.variables[name], self.instance
-        fmu, vr = inst.fmu, [v.valueReference]
-        items = list(value) if isinstance(value, list) else [value]
-        kind = PORT_TYPES[v.type]
-        if self.version < 3:
-            suffix = {"boolean": "Boolean", "integer": "Integer", "real": "Real"}[kind]
-        else:
-            suffix = "Int64" if v.type == "Enumeration" else v.type
-        inst.call(f"Set{suffix}({name} = {value!r})", getattr(fmu, f"set{suffix}"), vr, items)
+        suffix = FMI_TYPES[self.version][v.type][1]
+        items = value if isinstance(value, list) else [value]
+        inst.call(f"Set{suffix}({name} = {value!r})", getattr(inst.fmu, f"set{suffix}"), [v.valueReference], items)
 
     def bind(self, values, inputs, outputs, integers=None):
         """Output and update closures over the raw FMI functions, exchanging values with
@@ -479,54 +466,47 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         return None
 
     def _cs_update(self, set_all):
-        inst, h, name = self.instance, self.period, self.name
-        do_step, D = inst.raw(f"fmi{self.version}DoStep"), ctypes.c_double
+        """``update_fn(t)``: set the inputs and ``doStep`` (with its native operations if it can have them)."""
+        inst, h, name, v = self.instance, self.period, self.name, self.version
+        do_step, D = inst.raw(f"fmi{v}DoStep"), ctypes.c_double
         c, Dh = ctypes.c_void_p(inst.handle), ctypes.c_double(h)
-        if self.version < 3:
-            def failed(st: int, t: float) -> None:
-                if self.version == 1:            # Pending waited for, Discard without a stop request
-                    inst.step_failed(st, t, h)
-                    return
-                if st == 2:
-                    when = inst.discard_reason()
-                    if when is not None:
-                        raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
-                inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
 
-            new_step = ctypes.c_char(1) if self.version == 1 else 1
-
-            def update_fn(t: float) -> None:
-                set_all()
-                st = do_step(c, D(t), Dh, new_step)
-                if st > 1:
-                    failed(st, t)
-            return self._native_update(update_fn, set_all, OP_STEP1 if self.version == 1 else OP_STEP2, do_step,
-                                       lambda op, t: failed(op.status, t))
-        flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
-        refs = [ctypes.byref(x) for x in flags]
-        term, last = flags[1], flags[3]
-
-        def ended3(st: int, terminate: bool, last_time: float, t: float) -> None:
+        def ended(st: int, t: float, terminate: bool = False, last_time: float = 0.0) -> None:
+            """``doStep`` at ``t`` [s] returned ``st`` above Warning or asked to terminate."""
+            if v == 1:                       # Pending waited for, Discard without a stop request
+                inst.step_failed(st, t, h)
+                return
+            when = inst.discard_reason() if v == 2 and st == 2 else None
+            if when is not None:
+                raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
             if st > 1 and not (st == 2 and terminate):
                 inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
             if terminate:
                 when = last_time if st == 2 or last_time > t else t + h
                 raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
 
-        def update_fn(t: float) -> None:
-            set_all()
-            st = do_step(c, D(t), Dh, True, *refs)
-            if st > 1 or term.value:
-                ended3(st, term.value, last.value, t)
-        return self._native_update(update_fn, set_all, OP_STEP3, do_step,
-                                   lambda op, t: ended3(op.status, bool(op.flag), op.d, t))
+        if v < 3:
+            new_step = ctypes.c_char(1) if v == 1 else 1
 
-    def _native_update(self, update_fn, set_all, kind: int, do_step, fail):
-        """``update_fn`` with its native operations (set the inputs, ``doStep``) if it can have them."""
+            def update_fn(t: float) -> None:
+                set_all()
+                st = do_step(c, D(t), Dh, new_step)
+                if st > 1:
+                    ended(st, t)
+        else:
+            flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
+            refs, term, last = [ctypes.byref(x) for x in flags], flags[1], flags[3]
+
+            def update_fn(t: float) -> None:
+                set_all()
+                st = do_step(c, D(t), Dh, True, *refs)
+                if st > 1 or term.value:
+                    ended(st, t, term.value, last.value)
         ops = native_ops(set_all)
         if ops is not None and self.native_reason() is None:
-            step = Op(kind, dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=self.instance.handle,
-                                 a=float(self.period)), (do_step,), fail)
+            step = Op((OP_STEP1, OP_STEP2, OP_STEP3)[v - 1],
+                      dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=inst.handle, a=float(h)), (do_step,),
+                      lambda op, t: ended(op.status, t, bool(op.flag), op.d))
             update_fn.native = [*ops, step]
         return update_fn
 

@@ -109,20 +109,19 @@ class FMUInstance:
         Initialisation mode was left.
     messages : collections.deque of (int, str)
         The last 200 log messages (status, text).
+    keep_library : bool
+        Free only the instance at the end, not the library (its owner reuses or frees it).
     """
 
     def __init__(self, owner: str, description, directory: str, interface: str, logging_on: bool = False, *,
                  event_mode: bool = False, early_return: bool = False, clock_update=None, library=None):
-        self.owner, self.md, self.interface = owner, description.md, interface
-        self.version, self.prefix, self.asynchronous = description.version, description.prefix, description.asynchronous
-        self.file = description.path.name
+        self.owner, self.md, self.interface, self.description = owner, description.md, interface, description
+        self.version, self.prefix = description.version, description.prefix
         self.initial_events: tuple[bool, float | None] = (False, None)
         self.messages: deque = deque(maxlen=200)
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
         self._guard_entry = -1
-        self._freed = False
-        #: Free only the instance at the end, not the library (its owner reuses or frees it).
-        self.keep_library = False
+        self._freed = self.keep_library = False
         self.fmu = None
         ident = self._identifier = description.interfaces[interface].modelIdentifier
         args = dict(guid=self.md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
@@ -161,8 +160,8 @@ class FMUInstance:
         from fmpy.logging import addLoggerProxy
 
         fmi, p = (fmi1, "fmi1") if self.version == 1 else (fmi2, "fmi2")
-        kinds = (fmi1.FMU1Slave, fmi1.FMU1Model) if self.version == 1 else (fmi2.FMU2Slave, fmi2.FMU2Model)
-        fmu = self._guarded(library or kinds[self.interface != "cs"](**args))
+        kind = getattr(fmi, f"FMU{self.version}{'Slave' if self.interface == 'cs' else 'Model'}")
+        fmu = self._guarded(library or kind(**args))
         self._log_key = self.owner.encode() if self.version == 1 else next(_KEYS)
         _LOGS[self._log_key] = self._logger = self._log
         cb = getattr(fmi, f"{p}CallbackFunctions")()
@@ -189,9 +188,8 @@ class FMUInstance:
         if self.interface == "se":
             self._instantiate_se(self._guarded(fmi3.FMU3ScheduledExecution(**args)), directory, clock_update)
         elif self.interface == "cs":
-            fmu = self._guarded(library or fmi3.FMU3Slave(**args))
-            fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
-                            earlyReturnAllowed=bool(early_return))
+            self._guarded(library or fmi3.FMU3Slave(**args)).instantiate(
+                loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode), earlyReturnAllowed=bool(early_return))
         else:
             self._guarded(fmi3.FMU3Model(**args)).instantiate(loggingOn=True, logMessage=log3)
 
@@ -277,10 +275,9 @@ class FMUInstance:
         [s]); FMI 1.0 initialises at once: ``fmiInitializeSlave(t0, no stop time)`` or
         ``fmiInitialize`` (no tolerance control; its event information in ``initial_events``)."""
         fmu = self.fmu
-        if self.version == 3:
-            self.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
-        elif self.version == 2:
-            self.call("EnterInitializationMode", fmu.enterInitializationMode)
+        if self.version > 1:
+            args = (None, t0) if self.version == 3 else ()      # FMI 3.0: no tolerance, at t0
+            self.call("EnterInitializationMode", fmu.enterInitializationMode, *args)
         elif self.interface == "cs":        # fmpy's wrapper reads the status as a string: the raw call
             st = self.raw("fmi1InitializeSlave")(ctypes.c_void_p(self.handle), ctypes.c_double(t0), ctypes.c_char(0),
                                                  ctypes.c_double(0.0))
@@ -315,10 +312,10 @@ class FMUInstance:
     def _await_step(self, what: str) -> int:
         """``fmiGetStatus(fmiDoStepStatus)`` until the step is no longer Pending (its status
         returned); Ctrl-C cancels it. Without ``canRunAsynchronuously`` it is cancelled and refused."""
-        if not self.asynchronous:
+        if not self.description.asynchronous:
             self._cancel_step()
-            raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.file} does not declare "
-                           "canRunAsynchronuously (FMI 1.0): the step was cancelled (fmiCancelStep)")
+            raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.description.path.name} does "
+                           "not declare canRunAsynchronuously (FMI 1.0): the step was cancelled (fmiCancelStep)")
         get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
         try:
             while True:
@@ -383,8 +380,7 @@ class FMUInstance:
                 LOGGER.debug("%s: terminate refused", self.owner)
         try:
             if self.keep_library:       # fmpy's freeInstance would unload the library too
-                free = {1: "fmi1FreeSlaveInstance", 2: "fmi2FreeInstance", 3: "fmi3FreeInstance"}[self.version]
-                getattr(self.fmu, free)(self.fmu.component)
+                getattr(self.fmu, f"fmi{self.version}Free{'Slave' * (self.version == 1)}Instance")(self.fmu.component)
             else:
                 self.fmu.freeInstance()
         except Exception:  # noqa: BLE001

@@ -36,8 +36,9 @@ def _serve(fd_in: int, fd_out: int) -> None:
     setup = pickle.loads(read_exactly(fd_in, length))
     n_out = 0
 
-    def reply(status: bytes, payload: bytes = b"", out: bytes = b"") -> None:
-        write_all(fd_out, REPLY.pack(status, len(payload)) + payload + (out or bytes(16 * n_out)))
+    def reply(status: bytes = b"K", payload: bytes = b"") -> None:
+        out = values[n_in:].tobytes() + ints[n_in:].tobytes() if status == b"K" else bytes(16 * n_out)
+        write_all(fd_out, REPLY.pack(status, len(payload)) + payload + out)
 
     def fail(e: BaseException) -> None:
         if isinstance(e, StopRequest):
@@ -58,19 +59,14 @@ def _serve(fd_in: int, fd_out: int) -> None:
     except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
         fail(e)
         return
-    reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
-    size = 16 * n_in
+    reply()
     try:
-        while True:
-            head = read_exactly(fd_in, HEAD.size + size)
-            if not head:
-                break
+        while head := read_exactly(fd_in, HEAD.size + 16 * n_in):
             op, t = HEAD.unpack_from(head)
             if op == b"C":
                 break
-            if n_in:
-                values[:n_in] = np.frombuffer(head, np.float64, n_in, HEAD.size)
-                ints[:n_in] = np.frombuffer(head, np.int64, n_in, HEAD.size + 8 * n_in)
+            values[:n_in] = np.frombuffer(head, np.float64, n_in, HEAD.size)
+            ints[:n_in] = np.frombuffer(head, np.int64, n_in, HEAD.size + 8 * n_in)
             try:
                 if op == b"O":
                     out_fn(t)
@@ -80,8 +76,8 @@ def _serve(fd_in: int, fd_out: int) -> None:
                         out_fn(t + comp.period)
             except BaseException as e:  # noqa: BLE001
                 fail(e)
-                continue
-            reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
+            else:
+                reply()
     finally:
         comp.close()
 

@@ -45,7 +45,7 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
         try:
             f = float(value)
         except (TypeError, ValueError):
-            raise TypeMismatchError(f"{what}: {value!r} is not an integer (the variable is {type_name})") from None
+            f = math.nan
         if not (math.isfinite(f) and f == int(f)):
             raise TypeMismatchError(f"{what}: {value!r} is not an integer (the variable is {type_name})")
         if abs(f) > 2**53:
@@ -105,12 +105,6 @@ def array_shape(variable, structural: Mapping[str, int]) -> tuple[int, ...]:
     return tuple(shape)
 
 
-def _element_names(name: str, shape: tuple[int, ...]) -> list[str]:
-    if not shape:
-        return [name]
-    return [f"{name}[{','.join(str(i + 1) for i in idx)}]" for idx in np.ndindex(*shape)]
-
-
 @dataclass(frozen=True)
 class ElementPort:
     """One port of an FMU: an element of a variable.
@@ -148,6 +142,7 @@ def element_ports(md, structural: Mapping[str, int]) -> dict[str, ElementPort]:
         shape = array_shape(v, structural)
         size = int(np.prod(shape)) if shape else 1
         discrete = v.variability not in ("continuous", None) or v.type not in REAL_TYPES
-        for k, n in enumerate(_element_names(v.name, shape)):
+        names = [f"{v.name}[{','.join(str(i + 1) for i in idx)}]" for idx in np.ndindex(*shape)] if shape else [v.name]
+        for k, n in enumerate(names):
             ports[n] = ElementPort(n, v, k, size, v.type, discrete)
     return ports
