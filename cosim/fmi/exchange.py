@@ -42,9 +42,10 @@ def raw_function(dll, name: str):
 
 
 class _Group:
-    """The variables of one FMI type: one call moves them all (every element of an array)."""
+    """The variables of one FMI type: one call ``fn(*args)`` (``label`` in messages) moves them
+    all (every element of an array)."""
 
-    def __init__(self, ctype, type_name: str, ports: list[tuple[int, ElementPort]]):
+    def __init__(self, fn, label: str, ctype, type_name: str, ports: list[tuple[int, ElementPort]], inst, version):
         sizes = {p.variable.valueReference: p.size for _, p in ports}       # in order of appearance
         variables = list(sizes)
         base = dict(zip(variables, accumulate(sizes.values(), initial=0)))
@@ -55,6 +56,7 @@ class _Group:
         self.n_vr = ctypes.c_size_t(len(variables))
         self.n = ctypes.c_size_t(self.n_values)
         self.buf = (ctype * max(self.n_values, 1))()
+        self.fn, self.label, self.args = fn, label, self.args_with(inst, version, self.buf)
         self.view = np.ctypeslib.as_array(self.buf)[: self.n_values]
         #: the ports are the group's values in order (no gather needed)
         self.identity = bool(np.array_equal(self.offsets, np.arange(self.n_values)))
@@ -63,6 +65,10 @@ class _Group:
         self.boolean = type_name == "Boolean"
         self.unsigned64 = type_name == "UInt64"
         self.ports = [p for _, p in ports]
+
+    def args_with(self, inst, version: int, buf) -> tuple:
+        """The arguments of the call for the instance ``inst`` moving the values in ``buf``."""
+        return (inst, self.vr, self.n_vr, buf) + ((self.n,) if version == 3 else ())
 
 
 class Exchange:
@@ -108,23 +114,17 @@ class Exchange:
         self.inst = ctypes.c_void_p(instance)
         self.n = len(ports)
         self.sources = list(sources) if sources is not None else [("?", "Int64")] * len(ports)
-        self.groups = []
-        for suffix, (ctype, type_name, members) in by_suffix.items():
-            fn = raw_function(dll, f"fmi{version}{direction.capitalize()}{suffix}")
-            self.groups.append((fn, f"{direction.capitalize()}{suffix}", _Group(ctype, type_name, members)))
+        label = direction.capitalize()
+        self.groups = [_Group(raw_function(dll, f"fmi{version}{label}{suffix}"), label + suffix, ctype, type_name,
+                              members, self.inst, version)
+                       for suffix, (ctype, type_name, members) in by_suffix.items()]
         # aliases (sharing a value reference) are one value copied to each port: not in place
         self.direct = (all(p.type in ("Real", "Float64") and p.size == 1 for p in ports)
-                       and all(g.identity for _, _, g in self.groups))
-
-    def _args(self, g: _Group, buf):
-        if self.version < 3:
-            return (self.inst, g.vr, g.n_vr, buf)
-        return (self.inst, g.vr, g.n_vr, buf, g.n)
+                       and all(g.identity for g in self.groups))
 
     def preset(self, values_by_port: dict[str, float]) -> None:
-        """Start values of array elements that no connection sets (a set of an array sends
-        all its elements)."""
-        for _, _, g in self.groups:
+        """Start values of array elements that no connection sets (a set sends all of an array)."""
+        for g in self.groups:
             for off, p in zip(g.offsets, g.ports):
                 if p.name in values_by_port:
                     g.view[off] = values_by_port[p.name]
@@ -139,36 +139,35 @@ class Exchange:
             return no_exchange
         fail = self._fail
         if self.direct and isinstance(index, slice) and len(self.groups) == 1 and not changes:
-            fn, label, g = self.groups[0]
-            ptr = ctypes.cast(values.ctypes.data + 8 * index.start, ctypes.POINTER(ctypes.c_double))
-            args = self._args(g, ptr)
+            g = self.groups[0]
+            fn, label, address = g.fn, g.label, values.ctypes.data + 8 * index.start
+            args = g.args_with(self.inst, self.version, ctypes.cast(address, ctypes.POINTER(ctypes.c_double)))
 
             def call():
                 st = fn(*args)
                 if st > 1:
                     fail(label, st)
-            call.native = [self._op(fn, label, g, values.ctypes.data + 8 * index.start, None, values)]
+            call.native = [self._op(g, address, None, values)]
             return call
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
         idx = np.arange(len(values))[index]
-        parts = [(fn, label, g, self._args(g, g.buf), idx[g.positions]) for fn, label, g in self.groups]
+        parts = [(g.fn, g.label, g, g.args, idx[g.positions]) for g in self.groups]
         call = (self._getter(parts, values, integers) if self.direction == "get"
                 else self._setter(parts, values, integers, changes))
-        if not changes and all(g.type_name in ("Real", "Float64") for _, _, g in self.groups):
-            call.native = [self._op(fn, label, g, ctypes.addressof(g.buf), where, values)
-                           for fn, label, g, _, where in parts]
+        if not changes and all(g.type_name in ("Real", "Float64") for g in self.groups):
+            call.native = [self._op(g, ctypes.addressof(g.buf), where, values) for _, _, g, _, where in parts]
         return call
 
-    def _op(self, fn, label: str, g: _Group, buf: int, where, values):
+    def _op(self, g: _Group, buf: int, where, values):
         """The native kernel's operation (:mod:`cosim.core.native`) of group ``g``'s call: ``buf``
         the address the FMU reads or writes, ``where`` each port's signal (None: in place)."""
-        fail = self._fail
+        fail, label = self._fail, g.label
         if where is None:
             idx = off = np.zeros(0, np.int64)
         else:
             idx, off = np.ascontiguousarray(where, np.int64), np.ascontiguousarray(g.offsets, np.int64)
-        fields = dict(fn=ctypes.cast(fn, ctypes.c_void_p).value, inst=self.inst.value, vr=ctypes.addressof(g.vr),
+        fields = dict(fn=ctypes.cast(g.fn, ctypes.c_void_p).value, inst=self.inst.value, vr=ctypes.addressof(g.vr),
                       nvr=g.n_vr.value, nbuf=-1 if self.version < 3 else g.n.value, buf=buf, n=len(idx),
                       idx=idx.ctypes.data, off=off.ctypes.data)
         return Op(OP_GET if self.direction == "get" else OP_SET, fields, (g, idx, off, values),

@@ -1,7 +1,5 @@
 """An FMI 1.0, 2.0 or 3.0 FMU (Co-Simulation, Model Exchange or Scheduled Execution) as a
-co-simulation component: its timing, ports and call sequences are described in the
-co-simulation page of the documentation (FMUs in the master).
-"""
+co-simulation component (the co-simulation page of the documentation: FMUs in the master)."""
 from __future__ import annotations
 
 import ctypes
@@ -34,9 +32,8 @@ from .ports import element_ports, parse_start
 __all__ = ["FEEDTHROUGH_MODES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError", "HeldInputs"]
 
 FEEDTHROUGH_MODES = ("model", "none")
-#: The most fixed internal steps (an FMU's ``fixedInternalStepSize`` in Co-Simulation, the
-#: Euler/RK4 ``solver_step`` in Model Exchange) a run may take: beyond it the run is refused
-#: before it starts instead of running for days inside one call nobody can interrupt.
+#: The most fixed internal steps (``fixedInternalStepSize``, or Euler/RK4's ``solver_step``) a run may
+#: take; beyond it the run is refused, not left running for days inside one uninterruptible call.
 MAX_INTERNAL_STEPS = 10**9
 
 
@@ -48,9 +45,8 @@ def _unload_box(box: list) -> None:
 
 
 class HeldInputs:
-    """The inputs of :class:`FMUComponent` and :class:`~cosim.fmi.me_system.MESystem` (a
-    mixin): the master sets only the connected ones (:meth:`use_inputs`); the others keep
-    their start values; all are held over the step."""
+    """The inputs of :class:`FMUComponent` and :class:`~cosim.fmi.me_system.MESystem` (a mixin): the master
+    sets only the connected ones (:meth:`use_inputs`), the others keep their start values."""
 
     reentrant = True
     holds_inputs = True
@@ -171,9 +167,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     @classmethod
     def from_scenario(cls, name, table, context):
-        """Either ``model`` (this project's plant, built into the scenario's FMU folder as FMI
-        ``fmi_version``, with ``model_parameters``) or ``path`` (an FMU file); the other keys
-        as the constructor's."""
+        """Either ``model`` (this project's plant, built as FMI ``fmi_version`` with
+        ``model_parameters``) or ``path`` (an FMU file); the other keys as the constructor's."""
         table = dict(table)
         if ("model" in table) == ("path" in table):
             raise ConfigurationError(f"component {name!r}: give either model (this project's plant, built on "
@@ -199,10 +194,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 f"{self.interface.upper()}, period={self.period})")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
-        """The FMU as ``<folder>/<name>.fmu`` with this component's parameters and start values:
-        a plant built from the project's model in ``fmi_version`` (built again if the run used
-        another), an FMU file copied as it is (another ``fmi_version`` is said in the note, not
-        converted); ``clocked``: written unclocked, which the note says."""
+        """A plant built from the project's model in ``fmi_version``; an FMU file copied as it is
+        (not converted, nor clocked: the note says so)."""
         if fmi_version not in FMI_VERSIONS:
             raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
         check_clocked(clocked, fmi_version, self.name)
@@ -249,8 +242,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     @property
     def input_sources(self) -> list[tuple[str, str]] | None:
-        """Each connected input's source signal name and FMI type (given to :meth:`use_inputs`),
-        or None."""
+        """Each connected input's source signal name and FMI type (given to :meth:`use_inputs`), or None."""
         return list(self._sources) if self._sources is not None else None
 
     # ------------------------------------------------------------------ clocks
@@ -263,10 +255,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     def port_clocks(self, port: str) -> list[str]:
         """The clocks of the data port ``port`` (exchanged only at their activations)."""
-        if self.clock_model is None or port not in self.element_ports or port in self.clock_model.by_name:
+        clocks = self.clock_model
+        if clocks is None or port not in self.element_ports or port in clocks.by_name:
             return []
-        by_vr = self.clock_model.by_vr
-        return [by_vr[vr].name for vr in self.clock_model.clocks_of(self.element_ports[port].variable.name)]
+        return [clocks.by_vr[vr].name for vr in clocks.clocks_of(self.element_ports[port].variable.name)]
 
     def attach_clocks(self, board: ClockBoard) -> None:
         """Take the run's clock board (before :meth:`bind`)."""
@@ -275,19 +267,17 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     def _clock_update(self, env) -> None:
         """The Scheduled Execution ``clockUpdate`` callback, passed on to the run (an exception
         is kept by the run and raised when the FMU returns: a ctypes callback cannot raise)."""
+        run = self._run
         try:
-            run = self._run
             if run is not None:
                 run.clock_update(env)
         except BaseException as e:  # noqa: BLE001 - kept for the run
-            run = self._run
-            if run is not None and run._error is None:
+            if run._error is None:
                 run._error = e
 
     # ------------------------------------------------------------------ lifecycle
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`
-        (e.g. Roberts in Co-Simulation: steps of 1e-3 s over 1e8 s)."""
+        """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`."""
         if self.interface == "cs":
             h, what = self.md.coSimulation.fixedInternalStepSize, "its fixedInternalStepSize"
             hint = "; its Model Exchange interface (interface = 'me') integrates with CVODE" if \
@@ -306,8 +296,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                                 f"{stop_time:g} s, more than {MAX_INTERNAL_STEPS:.0e}{hint}")
 
     def use_unpacked(self, directory: str) -> None:
-        """Instantiate from the FMU unpacked in ``directory`` (the caller's, which removes it:
-        an isolated FMU's process uses its parent's folder)."""
+        """Instantiate from the FMU unpacked in ``directory`` (the caller's, which removes it)."""
         self.close()
         self._extraction = Extraction.existing(directory)
 
@@ -319,8 +308,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         return self._extraction.directory
 
     def reset(self, t0: float) -> None:
-        """Unpack (once), instantiate and initialise the FMU at ``t0`` [s] (:meth:`instantiate`)
-        and, in Model Exchange, start its integrator."""
+        """Unpack (once), instantiate and initialise the FMU at ``t0`` [s]; Model Exchange: start its integrator."""
         self.close()
         super().reset(t0)
         if self.isolate:
@@ -347,8 +335,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     def instantiate(self, t0: float) -> FMUInstance:
         """A new instance of the FMU (closing any previous one), initialised at ``t0`` [s] with
         the structural parameters (in Configuration Mode), parameters and start values; left
-        after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the integrator not
-        started; FMI 1.0: after ``fmiInitializeSlave`` or ``fmiInitialize``)."""
+        after ``ExitInitializationMode`` (FMI 1.0: ``fmiInitializeSlave`` or ``fmiInitialize``)."""
         self.close()
         options = {}
         if self.clock_model is not None:
@@ -392,9 +379,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         inst.call(f"Set{suffix}({name} = {value!r})", getattr(inst.fmu, f"set{suffix}"), [v.valueReference], items)
 
     def bind(self, values, inputs, outputs, integers=None):
-        """Output and update closures over the raw FMI functions, exchanging values with
-        ``values`` (and ``integers``, the exact integer signals) in place (see
-        :class:`~cosim.core.component.FastBinding`)."""
+        """Output and update closures over the raw FMI functions (:class:`~cosim.core.component.FastBinding`)."""
         if self._remote is not None:
             return self._remote.bind(values, inputs, outputs, integers)
         if self.instance is None:
@@ -518,8 +503,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 ints[i] = int(u[i])
 
     def close(self) -> None:
-        """End and free the FMU instance as the FMI rules allow (:mod:`cosim.fmi.instance`); the
-        unpacked files stay for the next run. Safe twice."""
+        """End and free the FMU instance as the FMI rules allow (:mod:`cosim.fmi.instance`); safe twice."""
         remote, self._remote = self._remote, None
         if remote is not None:
             remote.close()
@@ -533,8 +517,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 unload_library(inst.fmu)
 
     def release(self) -> None:
-        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (otherwise kept
-        between runs, until garbage collection or interpreter exit)."""
+        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (otherwise kept between runs)."""
         self.close()
         _unload_box(self._library_box)
         if self._extraction is not None:

@@ -1,8 +1,7 @@
-"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life: loaded,
-instantiated with a logger that keeps its last messages, its worst status remembered, ended
-as the standard allows (:meth:`~cosim.fmi.instance.FMUInstance.finish`: after *Error* only ``FreeInstance``,
-after *Fatal* no call at all); a failure is an :class:`~fmu_models.errors.FMUError` naming
-the component, the call, the status and the FMU's last messages.
+"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life: instantiated with a
+logger that keeps its last messages, its worst status remembered, ended as the standard allows
+(after *Error* only ``FreeInstance``, after *Fatal* no call at all); a failure is an
+:class:`~fmu_models.errors.FMUError` naming the component, the call, the status and the FMU's last messages.
 """
 from __future__ import annotations
 
@@ -59,8 +58,7 @@ class _Symbols:
 
 
 def unload_library(fmu) -> None:
-    """Unload the library of the fmpy FMU object ``fmu`` (its instance freed, or none made)
-    and forget it in the crash guard."""
+    """Unload the library of the fmpy FMU object ``fmu`` (its instance freed) and forget it in the crash guard."""
     try:
         fmu.freeLibrary()
     except Exception:
@@ -178,24 +176,36 @@ class FMUInstance:
                       library) -> None:
         """FMI 3.0: load (or reuse) the library and instantiate with this instance's logger,
         always on (an FMI 3.0 FMU logs even its errors only with loggingOn; :meth:`_log` keeps
-        debug messages off the log unless ``logging_on``)."""
+        debug messages off the log unless ``logging_on``); Scheduled Execution with ``clockUpdate``
+        (fmpy's instantiate passes a no-op) and no-op preemption locks (partitions run one after
+        the other here)."""
         from fmpy import fmi3
 
         def log3(env, status, category, message):
             self._log(status, message)
 
-        self._log3 = log3
-        if self.interface == "se":
-            self._instantiate_se(self._guarded(fmi3.FMU3ScheduledExecution(**args)), directory, clock_update)
-        elif self.interface == "cs":
+        def noop(*args):
+            return None
+
+        if self.interface == "cs":
             self._guarded(library or fmi3.FMU3Slave(**args)).instantiate(
                 loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode), earlyReturnAllowed=bool(early_return))
-        else:
+        elif self.interface == "me":
             self._guarded(fmi3.FMU3Model(**args)).instantiate(loggingOn=True, logMessage=log3)
+        else:
+            fmu = self._guarded(fmi3.FMU3ScheduledExecution(**args))
+            fmu.logMessage = fmi3.fmi3LogMessageCallback(log3)
+            fmu.clockUpdate = fmi3.fmi3ClockUpdateCallback(clock_update or noop)
+            fmu.lockPreemption = fmi3.fmi3LockPreemptionCallback(noop)
+            fmu.unlockPreemption = fmi3.fmi3UnlockPreemptionCallback(noop)
+            resources = os.path.join(directory, "resources") + os.path.sep
+            fmu.component = fmu.fmi3InstantiateScheduledExecution(
+                fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"), fmi3.fmi3False,
+                fmi3.fmi3Boolean(True), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
+                fmu.lockPreemption, fmu.unlockPreemption)
 
     def _guarded(self, fmu):
-        """``fmu`` (its library just loaded), registered with the crash guard: a fatal signal in
-        its code names this component (:mod:`cosim.core.crash_guard`)."""
+        """``fmu`` registered with the crash guard (:mod:`cosim.core.crash_guard`): its crash names this component."""
         name = f"{self._identifier}_fmiGetVersion" if self.version == 1 else f"fmi{self.version}GetVersion"
         version = getattr(fmu.dll, name, None)
         address = ctypes.cast(version, ctypes.c_void_p).value if version is not None else None
@@ -203,25 +213,6 @@ class FMUInstance:
         fmu.pendulum_guard_entry = self._guard_entry       # forgotten when its library is unloaded
         self.fmu = fmu
         return fmu
-
-    def _instantiate_se(self, fmu, directory: str, clock_update) -> None:
-        """``fmi3InstantiateScheduledExecution`` with this instance's logger and ``clockUpdate``
-        (fmpy's instantiate passes a no-op); the preemption locks are no-ops (partitions run
-        one after the other here)."""
-        from fmpy import fmi3
-
-        def noop(*args):
-            return None
-
-        fmu.logMessage = fmi3.fmi3LogMessageCallback(self._log3)
-        fmu.clockUpdate = fmi3.fmi3ClockUpdateCallback(clock_update or noop)
-        fmu.lockPreemption = fmi3.fmi3LockPreemptionCallback(noop)
-        fmu.unlockPreemption = fmi3.fmi3UnlockPreemptionCallback(noop)
-        resources = os.path.join(directory, "resources") + os.path.sep
-        fmu.component = fmu.fmi3InstantiateScheduledExecution(
-            fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"), fmi3.fmi3False,
-            fmi3.fmi3Boolean(True), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
-            fmu.lockPreemption, fmu.unlockPreemption)
 
     # ------------------------------------------------------------------ status
     def _log(self, status, message) -> None:
@@ -257,8 +248,7 @@ class FMUInstance:
         return raw_function(self.dll, name)
 
     def exchange(self, ports, direction: str, sources=None) -> Exchange:
-        """The :class:`~cosim.fmi.exchange.Exchange` of ``ports`` (ElementPorts) in ``direction``
-        ("get" or "set") with this instance; ``sources``: each port's source signal and type."""
+        """The :class:`~cosim.fmi.exchange.Exchange` of ``ports`` in ``direction`` with this instance."""
         return Exchange(self.dll, self.handle, self.version, ports, direction, self.fail, self.owner, sources)
 
     # ------------------------------------------------------------------ initialisation
@@ -337,8 +327,7 @@ class FMUInstance:
 
     # ------------------------------------------------------------------ stop requests
     def discard_reason(self) -> float | None:
-        """After an FMI 2.0 ``DoStep`` returned Discard: the time the FMU asks to stop at (if
-        ``fmi2Terminated``: its ``fmi2LastSuccessfulTime``), or None."""
+        """After an FMI 2.0 ``DoStep`` returned Discard: ``fmi2LastSuccessfulTime`` if ``fmi2Terminated``, or None."""
         from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
         try:
@@ -359,7 +348,24 @@ class FMUInstance:
             return
         self._freed = True
         try:
-            self._end()
+            if self.worst >= _FATAL:
+                LOGGER.debug("%s: fatal: the instance is abandoned (no further FMI call)", self.owner)
+                return
+            if self.worst < _ERROR and self.initialized:
+                try:
+                    self.fmu.terminate()
+                except Exception:  # noqa: BLE001 - a refusal changes nothing: free it anyway
+                    LOGGER.debug("%s: terminate refused", self.owner)
+            try:
+                if self.keep_library:       # fmpy's freeInstance would unload the library too
+                    getattr(self.fmu, f"fmi{self.version}Free{'Slave' * (self.version == 1)}Instance")(
+                        self.fmu.component)
+                else:
+                    self.fmu.freeInstance()
+            except Exception:  # noqa: BLE001
+                LOGGER.debug("%s: freeInstance failed", self.owner)
+            if not self.keep_library:
+                crash_guard.forget_library(self._guard_entry)
         finally:
             self._forget_log()
 
@@ -368,22 +374,3 @@ class FMUInstance:
         key = getattr(self, "_log_key", 0)
         if _LOGS.get(key) is getattr(self, "_logger", None):
             _LOGS.pop(key, None)
-
-    def _end(self) -> None:
-        if self.worst >= _FATAL:
-            LOGGER.debug("%s: fatal: the instance is abandoned (no further FMI call)", self.owner)
-            return
-        if self.worst < _ERROR and self.initialized:
-            try:
-                self.fmu.terminate()
-            except Exception:  # noqa: BLE001 - a refusal changes nothing: free it anyway
-                LOGGER.debug("%s: terminate refused", self.owner)
-        try:
-            if self.keep_library:       # fmpy's freeInstance would unload the library too
-                getattr(self.fmu, f"fmi{self.version}Free{'Slave' * (self.version == 1)}Instance")(self.fmu.component)
-            else:
-                self.fmu.freeInstance()
-        except Exception:  # noqa: BLE001
-            LOGGER.debug("%s: freeInstance failed", self.owner)
-        if not self.keep_library:
-            crash_guard.forget_library(self._guard_entry)

@@ -165,8 +165,7 @@ class RemoteFMU:
         return output_fn, update_fn
 
     def close(self) -> None:
-        """Ask the child to end its instance by the FMI rules; kill it if it does not exit in
-        :data:`CLOSE_TIMEOUT` s. Safe twice."""
+        """Ask the child to end its instance; kill it if it does not exit in :data:`CLOSE_TIMEOUT` s. Safe twice."""
         proc = self.proc
         if proc.poll() is None:
             with contextlib.suppress(OSError):

@@ -26,8 +26,7 @@ INTEGER_RANGES = {
 
 
 def integer_range(type_name: str, version: int) -> tuple[int, int]:
-    """The value range of the FMI ``type_name`` (an integer, Enumeration or Boolean type) in FMI
-    ``version``."""
+    """The value range of the FMI integer, Enumeration or Boolean ``type_name`` in FMI ``version``."""
     if type_name == "Enumeration":
         return INTEGER_RANGES["Int32" if version < 3 else "Int64"]
     return INTEGER_RANGES[type_name]
@@ -59,8 +58,8 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
 
 
 def check_declared_range(values: list, variable, what: str) -> None:
-    """Refuse values outside the variable's declared ``min``/``max`` (the standard makes
-    them an error), naming ``what``, the value and the range."""
+    """Refuse ``values`` outside the ``variable``'s declared ``min``/``max`` (an error by the
+    standard), naming ``what``, the value and the range."""
     conv = float if variable.type in REAL_TYPES else int
     try:
         lo = -math.inf if variable.min is None else conv(variable.min)
@@ -133,8 +132,7 @@ class ElementPort:
 
 
 def element_ports(md, structural: Mapping[str, int]) -> dict[str, ElementPort]:
-    """Every element port of the FMU ``md`` (fmpy ModelDescription), by name, for the
-    structural-parameter values ``structural``."""
+    """Every element port of the FMU ``md`` (fmpy's), by name, for the ``structural`` parameters' values."""
     ports = {}
     for v in md.modelVariables:
         if v.causality in ("parameter", "structuralParameter", "calculatedParameter", "independent"):
