@@ -1,7 +1,5 @@
 """One FMU file run on its own, as fmpy's ``simulate_fmu`` runs it, with fmpy's defaults
-(``pendulum-cosim run Model.fmu`` on the command line; the documentation's page on
-third-party FMUs says how).
-"""
+(``pendulum-cosim run Model.fmu``; the third-party FMUs page of the documentation says how)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -112,7 +110,8 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
     names = tables[0].output_names if tables else None
     fmu = FMUComponent(NAME, Path(path), h, inputs=names, outputs=None if outputs is None else list(outputs),
                        start=dict(start or {}), interface=interface, rtol=tol, isolate=isolate)
-    return FMUExperiment(Cosimulation([fmu, *tables], {f"{NAME}.{c}": f"input.{c}" for c in names or []}), t0, t1, h)
+    wiring = {f"{NAME}.{c}": f"input.{c}" for c in names or []}
+    return FMUExperiment(Cosimulation([fmu, *tables], wiring), t0, t1, h)
 
 
 def run_fmu(path, stop_time: float | None = None, **options) -> pd.DataFrame:

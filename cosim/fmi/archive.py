@@ -112,22 +112,13 @@ def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX
             raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
                            f"{first}") from None
         archive = FMUArchive(md, frozenset(z.namelist()), z.read("modelDescription.xml"))   # read by fmpy: readable
-    _complete_ranges(archive)
-    return archive
-
-
-def _complete_ranges(archive: FMUArchive) -> None:
-    """Read ``min``/``max`` of FMI 3.0 integer variables, which fmpy leaves None."""
-    md = archive.md
-    if not str(md.fmiVersion).startswith("3"):
-        return
-    missing = {v.name: v for v in md.modelVariables
-               if v.type.startswith(("Int", "UInt")) and v.min is None and v.max is None}
-    variables = archive.root.find("ModelVariables") if missing else None
-    for el in variables if variables is not None else ():
+    missing = {v.name: v for v in md.modelVariables if str(md.fmiVersion).startswith("3")
+               and v.type.startswith(("Int", "UInt")) and v.min is None and v.max is None}
+    for el in archive.root.iterfind("ModelVariables/*") if missing else ():     # fmpy leaves them None
         v = missing.get(el.get("name"))
         if v is not None:
             v.min, v.max = el.get("min"), el.get("max")
+    return archive
 
 
 def _remove(directory: str) -> None:

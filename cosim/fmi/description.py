@@ -2,11 +2,10 @@
 checked against it: the interface, clock intervals, parameter and start values, ports and their dependencies."""
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
 from pathlib import Path
-
-import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 from fmu_models.export.pack import library_suffix, platform_dir
@@ -168,7 +167,7 @@ class FMUDescription:
 
     def _value(self, v, val, shape: tuple[int, ...]):
         """The value ``val`` of the variable ``v`` of shape ``shape`` checked (a list for an array)."""
-        count = int(np.prod(shape)) if shape else 1
+        count = math.prod(shape)
         items = list(val) if isinstance(val, (list, tuple)) else [val]
         if len(items) != count:
             raise ConfigurationError(f"{self.owner}: {v.name} takes {count} value(s) (shape {shape or 'scalar'}), "

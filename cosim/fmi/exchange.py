@@ -76,20 +76,12 @@ class Exchange:
 
     Parameters
     ----------
-    dll : ctypes.CDLL
-        The FMU's library.
-    instance : int
-        The instance pointer.
-    version : {1, 2, 3}
-        FMI version (1: ``dll`` resolves the names ``fmi1GetReal`` ... to the library's
-        symbols).
+    instance : FMUInstance
+        The FMU instance (:mod:`cosim.fmi.instance`): its functions, pointer, FMI version, name
+        and ``fail(what, status)``, which raises its FMUError.
     ports : sequence of ElementPort
         In the order of the index given to :meth:`bind`.
     direction : {"get", "set"}
-    fail : callable
-        ``fail(what, status)`` raises the component's FMUError.
-    owner : str
-        The component's name, for messages.
     sources : sequence of (str, str), optional
         For ``"set"``: each port's source signal name and FMI type (default: unknown, signed).
 
@@ -100,8 +92,9 @@ class Exchange:
         no conversion, no copy).
     """
 
-    def __init__(self, dll, instance, version: int, ports: Sequence[ElementPort], direction: str,
-                 fail: Callable[[str, int], None], owner: str = "", sources: Sequence[tuple[str, str]] | None = None):
+    def __init__(self, instance, ports: Sequence[ElementPort], direction: str,
+                 sources: Sequence[tuple[str, str]] | None = None):
+        version = instance.version
         table = FMI_TYPES[version]
         by_suffix: dict[str, tuple] = {}
         for pos, p in enumerate(ports):
@@ -110,12 +103,12 @@ class Exchange:
                                         f"(supported: {', '.join(table)})")
             ctype, suffix = table[p.type]
             by_suffix.setdefault(suffix, (ctype, p.type, []))[2].append((pos, p))
-        self.version, self.direction, self._fail, self.owner = version, direction, fail, owner
-        self.inst = ctypes.c_void_p(instance)
+        self.version, self.direction, self._fail, self.owner = version, direction, instance.fail, instance.owner
+        self.inst = ctypes.c_void_p(instance.handle)
         self.n = len(ports)
         self.sources = list(sources) if sources is not None else [("?", "Int64")] * len(ports)
         label = direction.capitalize()
-        self.groups = [_Group(raw_function(dll, f"fmi{version}{label}{suffix}"), label + suffix, ctype, type_name,
+        self.groups = [_Group(instance.raw(f"fmi{version}{label}{suffix}"), label + suffix, ctype, type_name,
                               members, self.inst, version)
                        for suffix, (ctype, type_name, members) in by_suffix.items()]
         # aliases (sharing a value reference) are one value copied to each port: not in place

@@ -446,9 +446,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return "FMI 1.0 asynchronous doStep (canRunAsynchronuously: a Pending step is waited for)"
         ports = [self.element_ports[n] for n in (*self.connected_inputs, *self.output_names)]
         other = sorted({p.type for p in ports if p.type not in ("Real", "Float64")})
-        if other:
-            return f"{', '.join(other)} ports"
-        return None
+        return f"{', '.join(other)} ports" if other else None
 
     def _cs_update(self, set_all):
         """``update_fn(t)``: set the inputs and ``doStep`` (with its native operations if it can have them)."""

@@ -249,7 +249,7 @@ class FMUInstance:
 
     def exchange(self, ports, direction: str, sources=None) -> Exchange:
         """The :class:`~cosim.fmi.exchange.Exchange` of ``ports`` in ``direction`` with this instance."""
-        return Exchange(self.dll, self.handle, self.version, ports, direction, self.fail, self.owner, sources)
+        return Exchange(self, ports, direction, sources)
 
     # ------------------------------------------------------------------ initialisation
     def setup(self, t0: float) -> None:
@@ -285,11 +285,29 @@ class FMUInstance:
     # ------------------------------------------------------------------ FMI 1.0 steps
     def step_failed(self, status: int, t: float, h: float) -> None:
         """After an FMI 1.0 ``fmiDoStep(t, h)`` [s] returned ``status`` above Warning: Pending
-        waited for (returns if the step then ended well), else the FMUError (a Discard names
+        waited for with ``fmiGetStatus(fmiDoStepStatus)`` (returns if the step then ended well;
+        Ctrl-C, or no ``canRunAsynchronuously``, cancels it), else the FMUError (a Discard names
         ``fmiLastSuccessfulTime``)."""
         what = f"DoStep(t = {t:g} s, h = {h:g} s)"
         if status == _PENDING:
-            status = self._await_step(what)
+            if not self.description.asynchronous:
+                self._cancel_step()
+                raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.description.path.name} "
+                               "does not declare canRunAsynchronuously (FMI 1.0): the step was cancelled "
+                               "(fmiCancelStep)")
+            get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
+            try:
+                while status == _PENDING:
+                    st = get_status(c, 0, ctypes.byref(value))          # fmiDoStepStatus
+                    if st > 1:
+                        self.fail("GetStatus(fmiDoStepStatus)", st)
+                    status = value.value
+                    if status == _PENDING:
+                        time.sleep(delay)
+                        delay = min(2 * delay, 0.05)
+            except KeyboardInterrupt:
+                self._cancel_step()
+                raise
             if status <= 1:
                 return
         if status == 2:
@@ -298,27 +316,6 @@ class FMUInstance:
             known = f"; it computed up to t = {last.value:g} s (fmiLastSuccessfulTime)" if st <= 1 else ""
             what = f"DoStep(t = {t:g} s, h = {h:g} s{known}; FMI 1.0 has no stop request)"
         self.fail(what, status)
-
-    def _await_step(self, what: str) -> int:
-        """``fmiGetStatus(fmiDoStepStatus)`` until the step is no longer Pending (its status
-        returned); Ctrl-C cancels it. Without ``canRunAsynchronuously`` it is cancelled and refused."""
-        if not self.description.asynchronous:
-            self._cancel_step()
-            raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.description.path.name} does "
-                           "not declare canRunAsynchronuously (FMI 1.0): the step was cancelled (fmiCancelStep)")
-        get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
-        try:
-            while True:
-                st = get_status(c, 0, ctypes.byref(value))          # fmiDoStepStatus
-                if st > 1:
-                    self.fail("GetStatus(fmiDoStepStatus)", st)
-                if value.value != _PENDING:
-                    return value.value
-                time.sleep(delay)
-                delay = min(2 * delay, 0.05)
-        except KeyboardInterrupt:
-            self._cancel_step()
-            raise
 
     def _cancel_step(self) -> None:
         """``fmiCancelStep`` (then only ``fmiFreeSlaveInstance``: the instance counts as failed)."""

@@ -4,6 +4,7 @@ answers its requests until told to close."""
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import pickle
 import signal
@@ -18,14 +19,6 @@ from .fmu_component import FMUComponent
 from .isolated import HEAD, REPLY, read_exactly, write_all
 
 __all__ = ["main"]
-
-
-def _die_with_parent() -> None:
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
 
 
 def _serve(fd_in: int, fd_out: int) -> None:
@@ -86,7 +79,9 @@ def main() -> None:
     """The child process: serve one FMU on stdin/stdout until told to close."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     crash_guard.disable()          # the parent names a crash here as a named error, with its results
-    _die_with_parent()
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG: die with the parent
     fd_in, fd_out = sys.stdin.buffer.fileno(), os.dup(sys.stdout.buffer.fileno())
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # FMU prints go to stderr, not the pipe
     try:

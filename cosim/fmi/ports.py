@@ -138,7 +138,7 @@ def element_ports(md, structural: Mapping[str, int]) -> dict[str, ElementPort]:
         if v.causality in ("parameter", "structuralParameter", "calculatedParameter", "independent"):
             continue
         shape = array_shape(v, structural)
-        size = int(np.prod(shape)) if shape else 1
+        size = math.prod(shape)
         discrete = v.variability not in ("continuous", None) or v.type not in REAL_TYPES
         names = [f"{v.name}[{','.join(str(i + 1) for i in idx)}]" for idx in np.ndindex(*shape)] if shape else [v.name]
         for k, n in enumerate(names):
