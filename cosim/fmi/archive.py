@@ -165,10 +165,9 @@ class Extraction:
                 written = 0
                 for info in z.infolist():
                     target = Path(self.directory, info.filename)
+                    (target if info.is_dir() else target.parent).mkdir(parents=True, exist_ok=True)
                     if info.is_dir():
-                        target.mkdir(parents=True, exist_ok=True)
                         continue
-                    target.parent.mkdir(parents=True, exist_ok=True)
                     with z.open(info) as src, open(target, "wb") as dst:
                         while chunk := src.read(1 << 20):
                             written += len(chunk)

@@ -153,8 +153,7 @@ class Exchange:
         return call
 
     def _op(self, g: _Group, buf: int, where, values):
-        """The native kernel's operation (:mod:`cosim.core.native`) of group ``g``'s call: ``buf``
-        the address the FMU reads or writes, ``where`` each port's signal (None: in place)."""
+        """The native kernel's operation of ``g``'s call on ``buf``, ``where`` each port's signal (None: in place)."""
         fail, label = self._fail, g.label
         if where is None:
             idx = off = np.zeros(0, np.int64)

@@ -174,11 +174,9 @@ class FMUInstance:
 
     def _instantiate3(self, args: dict, directory: str, event_mode: bool, early_return: bool, clock_update,
                       library) -> None:
-        """FMI 3.0: load (or reuse) the library and instantiate with this instance's logger,
-        always on (an FMI 3.0 FMU logs even its errors only with loggingOn; :meth:`_log` keeps
-        debug messages off the log unless ``logging_on``); Scheduled Execution with ``clockUpdate``
-        (fmpy's instantiate passes a no-op) and no-op preemption locks (partitions run one after
-        the other here)."""
+        """FMI 3.0: instantiate with this instance's logger always on (an FMU logs even its errors
+        only with loggingOn); Scheduled Execution with ``clockUpdate`` (fmpy's passes a no-op) and
+        no-op preemption locks (partitions run one after the other here)."""
         from fmpy import fmi3
 
         def log3(env, status, category, message):

@@ -146,8 +146,7 @@ class RemoteFMU:
 
     # ------------------------------------------------------------------ the binding
     def bind(self, values: np.ndarray, inputs, outputs, integers: np.ndarray | None = None):
-        """Output and update closures (:class:`~cosim.core.component.FastBinding`), each one round
-        trip to the child (without feed-through, the output is the one the last update returned)."""
+        """Output and update closures (:class:`~cosim.core.component.FastBinding`), each one round trip to the child."""
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
         out_idx = np.arange(len(values))[outputs]
