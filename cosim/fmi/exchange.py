@@ -213,8 +213,9 @@ class Exchange:
 
     def _range_plan(self, g: _Group):
         """What a set of group ``g`` must check: None if every source's range fits the
-        destination's, else ``(checks, lo, hi)``: each group position whose source may not fit
-        and whether that source is a UInt64 (its bit pattern in int64), signed ones first."""
+        destination's ``[lo, hi]``, else ``(positions, unsigned, lo, hi)``: the group positions
+        whose source may not fit, signed ones first, and which of them are UInt64 sources (their
+        bit pattern in int64)."""
         if g.real:
             return None
         lo, hi = integer_range(g.type_name, self.version)
@@ -226,8 +227,11 @@ class Exchange:
             except KeyError:            # a source of another kind (a Python component's float)
                 lo_s, hi_s = -2**63, 2**63 - 1
             if not (lo <= lo_s and hi_s <= hi):
-                checks.append((k, src_type == "UInt64"))
-        return (sorted(checks, key=lambda c: c[1]), lo, hi) if checks else None
+                checks.append((src_type == "UInt64", k))
+        if not checks:
+            return None
+        unsigned, positions = zip(*sorted(checks))
+        return np.array(positions, np.intp), np.array(unsigned), lo, hi
 
 
 def no_exchange() -> bool:
@@ -240,10 +244,14 @@ no_exchange.native = []
 
 
 def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:
-    checks, lo, hi = plan
-    for k, unsigned in checks:
-        value = int(src[k].view(np.uint64) if unsigned else src[k])
-        if not lo <= value <= hi:
-            src_name, src_type = sources[g.positions[k]]
-            raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo}, {hi}]) cannot take {value} "
-                             f"from {src_name} ({src_type}): it does not fit (a value is never wrapped)")
+    positions, unsigned, lo, hi = plan
+    values = src[positions]
+    out = np.where(unsigned, values.view(np.uint64) > np.uint64(hi),
+                     (values < np.int64(lo)) | (values > np.int64(min(hi, 2**63 - 1))))
+    bad = np.flatnonzero(out)
+    if len(bad):
+        i = bad[0]
+        k, value = int(positions[i]), int(values[i].view(np.uint64) if unsigned[i] else values[i])
+        src_name, src_type = sources[g.positions[k]]
+        raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo}, {hi}]) cannot take {value} from "
+                         f"{src_name} ({src_type}): it does not fit (a value is never wrapped)")

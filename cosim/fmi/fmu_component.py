@@ -21,7 +21,7 @@ from ..core.component import BoundCalls, Component, ExportedFMU, StopRequest, po
 from ..core.native import OP_STEP1, OP_STEP2, OP_STEP3, Op, native_ops
 from .archive import Extraction
 from .clock_run import clocked_run
-from .clock_timing import ClockedRun, initialise
+from .clock_timing import initialise
 from .description import FMUDescription
 from .exchange import FMI_TYPES, no_exchange
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
@@ -152,11 +152,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         outs = d.ports(self.element_ports, outputs, "output")
         ft = d.feedthrough(self.element_ports, outs, ins, self.interface) if feedthrough == "model" else False
         super().__init__(name, period, ins, outs, feedthrough=ft, port_names_are_identifiers=False)
-        if self.interface == "se":
-            self.reentrant = False              # a partition is activated once per time
-        self._board: ClockBoard | None = None
-        self._run: ClockedRun | None = None
-        self._clock_schedule = self._remote = self._extraction = None
+        self.reentrant = self.interface != "se"         # a partition is activated once per time
+        self._board = self._run = self._clock_schedule = self._remote = self._extraction = None
         self.instance: FMUInstance | None = None
         self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
