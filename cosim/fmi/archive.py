@@ -1,6 +1,5 @@
 """Opening FMU files safely: a checked zip, bounded extraction into a private temporary
-folder, one named :class:`~fmu_models.errors.FMUError` for a bad file, no leftovers.
-"""
+folder, one named :class:`~fmu_models.errors.FMUError` for a bad file, no leftovers."""
 from __future__ import annotations
 
 import shutil

@@ -1,7 +1,5 @@
-"""Typed value exchange with an FMU through its raw FMI functions (no ctypes ``argtypes``,
-every argument prebuilt): one call per FMI type, integers exact (``integers``, int64; a
-UInt64 as its bit pattern) and checked against the destination's range, never wrapped.
-"""
+"""Typed value exchange with an FMU through its raw FMI functions, every argument prebuilt: one call
+per FMI type, integers exact (int64; a UInt64 as its bit pattern) and never wrapped."""
 from __future__ import annotations
 
 import ctypes

@@ -337,10 +337,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         options = {}
         if self.clock_model is not None:
             options = dict(event_mode=True, early_return=True, clock_update=self._clock_update)
-        library, self._library_box[0] = self._library_box[0], None
-        if library is not None and (options or self.interface != "cs"):
-            unload_library(library)
-            library = None
+        library, self._library_box[0] = self._library_box[0], None     # kept only by an unclocked CS instance
         inst = FMUInstance(self.name, self.description, self.unpacked, self.interface, self.logging, **options,
                            library=library)
         inst.keep_library = not options and self.interface == "cs"      # reused by the next run
@@ -391,10 +388,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         ports = [self.element_ports[n] for n in self.connected_inputs]
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
-        def exchange(positions, direction, changes=False):
+        def setter(positions, changes=False):
             if not positions:
                 return no_exchange
-            ex = inst.exchange([ports[i] for i in positions], direction, [sources[i] for i in positions])
+            ex = inst.exchange([ports[i] for i in positions], "set", [sources[i] for i in positions])
             ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
             return ex.bind(values, idx[positions], integers, changes)
 
@@ -406,11 +403,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         if self.interface == "me":            # continuous inputs and discrete ones (set in Event Mode) apart
             def setters(positions: list[int]) -> tuple[list, list]:
                 kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
-                return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
+                return tuple([setter(sel, changes=True)] if sel else [] for sel in kinds)
             return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
-        set_all = exchange(all_pos, "set")
-        set_ft = exchange(ft_pos, "set") if ft_pos else None
-        return self._output_fn(set_ft, get_out), self._cs_update(set_all)
+        return self._output_fn(setter(ft_pos), get_out), self._cs_update(setter(all_pos))
 
     def _input_starts(self) -> list:
         """The start value of every connected input (what an array's unconnected elements send)."""
@@ -419,16 +414,16 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     @staticmethod
     def _output_fn(set_ft, get_out):
-        if set_ft is None:
+        if set_ft is no_exchange:
             def output_fn(t: float) -> None:
                 get_out()
         else:
             def output_fn(t: float) -> None:
                 set_ft()
                 get_out()
-        parts = [native_ops(x) for x in ((set_ft,) if set_ft is not None else ()) + (get_out,)]
-        if all(p is not None for p in parts):
-            output_fn.native = [op for p in parts for op in p]
+        parts = [native_ops(set_ft), native_ops(get_out)]
+        if None not in parts:
+            output_fn.native = parts[0] + parts[1]
         return output_fn
 
     def native_reason(self) -> str | None:

@@ -1,8 +1,6 @@
-"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life: instantiated with a
-logger that keeps its last messages, its worst status remembered, ended as the standard allows
-(after *Error* only ``FreeInstance``, after *Fatal* no call at all); a failure is an
-:class:`~fmu_models.errors.FMUError` naming the component, the call, the status and the FMU's last messages.
-"""
+"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life (the co-simulation page of
+the documentation: the FMI call sequence); a failure is an :class:`~fmu_models.errors.FMUError`
+naming the component, the call, the status and the FMU's last messages."""
 from __future__ import annotations
 
 import ctypes

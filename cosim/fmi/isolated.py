@@ -1,8 +1,7 @@
 """An FMU in a process of its own (``isolate=True``): a crash of its code ends the run with
 an :class:`~fmu_models.errors.FMUError` naming the FMU, the call, the time and the signal.
 The parent (:class:`RemoteFMU`) and the child (:mod:`cosim.fmi.isolated_child`) talk over a
-pipe as the third-party FMUs page of the documentation says (crash isolation).
-"""
+pipe as the third-party FMUs page of the documentation says (crash isolation)."""
 from __future__ import annotations
 
 import contextlib

@@ -1,6 +1,5 @@
-"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`), started as ``python -m
-cosim.fmi.isolated_child``: builds the component on the parent's unpacked folder and
-answers its requests until told to close."""
+"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`): builds the component on the
+parent's unpacked folder and answers its requests until told to close."""
 from __future__ import annotations
 
 import contextlib

@@ -1,6 +1,5 @@
 """The ports of an FMU: its variables as element ports (an FMI 3.0 array is one port per
-element, ``y[1]``, ``A[1,2]``: 1-based, row-major) with exact integer types.
-"""
+element, ``y[1]``, ``A[1,2]``: 1-based, row-major) with exact integer types."""
 from __future__ import annotations
 
 import math
