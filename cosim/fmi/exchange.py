@@ -17,7 +17,7 @@ __all__ = ["FMI_TYPES", "Exchange", "raw_function"]
 
 _FMI2 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
          "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int, "Boolean")}
-#: By FMI version, by FMI type name: the ctypes element type and the FMI function suffix.
+#: The ctypes element type and the FMI function suffix of each FMI type name, by FMI version.
 FMI_TYPES = {
     1: {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")},          # fmiBoolean is a char
     2: _FMI2,

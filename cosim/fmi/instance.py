@@ -88,7 +88,7 @@ class FMUInstance:
         Scheduled Execution: the ``clockUpdate`` callback (it must not raise).
     library : fmpy FMU object, optional
         The library of an earlier, freed instance of the same FMU and interface
-        (:attr:`keep_library`), instantiated again without loading it again.
+        (``keep_library``), instantiated again without loading it again.
 
     Attributes
     ----------
