@@ -1,7 +1,5 @@
 """One FMU file run on its own, as fmpy's ``simulate_fmu`` runs it, with fmpy's defaults
-(``pendulum-cosim run Model.fmu`` on the command line; the documentation's page on
-third-party FMUs says how).
-"""
+(``pendulum-cosim run Model.fmu``; the third-party FMUs page of the documentation says how)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -105,17 +103,15 @@ def open_fmu(path, stop_time: float | None = None, *, start_time: float | None =
     isolate : bool
         Run the FMU in a process of its own (a crash of its code is a named error).
     """
-    path = Path(path)
     md = read_description(path)
     t0, t1, h = _times(md, start_time, stop_time, step_size)
     tol = rtol if rtol is not None else float(getattr(md.defaultExperiment, "tolerance", None) or 1e-5)
-    table = _input_table(md, inputs, h) if inputs is not None else None
-    fmu = FMUComponent(NAME, path, h, inputs=table.output_names if table is not None else None,
-                       outputs=None if outputs is None else list(outputs), start=dict(start or {}),
-                       interface=interface, rtol=tol, isolate=isolate)
-    parts = [fmu] + ([table] if table is not None else [])
-    wiring = {f"{NAME}.{c}": f"input.{c}" for c in (table.output_names if table is not None else [])}
-    return FMUExperiment(Cosimulation(parts, wiring), t0, t1, h)
+    tables = [_input_table(md, inputs, h)] if inputs is not None else []
+    names = tables[0].output_names if tables else None
+    fmu = FMUComponent(NAME, Path(path), h, inputs=names, outputs=None if outputs is None else list(outputs),
+                       start=dict(start or {}), interface=interface, rtol=tol, isolate=isolate)
+    wiring = {f"{NAME}.{c}": f"input.{c}" for c in names or []}
+    return FMUExperiment(Cosimulation([fmu, *tables], wiring), t0, t1, h)
 
 
 def run_fmu(path, stop_time: float | None = None, **options) -> pd.DataFrame:

@@ -1,12 +1,13 @@
 """Opening FMU files safely: a checked zip, bounded extraction into a private temporary
-folder, one named :class:`~fmu_models.errors.FMUError` for a bad file, no leftovers.
-"""
+folder, one named :class:`~fmu_models.errors.FMUError` for a bad file, no leftovers."""
 from __future__ import annotations
 
 import shutil
 import tempfile
 import weakref
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -23,34 +24,35 @@ MAX_UNPACKED_BYTES = 1 << 30
 MAX_FILES = 20_000
 
 
-def _open_zip(path: Path, label: str = "FMU") -> zipfile.ZipFile:
+@contextmanager
+def _checked_zip(path: Path, max_bytes: int, max_files: int, required: str = "modelDescription.xml",
+                 label: str = "FMU") -> Iterator[zipfile.ZipFile]:
+    """The archive at ``path`` opened: a zip within the limits, safe member paths, ``required`` in it."""
     if not path.exists():
         raise FMUError(f"no {label} file at {path}")
     if path.is_dir():
         raise FMUError(f"{path} is a folder, not an .{label.lower()} file (an {label} is a zip archive)")
     try:
-        return zipfile.ZipFile(path)
+        z = zipfile.ZipFile(path)
     except zipfile.BadZipFile:
         raise FMUError(f"{path} is not an {label}: not a zip archive (damaged or wrong file)") from None
     except OSError as e:
         raise FMUError(f"cannot read {path}: {e.strerror or e}") from None
-
-
-def _check_members(z: zipfile.ZipFile, path: Path, max_bytes: int, max_files: int,
-                   required: str = "modelDescription.xml", label: str = "FMU") -> None:
-    infos = z.infolist()
-    if len(infos) > max_files:
-        raise FMUError(f"{path.name} holds {len(infos)} files, more than the limit of {max_files}")
-    total = sum(i.file_size for i in infos)
-    if total > max_bytes:
-        raise FMUError(f"{path.name} would unpack to {total / 2**20:.0f} MiB, more than the limit of "
-                       f"{max_bytes / 2**20:.0f} MiB")
-    for i in infos:
-        name = i.filename
-        if name.startswith(("/", "\\")) or ".." in Path(name).parts or ":" in name.split("/")[0]:
-            raise FMUError(f"{path.name} contains the unsafe path {name!r}")
-    if required not in z.namelist():
-        raise FMUError(f"{path.name} is not an {label}: it has no {required}")
+    with z:
+        infos = z.infolist()
+        if len(infos) > max_files:
+            raise FMUError(f"{path.name} holds {len(infos)} files, more than the limit of {max_files}")
+        total = sum(i.file_size for i in infos)
+        if total > max_bytes:
+            raise FMUError(f"{path.name} would unpack to {total / 2**20:.0f} MiB, more than the limit of "
+                           f"{max_bytes / 2**20:.0f} MiB")
+        for i in infos:
+            name = i.filename
+            if name.startswith(("/", "\\")) or ".." in Path(name).parts or ":" in name.split("/")[0]:
+                raise FMUError(f"{path.name} contains the unsafe path {name!r}")
+        if required not in z.namelist():
+            raise FMUError(f"{path.name} is not an {label}: it has no {required}")
+        yield z
 
 
 def read_description(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES):
@@ -92,20 +94,12 @@ class FMUArchive:
 
 
 def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX_FILES) -> FMUArchive:
-    """The FMU at ``path`` checked as :func:`read_description` does, with its files' names and XML.
-
-    Parameters
-    ----------
-    path : str or Path
-        The ``.fmu`` file.
-    max_bytes, max_files : int
-        Limits on the total unpacked size [bytes] and the number of files.
-    """
+    """The FMU at ``path`` (at most ``max_bytes`` unpacked, ``max_files`` files) checked as
+    :func:`read_description` does, with its files' names and XML."""
     from fmpy import read_model_description
 
     path = Path(path)
-    with _open_zip(path) as z:
-        _check_members(z, path, max_bytes, max_files)
+    with _checked_zip(path, max_bytes, max_files) as z:
         try:
             z.testzip()
         except (zipfile.BadZipFile, OSError, EOFError) as e:
@@ -117,22 +111,13 @@ def read_archive(path, max_bytes: int = MAX_UNPACKED_BYTES, max_files: int = MAX
             raise FMUError(f"{path.name}: modelDescription.xml is not a valid FMI model description: "
                            f"{first}") from None
         archive = FMUArchive(md, frozenset(z.namelist()), z.read("modelDescription.xml"))   # read by fmpy: readable
-    _complete_ranges(archive)
-    return archive
-
-
-def _complete_ranges(archive: FMUArchive) -> None:
-    """Read ``min``/``max`` of FMI 3.0 integer variables, which fmpy leaves None."""
-    md = archive.md
-    if not str(md.fmiVersion).startswith("3"):
-        return
-    missing = {v.name: v for v in md.modelVariables
-               if v.type.startswith(("Int", "UInt")) and v.min is None and v.max is None}
-    variables = archive.root.find("ModelVariables") if missing else None
-    for el in variables if variables is not None else ():
+    missing = {v.name: v for v in md.modelVariables if str(md.fmiVersion).startswith("3")
+               and v.type.startswith(("Int", "UInt")) and v.min is None and v.max is None}
+    for el in archive.root.iterfind("ModelVariables/*") if missing else ():     # fmpy leaves them None
         v = missing.get(el.get("name"))
         if v is not None:
             v.min, v.max = el.get("min"), el.get("max")
+    return archive
 
 
 def _remove(directory: str) -> None:
@@ -148,8 +133,7 @@ class Extraction:
     path : path
         The ``.fmu`` file.
     max_bytes, max_files : int
-        Limits on the total unpacked size [bytes] and the number of files, enforced while
-        unpacking.
+        Limits on the total unpacked size [bytes] (enforced while unpacking too) and the number of files.
     required : str
         The member the archive must hold (default ``modelDescription.xml``).
     label : str
@@ -176,15 +160,13 @@ class Extraction:
         self._finalizer = weakref.finalize(self, _remove, self.directory)
         crash_guard.temp_folder_made(self.directory)      # removed by the salvage if an FMU crashes
         try:
-            with _open_zip(path, label) as z:
-                _check_members(z, path, max_bytes, max_files, required, label)
+            with _checked_zip(path, max_bytes, max_files, required, label) as z:
                 written = 0
                 for info in z.infolist():
                     target = Path(self.directory, info.filename)
+                    (target if info.is_dir() else target.parent).mkdir(parents=True, exist_ok=True)
                     if info.is_dir():
-                        target.mkdir(parents=True, exist_ok=True)
                         continue
-                    target.parent.mkdir(parents=True, exist_ok=True)
                     with z.open(info) as src, open(target, "wb") as dst:
                         while chunk := src.read(1 << 20):
                             written += len(chunk)

@@ -1,14 +1,11 @@
 """What an FMU declares, read once (:class:`~cosim.fmi.description.FMUDescription`), and a component's choices
-checked against it: the interface, clock intervals, parameter and start values, ports
-(:mod:`cosim.fmi.ports`) and their direct dependencies.
-"""
+checked against it: the interface, clock intervals, parameter and start values, ports and their dependencies."""
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
 from pathlib import Path
-
-import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 from fmu_models.export.pack import library_suffix, platform_dir
@@ -21,8 +18,7 @@ from .ports import ElementPort, array_shape, check_declared_range, check_integer
 
 __all__ = ["INTERFACES", "FMUDescription"]
 
-#: The interfaces a component may ask for (``"auto"``, Co-Simulation, Model Exchange,
-#: Scheduled Execution).
+#: The interfaces a component may ask for (``"auto"``, Co-Simulation, Model Exchange, Scheduled Execution).
 INTERFACES = ("auto", "cs", "me", "se")
 _WORDS = {"cs": "Co-Simulation", "me": "Model Exchange", "se": "Scheduled Execution"}
 
@@ -41,6 +37,8 @@ class FMUDescription:
     ----------
     version : int
         1, 2 or 3.
+    prefix : str
+        The prefix of the FMI functions in messages, ``fmi`` (FMI 1.0), ``fmi2`` or ``fmi3``.
     interfaces : dict
         The interfaces it has (fmpy's) by key, in the order ``"cs"``, ``"me"``, ``"se"``.
     variables : dict
@@ -62,6 +60,7 @@ class FMUDescription:
         archive = read_archive(self.path)
         md = self.md = archive.md
         self.version = {"1": 1, "3": 3}.get(str(md.fmiVersion)[:1], 2)
+        self.prefix = "fmi" if self.version == 1 else f"fmi{self.version}"
         found = {"cs": md.coSimulation, "me": md.modelExchange, "se": getattr(md, "scheduledExecution", None)}
         self.interfaces = {k: v for k, v in found.items() if v is not None}
         for key, interface in self.interfaces.items():
@@ -80,16 +79,10 @@ class FMUDescription:
         capabilities = root.find("Implementation/*/Capabilities") if root is not None else None
         self.asynchronous = capabilities is not None and capabilities.get("canRunAsynchronuously") in ("true", "1")
 
-    @property
-    def prefix(self) -> str:
-        """The prefix of the FMI functions in messages, ``fmi`` (FMI 1.0), ``fmi2`` or ``fmi3``."""
-        return "fmi" if self.version == 1 else f"fmi{self.version}"
-
     # ------------------------------------------------------------------ the interface
     def choose_interface(self, interface: str) -> str:
         """``interface`` (one of :data:`INTERFACES`; ``"auto"``: the first the FMU has) resolved
-        and checked: the FMU has it, its clocks allow it
-        (:meth:`~cosim.fmi.clocks.FMIClocks.check_interface`), Scheduled Execution has clocks."""
+        and checked: the FMU has it, its clocks allow it, Scheduled Execution has clocks."""
         owner, file = self.owner, self.path.name
         if interface not in INTERFACES:
             raise UnknownNameError(f"{owner}: interface must be one of {INTERFACES}, got {interface!r}")
@@ -110,9 +103,8 @@ class FMUDescription:
         return interface
 
     def clock_overrides(self, intervals: Mapping[str, float] | None, isolate: object) -> dict[str, Fraction]:
-        """The clock ``intervals`` [s] a component sets, by clock name, checked
-        (:meth:`~cosim.fmi.clocks.FMIClocks.check_overrides`); refused without clocks, as
-        ``isolate`` is with clocks."""
+        """The clock ``intervals`` [s] a component sets, by clock name, checked; refused without
+        clocks, as ``isolate`` is with clocks."""
         if self.clocks is None:
             if intervals is not None:
                 raise ConfigurationError(f"{self.owner}: clock_intervals given, but {self.path.name} has no clocks")
@@ -123,8 +115,7 @@ class FMUDescription:
         return self.clocks.check_overrides(intervals or {})
 
     def check_binary(self, interface: str) -> None:
-        """Refuse an FMU without a binary of ``interface`` ("cs", "me" or "se") for this
-        platform, naming the platforms it has (and saying so if it ships its sources)."""
+        """Refuse an FMU without a binary of ``interface`` for this platform, naming the ones it has."""
         platform = platform_dir(3 if self.version == 3 else 2)      # FMI 1.0 names platforms as 2.0 does
         want = f"binaries/{platform}/{self.interfaces[interface].modelIdentifier}{library_suffix()}"
         names = self._members
@@ -176,7 +167,7 @@ class FMUDescription:
 
     def _value(self, v, val, shape: tuple[int, ...]):
         """The value ``val`` of the variable ``v`` of shape ``shape`` checked (a list for an array)."""
-        count = int(np.prod(shape)) if shape else 1
+        count = math.prod(shape)
         items = list(val) if isinstance(val, (list, tuple)) else [val]
         if len(items) != count:
             raise ConfigurationError(f"{self.owner}: {v.name} takes {count} value(s) (shape {shape or 'scalar'}), "
@@ -211,32 +202,30 @@ class FMUDescription:
                 chosen += clocks.default_ports(direction)
         elif isinstance(chosen, str) or not all(isinstance(c, str) for c in chosen):
             raise TypeMismatchError(f"{owner}: {direction}s must be a list of variable names, got {chosen!r}")
-        ports, seen = [], set()
+        picked: dict[str, None] = {}            # the element ports in order, once each
         for p in chosen:
             names = [p] if p in available else [n for n, e in available.items() if e.variable.name == p and n != p]
             if not names:
                 self._refuse_negated(p, f"a {direction}")
                 raise UnknownNameError(f"{owner}: {p!r} is not an FMU {direction}; valid {direction}s: "
                                        f"{', '.join(available)}")
-            for n in names:
-                if n in seen:
-                    continue
-                seen.add(n)
-                e = available[n]
-                if e.type == CLOCK and clocks is not None:
-                    ports.append(clocks.port(n, direction))
-                elif e.type not in PORT_TYPES:
-                    raise TypeMismatchError(f"{owner}: {direction} {n!r} is of type {e.type}; ports can be "
-                                            f"{', '.join(sorted(set(PORT_TYPES)))}")
-                else:
-                    ports.append(Port(n, e.type, getattr(e.variable, "unit", None) or "", e.variable.description or ""))
+            picked.update(dict.fromkeys(names))
+        ports = []
+        for n in picked:
+            e = available[n]
+            if e.type == CLOCK and clocks is not None:
+                ports.append(clocks.port(n, direction))
+            elif e.type not in PORT_TYPES:
+                raise TypeMismatchError(f"{owner}: {direction} {n!r} is of type {e.type}; ports can be "
+                                        f"{', '.join(sorted(set(PORT_TYPES)))}")
+            else:
+                ports.append(Port(n, e.type, getattr(e.variable, "unit", None) or "", e.variable.description or ""))
         return ports
 
     def feedthrough(self, element_ports: Mapping[str, ElementPort], outs: Sequence[Port], ins: Sequence[Port],
                     interface: str) -> dict[str, list[str]]:
         """The direct dependencies of each output port on input ports as the ``ModelStructure``
-        declares them (by variable; undeclared: every input), restricted by the clocks in
-        ``interface`` (:meth:`~cosim.fmi.clocks.FMIClocks.feedthrough`)."""
+        declares them (undeclared: every input), restricted by the clocks in ``interface``."""
         by_variable: dict[str, list[str]] = {}
         for p in ins:
             by_variable.setdefault(element_ports[p.name].variable.name, []).append(p.name)

@@ -1,7 +1,5 @@
-"""Typed value exchange with an FMU through its raw FMI functions (no ctypes ``argtypes``,
-every argument prebuilt): one call per FMI type, integers exact (``integers``, int64; a
-UInt64 as its bit pattern) and checked against the destination's range, never wrapped.
-"""
+"""Typed value exchange with an FMU through its raw FMI functions, every argument prebuilt: one call
+per FMI type, integers exact (int64; a UInt64 as its bit pattern) and never wrapped."""
 from __future__ import annotations
 
 import ctypes
@@ -15,15 +13,18 @@ from fmu_models.errors import FMUError, InputError, TypeMismatchError
 from ..core.native import OP_GET, OP_SET, Op
 from .ports import INTEGER_RANGES, REAL_TYPES, ElementPort, integer_range
 
-__all__ = ["Exchange", "raw_function"]
+__all__ = ["FMI_TYPES", "Exchange", "raw_function"]
 
-# FMI type name -> (ctypes element type, FMI function suffix)
 _FMI2 = {"Real": (ctypes.c_double, "Real"), "Integer": (ctypes.c_int, "Integer"),
          "Enumeration": (ctypes.c_int, "Integer"), "Boolean": (ctypes.c_int, "Boolean")}
-_FMI1 = {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")}          # fmiBoolean is a char
-_FMI3 = {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
-         **{t: (getattr(ctypes, f"c_{t.lower()}"), t) for t in INTEGER_RANGES if t not in ("Integer", "Boolean")},
-         "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")}
+#: The ctypes element type and the FMI function suffix of each FMI type name, by FMI version.
+FMI_TYPES = {
+    1: {**_FMI2, "Boolean": (ctypes.c_int8, "Boolean")},          # fmiBoolean is a char
+    2: _FMI2,
+    3: {"Float64": (ctypes.c_double, "Float64"), "Float32": (ctypes.c_float, "Float32"),
+        **{t: (getattr(ctypes, f"c_{t.lower()}"), t) for t in INTEGER_RANGES if t not in ("Integer", "Boolean")},
+        "Enumeration": (ctypes.c_int64, "Int64"), "Boolean": (ctypes.c_bool, "Boolean")},
+}
 
 
 def raw_function(dll, name: str):
@@ -39,9 +40,10 @@ def raw_function(dll, name: str):
 
 
 class _Group:
-    """The variables of one FMI type: one call moves them all (every element of an array)."""
+    """The variables of one FMI type: one call ``fn(*args)`` (``label`` in messages) moves them
+    all (every element of an array)."""
 
-    def __init__(self, ctype, type_name: str, ports: list[tuple[int, ElementPort]]):
+    def __init__(self, fn, label: str, ctype, type_name: str, ports: list[tuple[int, ElementPort]], inst, version):
         sizes = {p.variable.valueReference: p.size for _, p in ports}       # in order of appearance
         variables = list(sizes)
         base = dict(zip(variables, accumulate(sizes.values(), initial=0)))
@@ -52,6 +54,7 @@ class _Group:
         self.n_vr = ctypes.c_size_t(len(variables))
         self.n = ctypes.c_size_t(self.n_values)
         self.buf = (ctype * max(self.n_values, 1))()
+        self.fn, self.label, self.args = fn, label, self.args_with(inst, version, self.buf)
         self.view = np.ctypeslib.as_array(self.buf)[: self.n_values]
         #: the ports are the group's values in order (no gather needed)
         self.identity = bool(np.array_equal(self.offsets, np.arange(self.n_values)))
@@ -61,26 +64,22 @@ class _Group:
         self.unsigned64 = type_name == "UInt64"
         self.ports = [p for _, p in ports]
 
+    def args_with(self, inst, version: int, buf) -> tuple:
+        """The arguments of the call for the instance ``inst`` moving the values in ``buf``."""
+        return (inst, self.vr, self.n_vr, buf) + ((self.n,) if version == 3 else ())
+
 
 class Exchange:
     """Get or set a fixed list of element ports.
 
     Parameters
     ----------
-    dll : ctypes.CDLL
-        The FMU's library.
-    instance : int
-        The instance pointer.
-    version : {1, 2, 3}
-        FMI version (1: ``dll`` resolves the names ``fmi1GetReal`` ... to the library's
-        symbols).
+    instance : FMUInstance
+        The FMU instance (:mod:`cosim.fmi.instance`): its functions, pointer, FMI version, name
+        and ``fail(what, status)``, which raises its FMUError.
     ports : sequence of ElementPort
         In the order of the index given to :meth:`bind`.
     direction : {"get", "set"}
-    fail : callable
-        ``fail(what, status)`` raises the component's FMUError.
-    owner : str
-        The component's name, for messages.
     sources : sequence of (str, str), optional
         For ``"set"``: each port's source signal name and FMI type (default: unknown, signed).
 
@@ -91,9 +90,10 @@ class Exchange:
         no conversion, no copy).
     """
 
-    def __init__(self, dll, instance, version: int, ports: Sequence[ElementPort], direction: str,
-                 fail: Callable[[str, int], None], owner: str = "", sources: Sequence[tuple[str, str]] | None = None):
-        table = {1: _FMI1, 2: _FMI2}.get(version, _FMI3)
+    def __init__(self, instance, ports: Sequence[ElementPort], direction: str,
+                 sources: Sequence[tuple[str, str]] | None = None):
+        version = instance.version
+        table = FMI_TYPES[version]
         by_suffix: dict[str, tuple] = {}
         for pos, p in enumerate(ports):
             if p.type not in table:
@@ -101,27 +101,21 @@ class Exchange:
                                         f"(supported: {', '.join(table)})")
             ctype, suffix = table[p.type]
             by_suffix.setdefault(suffix, (ctype, p.type, []))[2].append((pos, p))
-        self.version, self.direction, self._fail, self.owner = version, direction, fail, owner
-        self.inst = ctypes.c_void_p(instance)
+        self.version, self.direction, self._fail, self.owner = version, direction, instance.fail, instance.owner
+        self.inst = ctypes.c_void_p(instance.handle)
         self.n = len(ports)
         self.sources = list(sources) if sources is not None else [("?", "Int64")] * len(ports)
-        self.groups = []
-        for suffix, (ctype, type_name, members) in by_suffix.items():
-            fn = raw_function(dll, f"fmi{version}{direction.capitalize()}{suffix}")
-            self.groups.append((fn, f"{direction.capitalize()}{suffix}", _Group(ctype, type_name, members)))
+        label = direction.capitalize()
+        self.groups = [_Group(instance.raw(f"fmi{version}{label}{suffix}"), label + suffix, ctype, type_name,
+                              members, self.inst, version)
+                       for suffix, (ctype, type_name, members) in by_suffix.items()]
         # aliases (sharing a value reference) are one value copied to each port: not in place
         self.direct = (all(p.type in ("Real", "Float64") and p.size == 1 for p in ports)
-                       and all(g.identity for _, _, g in self.groups))
-
-    def _args(self, g: _Group, buf):
-        if self.version < 3:
-            return (self.inst, g.vr, g.n_vr, buf)
-        return (self.inst, g.vr, g.n_vr, buf, g.n)
+                       and all(g.identity for g in self.groups))
 
     def preset(self, values_by_port: dict[str, float]) -> None:
-        """Start values of array elements that no connection sets (a set of an array sends
-        all its elements)."""
-        for _, _, g in self.groups:
+        """Start values of array elements that no connection sets (a set sends all of an array)."""
+        for g in self.groups:
             for off, p in zip(g.offsets, g.ports):
                 if p.name in values_by_port:
                     g.view[off] = values_by_port[p.name]
@@ -136,36 +130,34 @@ class Exchange:
             return no_exchange
         fail = self._fail
         if self.direct and isinstance(index, slice) and len(self.groups) == 1 and not changes:
-            fn, label, g = self.groups[0]
-            ptr = ctypes.cast(values.ctypes.data + 8 * index.start, ctypes.POINTER(ctypes.c_double))
-            args = self._args(g, ptr)
+            g = self.groups[0]
+            fn, label, address = g.fn, g.label, values.ctypes.data + 8 * index.start
+            args = g.args_with(self.inst, self.version, ctypes.cast(address, ctypes.POINTER(ctypes.c_double)))
 
             def call():
                 st = fn(*args)
                 if st > 1:
                     fail(label, st)
-            call.native = [self._op(fn, label, g, values.ctypes.data + 8 * index.start, None, values)]
+            call.native = [self._op(g, address, None, values)]
             return call
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
         idx = np.arange(len(values))[index]
-        parts = [(fn, label, g, self._args(g, g.buf), idx[g.positions]) for fn, label, g in self.groups]
+        parts = [(g.fn, g.label, g, g.args, idx[g.positions]) for g in self.groups]
         call = (self._getter(parts, values, integers) if self.direction == "get"
                 else self._setter(parts, values, integers, changes))
-        if not changes and all(g.type_name in ("Real", "Float64") for _, _, g in self.groups):
-            call.native = [self._op(fn, label, g, ctypes.addressof(g.buf), where, values)
-                           for fn, label, g, _, where in parts]
+        if not changes and all(g.type_name in ("Real", "Float64") for g in self.groups):
+            call.native = [self._op(g, ctypes.addressof(g.buf), where, values) for _, _, g, _, where in parts]
         return call
 
-    def _op(self, fn, label: str, g: _Group, buf: int, where, values):
-        """The native kernel's operation (:mod:`cosim.core.native`) of group ``g``'s call: ``buf``
-        the address the FMU reads or writes, ``where`` each port's signal (None: in place)."""
-        fail = self._fail
+    def _op(self, g: _Group, buf: int, where, values):
+        """The native kernel's operation of ``g``'s call on ``buf``, ``where`` each port's signal (None: in place)."""
+        fail, label = self._fail, g.label
         if where is None:
             idx = off = np.zeros(0, np.int64)
         else:
             idx, off = np.ascontiguousarray(where, np.int64), np.ascontiguousarray(g.offsets, np.int64)
-        fields = dict(fn=ctypes.cast(fn, ctypes.c_void_p).value, inst=self.inst.value, vr=ctypes.addressof(g.vr),
+        fields = dict(fn=ctypes.cast(g.fn, ctypes.c_void_p).value, inst=self.inst.value, vr=ctypes.addressof(g.vr),
                       nvr=g.n_vr.value, nbuf=-1 if self.version < 3 else g.n.value, buf=buf, n=len(idx),
                       idx=idx.ctypes.data, off=off.ctypes.data)
         return Op(OP_GET if self.direction == "get" else OP_SET, fields, (g, idx, off, values),
@@ -219,24 +211,25 @@ class Exchange:
 
     def _range_plan(self, g: _Group):
         """What a set of group ``g`` must check: None if every source's range fits the
-        destination's, else ``(signed positions, lo, hi, unsigned positions, hi_u)``."""
+        destination's ``[lo, hi]``, else ``(positions, unsigned, lo, hi)``: the group positions
+        whose source may not fit, signed ones first, and which of them are UInt64 sources (their
+        bit pattern in int64)."""
         if g.real:
             return None
-        lo_d, hi_d = integer_range(g.type_name, self.version)
-        signed, unsigned = [], []
+        lo, hi = integer_range(g.type_name, self.version)
+        checks = []
         for k, pos in enumerate(g.positions):
             _, src_type = self.sources[pos]
             try:
                 lo_s, hi_s = integer_range(src_type, self.version)
             except KeyError:            # a source of another kind (a Python component's float)
                 lo_s, hi_s = -2**63, 2**63 - 1
-            if lo_d <= lo_s and hi_s <= hi_d:
-                continue
-            (unsigned if src_type == "UInt64" else signed).append(k)
-        if not signed and not unsigned:
+            if not (lo <= lo_s and hi_s <= hi):
+                checks.append((src_type == "UInt64", k))
+        if not checks:
             return None
-        return (np.array(signed, np.intp), np.int64(lo_d), np.int64(min(hi_d, 2**63 - 1)),
-                np.array(unsigned, np.intp), np.uint64(hi_d), lo_d, hi_d)
+        unsigned, positions = zip(*sorted(checks))
+        return np.array(positions, np.intp), np.array(unsigned), lo, hi
 
 
 def no_exchange() -> bool:
@@ -249,20 +242,14 @@ no_exchange.native = []
 
 
 def _check_range(src: np.ndarray, plan, g: _Group, owner: str, sources) -> None:
-    signed, lo, hi, unsigned, hi_u, lo_d, hi_d = plan
-    bad = None
-    if len(signed):
-        s = src[signed]
-        out = np.flatnonzero((s < lo) | (s > hi))
-        if len(out):
-            bad = (int(signed[out[0]]), int(s[out[0]]))
-    if bad is None and len(unsigned):
-        u = src[unsigned].view(np.uint64)
-        out = np.flatnonzero(u > hi_u)
-        if len(out):
-            bad = (int(unsigned[out[0]]), int(u[out[0]]))
-    if bad is not None:
-        k, value = bad
+    positions, unsigned, lo, hi = plan
+    values = src[positions]
+    out = np.where(unsigned, values.view(np.uint64) > np.uint64(hi),
+                     (values < np.int64(lo)) | (values > np.int64(min(hi, 2**63 - 1))))
+    bad = np.flatnonzero(out)
+    if len(bad):
+        i = bad[0]
+        k, value = int(positions[i]), int(values[i].view(np.uint64) if unsigned[i] else values[i])
         src_name, src_type = sources[g.positions[k]]
-        raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo_d}, {hi_d}]) cannot take {value} from "
+        raise InputError(f"{owner}.{g.ports[k].name} ({g.type_name}, range [{lo}, {hi}]) cannot take {value} from "
                          f"{src_name} ({src_type}): it does not fit (a value is never wrapped)")

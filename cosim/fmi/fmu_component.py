@@ -1,7 +1,5 @@
 """An FMI 1.0, 2.0 or 3.0 FMU (Co-Simulation, Model Exchange or Scheduled Execution) as a
-co-simulation component: its timing, ports and call sequences are described in the
-co-simulation page of the documentation (FMUs in the master).
-"""
+co-simulation component (the co-simulation page of the documentation: FMUs in the master)."""
 from __future__ import annotations
 
 import ctypes
@@ -19,13 +17,13 @@ from fmu_models.export.plant_fmu import build_fmu
 from fmu_models.infra.files import atomic_copy, private_tempdir
 
 from ..core.clocking import ClockBoard
-from ..core.component import PORT_TYPES, BoundCalls, Component, ExportedFMU, StopRequest, port_kind
+from ..core.component import BoundCalls, Component, ExportedFMU, StopRequest, port_kind
 from ..core.native import OP_STEP1, OP_STEP2, OP_STEP3, Op, native_ops
 from .archive import Extraction
 from .clock_run import clocked_run
-from .clock_timing import ClockedRun, initialise
+from .clock_timing import initialise
 from .description import FMUDescription
-from .exchange import no_exchange
+from .exchange import FMI_TYPES, no_exchange
 from .instance import _ERROR, _FATAL, FMUInstance, unload_library
 from .isolated import RemoteFMU
 from .model_exchange import FMUModel, MEIntegrator, check_solver, held_inputs, unit_nominals_instead
@@ -34,9 +32,8 @@ from .ports import element_ports, parse_start
 __all__ = ["FEEDTHROUGH_MODES", "MAX_INTERNAL_STEPS", "FMUComponent", "FMUError", "HeldInputs"]
 
 FEEDTHROUGH_MODES = ("model", "none")
-#: The most fixed internal steps (an FMU's ``fixedInternalStepSize`` in Co-Simulation, the
-#: Euler/RK4 ``solver_step`` in Model Exchange) a run may take: beyond it the run is refused
-#: before it starts instead of running for days inside one call nobody can interrupt.
+#: The most fixed internal steps (``fixedInternalStepSize``, or Euler/RK4's ``solver_step``) a run may
+#: take; beyond it the run is refused, not left running for days inside one uninterruptible call.
 MAX_INTERNAL_STEPS = 10**9
 
 
@@ -48,16 +45,14 @@ def _unload_box(box: list) -> None:
 
 
 class HeldInputs:
-    """The inputs of :class:`FMUComponent` and :class:`~cosim.fmi.me_system.MESystem` (a
-    mixin): the master sets only the connected ones (:meth:`use_inputs`); the others keep
-    their start values; all are held over the step."""
+    """The inputs of :class:`FMUComponent` and :class:`~cosim.fmi.me_system.MESystem` (a mixin): the master
+    sets only the connected ones (:meth:`use_inputs`), the others keep their start values."""
 
     reentrant = True
     holds_inputs = True
     _sources: list | None = None
 
     def required_inputs(self) -> list[str]:
-        """None: unconnected inputs keep their start values."""
         return []
 
     def use_inputs(self, names: Sequence[str], sources: Sequence[tuple[str, str]] | None = None) -> None:
@@ -113,11 +108,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     Attributes
     ----------
     description : FMUDescription
-        What the FMU declares (:mod:`cosim.fmi.description`); ``md``, ``version`` are its.
+        What the FMU declares (:mod:`cosim.fmi.description`); ``path``, ``md``, ``version`` and
+        ``clock_model`` (its clocks, :mod:`cosim.fmi.clocks`) are its.
     interface : str
         ``"cs"``, ``"me"`` or ``"se"``, as resolved.
-    clock_model : FMIClocks or None
-        The FMU's clocks (:mod:`cosim.fmi.clocks`).
     messages : collections.deque of (int, str)
         The last 200 log messages of the FMU (status, text), quoted in errors.
     integrator : MEIntegrator or None
@@ -125,8 +119,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     unit_nominals : bool
         Model Exchange: the states' nominal values are 1 (:mod:`cosim.fmi.model_exchange`).
     arguments : dict
-        The constructor's arguments but ``isolate`` (what an isolating child process builds
-        its copy from).
+        The constructor's arguments but ``isolate`` (an isolating child process builds its copy from them).
+    plant_model : object or None
+        The project's plant model this FMU was built from (a scenario's ``model``).
     """
 
     def __init__(self, name: str, path, period: float, inputs: Sequence[str] | None = None,
@@ -150,7 +145,6 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             raise TypeMismatchError(f"{name}: isolate must be true or false, got {isolate!r}")
         self.feedthrough_mode, self.logging, self.isolate = feedthrough, bool(logging), isolate
         d.check_binary(self.interface)
-        #: The project's plant model this FMU was built from (a scenario's ``model``), or None.
         self.plant_model = None
         self.settings, structural = d.settings(parameters or {}, start or {})
         self.element_ports = element_ports(d.md, structural)
@@ -158,27 +152,20 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         outs = d.ports(self.element_ports, outputs, "output")
         ft = d.feedthrough(self.element_ports, outs, ins, self.interface) if feedthrough == "model" else False
         super().__init__(name, period, ins, outs, feedthrough=ft, port_names_are_identifiers=False)
-        if self.interface == "se":
-            self.reentrant = False              # a partition is activated once per time
-        self._board: ClockBoard | None = None
-        self._run: ClockedRun | None = None
-        self._clock_schedule = None
+        self.reentrant = self.interface != "se"         # a partition is activated once per time
+        self._board = self._run = self._clock_schedule = self._remote = self._extraction = None
         self.instance: FMUInstance | None = None
         self.integrator: MEIntegrator | None = None
         self.messages: deque = deque(maxlen=200)
-        self._extraction: Extraction | None = None
-        # the library of the last Co-Simulation instance, reused by the next
-        self._library_box: list = [None]
+        self._library_box: list = [None]        # the last Co-Simulation instance's library, reused by the next
         weakref.finalize(self, _unload_box, self._library_box)
         self.connected_inputs = list(self.input_names)
-        self._remote = None
         self.unit_nominals = False
 
     @classmethod
     def from_scenario(cls, name, table, context):
-        """Either ``model`` (this project's plant, built into the scenario's FMU folder as FMI
-        ``fmi_version``, with ``model_parameters``) or ``path`` (an FMU file); the other keys
-        as the constructor's."""
+        """Either ``model`` (this project's plant, built as FMI ``fmi_version`` with
+        ``model_parameters``) or ``path`` (an FMU file); the other keys as the constructor's."""
         table = dict(table)
         if ("model" in table) == ("path" in table):
             raise ConfigurationError(f"component {name!r}: give either model (this project's plant, built on "
@@ -204,10 +191,8 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 f"{self.interface.upper()}, period={self.period})")
 
     def export_fmu(self, folder: Path, fmi_version: int = 2, clocked: bool = False) -> ExportedFMU:
-        """The FMU as ``<folder>/<name>.fmu`` with this component's parameters and start values:
-        a plant built from the project's model in ``fmi_version`` (built again if the run used
-        another), an FMU file copied as it is (another ``fmi_version`` is said in the note, not
-        converted); ``clocked``: written unclocked, which the note says."""
+        """A plant built from the project's model in ``fmi_version``; an FMU file copied as it is
+        (not converted, nor clocked: the note says so)."""
         if fmi_version not in FMI_VERSIONS:
             raise ConfigurationError(f"fmi_version must be one of {FMI_VERSIONS}, got {fmi_version!r}")
         check_clocked(clocked, fmi_version, self.name)
@@ -217,24 +202,23 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         dst = folder / f"{self.name}.fmu"
-        note = ""
+        notes = []
         if fmi_version != self.version and self.plant_model is not None:
             with private_tempdir(f"pendulum_cosim_export_{self.name}_") as tmp:
                 atomic_copy(build_fmu(self.plant_model, tmp, fmi_version=fmi_version), dst)
-            note = (f"{self.name}: built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run "
-                    f"used the FMI {self.version}.0 FMU of the same model)")
+            notes.append(f"built as FMI {fmi_version}.0 from its model {self.plant_model.name!r} (the run used the "
+                         f"FMI {self.version}.0 FMU of the same model)")
         else:
             atomic_copy(self.path, dst)
             if fmi_version != self.version:
-                note = (f"{self.name}: copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; "
-                        f"for FMI {fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
+                notes.append(f"copied as the FMI {self.version}.0 FMU it is (an FMU file is not converted; for FMI "
+                             f"{fmi_version}.0 give its scenario table fmi_version = {fmi_version})")
             elif self.interface == "me":
-                note = (f"{self.name}: the master ran this FMU through Model Exchange ({self.solver}); an SSP "
-                        "importer may use its Co-Simulation interface")
+                notes.append(f"the master ran this FMU through Model Exchange ({self.solver}); an SSP importer may "
+                             "use its Co-Simulation interface")
         if clocked:
-            unclocked = f"{self.name}: an FMU component has no clocked form; written unclocked"
-            note = f"{note}; {unclocked}" if note else unclocked
-        return ExportedFMU(dst, dict(self.settings), note)
+            notes.append("an FMU component has no clocked form; written unclocked")
+        return ExportedFMU(dst, dict(self.settings), "; ".join(f"{self.name}: {n}" for n in notes))
 
     def timing(self) -> str:
         if self.clock_model is not None:
@@ -255,8 +239,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     @property
     def input_sources(self) -> list[tuple[str, str]] | None:
-        """Each connected input's source signal name and FMI type (given to :meth:`use_inputs`),
-        or None."""
+        """Each connected input's source signal name and FMI type (given to :meth:`use_inputs`), or None."""
         return list(self._sources) if self._sources is not None else None
 
     # ------------------------------------------------------------------ clocks
@@ -269,10 +252,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     def port_clocks(self, port: str) -> list[str]:
         """The clocks of the data port ``port`` (exchanged only at their activations)."""
-        if self.clock_model is None or port not in self.element_ports or port in self.clock_model.by_name:
+        clocks = self.clock_model
+        if clocks is None or port not in self.element_ports or port in clocks.by_name:
             return []
-        by_vr = self.clock_model.by_vr
-        return [by_vr[vr].name for vr in self.clock_model.clocks_of(self.element_ports[port].variable.name)]
+        return [clocks.by_vr[vr].name for vr in clocks.clocks_of(self.element_ports[port].variable.name)]
 
     def attach_clocks(self, board: ClockBoard) -> None:
         """Take the run's clock board (before :meth:`bind`)."""
@@ -281,26 +264,22 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     def _clock_update(self, env) -> None:
         """The Scheduled Execution ``clockUpdate`` callback, passed on to the run (an exception
         is kept by the run and raised when the FMU returns: a ctypes callback cannot raise)."""
+        run = self._run
         try:
-            run = self._run
             if run is not None:
                 run.clock_update(env)
         except BaseException as e:  # noqa: BLE001 - kept for the run
-            run = self._run
-            if run is not None and run._error is None:
+            if run._error is None:
                 run._error = e
 
     # ------------------------------------------------------------------ lifecycle
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`
-        (e.g. Roberts in Co-Simulation: steps of 1e-3 s over 1e8 s)."""
-        if self.interface == "se":
-            return
+        """Refuse a run whose fixed internal steps would exceed :data:`MAX_INTERNAL_STEPS`."""
         if self.interface == "cs":
             h, what = self.md.coSimulation.fixedInternalStepSize, "its fixedInternalStepSize"
             hint = "; its Model Exchange interface (interface = 'me') integrates with CVODE" if \
-                self.md.modelExchange is not None else ""
-        elif self.solver != "cvode":
+                "me" in self.description.interfaces else ""
+        elif self.interface == "me" and self.solver != "cvode":
             h, what, hint = self.solver_step or self.period, f"solver_step ({self.solver})", "; use solver = 'cvode'"
         else:
             return
@@ -314,8 +293,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                                 f"{stop_time:g} s, more than {MAX_INTERNAL_STEPS:.0e}{hint}")
 
     def use_unpacked(self, directory: str) -> None:
-        """Instantiate from the FMU unpacked in ``directory`` (the caller's, which removes it:
-        an isolated FMU's process uses its parent's folder)."""
+        """Instantiate from the FMU unpacked in ``directory`` (the caller's, which removes it)."""
         self.close()
         self._extraction = Extraction.existing(directory)
 
@@ -327,8 +305,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         return self._extraction.directory
 
     def reset(self, t0: float) -> None:
-        """Unpack (once), instantiate and initialise the FMU at ``t0`` [s] (:meth:`instantiate`)
-        and, in Model Exchange, start its integrator."""
+        """Unpack (once), instantiate and initialise the FMU at ``t0`` [s]; Model Exchange: start its integrator."""
         self.close()
         super().reset(t0)
         if self.isolate:
@@ -355,16 +332,12 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
     def instantiate(self, t0: float) -> FMUInstance:
         """A new instance of the FMU (closing any previous one), initialised at ``t0`` [s] with
         the structural parameters (in Configuration Mode), parameters and start values; left
-        after ``ExitInitializationMode`` (Model Exchange: in Event Mode, the integrator not
-        started; FMI 1.0: after ``fmiInitializeSlave`` or ``fmiInitialize``)."""
+        after ``ExitInitializationMode`` (FMI 1.0: ``fmiInitializeSlave`` or ``fmiInitialize``)."""
         self.close()
         options = {}
         if self.clock_model is not None:
             options = dict(event_mode=True, early_return=True, clock_update=self._clock_update)
-        library, self._library_box[0] = self._library_box[0], None
-        if library is not None and (options or self.interface != "cs"):
-            unload_library(library)
-            library = None
+        library, self._library_box[0] = self._library_box[0], None     # kept only by an unclocked CS instance
         inst = FMUInstance(self.name, self.description, self.unpacked, self.interface, self.logging, **options,
                            library=library)
         inst.keep_library = not options and self.interface == "cs"      # reused by the next run
@@ -395,19 +368,12 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     def _set_setting(self, name: str, value) -> None:
         v, inst = self.description.variables[name], self.instance
-        fmu, vr = inst.fmu, [v.valueReference]
-        items = list(value) if isinstance(value, list) else [value]
-        kind = PORT_TYPES[v.type]
-        if self.version < 3:
-            suffix = {"boolean": "Boolean", "integer": "Integer", "real": "Real"}[kind]
-        else:
-            suffix = "Int64" if v.type == "Enumeration" else v.type
-        inst.call(f"Set{suffix}({name} = {value!r})", getattr(fmu, f"set{suffix}"), vr, items)
+        suffix = FMI_TYPES[self.version][v.type][1]
+        items = value if isinstance(value, list) else [value]
+        inst.call(f"Set{suffix}({name} = {value!r})", getattr(inst.fmu, f"set{suffix}"), [v.valueReference], items)
 
     def bind(self, values, inputs, outputs, integers=None):
-        """Output and update closures over the raw FMI functions, exchanging values with
-        ``values`` (and ``integers``, the exact integer signals) in place (see
-        :class:`~cosim.core.component.FastBinding`)."""
+        """Output and update closures over the raw FMI functions (:class:`~cosim.core.component.FastBinding`)."""
         if self._remote is not None:
             return self._remote.bind(values, inputs, outputs, integers)
         if self.instance is None:
@@ -422,10 +388,10 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         ports = [self.element_ports[n] for n in self.connected_inputs]
         sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
 
-        def exchange(positions, direction, changes=False):
+        def setter(positions, changes=False):
             if not positions:
                 return no_exchange
-            ex = inst.exchange([ports[i] for i in positions], direction, [sources[i] for i in positions])
+            ex = inst.exchange([ports[i] for i in positions], "set", [sources[i] for i in positions])
             ex.preset({p.name: s for p, s in zip(ports, self._input_starts())})
             return ex.bind(values, idx[positions], integers, changes)
 
@@ -437,11 +403,9 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         if self.interface == "me":            # continuous inputs and discrete ones (set in Event Mode) apart
             def setters(positions: list[int]) -> tuple[list, list]:
                 kinds = ([i for i in positions if not ports[i].discrete], [i for i in positions if ports[i].discrete])
-                return tuple([exchange(sel, "set", changes=True)] if sel else [] for sel in kinds)
+                return tuple([setter(sel, changes=True)] if sel else [] for sel in kinds)
             return held_inputs(self.integrator, self.period, setters(all_pos), setters(ft_pos), [get_out])
-        set_all = exchange(all_pos, "set")
-        set_ft = exchange(ft_pos, "set") if ft_pos else None
-        return self._output_fn(set_ft, get_out), self._cs_update(set_all)
+        return self._output_fn(setter(ft_pos), get_out), self._cs_update(setter(all_pos))
 
     def _input_starts(self) -> list:
         """The start value of every connected input (what an array's unconnected elements send)."""
@@ -450,16 +414,16 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
 
     @staticmethod
     def _output_fn(set_ft, get_out):
-        if set_ft is None:
+        if set_ft is no_exchange:
             def output_fn(t: float) -> None:
                 get_out()
         else:
             def output_fn(t: float) -> None:
                 set_ft()
                 get_out()
-        parts = [native_ops(x) for x in ((set_ft,) if set_ft is not None else ()) + (get_out,)]
-        if all(p is not None for p in parts):
-            output_fn.native = [op for p in parts for op in p]
+        parts = [native_ops(set_ft), native_ops(get_out)]
+        if None not in parts:
+            output_fn.native = parts[0] + parts[1]
         return output_fn
 
     def native_reason(self) -> str | None:
@@ -474,59 +438,50 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return "FMI 1.0 asynchronous doStep (canRunAsynchronuously: a Pending step is waited for)"
         ports = [self.element_ports[n] for n in (*self.connected_inputs, *self.output_names)]
         other = sorted({p.type for p in ports if p.type not in ("Real", "Float64")})
-        if other:
-            return f"{', '.join(other)} ports"
-        return None
+        return f"{', '.join(other)} ports" if other else None
 
     def _cs_update(self, set_all):
-        inst, h, name = self.instance, self.period, self.name
-        do_step, D = inst.raw(f"fmi{self.version}DoStep"), ctypes.c_double
+        """``update_fn(t)``: set the inputs and ``doStep`` (with its native operations if it can have them)."""
+        inst, h, name, v = self.instance, self.period, self.name, self.version
+        do_step, D = inst.raw(f"fmi{v}DoStep"), ctypes.c_double
         c, Dh = ctypes.c_void_p(inst.handle), ctypes.c_double(h)
-        if self.version < 3:
-            def failed(st: int, t: float) -> None:
-                if self.version == 1:            # Pending waited for, Discard without a stop request
-                    inst.step_failed(st, t, h)
-                    return
-                if st == 2:
-                    when = inst.discard_reason()
-                    if when is not None:
-                        raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
-                inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
 
-            new_step = ctypes.c_char(1) if self.version == 1 else 1
-
-            def update_fn(t: float) -> None:
-                set_all()
-                st = do_step(c, D(t), Dh, new_step)
-                if st > 1:
-                    failed(st, t)
-            return self._native_update(update_fn, set_all, OP_STEP1 if self.version == 1 else OP_STEP2, do_step,
-                                       lambda op, t: failed(op.status, t))
-        flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
-        refs = [ctypes.byref(x) for x in flags]
-        term, last = flags[1], flags[3]
-
-        def ended3(st: int, terminate: bool, last_time: float, t: float) -> None:
+        def ended(st: int, t: float, terminate: bool = False, last_time: float = 0.0) -> None:
+            """``doStep`` at ``t`` [s] returned ``st`` above Warning or asked to terminate."""
+            if v == 1:                       # Pending waited for, Discard without a stop request
+                inst.step_failed(st, t, h)
+                return
+            when = inst.discard_reason() if v == 2 and st == 2 else None
+            if when is not None:
+                raise StopRequest(name, when, "fmi2DoStep returned discard, fmi2Terminated is true")
             if st > 1 and not (st == 2 and terminate):
                 inst.fail(f"DoStep(t = {t:g} s, h = {h:g} s)", st)
             if terminate:
                 when = last_time if st == 2 or last_time > t else t + h
                 raise StopRequest(name, when, "fmi3DoStep returned terminateSimulation")
 
-        def update_fn(t: float) -> None:
-            set_all()
-            st = do_step(c, D(t), Dh, True, *refs)
-            if st > 1 or term.value:
-                ended3(st, term.value, last.value, t)
-        return self._native_update(update_fn, set_all, OP_STEP3, do_step,
-                                   lambda op, t: ended3(op.status, bool(op.flag), op.d, t))
+        if v < 3:
+            new_step = ctypes.c_char(1) if v == 1 else 1
 
-    def _native_update(self, update_fn, set_all, kind: int, do_step, fail):
-        """``update_fn`` with its native operations (set the inputs, ``doStep``) if it can have them."""
+            def update_fn(t: float) -> None:
+                set_all()
+                st = do_step(c, D(t), Dh, new_step)
+                if st > 1:
+                    ended(st, t)
+        else:
+            flags = [ctypes.c_bool(False) for _ in range(3)] + [ctypes.c_double(0)]
+            refs, term, last = [ctypes.byref(x) for x in flags], flags[1], flags[3]
+
+            def update_fn(t: float) -> None:
+                set_all()
+                st = do_step(c, D(t), Dh, True, *refs)
+                if st > 1 or term.value:
+                    ended(st, t, term.value, last.value)
         ops = native_ops(set_all)
         if ops is not None and self.native_reason() is None:
-            step = Op(kind, dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=self.instance.handle,
-                                 a=float(self.period)), (do_step,), fail)
+            step = Op((OP_STEP1, OP_STEP2, OP_STEP3)[v - 1],
+                      dict(fn=ctypes.cast(do_step, ctypes.c_void_p).value, inst=inst.handle, a=float(h)), (do_step,),
+                      lambda op, t: ended(op.status, t, bool(op.flag), op.d))
             update_fn.native = [*ops, step]
         return update_fn
 
@@ -538,8 +493,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 ints[i] = int(u[i])
 
     def close(self) -> None:
-        """End and free the FMU instance as the FMI rules allow (:mod:`cosim.fmi.instance`); the
-        unpacked files stay for the next run. Safe twice."""
+        """End and free the FMU instance as the FMI rules allow (:mod:`cosim.fmi.instance`); safe twice."""
         remote, self._remote = self._remote, None
         if remote is not None:
             remote.close()
@@ -553,8 +507,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
                 unload_library(inst.fmu)
 
     def release(self) -> None:
-        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (otherwise kept
-        between runs, until garbage collection or interpreter exit)."""
+        """:meth:`close`, unload the FMU's library and remove the unpacked FMU (otherwise kept between runs)."""
         self.close()
         _unload_box(self._library_box)
         if self._extraction is not None:

@@ -1,9 +1,6 @@
-"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life: loaded,
-instantiated with a logger that keeps its last messages, its worst status remembered, ended
-as the standard allows (:meth:`~cosim.fmi.instance.FMUInstance.finish`: after *Error* only ``FreeInstance``,
-after *Fatal* no call at all); a failure is an :class:`~fmu_models.errors.FMUError` naming
-the component, the call, the status and the FMU's last messages.
-"""
+"""One FMU instance (FMI 1.0, 2.0, 3.0) and the standard's rules of its life (the co-simulation page of
+the documentation: the FMI call sequence); a failure is an :class:`~fmu_models.errors.FMUError`
+naming the component, the call, the status and the FMU's last messages."""
 from __future__ import annotations
 
 import ctypes
@@ -59,8 +56,7 @@ class _Symbols:
 
 
 def unload_library(fmu) -> None:
-    """Unload the library of the fmpy FMU object ``fmu`` (its instance freed, or none made)
-    and forget it in the crash guard."""
+    """Unload the library of the fmpy FMU object ``fmu`` (its instance freed) and forget it in the crash guard."""
     try:
         fmu.freeLibrary()
     except Exception:
@@ -92,7 +88,7 @@ class FMUInstance:
         Scheduled Execution: the ``clockUpdate`` callback (it must not raise).
     library : fmpy FMU object, optional
         The library of an earlier, freed instance of the same FMU and interface
-        (:attr:`keep_library`), instantiated again without loading it again.
+        (``keep_library``), instantiated again without loading it again.
 
     Attributes
     ----------
@@ -109,20 +105,19 @@ class FMUInstance:
         Initialisation mode was left.
     messages : collections.deque of (int, str)
         The last 200 log messages (status, text).
+    keep_library : bool
+        Free only the instance at the end, not the library (its owner reuses or frees it).
     """
 
     def __init__(self, owner: str, description, directory: str, interface: str, logging_on: bool = False, *,
                  event_mode: bool = False, early_return: bool = False, clock_update=None, library=None):
-        self.owner, self.md, self.interface = owner, description.md, interface
-        self.version, self.prefix, self.asynchronous = description.version, description.prefix, description.asynchronous
-        self.file = description.path.name
+        self.owner, self.md, self.interface, self.description = owner, description.md, interface, description
+        self.version, self.prefix = description.version, description.prefix
         self.initial_events: tuple[bool, float | None] = (False, None)
         self.messages: deque = deque(maxlen=200)
         self.worst, self.initialized, self.logging_on = 0, False, bool(logging_on)
         self._guard_entry = -1
-        self._freed = False
-        #: Free only the instance at the end, not the library (its owner reuses or frees it).
-        self.keep_library = False
+        self._freed = self.keep_library = False
         self.fmu = None
         ident = self._identifier = description.interfaces[interface].modelIdentifier
         args = dict(guid=self.md.guid, unzipDirectory=directory, modelIdentifier=ident, instanceName=owner)
@@ -161,8 +156,8 @@ class FMUInstance:
         from fmpy.logging import addLoggerProxy
 
         fmi, p = (fmi1, "fmi1") if self.version == 1 else (fmi2, "fmi2")
-        kinds = (fmi1.FMU1Slave, fmi1.FMU1Model) if self.version == 1 else (fmi2.FMU2Slave, fmi2.FMU2Model)
-        fmu = self._guarded(library or kinds[self.interface != "cs"](**args))
+        kind = getattr(fmi, f"FMU{self.version}{'Slave' if self.interface == 'cs' else 'Model'}")
+        fmu = self._guarded(library or kind(**args))
         self._log_key = self.owner.encode() if self.version == 1 else next(_KEYS)
         _LOGS[self._log_key] = self._logger = self._log
         cb = getattr(fmi, f"{p}CallbackFunctions")()
@@ -177,27 +172,36 @@ class FMUInstance:
 
     def _instantiate3(self, args: dict, directory: str, event_mode: bool, early_return: bool, clock_update,
                       library) -> None:
-        """FMI 3.0: load (or reuse) the library and instantiate with this instance's logger,
-        always on (an FMI 3.0 FMU logs even its errors only with loggingOn; :meth:`_log` keeps
-        debug messages off the log unless ``logging_on``)."""
+        """FMI 3.0: instantiate with this instance's logger always on (an FMU logs even its errors
+        only with loggingOn); Scheduled Execution with ``clockUpdate`` (fmpy's passes a no-op) and
+        no-op preemption locks (partitions run one after the other here)."""
         from fmpy import fmi3
 
         def log3(env, status, category, message):
             self._log(status, message)
 
-        self._log3 = log3
-        if self.interface == "se":
-            self._instantiate_se(self._guarded(fmi3.FMU3ScheduledExecution(**args)), directory, clock_update)
-        elif self.interface == "cs":
-            fmu = self._guarded(library or fmi3.FMU3Slave(**args))
-            fmu.instantiate(loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode),
-                            earlyReturnAllowed=bool(early_return))
-        else:
+        def noop(*args):
+            return None
+
+        if self.interface == "cs":
+            self._guarded(library or fmi3.FMU3Slave(**args)).instantiate(
+                loggingOn=True, logMessage=log3, eventModeUsed=bool(event_mode), earlyReturnAllowed=bool(early_return))
+        elif self.interface == "me":
             self._guarded(fmi3.FMU3Model(**args)).instantiate(loggingOn=True, logMessage=log3)
+        else:
+            fmu = self._guarded(fmi3.FMU3ScheduledExecution(**args))
+            fmu.logMessage = fmi3.fmi3LogMessageCallback(log3)
+            fmu.clockUpdate = fmi3.fmi3ClockUpdateCallback(clock_update or noop)
+            fmu.lockPreemption = fmi3.fmi3LockPreemptionCallback(noop)
+            fmu.unlockPreemption = fmi3.fmi3UnlockPreemptionCallback(noop)
+            resources = os.path.join(directory, "resources") + os.path.sep
+            fmu.component = fmu.fmi3InstantiateScheduledExecution(
+                fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"), fmi3.fmi3False,
+                fmi3.fmi3Boolean(True), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
+                fmu.lockPreemption, fmu.unlockPreemption)
 
     def _guarded(self, fmu):
-        """``fmu`` (its library just loaded), registered with the crash guard: a fatal signal in
-        its code names this component (:mod:`cosim.core.crash_guard`)."""
+        """``fmu`` registered with the crash guard (:mod:`cosim.core.crash_guard`): its crash names this component."""
         name = f"{self._identifier}_fmiGetVersion" if self.version == 1 else f"fmi{self.version}GetVersion"
         version = getattr(fmu.dll, name, None)
         address = ctypes.cast(version, ctypes.c_void_p).value if version is not None else None
@@ -205,25 +209,6 @@ class FMUInstance:
         fmu.pendulum_guard_entry = self._guard_entry       # forgotten when its library is unloaded
         self.fmu = fmu
         return fmu
-
-    def _instantiate_se(self, fmu, directory: str, clock_update) -> None:
-        """``fmi3InstantiateScheduledExecution`` with this instance's logger and ``clockUpdate``
-        (fmpy's instantiate passes a no-op); the preemption locks are no-ops (partitions run
-        one after the other here)."""
-        from fmpy import fmi3
-
-        def noop(*args):
-            return None
-
-        fmu.logMessage = fmi3.fmi3LogMessageCallback(self._log3)
-        fmu.clockUpdate = fmi3.fmi3ClockUpdateCallback(clock_update or noop)
-        fmu.lockPreemption = fmi3.fmi3LockPreemptionCallback(noop)
-        fmu.unlockPreemption = fmi3.fmi3UnlockPreemptionCallback(noop)
-        resources = os.path.join(directory, "resources") + os.path.sep
-        fmu.component = fmu.fmi3InstantiateScheduledExecution(
-            fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"), fmi3.fmi3False,
-            fmi3.fmi3Boolean(True), fmi3.fmi3InstanceEnvironment(), fmu.logMessage, fmu.clockUpdate,
-            fmu.lockPreemption, fmu.unlockPreemption)
 
     # ------------------------------------------------------------------ status
     def _log(self, status, message) -> None:
@@ -259,9 +244,8 @@ class FMUInstance:
         return raw_function(self.dll, name)
 
     def exchange(self, ports, direction: str, sources=None) -> Exchange:
-        """The :class:`~cosim.fmi.exchange.Exchange` of ``ports`` (ElementPorts) in ``direction``
-        ("get" or "set") with this instance; ``sources``: each port's source signal and type."""
-        return Exchange(self.dll, self.handle, self.version, ports, direction, self.fail, self.owner, sources)
+        """The :class:`~cosim.fmi.exchange.Exchange` of ``ports`` in ``direction`` with this instance."""
+        return Exchange(self, ports, direction, sources)
 
     # ------------------------------------------------------------------ initialisation
     def setup(self, t0: float) -> None:
@@ -277,10 +261,9 @@ class FMUInstance:
         [s]); FMI 1.0 initialises at once: ``fmiInitializeSlave(t0, no stop time)`` or
         ``fmiInitialize`` (no tolerance control; its event information in ``initial_events``)."""
         fmu = self.fmu
-        if self.version == 3:
-            self.call("EnterInitializationMode", fmu.enterInitializationMode, None, t0)
-        elif self.version == 2:
-            self.call("EnterInitializationMode", fmu.enterInitializationMode)
+        if self.version > 1:
+            args = (None, t0) if self.version == 3 else ()      # FMI 3.0: no tolerance, at t0
+            self.call("EnterInitializationMode", fmu.enterInitializationMode, *args)
         elif self.interface == "cs":        # fmpy's wrapper reads the status as a string: the raw call
             st = self.raw("fmi1InitializeSlave")(ctypes.c_void_p(self.handle), ctypes.c_double(t0), ctypes.c_char(0),
                                                  ctypes.c_double(0.0))
@@ -298,11 +281,29 @@ class FMUInstance:
     # ------------------------------------------------------------------ FMI 1.0 steps
     def step_failed(self, status: int, t: float, h: float) -> None:
         """After an FMI 1.0 ``fmiDoStep(t, h)`` [s] returned ``status`` above Warning: Pending
-        waited for (returns if the step then ended well), else the FMUError (a Discard names
+        waited for with ``fmiGetStatus(fmiDoStepStatus)`` (returns if the step then ended well;
+        Ctrl-C, or no ``canRunAsynchronuously``, cancels it), else the FMUError (a Discard names
         ``fmiLastSuccessfulTime``)."""
         what = f"DoStep(t = {t:g} s, h = {h:g} s)"
         if status == _PENDING:
-            status = self._await_step(what)
+            if not self.description.asynchronous:
+                self._cancel_step()
+                raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.description.path.name} "
+                               "does not declare canRunAsynchronuously (FMI 1.0): the step was cancelled "
+                               "(fmiCancelStep)")
+            get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
+            try:
+                while status == _PENDING:
+                    st = get_status(c, 0, ctypes.byref(value))          # fmiDoStepStatus
+                    if st > 1:
+                        self.fail("GetStatus(fmiDoStepStatus)", st)
+                    status = value.value
+                    if status == _PENDING:
+                        time.sleep(delay)
+                        delay = min(2 * delay, 0.05)
+            except KeyboardInterrupt:
+                self._cancel_step()
+                raise
             if status <= 1:
                 return
         if status == 2:
@@ -312,27 +313,6 @@ class FMUInstance:
             what = f"DoStep(t = {t:g} s, h = {h:g} s{known}; FMI 1.0 has no stop request)"
         self.fail(what, status)
 
-    def _await_step(self, what: str) -> int:
-        """``fmiGetStatus(fmiDoStepStatus)`` until the step is no longer Pending (its status
-        returned); Ctrl-C cancels it. Without ``canRunAsynchronuously`` it is cancelled and refused."""
-        if not self.asynchronous:
-            self._cancel_step()
-            raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.file} does not declare "
-                           "canRunAsynchronuously (FMI 1.0): the step was cancelled (fmiCancelStep)")
-        get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
-        try:
-            while True:
-                st = get_status(c, 0, ctypes.byref(value))          # fmiDoStepStatus
-                if st > 1:
-                    self.fail("GetStatus(fmiDoStepStatus)", st)
-                if value.value != _PENDING:
-                    return value.value
-                time.sleep(delay)
-                delay = min(2 * delay, 0.05)
-        except KeyboardInterrupt:
-            self._cancel_step()
-            raise
-
     def _cancel_step(self) -> None:
         """``fmiCancelStep`` (then only ``fmiFreeSlaveInstance``: the instance counts as failed)."""
         self.worst = max(self.worst, _ERROR)
@@ -340,8 +320,7 @@ class FMUInstance:
 
     # ------------------------------------------------------------------ stop requests
     def discard_reason(self) -> float | None:
-        """After an FMI 2.0 ``DoStep`` returned Discard: the time the FMU asks to stop at (if
-        ``fmi2Terminated``: its ``fmi2LastSuccessfulTime``), or None."""
+        """After an FMI 2.0 ``DoStep`` returned Discard: ``fmi2LastSuccessfulTime`` if ``fmi2Terminated``, or None."""
         from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
         try:
@@ -362,7 +341,24 @@ class FMUInstance:
             return
         self._freed = True
         try:
-            self._end()
+            if self.worst >= _FATAL:
+                LOGGER.debug("%s: fatal: the instance is abandoned (no further FMI call)", self.owner)
+                return
+            if self.worst < _ERROR and self.initialized:
+                try:
+                    self.fmu.terminate()
+                except Exception:  # noqa: BLE001 - a refusal changes nothing: free it anyway
+                    LOGGER.debug("%s: terminate refused", self.owner)
+            try:
+                if self.keep_library:       # fmpy's freeInstance would unload the library too
+                    getattr(self.fmu, f"fmi{self.version}Free{'Slave' * (self.version == 1)}Instance")(
+                        self.fmu.component)
+                else:
+                    self.fmu.freeInstance()
+            except Exception:  # noqa: BLE001
+                LOGGER.debug("%s: freeInstance failed", self.owner)
+            if not self.keep_library:
+                crash_guard.forget_library(self._guard_entry)
         finally:
             self._forget_log()
 
@@ -371,23 +367,3 @@ class FMUInstance:
         key = getattr(self, "_log_key", 0)
         if _LOGS.get(key) is getattr(self, "_logger", None):
             _LOGS.pop(key, None)
-
-    def _end(self) -> None:
-        if self.worst >= _FATAL:
-            LOGGER.debug("%s: fatal: the instance is abandoned (no further FMI call)", self.owner)
-            return
-        if self.worst < _ERROR and self.initialized:
-            try:
-                self.fmu.terminate()
-            except Exception:  # noqa: BLE001 - a refusal changes nothing: free it anyway
-                LOGGER.debug("%s: terminate refused", self.owner)
-        try:
-            if self.keep_library:       # fmpy's freeInstance would unload the library too
-                free = {1: "fmi1FreeSlaveInstance", 2: "fmi2FreeInstance", 3: "fmi3FreeInstance"}[self.version]
-                getattr(self.fmu, free)(self.fmu.component)
-            else:
-                self.fmu.freeInstance()
-        except Exception:  # noqa: BLE001
-            LOGGER.debug("%s: freeInstance failed", self.owner)
-        if not self.keep_library:
-            crash_guard.forget_library(self._guard_entry)

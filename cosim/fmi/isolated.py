@@ -1,14 +1,7 @@
 """An FMU in a process of its own (``isolate=True``): a crash of its code ends the run with
 an :class:`~fmu_models.errors.FMUError` naming the FMU, the call, the time and the signal.
-
-The parent (:class:`RemoteFMU`) unpacks the FMU and owns the folder; the child
-(:mod:`cosim.fmi.isolated_child`) builds the same component on it and answers requests
-over a pipe: ``R`` set up, ``O`` set the feed-through inputs and get the outputs at ``t``,
-``U`` set all inputs and advance (the reply carries the outputs at ``t + period``), ``C``
-end the instance and exit. A request is the op byte, ``t`` and the inputs (float64, then
-exact int64); a reply a status byte (``K`` ok; ``S`` stop request, ``E`` error, with a
-pickled payload) and the outputs.
-"""
+The parent (:class:`RemoteFMU`) and the child (:mod:`cosim.fmi.isolated_child`) talk over a
+pipe as the third-party FMUs page of the documentation says (crash isolation)."""
 from __future__ import annotations
 
 import contextlib
@@ -105,7 +98,6 @@ class RemoteFMU:
         self.proc = subprocess.Popen([sys.executable, "-m", "cosim.fmi.isolated_child"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, bufsize=0, close_fds=True)
         self._to, self._from = self.proc.stdin.fileno(), self.proc.stdout.fileno()
-        self._buf = bytearray(HEAD.size + 16 * self.n_in)
         self.outputs = np.zeros(self.n_out)
         self.int_outputs = np.zeros(self.n_out, dtype=np.int64)
         payload = pickle.dumps(setup)
@@ -146,20 +138,14 @@ class RemoteFMU:
             cls = FMUError
         raise cls(message)
 
-    def _request(self, op: bytes, t: float, values, integers, index) -> bytes:
-        buf = self._buf
-        HEAD.pack_into(buf, 0, op, t)
-        n = self.n_in
-        if n:
-            off = HEAD.size
-            buf[off:off + 8 * n] = np.ascontiguousarray(values[index], dtype=np.float64).tobytes()
-            buf[off + 8 * n:] = np.ascontiguousarray(integers[index], dtype=np.int64).tobytes()
-        return bytes(buf)
+    @staticmethod
+    def _request(op: bytes, t: float, values, integers, index) -> bytes:
+        return (HEAD.pack(op, t) + np.ascontiguousarray(values[index], dtype=np.float64).tobytes()
+                + np.ascontiguousarray(integers[index], dtype=np.int64).tobytes())
 
     # ------------------------------------------------------------------ the binding
     def bind(self, values: np.ndarray, inputs, outputs, integers: np.ndarray | None = None):
-        """Output and update closures (:class:`~cosim.core.component.FastBinding`), each one round
-        trip to the child (without feed-through, the output is the one the last update returned)."""
+        """Output and update closures (:class:`~cosim.core.component.FastBinding`), each one round trip to the child."""
         if integers is None:
             integers = np.zeros(len(values), dtype=np.int64)
         out_idx = np.arange(len(values))[outputs]
@@ -177,8 +163,7 @@ class RemoteFMU:
         return output_fn, update_fn
 
     def close(self) -> None:
-        """Ask the child to end its instance by the FMI rules; kill it if it does not exit in
-        :data:`CLOSE_TIMEOUT` s. Safe twice."""
+        """Ask the child to end its instance; kill it if it does not exit in :data:`CLOSE_TIMEOUT` s. Safe twice."""
         proc = self.proc
         if proc.poll() is None:
             with contextlib.suppress(OSError):

@@ -1,9 +1,9 @@
-"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`), started as ``python -m
-cosim.fmi.isolated_child``: builds the component on the parent's unpacked folder and
-answers its requests until told to close."""
+"""The child process of an isolated FMU (:mod:`cosim.fmi.isolated`): builds the component on the
+parent's unpacked folder and answers its requests until told to close."""
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import pickle
 import signal
@@ -20,14 +20,6 @@ from .isolated import HEAD, REPLY, read_exactly, write_all
 __all__ = ["main"]
 
 
-def _die_with_parent() -> None:
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
-
-
 def _serve(fd_in: int, fd_out: int) -> None:
     head = read_exactly(fd_in, HEAD.size + 4)
     if not head:
@@ -36,8 +28,9 @@ def _serve(fd_in: int, fd_out: int) -> None:
     setup = pickle.loads(read_exactly(fd_in, length))
     n_out = 0
 
-    def reply(status: bytes, payload: bytes = b"", out: bytes = b"") -> None:
-        write_all(fd_out, REPLY.pack(status, len(payload)) + payload + (out or bytes(16 * n_out)))
+    def reply(status: bytes = b"K", payload: bytes = b"") -> None:
+        out = values[n_in:].tobytes() + ints[n_in:].tobytes() if status == b"K" else bytes(16 * n_out)
+        write_all(fd_out, REPLY.pack(status, len(payload)) + payload + out)
 
     def fail(e: BaseException) -> None:
         if isinstance(e, StopRequest):
@@ -58,19 +51,14 @@ def _serve(fd_in: int, fd_out: int) -> None:
     except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
         fail(e)
         return
-    reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
-    size = 16 * n_in
+    reply()
     try:
-        while True:
-            head = read_exactly(fd_in, HEAD.size + size)
-            if not head:
-                break
+        while head := read_exactly(fd_in, HEAD.size + 16 * n_in):
             op, t = HEAD.unpack_from(head)
             if op == b"C":
                 break
-            if n_in:
-                values[:n_in] = np.frombuffer(head, np.float64, n_in, HEAD.size)
-                ints[:n_in] = np.frombuffer(head, np.int64, n_in, HEAD.size + 8 * n_in)
+            values[:n_in] = np.frombuffer(head, np.float64, n_in, HEAD.size)
+            ints[:n_in] = np.frombuffer(head, np.int64, n_in, HEAD.size + 8 * n_in)
             try:
                 if op == b"O":
                     out_fn(t)
@@ -80,8 +68,8 @@ def _serve(fd_in: int, fd_out: int) -> None:
                         out_fn(t + comp.period)
             except BaseException as e:  # noqa: BLE001
                 fail(e)
-                continue
-            reply(b"K", b"", values[n_in:].tobytes() + ints[n_in:].tobytes())
+            else:
+                reply()
     finally:
         comp.close()
 
@@ -90,7 +78,9 @@ def main() -> None:
     """The child process: serve one FMU on stdin/stdout until told to close."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     crash_guard.disable()          # the parent names a crash here as a named error, with its results
-    _die_with_parent()
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG: die with the parent
     fd_in, fd_out = sys.stdin.buffer.fileno(), os.dup(sys.stdout.buffer.fileno())
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())        # FMU prints go to stderr, not the pipe
     try:

@@ -1,6 +1,5 @@
 """The ports of an FMU: its variables as element ports (an FMI 3.0 array is one port per
-element, ``y[1]``, ``A[1,2]``: 1-based, row-major) with exact integer types.
-"""
+element, ``y[1]``, ``A[1,2]``: 1-based, row-major) with exact integer types."""
 from __future__ import annotations
 
 import math
@@ -26,8 +25,7 @@ INTEGER_RANGES = {
 
 
 def integer_range(type_name: str, version: int) -> tuple[int, int]:
-    """The value range of the FMI ``type_name`` (an integer, Enumeration or Boolean type) in FMI
-    ``version``."""
+    """The value range of the FMI integer, Enumeration or Boolean ``type_name`` in FMI ``version``."""
     if type_name == "Enumeration":
         return INTEGER_RANGES["Int32" if version < 3 else "Int64"]
     return INTEGER_RANGES[type_name]
@@ -45,7 +43,7 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
         try:
             f = float(value)
         except (TypeError, ValueError):
-            raise TypeMismatchError(f"{what}: {value!r} is not an integer (the variable is {type_name})") from None
+            f = math.nan
         if not (math.isfinite(f) and f == int(f)):
             raise TypeMismatchError(f"{what}: {value!r} is not an integer (the variable is {type_name})")
         if abs(f) > 2**53:
@@ -59,8 +57,8 @@ def check_integer(value, type_name: str, version: int, what: str) -> int:
 
 
 def check_declared_range(values: list, variable, what: str) -> None:
-    """Refuse values outside the variable's declared ``min``/``max`` (the standard makes
-    them an error), naming ``what``, the value and the range."""
+    """Refuse ``values`` outside the ``variable``'s declared ``min``/``max`` (an error by the
+    standard), naming ``what``, the value and the range."""
     conv = float if variable.type in REAL_TYPES else int
     try:
         lo = -math.inf if variable.min is None else conv(variable.min)
@@ -105,12 +103,6 @@ def array_shape(variable, structural: Mapping[str, int]) -> tuple[int, ...]:
     return tuple(shape)
 
 
-def _element_names(name: str, shape: tuple[int, ...]) -> list[str]:
-    if not shape:
-        return [name]
-    return [f"{name}[{','.join(str(i + 1) for i in idx)}]" for idx in np.ndindex(*shape)]
-
-
 @dataclass(frozen=True)
 class ElementPort:
     """One port of an FMU: an element of a variable.
@@ -139,15 +131,15 @@ class ElementPort:
 
 
 def element_ports(md, structural: Mapping[str, int]) -> dict[str, ElementPort]:
-    """Every element port of the FMU ``md`` (fmpy ModelDescription), by name, for the
-    structural-parameter values ``structural``."""
+    """Every element port of the FMU ``md`` (fmpy's), by name, for the ``structural`` parameters' values."""
     ports = {}
     for v in md.modelVariables:
         if v.causality in ("parameter", "structuralParameter", "calculatedParameter", "independent"):
             continue
         shape = array_shape(v, structural)
-        size = int(np.prod(shape)) if shape else 1
+        size = math.prod(shape)
         discrete = v.variability not in ("continuous", None) or v.type not in REAL_TYPES
-        for k, n in enumerate(_element_names(v.name, shape)):
+        names = [f"{v.name}[{','.join(str(i + 1) for i in idx)}]" for idx in np.ndindex(*shape)] if shape else [v.name]
+        for k, n in enumerate(names):
             ports[n] = ElementPort(n, v, k, size, v.type, discrete)
     return ports
