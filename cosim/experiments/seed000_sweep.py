@@ -104,16 +104,11 @@ def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n
 def _cells(table: pd.DataFrame) -> pd.DataFrame:
     """Per filter and cell: the mean over the scenarios of the numbers, the worst state's
     RMSE / PCRB over the scenarios, and in how many scenarios the filter is consistent."""
-    t = table.assign(consistent=table["consistent"].astype(float),
-                     consistent_late=table["consistent_late"].astype(float))
-    g = t.groupby(["filter", "q_factor", "r_factor"])
-    cell = g.mean(numeric_only=True)
-    cell["pcrb_ratio_worst"] = g["pcrb_ratio_max"].max()
-    cell["pcrb_ratio_worst_late"] = g["pcrb_ratio_max_late"].max()
-    cell["scenarios"] = g.size()
-    cell["consistent_scenarios"] = g["consistent"].sum()
-    cell["consistent_scenarios_late"] = g["consistent_late"].sum()
-    return cell.reset_index()
+    g = table.astype({"consistent": float, "consistent_late": float}).groupby(["filter", "q_factor", "r_factor"])
+    return g.mean(numeric_only=True).join(g.agg(
+        pcrb_ratio_worst=("pcrb_ratio_max", "max"), pcrb_ratio_worst_late=("pcrb_ratio_max_late", "max"),
+        scenarios=("scenario", "size"), consistent_scenarios=("consistent", "sum"),
+        consistent_scenarios_late=("consistent_late", "sum"))).reset_index()
 
 
 def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
@@ -277,16 +272,13 @@ class Sweep(Experiment, register="seed000-sweep"):
         return apply_overrides(replace(SweepSettings(), campaign=campaign), mine)
 
     def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
-        """:func:`run` (the fast path only)."""
         self.check_path(path)
         return run(settings, backend=backend, n_jobs=n_jobs, progress=progress)
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
-        """:func:`write_report`."""
         return write_report(*result, settings, out_dir, partial=partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
-        """The goals table."""
         return "\n".join([f"Seed 000 sweep: {len(settings.factors)} x {len(settings.factors)} cells, "
                           f"{settings.campaign.runs} realisations a cell, {result.wall:.1f} s",
                           goals(result.table, settings).to_string(index=False, float_format=lambda v: f"{v:.3f}")])

@@ -220,15 +220,12 @@ class Seed002(Experiment, register="seed002"):
     configs: ClassVar[dict] = {"default": Settings()}
 
     def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
-        """:func:`run`."""
         return run(settings, path=self.check_path(path), backend=backend, n_jobs=n_jobs, progress=progress)
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
-        """:func:`write_report`."""
         return write_report(*result, settings, out_dir, path, partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
-        """What the EKF adds over its inputs, and the loop."""
         agg = result.per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
                                                           "alpha amplitude ratio"]].mean()
         return "\n".join([f"Seed 002: wheel pendulum through the sensor chain, {settings.runs} realisations, "
