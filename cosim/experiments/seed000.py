@@ -118,10 +118,9 @@ class Settings(CommonSettings):
             positive_int(getattr(self, name), name)
         if self.swml_posterior_average and self.swml_prior_sd is None:
             raise ConfigurationError("swml_posterior_average needs a prior: set swml_prior_sd")
-        if not self.swml_keep_r_nats >= 0:
-            raise ConfigurationError(f"swml_keep_r_nats must be >= 0, got {self.swml_keep_r_nats}")
-        if not self.swml_max_fall >= 1:
-            raise ConfigurationError(f"swml_max_fall must be >= 1, got {self.swml_max_fall}")
+        for name, low in (("swml_keep_r_nats", 0), ("swml_max_fall", 1)):
+            if not getattr(self, name) >= low:
+                raise ConfigurationError(f"{name} must be >= {low}, got {getattr(self, name)}")
         if self.swml_window % self.swml_every:
             raise ConfigurationError(f"swml_window = {self.swml_window} must be a multiple of swml_every = "
                                      f"{self.swml_every}")
