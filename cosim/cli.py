@@ -557,14 +557,8 @@ def _scenarios(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
-    when interrupted).
-
-    Parameters
-    ----------
-    argv
-        The arguments (default: ``sys.argv[1:]``).
-    """
+    """Entry point of ``pendulum-cosim`` with the arguments ``argv`` (default: ``sys.argv[1:]``);
+    returns the exit status (0, 2 on an error, 130 when interrupted)."""
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--plugin", action="append", default=[])
     pre.add_argument("--debug", action="store_true")

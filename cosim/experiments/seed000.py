@@ -128,8 +128,7 @@ class Settings(CommonSettings):
             raise ConfigurationError(f"x0 must have 4 entries, got {self.x0}")
         if not self.scenarios or any(len(sc) != 2 or min(sc) <= 0 for sc in self.scenarios):
             raise ConfigurationError(f"scenarios must be pairs of positive variances, got {self.scenarios}")
-        bad = [r for r in self.readings if r not in READINGS]
-        if bad or not self.readings:
+        if not self.readings or not set(self.readings) <= set(READINGS):
             raise UnknownNameError(f"readings must be among {list(READINGS)}, got {self.readings}")
 
     @property
@@ -630,11 +629,9 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
         e1 = eps[(eps.reading == rd) & (eps.scenario == eps.scenario.min())]
         sc = int(e1["scenario"].iloc[0])
         for stat, label, ny in (("anees", "average NEES", 4), ("anis", "average NIS", 2)):
-            fig, axes = common.new_figure(1, 1, figsize=(8, 4))
-            ax = axes[0, 0]
+            fig, ((ax,),) = common.new_figure(1, 1, figsize=(8, 4))
             first = e1[e1["filter"] == FILTERS[0]]
-            lo, hi = ("nees_lo", "nees_hi") if stat == "anees" else ("nis_lo", "nis_hi")
-            ax.fill_between(first["time"], first[lo], first[hi], color="0.85",
+            ax.fill_between(first["time"], first[f"{stat[1:]}_lo"], first[f"{stat[1:]}_hi"], color="0.85",
                             label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
             for name in FILTERS:
                 f = e1[e1["filter"] == name]
@@ -645,8 +642,7 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
             common.save_figure(fig, out / f"figure_{stat[1:]}_{rd}.png")
         b = bound[(bound.reading == rd) & (bound.scenario == sc)] if len(bound) else bound
         fig, axes = common.new_figure(4, 1, figsize=(8, 9), sharex=True)
-        for a, x in enumerate(STATES):
-            ax = axes[a, 0]
+        for ax, x in zip(axes[:, 0], STATES):
             for name in ("EKF", "MF-IAE", "SWML", TRUE_EKF):
                 f = e1[e1["filter"] == name]
                 ax.plot(f["time"], np.sqrt(f[f"mse_{x}"]), lw=0.9, label=name)
@@ -662,14 +658,11 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
     """Figures 3 (scenario 1, realisation 0: truth and the EKF's and MF-IAE's estimates) and
     4 (scenario 1: eps_k of every filter) of the paper, one per reading."""
-    for rd in sorted({k[0] for k in examples}):
-        if (rd, 1) not in examples:
-            continue
+    for rd in sorted(rd for rd, sc in examples if sc == 1):
         ex = examples[(rd, 1)]
         t = np.arange(ex["truth"].shape[0]) * settings.T
         fig, axes = common.new_figure(4, 1, figsize=(8, 8), sharex=True)
-        for a in range(4):
-            ax = axes[a, 0]
+        for a, ax in enumerate(axes[:, 0]):
             ax.plot(t, ex["truth"][:, a], "k-", lw=1.2, label="truth")
             for name, style in (("EKF", "b--"), ("MF-IAE", "r-.")):
                 ax.plot(t, ex[f"est {name}"][:, a], style, lw=0.9, label=name)

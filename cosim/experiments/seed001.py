@@ -92,8 +92,7 @@ def _summary(errors: dict, s: Settings, nees: dict, nis: dict, white: dict, boun
             rmse_k = np.sqrt(np.mean(err[:, 1:] ** 2, axis=0))
         out[name] = {"pos_err": np.abs(err[:, idx, 0]), "rmse": rmse, "rms_mean": rms.mean(axis=0),
                      "t_div": np.where(stays.any(axis=1), t[np.argmax(stays, axis=1)], np.nan),
-                     "pcrb_ratio": metrics.pcrb_ratio(rmse, bound[1:]),
-                     "pcrb_ratio_se": metrics.pcrb_ratio_se(rmse, bound[1:]), "tests": row, "anees": per_step["anees"],
+                     "pcrb_ratio": metrics.pcrb_ratio(rmse, bound[1:]), "tests": row, "anees": per_step["anees"],
                      "nees_band": (per_step["nees_lo"], per_step["nees_hi"]), "rmse_k": rmse_k}
     return out
 
