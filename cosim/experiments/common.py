@@ -28,9 +28,8 @@ from .campaign import realisation_seeds, run_tasks
 
 # ---------------------------------------------------------------------------- the campaign's plumbing
 def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tuple[int, int]]:
-    """The (process, measurement) seeds of the realisations ``runs`` (default all
-    ``settings.runs``) of task ``key`` (e.g. a scenario's index):
-    :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``."""
+    """The (process, measurement) seeds of the realisations ``runs`` (default all) of task ``key``
+    (e.g. a scenario's index): :func:`~cosim.experiments.campaign.realisation_seeds`."""
     runs = range(settings.runs) if runs is None else runs
     return [tuple(realisation_seeds(settings.seed, key, r)) for r in runs]
 
@@ -88,10 +87,9 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
 
 
 class BatchOutcome(NamedTuple):
-    """One filter over every realisation (what :func:`batch_run` returns): estimates ``x``
-    (runs, N+1, nx) with the initial one at k = 0, ``nees`` and ``nis`` (runs, N), the
-    ``failed`` realisations (runs,), the ``innovation`` (runs, N, ny) and its covariance
-    ``S`` (runs, N, ny, ny)."""
+    """One filter over every realisation: estimates ``x`` (runs, N+1, nx; the initial one at
+    k = 0), ``nees`` and ``nis`` (runs, N), the ``failed`` realisations (runs,), the
+    ``innovation`` (runs, N, ny) and its covariance ``S`` (runs, N, ny, ny)."""
 
     x: np.ndarray
     nees: np.ndarray
@@ -255,9 +253,7 @@ def write_summary(out: Path, lines: Sequence[str], partial: bool = False) -> Pat
     ``partial``, :data:`PARTIAL_NOTE` after it); returns its path."""
     if partial:
         lines = [*lines[:2], *PARTIAL_NOTE, *lines[2:]]
-    md = out / "summary.md"
-    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return md
+    return atomic_write(out / "summary.md", lambda p: p.write_text("\n".join(lines) + "\n"))
 
 
 def new_figure(rows: int = 1, cols: int = 1, figsize=(8, 4), **subplot_kw):

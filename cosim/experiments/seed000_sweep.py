@@ -215,9 +215,7 @@ def _goal_lines(table: pd.DataFrame, g: pd.DataFrame, wall: float, settings: Swe
 def _grid(table: pd.DataFrame, name: str, metric: str, how: str = "mean") -> pd.DataFrame:
     t = table[table["filter"] == name].assign(consistent=lambda d: d["consistent"].astype(float))
     g = t.groupby(["q_factor", "r_factor"])[metric].agg(how).unstack("r_factor")
-    g.index = [f"Q0 x{f:g}" for f in g.index]
-    g.columns = [f"R0 x{f:g}" for f in g.columns]
-    return g
+    return g.rename(index=lambda f: f"Q0 x{f:g}", columns=lambda f: f"R0 x{f:g}").rename_axis(index=None, columns=None)
 
 
 def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
