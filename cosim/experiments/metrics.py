@@ -156,8 +156,7 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
 
 def consistency_markdown(table, keys: list[str]) -> list[str]:
     """Markdown lines of the consistency tests, a row per row of ``table`` (a DataFrame with the
-    columns of :func:`consistency`, ``filter`` and the identifying columns ``keys``, shown first).
-    """
+    columns of :func:`consistency`, ``filter`` and the identifying columns ``keys``, shown first)."""
     def yes(v):
         return "n/a" if v is None or (isinstance(v, float) and np.isnan(v)) else ("yes" if v else "no")
 
