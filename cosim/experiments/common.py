@@ -29,7 +29,7 @@ from .campaign import realisation_seeds, run_tasks
 # ---------------------------------------------------------------------------- the campaign's plumbing
 def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tuple[int, int]]:
     """The (process, measurement) seeds of the realisations ``runs`` (default all) of task ``key``
-    (e.g. a scenario's index): :func:`~cosim.experiments.campaign.realisation_seeds`."""
+    (e.g. a scenario's index): :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``."""
     runs = range(settings.runs) if runs is None else runs
     return [tuple(realisation_seeds(settings.seed, key, r)) for r in runs]
 

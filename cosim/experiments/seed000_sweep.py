@@ -167,7 +167,7 @@ GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 facto
 
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
     """``sweep.csv|parquet``, ``goals.csv``, heat maps, ``settings.toml`` and ``summary.md`` into
-    ``out_dir`` (``table``, ``wall``: a :class:`SweepResult`'s; the rest as
+    ``out_dir`` (``table``, ``wall``: a :class:`SweepResult`'s; ``settings``, ``partial`` as
     :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     toml = to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"
     out = common.report_folder(out_dir, toml, {"sweep.csv": table, "sweep.parquet": table})

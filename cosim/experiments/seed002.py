@@ -180,7 +180,7 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str, partial: bool = False) -> Path:
     """The tables, the figure, ``settings.toml`` and ``summary.md`` into ``out_dir`` (``per_run``,
-    ``traces``, ``wall``: a :class:`Seed002Result`'s; the rest as
+    ``traces``, ``wall``: a :class:`Seed002Result`'s; ``settings``, ``path``, ``partial`` as
     :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     table = summary_table(per_run)
     out = common.report_folder(out_dir, to_toml(settings, "seed002"),
