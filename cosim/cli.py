@@ -95,9 +95,8 @@ def _truth_of(df, est: str, estimators_) -> str | None:
     """The component (not an estimator) that outputs every state ``est`` estimates, ``plant``
     first if several do; None if none does."""
     states = _estimated(df, est)
-    comps = sorted({c.split(".", 1)[0] for c in df.columns} - set(estimators_))
-    found = [c for c in comps if states and all(f"{c}.{n}" in df.columns for n in states)]
-    return "plant" if "plant" in found else (found[0] if found else None)
+    comps = sorted({c.split(".", 1)[0] for c in df.columns} - set(estimators_), key=lambda c: (c != "plant", c))
+    return next((c for c in comps if states and all(f"{c}.{n}" in df.columns for n in states)), None)
 
 
 def _rms(a, b) -> float:
@@ -146,18 +145,18 @@ def _kind_of(path: Path) -> str:
                                  "a SystemStructure.ssd)")
     if path.suffix.lower() == ".ssd":
         return "ssp"
-    if path.suffix.lower() in (".fmu", ".ssp") and not zipfile.is_zipfile(path):
-        raise FMUError(f"{path.name} is not an {path.suffix[1:].upper()}: not a zip archive")
-    if zipfile.is_zipfile(path):
-        with zipfile.ZipFile(path) as z:
-            names = set(z.namelist())
-        if "modelDescription.xml" in names:
-            return "fmu"
-        if "SystemStructure.ssd" in names:
-            return "ssp"
-        raise ConfigurationError(f"{path.name} is a zip archive with neither a modelDescription.xml (an FMU) nor a "
-                                 "SystemStructure.ssd (an SSP)")
-    return "scenario"
+    if not zipfile.is_zipfile(path):
+        if path.suffix.lower() in (".fmu", ".ssp"):
+            raise FMUError(f"{path.name} is not an {path.suffix[1:].upper()}: not a zip archive")
+        return "scenario"
+    with zipfile.ZipFile(path) as z:
+        names = set(z.namelist())
+    if "modelDescription.xml" in names:
+        return "fmu"
+    if "SystemStructure.ssd" in names:
+        return "ssp"
+    raise ConfigurationError(f"{path.name} is a zip archive with neither a modelDescription.xml (an FMU) nor a "
+                             "SystemStructure.ssd (an SSP)")
 
 
 @dataclass
@@ -558,14 +557,8 @@ def _scenarios(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``pendulum-cosim``; returns the exit status (0, 2 on an error, 130
-    when interrupted).
-
-    Parameters
-    ----------
-    argv
-        The arguments (default: ``sys.argv[1:]``).
-    """
+    """Entry point of ``pendulum-cosim`` with the arguments ``argv`` (default: ``sys.argv[1:]``);
+    returns the exit status (0, 2 on an error, 130 when interrupted)."""
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--plugin", action="append", default=[])
     pre.add_argument("--debug", action="store_true")

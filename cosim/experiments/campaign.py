@@ -82,20 +82,13 @@ def _quiet(logger_name: str):
 
 def run_tasks(tasks: Sequence[tuple[Callable, dict]], backend: str = "processes",
               n_jobs: int | None = None, progress: bool = True, desc: str = "tasks") -> list:
-    """Run ``fn(**kwargs)`` for each task; returns the results in task order.
-
-    Parameters
-    ----------
-    tasks : sequence of (callable, dict)
-        Module-level functions (picklable) and their keyword arguments.
-    backend : {"processes", "serial", "dask"}
-        Local worker processes, one process, or a dask.distributed cluster (the ``dask``
-        extra: the scheduler dask's configuration names as ``scheduler-address``, else the
-        current client, else a local one). The tasks share no file with the caller.
-    n_jobs : int, optional
-        Worker processes for ``"processes"`` and a local dask cluster (default: the cores).
-    progress, desc : bool, str
-        Show a tqdm progress bar, labelled ``desc``.
+    """Run ``fn(**kwargs)`` for each of the ``tasks`` (module-level, picklable functions and
+    their keyword arguments); returns the results in task order. ``backend``: local worker
+    processes (``"processes"``), one process (``"serial"``) or a dask.distributed cluster
+    (``"dask"``, the ``dask`` extra: the scheduler dask's configuration names as
+    ``scheduler-address``, else the current client, else a local one); the tasks share no file
+    with the caller. ``n_jobs``: worker processes of ``"processes"`` and of a local dask
+    cluster (default: the cores). ``progress``: a tqdm progress bar, labelled ``desc``.
 
     Raises
     ------

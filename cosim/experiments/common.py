@@ -28,9 +28,8 @@ from .campaign import realisation_seeds, run_tasks
 
 # ---------------------------------------------------------------------------- the campaign's plumbing
 def seed_pairs(settings, key: int, runs: Iterable[int] | None = None) -> list[tuple[int, int]]:
-    """The (process, measurement) seeds of the realisations ``runs`` (default all
-    ``settings.runs``) of task ``key`` (e.g. a scenario's index):
-    :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``."""
+    """The (process, measurement) seeds of the realisations ``runs`` (default all) of task ``key``
+    (e.g. a scenario's index): :func:`~cosim.experiments.campaign.realisation_seeds` of ``settings.seed``."""
     runs = range(settings.runs) if runs is None else runs
     return [tuple(realisation_seeds(settings.seed, key, r)) for r in runs]
 
@@ -61,26 +60,12 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
                    substeps=1):
     """Truth ``X`` (runs, N+1, nx) and measurements ``Y`` (runs, N+1, ny), drawing exactly the
     numbers the ProcessNoise and Sensor components draw on the master path (same seeds, same
-    order).
-
-    Parameters
-    ----------
-    model
-        A plant model, or a process model (:class:`~estimators.DiscreteModel`, an FMU's too:
-        its own map and period, ``method`` and ``substeps`` unused).
-    x0, us
-        Initial state, and the inputs, shape (N+1, nu).
-    T
-        Sample period [s].
-    q, r_std
-        Process noise covariance (scalar, diagonal or matrix), measurement noise standard deviations.
-    measured
-        The measured states (``Y`` picks them; for a process model, its outputs if they are these).
-    seeds
-        (process, measurement) seed pairs, one per realisation.
-    method, substeps
-        Integration method of the truth map, and its substeps.
-    """
+    order): from the initial state ``x0`` under the inputs ``us`` (N+1, nu) at the period ``T``
+    [s], the process noise covariance ``q`` (scalar, diagonal or matrix) and the standard
+    deviations ``r_std`` of the ``measured`` states' noise, a realisation per (process,
+    measurement) seed pair of ``seeds``. ``model``: a plant model (its truth map by ``method``
+    in ``substeps``), or a process model (:class:`~estimators.DiscreteModel`, an FMU's too: its
+    own map and period; ``Y`` its outputs if they are the ``measured``)."""
     R, N = len(seeds), len(us) - 1
     noise, sensor = _noise_components(model, T, q, measured, r_std, 0, 0)
     W = np.stack([np.random.default_rng(sw).standard_normal((N + 1, model.nx)) @ noise.L.T
@@ -102,10 +87,9 @@ def simulate_truth(model, x0, us: np.ndarray, T: float, q, measured, r_std, seed
 
 
 class BatchOutcome(NamedTuple):
-    """One filter over every realisation (what :func:`batch_run` returns): estimates ``x``
-    (runs, N+1, nx) with the initial one at k = 0, ``nees`` and ``nis`` (runs, N), the
-    ``failed`` realisations (runs,), the ``innovation`` (runs, N, ny) and its covariance
-    ``S`` (runs, N, ny, ny)."""
+    """One filter over every realisation: estimates ``x`` (runs, N+1, nx; the initial one at
+    k = 0), ``nees`` and ``nis`` (runs, N), the ``failed`` realisations (runs,), the
+    ``innovation`` (runs, N, ny) and its covariance ``S`` (runs, N, ny, ny)."""
 
     x: np.ndarray
     nees: np.ndarray
@@ -127,79 +111,50 @@ def batch_run(make: Callable, X: np.ndarray, Y: np.ndarray, us: np.ndarray) -> B
 
 def master_runs(model, x0, source, q, measured: Sequence[str], r_std, makers: dict, T: float, duration: float,
                 seeds: Sequence[tuple[int, int]], fmu_dir=None):
-    """Realisations through the co-simulation master (:class:`MasterRealisations`), one per
-    seed pair of ``seeds``; returns truth (runs, N+1, nx), the estimates by filter (runs, N+1,
-    nx), and NEES (from the full covariance) and NIS by filter (runs, N).
-
-    Parameters
-    ----------
-    model, x0, q, measured, r_std, T, seeds
-        As :func:`simulate_truth` (``model`` a plant model).
-    source, makers
-        As :class:`MasterRealisations`.
-    duration
-        Simulated time [s].
-    fmu_dir
-        Where to build the plant FMU (default a temporary folder).
-    """
+    """:func:`simulate_truth`'s realisations (``model`` a plant model, ``x0``, ``q``,
+    ``measured``, ``r_std``, ``T``, ``seeds`` as there) through the co-simulation master, ``duration``
+    [s] long: the plant FMU (built in ``fmu_dir``, default a temporary folder), the sensor, the
+    filters of the factories ``makers`` by name, the input ``source`` (its outputs drive the
+    plant's inputs in order) and the process noise, built once, each filter restored to its
+    initial state before each run (the numbers of a new filter). Returns truth (runs, N+1, nx),
+    the estimates by filter (runs, N+1, nx), and NEES (from the full covariance) and NIS by
+    filter (runs, N)."""
     X = np.empty((len(seeds), round(duration / T) + 1, model.nx))
     est = {n: np.empty_like(X) for n in makers}
     nees = {n: np.empty((len(seeds), X.shape[1] - 1)) for n in makers}
     nis = {n: np.empty_like(nees[n]) for n in makers}
     with tempfile.TemporaryDirectory() as tmp:
         plant = FMUComponent("plant", build_fmu(model, fmu_dir or tmp), T, start=dict(zip(model.state_names, x0)))
-        master = MasterRealisations(plant, source, *_noise_components(model, T, q, measured, r_std, *seeds[0]),
-                                    makers, T)
-        for i, (seed_w, seed_v) in enumerate(seeds):
-            X[i], e, P, v = master.run(seed_w, seed_v, duration)
-            for n in makers:
-                est[n][i], nis[n][i] = e[n], v[n]
-                with np.errstate(over="ignore", invalid="ignore"):
-                    nees[n][i] = metrics.nees(e[n][None, 1:] - X[i][None, 1:], P[n][None, 1:])[0]
-    return X, est, nees, nis
-
-
-class MasterRealisations:
-    """One co-simulation of the ``plant`` FMU component, the ``sensor``, the filters, the input
-    ``source`` and the process ``noise`` components, built once for realisations that differ
-    only in the noise's and the sensor's seeds. Each filter (of the factories ``makers`` by
-    name, at period ``T`` [s]) is built once and restored to its initial state before each run
-    (:meth:`~estimators.base.KalmanBase.restore`: the numbers of a new filter)."""
-
-    def __init__(self, plant, source, noise, sensor, makers: dict, T: float):
         states = [p for p in plant.output_names if f"w_{p}" in plant.input_names]
+        nx = len(states)
+        noise, sensor = _noise_components(model, T, q, measured, r_std, *seeds[0])
         inputs = {u: f"{source.name}.{source.output_names[j]}"
                   for j, u in enumerate(p for p in plant.input_names if not p.startswith("w_"))}
-        self.tags = tags = {name: f"f{i}" for i, name in enumerate(makers)}
-        ests = [EstimatorComponent(tags[n], _restored(makers[n]), T, covariance="full") for n in makers]
+        tags = {name: f"f{i}" for i, name in enumerate(makers)}
         conn = {**{f"plant.{u}": src for u, src in inputs.items()},
                 **{f"sensor.{m}": f"plant.{m}" for m in sensor.input_names},
                 **{f"plant.w_{x}": f"noise.w_{x}" for x in states}}
         for t in tags.values():
             conn.update({f"{t}.{u}": src for u, src in inputs.items()})
             conn.update({f"{t}.y_{m}": f"sensor.y_{m}" for m in sensor.input_names})
-        self.noise, self.sensor, self.states = noise, sensor, states
-        self.cosim = Cosimulation([plant, sensor, *ests, source, noise], conn)
-
-    def run(self, seed_w: int, seed_v: int, duration: float):
-        """One realisation with process-noise seed ``seed_w`` and sensor seed ``seed_v``,
-        ``duration`` [s] long; returns truth (N+1, nx), estimates by filter (N+1, nx), their
-        full covariances (N+1, nx, nx) and NIS (N,)."""
-        self.noise.seed, self.sensor.seed = int(seed_w), int(seed_v)
-        df = self.cosim.run(duration)
-        data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
-        col = {c: i for i, c in enumerate(df.columns)}
-        states, n = self.states, len(self.states)
-        est, cov, nis = {}, {}, {}
-        for name, t in self.tags.items():
-            est[name] = data[:, [col[f"{t}.{x}"] for x in states]]
-            cov[name] = P = np.empty((len(data), n, n))
-            for i, x in enumerate(states):
-                P[:, i, i] = data[:, col[f"{t}.P_{x}"]]
-                for j in range(i + 1, n):
-                    P[:, i, j] = P[:, j, i] = data[:, col[f"{t}.P_{i}_{j}"]]
-            nis[name] = data[1:, col[f"{t}.nis"]]
-        return data[:, [col[f"plant.{x}"] for x in states]], est, cov, nis
+        ests = [EstimatorComponent(tags[n], _restored(makers[n]), T, covariance="full") for n in makers]
+        cosim = Cosimulation([plant, sensor, *ests, source, noise], conn)
+        for i, (seed_w, seed_v) in enumerate(seeds):
+            noise.seed, sensor.seed = int(seed_w), int(seed_v)
+            df = cosim.run(duration)
+            data = df.to_numpy(dtype=float)                 # every signal here is real: the frame's values
+            col = {c: k for k, c in enumerate(df.columns)}
+            X[i] = data[:, [col[f"plant.{x}"] for x in states]]
+            for name, t in tags.items():
+                P = np.empty((len(data), nx, nx))
+                for a, x in enumerate(states):
+                    P[:, a, a] = data[:, col[f"{t}.P_{x}"]]
+                    for b in range(a + 1, nx):
+                        P[:, a, b] = P[:, b, a] = data[:, col[f"{t}.P_{a}_{b}"]]
+                est[name][i], nis[name][i] = data[:, [col[f"{t}.{x}"] for x in states]], data[1:, col[f"{t}.nis"]]
+                with np.errstate(over="ignore", invalid="ignore"):
+                    nees[name][i] = metrics.nees(est[name][i][None, 1:] - X[i][None, 1:], P[None, 1:])[0]
+    return X, est, nees, nis
 
 
 def _restored(make):
@@ -298,9 +253,7 @@ def write_summary(out: Path, lines: Sequence[str], partial: bool = False) -> Pat
     ``partial``, :data:`PARTIAL_NOTE` after it); returns its path."""
     if partial:
         lines = [*lines[:2], *PARTIAL_NOTE, *lines[2:]]
-    md = out / "summary.md"
-    atomic_write(md, lambda p: p.write_text("\n".join(lines) + "\n"))
-    return md
+    return atomic_write(out / "summary.md", lambda p: p.write_text("\n".join(lines) + "\n"))
 
 
 def new_figure(rows: int = 1, cols: int = 1, figsize=(8, 4), **subplot_kw):
@@ -320,10 +273,7 @@ def style_axes(ax, xlabel: str = "", ylabel: str = "", title: str = "", log: boo
     ``legend`` in ``ncol`` columns (none if 0)."""
     if log:
         ax.set_yscale("log")
-    if xlabel:
-        ax.set_xlabel(xlabel)
-    if ylabel:
-        ax.set_ylabel(ylabel)
+    ax.set(**{key: text for key, text in (("xlabel", xlabel), ("ylabel", ylabel)) if text})
     ax.grid(alpha=0.3)
     if legend:
         ax.legend(fontsize=legend, ncol=ncol)

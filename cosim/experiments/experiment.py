@@ -22,20 +22,10 @@ PATHS = ("fast", "master")
 
 
 class Experiment:
-    """An experiment runnable from the command line (docs/guide/extending.md).
-
-    Attributes
-    ----------
-    name : str
-        Its registered name (set by the ``register`` class keyword).
-    description : str
-        One line for ``--help``.
-    configs : dict of str to settings
-        Named configurations; ``default_config`` is used without ``--config``.
-    default_config : str
-    paths : tuple of str
-        The paths it supports (see :data:`PATHS`).
-    """
+    """An experiment runnable from the command line (docs/guide/extending.md): its ``name``
+    (set by the ``register`` class keyword), a one-line ``description`` for ``--help``, its
+    named settings ``configs`` (``default_config`` without ``--config``) and the ``paths`` it
+    supports (see :data:`PATHS`)."""
 
     name = ""
     description = ""
@@ -53,13 +43,8 @@ class Experiment:
                  seed: int | None = None):
         """The settings of configuration ``config`` (default ``default_config``) with the
         values of the TOML ``settings_file``, then ``runs``, ``seed`` and every ``name=value``
-        of ``overrides`` applied, in that order.
-
-        Raises
-        ------
-        ConfigurationError
-            An unknown configuration or setting, or a value of the wrong type.
-        """
+        of ``overrides`` applied, in that order; ConfigurationError for an unknown
+        configuration or setting, or a value of the wrong type."""
         config = config or self.default_config
         if config not in self.configs:
             raise ConfigurationError(f"{self.name}: unknown --config {config!r}; valid: {', '.join(self.configs)}")

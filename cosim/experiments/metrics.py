@@ -63,14 +63,12 @@ def consistency_rule(confidence: float, lags: int) -> str:
 
 
 def band_row(nees: np.ndarray, nis: np.ndarray, nx: int, ny: int, confidence: float = 0.95) -> tuple[dict, dict]:
-    """Tests (1) and (2) of :func:`consistency_rule` for one filter: ``(row, per_step)``.
-
-    ``row``: ``runs``, ``anees``, its band ``anees_lo``, ``anees_hi``, ``anees_inside`` (share
-    of the steps inside their band), ``nees_ok``, the same for ``anis`` / ``nis_ok``;
-    ``per_step``: the arrays (K,) ``anees``, ``anis`` and bands ``nees_lo``, ``nees_hi``,
-    ``nis_lo``, ``nis_hi``. ``nees`` and ``nis``: shape (runs, K), NaN (a diverged run)
-    counting as infinite; ``nx``, ``ny``: state and measurement dimensions; ``confidence``:
-    probability of the bands."""
+    """Tests (1) and (2) of :func:`consistency_rule` for one filter of ``nees`` and ``nis``
+    (runs, K; NaN, a diverged run, counts as infinite) in ``nx`` and ``ny`` dimensions, bands
+    of probability ``confidence``: ``(row, per_step)``, ``row`` with ``runs``, ``anees``, its
+    band ``anees_lo``, ``anees_hi``, ``anees_inside`` (share of the steps inside their band),
+    ``nees_ok`` and the same for ``anis`` / ``nis_ok``; ``per_step`` the arrays (K,) ``anees``,
+    ``anis`` and their bands ``nees_lo``, ``nees_hi``, ``nis_lo``, ``nis_hi``."""
     ne = nees_test(np.where(np.isnan(nees), np.inf, nees), nx, confidence)
     ni = nis_test(np.where(np.isnan(nis), np.inf, nis), ny, confidence)
     row = {"runs": ne.runs, "anees": ne.average, "anees_lo": ne.band[0], "anees_hi": ne.band[1],
@@ -158,8 +156,7 @@ def after_transient(nees: np.ndarray, nis: np.ndarray, mse: np.ndarray, bound_ms
 
 def consistency_markdown(table, keys: list[str]) -> list[str]:
     """Markdown lines of the consistency tests, a row per row of ``table`` (a DataFrame with the
-    columns of :func:`consistency`, ``filter`` and the identifying columns ``keys``, shown first).
-    """
+    columns of :func:`consistency`, ``filter`` and the identifying columns ``keys``, shown first)."""
     def yes(v):
         return "n/a" if v is None or (isinstance(v, float) and np.isnan(v)) else ("yes" if v else "no")
 

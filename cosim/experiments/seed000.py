@@ -118,10 +118,9 @@ class Settings(CommonSettings):
             positive_int(getattr(self, name), name)
         if self.swml_posterior_average and self.swml_prior_sd is None:
             raise ConfigurationError("swml_posterior_average needs a prior: set swml_prior_sd")
-        if not self.swml_keep_r_nats >= 0:
-            raise ConfigurationError(f"swml_keep_r_nats must be >= 0, got {self.swml_keep_r_nats}")
-        if not self.swml_max_fall >= 1:
-            raise ConfigurationError(f"swml_max_fall must be >= 1, got {self.swml_max_fall}")
+        for name, low in (("swml_keep_r_nats", 0), ("swml_max_fall", 1)):
+            if not getattr(self, name) >= low:
+                raise ConfigurationError(f"{name} must be >= {low}, got {getattr(self, name)}")
         if self.swml_window % self.swml_every:
             raise ConfigurationError(f"swml_window = {self.swml_window} must be a multiple of swml_every = "
                                      f"{self.swml_every}")
@@ -129,8 +128,7 @@ class Settings(CommonSettings):
             raise ConfigurationError(f"x0 must have 4 entries, got {self.x0}")
         if not self.scenarios or any(len(sc) != 2 or min(sc) <= 0 for sc in self.scenarios):
             raise ConfigurationError(f"scenarios must be pairs of positive variances, got {self.scenarios}")
-        bad = [r for r in self.readings if r not in READINGS]
-        if bad or not self.readings:
+        if not self.readings or not set(self.readings) <= set(READINGS):
             raise UnknownNameError(f"readings must be among {list(READINGS)}, got {self.readings}")
 
     @property
@@ -198,9 +196,8 @@ def make_filters(system, s: Settings, q: float, r: float, learned=None) -> dict:
 
 
 def figure2_prbs(s: Settings):
-    """The input source: Figure 2's PRBS of +/-``input_amplitude``, -0.5 N until 2 s, then
-    +0.5 N: the maximal-length LFSR of order 7 (taps 7, 6) from state 28, one bit per second,
-    whose first five bits ``0 0 1 1 1`` are the figure."""
+    """The input source of the settings ``s``: Figure 2's PRBS (by default the LFSR of order 7,
+    taps 7, 6, from state 28, a bit per second; its first bits ``0 0 1 1 1``: -0.5 N until 2 s)."""
     return PRBS("force", s.T, s.input_amplitude, s.input_bit_time, s.input_order, s.input_seed)
 
 
@@ -219,24 +216,21 @@ def scenario_bound(s: Settings, X: np.ndarray, u: np.ndarray, q: float, r: float
     """The PCRB on each state's mean-square error at k = 0..N, shape (N+1, 4), over the
     realisations ``X`` (runs, N+1, 4) with inputs ``u`` (N+1,), under ``s.pcrb_prior``
     (``s``, ``q``, ``r`` as :func:`simulate_truth`)."""
-    P0 = None if s.pcrb_prior == "known" else s.P0
-    return posterior_crb(_system(s.T), X, u[:-1, None], q, r, P0).mse
+    return posterior_crb(_system(s.T), X, u[:-1, None], q, r, None if s.pcrb_prior == "known" else s.P0).mse
 
 
 def bound_task(scenario_index: int, reading: str, settings: Settings) -> np.ndarray:
     """:func:`scenario_bound` over all realisations of one scenario and reading (the master
     path's PCRB: the fast path's truth of the same seeds); ``scenario_index``, ``reading``
     and ``settings`` as :func:`fast_task`."""
-    s = settings
-    q, r = true_noise(s.scenarios[scenario_index], reading)
-    X, _, u = simulate_truth(s, q, r, common.seed_pairs(s, scenario_index))
-    return scenario_bound(s, X, u, q, r)
+    q, r = true_noise(settings.scenarios[scenario_index], reading)
+    X, _, u = simulate_truth(settings, q, r, common.seed_pairs(settings, scenario_index))
+    return scenario_bound(settings, X, u, q, r)
 
 
 class _FilterRun(NamedTuple):
     """One filter over a task's realisations: errors (runs, N+1, 4), NEES and NIS (runs, N),
-    the failed realisations (runs,), the whiteness rows over all steps and after the
-    transient (None: not tested)."""
+    the failed realisations (runs,), the whiteness rows (after the transient: None, not tested)."""
 
     errors: np.ndarray
     nees: np.ndarray
@@ -257,9 +251,8 @@ def _fast_filter(make, X: np.ndarray, Y: np.ndarray, u: np.ndarray, s: Settings)
 
 
 def _summarise(filters: dict, s: Settings, example: dict, learned) -> dict:
-    """A task's result from its :class:`_FilterRun` by filter (errors over k = 1..N): eps_k,
-    the per-realisation and per-step numbers, the whiteness rows, the ``example``
-    realisation and EM's ``learned`` (q, r)."""
+    """A task's result from its :class:`_FilterRun` by filter (errors over k = 1..N), the
+    ``example`` realisation and EM's ``learned`` (q, r)."""
     out = {"eps_k": {}, "per_run": {}, "steps": {}, "example": example, "learned": learned,
            "whiteness": {n: f.whiteness for n, f in filters.items()},
            "whiteness_late": {n: f.whiteness_late for n, f in filters.items()}}
@@ -277,22 +270,12 @@ def _summarise(filters: dict, s: Settings, example: dict, learned) -> dict:
 
 def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, bound=None,
               shared: dict | None = None) -> dict:
-    """All realisations of one scenario and reading, every filter batched in native calls,
-    with the PCRB over the same realisations and the innovations' whiteness.
-
-    Parameters
-    ----------
-    scenario_index, reading, settings
-        Which scenario (0-based), which reading of the noise names, the campaign's settings.
-    runs
-        Which realisations (default all).
-    bound
-        The PCRB of these realisations (:func:`scenario_bound`; default: computed here).
-    shared
-        A dict kept between calls that differ only in the nominal noise (the sweep's cells):
-        the truth, the training realisation and the EKF given the true Q and R are computed
-        once and reused (default: nothing kept).
-    """
+    """The realisations ``runs`` (default all) of scenario ``scenario_index`` (0-based) under
+    the ``reading`` of the noise names and the campaign's ``settings``, every filter batched in
+    native calls, with their PCRB (``bound``, :func:`scenario_bound`; default: computed here)
+    and the innovations' whiteness. ``shared``: a dict kept between calls that differ only in
+    the nominal noise (the sweep's cells), where the truth, the training realisation and the
+    EKF given the true Q and R are computed once (default: nothing kept)."""
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
     shared = {} if shared is None else shared
@@ -312,9 +295,9 @@ def fast_task(scenario_index: int, reading: str, settings: Settings, runs=None, 
 
 def master_task(scenario_index: int, reading: str, settings: Settings, runs=None, fmu_dir=None,
                 learned=None) -> dict:
-    """:func:`fast_task` (``scenario_index``, ``reading``, ``settings``, ``runs``), each
-    realisation through the co-simulation master with the plant FMU built in ``fmu_dir``
-    (default a temporary folder); ``learned``: the scenario's EM-learned (q, r), if known."""
+    """:func:`fast_task` (``scenario_index``, ``reading``, ``settings``, ``runs``) through the
+    master with the plant FMU built in ``fmu_dir`` (default a temporary folder); ``learned``:
+    the scenario's EM-learned (q, r), if known."""
     s = settings
     q, r = true_noise(s.scenarios[scenario_index], reading)
     system = _system(s.T)
@@ -329,12 +312,11 @@ def master_task(scenario_index: int, reading: str, settings: Settings, runs=None
 
 
 class CampaignResult(NamedTuple):
-    """What :func:`run` returns: ``per_run`` (a row per reading, scenario, filter and
-    realisation), ``eps`` (per reading, scenario, filter and step: eps_k (eq 43), average
-    NEES and NIS with their bands, each state's mean-square error), the ``examples`` of
-    Figure 3 by (reading, scenario), the ``wall`` time [s], ``consistency`` (a row per
-    reading, scenario and filter, and the PCRB's: RMSE, RMSE / PCRB, the tests and verdicts)
-    and ``bound`` (the PCRB per reading, scenario and step)."""
+    """What :func:`run` returns, by reading and scenario: ``per_run`` (a row per filter and
+    realisation), ``eps`` (per filter and step: eps_k (eq 43), average NEES and NIS with their
+    bands, each state's mean-square error), Figure 3's ``examples``, the ``wall`` time [s],
+    ``consistency`` (a row per filter and the PCRB's: RMSE, RMSE / PCRB, the tests and
+    verdicts) and ``bound`` (the PCRB per step)."""
 
     per_run: pd.DataFrame
     eps: pd.DataFrame
@@ -380,8 +362,8 @@ def _master_tasks(s: Settings, keys: list) -> tuple[list, list]:
 
 
 def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult:
-    """The campaign's tables from the task results (None: not finished): ``len(keys) *
-    len(chunks)`` filter tasks, then (master path) a PCRB task per key."""
+    """The campaign's tables from the filter tasks' results by key and chunk (None: not
+    finished), then (master path) a PCRB task's per key."""
     n = len(chunks)
     tables, examples = ([], [], [], []), {}
     for j, (rd, i) in enumerate(keys):
@@ -400,9 +382,8 @@ def _assemble(settings: Settings, keys, chunks, results, wall) -> CampaignResult
 
 
 def _scenario_tables(s: Settings, rd: str, i: int, parts: list, bound, whole: bool) -> tuple[list, list, list, list]:
-    """One reading and scenario's rows of the per-run and consistency tables, its eps_k and
-    bound frames, from ``parts`` ((runs, result) of its tasks; ``whole``: one task ran all
-    realisations, so its whiteness tests hold)."""
+    """One reading and scenario's per-run and consistency rows, eps_k and bound frames from
+    ``parts`` ((runs, result) of its tasks; ``whole``: one task ran all, its whiteness holds)."""
     q, r = true_noise(s.scenarios[i], rd)
     (q0, r0), (q_em, r_em) = nominal_noise(s, q, r), parts[0][1]["learned"]
     ident = {"reading": rd, "scenario": i + 1}
@@ -428,8 +409,7 @@ def _step_frame(ident: dict, k: np.ndarray, s: Settings, mse: np.ndarray, **colu
 
 
 def _filter_tables(s: Settings, head: dict, ident: dict, name: str, parts: list, bound, whole: bool):
-    """One filter's per-run rows (after ``head``), consistency row and eps_k frame over the
-    tasks' results ``parts``; ``bound``: the PCRB of all the realisations (None: unknown)."""
+    """One filter's per-run rows, consistency row and eps_k frame (``bound``: None if unknown)."""
     runs = np.concatenate([c for c, _ in parts])
     pr = {k: np.concatenate([res["per_run"][name][k] for _, res in parts])
           for k in ("eta", "diverged", "anees", "anis", "rmse")}
@@ -459,8 +439,7 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
     over that of the EKF given the true Q and R."""
     rows = []
     for (rd, sc), g in per_run.groupby(["reading", "scenario"], sort=True):
-        row = {"reading": rd, "scenario": sc, "sigma_q2": g["sigma_q2"].iloc[0],
-               "sigma_r2": g["sigma_r2"].iloc[0], "q0": g["q0"].iloc[0], "r0": g["r0"].iloc[0],
+        row = {"reading": rd, "scenario": sc, **{c: g[c].iloc[0] for c in ("sigma_q2", "sigma_r2", "q0", "r0")},
                "paper EKF": PAPER_ETA["EKF"][sc - 1], "paper MF-IAE": PAPER_ETA["MF-IAE"][sc - 1]}
         for name in FILTERS:
             f = g[g["filter"] == name]
@@ -470,7 +449,7 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
             if f["diverged"].any():
                 ok = f[~f["diverged"]]
                 row[f"{name} (no div.)"] = ok["eta"].mean() if len(ok) else np.nan
-        row["q_em"], row["r_em"] = g["q_em"].iloc[0], g["r_em"].iloc[0]
+        row.update({c: g[c].iloc[0] for c in ("q_em", "r_em")})
         for name in FILTERS[:-1]:
             row[f"{name} / {TRUE_EKF}"] = row[name] / row[TRUE_EKF]
         rows.append(row)
@@ -490,13 +469,12 @@ def agreement(table: pd.DataFrame) -> list[str]:
     """Sentences on where the ``table`` of :func:`summary_table` agrees with the paper's Table 3."""
     lines = []
     for rd, g in table.groupby("reading", sort=False):
-        for label, ours, paper in (("EKF", "EKF", "paper EKF"), ("MF-IAE", "MF-IAE", "paper MF-IAE")):
-            ratio = g[ours] / g[paper]
+        for name in ("EKF", "MF-IAE"):
+            ratio = g[name] / g[f"paper {name}"]
             within = ratio.between(0.9, 1.1)
-            cells = _join(ratio)
             verdict = ("agrees with the paper within 10 % in every scenario" if within.all() else
                        f"agrees within 10 % in {int(within.sum())} of {len(g)} scenarios")
-            lines.append(f"- {rd} reading, {label}: ours / paper = {cells}; {verdict}.")
+            lines.append(f"- {rd} reading, {name}: ours / paper = {_join(ratio)}; {verdict}.")
         vs = f" / {TRUE_EKF}"
         true_q = g["sigma_q2" if rd == "eqs" else "sigma_r2"]
         lines.append(f"- {rd} reading, eta over the EKF given the true Q and R: MF-IAE {_join(g['MF-IAE' + vs])} "
@@ -651,11 +629,9 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
         e1 = eps[(eps.reading == rd) & (eps.scenario == eps.scenario.min())]
         sc = int(e1["scenario"].iloc[0])
         for stat, label, ny in (("anees", "average NEES", 4), ("anis", "average NIS", 2)):
-            fig, axes = common.new_figure(1, 1, figsize=(8, 4))
-            ax = axes[0, 0]
+            fig, ((ax,),) = common.new_figure(1, 1, figsize=(8, 4))
             first = e1[e1["filter"] == FILTERS[0]]
-            lo, hi = ("nees_lo", "nees_hi") if stat == "anees" else ("nis_lo", "nis_hi")
-            ax.fill_between(first["time"], first[lo], first[hi], color="0.85",
+            ax.fill_between(first["time"], first[f"{stat[1:]}_lo"], first[f"{stat[1:]}_hi"], color="0.85",
                             label=f"{settings.confidence:.0%} band ({settings.runs} runs)")
             for name in FILTERS:
                 f = e1[e1["filter"] == name]
@@ -666,8 +642,7 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
             common.save_figure(fig, out / f"figure_{stat[1:]}_{rd}.png")
         b = bound[(bound.reading == rd) & (bound.scenario == sc)] if len(bound) else bound
         fig, axes = common.new_figure(4, 1, figsize=(8, 9), sharex=True)
-        for a, x in enumerate(STATES):
-            ax = axes[a, 0]
+        for ax, x in zip(axes[:, 0], STATES):
             for name in ("EKF", "MF-IAE", "SWML", TRUE_EKF):
                 f = e1[e1["filter"] == name]
                 ax.plot(f["time"], np.sqrt(f[f"mse_{x}"]), lw=0.9, label=name)
@@ -683,14 +658,11 @@ def _limit_figures(eps: pd.DataFrame, bound: pd.DataFrame, settings: Settings, o
 def _figures(eps, examples, settings: Settings, out: Path) -> None:
     """Figures 3 (scenario 1, realisation 0: truth and the EKF's and MF-IAE's estimates) and
     4 (scenario 1: eps_k of every filter) of the paper, one per reading."""
-    for rd in sorted({k[0] for k in examples}):
-        if (rd, 1) not in examples:
-            continue
+    for rd in sorted(rd for rd, sc in examples if sc == 1):
         ex = examples[(rd, 1)]
         t = np.arange(ex["truth"].shape[0]) * settings.T
         fig, axes = common.new_figure(4, 1, figsize=(8, 8), sharex=True)
-        for a in range(4):
-            ax = axes[a, 0]
+        for a, ax in enumerate(axes[:, 0]):
             ax.plot(t, ex["truth"][:, a], "k-", lw=1.2, label="truth")
             for name, style in (("EKF", "b--"), ("MF-IAE", "r-.")):
                 ax.plot(t, ex[f"est {name}"][:, a], style, lw=0.9, label=name)
@@ -716,15 +688,12 @@ class Seed000(Experiment, register="seed000"):
     configs = CONFIGS
 
     def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
-        """:func:`run`."""
         return run(settings, path=path, backend=backend, n_jobs=n_jobs, progress=progress)
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
-        """:func:`write_report`."""
         return write_report(result, settings, out_dir, path, config, partial=partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
-        """Table 3 beside ours, the agreement in words, and the distance to the PCRB."""
         table = summary_table(result.per_run)
         cols = ["reading", "scenario", "paper EKF", "paper MF-IAE", *FILTERS]
         cons = result.consistency

@@ -104,16 +104,11 @@ def run(settings: SweepSettings = SweepSettings(), backend: str = "processes", n
 def _cells(table: pd.DataFrame) -> pd.DataFrame:
     """Per filter and cell: the mean over the scenarios of the numbers, the worst state's
     RMSE / PCRB over the scenarios, and in how many scenarios the filter is consistent."""
-    t = table.assign(consistent=table["consistent"].astype(float),
-                     consistent_late=table["consistent_late"].astype(float))
-    g = t.groupby(["filter", "q_factor", "r_factor"])
-    cell = g.mean(numeric_only=True)
-    cell["pcrb_ratio_worst"] = g["pcrb_ratio_max"].max()
-    cell["pcrb_ratio_worst_late"] = g["pcrb_ratio_max_late"].max()
-    cell["scenarios"] = g.size()
-    cell["consistent_scenarios"] = g["consistent"].sum()
-    cell["consistent_scenarios_late"] = g["consistent_late"].sum()
-    return cell.reset_index()
+    g = table.astype({"consistent": float, "consistent_late": float}).groupby(["filter", "q_factor", "r_factor"])
+    return g.mean(numeric_only=True).join(g.agg(
+        pcrb_ratio_worst=("pcrb_ratio_max", "max"), pcrb_ratio_worst_late=("pcrb_ratio_max_late", "max"),
+        scenarios=("scenario", "size"), consistent_scenarios=("consistent", "sum"),
+        consistent_scenarios_late=("consistent_late", "sum"))).reset_index()
 
 
 def goals(table: pd.DataFrame, settings: SweepSettings) -> pd.DataFrame:
@@ -171,9 +166,8 @@ GRIDS = (("Worst state's RMSE / PCRB, largest over the scenarios (rows: Q0 facto
 
 
 def write_report(table: pd.DataFrame, wall: float, settings: SweepSettings, out_dir, partial: bool = False) -> Path:
-    """``sweep.csv|parquet``, ``goals.csv``, heat maps, ``settings.toml`` and ``summary.md``
-    into ``out_dir``; returns ``summary.md`` (``table``, ``wall``: the fields of
-    :class:`SweepResult`; ``settings``, ``partial`` as
+    """``sweep.csv|parquet``, ``goals.csv``, heat maps, ``settings.toml`` and ``summary.md`` into
+    ``out_dir`` (``table``, ``wall``: a :class:`SweepResult`'s; ``settings``, ``partial`` as
     :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     toml = to_toml(settings.campaign, "seed000-sweep") + f"factors = {list(settings.factors)}\n"
     out = common.report_folder(out_dir, toml, {"sweep.csv": table, "sweep.parquet": table})
@@ -220,9 +214,7 @@ def _goal_lines(table: pd.DataFrame, g: pd.DataFrame, wall: float, settings: Swe
 def _grid(table: pd.DataFrame, name: str, metric: str, how: str = "mean") -> pd.DataFrame:
     t = table[table["filter"] == name].assign(consistent=lambda d: d["consistent"].astype(float))
     g = t.groupby(["q_factor", "r_factor"])[metric].agg(how).unstack("r_factor")
-    g.index = [f"Q0 x{f:g}" for f in g.index]
-    g.columns = [f"R0 x{f:g}" for f in g.columns]
-    return g
+    return g.rename(index=lambda f: f"Q0 x{f:g}", columns=lambda f: f"R0 x{f:g}").rename_axis(index=None, columns=None)
 
 
 def _heatmaps(table: pd.DataFrame, settings: SweepSettings, out: Path) -> None:
@@ -277,16 +269,13 @@ class Sweep(Experiment, register="seed000-sweep"):
         return apply_overrides(replace(SweepSettings(), campaign=campaign), mine)
 
     def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
-        """:func:`run` (the fast path only)."""
         self.check_path(path)
         return run(settings, backend=backend, n_jobs=n_jobs, progress=progress)
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
-        """:func:`write_report`."""
         return write_report(*result, settings, out_dir, partial=partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
-        """The goals table."""
         return "\n".join([f"Seed 000 sweep: {len(settings.factors)} x {len(settings.factors)} cells, "
                           f"{settings.campaign.runs} realisations a cell, {result.wall:.1f} s",
                           goals(result.table, settings).to_string(index=False, float_format=lambda v: f"{v:.3f}")])

@@ -179,9 +179,8 @@ def summary_table(per_run: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_report(per_run, traces, wall, settings: Settings, out_dir, path: str, partial: bool = False) -> Path:
-    """The tables, the figure, ``settings.toml`` and ``summary.md`` into ``out_dir``; returns
-    ``summary.md`` (``per_run``, ``traces``, ``wall``: the fields of :class:`Seed002Result`;
-    ``settings``, ``path``, ``partial`` as
+    """The tables, the figure, ``settings.toml`` and ``summary.md`` into ``out_dir`` (``per_run``,
+    ``traces``, ``wall``: a :class:`Seed002Result`'s; ``settings``, ``path``, ``partial`` as
     :meth:`Experiment.write_report <cosim.experiments.experiment.Experiment.write_report>`)."""
     table = summary_table(per_run)
     out = common.report_folder(out_dir, to_toml(settings, "seed002"),
@@ -220,15 +219,12 @@ class Seed002(Experiment, register="seed002"):
     configs: ClassVar[dict] = {"default": Settings()}
 
     def run(self, settings, path="fast", backend="processes", n_jobs=None, progress=True):
-        """:func:`run`."""
         return run(settings, path=self.check_path(path), backend=backend, n_jobs=n_jobs, progress=progress)
 
     def write_report(self, result, settings, out_dir, path="fast", config="custom", partial=False):
-        """:func:`write_report`."""
         return write_report(*result, settings, out_dir, path, partial)
 
     def summary(self, result, settings, path="fast", config="custom"):
-        """What the EKF adds over its inputs, and the loop."""
         agg = result.per_run.groupby("case", sort=False)[["balanced", "bias estimate", "alpha lag [s]",
                                                           "alpha amplitude ratio"]].mean()
         return "\n".join([f"Seed 002: wheel pendulum through the sensor chain, {settings.runs} realisations, "

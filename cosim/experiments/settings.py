@@ -94,9 +94,7 @@ def _convert(name: str, value, kind, default):
         if not isinstance(value, (list, tuple)):
             value = [value]
         return tuple(tuple(v) if isinstance(v, list) else v for v in value)
-    if kind is bool:
-        if isinstance(value, bool):
-            return value
+    if kind is bool and not isinstance(value, bool):
         raise ConfigurationError(f"setting {name} must be true or false, got {value!r}")
     if kind in (int, float):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
