@@ -1,13 +1,10 @@
-"""The component protocol: what the co-simulation master needs from every component.
+"""The component protocol (:class:`~cosim.core.component.Component`), the one class the master depends on.
 
-Every component, FMU or Python, is a :class:`Component`, the one class the master depends on. At
-each of its instants the master calls ``output(t, u)`` (in an order that respects the declared
-direct ``feedthrough``), records the row, then ``update(t, u)``; ``reset`` comes before a run,
-``close`` after it; a ``reentrant`` component may evaluate ``output`` twice at an instant (an
-algebraic loop). Optional capabilities are protocols tested with ``isinstance``:
-:class:`FastBinding` (``bind``, the loop's fast path), :class:`ExportsFMU`, :class:`StateEstimator`.
-The whole protocol (zero-order hold, exact integer signals, :class:`StopRequest`) is on the
-extending page of the documentation.
+At each instant the master calls ``output(t, u)`` (in an order that respects the direct
+``feedthrough``), records the row, then ``update(t, u)``; ``reset`` comes before a run, ``close``
+after it; a ``reentrant`` component may evaluate ``output`` twice at an instant. Optional
+capabilities (``bind``, ``export_fmu``, state estimates) are protocols tested with ``isinstance``.
+The whole protocol is on the extending page of the documentation.
 """
 from __future__ import annotations
 
@@ -24,8 +21,8 @@ from fmu_models.infra.checks import positive
 from fmu_models.infra.registry import Registry
 
 __all__ = ["CLOCK", "COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding",
-           "Port", "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
-           "ports_compatible", "split_port"]
+           "Port", "StateEstimator", "StopRequest", "bind_protocol", "check_name", "port_kind", "ports_compatible",
+           "split_port"]
 
 #: FMI type names a port may have, by kind (real, integer incl. enumerations, boolean).
 PORT_TYPES = {
@@ -95,12 +92,6 @@ def check_name(name: str, what: str = "component name") -> str:
     if not isinstance(name, str) or not name.isidentifier() or not name.isascii():
         raise ConfigurationError(f"{what} {name!r} must be an ASCII identifier (letters, digits, _)")
     return name
-
-
-def check_period(period, owner: str) -> float:
-    """A component's sample period [s] as a positive finite float, else
-    :class:`ConfigurationError` naming the ``owner`` component."""
-    return positive(period, f"{owner}: sample period")
 
 
 def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Port, ...]:
@@ -252,7 +243,7 @@ class Component(ABC):
                  feedthrough: Mapping[str, Sequence[str]] | bool = True,
                  port_names_are_identifiers: bool = True):
         self.name = check_name(name)
-        self.period = check_period(period, name)
+        self.period = positive(period, f"{name}: sample period")
         self.input_ports = _as_ports(inputs, name, "input", port_names_are_identifiers)
         self.output_ports = _as_ports(outputs, name, "output", port_names_are_identifiers)
         self.feedthrough = self._feedthrough(feedthrough)

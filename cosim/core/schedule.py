@@ -19,6 +19,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 
+import numpy as np
+from scipy.sparse import coo_array
+from scipy.sparse.csgraph import connected_components
+
 from fmu_models.errors import ConfigurationError, ResourceError
 
 from .component import Component
@@ -122,39 +126,15 @@ def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
     return [Unit(comp, "all", frozenset(comp.output_names), needs)]
 
 
-def _sccs(nodes: list, edges: dict) -> list[list]:
-    """Strongly connected components (Tarjan, iterative), each in discovery order."""
-    index, low, on, stack, work, out = {}, {}, set(), [], [], []
-
-    def visit(v) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on.add(v)
-        work.append((v, iter(edges.get(v, ()))))
-
-    for root in nodes:
-        if root in index:
-            continue
-        visit(root)
-        while work:
-            v, it = work[-1]
-            for w in it:
-                if w not in index:
-                    visit(w)
-                    break
-                if w in on:
-                    low[v] = min(low[v], index[w])
-            else:                               # every successor seen: v is done
-                work.pop()
-                if work:
-                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
-                if low[v] == index[v]:
-                    comp = []
-                    while not comp or comp[-1] != v:
-                        comp.append(stack.pop())
-                        on.discard(comp[-1])
-                    out.append(comp)
-    return out
+def _sccs(units: list, edges: dict) -> list[list]:
+    """Strongly connected components of the graph ``edges``, each in ``units`` order."""
+    at = {u: i for i, u in enumerate(units)}
+    arcs = np.array([(at[u], at[v]) for u in units for v in edges[u]], dtype=np.intp).reshape(-1, 2)
+    graph = coo_array((np.ones(len(arcs)), (arcs[:, 0], arcs[:, 1])), shape=(len(units), len(units)))
+    sccs: dict = {}
+    for u, label in zip(units, connected_components(graph, connection="strong")[1]):
+        sccs.setdefault(label, []).append(u)
+    return list(sccs.values())
 
 
 def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
