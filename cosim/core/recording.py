@@ -1,11 +1,6 @@
-"""Recording of co-simulation signals: which signals, how often, in memory or streamed to disk.
-
-The signals matching glob ``signals`` (:func:`select_signals`) are recorded every
-``output_interval`` (a multiple of the base step), in memory (:class:`MemorySink`, a DataFrame at
-the end) or streamed to a Parquet file in chunks (:class:`ParquetSink`, constant memory; written
-under a temporary name and renamed at the end; a failed run leaves ``<name>.partial.parquet``).
-Integer signals are recorded exactly (``int64``; ``uint64`` for UInt64 columns); the last row of a
-run a component stopped may lie between two recording instants (``last_time``).
+"""Recording of co-simulation signals: the signals matching glob patterns, every ``output_interval``,
+in memory (:class:`~cosim.core.recording.MemorySink`) or streamed to a Parquet file in chunks
+(:class:`~cosim.core.recording.ParquetSink`); integer signals exactly (``int64``, ``uint64`` for UInt64).
 """
 from __future__ import annotations
 
@@ -113,21 +108,15 @@ class MemorySink(_Rows):
         """``rows`` more rows of ``buffer`` are complete (it holds the whole run: it fills once)."""
         self.n += rows
 
-    def frame(self) -> pd.DataFrame:
-        """The rows recorded so far, indexed by ``time``."""
+    def finish(self) -> pd.DataFrame:
+        """The rows recorded so far (after a successful run: the whole recording), indexed by ``time``."""
         df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(self._times(0, self.n), name="time"),
                           columns=self.columns, copy=False)     # the run is over, nothing writes the buffer
         for k, pos in enumerate(self.int_positions):
             df[self.columns[pos]] = self._exact(k, self.n).copy()
         return df
 
-    def finish(self) -> pd.DataFrame:
-        """End of a successful run: the whole recording."""
-        return self.frame()
-
-    def abort(self) -> pd.DataFrame:
-        """End of a failed run: the rows recorded so far."""
-        return self.frame()
+    abort = finish          # a failed run: the rows recorded so far
 
 
 class ParquetSink(_Rows):
