@@ -109,7 +109,7 @@ class Stepping:
             self.members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
                             for me in range(self.n)]
             self.thread_of = {c: me for me, calls in enumerate(self.members) for c in calls}
-            self._parallel(self.thread_of, self.members)
+            self._parallel()
 
     def _groups(self) -> list[tuple[set, list]]:
         """The FMU update calls of the parallel runs, in groups that never step at once (a
@@ -154,7 +154,7 @@ class Stepping:
             thread_of.update(dict.fromkeys(self.groups[g][1], me))
         return thread_of, members
 
-    def _parallel(self, thread_of: dict, members: list) -> bool:
+    def _parallel(self) -> bool:
         """Step on the pool's threads by ``thread_of`` (each thread's calls: ``members``); False
         (and serially) if the threads could not be started."""
         if self.pool is None:
@@ -163,8 +163,8 @@ class Stepping:
                 self._serial(f"serial: {self.n} threads could not be started")
                 return False
         self.kst.pool, self.on_threads = self.pool, True
-        self._lanes(thread_of)
-        names = [", ".join(self.run.owner.get(c, "?") for c in calls) for calls in members]
+        self._lanes(self.thread_of)
+        names = [", ".join(self.run.owner.get(c, "?") for c in calls) for calls in self.members]
         self.text = f"{self.n} threads: " + "; ".join(f"[{n}]" for n in names)
         return True
 
@@ -190,7 +190,7 @@ class Stepping:
         elif (self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check
               and time.perf_counter() >= self.next_time):
             decided = self.text
-            if self._parallel(self.thread_of, self.members):
+            if self._parallel():
                 self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
                 self._measure(warm=True)
 
@@ -200,13 +200,6 @@ class Stepping:
         self.kst.timing, self.kst.seg_time = 1, 0.0
         self.cost[:] = 0.0
 
-    def chunk_length(self, adaptive: int) -> int:
-        """The next chunk's base steps: ``adaptive`` (the loop's own), or while measuring one
-        warming block, then :data:`MEASURE_BLOCKS` blocks (the threads may sleep between chunks)."""
-        if self.state != "measure":
-            return adaptive
-        return BLOCK if self.warm else MEASURE_BLOCKS * BLOCK
-
     def _decide(self, steps: int) -> None:
         """After ``steps`` measured base steps: the threads balanced by the updates' times, and kept
         or (``threads="auto"``) left for the serial loop."""
@@ -215,7 +208,7 @@ class Stepping:
         measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)}"
         if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
             self._serial(f"serial: the FMU updates that may step at once took {measured}")
-        elif self._parallel(self.thread_of, self.members):
+        elif self._parallel():
             self.state, self.kst.timing = "parallel", 0
             self.text += f" (measured: {measured})"
 
@@ -323,13 +316,15 @@ class NativeLoop:
 
     def _chunk(self) -> None:
         """A chunk done: the bar moves, and the next chunk's length aims at :data:`CHUNK_SECONDS`."""
-        kst = self.kst
+        kst, stepping = self.kst, self.stepping
         self.run.bar.update(kst.k - self.done)
         now = time.perf_counter()
-        self.stepping.chunk(kst.k - self.done, now - self.since)
+        stepping.chunk(kst.k - self.done, now - self.since)
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-        self.done, self.since, kst.kstop = kst.k, now, kst.k + self.stepping.chunk_length(self.chunk)
+        # while measuring: one warming block, then MEASURE_BLOCKS blocks (the threads may sleep between chunks)
+        length = self.chunk if stepping.state != "measure" else BLOCK if stepping.warm else MEASURE_BLOCKS * BLOCK
+        self.done, self.since, kst.kstop = kst.k, now, kst.k + length
 
     def _end(self, event: int) -> None:
         """The end of the loop by ``event``: the bar's last steps, the non-finite signal or the
