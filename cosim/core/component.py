@@ -197,28 +197,22 @@ class Component(ABC):
         Unique identifier of the component in a co-simulation.
     period : float
         Sample period [s].
-    inputs : sequence of str or Port
-        Input ports (strings are Float64 ports).
-    outputs : sequence of str or Port
-        Output ports.
+    inputs, outputs : sequence of str or Port
+        Input and output ports (strings are Float64 ports), kept as ``input_ports`` and
+        ``output_ports`` (tuples of Port).
     feedthrough : mapping or bool, optional
         Which inputs each output depends on directly: ``{output: [inputs]}`` (outputs not
         listed depend on no input), ``True`` (every output on every input; the default)
-        or ``False`` (no output on any input).
+        or ``False``; kept as a dict of output name -> frozenset of input names.
     port_names_are_identifiers : bool
         Check that port names are identifiers (default True; FMU variables such as
         ``der(x)`` are not).
 
     Attributes
     ----------
-    input_ports, output_ports : tuple of Port
-    feedthrough : dict of str to frozenset of str
-        Output name -> the input names it depends on directly.
-    reentrant : bool
-        ``output`` may be called several times at one instant (class attribute, default False).
-    holds_inputs : bool
-        The inputs consumed by ``update`` are held over ``[t, t + period]`` (class attribute,
-        default False).
+    reentrant, holds_inputs : bool
+        Class attributes (default False): ``output`` may be called several times at one instant;
+        the inputs ``update`` consumes are held over ``[t, t + period]``.
     n_samples : int
         Instants of the last run at which the component computed its outputs.
     """

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import fnmatch
-import json
 import os
 import shutil
 from collections.abc import Sequence
@@ -155,12 +154,10 @@ class ParquetSink(_Rows):
         super().__init__(columns, int(chunk_rows), t0, step, every, int_columns)
         self.total, self._pa = 0, pa
         self._exact_at = {int(p): k for k, p in enumerate(self.int_positions)}     # column -> exact column
-        kinds = [pa.float64() if j not in self._exact_at else
-                 pa.uint64() if self._int_types[self._exact_at[j]] == "UInt64" else pa.int64()
-                 for j in range(len(self.columns))]
-        meta = {b"pandas": _pandas_metadata(self.columns, {self.columns[j]: str(kinds[j]) for j in self._exact_at})}
-        self.schema = pa.schema([pa.field("time", pa.float64())]
-                                + [pa.field(c, kind) for c, kind in zip(self.columns, kinds)], metadata=meta)
+        # pandas' own metadata, so that pandas.read_parquet restores the time index; time the first column
+        empty = pd.DataFrame(dict(zip(self.columns, self._arrays(0))), index=pd.Index([], dtype=float, name="time"))
+        schema = pa.Schema.from_pandas(empty)
+        self.schema = pa.schema([schema.field("time"), *list(schema)[:-1]], metadata=schema.metadata)
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
         # every chunk also goes to an Arrow stream, complete on disk once written: if an FMU's
@@ -175,13 +172,16 @@ class ParquetSink(_Rows):
         """Write the first ``rows`` rows of ``buffer`` as one row group."""
         if not rows:
             return
-        columns = [self.buffer[:rows, j] if j not in self._exact_at else self._exact(self._exact_at[j], rows)
-                   for j in range(len(self.columns))]
-        table = self._pa.Table.from_arrays([self._pa.array(c) for c in (self._times(self.total, rows), *columns)],
-                                           schema=self.schema)
+        arrays = (self._times(self.total, rows), *self._arrays(rows))
+        table = self._pa.Table.from_arrays([self._pa.array(a) for a in arrays], schema=self.schema)
         self.writer.write_table(table)
         self._ipc.write_table(table)
         self.total += rows
+
+    def _arrays(self, rows: int) -> list[np.ndarray]:
+        """The first ``rows`` values of every column, the exact integer ones as :meth:`_exact` gives them."""
+        return [self.buffer[:rows, j] if j not in self._exact_at else self._exact(self._exact_at[j], rows)
+                for j in range(len(self.columns))]
 
     def _close(self) -> None:
         """Close the Parquet writer and end the crash-safe stream."""
@@ -252,13 +252,3 @@ class RowWriter:
             self.sink.flush(row)
             row = 0
         return row
-
-
-def _pandas_metadata(columns: Sequence[str], exact: dict) -> bytes:
-    """pandas' Parquet metadata for a frame indexed by ``time`` (float columns, and the exact
-    integer ones named in ``exact`` with their types), so that ``pandas.read_parquet``
-    restores the index."""
-    cols = [{"name": c, "field_name": c, "pandas_type": exact.get(c, "float64"),
-             "numpy_type": exact.get(c, "float64"), "metadata": None} for c in [*columns, "time"]]
-    return json.dumps({"index_columns": ["time"], "column_indexes": [], "columns": cols,
-                       "creator": {"library": "pendulum-cosim"}, "pandas_version": pd.__version__}).encode()

@@ -1,12 +1,6 @@
-"""Static analysis of a co-simulation before it runs: base step, evaluation order, loops.
-
-:func:`base_step` gives the base step (the exact rational greatest common divisor of the
-periods), each period in base steps and the hyperperiod, refusing unreasonable sets of periods
-(1 ms beside pi ms). :func:`evaluation_order` sorts the components' outputs at an instant
-topologically by the connections and the declared direct feedthrough (any list order gives the
-same result); a cycle of direct dependencies is an algebraic loop, refused with its ports named
-or kept as a group to iterate (``loops="iterate"``). A cycle only between components, not ports,
-is broken by evaluating a reentrant component twice: its outputs that depend on no input first.
+"""Static analysis of a co-simulation before it runs: the base step (:func:`~cosim.core.schedule.base_step`)
+and the evaluation order of the outputs at an instant (:func:`~cosim.core.schedule.evaluation_order`), as
+the co-simulation page of the documentation describes them (order, timing and latency).
 """
 from __future__ import annotations
 
