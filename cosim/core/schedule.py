@@ -220,19 +220,18 @@ def _topological(units: list[Unit], edges: dict, node_of: dict, key) -> list[Gro
     for u, vs in edges.items():
         succ[node_of[u]].update(node_of[v] for v in vs if node_of[v] != node_of[u])
     indeg = Counter(b for bs in succ.values() for b in bs)
-    keys = {}
-    for n, ms in members.items():
+    rank = {}
+    for i, (n, ms) in enumerate(members.items()):
         ms.sort(key=key)
-        keys[n] = key(ms[0])
-    seq = {n: i for i, n in enumerate(members)}          # a total order among equal keys
-    ready = [(keys[n], seq[n], n) for n in members if indeg[n] == 0]
+        rank[n] = (key(ms[0]), i)                       # i: a total order among equal keys
+    ready = [(rank[n], n) for n in members if indeg[n] == 0]
     heapq.heapify(ready)
     order: list[Group] = []
     while ready:
-        _, _, n = heapq.heappop(ready)
+        n = heapq.heappop(ready)[1]
         order.append(Group(tuple(members[n]), loop=isinstance(n, tuple)))
         for m in succ[n]:
             indeg[m] -= 1
             if indeg[m] == 0:
-                heapq.heappush(ready, (keys[m], seq[m], m))
+                heapq.heappush(ready, (rank[m], m))
     return order
