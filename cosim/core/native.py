@@ -95,13 +95,11 @@ def load_kernel() -> tuple[ctypes.CDLL | None, str]:
         return _kernel[0], _kernel[1]
     lib, why = compiled_library(_SOURCE.read_text(), "kernel", _FLAGS, "kernel_run", "the native co-simulation kernel",
                                 "runs take the Python path (same results, slower)", link=("-lm", "-pthread"))
-    if lib is not None:
-        lib.kernel_run.restype = ctypes.c_int
-        lib.kernel_run.argtypes = [ctypes.POINTER(KState)]
-        lib.kernel_pool_start.restype = ctypes.c_void_p
-        lib.kernel_pool_start.argtypes = [ctypes.c_int64]
-        lib.kernel_pool_stop.restype = None
-        lib.kernel_pool_stop.argtypes = [ctypes.c_void_p]
+    signatures = {"kernel_run": (ctypes.c_int, [ctypes.POINTER(KState)]), "kernel_pool_start": (_P, [_I]),
+                  "kernel_pool_stop": (None, [_P])}
+    for name, (restype, argtypes) in signatures.items() if lib is not None else ():
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = restype, argtypes
     _kernel[:] = [lib, why]
     return lib, why
 
