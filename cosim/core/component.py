@@ -336,12 +336,9 @@ def _exact(value, type_name: str, owner: str, port: str) -> int:
 
 def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, inputs, outputs: slice,
                   integers: np.ndarray | None = None) -> tuple[Callable[[float], None], Callable[[float], None]]:
-    """``(output_fn, update_fn)`` calling ``comp``'s :meth:`~Component.output` and
-    :meth:`~Component.update` with its inputs read from ``source[inputs]`` and its outputs
-    written to ``values[outputs]`` (the number checked), the exact values of integer and Boolean
-    ports also to ``integers[outputs]``: the binding of a component without :class:`FastBinding`
-    (``source is values``), and the Jacobi order's binding of any component (``source``: the
-    values before the instant)."""
+    """The :meth:`FastBinding.bind` of ``comp`` through its :meth:`~Component.output` (the number of
+    outputs checked) and :meth:`~Component.update`: outputs to ``values[outputs]`` (and ``integers``),
+    inputs from ``source[inputs]`` (``values``; for the Jacobi order, the values before the instant)."""
     n_out = outputs.stop - outputs.start
     output, update = comp.output, comp.update
     exact = [] if integers is None else [(j, outputs.start + j, p.type) for j, p in enumerate(comp.output_ports)
