@@ -1,10 +1,7 @@
-"""The native kernel: the master's base-step loop in compiled C (``kernel.c``, the co-simulation
-page of the documentation), interpreting a :class:`~cosim.core.native.Program`.
-
-Per pattern of due components, the program holds the operations of the bound output and update
-calls: a call that can run natively lists them in its ``native`` attribute (:class:`Op`), any other
-returns to Python, which makes it and resumes the kernel. The kernel computes as the Python path
-does, without fused multiply-adds, so the results are the same bit for bit.
+"""The native kernel: the master's base-step loop in compiled C (``kernel.c``; the co-simulation page
+of the documentation), interpreting a :class:`~cosim.core.native.Program` of the bound calls'
+operations (:class:`Op`; a call without them returns to Python). It computes as the Python path
+does, without fused multiply-adds: the same results bit for bit.
 """
 from __future__ import annotations
 

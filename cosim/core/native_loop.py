@@ -1,10 +1,6 @@
-"""A run's loop in the native kernel (:class:`~cosim.core.native_loop.NativeLoop`), and which thread steps each FMU.
-
-:class:`NativeLoop` answers the kernel's events (a Python call, a hook, a noise refill, a chunk
-done, a full record buffer) until it ends, handing the run's position and the Python objects'
-state back first whichever way it ends; :class:`Stepping` balances the FMU updates on a pool's
-threads. Both are described in the co-simulation page of the documentation (the native kernel,
-parallel stepping): the same results bit for bit as the serial run.
+"""A run's loop in the native kernel (:class:`~cosim.core.native_loop.NativeLoop`, answering the kernel's
+events) and which thread steps each FMU (:class:`~cosim.core.native_loop.Stepping`), both described in the
+co-simulation page of the documentation (the native kernel, parallel stepping).
 """
 from __future__ import annotations
 
