@@ -203,13 +203,12 @@ class ParquetSink(_Rows):
         """End of a failed or interrupted run (after the last :meth:`flush`): keep the rows so far as
         ``<name>.partial.parquet`` (returned), or nothing if no row was recorded."""
         self._close()
-        if self.total == 0:
-            with contextlib.suppress(OSError):
-                os.unlink(self.tmp)
-            return None
-        target = partial_path(self.path)
-        os.replace(self.tmp, target)
-        return target
+        if self.total:
+            os.replace(self.tmp, partial_path(self.path))
+            return partial_path(self.path)
+        with contextlib.suppress(OSError):
+            os.unlink(self.tmp)
+        return None
 
 
 class RowWriter:
