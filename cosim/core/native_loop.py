@@ -213,12 +213,11 @@ class Stepping:
         self.kst.pool, self.on_threads = None, False
         self.state, self.text, self.kst.timing = "serial", why, 0
 
-    def finish(self, steps: int, seconds: float) -> None:
-        """The loop ended ``steps`` base steps and ``seconds`` [s] after the last chunk: a
-        measurement under way is decided on what it measured, and the pool's threads end."""
+    def finish(self, steps: int) -> None:
+        """The loop ended ``steps`` base steps after the last chunk: a measurement under way is
+        decided on what it measured, and the pool's threads end."""
         if self.state == "measure" and self.measured[0] + steps > 0:
-            self.measured = (self.measured[0] + steps, self.measured[1] + seconds)
-            self._decide(self.measured[0])
+            self._decide(self.measured[0] + steps)
         pool, self.pool = self.pool, None
         self.kst.pool = None
         if pool:
@@ -292,7 +291,7 @@ class NativeLoop:
                 else:
                     break
         finally:
-            self.stepping.finish(kst.k - self.done, time.perf_counter() - self.since)
+            self.stepping.finish(kst.k - self.done)
             run.cosim.stepping = self.stepping.text
             run.k, run.j, run.jb, run.k0 = kst.k, kst.j, kst.jb, kst.k0
             for sync in program.syncs_out:

@@ -72,9 +72,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
             f"{float(base):.3g} s, {ratios[worst]} times shorter than {worst!r}'s period (limit "
             f"{MAX_RATIO}). Use periods that are multiples of a common step (e.g. round them), "
             "or set step_size and periods that divide it")
-    hyper = 1
-    for r in ratios.values():
-        hyper = math.lcm(hyper, r)
+    for hyper in itertools.accumulate(ratios.values(), math.lcm):
         if hyper > MAX_HYPERPERIOD:
             raise ResourceError(
                 f"the periods ({listing}) repeat their pattern only every {hyper}+ base steps of "
@@ -114,7 +112,7 @@ def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
     ft = {o: frozenset(comp.feedthrough.get(o, ())) & connected for o in comp.output_names}
     free = frozenset(o for o, d in ft.items() if not d)
     dep = frozenset(comp.output_names) - free
-    needs = frozenset().union(*ft.values()) if ft else frozenset()
+    needs = frozenset().union(*ft.values())
     if split and free and dep:
         return [Unit(comp, "free", free, frozenset()), Unit(comp, "dependent", dep, needs)]
     return [Unit(comp, "all", frozenset(comp.output_names), needs)]
