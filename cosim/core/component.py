@@ -144,12 +144,15 @@ class BoundCalls:
 
     _private = None
 
-    def _private_binding(self):
+    def _bound(self, u) -> tuple:
+        """``(buf, output_fn, update_fn)`` of the private binding, its inputs set to ``u``."""
         if self._private is None:
             n_in, n_out = len(self.connected_inputs), len(self.output_names)
             buf, ints = np.zeros(n_in + n_out), np.zeros(n_in + n_out, dtype=np.int64)
             self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
-        return self._private
+        buf, ints, out_fn, upd_fn = self._private
+        self._set_private_inputs(buf, ints, u)
+        return buf, out_fn, upd_fn
 
     def _set_private_inputs(self, buf: np.ndarray, ints: np.ndarray, u) -> None:
         n_in = len(self.connected_inputs)
@@ -158,16 +161,13 @@ class BoundCalls:
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
         """Outputs at ``t`` [s] from the connected inputs ``u`` (in order); a new array."""
-        buf, ints, out_fn, _ = self._private_binding()
-        self._set_private_inputs(buf, ints, u)
+        buf, out_fn, _ = self._bound(u)
         out_fn(t)
         return buf[len(self.connected_inputs):].copy()
 
     def update(self, t: float, u: np.ndarray) -> None:
         """Set the connected inputs ``u`` and advance over ``[t, t + period]`` (``t`` in s)."""
-        buf, ints, _, upd_fn = self._private_binding()
-        self._set_private_inputs(buf, ints, u)
-        upd_fn(t)
+        self._bound(u)[2](t)
 
 
 @runtime_checkable

@@ -1,7 +1,7 @@
 """The native kernel: the master's base-step loop in compiled C (``kernel.c``; the co-simulation page
 of the documentation), interpreting a :class:`~cosim.core.native.Program` of the bound calls'
-operations (:class:`Op`; a call without them returns to Python). It computes as the Python path
-does, without fused multiply-adds: the same results bit for bit.
+operations (:class:`~cosim.core.native.Op`; a call without them returns to Python). It computes as
+the Python path does, without fused multiply-adds: the same results bit for bit.
 """
 from __future__ import annotations
 
