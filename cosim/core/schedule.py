@@ -119,9 +119,9 @@ def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
 
 
 def _sccs(units: list, edges: dict) -> list[list]:
-    """Strongly connected components of the graph ``edges``, each in ``units`` order."""
+    """Strongly connected components of the graph ``edges`` among ``units``, each in ``units`` order."""
     at = {u: i for i, u in enumerate(units)}
-    arcs = np.array([(at[u], at[v]) for u in units for v in edges[u]], dtype=np.intp).reshape(-1, 2)
+    arcs = np.array([(at[u], at[v]) for u in units for v in edges.get(u, ()) if v in at], dtype=np.intp).reshape(-1, 2)
     graph = coo_array((np.ones(len(arcs)), (arcs[:, 0], arcs[:, 1])), shape=(len(units), len(units)))
     sccs: dict = {}
     for u, label in zip(units, connected_components(graph, connection="strong")[1]):
