@@ -232,12 +232,8 @@ def plot_signals(df: pd.DataFrame, path=None, title: str = ""):
 
     Parameters
     ----------
-    df : DataFrame
-        Results indexed by time [s].
-    path : path, optional
-        Write the figure to this PNG file.
-    title : str
-        Figure title.
+    df, path, title
+        As :func:`plot_estimates`.
 
     Returns the matplotlib Figure.
     """

@@ -51,10 +51,8 @@ class ScenarioContext:
 
     Parameters
     ----------
-    base_dir : path
-        The scenario file's folder (relative paths refer to it).
-    fmu_dir : path
-        Where to build this project's FMUs.
+    base_dir, fmu_dir : path
+        As :class:`Scenario` (``fmu_dir`` given, not defaulted).
     """
 
     def __init__(self, base_dir, fmu_dir):

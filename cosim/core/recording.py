@@ -125,16 +125,10 @@ class ParquetSink(_Rows):
     ----------
     path : path
         Target file; written as ``.<name>.<pid>.tmp`` and renamed at the end.
-    columns : sequence of str
-        Signal names of the recorded columns.
-    n_rows : int
-        Rows the run will record (for the disk-space check).
-    t0, step, every
-        As :class:`MemorySink`.
+    columns, n_rows, t0, step, every, int_columns
+        As :class:`MemorySink` (``n_rows`` for the disk-space check).
     chunk_rows : int
         Rows per Parquet row group (default 8192).
-    int_columns : dict of int to str, optional
-        As :class:`MemorySink`.
     """
 
     def __init__(self, path, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
