@@ -8,7 +8,7 @@ import contextlib
 import fcntl
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -55,10 +55,64 @@ def _files_below(folder: Path) -> list[str]:
     return sorted(p for p in paths if p != MARKER)
 
 
-class OutputFolder:
-    """An output folder held for one run (a context manager): created (and removed again,
-    parents included, if the run wrote nothing), checked, optionally cleared, locked
-    (``flock``); only the files a previous run listed in its marker file
+def _manifest(folder: Path) -> set[str] | None:
+    """What a previous run of this project wrote in ``folder``, or None (no or unreadable marker)."""
+    try:
+        data = json.loads((folder / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    files = data.get("files") if isinstance(data, dict) and data.get("tool") == "pendulum-cosim" else None
+    return set(files) if isinstance(files, list) and all(isinstance(x, str) for x in files) else None
+
+
+def _write_marker(folder: Path, files: list[str], state: str) -> None:
+    atomic_write(folder / MARKER, lambda tmp: tmp.write_text(json.dumps(
+        {"tool": "pendulum-cosim", "state": state, "files": files}, indent=1), encoding="utf-8"))
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders this run created, the deepest first, if nothing was written in them."""
+    for d in reversed(folders):
+        with contextlib.suppress(OSError):
+            d.rmdir()
+
+
+def _take(p: Path, overwrite: bool) -> None:
+    """Check the locked output folder ``p``, clear a previous result of this project from it
+    (``overwrite``) and mark it as ours; a ConfigurationError says why not."""
+    content = _files_below(p)
+    if content:
+        if not overwrite:
+            raise ConfigurationError(f"the output folder {p} is not empty ({len(content)} entries, e.g. "
+                                     f"{content[0]}); use --overwrite to replace a previous result of "
+                                     "pendulum-cosim, or another --out")
+        ours = _manifest(p)
+        foreign = content if ours is None else [f for f in content if f not in ours]
+        if foreign:
+            shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+            raise ConfigurationError(f"the output folder {p} holds files pendulum-cosim did not write ({shown}); "
+                                     "--overwrite only replaces a previous result of pendulum-cosim; move them or "
+                                     "choose another --out (nothing was removed)")
+        for rel in sorted(content, key=lambda f: -f.count("/")):      # files, then their folders
+            entry = p / rel
+            with contextlib.suppress(FileNotFoundError):
+                if entry.is_dir() and not entry.is_symlink():
+                    entry.rmdir()
+                else:
+                    entry.unlink()
+    if not os.access(p, os.W_OK):
+        raise ConfigurationError(f"the output folder {p} is not writable")
+    try:
+        _write_marker(p, [], "running")
+    except OSError as e:
+        raise ConfigurationError(f"cannot write into the output folder {p}: {e.strerror or e}") from None
+
+
+@contextlib.contextmanager
+def OutputFolder(path, overwrite: bool = False) -> Iterator[Path]:
+    """An output folder held for one run (a context manager giving its path): created (and
+    removed again, parents included, if the run wrote nothing), checked, optionally cleared,
+    locked (``flock``); only the files a previous run listed in its marker file
     (``.pendulum-cosim-output``) are ever cleared.
 
     Parameters
@@ -76,104 +130,45 @@ class OutputFolder:
         files this project did not write, another run holds the folder, or it cannot be
         created or written.
     """
-
-    def __init__(self, path, overwrite: bool = False):
-        self.path, self.overwrite = Path(path), bool(overwrite)
-        self._fd: int | None = None
-        self._created: list[Path] = []
-        self._owned = False                    # the checks passed: what is written now is ours
-
-    def _refuse(self, message: str):
-        self.__exit__(None, None, None)
-        raise ConfigurationError(message)
-
-    def _manifest(self) -> set[str] | None:
-        """What a previous run of this project wrote here, or None (no or unreadable marker)."""
+    p, created = Path(path), []
+    if p.exists() and not p.is_dir():
+        raise ConfigurationError(f"--out {p} is a file, not a folder")
+    try:
+        for d in reversed([q for q in (p.absolute(), *p.absolute().parents) if not q.exists()]):
+            d.mkdir()
+            created.append(d)
+        fd = os.open(p, os.O_RDONLY)
+    except OSError as e:
+        _remove_empty(created)
+        raise ConfigurationError(f"cannot create the output folder {p}: {e.strerror or e}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise ConfigurationError(f"another pendulum-cosim run is writing to {p}; wait for it or "
+                                 "choose another --out") from None
+    owned, state = False, "failed"
+    try:
+        _take(p, overwrite)
+        owned = True                    # the checks passed: what is written now is ours
+        yield p
+        state = "complete"
+    finally:
         try:
-            data = json.loads((self.path / MARKER).read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return None
-        files = data.get("files") if isinstance(data, dict) and data.get("tool") == "pendulum-cosim" else None
-        return set(files) if isinstance(files, list) and all(isinstance(x, str) for x in files) else None
-
-    def _write_marker(self, files: list[str], state: str) -> None:
-        atomic_write(self.path / MARKER, lambda tmp: tmp.write_text(json.dumps(
-            {"tool": "pendulum-cosim", "state": state, "files": files}, indent=1), encoding="utf-8"))
-
-    def __enter__(self) -> Path:
-        p = self.path
-        if p.exists() and not p.is_dir():
-            raise ConfigurationError(f"--out {p} is a file, not a folder")
-        missing = [q for q in (p.absolute(), *p.absolute().parents) if not q.exists()]
-        try:
-            for d in reversed(missing):
-                d.mkdir()
-                self._created.append(d)
-            self._fd = os.open(p, os.O_RDONLY)
-        except OSError as e:
-            self._remove_created()
-            raise ConfigurationError(f"cannot create the output folder {p}: {e.strerror or e}") from None
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(self._fd)
-            self._fd = None
-            raise ConfigurationError(f"another pendulum-cosim run is writing to {p}; wait for it or "
-                                     "choose another --out") from None
-        content = _files_below(p)
-        if content:
-            if not self.overwrite:
-                self._refuse(f"the output folder {p} is not empty ({len(content)} entries, e.g. {content[0]}); "
-                             "use --overwrite to replace a previous result of pendulum-cosim, or another --out")
-            ours = self._manifest()
-            foreign = content if ours is None else [f for f in content if f not in ours]
-            if foreign:
-                shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
-                self._refuse(f"the output folder {p} holds files pendulum-cosim did not write ({shown}); "
-                             "--overwrite only replaces a previous result of pendulum-cosim; move them or "
-                             "choose another --out (nothing was removed)")
-            for rel in sorted(content, key=lambda f: -f.count("/")):      # files, then their folders
-                entry = p / rel
-                with contextlib.suppress(FileNotFoundError):
-                    if entry.is_dir() and not entry.is_symlink():
-                        entry.rmdir()
-                    else:
-                        entry.unlink()
-        if not os.access(p, os.W_OK):
-            self._refuse(f"the output folder {p} is not writable")
-        try:
-            self._write_marker([], "running")
-        except OSError as e:
-            self._refuse(f"cannot write into the output folder {p}: {e.strerror or e}")
-        self._owned = True
-        return p
-
-    def _remove_created(self) -> None:
-        for d in reversed(self._created):
-            with contextlib.suppress(OSError):
-                d.rmdir()                      # only succeeds if nothing was written
-        self._created = []
-
-    def __exit__(self, *exc) -> None:
-        if self._fd is None:
-            return
-        try:
-            files = _files_below(self.path) if self._owned else []
+            files = _files_below(p) if owned else []
             if files:
-                self._write_marker(files, "complete" if exc[0] is None else "failed")
-            elif self._owned:
+                _write_marker(p, files, state)
+            elif owned:
                 with contextlib.suppress(OSError):
-                    (self.path / MARKER).unlink()
+                    (p / MARKER).unlink()
             if not files:
-                self._remove_created()
+                _remove_empty(created)
         except OSError:
             pass
         finally:
             with contextlib.suppress(OSError):
-                fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
-            self._owned = False
+                fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
 
 
 def plot_estimates(df: pd.DataFrame, truth: Sequence[str], estimate: Sequence[str],
@@ -237,12 +232,8 @@ def plot_signals(df: pd.DataFrame, path=None, title: str = ""):
 
     Parameters
     ----------
-    df : DataFrame
-        Results indexed by time [s].
-    path : path, optional
-        Write the figure to this PNG file.
-    title : str
-        Figure title.
+    df, path, title
+        As :func:`plot_estimates`.
 
     Returns the matplotlib Figure.
     """

@@ -51,10 +51,8 @@ class ScenarioContext:
 
     Parameters
     ----------
-    base_dir : path
-        The scenario file's folder (relative paths refer to it).
-    fmu_dir : path
-        Where to build this project's FMUs.
+    base_dir, fmu_dir : path
+        As :class:`Scenario` (``fmu_dir`` given, not defaulted).
     """
 
     def __init__(self, base_dir, fmu_dir):
@@ -110,10 +108,9 @@ class ScenarioContext:
         """:meth:`construct` with the table's ``model`` (a registered model's name) and
         ``model_parameters`` turned into the constructor's ``model`` argument."""
         t = dict(table)
-        if "model" not in t:
-            raise ConfigurationError(f"component {name!r} ({getattr(cls, 'kind', cls.__name__)}) needs the key "
-                                     "'model'")
-        return self.construct(cls, name, t, model=self.model(t.pop("model"), t.pop("model_parameters", None)))
+        if "model" in t:            # else construct names it missing
+            t["model"] = self.model(t["model"], t.pop("model_parameters", None))
+        return self.construct(cls, name, t)
 
     def construct(self, cls: type, name: str, table: dict, **extra) -> Component:
         """``cls(name, **table, **extra)`` with the keys checked (:meth:`check_keys`); an

@@ -5,6 +5,7 @@ every failure a :class:`~fmu_models.errors.ConfigurationError` naming the file.
 """
 from __future__ import annotations
 
+import itertools
 import re
 import tomllib
 from pathlib import Path
@@ -25,11 +26,8 @@ _NOT_NESTING = re.compile(r'"(?:\\[\s\S]?|[^"\\])*(?:"|\Z)|\'[^\']*(?:\'|\Z)|#[^
 
 def _depth(text: str) -> int:
     """The deepest nesting of ``[``/``{`` outside strings and comments (a scan, no parse)."""
-    depth = deepest = 0
-    for ch in re.findall(r"[][{}]", _NOT_NESTING.sub("", text)):
-        depth += 1 if ch in "[{" else -1
-        deepest = max(deepest, depth)
-    return deepest
+    brackets = re.findall(r"[][{}]", _NOT_NESTING.sub("", text))
+    return max(itertools.accumulate((1 if ch in "[{" else -1 for ch in brackets), initial=0))
 
 
 def loads(text: str, what: str) -> dict:

@@ -1,13 +1,10 @@
-"""The component protocol: what the co-simulation master needs from every component.
+"""The component protocol (:class:`~cosim.core.component.Component`), the one class the master depends on.
 
-Every component, FMU or Python, is a :class:`Component`, the one class the master depends on. At
-each of its instants the master calls ``output(t, u)`` (in an order that respects the declared
-direct ``feedthrough``), records the row, then ``update(t, u)``; ``reset`` comes before a run,
-``close`` after it; a ``reentrant`` component may evaluate ``output`` twice at an instant (an
-algebraic loop). Optional capabilities are protocols tested with ``isinstance``:
-:class:`FastBinding` (``bind``, the loop's fast path), :class:`ExportsFMU`, :class:`StateEstimator`.
-The whole protocol (zero-order hold, exact integer signals, :class:`StopRequest`) is on the
-extending page of the documentation.
+At each instant the master calls ``output(t, u)`` (in an order that respects the direct
+``feedthrough``), records the row, then ``update(t, u)``; ``reset`` comes before a run, ``close``
+after it; a ``reentrant`` component may evaluate ``output`` twice at an instant. Optional
+capabilities (``bind``, ``export_fmu``, state estimates) are protocols tested with ``isinstance``.
+The whole protocol is on the extending page of the documentation.
 """
 from __future__ import annotations
 
@@ -24,8 +21,8 @@ from fmu_models.infra.checks import positive
 from fmu_models.infra.registry import Registry
 
 __all__ = ["CLOCK", "COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding",
-           "Port", "StateEstimator", "StopRequest", "bind_protocol", "check_name", "check_period", "port_kind",
-           "ports_compatible", "split_port"]
+           "Port", "StateEstimator", "StopRequest", "bind_protocol", "check_name", "port_kind", "ports_compatible",
+           "split_port"]
 
 #: FMI type names a port may have, by kind (real, integer incl. enumerations, boolean).
 PORT_TYPES = {
@@ -97,12 +94,6 @@ def check_name(name: str, what: str = "component name") -> str:
     return name
 
 
-def check_period(period, owner: str) -> float:
-    """A component's sample period [s] as a positive finite float, else
-    :class:`ConfigurationError` naming the ``owner`` component."""
-    return positive(period, f"{owner}: sample period")
-
-
 def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Port, ...]:
     out = tuple(p if isinstance(p, Port) else Port(p) for p in ports)
     for port in out:
@@ -153,12 +144,15 @@ class BoundCalls:
 
     _private = None
 
-    def _private_binding(self):
+    def _bound(self, u) -> tuple:
+        """``(buf, output_fn, update_fn)`` of the private binding, its inputs set to ``u``."""
         if self._private is None:
             n_in, n_out = len(self.connected_inputs), len(self.output_names)
             buf, ints = np.zeros(n_in + n_out), np.zeros(n_in + n_out, dtype=np.int64)
             self._private = (buf, ints, *self.bind(buf, slice(0, n_in), slice(n_in, n_in + n_out), ints))
-        return self._private
+        buf, ints, out_fn, upd_fn = self._private
+        self._set_private_inputs(buf, ints, u)
+        return buf, out_fn, upd_fn
 
     def _set_private_inputs(self, buf: np.ndarray, ints: np.ndarray, u) -> None:
         n_in = len(self.connected_inputs)
@@ -167,16 +161,13 @@ class BoundCalls:
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
         """Outputs at ``t`` [s] from the connected inputs ``u`` (in order); a new array."""
-        buf, ints, out_fn, _ = self._private_binding()
-        self._set_private_inputs(buf, ints, u)
+        buf, out_fn, _ = self._bound(u)
         out_fn(t)
         return buf[len(self.connected_inputs):].copy()
 
     def update(self, t: float, u: np.ndarray) -> None:
         """Set the connected inputs ``u`` and advance over ``[t, t + period]`` (``t`` in s)."""
-        buf, ints, _, upd_fn = self._private_binding()
-        self._set_private_inputs(buf, ints, u)
-        upd_fn(t)
+        self._bound(u)[2](t)
 
 
 @runtime_checkable
@@ -206,28 +197,22 @@ class Component(ABC):
         Unique identifier of the component in a co-simulation.
     period : float
         Sample period [s].
-    inputs : sequence of str or Port
-        Input ports (strings are Float64 ports).
-    outputs : sequence of str or Port
-        Output ports.
+    inputs, outputs : sequence of str or Port
+        Input and output ports (strings are Float64 ports), kept as ``input_ports`` and
+        ``output_ports`` (tuples of Port).
     feedthrough : mapping or bool, optional
         Which inputs each output depends on directly: ``{output: [inputs]}`` (outputs not
         listed depend on no input), ``True`` (every output on every input; the default)
-        or ``False`` (no output on any input).
+        or ``False``; kept as a dict of output name -> frozenset of input names.
     port_names_are_identifiers : bool
         Check that port names are identifiers (default True; FMU variables such as
         ``der(x)`` are not).
 
     Attributes
     ----------
-    input_ports, output_ports : tuple of Port
-    feedthrough : dict of str to frozenset of str
-        Output name -> the input names it depends on directly.
-    reentrant : bool
-        ``output`` may be called several times at one instant (class attribute, default False).
-    holds_inputs : bool
-        The inputs consumed by ``update`` are held over ``[t, t + period]`` (class attribute,
-        default False).
+    reentrant, holds_inputs : bool
+        Class attributes (default False): ``output`` may be called several times at one instant;
+        the inputs ``update`` consumes are held over ``[t, t + period]``.
     n_samples : int
         Instants of the last run at which the component computed its outputs.
     """
@@ -252,7 +237,7 @@ class Component(ABC):
                  feedthrough: Mapping[str, Sequence[str]] | bool = True,
                  port_names_are_identifiers: bool = True):
         self.name = check_name(name)
-        self.period = check_period(period, name)
+        self.period = positive(period, f"{name}: sample period")
         self.input_ports = _as_ports(inputs, name, "input", port_names_are_identifiers)
         self.output_ports = _as_ports(outputs, name, "output", port_names_are_identifiers)
         self.feedthrough = self._feedthrough(feedthrough)
@@ -351,12 +336,9 @@ def _exact(value, type_name: str, owner: str, port: str) -> int:
 
 def bind_protocol(comp: Component, values: np.ndarray, source: np.ndarray, inputs, outputs: slice,
                   integers: np.ndarray | None = None) -> tuple[Callable[[float], None], Callable[[float], None]]:
-    """``(output_fn, update_fn)`` calling ``comp``'s :meth:`~Component.output` and
-    :meth:`~Component.update` with its inputs read from ``source[inputs]`` and its outputs
-    written to ``values[outputs]`` (the number checked), the exact values of integer and Boolean
-    ports also to ``integers[outputs]``: the binding of a component without :class:`FastBinding`
-    (``source is values``), and the Jacobi order's binding of any component (``source``: the
-    values before the instant)."""
+    """The :meth:`FastBinding.bind` of ``comp`` through its :meth:`~Component.output` (the number of
+    outputs checked) and :meth:`~Component.update`: outputs to ``values[outputs]`` (and ``integers``),
+    inputs from ``source[inputs]`` (``values``; for the Jacobi order, the values before the instant)."""
     n_out = outputs.stop - outputs.start
     output, update = comp.output, comp.update
     exact = [] if integers is None else [(j, outputs.start + j, p.type) for j, p in enumerate(comp.output_ports)

@@ -1,14 +1,7 @@
-"""The native kernel: the master's base-step loop in compiled C.
-
-One generic kernel (``kernel.c``), compiled once per machine and cached
-(:mod:`fmu_models.infra.cache`), interprets a :class:`Program`: per pattern of due components,
-the operations of the bound output and update calls. A call that can run natively lists them in
-its ``native`` attribute (:class:`Op`: an FMU's get, set and ``doStep`` through its library's
-function pointers, a filter's compiled step, a source); any other call returns to Python, which
-makes it and resumes the kernel. The kernel computes ``t = t0 + k h`` and everything else as the
-Python path does, without fused multiply-adds, so the results are the same bit for bit; a failed
-operation's ``fail`` raises the Python path's error. :meth:`Program.parallel_runs` and
-:meth:`Program.lanes` give the update runs that may step on threads (:mod:`cosim.core.native_loop`).
+"""The native kernel: the master's base-step loop in compiled C (``kernel.c``; the co-simulation page
+of the documentation), interpreting a :class:`~cosim.core.native.Program` of the bound calls'
+operations (:class:`~cosim.core.native.Op`; a call without them returns to Python). It computes as
+the Python path does, without fused multiply-adds: the same results bit for bit.
 """
 from __future__ import annotations
 
@@ -59,28 +52,14 @@ class KState(ctypes.Structure):
 
 @dataclass
 class Op:
-    """One native operation of a bound call.
-
-    Parameters
-    ----------
-    kind : int
-        The operation (``OP_GET``, ``OP_SET``, ``OP_STEP2``, ... of this module).
-    fields : dict
-        :class:`OpStruct` fields (pointers as integers).
-    keep : tuple
-        What the pointers point into (kept alive with the operation).
-    fail : callable, optional
-        ``fail(op, t)`` raises the failed operation's error as the Python path does (``op``: its
-        OpStruct, ``status``, ``flag``, ``d`` set; ``t`` [s]).
-    sync_in, sync_out : callable, optional
-        Move the state Python objects keep (a filter's state copy, step count) into and out of
-        the kernel's arrays.
-    hook : callable, optional
-        What an ``OP_HOOK`` runs in Python (a filter's ``after_step``; a full ``OP_RECORD``), or
-        an ``OP_NOISE`` stream's refill.
-    rebind : callable, optional
-        ``rebind(op)`` after the hook: the OpStruct pointed at the arrays the hook replaced.
-    """
+    """One native operation of a bound call: its ``kind`` (``OP_GET``, ``OP_SET``, ... of this module),
+    its :class:`OpStruct` ``fields`` (pointers as integers) and what they point into (``keep``, kept
+    alive with it). ``fail(op, t)`` raises the failed operation's error as the Python path does
+    (``op``: its OpStruct, ``status``, ``flag``, ``d`` set; ``t`` [s]); ``sync_in`` and ``sync_out``
+    move the state Python objects keep (a filter's state, step count) into and out of the kernel's
+    arrays; ``hook`` is what an ``OP_HOOK`` runs in Python (a filter's ``after_step``; a full
+    ``OP_RECORD``) or an ``OP_NOISE`` stream's refill, after which ``rebind(op)`` points the OpStruct
+    at the arrays the hook replaced."""
 
     kind: int
     fields: dict = field(default_factory=dict)
@@ -113,41 +92,24 @@ def load_kernel() -> tuple[ctypes.CDLL | None, str]:
         return _kernel[0], _kernel[1]
     lib, why = compiled_library(_SOURCE.read_text(), "kernel", _FLAGS, "kernel_run", "the native co-simulation kernel",
                                 "runs take the Python path (same results, slower)", link=("-lm", "-pthread"))
-    if lib is not None:
-        lib.kernel_run.restype = ctypes.c_int
-        lib.kernel_run.argtypes = [ctypes.POINTER(KState)]
-        lib.kernel_pool_start.restype = ctypes.c_void_p
-        lib.kernel_pool_start.argtypes = [ctypes.c_int64]
-        lib.kernel_pool_stop.restype = None
-        lib.kernel_pool_stop.argtypes = [ctypes.c_void_p]
+    signatures = {"kernel_run": (ctypes.c_int, [ctypes.POINTER(KState)]), "kernel_pool_start": (_P, [_I]),
+                  "kernel_pool_stop": (None, [_P])}
+    for name, (restype, argtypes) in signatures.items() if lib is not None else ():
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = restype, argtypes
     _kernel[:] = [lib, why]
     return lib, why
 
 
 @dataclass
 class Program:
-    """The kernel's program for one run: the operations of every pattern of due components.
-
-    Parameters
-    ----------
-    ops : ctypes array of OpStruct
-        Every operation.
-    meta : list
-        The :class:`Op` of each operation (None: a call back into Python).
-    pattern : ndarray of int64, shape (L,)
-        The pattern of base step ``k`` is ``pattern[k % L]``.
-    out_start, out_len, upd_start, upd_len : ndarray of int64
-        Pattern ``p``'s output operations are ``ops[out_start[p] : out_start[p] +
-        out_len[p]]``, likewise its updates.
-    syncs_in, syncs_out : list of callable
-        Every operation's ``sync_in`` / ``sync_out``.
-    n_native : int
-        How many operations run natively.
-    calls : list of callable
-        The Python call each operation belongs to.
-    updates : list of bool
-        Whether each operation is part of an update.
-    """
+    """The kernel's program for one run: every operation (``ops``, a ctypes array of OpStruct), each
+    one's :class:`Op` (``meta``; None: a call back into Python), the Python call it belongs to
+    (``calls``) and whether that is an update (``updates``); base step ``k``'s pattern ``p =
+    pattern[k % L]`` (int64, shape (L,)) has the operations ``ops[out_start[p] : out_start[p] +
+    out_len[p]]`` for its outputs, likewise ``upd_start``, ``upd_len`` for its updates.
+    ``syncs_in`` and ``syncs_out`` are the operations' ``sync_in`` / ``sync_out``, ``n_native``
+    how many operations run natively."""
 
     ops: ctypes.Array
     meta: list

@@ -1,21 +1,6 @@
-"""A run's loop in the native kernel, and which thread steps each FMU.
-
-The kernel (:mod:`cosim.core.native`) runs a :class:`~cosim.core.run.Run`'s base steps and records
-its rows, driven by :class:`NativeLoop`; it returns to Python for a Python call (``EV_PY``), a
-filter's hook (``EV_HOOK``), a noise refill (``EV_REFILL``), a chunk done (``EV_CHUNK``: the bar
-moves, Ctrl-C is seen) and a full record buffer (``EV_FLUSH``), and ends with ``EV_DONE``,
-``EV_NONFINITE``, ``EV_FAIL`` or a stop request, the run's position and the Python objects' state
-handed back first whichever way it ends.
-
-Parallel stepping (:class:`Stepping`, the master's ``threads``; the co-simulation page of the
-documentation): the FMU updates between two calls into Python
-(:meth:`~cosim.core.native.Program.parallel_runs`) may step on a pool's threads, FMUs sharing a
-library or ``canBeInstantiatedOnlyOncePerProcess`` on one. A measurement (one warming block, then
-chunks timed until :data:`MEASURE_SECONDS`) balances the groups on the threads, costliest first;
-``threads="auto"`` keeps them only where they gained (the constants below say by how much) and
-measures again now and then. Each FMU gets the serial run's calls in order: the same results bit
-for bit, a failure is the first in the serial order, and after a stop request no update is made
-twice.
+"""A run's loop in the native kernel (:class:`~cosim.core.native_loop.NativeLoop`, answering the kernel's
+events) and which thread steps each FMU (:class:`~cosim.core.native_loop.Stepping`), both described in the
+co-simulation page of the documentation (the native kernel, parallel stepping).
 """
 from __future__ import annotations
 
@@ -44,25 +29,21 @@ CHUNK_SECONDS = 0.02
 #: ``threads="auto"``: the least gain [s per base step] parallel stepping must have measured
 #: to be kept (below it, the gain is within the timing's own noise).
 MIN_GAIN = 0.2e-6
-#: ``threads="auto"``: parallel stepping is kept if the measured steps took at most this
-#: fraction of the serial time of the same updates.
+#: ``threads="auto"``: the threads are kept if they took at most this fraction of the serial time.
 KEEP_RATIO = 0.9
-#: Wall time [s] the threads are measured for before they are kept or left (at least one
-#: block): long enough that a preemption or a page fault does not decide it; sooner when
-#: the threads took longer than the serial time, or less than :data:`CLEAR_RATIO` of it.
+#: Wall time [s] the threads are measured for (at least one block), so that a preemption or a page
+#: fault does not decide it; less when they took longer than the serial time or under :data:`CLEAR_RATIO` of it.
 MEASURE_SECONDS = 0.002
 #: The measured fraction of the serial time below which the threads are kept at once.
 CLEAR_RATIO = 0.6
 #: ``threads="auto"``: the threads are left after the warming block if they took more than
 #: this many times the serial time in it.
 HOPELESS_RATIO = 2.0
-#: Blocks in a measured chunk (after the first block of a measurement, which warms the threads
-#: and is not counted).
+#: Blocks in a measured chunk (after a measurement's first block, which warms the threads, not counted).
 MEASURE_BLOCKS = 4
 #: ``threads="auto"``: base steps after a measurement until the next (twice as many after each)...
 RECHECK = 16 * BLOCK
-#: ... and at least this wall time [s], so that measuring (each FMU update timed) stays a
-#: small share of a run.
+#: ... and at least this wall time [s], so that measuring stays a small share of a run.
 RECHECK_SECONDS = 0.5
 
 
@@ -86,14 +67,8 @@ def _seconds(value: float) -> str:
     return f"{value * 1e3:.3g} ms" if value >= 1e-3 else f"{value * 1e6:.3g} µs"
 
 
-def _once_per_process(component) -> bool:
-    """Whether the FMU of ``component`` declares ``canBeInstantiatedOnlyOncePerProcess``."""
-    cs = getattr(getattr(component, "md", None), "coSimulation", None)
-    return bool(getattr(cs, "canBeInstantiatedOnlyOncePerProcess", False))
-
-
 class Stepping:
-    """Which thread steps each FMU update of a run (see the module documentation); ``text`` says
+    """Which thread steps each FMU update of a run (the co-simulation page: parallel stepping); ``text`` says
     it in words (the master's ``stepping``).
 
     Parameters
@@ -130,7 +105,7 @@ class Stepping:
             self.members = [[c for g, (_, calls) in enumerate(self.groups) if g % self.n == me for c in calls]
                             for me in range(self.n)]
             self.thread_of = {c: me for me, calls in enumerate(self.members) for c in calls}
-            self._parallel(self.thread_of, self.members)
+            self._parallel()
 
     def _groups(self) -> list[tuple[set, list]]:
         """The FMU update calls of the parallel runs, in groups that never step at once (a
@@ -143,7 +118,8 @@ class Stepping:
                     continue
                 step = next(program.ops[q] for q in range(first, end) if program.ops[q].kind in STEP_KINDS)
                 keys = {("library", _library_base(step.fn))}
-                if _once_per_process(by_name.get(owner.get(call))):
+                cs = getattr(getattr(by_name.get(owner.get(call)), "md", None), "coSimulation", None)
+                if getattr(cs, "canBeInstantiatedOnlyOncePerProcess", False):
                     keys.add(("once",))
                 merged = [g for g in groups if g[0] & keys]
                 joined = (keys.union(*(k for k, _ in merged)), [c for _, cs in merged for c in cs] + [call])
@@ -156,10 +132,6 @@ class Stepping:
         """Point the kernel at the segments for ``thread_of`` (the thread of each FMU update)."""
         self.lane, self.seg = self.program.lanes(self.runs, thread_of)
         self.kst.lane, self.kst.seg = self.lane.ctypes.data, self.seg.ctypes.data
-
-    def _names(self, calls) -> str:
-        """The components of ``calls``, in words."""
-        return ", ".join(self.run.owner.get(c, "?") for c in calls)
 
     def _assign(self) -> tuple[dict, list[list]]:
         """The thread of each call and each thread's calls: the costliest group first, each to the
@@ -178,7 +150,7 @@ class Stepping:
             thread_of.update(dict.fromkeys(self.groups[g][1], me))
         return thread_of, members
 
-    def _parallel(self, thread_of: dict, members: list) -> bool:
+    def _parallel(self) -> bool:
         """Step on the pool's threads by ``thread_of`` (each thread's calls: ``members``); False
         (and serially) if the threads could not be started."""
         if self.pool is None:
@@ -187,8 +159,9 @@ class Stepping:
                 self._serial(f"serial: {self.n} threads could not be started")
                 return False
         self.kst.pool, self.on_threads = self.pool, True
-        self._lanes(thread_of)
-        self.text = f"{self.n} threads: " + "; ".join(f"[{self._names(m)}]" for m in members)
+        self._lanes(self.thread_of)
+        names = [", ".join(self.run.owner.get(c, "?") for c in calls) for calls in self.members]
+        self.text = f"{self.n} threads: " + "; ".join(f"[{n}]" for n in names)
         return True
 
     def chunk(self, steps: int, seconds: float) -> None:
@@ -196,12 +169,16 @@ class Stepping:
         decided, or (``threads="auto"``) a new one starts when it is time."""
         kst = self.kst
         if self.state == "measure":
-            if self.warm and kst.k < self.run.n and not self._hopeless():
+            serial, parallel = self.cost.sum(), kst.seg_time
+            hopeless = self.threads == "auto" and parallel > HOPELESS_RATIO * serial
+            if self.warm and kst.k < self.run.n and not hopeless:
                 self._measure(warm=False)           # the threads started and woken: not counted
                 return
             steps, seconds = self.measured[0] + steps, self.measured[1] + seconds
             self.measured = (steps, seconds)
-            if not self.warm and seconds < MEASURE_SECONDS and kst.k < self.run.n and not self._plain():
+            # a plain result decides at once (a wrong call is corrected at the next measurement)
+            plain = parallel > serial or parallel < CLEAR_RATIO * serial
+            if not self.warm and seconds < MEASURE_SECONDS and kst.k < self.run.n and not plain:
                 return
             self._decide(steps)
             self.next_check, self.wait = kst.k + self.wait, 2 * self.wait
@@ -209,7 +186,7 @@ class Stepping:
         elif (self.threads == "auto" and self.n >= 2 and kst.k >= self.next_check
               and time.perf_counter() >= self.next_time):
             decided = self.text
-            if self._parallel(self.thread_of, self.members):
+            if self._parallel():
                 self.text = f"{decided}; measuring {self.n} threads again from base step {kst.k}"
                 self._measure(warm=True)
 
@@ -219,24 +196,6 @@ class Stepping:
         self.kst.timing, self.kst.seg_time = 1, 0.0
         self.cost[:] = 0.0
 
-    def chunk_length(self, adaptive: int) -> int:
-        """The next chunk's base steps: ``adaptive`` (the loop's own), or while measuring one
-        warming block, then :data:`MEASURE_BLOCKS` blocks (the threads may sleep between chunks)."""
-        if self.state != "measure":
-            return adaptive
-        return BLOCK if self.warm else MEASURE_BLOCKS * BLOCK
-
-    def _hopeless(self) -> bool:
-        """Whether ``threads="auto"`` ends the measurement at the warming block (the other cores
-        busy, e.g. a campaign's workers on every core)."""
-        return self.threads == "auto" and self.kst.seg_time > HOPELESS_RATIO * self.cost.sum()
-
-    def _plain(self) -> bool:
-        """Whether the steps measured so far decide it already (a cheap FMU's run is not spent
-        measuring; a wrong call is corrected at the next measurement)."""
-        serial, parallel = self.cost.sum(), self.kst.seg_time
-        return parallel > serial or parallel < CLEAR_RATIO * serial
-
     def _decide(self, steps: int) -> None:
         """After ``steps`` measured base steps: the threads balanced by the updates' times, and kept
         or (``threads="auto"``) left for the serial loop."""
@@ -245,7 +204,7 @@ class Stepping:
         measured = f"on {self.n} threads {_seconds(parallel)} per base step, serially {_seconds(serial)}"
         if self.threads == "auto" and (serial - parallel < MIN_GAIN or parallel > KEEP_RATIO * serial):
             self._serial(f"serial: the FMU updates that may step at once took {measured}")
-        elif self._parallel(self.thread_of, self.members):
+        elif self._parallel():
             self.state, self.kst.timing = "parallel", 0
             self.text += f" (measured: {measured})"
 
@@ -254,16 +213,11 @@ class Stepping:
         self.kst.pool, self.on_threads = None, False
         self.state, self.text, self.kst.timing = "serial", why, 0
 
-    def finish(self, steps: int, seconds: float) -> None:
-        """The loop ended ``steps`` base steps and ``seconds`` [s] after the last chunk: a
-        measurement under way is decided on what it measured, and the pool's threads end."""
+    def finish(self, steps: int) -> None:
+        """The loop ended ``steps`` base steps after the last chunk: a measurement under way is
+        decided on what it measured, and the pool's threads end."""
         if self.state == "measure" and self.measured[0] + steps > 0:
-            self.measured = (self.measured[0] + steps, self.measured[1] + seconds)
-            self._decide(self.measured[0])
-        self.stop()
-
-    def stop(self) -> None:
-        """End the pool's threads (the kernel runs serially after it)."""
+            self._decide(self.measured[0] + steps)
         pool, self.pool = self.pool, None
         self.kst.pool = None
         if pool:
@@ -337,7 +291,7 @@ class NativeLoop:
                 else:
                     break
         finally:
-            self.stepping.finish(kst.k - self.done, time.perf_counter() - self.since)
+            self.stepping.finish(kst.k - self.done)
             run.cosim.stepping = self.stepping.text
             run.k, run.j, run.jb, run.k0 = kst.k, kst.j, kst.jb, kst.k0
             for sync in program.syncs_out:
@@ -357,13 +311,15 @@ class NativeLoop:
 
     def _chunk(self) -> None:
         """A chunk done: the bar moves, and the next chunk's length aims at :data:`CHUNK_SECONDS`."""
-        kst = self.kst
+        kst, stepping = self.kst, self.stepping
         self.run.bar.update(kst.k - self.done)
         now = time.perf_counter()
-        self.stepping.chunk(kst.k - self.done, now - self.since)
+        stepping.chunk(kst.k - self.done, now - self.since)
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
-        self.done, self.since, kst.kstop = kst.k, now, kst.k + self.stepping.chunk_length(self.chunk)
+        # while measuring: one warming block, then MEASURE_BLOCKS blocks (the threads may sleep between chunks)
+        length = self.chunk if stepping.state != "measure" else BLOCK if stepping.warm else MEASURE_BLOCKS * BLOCK
+        self.done, self.since, kst.kstop = kst.k, now, kst.k + length
 
     def _end(self, event: int) -> None:
         """The end of the loop by ``event``: the bar's last steps, the non-finite signal or the

@@ -1,17 +1,11 @@
-"""Recording of co-simulation signals: which signals, how often, in memory or streamed to disk.
-
-The signals matching glob ``signals`` (:func:`select_signals`) are recorded every
-``output_interval`` (a multiple of the base step), in memory (:class:`MemorySink`, a DataFrame at
-the end) or streamed to a Parquet file in chunks (:class:`ParquetSink`, constant memory; written
-under a temporary name and renamed at the end; a failed run leaves ``<name>.partial.parquet``).
-Integer signals are recorded exactly (``int64``; ``uint64`` for UInt64 columns); the last row of a
-run a component stopped may lie between two recording instants (``last_time``).
+"""Recording of co-simulation signals: the signals matching glob patterns, every ``output_interval``,
+in memory (:class:`~cosim.core.recording.MemorySink`) or streamed to a Parquet file in chunks
+(:class:`~cosim.core.recording.ParquetSink`); integer signals exactly (``int64``, ``uint64`` for UInt64).
 """
 from __future__ import annotations
 
 import contextlib
 import fnmatch
-import json
 import os
 import shutil
 from collections.abc import Sequence
@@ -113,21 +107,15 @@ class MemorySink(_Rows):
         """``rows`` more rows of ``buffer`` are complete (it holds the whole run: it fills once)."""
         self.n += rows
 
-    def frame(self) -> pd.DataFrame:
-        """The rows recorded so far, indexed by ``time``."""
+    def finish(self) -> pd.DataFrame:
+        """The rows recorded so far (after a successful run: the whole recording), indexed by ``time``."""
         df = pd.DataFrame(self.buffer[: self.n], index=pd.Index(self._times(0, self.n), name="time"),
                           columns=self.columns, copy=False)     # the run is over, nothing writes the buffer
         for k, pos in enumerate(self.int_positions):
             df[self.columns[pos]] = self._exact(k, self.n).copy()
         return df
 
-    def finish(self) -> pd.DataFrame:
-        """End of a successful run: the whole recording."""
-        return self.frame()
-
-    def abort(self) -> pd.DataFrame:
-        """End of a failed run: the rows recorded so far."""
-        return self.frame()
+    abort = finish          # a failed run: the rows recorded so far
 
 
 class ParquetSink(_Rows):
@@ -137,16 +125,10 @@ class ParquetSink(_Rows):
     ----------
     path : path
         Target file; written as ``.<name>.<pid>.tmp`` and renamed at the end.
-    columns : sequence of str
-        Signal names of the recorded columns.
-    n_rows : int
-        Rows the run will record (for the disk-space check).
-    t0, step, every
-        As :class:`MemorySink`.
+    columns, n_rows, t0, step, every, int_columns
+        As :class:`MemorySink` (``n_rows`` for the disk-space check).
     chunk_rows : int
         Rows per Parquet row group (default 8192).
-    int_columns : dict of int to str, optional
-        As :class:`MemorySink`.
     """
 
     def __init__(self, path, columns: Sequence[str], n_rows: int, t0: float = 0.0, step: float = 1.0,
@@ -166,12 +148,10 @@ class ParquetSink(_Rows):
         super().__init__(columns, int(chunk_rows), t0, step, every, int_columns)
         self.total, self._pa = 0, pa
         self._exact_at = {int(p): k for k, p in enumerate(self.int_positions)}     # column -> exact column
-        kinds = [pa.float64() if j not in self._exact_at else
-                 pa.uint64() if self._int_types[self._exact_at[j]] == "UInt64" else pa.int64()
-                 for j in range(len(self.columns))]
-        meta = {b"pandas": _pandas_metadata(self.columns, {self.columns[j]: str(kinds[j]) for j in self._exact_at})}
-        self.schema = pa.schema([pa.field("time", pa.float64())]
-                                + [pa.field(c, kind) for c, kind in zip(self.columns, kinds)], metadata=meta)
+        # pandas' own metadata, so that pandas.read_parquet restores the time index; time the first column
+        empty = pd.DataFrame(dict(zip(self.columns, self._arrays(0))), index=pd.Index([], dtype=float, name="time"))
+        schema = pa.Schema.from_pandas(empty)
+        self.schema = pa.schema([schema.field("time"), *list(schema)[:-1]], metadata=schema.metadata)
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
         self.writer = pq.ParquetWriter(self.tmp, self.schema)
         # every chunk also goes to an Arrow stream, complete on disk once written: if an FMU's
@@ -186,13 +166,16 @@ class ParquetSink(_Rows):
         """Write the first ``rows`` rows of ``buffer`` as one row group."""
         if not rows:
             return
-        columns = [self.buffer[:rows, j] if j not in self._exact_at else self._exact(self._exact_at[j], rows)
-                   for j in range(len(self.columns))]
-        table = self._pa.Table.from_arrays([self._pa.array(c) for c in (self._times(self.total, rows), *columns)],
-                                           schema=self.schema)
+        arrays = (self._times(self.total, rows), *self._arrays(rows))
+        table = self._pa.Table.from_arrays([self._pa.array(a) for a in arrays], schema=self.schema)
         self.writer.write_table(table)
         self._ipc.write_table(table)
         self.total += rows
+
+    def _arrays(self, rows: int) -> list[np.ndarray]:
+        """The first ``rows`` values of every column, the exact integer ones as :meth:`_exact` gives them."""
+        return [self.buffer[:rows, j] if j not in self._exact_at else self._exact(self._exact_at[j], rows)
+                for j in range(len(self.columns))]
 
     def _close(self) -> None:
         """Close the Parquet writer and end the crash-safe stream."""
@@ -214,13 +197,12 @@ class ParquetSink(_Rows):
         """End of a failed or interrupted run (after the last :meth:`flush`): keep the rows so far as
         ``<name>.partial.parquet`` (returned), or nothing if no row was recorded."""
         self._close()
-        if self.total == 0:
-            with contextlib.suppress(OSError):
-                os.unlink(self.tmp)
-            return None
-        target = partial_path(self.path)
-        os.replace(self.tmp, target)
-        return target
+        if self.total:
+            os.replace(self.tmp, partial_path(self.path))
+            return partial_path(self.path)
+        with contextlib.suppress(OSError):
+            os.unlink(self.tmp)
+        return None
 
 
 class RowWriter:
@@ -263,13 +245,3 @@ class RowWriter:
             self.sink.flush(row)
             row = 0
         return row
-
-
-def _pandas_metadata(columns: Sequence[str], exact: dict) -> bytes:
-    """pandas' Parquet metadata for a frame indexed by ``time`` (float columns, and the exact
-    integer ones named in ``exact`` with their types), so that ``pandas.read_parquet``
-    restores the index."""
-    cols = [{"name": c, "field_name": c, "pandas_type": exact.get(c, "float64"),
-             "numpy_type": exact.get(c, "float64"), "metadata": None} for c in [*columns, "time"]]
-    return json.dumps({"index_columns": ["time"], "column_indexes": [], "columns": cols,
-                       "creator": {"library": "pendulum-cosim"}, "pandas_version": pd.__version__}).encode()

@@ -1,12 +1,6 @@
-"""Static analysis of a co-simulation before it runs: base step, evaluation order, loops.
-
-:func:`base_step` gives the base step (the exact rational greatest common divisor of the
-periods), each period in base steps and the hyperperiod, refusing unreasonable sets of periods
-(1 ms beside pi ms). :func:`evaluation_order` sorts the components' outputs at an instant
-topologically by the connections and the declared direct feedthrough (any list order gives the
-same result); a cycle of direct dependencies is an algebraic loop, refused with its ports named
-or kept as a group to iterate (``loops="iterate"``). A cycle only between components, not ports,
-is broken by evaluating a reentrant component twice: its outputs that depend on no input first.
+"""Static analysis of a co-simulation before it runs: the base step (:func:`~cosim.core.schedule.base_step`)
+and the evaluation order of the outputs at an instant (:func:`~cosim.core.schedule.evaluation_order`), as
+the co-simulation page of the documentation describes them (order, timing and latency).
 """
 from __future__ import annotations
 
@@ -18,6 +12,10 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
+
+import numpy as np
+from scipy.sparse import coo_array
+from scipy.sparse.csgraph import connected_components
 
 from fmu_models.errors import ConfigurationError, ResourceError
 
@@ -74,9 +72,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
             f"{float(base):.3g} s, {ratios[worst]} times shorter than {worst!r}'s period (limit "
             f"{MAX_RATIO}). Use periods that are multiples of a common step (e.g. round them), "
             "or set step_size and periods that divide it")
-    hyper = 1
-    for r in ratios.values():
-        hyper = math.lcm(hyper, r)
+    for hyper in itertools.accumulate(ratios.values(), math.lcm):
         if hyper > MAX_HYPERPERIOD:
             raise ResourceError(
                 f"the periods ({listing}) repeat their pattern only every {hyper}+ base steps of "
@@ -116,45 +112,21 @@ def _units(comp: Component, connected: set[str], split: bool) -> list[Unit]:
     ft = {o: frozenset(comp.feedthrough.get(o, ())) & connected for o in comp.output_names}
     free = frozenset(o for o, d in ft.items() if not d)
     dep = frozenset(comp.output_names) - free
-    needs = frozenset().union(*ft.values()) if ft else frozenset()
+    needs = frozenset().union(*ft.values())
     if split and free and dep:
         return [Unit(comp, "free", free, frozenset()), Unit(comp, "dependent", dep, needs)]
     return [Unit(comp, "all", frozenset(comp.output_names), needs)]
 
 
-def _sccs(nodes: list, edges: dict) -> list[list]:
-    """Strongly connected components (Tarjan, iterative), each in discovery order."""
-    index, low, on, stack, work, out = {}, {}, set(), [], [], []
-
-    def visit(v) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on.add(v)
-        work.append((v, iter(edges.get(v, ()))))
-
-    for root in nodes:
-        if root in index:
-            continue
-        visit(root)
-        while work:
-            v, it = work[-1]
-            for w in it:
-                if w not in index:
-                    visit(w)
-                    break
-                if w in on:
-                    low[v] = min(low[v], index[w])
-            else:                               # every successor seen: v is done
-                work.pop()
-                if work:
-                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
-                if low[v] == index[v]:
-                    comp = []
-                    while not comp or comp[-1] != v:
-                        comp.append(stack.pop())
-                        on.discard(comp[-1])
-                    out.append(comp)
-    return out
+def _sccs(units: list, edges: dict) -> list[list]:
+    """Strongly connected components of the graph ``edges`` among ``units``, each in ``units`` order."""
+    at = {u: i for i, u in enumerate(units)}
+    arcs = np.array([(at[u], at[v]) for u in units for v in edges.get(u, ()) if v in at], dtype=np.intp).reshape(-1, 2)
+    graph = coo_array((np.ones(len(arcs)), (arcs[:, 0], arcs[:, 1])), shape=(len(units), len(units)))
+    sccs: dict = {}
+    for u, label in zip(units, connected_components(graph, connection="strong")[1]):
+        sccs.setdefault(label, []).append(u)
+    return list(sccs.values())
 
 
 def _graph(units: list[Unit], conn: Mapping) -> tuple[dict, dict]:
@@ -246,19 +218,18 @@ def _topological(units: list[Unit], edges: dict, node_of: dict, key) -> list[Gro
     for u, vs in edges.items():
         succ[node_of[u]].update(node_of[v] for v in vs if node_of[v] != node_of[u])
     indeg = Counter(b for bs in succ.values() for b in bs)
-    keys = {}
-    for n, ms in members.items():
+    rank = {}
+    for i, (n, ms) in enumerate(members.items()):
         ms.sort(key=key)
-        keys[n] = key(ms[0])
-    seq = {n: i for i, n in enumerate(members)}          # a total order among equal keys
-    ready = [(keys[n], seq[n], n) for n in members if indeg[n] == 0]
+        rank[n] = (key(ms[0]), i)                       # i: a total order among equal keys
+    ready = [(rank[n], n) for n in members if indeg[n] == 0]
     heapq.heapify(ready)
     order: list[Group] = []
     while ready:
-        _, _, n = heapq.heappop(ready)
+        n = heapq.heappop(ready)[1]
         order.append(Group(tuple(members[n]), loop=isinstance(n, tuple)))
         for m in succ[n]:
             indeg[m] -= 1
             if indeg[m] == 0:
-                heapq.heappush(ready, (keys[m], seq[m], m))
+                heapq.heappush(ready, (rank[m], m))
     return order
