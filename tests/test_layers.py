@@ -59,8 +59,8 @@ def import_graph() -> dict[str, dict[str, int]]:
 
 
 def cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
-    """The strongly connected components of more than one module (the scheduler's Tarjan,
-    which finds the algebraic loops of a co-simulation)."""
+    """The strongly connected components of more than one module (the scheduler's
+    strong-component search, which finds the algebraic loops of a co-simulation)."""
     return [sorted(c) for c in _sccs(list(graph), graph) if len(c) > 1]
 
 
