@@ -1,15 +1,6 @@
-"""A clocked Co-Simulation FMU with Event Mode (``eventModeUsed``, ``earlyReturnAllowed``)
-in a run, in the FMI 3.0 call sequence: §4.2 State Machine for Co-Simulation, its Event Mode
-(§2.3.5) in :mod:`cosim.fmi.clock_event`, §4.1.3 Early Return.
-
-At an instant: the outputs without clock read in Step Mode before any input is set (a get
-after a set is forbidden there, so they depend on no input directly); Event Mode if clocks
-tick. In the update: the event iteration, ``fmi3EnterStepMode``, ``fmi3DoStep`` over the
-period, stopped at every activation between instants (a clock, ``nextEventTime``) for an
-Event Mode there. An early return with ``eventHandlingNeeded`` is handled in Event Mode at
-its ``lastSuccessfulTime`` (at the step's end: in the next instant's). A discrete input
-without clock that changes where no clock ticks is set in an Event Mode of its own. The
-common instant (periodic clocks, nothing pending) takes a short path (``_tick``, ``_tock``).
+"""A clocked Co-Simulation FMU with Event Mode in a run, in the FMI 3.0 call sequence
+(§4.2 State Machine for Co-Simulation, §4.1.3 Early Return; its Event Mode §2.3.5 in
+:mod:`cosim.fmi.clock_event`), as the clocks page of the documentation describes.
 """
 from __future__ import annotations
 

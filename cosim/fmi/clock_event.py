@@ -1,15 +1,6 @@
-"""Event Mode with clocks (FMI 3.0 §2.3.5 State: Event Mode; the functions of §2.2.8.4
-Clocks specific API), shared by Model Exchange (:mod:`cosim.fmi.clock_me`) and
-Co-Simulation with Event Mode (:mod:`cosim.fmi.clock_cs`).
-
-At an instant where clocks tick: ``fmi3EnterEventMode`` (unless still in Event Mode),
-``fmi3SetClock`` of the ticking input clocks, the clocked inputs the outputs depend on set
-(the others in the update), their clocked outputs read, ``fmi3GetClock`` of the output
-clocks and the outputs they clock read. In the update, the event iteration:
-``fmi3UpdateDiscreteStates`` until no more is needed (``fmi3GetClock`` again at every
-further super-dense instant), then ``fmi3GetInterval*`` of every countdown clock and of the
-changing and tunable clocks that ticked; a clock due again at once or an activation that
-arrived meanwhile ticks in the same Event Mode.
+"""Event Mode with clocks (FMI 3.0 §2.3.5; the functions of §2.2.8.4 Clocks specific API),
+shared by Model Exchange (:mod:`cosim.fmi.clock_me`) and Co-Simulation with Event Mode
+(:mod:`cosim.fmi.clock_cs`), as the clocks page of the documentation describes.
 """
 from __future__ import annotations
 

@@ -1,12 +1,6 @@
 """A clocked Model Exchange FMU in a run, in the FMI 3.0 call sequence (§3.2 State Machine
 for Model Exchange: Event Mode §2.3.5 in :mod:`cosim.fmi.clock_event`, Continuous-Time Mode
-§3.2.1). The integrator (:class:`~cosim.fmi.model_exchange.MEIntegrator`) steps the FMU in
-Continuous-Time Mode, the activations between instants (a clock, the FMU's
-``nextEventTime``) its time events. Every Event Mode it enters goes through this run: the
-clocks due activated, the output clocks read, the event iteration,
-``fmi3EnterContinuousTimeMode``; an event found at the end of a step waits for that
-instant's Event Mode. At an instant without clocks the inputs without clock are set in
-Continuous-Time Mode, a discrete one that changes in an Event Mode of its own.
+§3.2.1), as the clocks page of the documentation describes.
 """
 from __future__ import annotations
 

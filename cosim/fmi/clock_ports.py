@@ -1,9 +1,6 @@
 """The ports of a clocked FMI 3.0 FMU in a run: a clocked variable is set and got only while
-one of its clocks is active (FMI 3.0 §2.2.8.3 Model Partitions and Clocked Variables); the
-inputs an output depends on directly are set before the outputs are read, the others before
-the state changes. Each set of ports is one :class:`~cosim.fmi.exchange.Exchange` (a call
-per type, §2.2.7.2; scalar Float64 ports in place where their values lie side by side).
-Outputs read between instants go to the own buffers, the signals at the next instant.
+one of its clocks is active (§2.2.8.3); each set of ports is one
+:class:`~cosim.fmi.exchange.Exchange` (a call per type, §2.2.7.2).
 """
 from __future__ import annotations
 

@@ -1,12 +1,6 @@
 """A Scheduled Execution FMU in a run, in the FMI 3.0 call sequence (§5.1.1 Activating
-Model Partitions, §5.2.1 Clock Activation Mode, §5.2.2 Clock Update Mode). At each
-activation time the partitions due are activated with ``fmi3ActivateModelPartition`` in
-priority order (smaller first, then declaration order; a countdown clock due at the same
-time joins the queue), each after its inputs are set (direct inputs of its outputs: the
-partition computes both at once), its outputs and those of the output clocks it activated
-read after it. The ``clockUpdate`` callback (Clock Update Mode) reads the output clocks
-(``fmi3GetClock``) and the countdown clocks' intervals. ``fmi3Discard`` counts as an error.
-The common instant (one periodic partition, nothing pending) takes a short path (``_fire``).
+Model Partitions, §5.2.1 Clock Activation Mode, §5.2.2 Clock Update Mode), as the clocks
+page of the documentation describes.
 """
 from __future__ import annotations
 
