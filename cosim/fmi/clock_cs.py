@@ -32,8 +32,8 @@ class CSClockedRun(EventModeRun):
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
         super().__init__(comp, board, values, inputs, outputs, integers)
-        self._enter_step_mode = self._fn("fmi3EnterStepMode")
-        self._do_step = self._fn("fmi3DoStep")
+        self._enter_step_mode = self.inst.raw("fmi3EnterStepMode")
+        self._do_step = self.inst.raw("fmi3DoStep")
         db = self._ds_bytes = (ctypes.c_uint8 * 4)()      # eventHandlingNeeded, terminate, earlyReturn
         self._ds_flags = [ctypes.c_bool.from_buffer(db, i) for i in range(3)]
         self._ds_any = ctypes.c_uint32.from_buffer(db)

@@ -35,9 +35,9 @@ class EventModeRun(ClockedRun):
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
         super().__init__(comp, board, values, inputs, outputs, integers)
-        self._set_clock = self._fn("fmi3SetClock")
-        self._enter_event_mode = self._fn("fmi3EnterEventMode")
-        self._update_discrete_states = self._fn("fmi3UpdateDiscreteStates")
+        self._set_clock = self.inst.raw("fmi3SetClock")
+        self._enter_event_mode = self.inst.raw("fmi3EnterEventMode")
+        self._update_discrete_states = self.inst.raw("fmi3UpdateDiscreteStates")
         ub = self._uds_bytes = (ctypes.c_uint8 * 8)()        # the five flags side by side
         self._uds_flags = [ctypes.c_bool.from_buffer(ub, i) for i in range(5)]
         self._uds_any = ctypes.c_uint64.from_buffer(ub)       # any of them set

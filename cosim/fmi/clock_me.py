@@ -119,7 +119,7 @@ class MEClockedRun(EventModeRun):
             set_inputs()
         if self._finish(t):
             return True, None
-        st = self._fn("fmi3EnterContinuousTimeMode")(self.c)
+        st = self.inst.raw("fmi3EnterContinuousTimeMode")(self.c)
         if st > 1:
             self._fail(f"EnterContinuousTimeMode(t = {t:g} s)", st)
         self.in_event = False

@@ -101,7 +101,7 @@ class ClockPorts:
 
     # a run's state, as slots: the hot paths' attribute and method look-ups stay fast
     __slots__ = ("_ft", "_get_clock", "_in_srcs", "_in_starts", "_logged", "_n_out", "_out_val", "_out_vr", "_outbox",
-                 "_plans", "_raw", "board", "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k",
+                 "_plans", "board", "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k",
                  "get_kd", "get_u", "get_ud", "idx_in", "iin", "iin_base", "in_ft", "inst", "integers", "labels",
                  "log_id", "log_t", "model", "n_in", "name", "out", "out_clock_pos", "out_clocks", "out_counts", "own",
                  "own_i", "port_clock", "priority", "publishers", "sources", "unclocked_in", "values", "vin",
@@ -123,7 +123,6 @@ class ClockPorts:
         self.log_t, self.log_id, self._logged = board.log_functions()
         self.dirty = False                           # the own buffers hold outputs newer than the signals
         self._outbox: list = []                      # output clock activations to send
-        self._raw: dict = {}
         self._plans: dict = {}
         self._in_starts = comp._input_starts()        # the connected inputs' start values and sources
         self._in_srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type)
@@ -134,11 +133,6 @@ class ClockPorts:
         self._fillers()
 
     # ------------------------------------------------------------------ set-up
-    def _fn(self, name: str):
-        if name not in self._raw:
-            self._raw[name] = self.inst.raw(name)
-        return self._raw[name]
-
     def _fail(self, what: str, status: int):
         self.inst.fail(what, status)
 
@@ -166,7 +160,7 @@ class ClockPorts:
         self._out_vr = (_U32 * max(n, 1))(*[k.vr for k in self.out_clocks])
         self._out_val = (_B * max(n, 1))()
         self._n_out = _SIZE(n)
-        self._get_clock = self._fn("fmi3GetClock")
+        self._get_clock = self.inst.raw("fmi3GetClock")
 
     def _by_clock(self, names: list[str], positions) -> tuple[dict[int, list[int]], list[int]]:
         """The ``positions`` of the variables ``names`` grouped by the clocks that clock them,

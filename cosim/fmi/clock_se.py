@@ -32,7 +32,7 @@ class SEClockedRun(ClockedRun):
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
         super().__init__(comp, board, values, inputs, outputs, integers)
-        self._activate_model_partition = self._fn("fmi3ActivateModelPartition")
+        self._activate_model_partition = self.inst.raw("fmi3ActivateModelPartition")
         self.rest_later = self.free_in.rest is not no_exchange      # inputs consumed at the update
         self.reported: list[int] = []                # output clocks reported active in callbacks
         self.now: float | None = None                # the time of the activation under way

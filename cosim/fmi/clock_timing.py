@@ -309,7 +309,7 @@ class ClockedRun(ClockPorts):
             label = "GetIntervalFraction" if fraction else "GetIntervalDecimal"
             q = (_I * n)()
             args = (self.c, (_U32 * n)(*key), _SIZE(n), *bufs, q)
-            call = self._interval_calls[key] = (self._fn(f"fmi3{label}"), args, label, bufs, q)
+            call = self._interval_calls[key] = (self.inst.raw(f"fmi3{label}"), args, label, bufs, q)
         fn, args, label, bufs, q = call
         st = fn(*args)
         if st > 1:

@@ -138,32 +138,22 @@ def _timing(where: str, var: str, a: dict) -> dict:
     counter, resolution, shift_counter = (_uint(a[n], f"{where}: {n}")
                                           for n in ("intervalCounter", "resolution", "shiftCounter"))
     fraction = _bool(a["supportsFraction"], f"{where}: supportsFraction")
-    if decimal is not None:
-        if var not in PERIODIC:
-            raise FMUError(f"{where} ({var}) declares intervalDecimal, which only periodic clocks (constant, "
-                           "fixed, tunable) may have")
-        if decimal <= 0:
-            raise FMUError(f"{where}: intervalDecimal must be > 0, got {float(decimal):g}")
-    if shift_decimal is not None:
-        if decimal is None:
-            raise FMUError(f"{where} declares shiftDecimal without intervalDecimal (the standard requires both)")
-        if shift_decimal < 0:
-            raise FMUError(f"{where}: shiftDecimal must be >= 0, got {float(shift_decimal):g}")
-    if counter is not None:
-        if var not in PERIODIC or not fraction:
-            raise FMUError(f"{where} declares intervalCounter, which only a periodic clock with "
-                           "supportsFraction = true may have")
-        if counter == 0:
-            raise FMUError(f"{where}: intervalCounter must be > 0")
-        if resolution is None:
-            raise FMUError(f"{where} declares intervalCounter without resolution (the standard requires both)")
-    if resolution is not None:
-        if var not in PERIODIC:
-            raise FMUError(f"{where} ({var}) declares resolution, which only periodic clocks may have")
-        if resolution == 0:
-            raise FMUError(f"{where}: resolution must be > 0")
-    if shift_counter is not None and counter is None:
-        raise FMUError(f"{where} declares shiftCounter without intervalCounter (the standard requires both)")
+    for attr, needs in (("shiftDecimal", "intervalDecimal"), ("intervalCounter", "resolution"),
+                        ("shiftCounter", "intervalCounter")):
+        if a[attr] is not None and a[needs] is None:
+            raise FMUError(f"{where} declares {attr} without {needs} (the standard requires both)")
+    for attr in ("intervalDecimal", "resolution"):
+        if a[attr] is not None and var not in PERIODIC:
+            raise FMUError(f"{where} ({var}) declares {attr}, which only periodic clocks (constant, fixed, tunable) "
+                           "may have")
+    if counter is not None and (var not in PERIODIC or not fraction):
+        raise FMUError(f"{where} declares intervalCounter, which only a periodic clock with supportsFraction = true "
+                       "may have")
+    for attr, v in (("intervalDecimal", decimal), ("intervalCounter", counter), ("resolution", resolution)):
+        if v is not None and v <= 0:
+            raise FMUError(f"{where}: {attr} must be > 0, got {float(v):g}")
+    if shift_decimal is not None and shift_decimal < 0:
+        raise FMUError(f"{where}: shiftDecimal must be >= 0, got {float(shift_decimal):g}")
     if var == "constant" and decimal is None:
         raise FMUError(f"{where} is a constant clock without intervalDecimal (the standard requires it)")
     interval, shift = decimal, shift_decimal or Fraction(0)
