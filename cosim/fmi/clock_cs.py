@@ -8,7 +8,7 @@ import ctypes
 
 from fmu_models.errors import FMUError
 
-from ..core.clocking import MAX_TICKS, ClockBoard
+from ..core.clocking import MAX_TICKS
 from ..core.component import StopRequest
 from .clock_event import EventModeRun
 from .clock_ports import Plan
@@ -17,21 +17,15 @@ __all__ = ["CSClockedRun"]
 
 
 class CSClockedRun(EventModeRun):
-    """One run of a clocked Co-Simulation FMU.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    """One run of a clocked Co-Simulation FMU."""
 
     __slots__ = ("_ch", "_ct", "_do_step", "_ds_any", "_ds_bytes", "_ds_flags", "_ds_last", "_ds_refs",
                  "_enter_step_mode", "_tick_calls", "_tock_calls", "can_vary", "fast", "quiet", "set_u_all_d",
                  "set_u_ft_d", "set_ud")
     discrete_apart = True
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
+    def _setup(self) -> None:
+        super()._setup()
         self._enter_step_mode = self.inst.raw("fmi3EnterStepMode")
         self._do_step = self.inst.raw("fmi3DoStep")
         db = self._ds_bytes = (ctypes.c_uint8 * 4)()      # eventHandlingNeeded, terminate, earlyReturn
@@ -40,7 +34,7 @@ class CSClockedRun(EventModeRun):
         self._ds_last = ctypes.c_double(0.0)
         self._ds_refs = (*[ctypes.byref(db, i) for i in range(3)], ctypes.byref(self._ds_last))
         self._ct, self._ch = ctypes.c_double(0.0), ctypes.c_double(self.P)
-        self.can_vary = bool(getattr(comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
+        self.can_vary = bool(getattr(self.comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
         self.set_ud = self._or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
         self.set_u_ft_d, self.set_u_all_d = self._or_none(self.free_in.ft_d), self._or_none(self.free_in.all_d)
         self.quiet = False       # nothing pending, nothing held: the short path may run (set by each update)

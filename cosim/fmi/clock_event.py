@@ -8,7 +8,6 @@ import ctypes
 
 from fmu_models.errors import FMUError
 
-from ..core.clocking import ClockBoard
 from .clock_ports import Plan
 from .clock_timing import ClockedRun
 
@@ -19,13 +18,7 @@ MAX_SUPERDENSE = 1000
 
 
 class EventModeRun(ClockedRun):
-    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run."""
 
     __slots__ = ("_enter_event_mode", "_set_clock", "_uds_any", "_uds_args", "_uds_bytes", "_uds_flags", "_uds_next",
                  "_update_discrete_states", "active", "in_event", "pending_event", "ticked")
@@ -33,8 +26,8 @@ class EventModeRun(ClockedRun):
     #: instants is sent (Model Exchange; in Co-Simulation they are the step's left limits).
     read_unclocked_between = False
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
+    def _setup(self) -> None:
+        super()._setup()
         self._set_clock = self.inst.raw("fmi3SetClock")
         self._enter_event_mode = self.inst.raw("fmi3EnterEventMode")
         self._update_discrete_states = self.inst.raw("fmi3UpdateDiscreteStates")

@@ -131,6 +131,10 @@ class ClockPorts:
         self._build_inputs(comp)
         self._build_outputs(comp)
         self._fillers()
+        self._setup()
+
+    def _setup(self) -> None:
+        """A subclass's set-up, after the ports'."""
 
     # ------------------------------------------------------------------ set-up
     def _fail(self, what: str, status: int):

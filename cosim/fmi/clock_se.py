@@ -8,7 +8,7 @@ import ctypes
 
 from fmu_models.errors import FMUError
 
-from ..core.clocking import MAX_TICKS, ClockBoard
+from ..core.clocking import MAX_TICKS
 from .clock_ports import Plan
 from .clock_timing import ClockedRun
 from .clocks import CHANGED, FMIClock
@@ -18,20 +18,14 @@ __all__ = ["SEClockedRun"]
 
 
 class SEClockedRun(ClockedRun):
-    """One run of a Scheduled Execution FMU.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    """One run of a Scheduled Execution FMU."""
 
     __slots__ = ("_activate_model_partition", "_at", "_cv", "_error", "_fire_calls", "in_callback", "now", "queue",
                  "reported", "rest_later")
     by_priority = True
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
+    def _setup(self) -> None:
+        super()._setup()
         self._activate_model_partition = self.inst.raw("fmi3ActivateModelPartition")
         self.rest_later = self.free_in.rest is not no_exchange      # inputs consumed at the update
         self.reported: list[int] = []                # output clocks reported active in callbacks

@@ -11,7 +11,7 @@ from fractions import Fraction
 
 from fmu_models.errors import ConfigurationError, FMUError
 
-from ..core.clocking import ClockBoard, fraction_gcd, time_fraction
+from ..core.clocking import fraction_gcd, time_fraction
 from .clock_ports import ClockPorts, Plan
 from .clocks import CHANGED, NOT_YET_KNOWN, QUALIFIERS, FMIClock
 
@@ -190,26 +190,20 @@ def _ask_periodic(call, k: FMIClock, owner: str) -> tuple[Fraction, Fraction]:
 # ---------------------------------------------------------------------- a run
 class ClockedRun(ClockPorts):
     """One run of a clocked FMU: its ports and its clocks' timing; each interface's run
-    adds its call sequence as the methods ``output(t)`` and ``update(t)``.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    adds its call sequence as the methods ``output(t)`` and ``update(t)``."""
 
     __slots__ = ("P", "_interval_calls", "countdown", "done_n", "first", "fmu_next", "inbox", "inv", "next_at",
                  "plan_len", "plans", "sched", "t0", "tol")
     #: Whether the periodic clocks due at one instant are activated in priority order.
     by_priority = False
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
-        self.sched: ClockSchedule = comp._clock_schedule
+    def _setup(self) -> None:
+        super()._setup()
+        self.sched: ClockSchedule = self.comp._clock_schedule
         self.next_at = self.sched.next_at
-        self.P, self.t0, self.tol = comp.period, self.sched.t0, 1e-9 * comp.period
+        self.P, self.t0, self.tol = self.comp.period, self.sched.t0, 1e-9 * self.comp.period
         self.inv = 1.0 / self.P
-        self.inbox = board.inbox(self.name)
+        self.inbox = self.board.inbox(self.name)
         self.countdown = [k for k in self.model.clocks if k.variability == "countdown" and k.causality == "input"]
         self.fmu_next: float | None = None           # the FMU's nextEventTime
         self.done_n = -1                             # the instant whose outputs were computed
