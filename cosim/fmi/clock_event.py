@@ -51,8 +51,7 @@ class EventModeRun(ClockedRun):
 
     # ------------------------------------------------------------------ at an instant
     def _instant_event(self, t: float, plan: Plan | None) -> bool:
-        """Event Mode at instant ``t`` if anything happens there (the clocks of ``plan``, due or
-        received, a pending event, Event Mode not left yet); whether it did."""
+        """Event Mode at instant ``t`` if anything happens there (``plan``, due, received, pending); whether it did."""
         ks = (list(plan.vrs) if plan is not None else []) + self._due_at(t)
         got, snap = self._received_at(t)
         if not (ks or got or self.pending_event or self.in_event):
@@ -89,8 +88,7 @@ class EventModeRun(ClockedRun):
         self._read_output_clocks(t, snap, not direct)
 
     def _read_output_clocks(self, t: float, snap: dict | None, fresh: bool) -> None:
-        """``fmi3GetClock`` of the output (and local) clocks, the active ones handled by
-        :meth:`_clocks_ticked` (``fresh``: sent at once, else with the instant's outputs)."""
+        """``fmi3GetClock`` of the output clocks, the active ones handled (``fresh``: sent at once)."""
         if not self.out_clocks:
             return
         active = self._active_out_clocks(f"GetClock(t = {t:g} s)")
@@ -124,8 +122,7 @@ class EventModeRun(ClockedRun):
 
     # ------------------------------------------------------------------ the event iteration
     def _set_rest(self) -> None:
-        """In the update, before the state changes: the clocked inputs of the active clocks
-        no output depends on, and every input without clock."""
+        """Before the state changes: the active clocks' other clocked inputs, the inputs without clock."""
         for vr in list(self.active):
             self.clock_in[vr].rest()
         self.free_in.all()
@@ -163,8 +160,7 @@ class EventModeRun(ClockedRun):
                        "super-dense instants")
 
     def _read_intervals(self, t: float) -> None:
-        """``fmi3GetInterval*`` after the event iteration (§2.3.5): every countdown clock, and
-        the changing (and tunable without ``intervalDecimal``) input clocks that ticked."""
+        """``fmi3GetInterval*`` after the iteration (§2.3.5): countdown clocks, ticked ones :meth:`interval_read`."""
         want = list(self.countdown)
         want += [k for k in map(self.model.by_vr.get, self.ticked) if k.causality == "input" and self.interval_read(k)]
         for k, v, q in self._intervals(want):

@@ -167,8 +167,7 @@ class ClockPorts:
         self._get_clock = self.inst.raw("fmi3GetClock")
 
     def _by_clock(self, names: list[str], positions) -> tuple[dict[int, list[int]], list[int]]:
-        """The ``positions`` of the variables ``names`` grouped by the clocks that clock them,
-        and those without clock."""
+        """The ``positions`` of the variables ``names`` by the clocks that clock them, and the unclocked."""
         by_clock: dict[int, list[int]] = {}
         unclocked = []
         for i in positions:
@@ -202,8 +201,7 @@ class ClockPorts:
         self._hold_starts(comp, sorted({j for positions in by_clock.values() for j in positions}))
 
     def _hold_starts(self, comp, positions: list[int]) -> None:
-        """Clocked outputs carry their declared start value until their clock first ticks (they
-        may be read only while it is active)."""
+        """Clocked outputs hold their start values until their clock first ticks (read only while active)."""
         start = self.out.start
         for j in positions:
             p = comp.element_ports[comp.output_names[j]]
@@ -236,8 +234,7 @@ class ClockPorts:
         return ex.bind(self.vin, _index(positions), self.iin, changes)
 
     def _getter(self, positions: list[int], direct: bool):
-        """A call reading the output ports at ``positions`` into the master's signals
-        (``direct``: at an instant) or into the own buffers (between instants); None for none."""
+        """A call reading the outputs at ``positions`` into the signals (``direct``) or own buffers; None: none."""
         if not positions:
             return None
         own, own_i, base = (self.values, self.integers, self.out.start) if direct else (self.own, self.own_i, 0)

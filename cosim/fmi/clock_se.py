@@ -66,8 +66,7 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, ks + got, snap, True)
 
     def _fire(self, plan: Plan, t: float) -> None:
-        """The short path of ``plan`` at instant ``t`` (one partition whose interval is not read):
-        ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its own."""
+        """The short path of ``plan`` at ``t`` (one partition, no interval read): §5.2.1 activation."""
         sets, cv, name, label, gets = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
@@ -102,8 +101,7 @@ class SEClockedRun(ClockedRun):
         return plan.short
 
     def _run_at(self, t: float, ks: list[int], snap: dict | None, direct: bool) -> None:
-        """The partitions ``ks`` at ``t`` in priority order (§5.1.1), and any that become due
-        then (outputs into the signals if ``direct``, else into the own buffers)."""
+        """The partitions ``ks`` at ``t`` in priority order (§5.1.1), and those due then (``direct``: at an instant)."""
         if not direct:
             self._use_own()
         self.now = t
@@ -146,8 +144,7 @@ class SEClockedRun(ClockedRun):
             g()
 
     def _activation_failed(self, st: int, name: str, t: float) -> None:
-        """After ``fmi3ActivateModelPartition`` of ``name`` at ``t`` returned ``st``: raise what went
-        wrong in its callbacks, else the failed call."""
+        """Raise what went wrong in the callbacks of ``fmi3ActivateModelPartition``, else its failure ``st``."""
         if self._error is not None:
             err, self._error = self._error, None
             if st > 1:

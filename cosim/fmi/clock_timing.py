@@ -146,8 +146,7 @@ def initialise(comp, inst, t0: float) -> ClockSchedule:
 
 
 def _set_interval(call, k: FMIClock, interval: Fraction, owner: str) -> Fraction:
-    """``fmi3SetInterval*`` of clock ``k``: ``interval`` [s] (in the counter form: a whole
-    number of its resolution)."""
+    """``fmi3SetInterval*`` of clock ``k`` (counter form: a whole number of its resolution)."""
     if k.supports_fraction and k.counter is not None:
         counter = interval * k.resolution
         if counter.denominator != 1:
@@ -212,8 +211,7 @@ class ClockedRun(ClockPorts):
 
     # ------------------------------------------------------------------ periodic clocks
     def _patterns(self) -> None:
-        """The periodic clocks' activations at each instant, as plans over their common
-        period (``self.plans[n % len]`` for instants from ``self.first`` on)."""
+        """The periodic clocks' plans over their common period (``plans[n % plan_len]`` from instant ``first``)."""
         periodic = self.sched.periodic
         length = math.lcm(*(every for _, every, _ in periodic))
         first = max((f for _, _, f in periodic), default=0)
@@ -259,8 +257,7 @@ class ClockedRun(ClockPorts):
         return due
 
     def _received_at(self, t: float) -> tuple[list[int], dict | None]:
-        """The triggered clocks activated at ``t`` by their sources, and the snapshot of the
-        sources' outputs (merged)."""
+        """The triggered clocks activated at ``t`` by their sources, and the sources' outputs (merged)."""
         box = self.inbox
         if not box:
             return [], None
@@ -290,8 +287,7 @@ class ClockedRun(ClockPorts):
 
     # ------------------------------------------------------------------ intervals
     def _intervals(self, clocks: list[FMIClock]) -> list[tuple[FMIClock, float, int]]:
-        """``fmi3GetInterval*`` of ``clocks`` (the fraction form where supported):
-        ``(clock, interval [s], qualifier)`` each."""
+        """``fmi3GetInterval*`` of ``clocks`` (fraction form if supported): ``(clock, interval [s], qualifier)``s."""
         if not clocks:
             return []
         key = tuple(k.vr for k in clocks)

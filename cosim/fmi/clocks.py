@@ -102,8 +102,7 @@ def _bool(text, what: str) -> bool:
 
 
 def _number(text, what: str, conv, kind: str):
-    """``conv(text)``, None for an attribute not given; an FMUError naming ``what`` if
-    ``text`` is not ``kind``."""
+    """``conv(text)`` (None if not given); an FMUError naming ``what`` if ``text`` is not ``kind``."""
     if text is None:
         return None
     try:
@@ -132,8 +131,7 @@ def _decimal(text, what: str) -> Fraction | None:
 
 
 def _timing(where: str, var: str, a: dict) -> dict:
-    """The interval and shift attributes ``a`` of the clock ``where`` (of intervalVariability
-    ``var``), parsed and checked: the timing fields of its :class:`FMIClock`."""
+    """The timing attributes ``a`` of clock ``where`` (intervalVariability ``var``), parsed and checked."""
     decimal, shift_decimal = (_decimal(a[n], f"{where}: {n}") for n in ("intervalDecimal", "shiftDecimal"))
     counter, resolution, shift_counter = (_uint(a[n], f"{where}: {n}")
                                           for n in ("intervalCounter", "resolution", "shiftCounter"))
