@@ -238,17 +238,16 @@ class ClockPlan:
 
     def _topological(self) -> list[Component]:
         """The components, each clock source before its sinks, ties in list order."""
-        sources = {c.name: {sn for sn, _, dn, _ in self.links if dn == c.name} for c in self.components}
-        pending, done, out = list(self.components), set(), []
+        pending, out = list(self.components), []
         while pending:
-            c = next((c for c in pending if sources[c.name] <= done), None)
+            done = {c.name for c in out}
+            c = next((c for c in pending if all(sn in done for sn, _, dn, _ in self.links if dn == c.name)), None)
             if c is None:
                 cyc = {c.name for c in pending}
                 hops = ", ".join(f"{sn}.{sp} -> {dn}.{dp}" for sn, sp, dn, dp in self.links if sn in cyc and dn in cyc)
                 raise ConfigurationError(f"the clock connections form a cycle ({hops}): no component can be stepped "
                                          "before the others; break the cycle")
             pending.remove(c)
-            done.add(c.name)
             out.append(c)
         return out
 
@@ -421,8 +420,7 @@ class ClockTicks(Component, kind="clock_ticks"):
                 raise ConfigurationError(f"{name}: the time {dup[0]:g} s is given twice (one activation per time)")
             self.times, self.interval, self.shift = ts, None, None
         else:
-            self.times = None
-            self.interval = positive(interval, f"{name}: interval [s]")
+            self.times, self.interval = None, positive(interval, f"{name}: interval [s]")
             self.shift = finite(shift, f"{name}: shift [s]")
             if self.shift < 0:
                 raise ConfigurationError(f"{name}: shift must be >= 0 s, got {self.shift:g}")
@@ -433,15 +431,13 @@ class ClockTicks(Component, kind="clock_ticks"):
         self.reset(0.0)
 
     def attach_clocks(self, board: ClockBoard) -> None:
-        """Take the run's board: the activations go to the clocks connected to ``tick``."""
         self._board = board
         self._publish = board.publisher(self.name, "tick")
         self._label = board.label(self.name, "tick")
 
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse activation times before the start, and more activations than a run may
-        log (:data:`MAX_TICKS`)."""
-        if self.times is not None and self.times and self.times[0] < start_time:
+        """Refuse activation times before the start, and more than :data:`MAX_TICKS` activations."""
+        if self.times and self.times[0] < start_time:
             raise ConfigurationError(f"{self.name}: activation time {self.times[0]:g} s is before the start time "
                                      f"{start_time:g} s")
         if self.interval is not None:
@@ -453,7 +449,7 @@ class ClockTicks(Component, kind="clock_ticks"):
     def reset(self, t0: float) -> None:
         """Start at ``t0`` [s]: no activation yet."""
         super().reset(t0)
-        self.count, self._t0, self._i = 0, float(t0), 0
+        self.count, self._t0 = 0, float(t0)
 
     def _time(self, i: int) -> float | None:
         if self.times is not None:
@@ -463,10 +459,9 @@ class ClockTicks(Component, kind="clock_ticks"):
     def _fire(self, until: float, inclusive: bool) -> None:
         tol = 1e-9 * self.period
         while True:
-            ti = self._time(self._i)
+            ti = self._time(self.count)
             if ti is None or ti > until + tol or (not inclusive and ti >= until - tol):
                 return
-            self._i += 1
             self.count += 1
             if self._board is not None:
                 self._board.log(ti, self._label)
