@@ -243,10 +243,7 @@ class ClockedRun(ClockPorts):
     # ------------------------------------------------------------------ aperiodic and triggered clocks
     def _due_at(self, t: float) -> list[int]:
         """Aperiodic clocks due at ``t`` (removed from the pending)."""
-        nxt = self.next_at
-        if not nxt:
-            return []
-        tol, due = self.tol, []
+        nxt, tol, due = self.next_at, self.tol, []
         for vr, tn in list(nxt.items()):
             if abs(tn - t) <= tol:
                 due.append(vr)
@@ -258,10 +255,7 @@ class ClockedRun(ClockPorts):
 
     def _received_at(self, t: float) -> tuple[list[int], dict | None]:
         """The triggered clocks activated at ``t`` by their sources, and the sources' outputs (merged)."""
-        box = self.inbox
-        if not box:
-            return [], None
-        tol = self.tol
+        box, tol = self.inbox, self.tol
         ks, snap, keep = [], None, []
         for entry in box:
             te, port, s = entry
@@ -279,11 +273,8 @@ class ClockedRun(ClockPorts):
 
     def _next_point(self, after: float, before: float) -> float | None:
         """The earliest pending activation strictly between ``after`` and ``before`` [s]."""
-        tol = self.tol
-        times = [*self.next_at.values(), *(te for te, _, _ in self.inbox)]
-        if self.fmu_next is not None:
-            times.append(self.fmu_next)
-        return min((x for x in times if after + tol < x < before - tol), default=None)
+        times = [*self.next_at.values(), *(te for te, _, _ in self.inbox), self.fmu_next]
+        return min((x for x in times if x is not None and after + self.tol < x < before - self.tol), default=None)
 
     # ------------------------------------------------------------------ intervals
     def _intervals(self, clocks: list[FMIClock]) -> list[tuple[FMIClock, float, int]]:

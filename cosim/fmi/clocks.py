@@ -220,17 +220,15 @@ class FMIClocks:
         for v in md.modelVariables:
             if not (refs := getattr(v, "clocks", None)):
                 continue
-            vrs = []
-            for r in refs:
-                vr = getattr(r, "valueReference", r)
+            vrs = tuple(int(getattr(r, "valueReference", r)) for r in refs)
+            for vr in vrs:
                 if vr not in self.by_vr:
                     raise FMUError(f"{owner}: variable {v.name!r} is clocked by value reference {vr}, which is not a "
                                    "clock (the standard's clocks attribute lists clocks only)")
-                vrs.append(int(vr))
             if v.type != "Clock" and v.variability not in (None, "discrete", "tunable"):
                 raise FMUError(f"{owner}: clocked variable {v.name!r} has variability {v.variability!r}; clocked "
                                "variables must be discrete or tunable")
-            self.clocked[v.name] = tuple(vrs)
+            self.clocked[v.name] = vrs
         self.dependencies = {u.variable.valueReference: tuple(d.valueReference for d in u.dependencies or ())
                              for u in md.outputs if u.variable is not None and u.variable.type == "Clock"}
 
