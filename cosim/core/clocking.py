@@ -255,27 +255,23 @@ class ClockPlan:
     def describe_lines(self) -> list[str]:
         """The clocks in words, one line each (for :meth:`~cosim.core.master.Cosimulation.describe`)."""
         lines = ["clocks (a clock port's signal counts its activations):"]
-        drives: dict = {}
-        for sn, sp, dn, dp in self.links:
-            drives.setdefault((sn, sp), []).append(f"{dn}.{dp}")
-        source = {(dn, dp): f"{sn}.{sp}" for sn, sp, dn, dp in self.links}
         for c in self.members:
             p = self.period(c.name)
             for k in c.clock_infos:
                 text = k.timing()
-                if k.causality == "input" and k.variability in PERIODIC and k.interval is not None:
-                    every = int(k.interval / p)
-                    first = int((k.shift or 0) / p)
+                if k.causality != "input":
+                    drives = [f"{dn}.{dp}" for sn, sp, dn, dp in self.links if (sn, sp) == (c.name, k.port)]
+                    text += f"; drives {', '.join(drives) or 'nothing'}"
+                elif k.variability == "triggered":                # a source is checked to exist
+                    text += f" by {'.'.join(self.connections[(c.name, k.port)])}"
+                elif k.variability not in PERIODIC:
+                    text += "; at its exact time, between instants if it falls there"
+                elif k.interval is None:
+                    text += f" (checked at initialisation to be multiples of {c.name}'s period)"
+                else:
+                    every, first = int(k.interval / p), int((k.shift or 0) / p)
                     text += (f": every instant of {c.name}" if every == 1 and first == 0 else
                              f": every {every} instant(s) of {c.name} from instant {first}")
-                elif k.causality == "input" and k.variability in PERIODIC:
-                    text += f" (checked at initialisation to be multiples of {c.name}'s period)"
-                elif k.causality == "input" and k.variability == "triggered":
-                    text += f" by {source.get((c.name, k.port), '(no source)')}"
-                elif k.causality == "input":
-                    text += "; at its exact time, between instants if it falls there"
-                if k.causality != "input":
-                    text += f"; drives {', '.join(drives.get((c.name, k.port), [])) or 'nothing'}"
                 if k.priority is not None:
                     text += f"; priority {k.priority}"
                 lines.append(f"  {c.name}.{k.name}: {text}")
@@ -315,9 +311,6 @@ class ClockBoard:
 
     def __init__(self, plan: ClockPlan | None, values: np.ndarray, integers: np.ndarray, slots: Mapping):
         self.plan, self.values, self.integers, self.slots = plan, values, integers, dict(slots)
-        self._routes: dict = {}
-        for sn, sp, dn, dp in plan.links if plan is not None else ():
-            self._routes.setdefault((sn, sp), []).append((dn, dp))
         self._inbox: dict = {}
         self._label_of: dict[str, int] = {}          # in the order of their numbers
         self._times, self._ids = array("d"), array("q")
@@ -331,10 +324,10 @@ class ClockBoard:
         """A function ``publish(time, snapshot)`` that activates every triggered clock connected
         to ``component.port`` at ``time`` [s] (``snapshot``: ``{component: (floats, ints)}``,
         outputs at that time); None if nothing is connected to it."""
-        routes = self._routes.get((component, port))
-        if not routes:
+        links = self.plan.links if self.plan is not None else ()
+        boxes = [(self.inbox(dn), dp) for sn, sp, dn, dp in links if (sn, sp) == (component, port)]
+        if not boxes:
             return None
-        boxes = [(self.inbox(dn), dp) for dn, dp in routes]
 
         def publish(time: float, snapshot: dict) -> None:
             for box, dp in boxes:
