@@ -48,12 +48,8 @@ def time_fraction(x) -> Fraction:
 
 def fraction_gcd(*values: Fraction) -> Fraction:
     """The greatest common divisor of positive fractions (zeros are skipped; 0 if all are)."""
-    g = Fraction(0)
-    for v in values:
-        if v:
-            g = Fraction(math.gcd(g.numerator * v.denominator, v.numerator * g.denominator),
-                         g.denominator * v.denominator)
-    return g
+    values = [v for v in values if v]                  # in lowest terms: gcd of numerators / lcm of denominators
+    return Fraction(math.gcd(*(v.numerator for v in values)), math.lcm(*(v.denominator for v in values)))
 
 
 @dataclass(frozen=True)
