@@ -11,7 +11,7 @@ from fractions import Fraction
 
 from fmu_models.errors import ConfigurationError, FMUError
 
-from ..core.clocking import fraction_gcd, time_fraction
+from ..core.clocking import APERIODIC, PERIODIC, fraction_gcd, time_fraction
 from .clock_ports import ClockPorts, Plan
 from .clocks import CHANGED, NOT_YET_KNOWN, QUALIFIERS, FMIClock
 
@@ -135,9 +135,9 @@ def initialise(comp, inst, t0: float) -> ClockSchedule:
             sched.add_periodic(k, k.interval, k.shift)
         elif k.importer_sets_interval:
             sched.add_periodic(k, _set_interval(call, k, comp.clock_overrides.get(k.name, k.interval), owner), k.shift)
-        elif k.periodic:                                  # fixed/tunable without intervalDecimal: ask
+        elif k.variability in PERIODIC:                   # fixed/tunable without intervalDecimal: ask
             sched.add_periodic(k, *_ask_periodic(call, k, owner))
-        elif k.aperiodic:
+        elif k.variability in APERIODIC:
             interval, q = _get_interval(call, k)
             if k.supports_fraction:
                 interval = interval[0] / interval[1] if interval[1] else float("nan")

@@ -15,7 +15,7 @@ from fractions import Fraction
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import positive
 
-from ..core.clocking import APERIODIC, PERIODIC, VARIABILITIES, ClockInfo, time_fraction
+from ..core.clocking import PERIODIC, VARIABILITIES, ClockInfo, time_fraction
 from ..core.component import CLOCK, Port
 
 __all__ = ["CHANGED", "NOT_YET_KNOWN", "QUALIFIERS", "UNCHANGED", "FMIClock", "FMIClocks"]
@@ -73,16 +73,6 @@ class FMIClock:
     can_be_deactivated: bool
     index: int
     description: str = ""
-
-    @property
-    def periodic(self) -> bool:
-        """Constant, fixed or tunable."""
-        return self.variability in PERIODIC
-
-    @property
-    def aperiodic(self) -> bool:
-        """Changing or countdown."""
-        return self.variability in APERIODIC
 
     @property
     def is_port(self) -> bool:
@@ -332,8 +322,8 @@ class FMIClocks:
         ports = set(ports)
         out = []
         for k in self.clocks:
-            interval = overrides.get(k.name, k.interval) if k.periodic and (k.has_decimal or k.variability ==
-                                                                            "constant") else None
+            # intervalDecimal is declared by periodic clocks only, by every constant one
+            interval = overrides.get(k.name, k.interval) if k.has_decimal else None
             note = "activated by the FMU" if k.causality != "input" else ""
             if k.name in overrides:
                 note = "interval set by the component (clock_intervals)"
