@@ -436,7 +436,6 @@ class ClockTicks(Component, kind="clock_ticks"):
                                     f"{stop_time:g} s makes {n:.3g} of them, more than {MAX_TICKS} (a run logs each)")
 
     def reset(self, t0: float) -> None:
-        """Start at ``t0`` [s]: no activation yet."""
         super().reset(t0)
         self.count, self._t0 = 0, float(t0)
 
@@ -467,5 +466,4 @@ class ClockTicks(Component, kind="clock_ticks"):
         self._fire(t + self.period, False)
 
     def timing(self) -> str:
-        """What its output means."""
         return f"clock source: tick {self.clock_infos[0].note}"

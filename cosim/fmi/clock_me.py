@@ -44,7 +44,7 @@ class MEClockedRun(EventModeRun):
     def output(self, t: float) -> None:
         """The outputs at instant ``t`` [s]: Event Mode where clocks tick or an event is pending,
         else the inputs without clock the outputs depend on set."""
-        n = self.instant(t)
+        n = round((t - self.t0) * self.inv)
         if n == self.done_n:
             self._again()
             return

@@ -236,10 +236,6 @@ class ClockedRun(ClockPorts):
             return self.plans[n % self.plan_len]
         return self._plan_at(n)
 
-    def instant(self, t: float) -> int:
-        """The component's instant number of ``t`` [s]."""
-        return round((t - self.t0) / self.P)
-
     # ------------------------------------------------------------------ aperiodic and triggered clocks
     def _due_at(self, t: float) -> list[int]:
         """Aperiodic clocks due at ``t`` (removed from the pending)."""
