@@ -99,8 +99,7 @@ class ClockSchedule:
                            f"t = {t:g} s, not a multiple of the period {self.period:g} s")
         for entry in self.periodic:
             if entry[0].vr == k.vr:
-                entry[1] = round(ratio)
-                entry[2] = round((t - self.t0) / self.period) + round(ratio)
+                entry[1:] = [round(ratio), round((t - self.t0) / self.period) + round(ratio)]
         return True
 
 
@@ -217,11 +216,9 @@ class ClockedRun(ClockPorts):
         first = max((f for _, _, f in periodic), default=0)
         if length > MAX_PATTERN or first > MAX_PATTERN:
             self.plans, self.plan_len, self.first = None, 1, 0
-            return
-        plans: list = [None] * length
-        for n in range(first, first + length):
-            plans[n % length] = self._plan_at(n)
-        self.plans, self.plan_len, self.first = plans, length, first
+        else:                                        # plans[i]: the instant n from first on with n % length == i
+            self.plans = [self._plan_at(first + (i - first) % length) for i in range(length)]
+            self.plan_len, self.first = length, first
 
     def _plan_at(self, n: int) -> Plan | None:
         """The plan of the periodic clocks due at instant ``n`` (None: none)."""
