@@ -1,9 +1,7 @@
 """Clocks in the master (FMI 3.0 clocks): what a clocked component declares
-(:class:`~cosim.core.clocking.ClockInfo`), the clock connections and timing checked before
-a run (:class:`~cosim.core.clocking.ClockPlan`), a run's activations and their log
-(:class:`~cosim.core.clocking.ClockBoard`), and the clock source :class:`ClockTicks`. The
-timing on the base grid, the clock connections and what is refused are on the clocks page
-of the documentation.
+(:class:`~cosim.core.clocking.ClockInfo`), the plan checked before a run
+(:class:`~cosim.core.clocking.ClockPlan`), a run's activations (:class:`~cosim.core.clocking.ClockBoard`)
+and the clock source :class:`~cosim.core.clocking.ClockTicks`; see the clocks page of the documentation.
 """
 from __future__ import annotations
 

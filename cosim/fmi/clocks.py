@@ -1,9 +1,6 @@
-"""The FMI 3.0 clocks of an imported FMU (§2.2.8 Clocks), read and checked from its model
-description: the attributes fmpy leaves out are read from the XML (also through a
-``ClockType``), and what the standard forbids is refused naming the clock and the rule (the
-list is on the clocks page of the documentation). Triggered input clocks and output clocks
-are ports of type :data:`~cosim.core.component.CLOCK`; how a run drives the clocks is in
-:mod:`cosim.fmi.clock_run`.
+"""The FMI 3.0 clocks of an imported FMU (§2.2.8 Clocks), read from its model description
+(also what fmpy leaves out) and checked: what the standard forbids is refused naming the
+clock and the rule (listed on the clocks page of the documentation).
 """
 from __future__ import annotations
 
@@ -283,13 +280,8 @@ class FMIClocks:
 
     def feedthrough(self, declared: Mapping[str, Sequence[str]], outs: list[Port], ins: list[Port], ports,
                     interface: str) -> dict:
-        """The direct dependencies the master may assume (see the module documentation):
-        a clocked output on the inputs its ``ModelStructure`` lists (in Co-Simulation not on
-        discrete inputs without a clock: those change in Event Mode in the update) and on its
-        clocks' triggered input ports; in Scheduled Execution also on every input of its
-        partitions; outputs without clocks as declared in Model Exchange, on no input in
-        Co-Simulation and Scheduled Execution. ``declared``: the dependencies read from the
-        ``ModelStructure`` (output port -> input ports)."""
+        """The direct dependencies the master may assume (the rules: the clocks page of the
+        documentation); ``declared``: those the ``ModelStructure`` lists (output port -> input ports)."""
         in_names = [p.name for p in ins]
         by_clock: dict[int, list[str]] = {}          # input clock -> the input ports it is or clocks
         for p in ins:
