@@ -71,8 +71,9 @@ class Plan:
 
 
 class ClockPorts:
-    """The ports of a clocked FMU in one run (see the module documentation): its setters,
-    getters, input and output buffers, its output clocks' counts and sinks.
+    """The ports of a clocked FMU in one run: its setters, getters, input and output buffers
+    (outputs read between instants go to its own, the signals at the next instant), its
+    output clocks' counts and sinks.
 
     Parameters
     ----------

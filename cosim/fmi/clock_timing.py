@@ -105,8 +105,8 @@ class ClockSchedule:
 
 # ---------------------------------------------------------------------- Initialization Mode
 def initialise(comp, inst, t0: float) -> ClockSchedule:
-    """In Initialization Mode (§2.3.3): the input clocks' intervals set or asked (see the
-    module documentation); returns the run's schedule.
+    """In Initialization Mode (§2.3.3): the input clocks' intervals set or asked (as the clocks
+    page of the documentation says); returns the run's schedule.
 
     Parameters
     ----------

@@ -160,9 +160,7 @@ def _timing(where: str, var: str, a: dict) -> dict:
 
 def _by_name(root, section: str, tag: str) -> dict:
     """The ``tag`` elements of the XML ``section`` (under ``root``), by name."""
-    parent = root.find(section)
-    elements = parent if parent is not None else ()
-    return {el.get("name"): el for el in elements if el.tag == tag and el.get("name") is not None}
+    return {el.get("name"): el for el in root.findall(f"{section}/{tag}") if el.get("name") is not None}
 
 
 class FMIClocks:
