@@ -85,15 +85,14 @@ class ClockInfo:
         """The clock's timing in words."""
         if self.causality != "input":
             return f"{self.causality} clock" + (f", {self.note}" if self.note else "")
-        if self.variability in PERIODIC:
-            if self.interval is None:
-                what = f"{self.variability}, interval and shift from the FMU at initialisation"
-            else:
-                what = f"{self.variability}, every {float(self.interval):g} s from {float(self.shift or 0):g} s"
+        if self.variability == "triggered":
+            what = "triggered"
         elif self.variability in APERIODIC:
             what = f"{self.variability}: when the FMU says (its intervals read at run time)"
+        elif self.interval is None:
+            what = f"{self.variability}, interval and shift from the FMU at initialisation"
         else:
-            what = "triggered"
+            what = f"{self.variability}, every {float(self.interval):g} s from {float(self.shift or 0):g} s"
         return what + (f"; {self.note}" if self.note else "")
 
 

@@ -228,14 +228,13 @@ class CSClockedRun(EventModeRun):
             if reached >= end - self.tol:            # at the step's end: the next instant's Event Mode
                 self.pending_event = True
                 return None
-            self._between(reached)
+        elif early and reached < target - self.tol:  # an early return without event: step on
             return reached
-        if early and reached < target - self.tol:    # an early return without event: step on
-            return reached
-        if target >= end - self.tol:
+        elif target >= end - self.tol:
             return None
-        self._between(target)                        # an activation between instants
-        return target
+        te = reached if ehn else target              # an event or an activation between instants
+        self._between(te)
+        return te
 
     def _between(self, te: float) -> None:
         """Event Mode between instants at ``te``: the outputs without clocks, the activations, the iteration."""
