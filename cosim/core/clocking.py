@@ -1,9 +1,7 @@
 """Clocks in the master (FMI 3.0 clocks): what a clocked component declares
-(:class:`~cosim.core.clocking.ClockInfo`), the clock connections and timing checked before
-a run (:class:`~cosim.core.clocking.ClockPlan`), a run's activations and their log
-(:class:`~cosim.core.clocking.ClockBoard`), and the clock source :class:`ClockTicks`. The
-timing on the base grid, the clock connections and what is refused are on the clocks page
-of the documentation.
+(:class:`~cosim.core.clocking.ClockInfo`), the plan checked before a run
+(:class:`~cosim.core.clocking.ClockPlan`), a run's activations (:class:`~cosim.core.clocking.ClockBoard`)
+and the clock source :class:`~cosim.core.clocking.ClockTicks`; see the clocks page of the documentation.
 """
 from __future__ import annotations
 
@@ -48,12 +46,8 @@ def time_fraction(x) -> Fraction:
 
 def fraction_gcd(*values: Fraction) -> Fraction:
     """The greatest common divisor of positive fractions (zeros are skipped; 0 if all are)."""
-    g = Fraction(0)
-    for v in values:
-        if v:
-            g = Fraction(math.gcd(g.numerator * v.denominator, v.numerator * g.denominator),
-                         g.denominator * v.denominator)
-    return g
+    values = [v for v in values if v]                  # in lowest terms: gcd of numerators / lcm of denominators
+    return Fraction(math.gcd(*(v.numerator for v in values)), math.lcm(*(v.denominator for v in values)))
 
 
 @dataclass(frozen=True)
@@ -91,15 +85,14 @@ class ClockInfo:
         """The clock's timing in words."""
         if self.causality != "input":
             return f"{self.causality} clock" + (f", {self.note}" if self.note else "")
-        if self.variability in PERIODIC:
-            if self.interval is None:
-                what = f"{self.variability}, interval and shift from the FMU at initialisation"
-            else:
-                what = f"{self.variability}, every {float(self.interval):g} s from {float(self.shift or 0):g} s"
+        if self.variability == "triggered":
+            what = "triggered"
         elif self.variability in APERIODIC:
             what = f"{self.variability}: when the FMU says (its intervals read at run time)"
+        elif self.interval is None:
+            what = f"{self.variability}, interval and shift from the FMU at initialisation"
         else:
-            what = "triggered"
+            what = f"{self.variability}, every {float(self.interval):g} s from {float(self.shift or 0):g} s"
         return what + (f"; {self.note}" if self.note else "")
 
 
@@ -238,17 +231,16 @@ class ClockPlan:
 
     def _topological(self) -> list[Component]:
         """The components, each clock source before its sinks, ties in list order."""
-        sources = {c.name: {sn for sn, _, dn, _ in self.links if dn == c.name} for c in self.components}
-        pending, done, out = list(self.components), set(), []
+        pending, out = list(self.components), []
         while pending:
-            c = next((c for c in pending if sources[c.name] <= done), None)
+            done = {c.name for c in out}
+            c = next((c for c in pending if all(sn in done for sn, _, dn, _ in self.links if dn == c.name)), None)
             if c is None:
                 cyc = {c.name for c in pending}
                 hops = ", ".join(f"{sn}.{sp} -> {dn}.{dp}" for sn, sp, dn, dp in self.links if sn in cyc and dn in cyc)
                 raise ConfigurationError(f"the clock connections form a cycle ({hops}): no component can be stepped "
                                          "before the others; break the cycle")
             pending.remove(c)
-            done.add(c.name)
             out.append(c)
         return out
 
@@ -256,27 +248,23 @@ class ClockPlan:
     def describe_lines(self) -> list[str]:
         """The clocks in words, one line each (for :meth:`~cosim.core.master.Cosimulation.describe`)."""
         lines = ["clocks (a clock port's signal counts its activations):"]
-        drives: dict = {}
-        for sn, sp, dn, dp in self.links:
-            drives.setdefault((sn, sp), []).append(f"{dn}.{dp}")
-        source = {(dn, dp): f"{sn}.{sp}" for sn, sp, dn, dp in self.links}
         for c in self.members:
             p = self.period(c.name)
             for k in c.clock_infos:
                 text = k.timing()
-                if k.causality == "input" and k.variability in PERIODIC and k.interval is not None:
-                    every = int(k.interval / p)
-                    first = int((k.shift or 0) / p)
+                if k.causality != "input":
+                    drives = [f"{dn}.{dp}" for sn, sp, dn, dp in self.links if (sn, sp) == (c.name, k.port)]
+                    text += f"; drives {', '.join(drives) or 'nothing'}"
+                elif k.variability == "triggered":                # a source is checked to exist
+                    text += f" by {'.'.join(self.connections[(c.name, k.port)])}"
+                elif k.variability not in PERIODIC:
+                    text += "; at its exact time, between instants if it falls there"
+                elif k.interval is None:
+                    text += f" (checked at initialisation to be multiples of {c.name}'s period)"
+                else:
+                    every, first = int(k.interval / p), int((k.shift or 0) / p)
                     text += (f": every instant of {c.name}" if every == 1 and first == 0 else
                              f": every {every} instant(s) of {c.name} from instant {first}")
-                elif k.causality == "input" and k.variability in PERIODIC:
-                    text += f" (checked at initialisation to be multiples of {c.name}'s period)"
-                elif k.causality == "input" and k.variability == "triggered":
-                    text += f" by {source.get((c.name, k.port), '(no source)')}"
-                elif k.causality == "input":
-                    text += "; at its exact time, between instants if it falls there"
-                if k.causality != "input":
-                    text += f"; drives {', '.join(drives.get((c.name, k.port), [])) or 'nothing'}"
                 if k.priority is not None:
                     text += f"; priority {k.priority}"
                 lines.append(f"  {c.name}.{k.name}: {text}")
@@ -316,9 +304,6 @@ class ClockBoard:
 
     def __init__(self, plan: ClockPlan | None, values: np.ndarray, integers: np.ndarray, slots: Mapping):
         self.plan, self.values, self.integers, self.slots = plan, values, integers, dict(slots)
-        self._routes: dict = {}
-        for sn, sp, dn, dp in plan.links if plan is not None else ():
-            self._routes.setdefault((sn, sp), []).append((dn, dp))
         self._inbox: dict = {}
         self._label_of: dict[str, int] = {}          # in the order of their numbers
         self._times, self._ids = array("d"), array("q")
@@ -332,10 +317,10 @@ class ClockBoard:
         """A function ``publish(time, snapshot)`` that activates every triggered clock connected
         to ``component.port`` at ``time`` [s] (``snapshot``: ``{component: (floats, ints)}``,
         outputs at that time); None if nothing is connected to it."""
-        routes = self._routes.get((component, port))
-        if not routes:
+        links = self.plan.links if self.plan is not None else ()
+        boxes = [(self.inbox(dn), dp) for sn, sp, dn, dp in links if (sn, sp) == (component, port)]
+        if not boxes:
             return None
-        boxes = [(self.inbox(dn), dp) for dn, dp in routes]
 
         def publish(time: float, snapshot: dict) -> None:
             for box, dp in boxes:
@@ -421,8 +406,7 @@ class ClockTicks(Component, kind="clock_ticks"):
                 raise ConfigurationError(f"{name}: the time {dup[0]:g} s is given twice (one activation per time)")
             self.times, self.interval, self.shift = ts, None, None
         else:
-            self.times = None
-            self.interval = positive(interval, f"{name}: interval [s]")
+            self.times, self.interval = None, positive(interval, f"{name}: interval [s]")
             self.shift = finite(shift, f"{name}: shift [s]")
             if self.shift < 0:
                 raise ConfigurationError(f"{name}: shift must be >= 0 s, got {self.shift:g}")
@@ -433,15 +417,13 @@ class ClockTicks(Component, kind="clock_ticks"):
         self.reset(0.0)
 
     def attach_clocks(self, board: ClockBoard) -> None:
-        """Take the run's board: the activations go to the clocks connected to ``tick``."""
         self._board = board
         self._publish = board.publisher(self.name, "tick")
         self._label = board.label(self.name, "tick")
 
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse activation times before the start, and more activations than a run may
-        log (:data:`MAX_TICKS`)."""
-        if self.times is not None and self.times and self.times[0] < start_time:
+        """Refuse activation times before the start, and more than :data:`MAX_TICKS` activations."""
+        if self.times and self.times[0] < start_time:
             raise ConfigurationError(f"{self.name}: activation time {self.times[0]:g} s is before the start time "
                                      f"{start_time:g} s")
         if self.interval is not None:
@@ -451,9 +433,8 @@ class ClockTicks(Component, kind="clock_ticks"):
                                     f"{stop_time:g} s makes {n:.3g} of them, more than {MAX_TICKS} (a run logs each)")
 
     def reset(self, t0: float) -> None:
-        """Start at ``t0`` [s]: no activation yet."""
         super().reset(t0)
-        self.count, self._t0, self._i = 0, float(t0), 0
+        self.count, self._t0 = 0, float(t0)
 
     def _time(self, i: int) -> float | None:
         if self.times is not None:
@@ -463,10 +444,9 @@ class ClockTicks(Component, kind="clock_ticks"):
     def _fire(self, until: float, inclusive: bool) -> None:
         tol = 1e-9 * self.period
         while True:
-            ti = self._time(self._i)
+            ti = self._time(self.count)
             if ti is None or ti > until + tol or (not inclusive and ti >= until - tol):
                 return
-            self._i += 1
             self.count += 1
             if self._board is not None:
                 self._board.log(ti, self._label)
@@ -483,5 +463,4 @@ class ClockTicks(Component, kind="clock_ticks"):
         self._fire(t + self.period, False)
 
     def timing(self) -> str:
-        """What its output means."""
         return f"clock source: tick {self.clock_infos[0].note}"

@@ -1,15 +1,6 @@
-"""A clocked Co-Simulation FMU with Event Mode (``eventModeUsed``, ``earlyReturnAllowed``)
-in a run, in the FMI 3.0 call sequence: §4.2 State Machine for Co-Simulation, its Event Mode
-(§2.3.5) in :mod:`cosim.fmi.clock_event`, §4.1.3 Early Return.
-
-At an instant: the outputs without clock read in Step Mode before any input is set (a get
-after a set is forbidden there, so they depend on no input directly); Event Mode if clocks
-tick. In the update: the event iteration, ``fmi3EnterStepMode``, ``fmi3DoStep`` over the
-period, stopped at every activation between instants (a clock, ``nextEventTime``) for an
-Event Mode there. An early return with ``eventHandlingNeeded`` is handled in Event Mode at
-its ``lastSuccessfulTime`` (at the step's end: in the next instant's). A discrete input
-without clock that changes where no clock ticks is set in an Event Mode of its own. The
-common instant (periodic clocks, nothing pending) takes a short path (``_tick``, ``_tock``).
+"""A clocked Co-Simulation FMU with Event Mode in a run, in the FMI 3.0 call sequence
+(§4.2 State Machine for Co-Simulation, §4.1.3 Early Return; its Event Mode §2.3.5 in
+:mod:`cosim.fmi.clock_event`), as the clocks page of the documentation describes.
 """
 from __future__ import annotations
 
@@ -17,7 +8,7 @@ import ctypes
 
 from fmu_models.errors import FMUError
 
-from ..core.clocking import MAX_TICKS, ClockBoard
+from ..core.clocking import MAX_TICKS
 from ..core.component import StopRequest
 from .clock_event import EventModeRun
 from .clock_ports import Plan
@@ -26,30 +17,24 @@ __all__ = ["CSClockedRun"]
 
 
 class CSClockedRun(EventModeRun):
-    """One run of a clocked Co-Simulation FMU.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    """One run of a clocked Co-Simulation FMU."""
 
     __slots__ = ("_ch", "_ct", "_do_step", "_ds_any", "_ds_bytes", "_ds_flags", "_ds_last", "_ds_refs",
                  "_enter_step_mode", "_tick_calls", "_tock_calls", "can_vary", "fast", "quiet", "set_u_all_d",
                  "set_u_ft_d", "set_ud")
     discrete_apart = True
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
-        self._enter_step_mode = self._fn("fmi3EnterStepMode")
-        self._do_step = self._fn("fmi3DoStep")
+    def _setup(self) -> None:
+        super()._setup()
+        self._enter_step_mode = self.inst.raw("fmi3EnterStepMode")
+        self._do_step = self.inst.raw("fmi3DoStep")
         db = self._ds_bytes = (ctypes.c_uint8 * 4)()      # eventHandlingNeeded, terminate, earlyReturn
         self._ds_flags = [ctypes.c_bool.from_buffer(db, i) for i in range(3)]
         self._ds_any = ctypes.c_uint32.from_buffer(db)
         self._ds_last = ctypes.c_double(0.0)
         self._ds_refs = (*[ctypes.byref(db, i) for i in range(3)], ctypes.byref(self._ds_last))
         self._ct, self._ch = ctypes.c_double(0.0), ctypes.c_double(self.P)
-        self.can_vary = bool(getattr(comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
+        self.can_vary = bool(getattr(self.comp.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
         self.set_ud = self._or_none(self._setter(self.discrete(self.unclocked_in), changes=True))
         self.set_u_ft_d, self.set_u_all_d = self._or_none(self.free_in.ft_d), self._or_none(self.free_in.all_d)
         self.quiet = False       # nothing pending, nothing held: the short path may run (set by each update)
@@ -90,8 +75,7 @@ class CSClockedRun(EventModeRun):
             self._tick(plan, t)
 
     def _tick(self, plan: Plan, t: float) -> None:
-        """The short path's Event Mode (§2.3.5) at instant ``t``: ``fmi3EnterEventMode``,
-        ``fmi3SetClock`` of ``plan``'s clocks, their inputs and outputs, the output clocks."""
+        """The short path's Event Mode at instant ``t`` (§2.3.5): ``plan``'s clocks, their ports, the output clocks."""
         enter_event_mode, set_clock, c, set_u_ft, log_t, log_id = self._tick_calls
         simple = (plan.short or self._shorten(plan))[1]
         st = enter_event_mode(c)
@@ -121,8 +105,7 @@ class CSClockedRun(EventModeRun):
             self.ticked.update(plan.vrs)
 
     def _shorten(self, plan: Plan) -> tuple:
-        """``plan``'s short path ``(sets, simple)``: the update's input buffer fill (for the discrete
-        inputs without clock) and setters, whether it may take the short path (no interval to read)."""
+        """``plan``'s short update ``(setters, simple)``; ``simple``: no interval to read after it."""
         sets = self.calls((self.fill_all if self.set_ud is not None else None, *plan.set_rest_d, self.set_u_all_d,
                            self.set_ud))
         plan.short = (sets, not plan.intervals and not self.countdown)
@@ -163,8 +146,7 @@ class CSClockedRun(EventModeRun):
             self.board.check_room()
 
     def _tock(self, plan: Plan, t: float) -> None:
-        """The short path's update: the other inputs set, ``fmi3UpdateDiscreteStates``,
-        ``fmi3EnterStepMode`` (§4.2.1 Step Mode), ``fmi3DoStep``."""
+        """The short path's update: the other inputs, ``fmi3UpdateDiscreteStates``, Step Mode (§4.2.1), the step."""
         update_discrete_states, uds_args, uds_any, enter_step_mode, do_step, ct, ch, ds_refs, ds_any = self._tock_calls
         for f in plan.short[0]:
             f()
@@ -187,14 +169,12 @@ class CSClockedRun(EventModeRun):
         if st > 1:
             self._fail(f"DoStep(t = {t:g} s, h = {self.P:g} s)", st)
         if ds_any.value:                             # an event, an early return, a stop
-            self._stopped(t, False)
-            self.quiet = self._now_quiet()
+            self._step(t, False, True)
         else:
             self.quiet = True
 
     def _event(self, t: float, called: bool = False) -> None:
-        """The rest of the Event Mode at ``t`` (the event iteration; ``called``: its first
-        ``fmi3UpdateDiscreteStates`` made), then Step Mode."""
+        """The event iteration at ``t`` (``called``: its first call made), then Step Mode."""
         if self._finish(t, called):
             raise StopRequest(self.name, t, "the FMU requested termination in its event update")
         st = self._enter_step_mode(self.c)
@@ -202,31 +182,20 @@ class CSClockedRun(EventModeRun):
             self._fail(f"EnterStepMode(t = {t:g} s)", st)
         self.in_event = False
 
-    def _now_quiet(self) -> bool:
-        return not (self.next_at or self.fmu_next is not None or self.pending_event or self.dirty or self.in_event)
-
     # ------------------------------------------------------------------ the step
-    def _step(self, t: float, filled: bool) -> None:
-        """The step from ``t`` in Step Mode (§4.2.1), whatever may stop it; then whether the
-        next instant may take the short path."""
-        if not self.inbox and not self.next_at and self.fmu_next is None:
+    def _step(self, t: float, filled: bool, stepped: bool = False) -> None:
+        """The step from ``t`` (§4.2.1; ``stepped``: the whole step made), on from wherever it stopped;
+        then whether the next instant may take the short path."""
+        whole = stepped or not (self.inbox or self.next_at or self.fmu_next is not None)
+        if whole and not stepped:
             self._do(t, self._ch)
-            if self._ds_any.value:
-                self._stopped(t, filled)
-        else:
+        if not whole or self._ds_any.value:
             if not filled:
                 self._fill()
             self._keep_base()
-            self._advance(t, t)
-        self.quiet = self._now_quiet()
-
-    def _stopped(self, t: float, filled: bool) -> None:
-        """``fmi3DoStep`` from ``t`` over the period returned early (an event, an early return,
-        a stop): the inputs kept, the step on from there."""
-        if not filled:
-            self._fill()
-        self._keep_base()
-        self._advance(t, self._step_done(t, t + self.P))
+            self._advance(t, self._step_done(t, t + self.P) if whole else t)
+        self.quiet = not (self.next_at or self.fmu_next is not None or self.pending_event or self.dirty
+                          or self.in_event)
 
     def _advance(self, t: float, tc: float | None) -> None:
         """Step from ``tc`` to ``t + P``, stopping at every activation on the way."""
@@ -249,8 +218,7 @@ class CSClockedRun(EventModeRun):
             self._fail(f"DoStep(t = {tc:g} s, h = {h.value:g} s)", st)
 
     def _step_done(self, t: float, target: float) -> float | None:
-        """After ``fmi3DoStep`` towards ``target`` (§4.1.3 Early Return): the time to step on
-        from, or None (the step reached its end)."""
+        """After ``fmi3DoStep`` towards ``target`` (§4.1.3 Early Return): where to step on from (None: done)."""
         end = t + self.P
         ehn, stop, early = (f.value for f in self._ds_flags)
         reached = self._ds_last.value if early else target
@@ -260,18 +228,16 @@ class CSClockedRun(EventModeRun):
             if reached >= end - self.tol:            # at the step's end: the next instant's Event Mode
                 self.pending_event = True
                 return None
-            self._between(reached)
+        elif early and reached < target - self.tol:  # an early return without event: step on
             return reached
-        if early and reached < target - self.tol:    # an early return without event: step on
-            return reached
-        if target >= end - self.tol:
+        elif target >= end - self.tol:
             return None
-        self._between(target)                        # an activation between instants
-        return target
+        te = reached if ehn else target              # an event or an activation between instants
+        self._between(te)
+        return te
 
     def _between(self, te: float) -> None:
-        """Event Mode between instants at ``te``: the outputs without clocks read first (in
-        Step Mode), the activations due, the event iteration."""
+        """Event Mode between instants at ``te``: the outputs without clocks, the activations, the iteration."""
         self._use_own()
         if self.get_u is not None:
             self.get_u()

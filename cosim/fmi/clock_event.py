@@ -1,15 +1,6 @@
-"""Event Mode with clocks (FMI 3.0 §2.3.5 State: Event Mode; the functions of §2.2.8.4
-Clocks specific API), shared by Model Exchange (:mod:`cosim.fmi.clock_me`) and
-Co-Simulation with Event Mode (:mod:`cosim.fmi.clock_cs`).
-
-At an instant where clocks tick: ``fmi3EnterEventMode`` (unless still in Event Mode),
-``fmi3SetClock`` of the ticking input clocks, the clocked inputs the outputs depend on set
-(the others in the update), their clocked outputs read, ``fmi3GetClock`` of the output
-clocks and the outputs they clock read. In the update, the event iteration:
-``fmi3UpdateDiscreteStates`` until no more is needed (``fmi3GetClock`` again at every
-further super-dense instant), then ``fmi3GetInterval*`` of every countdown clock and of the
-changing and tunable clocks that ticked; a clock due again at once or an activation that
-arrived meanwhile ticks in the same Event Mode.
+"""Event Mode with clocks (FMI 3.0 §2.3.5; the functions of §2.2.8.4 Clocks specific API),
+shared by Model Exchange (:mod:`cosim.fmi.clock_me`) and Co-Simulation with Event Mode
+(:mod:`cosim.fmi.clock_cs`), as the clocks page of the documentation describes.
 """
 from __future__ import annotations
 
@@ -17,7 +8,6 @@ import ctypes
 
 from fmu_models.errors import FMUError
 
-from ..core.clocking import ClockBoard
 from .clock_ports import Plan
 from .clock_timing import ClockedRun
 
@@ -28,13 +18,7 @@ MAX_SUPERDENSE = 1000
 
 
 class EventModeRun(ClockedRun):
-    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    """The Event Mode of a clocked Model Exchange or Co-Simulation FMU in one run."""
 
     __slots__ = ("_enter_event_mode", "_set_clock", "_uds_any", "_uds_args", "_uds_bytes", "_uds_flags", "_uds_next",
                  "_update_discrete_states", "active", "in_event", "pending_event", "ticked")
@@ -42,11 +26,11 @@ class EventModeRun(ClockedRun):
     #: instants is sent (Model Exchange; in Co-Simulation they are the step's left limits).
     read_unclocked_between = False
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
-        self._set_clock = self._fn("fmi3SetClock")
-        self._enter_event_mode = self._fn("fmi3EnterEventMode")
-        self._update_discrete_states = self._fn("fmi3UpdateDiscreteStates")
+    def _setup(self) -> None:
+        super()._setup()
+        self._set_clock = self.inst.raw("fmi3SetClock")
+        self._enter_event_mode = self.inst.raw("fmi3EnterEventMode")
+        self._update_discrete_states = self.inst.raw("fmi3UpdateDiscreteStates")
         ub = self._uds_bytes = (ctypes.c_uint8 * 8)()        # the five flags side by side
         self._uds_flags = [ctypes.c_bool.from_buffer(ub, i) for i in range(5)]
         self._uds_any = ctypes.c_uint64.from_buffer(ub)       # any of them set
@@ -67,8 +51,7 @@ class EventModeRun(ClockedRun):
 
     # ------------------------------------------------------------------ at an instant
     def _instant_event(self, t: float, plan: Plan | None) -> bool:
-        """Event Mode at instant ``t`` if anything happens there (the clocks of ``plan``, due or
-        received, a pending event, Event Mode not left yet); whether it did."""
+        """Event Mode at instant ``t`` if anything happens there (``plan``, due, received, pending); whether it did."""
         ks = (list(plan.vrs) if plan is not None else []) + self._due_at(t)
         got, snap = self._received_at(t)
         if not (ks or got or self.pending_event or self.in_event):
@@ -105,8 +88,7 @@ class EventModeRun(ClockedRun):
         self._read_output_clocks(t, snap, not direct)
 
     def _read_output_clocks(self, t: float, snap: dict | None, fresh: bool) -> None:
-        """``fmi3GetClock`` of the output (and local) clocks, the active ones handled by
-        :meth:`_clocks_ticked` (``fresh``: sent at once, else with the instant's outputs)."""
+        """``fmi3GetClock`` of the output clocks, the active ones handled (``fresh``: sent at once)."""
         if not self.out_clocks:
             return
         active = self._active_out_clocks(f"GetClock(t = {t:g} s)")
@@ -140,8 +122,7 @@ class EventModeRun(ClockedRun):
 
     # ------------------------------------------------------------------ the event iteration
     def _set_rest(self) -> None:
-        """In the update, before the state changes: the clocked inputs of the active clocks
-        no output depends on, and every input without clock."""
+        """Before the state changes: the active clocks' other clocked inputs, the inputs without clock."""
         for vr in list(self.active):
             self.clock_in[vr].rest()
         self.free_in.all()
@@ -179,8 +160,7 @@ class EventModeRun(ClockedRun):
                        "super-dense instants")
 
     def _read_intervals(self, t: float) -> None:
-        """``fmi3GetInterval*`` after the event iteration (§2.3.5): every countdown clock, and
-        the changing (and tunable without ``intervalDecimal``) input clocks that ticked."""
+        """``fmi3GetInterval*`` after the iteration (§2.3.5): countdown clocks, ticked ones :meth:`interval_read`."""
         want = list(self.countdown)
         want += [k for k in map(self.model.by_vr.get, self.ticked) if k.causality == "input" and self.interval_read(k)]
         for k, v, q in self._intervals(want):

@@ -1,34 +1,16 @@
 """A clocked Model Exchange FMU in a run, in the FMI 3.0 call sequence (§3.2 State Machine
 for Model Exchange: Event Mode §2.3.5 in :mod:`cosim.fmi.clock_event`, Continuous-Time Mode
-§3.2.1). The integrator (:class:`~cosim.fmi.model_exchange.MEIntegrator`) steps the FMU in
-Continuous-Time Mode, the activations between instants (a clock, the FMU's
-``nextEventTime``) its time events. Every Event Mode it enters goes through this run: the
-clocks due activated, the output clocks read, the event iteration,
-``fmi3EnterContinuousTimeMode``; an event found at the end of a step waits for that
-instant's Event Mode. At an instant without clocks the inputs without clock are set in
-Continuous-Time Mode, a discrete one that changes in an Event Mode of its own.
+§3.2.1), as the clocks page of the documentation describes.
 """
 from __future__ import annotations
+
+from functools import partial
 
 from ..core.clocking import ClockBoard
 from .clock_event import EventModeRun
 from .model_exchange import FMUModel, MEIntegrator
 
 __all__ = ["MEClockedRun"]
-
-
-class _ClockedModel(FMUModel):
-    """The FMU as the integrator sees it, its events going through the clocks' run."""
-
-    def __init__(self, instance, run: MEClockedRun):
-        super().__init__(instance)
-        self.run = run
-
-    def event(self, t, set_inputs=None):
-        return self.run._event(t, set_inputs)
-
-    def initial_event(self, t):
-        return self.run._event(t, self.run._pending_inputs)
 
 
 class MEClockedRun(EventModeRun):
@@ -42,8 +24,7 @@ class MEClockedRun(EventModeRun):
         The component's integrator, whose events come here.
     """
 
-    __slots__ = ("_pending_inputs", "inputs_changed", "me", "set_cont", "set_cont_ft", "set_disc", "set_disc_ft",
-                 "started", "window_end")
+    __slots__ = ("inputs_changed", "me", "set_cont", "set_cont_ft", "set_disc", "set_disc_ft", "started", "window_end")
     read_unclocked_between = True
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers, integrator: MEIntegrator):
@@ -54,8 +35,8 @@ class MEClockedRun(EventModeRun):
         self.set_cont_ft = self._setter([i for i in cont if i in self._ft], changes=True)
         self.set_disc_ft = self._setter([i for i in disc if i in self._ft], changes=True)
         self.me = integrator
-        integrator.model = _ClockedModel(self.inst, self)
-        self._pending_inputs = None                  # the inputs of the first Event Mode
+        model = integrator.model = FMUModel(self.inst)   # its events go through this run
+        model.event, model.initial_event = self._event, partial(self._event, set_inputs=self._set_rest)
         self.started = False
         self.window_end = self.t0                    # the end of the current step [s]
         self.inputs_changed = False                  # an input without clock changed in Continuous-Time Mode
@@ -63,7 +44,7 @@ class MEClockedRun(EventModeRun):
     def output(self, t: float) -> None:
         """The outputs at instant ``t`` [s]: Event Mode where clocks tick or an event is pending,
         else the inputs without clock the outputs depend on set."""
-        n = self.instant(t)
+        n = round((t - self.t0) * self.inv)
         if n == self.done_n:
             self._again()
             return
@@ -90,7 +71,6 @@ class MEClockedRun(EventModeRun):
         self._fill()
         self.window_end = t + self.P
         if not self.started:
-            self._pending_inputs = self._set_rest
             self.started = True
             self.me.start(t)
         elif self.in_event:
@@ -110,7 +90,7 @@ class MEClockedRun(EventModeRun):
         f = self.fmu_next if self.fmu_next is not None and self.fmu_next > t + self.tol else None
         return min((x for x in (self._next_point(t, self.window_end), f) if x is not None), default=None)
 
-    def _event(self, t: float, set_inputs) -> tuple[bool, float | None]:
+    def _event(self, t: float, set_inputs=None) -> tuple[bool, float | None]:
         """An Event Mode at ``t`` (entered unless in it), the inputs set by ``set_inputs``, ended
         with ``fmi3EnterContinuousTimeMode`` (§3.2): ``(terminate, next time event)``."""
         if not self.in_event and set_inputs is None and abs(t - self.window_end) <= self.tol:
@@ -125,7 +105,7 @@ class MEClockedRun(EventModeRun):
             set_inputs()
         if self._finish(t):
             return True, None
-        st = self._fn("fmi3EnterContinuousTimeMode")(self.c)
+        st = self.inst.raw("fmi3EnterContinuousTimeMode")(self.c)
         if st > 1:
             self._fail(f"EnterContinuousTimeMode(t = {t:g} s)", st)
         self.in_event = False

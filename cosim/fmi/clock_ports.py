@@ -1,9 +1,6 @@
 """The ports of a clocked FMI 3.0 FMU in a run: a clocked variable is set and got only while
-one of its clocks is active (FMI 3.0 §2.2.8.3 Model Partitions and Clocked Variables); the
-inputs an output depends on directly are set before the outputs are read, the others before
-the state changes. Each set of ports is one :class:`~cosim.fmi.exchange.Exchange` (a call
-per type, §2.2.7.2; scalar Float64 ports in place where their values lie side by side).
-Outputs read between instants go to the own buffers, the signals at the next instant.
+one of its clocks is active (§2.2.8.3); each set of ports is one
+:class:`~cosim.fmi.exchange.Exchange` (a call per type, §2.2.7.2).
 """
 from __future__ import annotations
 
@@ -74,8 +71,9 @@ class Plan:
 
 
 class ClockPorts:
-    """The ports of a clocked FMU in one run (see the module documentation): its setters,
-    getters, input and output buffers, its output clocks' counts and sinks.
+    """The ports of a clocked FMU in one run: its setters, getters, input and output buffers
+    (outputs read between instants go to its own, the signals at the next instant), its
+    output clocks' counts and sinks.
 
     Parameters
     ----------
@@ -104,7 +102,7 @@ class ClockPorts:
 
     # a run's state, as slots: the hot paths' attribute and method look-ups stay fast
     __slots__ = ("_ft", "_get_clock", "_in_srcs", "_in_starts", "_logged", "_n_out", "_out_val", "_out_vr", "_outbox",
-                 "_plans", "_raw", "board", "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k",
+                 "_plans", "board", "c", "clock_in", "comp", "dirty", "fill_all", "fill_ft", "free_in", "get_k",
                  "get_kd", "get_u", "get_ud", "idx_in", "iin", "iin_base", "in_ft", "inst", "integers", "labels",
                  "log_id", "log_t", "model", "n_in", "name", "out", "out_clock_pos", "out_clocks", "out_counts", "own",
                  "own_i", "port_clock", "priority", "publishers", "sources", "unclocked_in", "values", "vin",
@@ -126,7 +124,6 @@ class ClockPorts:
         self.log_t, self.log_id, self._logged = board.log_functions()
         self.dirty = False                           # the own buffers hold outputs newer than the signals
         self._outbox: list = []                      # output clock activations to send
-        self._raw: dict = {}
         self._plans: dict = {}
         self._in_starts = comp._input_starts()        # the connected inputs' start values and sources
         self._in_srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type)
@@ -135,13 +132,12 @@ class ClockPorts:
         self._build_inputs(comp)
         self._build_outputs(comp)
         self._fillers()
+        self._setup()
+
+    def _setup(self) -> None:
+        """A subclass's set-up, after the ports'."""
 
     # ------------------------------------------------------------------ set-up
-    def _fn(self, name: str):
-        if name not in self._raw:
-            self._raw[name] = self.inst.raw(name)
-        return self._raw[name]
-
     def _fail(self, what: str, status: int):
         self.inst.fail(what, status)
 
@@ -169,11 +165,10 @@ class ClockPorts:
         self._out_vr = (_U32 * max(n, 1))(*[k.vr for k in self.out_clocks])
         self._out_val = (_B * max(n, 1))()
         self._n_out = _SIZE(n)
-        self._get_clock = self._fn("fmi3GetClock")
+        self._get_clock = self.inst.raw("fmi3GetClock")
 
     def _by_clock(self, names: list[str], positions) -> tuple[dict[int, list[int]], list[int]]:
-        """The ``positions`` of the variables ``names`` grouped by the clocks that clock them,
-        and those without clock."""
+        """The ``positions`` of the variables ``names`` by the clocks that clock them, and the unclocked."""
         by_clock: dict[int, list[int]] = {}
         unclocked = []
         for i in positions:
@@ -207,8 +202,7 @@ class ClockPorts:
         self._hold_starts(comp, sorted({j for positions in by_clock.values() for j in positions}))
 
     def _hold_starts(self, comp, positions: list[int]) -> None:
-        """Clocked outputs carry their declared start value until their clock first ticks (they
-        may be read only while it is active)."""
+        """Clocked outputs hold their start values until their clock first ticks (read only while active)."""
         start = self.out.start
         for j in positions:
             p = comp.element_ports[comp.output_names[j]]
@@ -241,8 +235,7 @@ class ClockPorts:
         return ex.bind(self.vin, _index(positions), self.iin, changes)
 
     def _getter(self, positions: list[int], direct: bool):
-        """A call reading the output ports at ``positions`` into the master's signals
-        (``direct``: at an instant) or into the own buffers (between instants); None for none."""
+        """A call reading the outputs at ``positions`` into the signals (``direct``) or own buffers; None: none."""
         if not positions:
             return None
         own, own_i, base = (self.values, self.integers, self.out.start) if direct else (self.own, self.own_i, 0)

@@ -1,9 +1,6 @@
-"""A clocked FMI 3.0 FMU in a run: the standard's call sequence of its interface,
-Co-Simulation with Event Mode (:mod:`cosim.fmi.clock_cs`), Model Exchange
-(:mod:`cosim.fmi.clock_me`) or Scheduled Execution (:mod:`cosim.fmi.clock_se`), over the
-clocks' timing (:mod:`cosim.fmi.clock_timing`), ports (:mod:`cosim.fmi.clock_ports`) and
-the Event Mode of the first two (:mod:`cosim.fmi.clock_event`). A failing call raises
-:class:`~fmu_models.errors.FMUError` naming the call, the time and the FMU's message.
+"""A clocked FMI 3.0 FMU in a run: the call sequence of its interface, Co-Simulation with
+Event Mode (:mod:`cosim.fmi.clock_cs`), Model Exchange (:mod:`cosim.fmi.clock_me`) or
+Scheduled Execution (:mod:`cosim.fmi.clock_se`); see the clocks page of the documentation.
 """
 from __future__ import annotations
 

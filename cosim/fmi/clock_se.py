@@ -1,12 +1,6 @@
 """A Scheduled Execution FMU in a run, in the FMI 3.0 call sequence (§5.1.1 Activating
-Model Partitions, §5.2.1 Clock Activation Mode, §5.2.2 Clock Update Mode). At each
-activation time the partitions due are activated with ``fmi3ActivateModelPartition`` in
-priority order (smaller first, then declaration order; a countdown clock due at the same
-time joins the queue), each after its inputs are set (direct inputs of its outputs: the
-partition computes both at once), its outputs and those of the output clocks it activated
-read after it. The ``clockUpdate`` callback (Clock Update Mode) reads the output clocks
-(``fmi3GetClock``) and the countdown clocks' intervals. ``fmi3Discard`` counts as an error.
-The common instant (one periodic partition, nothing pending) takes a short path (``_fire``).
+Model Partitions, §5.2.1 Clock Activation Mode, §5.2.2 Clock Update Mode), as the clocks
+page of the documentation describes.
 """
 from __future__ import annotations
 
@@ -14,7 +8,7 @@ import ctypes
 
 from fmu_models.errors import FMUError
 
-from ..core.clocking import MAX_TICKS, ClockBoard
+from ..core.clocking import MAX_TICKS
 from .clock_ports import Plan
 from .clock_timing import ClockedRun
 from .clocks import CHANGED, FMIClock
@@ -24,21 +18,15 @@ __all__ = ["SEClockedRun"]
 
 
 class SEClockedRun(ClockedRun):
-    """One run of a Scheduled Execution FMU.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    """One run of a Scheduled Execution FMU."""
 
     __slots__ = ("_activate_model_partition", "_at", "_cv", "_error", "_fire_calls", "in_callback", "now", "queue",
                  "reported", "rest_later")
     by_priority = True
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
-        self._activate_model_partition = self._fn("fmi3ActivateModelPartition")
+    def _setup(self) -> None:
+        super()._setup()
+        self._activate_model_partition = self.inst.raw("fmi3ActivateModelPartition")
         self.rest_later = self.free_in.rest is not no_exchange      # inputs consumed at the update
         self.reported: list[int] = []                # output clocks reported active in callbacks
         self.now: float | None = None                # the time of the activation under way
@@ -78,8 +66,7 @@ class SEClockedRun(ClockedRun):
             self._run_at(t, ks + got, snap, True)
 
     def _fire(self, plan: Plan, t: float) -> None:
-        """The short path of ``plan`` at instant ``t`` (one partition whose interval is not read):
-        ``fmi3ActivateModelPartition`` (§5.2.1) after the inputs without clock and its own."""
+        """The short path of ``plan`` at ``t`` (one partition, no interval read): §5.2.1 activation."""
         sets, cv, name, label, gets = plan.short or self._shorten(plan)
         if cv is None:
             self._fill(self.in_ft)
@@ -114,8 +101,7 @@ class SEClockedRun(ClockedRun):
         return plan.short
 
     def _run_at(self, t: float, ks: list[int], snap: dict | None, direct: bool) -> None:
-        """The partitions ``ks`` at ``t`` in priority order (§5.1.1), and any that become due
-        then (outputs into the signals if ``direct``, else into the own buffers)."""
+        """The partitions ``ks`` at ``t`` in priority order (§5.1.1), and those due then (``direct``: at an instant)."""
         if not direct:
             self._use_own()
         self.now = t
@@ -158,8 +144,7 @@ class SEClockedRun(ClockedRun):
             g()
 
     def _activation_failed(self, st: int, name: str, t: float) -> None:
-        """After ``fmi3ActivateModelPartition`` of ``name`` at ``t`` returned ``st``: raise what went
-        wrong in its callbacks, else the failed call."""
+        """Raise what went wrong in the callbacks of ``fmi3ActivateModelPartition``, else its failure ``st``."""
         if self._error is not None:
             err, self._error = self._error, None
             if st > 1:

@@ -1,24 +1,19 @@
 """The timing of a clocked FMI 3.0 FMU's clocks, shared by the call sequences of
-:mod:`cosim.fmi.clock_run`. In Initialization Mode (§2.3.3; the functions of §2.2.8.4
-Clocks specific API) fixed and tunable clocks that declare ``intervalDecimal`` are set
-their interval (``fmi3SetInterval*``: the declared one or ``clock_intervals``), the others
-asked theirs (``fmi3GetInterval*``, ``fmi3GetShift*``), changing and countdown clocks
-their first one. In a run periodic clocks tick at instants, computed once as a pattern
-over their common period; an aperiodic clock ticks when its last ``fmi3IntervalChanged``
-interval says, a triggered one when its source sends, between instants too.
+:mod:`cosim.fmi.clock_run`: set or asked in Initialization Mode (§2.3.3), then followed in
+the run (the clocks page of the documentation).
 """
 from __future__ import annotations
 
 import ctypes
 import math
-from collections.abc import Mapping
+from dataclasses import dataclass, field
 from fractions import Fraction
 
 from fmu_models.errors import ConfigurationError, FMUError
 
-from ..core.clocking import ClockBoard, fraction_gcd, time_fraction
+from ..core.clocking import APERIODIC, PERIODIC, fraction_gcd, time_fraction
 from .clock_ports import ClockPorts, Plan
-from .clocks import CHANGED, NOT_YET_KNOWN, QUALIFIERS, FMIClock, FMIClocks
+from .clocks import CHANGED, NOT_YET_KNOWN, QUALIFIERS, FMIClock
 
 __all__ = ["MAX_PATTERN", "ClockSchedule", "ClockedRun", "initialise"]
 
@@ -36,38 +31,38 @@ def checked_interval(v: float, k: FMIClock, owner: str, periodic: bool) -> float
     return v
 
 
+def _not_yet_known(k: FMIClock, owner: str) -> FMUError:
+    return FMUError(f"{owner}: fmi3GetInterval of {k.variability} clock {k.name!r} returned fmi3IntervalNotYetKnown, "
+                    "which only countdown clocks may return")
+
+
+@dataclass
 class ClockSchedule:
     """A run's timing of one FMU's clocks, from its initialisation on.
 
     Parameters
     ----------
-    model : FMIClocks
-        The FMU's clocks.
+    owner : str
+        The component's name (for messages).
     t0 : float
         The start time [s].
     period : float
         The component's period [s].
-    overrides : mapping of str to Fraction
-        Intervals [s] the component sets (``clock_intervals``).
-
-    Attributes
-    ----------
     periodic : list of [FMIClock, int, int]
         Each periodic clock, its interval and its first activation in instants.
     next_at : dict of int to float
         The pending activation time [s] of each aperiodic clock that has one.
     """
 
-    def __init__(self, model: FMIClocks, t0: float, period: float, overrides: Mapping[str, Fraction]):
-        self.model, self.t0, self.period, self.tol = model, t0, period, 1e-9 * period
-        self.overrides = dict(overrides)
-        self.periodic: list[list] = []
-        self.next_at: dict[int, float] = {}
+    owner: str
+    t0: float
+    period: float
+    periodic: list[list] = field(default_factory=list)
+    next_at: dict[int, float] = field(default_factory=dict)
 
-    def add_periodic(self, k: FMIClock, interval: Fraction, shift: Fraction, owner: str) -> None:
-        """Add periodic clock ``k`` of component ``owner``, its ``interval`` and ``shift`` [s]
-        multiples of the period."""
-        p = time_fraction(self.period)
+    def add_periodic(self, k: FMIClock, interval: Fraction, shift: Fraction) -> None:
+        """Add periodic clock ``k``, its ``interval`` and ``shift`` [s] multiples of the period."""
+        p, owner = time_fraction(self.period), self.owner
         ratio, first = interval / p, shift / p
         for what, r, v in (("interval", ratio, interval), ("shift", first, shift)):
             if r.denominator != 1:
@@ -80,11 +75,38 @@ class ClockSchedule:
             raise FMUError(f"{owner}: clock {k.name!r} has the interval {float(interval):g} s; it must be > 0")
         self.periodic.append([k, int(ratio), int(first)])
 
+    def apply_interval(self, k: FMIClock, v: float, q: int, t: float, ticked: bool) -> bool:
+        """Clock ``k``'s interval ``v`` [s] (qualifier ``q``) read at ``t`` [s] (``ticked``: it was
+        active there): its next activation, or (tunable) its pattern from now on; whether the
+        pattern changed."""
+        owner = self.owner
+        if q not in QUALIFIERS:
+            raise FMUError(f"{owner}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
+        if k.variability == "changing" and ticked and q != CHANGED:
+            raise FMUError(f"{owner}: changing clock {k.name!r} ticked at t = {t:g} s but fmi3GetInterval "
+                           f"returned {QUALIFIERS[q]}; the standard requires its next interval (changed)")
+        if k.variability == "changing" and q == NOT_YET_KNOWN:
+            raise _not_yet_known(k, owner)
+        if q != CHANGED:
+            return False
+        if k.variability in ("countdown", "changing"):
+            self.next_at[k.vr] = t + checked_interval(v, k, owner, False)
+            return False
+        iv = checked_interval(v, k, owner, True)          # tunable without intervalDecimal: from now on
+        ratio = iv / self.period
+        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+            raise FMUError(f"{owner}: tunable clock {k.name!r} changed its interval to {iv:g} s at "
+                           f"t = {t:g} s, not a multiple of the period {self.period:g} s")
+        for entry in self.periodic:
+            if entry[0].vr == k.vr:
+                entry[1:] = [round(ratio), round((t - self.t0) / self.period) + round(ratio)]
+        return True
+
 
 # ---------------------------------------------------------------------- Initialization Mode
 def initialise(comp, inst, t0: float) -> ClockSchedule:
-    """In Initialization Mode (§2.3.3): the input clocks' intervals set or asked (see the
-    module documentation); returns the run's schedule.
+    """In Initialization Mode (§2.3.3): the input clocks' intervals set or asked (as the clocks
+    page of the documentation says); returns the run's schedule.
 
     Parameters
     ----------
@@ -95,7 +117,7 @@ def initialise(comp, inst, t0: float) -> ClockSchedule:
     t0 : float
         The start time [s].
     """
-    sched = ClockSchedule(comp.clock_model, t0, comp.period, comp.clock_overrides)
+    sched = ClockSchedule(comp.name, t0, comp.period)
     c, owner = ctypes.c_void_p(inst.handle), comp.name
 
     def call(name: str, k: FMIClock, *args) -> list:
@@ -105,33 +127,25 @@ def initialise(comp, inst, t0: float) -> ClockSchedule:
             inst.fail(name[4:], st)
         return [a[0] for a in args]
 
-    for k in sched.model.clocks:
+    for k in comp.clock_model.clocks:
         if k.causality != "input":
             continue
         if k.variability == "constant":
-            sched.add_periodic(k, k.interval, k.shift, owner)
+            sched.add_periodic(k, k.interval, k.shift)
         elif k.importer_sets_interval:
-            sched.add_periodic(k, _set_interval(call, k, sched.overrides.get(k.name, k.interval), owner), k.shift,
-                               owner)
-        elif k.periodic:                                  # fixed/tunable without intervalDecimal: ask
-            sched.add_periodic(k, *_ask_periodic(call, k, owner), owner)
-        elif k.aperiodic:
+            sched.add_periodic(k, _set_interval(call, k, comp.clock_overrides.get(k.name, k.interval), owner), k.shift)
+        elif k.variability in PERIODIC:                   # fixed/tunable without intervalDecimal: ask
+            sched.add_periodic(k, *_ask_periodic(call, k, owner))
+        elif k.variability in APERIODIC:
             interval, q = _get_interval(call, k)
             if k.supports_fraction:
                 interval = interval[0] / interval[1] if interval[1] else float("nan")
-            if q not in QUALIFIERS:
-                raise FMUError(f"{owner}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
-            if k.variability == "changing" and q == NOT_YET_KNOWN:
-                raise FMUError(f"{owner}: fmi3GetInterval of changing clock {k.name!r} returned "
-                               "fmi3IntervalNotYetKnown, which only countdown clocks may return")
-            if q == CHANGED:
-                sched.next_at[k.vr] = t0 + checked_interval(interval, k, owner, False)
+            sched.apply_interval(k, interval, q, t0, False)
     return sched
 
 
 def _set_interval(call, k: FMIClock, interval: Fraction, owner: str) -> Fraction:
-    """``fmi3SetInterval*`` of clock ``k``: ``interval`` [s] (in the counter form: a whole
-    number of its resolution)."""
+    """``fmi3SetInterval*`` of clock ``k`` (counter form: a whole number of its resolution)."""
     if k.supports_fraction and k.counter is not None:
         counter = interval * k.resolution
         if counter.denominator != 1:
@@ -167,34 +181,27 @@ def _ask_periodic(call, k: FMIClock, owner: str) -> tuple[Fraction, Fraction]:
             raise FMUError(f"{owner}: fmi3GetShiftDecimal of clock {k.name!r} returned {sh!r}")
         shift = time_fraction(sh)
     if q == NOT_YET_KNOWN:
-        raise FMUError(f"{owner}: fmi3GetInterval of {k.variability} clock {k.name!r} returned "
-                       "fmi3IntervalNotYetKnown, which only countdown clocks may return")
+        raise _not_yet_known(k, owner)
     return interval, shift
 
 
 # ---------------------------------------------------------------------- a run
 class ClockedRun(ClockPorts):
     """One run of a clocked FMU: its ports and its clocks' timing; each interface's run
-    adds its call sequence as the methods ``output(t)`` and ``update(t)``.
-
-    Parameters
-    ----------
-    comp, board, values, inputs, outputs, integers
-        As for :class:`~cosim.fmi.clock_ports.ClockPorts`.
-    """
+    adds its call sequence as the methods ``output(t)`` and ``update(t)``."""
 
     __slots__ = ("P", "_interval_calls", "countdown", "done_n", "first", "fmu_next", "inbox", "inv", "next_at",
                  "plan_len", "plans", "sched", "t0", "tol")
     #: Whether the periodic clocks due at one instant are activated in priority order.
     by_priority = False
 
-    def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers):
-        super().__init__(comp, board, values, inputs, outputs, integers)
-        self.sched: ClockSchedule = comp._clock_schedule
+    def _setup(self) -> None:
+        super()._setup()
+        self.sched: ClockSchedule = self.comp._clock_schedule
         self.next_at = self.sched.next_at
-        self.P, self.t0, self.tol = comp.period, self.sched.t0, self.sched.tol
+        self.P, self.t0, self.tol = self.comp.period, self.sched.t0, 1e-9 * self.comp.period
         self.inv = 1.0 / self.P
-        self.inbox = board.inbox(self.name)
+        self.inbox = self.board.inbox(self.name)
         self.countdown = [k for k in self.model.clocks if k.variability == "countdown" and k.causality == "input"]
         self.fmu_next: float | None = None           # the FMU's nextEventTime
         self.done_n = -1                             # the instant whose outputs were computed
@@ -203,18 +210,15 @@ class ClockedRun(ClockPorts):
 
     # ------------------------------------------------------------------ periodic clocks
     def _patterns(self) -> None:
-        """The periodic clocks' activations at each instant, as plans over their common
-        period (``self.plans[n % len]`` for instants from ``self.first`` on)."""
+        """The periodic clocks' plans over their common period (``plans[n % plan_len]`` from instant ``first``)."""
         periodic = self.sched.periodic
         length = math.lcm(*(every for _, every, _ in periodic))
         first = max((f for _, _, f in periodic), default=0)
         if length > MAX_PATTERN or first > MAX_PATTERN:
             self.plans, self.plan_len, self.first = None, 1, 0
-            return
-        plans: list = [None] * length
-        for n in range(first, first + length):
-            plans[n % length] = self._plan_at(n)
-        self.plans, self.plan_len, self.first = plans, length, first
+        else:                                        # plans[i]: the instant n from first on with n % length == i
+            self.plans = [self._plan_at(first + (i - first) % length) for i in range(length)]
+            self.plan_len, self.first = length, first
 
     def _plan_at(self, n: int) -> Plan | None:
         """The plan of the periodic clocks due at instant ``n`` (None: none)."""
@@ -229,17 +233,10 @@ class ClockedRun(ClockPorts):
             return self.plans[n % self.plan_len]
         return self._plan_at(n)
 
-    def instant(self, t: float) -> int:
-        """The component's instant number of ``t`` [s]."""
-        return round((t - self.t0) / self.P)
-
     # ------------------------------------------------------------------ aperiodic and triggered clocks
     def _due_at(self, t: float) -> list[int]:
         """Aperiodic clocks due at ``t`` (removed from the pending)."""
-        nxt = self.next_at
-        if not nxt:
-            return []
-        tol, due = self.tol, []
+        nxt, tol, due = self.next_at, self.tol, []
         for vr, tn in list(nxt.items()):
             if abs(tn - t) <= tol:
                 due.append(vr)
@@ -250,12 +247,8 @@ class ClockedRun(ClockPorts):
         return due
 
     def _received_at(self, t: float) -> tuple[list[int], dict | None]:
-        """The triggered clocks activated at ``t`` by their sources, and the snapshot of the
-        sources' outputs (merged)."""
-        box = self.inbox
-        if not box:
-            return [], None
-        tol = self.tol
+        """The triggered clocks activated at ``t`` by their sources, and the sources' outputs (merged)."""
+        box, tol = self.inbox, self.tol
         ks, snap, keep = [], None, []
         for entry in box:
             te, port, s = entry
@@ -273,16 +266,12 @@ class ClockedRun(ClockPorts):
 
     def _next_point(self, after: float, before: float) -> float | None:
         """The earliest pending activation strictly between ``after`` and ``before`` [s]."""
-        tol = self.tol
-        times = [*self.next_at.values(), *(te for te, _, _ in self.inbox)]
-        if self.fmu_next is not None:
-            times.append(self.fmu_next)
-        return min((x for x in times if after + tol < x < before - tol), default=None)
+        times = [*self.next_at.values(), *(te for te, _, _ in self.inbox), self.fmu_next]
+        return min((x for x in times if x is not None and after + self.tol < x < before - self.tol), default=None)
 
     # ------------------------------------------------------------------ intervals
     def _intervals(self, clocks: list[FMIClock]) -> list[tuple[FMIClock, float, int]]:
-        """``fmi3GetInterval*`` of ``clocks`` (the fraction form where supported):
-        ``(clock, interval [s], qualifier)`` each."""
+        """``fmi3GetInterval*`` of ``clocks`` (fraction form if supported): ``(clock, interval [s], qualifier)``s."""
         if not clocks:
             return []
         key = tuple(k.vr for k in clocks)
@@ -294,7 +283,7 @@ class ClockedRun(ClockPorts):
             label = "GetIntervalFraction" if fraction else "GetIntervalDecimal"
             q = (_I * n)()
             args = (self.c, (_U32 * n)(*key), _SIZE(n), *bufs, q)
-            call = self._interval_calls[key] = (self._fn(f"fmi3{label}"), args, label, bufs, q)
+            call = self._interval_calls[key] = (self.inst.raw(f"fmi3{label}"), args, label, bufs, q)
         fn, args, label, bufs, q = call
         st = fn(*args)
         if st > 1:
@@ -303,25 +292,6 @@ class ClockedRun(ClockPorts):
         return [(k, v, q[i]) for i, (k, v) in enumerate(zip(clocks, values))]
 
     def _apply_interval(self, k: FMIClock, v: float, q: int, t: float, ticked: bool) -> None:
-        """Clock ``k``'s interval ``v`` [s] (qualifier ``q``) read at ``t`` (``ticked``: it was
-        active there): its next activation, or (tunable) its pattern from now on."""
-        if q not in QUALIFIERS:
-            raise FMUError(f"{self.name}: fmi3GetInterval of clock {k.name!r} returned the qualifier {q}")
-        if k.variability == "changing" and ticked and q != CHANGED:
-            raise FMUError(f"{self.name}: changing clock {k.name!r} ticked at t = {t:g} s but fmi3GetInterval "
-                           f"returned {QUALIFIERS[q]}; the standard requires its next interval (changed)")
-        if q != CHANGED:
-            return
-        if k.variability in ("countdown", "changing"):
-            self.next_at[k.vr] = t + checked_interval(v, k, self.name, False)
-            return
-        iv = checked_interval(v, k, self.name, True)          # tunable without intervalDecimal: from now on
-        ratio = iv / self.P
-        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
-            raise FMUError(f"{self.name}: tunable clock {k.name!r} changed its interval to {iv:g} s at "
-                           f"t = {t:g} s, not a multiple of the period {self.P:g} s")
-        for entry in self.sched.periodic:
-            if entry[0].vr == k.vr:
-                entry[1] = round(ratio)
-                entry[2] = self.instant(t) + round(ratio)
-        self._patterns()
+        """:meth:`ClockSchedule.apply_interval`, the patterns again if they changed."""
+        if self.sched.apply_interval(k, v, q, t, ticked):
+            self._patterns()

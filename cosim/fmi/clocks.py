@@ -1,9 +1,6 @@
-"""The FMI 3.0 clocks of an imported FMU (§2.2.8 Clocks), read and checked from its model
-description: the attributes fmpy leaves out are read from the XML (also through a
-``ClockType``), and what the standard forbids is refused naming the clock and the rule (the
-list is on the clocks page of the documentation). Triggered input clocks and output clocks
-are ports of type :data:`~cosim.core.component.CLOCK`; how a run drives the clocks is in
-:mod:`cosim.fmi.clock_run`.
+"""The FMI 3.0 clocks of an imported FMU (§2.2.8 Clocks), read from its model description
+(also what fmpy leaves out) and checked: what the standard forbids is refused naming the
+clock and the rule (listed on the clocks page of the documentation).
 """
 from __future__ import annotations
 
@@ -15,7 +12,7 @@ from fractions import Fraction
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
 from fmu_models.infra.checks import positive
 
-from ..core.clocking import APERIODIC, PERIODIC, VARIABILITIES, ClockInfo, time_fraction
+from ..core.clocking import PERIODIC, VARIABILITIES, ClockInfo, time_fraction
 from ..core.component import CLOCK, Port
 
 __all__ = ["CHANGED", "NOT_YET_KNOWN", "QUALIFIERS", "UNCHANGED", "FMIClock", "FMIClocks"]
@@ -75,16 +72,6 @@ class FMIClock:
     description: str = ""
 
     @property
-    def periodic(self) -> bool:
-        """Constant, fixed or tunable."""
-        return self.variability in PERIODIC
-
-    @property
-    def aperiodic(self) -> bool:
-        """Changing or countdown."""
-        return self.variability in APERIODIC
-
-    @property
     def is_port(self) -> bool:
         """A triggered input clock or an output clock (a port of the component)."""
         return self.causality == "output" or (self.causality == "input" and self.variability == "triggered")
@@ -102,8 +89,7 @@ def _bool(text, what: str) -> bool:
 
 
 def _number(text, what: str, conv, kind: str):
-    """``conv(text)``, None for an attribute not given; an FMUError naming ``what`` if
-    ``text`` is not ``kind``."""
+    """``conv(text)`` (None if not given); an FMUError naming ``what`` if ``text`` is not ``kind``."""
     if text is None:
         return None
     try:
@@ -132,38 +118,27 @@ def _decimal(text, what: str) -> Fraction | None:
 
 
 def _timing(where: str, var: str, a: dict) -> dict:
-    """The interval and shift attributes ``a`` of the clock ``where`` (of intervalVariability
-    ``var``), parsed and checked: the timing fields of its :class:`FMIClock`."""
+    """The timing attributes ``a`` of clock ``where`` (intervalVariability ``var``), parsed and checked."""
     decimal, shift_decimal = (_decimal(a[n], f"{where}: {n}") for n in ("intervalDecimal", "shiftDecimal"))
     counter, resolution, shift_counter = (_uint(a[n], f"{where}: {n}")
                                           for n in ("intervalCounter", "resolution", "shiftCounter"))
     fraction = _bool(a["supportsFraction"], f"{where}: supportsFraction")
-    if decimal is not None:
-        if var not in PERIODIC:
-            raise FMUError(f"{where} ({var}) declares intervalDecimal, which only periodic clocks (constant, "
-                           "fixed, tunable) may have")
-        if decimal <= 0:
-            raise FMUError(f"{where}: intervalDecimal must be > 0, got {float(decimal):g}")
-    if shift_decimal is not None:
-        if decimal is None:
-            raise FMUError(f"{where} declares shiftDecimal without intervalDecimal (the standard requires both)")
-        if shift_decimal < 0:
-            raise FMUError(f"{where}: shiftDecimal must be >= 0, got {float(shift_decimal):g}")
-    if counter is not None:
-        if var not in PERIODIC or not fraction:
-            raise FMUError(f"{where} declares intervalCounter, which only a periodic clock with "
-                           "supportsFraction = true may have")
-        if counter == 0:
-            raise FMUError(f"{where}: intervalCounter must be > 0")
-        if resolution is None:
-            raise FMUError(f"{where} declares intervalCounter without resolution (the standard requires both)")
-    if resolution is not None:
-        if var not in PERIODIC:
-            raise FMUError(f"{where} ({var}) declares resolution, which only periodic clocks may have")
-        if resolution == 0:
-            raise FMUError(f"{where}: resolution must be > 0")
-    if shift_counter is not None and counter is None:
-        raise FMUError(f"{where} declares shiftCounter without intervalCounter (the standard requires both)")
+    for attr, needs in (("shiftDecimal", "intervalDecimal"), ("intervalCounter", "resolution"),
+                        ("shiftCounter", "intervalCounter")):
+        if a[attr] is not None and a[needs] is None:
+            raise FMUError(f"{where} declares {attr} without {needs} (the standard requires both)")
+    for attr in ("intervalDecimal", "resolution"):
+        if a[attr] is not None and var not in PERIODIC:
+            raise FMUError(f"{where} ({var}) declares {attr}, which only periodic clocks (constant, fixed, tunable) "
+                           "may have")
+    if counter is not None and (var not in PERIODIC or not fraction):
+        raise FMUError(f"{where} declares intervalCounter, which only a periodic clock with supportsFraction = true "
+                       "may have")
+    for attr, v in (("intervalDecimal", decimal), ("intervalCounter", counter), ("resolution", resolution)):
+        if v is not None and v <= 0:
+            raise FMUError(f"{where}: {attr} must be > 0, got {float(v):g}")
+    if shift_decimal is not None and shift_decimal < 0:
+        raise FMUError(f"{where}: shiftDecimal must be >= 0, got {float(shift_decimal):g}")
     if var == "constant" and decimal is None:
         raise FMUError(f"{where} is a constant clock without intervalDecimal (the standard requires it)")
     interval, shift = decimal, shift_decimal or Fraction(0)
@@ -185,9 +160,7 @@ def _timing(where: str, var: str, a: dict) -> dict:
 
 def _by_name(root, section: str, tag: str) -> dict:
     """The ``tag`` elements of the XML ``section`` (under ``root``), by name."""
-    parent = root.find(section)
-    elements = parent if parent is not None else ()
-    return {el.get("name"): el for el in elements if el.tag == tag and el.get("name") is not None}
+    return {el.get("name"): el for el in root.findall(f"{section}/{tag}") if el.get("name") is not None}
 
 
 class FMIClocks:
@@ -232,17 +205,15 @@ class FMIClocks:
         for v in md.modelVariables:
             if not (refs := getattr(v, "clocks", None)):
                 continue
-            vrs = []
-            for r in refs:
-                vr = getattr(r, "valueReference", r)
+            vrs = tuple(int(getattr(r, "valueReference", r)) for r in refs)
+            for vr in vrs:
                 if vr not in self.by_vr:
                     raise FMUError(f"{owner}: variable {v.name!r} is clocked by value reference {vr}, which is not a "
                                    "clock (the standard's clocks attribute lists clocks only)")
-                vrs.append(int(vr))
             if v.type != "Clock" and v.variability not in (None, "discrete", "tunable"):
                 raise FMUError(f"{owner}: clocked variable {v.name!r} has variability {v.variability!r}; clocked "
                                "variables must be discrete or tunable")
-            self.clocked[v.name] = tuple(vrs)
+            self.clocked[v.name] = vrs
         self.dependencies = {u.variable.valueReference: tuple(d.valueReference for d in u.dependencies or ())
                              for u in md.outputs if u.variable is not None and u.variable.type == "Clock"}
 
@@ -307,13 +278,8 @@ class FMIClocks:
 
     def feedthrough(self, declared: Mapping[str, Sequence[str]], outs: list[Port], ins: list[Port], ports,
                     interface: str) -> dict:
-        """The direct dependencies the master may assume (see the module documentation):
-        a clocked output on the inputs its ``ModelStructure`` lists (in Co-Simulation not on
-        discrete inputs without a clock: those change in Event Mode in the update) and on its
-        clocks' triggered input ports; in Scheduled Execution also on every input of its
-        partitions; outputs without clocks as declared in Model Exchange, on no input in
-        Co-Simulation and Scheduled Execution. ``declared``: the dependencies read from the
-        ``ModelStructure`` (output port -> input ports)."""
+        """The direct dependencies the master may assume (the rules: the clocks page of the
+        documentation); ``declared``: those the ``ModelStructure`` lists (output port -> input ports)."""
         in_names = [p.name for p in ins]
         by_clock: dict[int, list[str]] = {}          # input clock -> the input ports it is or clocks
         for p in ins:
@@ -346,8 +312,8 @@ class FMIClocks:
         ports = set(ports)
         out = []
         for k in self.clocks:
-            interval = overrides.get(k.name, k.interval) if k.periodic and (k.has_decimal or k.variability ==
-                                                                            "constant") else None
+            # intervalDecimal is declared by periodic clocks only, by every constant one
+            interval = overrides.get(k.name, k.interval) if k.has_decimal else None
             note = "activated by the FMU" if k.causality != "input" else ""
             if k.name in overrides:
                 note = "interval set by the component (clock_intervals)"
