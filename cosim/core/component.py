@@ -17,7 +17,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, TypeMismatchError
-from fmu_models.infra.checks import positive
+from fmu_models.infra.checks import check_unique, positive
 from fmu_models.infra.registry import Registry
 
 __all__ = ["CLOCK", "COMPONENTS", "PORT_TYPES", "BoundCalls", "Component", "ExportedFMU", "ExportsFMU", "FastBinding",
@@ -100,9 +100,7 @@ def _as_ports(ports, owner: str, direction: str, check_names: bool) -> tuple[Por
         if check_names:
             check_name(port.name, f"{owner}: {direction} port")
         port_kind(port.type)
-    names = [p.name for p in out]
-    if len(set(names)) != len(names):
-        raise ConfigurationError(f"{owner}: duplicate {direction} port names in {names}")
+    check_unique((p.name for p in out), f"{owner}: duplicate {direction} port names:")
     return out
 
 
