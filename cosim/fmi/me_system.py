@@ -84,17 +84,11 @@ class _Coupled(ContinuousModel):
                 enter, term = enter or e, term or t
         return enter, term
 
-    def event(self, t, set_inputs=None):
+    def enter_event_mode(self) -> None:
         for m in self.models:
             m.enter_event_mode()
-        if set_inputs is not None:
-            set_inputs()
-        return self._iterate(t)
 
-    def initial_event(self, t):
-        return self._iterate(t)
-
-    def _iterate(self, t: float) -> tuple[bool, float | None]:
+    def settle(self, t: float) -> tuple[bool, float | None]:
         """The joint event iteration: every member's own, the connections propagated,
         until no connected value changes. A member that asks to terminate is not asked
         again; the others settle on its last values, then the system terminates."""

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, FMUError, UnknownNameError
+from fmu_models.errors import FMUError, UnknownNameError
 from fmu_models.infra.checks import positive
 
 from ..core.component import StopRequest
@@ -41,9 +41,8 @@ class ContinuousModel:
 
     A model also has ``set_time(t)`` [s], ``get_states(x)``, ``set_states(x)``,
     ``derivatives(dx)`` (arrays of nx values), ``indicators(z)`` (nz values),
-    ``event(t, set_inputs=None)`` (Event Mode, ``set_inputs()``, the event iteration,
-    Continuous-Time Mode) and ``initial_event(t)`` (the same after
-    ``ExitInitializationMode``), both returning ``(terminate, next event time or None)``.
+    ``enter_event_mode()`` and ``settle(t)`` (the event iteration, then Continuous-Time Mode
+    unless the model terminates: ``(terminate, next event time or None)``).
 
     Attributes
     ----------
@@ -77,6 +76,17 @@ class ContinuousModel:
     def completed_step(self) -> tuple[bool, bool]:
         """After an integrator step: ``(enter_event_mode, terminate)``."""
         return False, False
+
+    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
+        """Event Mode at ``t`` [s], ``set_inputs()``, then :meth:`settle`."""
+        self.enter_event_mode()
+        if set_inputs is not None:
+            set_inputs()
+        return self.settle(t)
+
+    def initial_event(self, t: float) -> tuple[bool, float | None]:
+        """:meth:`settle` after ``ExitInitializationMode``."""
+        return self.settle(t)
 
 
 class FMUModel(ContinuousModel):
@@ -152,21 +162,14 @@ class FMUModel(ContinuousModel):
         if self.version > 1:
             self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
 
-    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
-        """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
-        self.enter_event_mode()
-        if set_inputs is not None:
-            set_inputs()
-        return self._settle(t)
-
     def initial_event(self, t):
         """FMI 1.0: what ``fmiInitialize`` said (its initial event iteration is its own)."""
         if self.version == 1:
             return self.inst.initial_events
-        return self._settle(t)
+        return self.settle(t)
 
-    def _settle(self, t: float) -> tuple[bool, float | None]:
-        """The event iteration, then Continuous-Time Mode unless the model terminates."""
+    def settle(self, t: float) -> tuple[bool, float | None]:
+        """:meth:`iterate`, then Continuous-Time Mode unless the model terminates."""
         terminate, nxt = self.iterate(t)
         if not terminate:
             self.enter_continuous_time_mode()
@@ -192,96 +195,66 @@ class FMUModel(ContinuousModel):
         raise FMUError(f"{self.name}: the event iteration at t = {t:g} s did not converge in 1000 rounds")
 
 
-class _Callbacks:
-    """The functions fmpy's CVODE binding calls; an exception inside one is kept and raised
-    after CVODE returns (a ctypes callback cannot raise), and no model call follows it (after
-    an Error only FreeInstance may)."""
-
-    def __init__(self, model: ContinuousModel):
-        self.m = model
-        self.pending: BaseException | None = None
-        n = max(model.nx, 1)
-        self.x, self.dx = np.zeros(n), np.zeros(n)
-        self.z = np.zeros(max(model.nz, 1))
-
-    def _guard(self, fn):
-        if self.pending is not None:
-            return -1
-        try:
-            fn()
-            return 0
-        except BaseException as e:  # noqa: BLE001 - kept, raised after CVODE returns
-            self.pending = e
-            return -1
-
-    @staticmethod
-    def _out(fill, buf: np.ndarray, ptr, n: int) -> None:
-        fill(buf)
-        ctypes.memmove(ptr, buf.ctypes.data, 8 * n)
-
-    def get_x(self, ptr, n):
-        self._out(self.m.get_states, self.x, ptr, n)
-
-    def set_x(self, ptr, n):
-        if self.pending is not None:        # fmpy sets the states after a failed CVode call too
-            return
-        ctypes.memmove(self.x.ctypes.data, ptr, 8 * n)
-        self.m.set_states(self.x)
-
-    def get_dx(self, ptr, n):
-        self._out(self.m.derivatives, self.dx, ptr, n)
-
-    def get_z(self, ptr, n):
-        self._out(self.m.indicators, self.z, ptr, n)
-
-    def get_nominals(self, ptr, n):
-        self._out(self.m.nominals, np.ones(max(self.m.nx, 1)), ptr, n)
-
-
 def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
-    """fmpy's CVodeSolver for ``model``, its callbacks guarded (:class:`_Callbacks`), a
-    destructor that cannot fail (fmpy's reads ``cvode_mem``, never set by a constructor that
-    failed) and SUNDIALS' error messages kept for the FMUError, not printed on stderr."""
-    from fmpy.sundials import NV_DATA_S, CVodeSolver, SUNContext_PushErrHandler
+    """fmpy's CVodeSolver for ``model``: an exception inside a callback is kept in its ``pending`` and
+    raised after CVODE returns (a ctypes callback cannot raise), and no model call follows it (after
+    an Error only FreeInstance may); a destructor that cannot fail (fmpy's reads ``cvode_mem``, never
+    set by a constructor that failed); SUNDIALS' error messages kept for the FMUError, not printed."""
+    from fmpy.sundials import CVodeSolver, SUNContext_PushErrHandler
     from fmpy.sundials.libraries import sundials_core
 
-    cb = _Callbacks(model)
+    n = max(model.nx, 1)
+    x = np.zeros(n)
+
+    def out(fill, buf: np.ndarray):
+        def copy(ptr, size: int) -> None:
+            fill(buf)
+            ctypes.memmove(ptr, buf.ctypes.data, 8 * size)
+        return copy
 
     class _Solver(CVodeSolver):
-        def f(self, t, y, ydot, user_data):
-            def run():
-                model.set_time(t)
-                if model.nx:
-                    cb.set_x(NV_DATA_S(y), self.nx)
-                    cb.get_dx(NV_DATA_S(ydot), self.nx)
-                else:
-                    np.ctypeslib.as_array(NV_DATA_S(ydot), (self.nx,))[:] = 0.0
-            return cb._guard(run)
+        pending: BaseException | None = None
 
-        def g(self, t, y, gout, user_data):
-            def run():
-                model.set_time(t)
-                if model.nx:
-                    cb.set_x(NV_DATA_S(y), self.nx)
-                cb.get_z(gout, self.nz)
-            return cb._guard(run)
+        def __init__(self):
+            super().__init__(nx=model.nx, nz=model.nz, get_x=out(model.get_states, x), set_x=self._set_x,
+                             get_dx=out(model.derivatives, np.zeros(n)), get_nominals=out(model.nominals, np.ones(n)),
+                             get_z=out(model.indicators, np.zeros(max(model.nz, 1))), set_time=model.set_time,
+                             input=SimpleNamespace(apply=lambda t: None),     # the master holds the inputs
+                             startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+
+        def _set_x(self, ptr, size: int) -> None:
+            if self.pending is None:        # fmpy sets the states after a failed CVode call too
+                ctypes.memmove(x.ctypes.data, ptr, 8 * size)
+                model.set_states(x)
+
+        def _guarded(self, call, *args) -> int:
+            if self.pending is not None:
+                return -1
+            try:
+                return call(*args)
+            except BaseException as e:  # noqa: BLE001 - kept, raised after CVODE returns
+                self.pending = e
+                return -1
+
+        def f(self, *args):
+            return self._guarded(super().f, *args)
+
+        def g(self, *args):
+            return self._guarded(super().g, *args)
 
         def __del__(self):
             if "cvode_mem" in vars(self):       # made: freed (a constructor that failed before made none)
                 super().__del__()
 
     try:
-        solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
-                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time,
-                         input=SimpleNamespace(apply=lambda t, **kw: None),     # the master holds the inputs
-                         startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+        solver = _Solver()
     except FMUError:
         raise
     except Exception as e:  # noqa: BLE001 - fmpy's binding raises a plain Exception when a CVODE call fails
         raise FMUError(f"{model.name}: CVODE could not be set up at t = {t0:g} s: {e}") from None
     sundials_core.SUNContext_ClearErrHandlers(solver.sunctx)         # only fmpy's handler, which keeps them
     SUNContext_PushErrHandler(solver.sunctx, solver.ehfun_, None)
-    return solver, cb
+    return solver
 
 
 class MEIntegrator:
@@ -303,15 +276,13 @@ class MEIntegrator:
     MAX_ROUNDS = 10_000_000
 
     def __init__(self, model: ContinuousModel, solver: str, solver_step: float | None, rtol: float):
-        if solver not in SOLVERS:
-            raise ConfigurationError(f"unknown solver {solver!r}; valid: {', '.join(SOLVERS)}")
-        self.model, self.solver, self.h_int, self.rtol = model, solver, solver_step, rtol
+        self.model = model
+        self.solver, self.h_int, self.rtol = check_solver(model.name, solver, solver_step, rtol)
         n = max(model.nx, 1)
         self.x, self.dx, self.scratch = np.zeros(n), np.zeros(n), np.zeros(n)
         self.z, self.z_new = np.zeros(max(model.nz, 1)), np.zeros(max(model.nz, 1))
         self.next_event: float | None = None
         self.cvode = None
-        self._cb = None
         self.t = float("nan")
 
     # ------------------------------------------------------------------ events
@@ -329,7 +300,7 @@ class MEIntegrator:
         terminate, nxt = self.model.initial_event(t0)
         self.t = t0
         if self.solver == "cvode":
-            self.cvode, self._cb = _cvode(self.model, t0, self.h_int or math.inf, self.rtol)
+            self.cvode = _cvode(self.model, t0, self.h_int or math.inf, self.rtol)
         self._after_event(t0, terminate, nxt)
 
     def reset(self, t: float) -> None:
@@ -363,14 +334,14 @@ class MEIntegrator:
         m.set_states(x)
 
     def _cvode_step(self, t: float, t_next: float) -> tuple[float, bool]:
-        cb = self._cb
+        cvode = self.cvode
         try:
-            root, _, t_reached = self.cvode.step(t, t_next)
+            root, _, t_reached = cvode.step(t, t_next)
         except RuntimeError as e:
-            if cb.pending is None:
+            if cvode.pending is None:
                 raise FMUError(f"{self.model.name}: CVODE failed between t = {t:g} s and {t_next:g} s: {e}") from None
-        if cb.pending is not None:
-            err, cb.pending = cb.pending, None
+        if cvode.pending is not None:
+            err, cvode.pending = cvode.pending, None
             raise err from None
         self.model.set_time(t_reached)
         self.model.get_states(self.x)
@@ -469,18 +440,12 @@ def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthro
     model = me.model
     pending = [False]                        # a continuous input jumped since the last advance
 
-    def apply(calls) -> bool:
-        changed = False
-        for s in calls:
-            changed |= bool(s())
-        return changed
-
     def set_inputs(t: float, cont: list, disc: list) -> None:
-        if cont and apply(cont):
+        if cont and any([s() for s in cont]):          # a list: every setter called
             pending[0] = True
             model.dirty = True
         if disc and any(s.differs() for s in disc):
-            me.at_event(t, lambda: apply(disc))
+            me.at_event(t, lambda: [s() for s in disc])
 
     def output_fn(t: float) -> None:
         set_inputs(t, *feedthrough)
