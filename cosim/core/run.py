@@ -1,15 +1,6 @@
-"""One run of a co-simulation: its state, its setup, the Python loop and the run's end.
-
-:meth:`Cosimulation.run <cosim.core.master.Cosimulation.run>` and ``run_to_parquet`` make a
-:class:`Run` and call :meth:`Run.execute`: the setup (:meth:`Run.setup`: reset, clocks attached,
-calls bound, the schedule listed, the native program built where the kernel runs), the loop
-(:meth:`Run.python_loop` or :class:`~cosim.core.native_loop.NativeLoop`, the same results bit for
-bit, every signal checked for NaN and inf after each block of
-:data:`~cosim.core.native_loop.BLOCK` base steps), and the end (the sink's result, a stop request
-finished by :meth:`Run.finish_stop`, a failure's CosimError with the rows so far, and whatever
-happened every component closed by :meth:`Run.teardown`). Its position: base step ``k``, next row
-``j``, the block's first base step ``k0`` and row ``jb``; ``phase`` is ``reset``, ``bind``,
-``output`` or ``update``, ``failing`` the call being made.
+"""One run of a co-simulation (:class:`~cosim.core.run.Run`): its state, its setup, the Python loop
+(the native one is :class:`~cosim.core.native_loop.NativeLoop`, the same results bit for bit) and
+the run's end, whatever happened.
 """
 from __future__ import annotations
 
@@ -35,7 +26,8 @@ __all__ = ["Run"]
 
 
 class Run:
-    """One run of a co-simulation (see the module documentation).
+    """One run of a co-simulation, made by :meth:`Cosimulation.run <cosim.core.master.Cosimulation.run>`
+    and ``run_to_parquet``; :meth:`execute` runs it.
 
     Parameters
     ----------
@@ -45,14 +37,19 @@ class Run:
         Where the rows go.
     sel : sequence of int
         The recorded signals (positions in ``cosim.signal_names``).
-    n : int
-        Base steps of the run.
-    m : int
-        Base steps between two rows.
+    n, m : int
+        Base steps of the run, and between two rows.
     t0 : float
         Start time [s].
     progress : bool or None
         Show a progress bar (None: when the run takes more than 2 s).
+
+    Attributes
+    ----------
+    k, j, k0, jb : int
+        The position: base step, next row, the block's first base step and its first row.
+    phase : str
+        ``reset``, ``bind``, ``output`` or ``update``; ``failing`` is the call being made.
     """
 
     def __init__(self, cosim, sink: MemorySink | ParquetSink, sel: Sequence[int], n: int, m: int, t0: float,

@@ -25,8 +25,7 @@ MAX_EVENT_ROUNDS = 1000
 
 def _slices(sizes: list[int]) -> list[slice]:
     """Consecutive slices of these sizes."""
-    ends = list(accumulate(sizes, initial=0))
-    return [slice(a, b) for a, b in pairwise(ends)]
+    return [slice(a, b) for a, b in pairwise(accumulate(sizes, initial=0))]
 
 
 class _Coupled(ContinuousModel):
@@ -77,12 +76,8 @@ class _Coupled(ContinuousModel):
             m.nominals(out[s])
 
     def completed_step(self):
-        enter = term = False
-        for m in self.models:
-            if m.needs_completed_step:
-                e, t = m.completed_step()
-                enter, term = enter or e, term or t
-        return enter, term
+        flags = [m.completed_step() for m in self.models if m.needs_completed_step]
+        return any(enter for enter, _ in flags), any(term for _, term in flags)
 
     def enter_event_mode(self) -> None:
         for m in self.models:
@@ -146,7 +141,6 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
 
     def __init__(self, name: str, members: Sequence[FMUComponent], connections: Mapping[str, str],
                  period: float, solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6):
-
         self.members = list(members)
         if not self.members:
             raise ConfigurationError(f"{name}: an ME system needs at least one member")
