@@ -161,15 +161,13 @@ class Run:
 
     def _program(self):
         """The native kernel's program of the run, or None for the Python loop."""
-        if self.cosim._whole_run_python() is not None:
-            return None
-        self.kernel, _ = load_kernel()
+        if self.cosim._whole_run_python() is None:
+            self.kernel = load_kernel()[0]
         if self.kernel is None:
             return None
         program = build_program(self.schedule)
-        if program.n_native == 0 and self.cosim.engine == "auto":
-            return None                  # nothing runs natively: the Python loop costs less
-        return program
+        nothing_native = program.n_native == 0 and self.cosim.engine == "auto"      # the Python loop costs less
+        return None if nothing_native else program
 
     # ---------------------------------------------------------------- the Python loop
     def python_loop(self) -> None:

@@ -242,18 +242,16 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         return order
 
     def _feedthrough_map(self) -> dict[str, set[str]]:
-        """The external inputs each output depends on directly (through the connections)."""
-        memo: dict[tuple[str, str], set[str]] = {}
-
-        def deps(member: str, output: str) -> set[str]:
-            key = (member, output)
-            if key not in memo:
-                found = memo[key] = set()          # _order refused cycles: no recursion comes back here
-                for i in self.by_name[member].feedthrough.get(output, ()):
-                    src = self.connections.get((member, i))
-                    found |= deps(*src) if src is not None else {f"{member}.{i}"}
-            return memo[key]
-        return {f"{m.name}.{o}": deps(m.name, o) for m in self.members for o in m.output_names}
+        """The external inputs each output depends on directly (through the connections), found
+        in :meth:`_order`'s order: a connected feed-through input's source output comes first."""
+        deps: dict[tuple[str, str], set[str]] = {}
+        for m in self.order:
+            for o in m.output_names:
+                found = deps[m.name, o] = set()
+                for i in m.feedthrough.get(o, ()):
+                    src = self.connections.get((m.name, i))
+                    found |= deps[src] if src is not None else {f"{m.name}.{i}"}
+        return {f"{m.name}.{o}": deps[m.name, o] for m in self.members for o in m.output_names}
 
     def timing(self) -> str:
         return ("Model Exchange system: outputs at t; connections between members inside every derivative "

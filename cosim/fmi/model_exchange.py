@@ -55,8 +55,7 @@ class ContinuousModel:
     stop_reason : str
         Why the model asked to terminate in its last event (for the stop notice).
     dirty : bool
-        An input changed since the values the outputs are read from were brought up to
-        date (:meth:`refresh`).
+        An input changed since the outputs' values were brought up to date (:meth:`refresh`).
     """
 
     nx = 0
