@@ -33,13 +33,10 @@ def guard() -> ctypes.CDLL | None:
     lib, _ = compiled_library(_SOURCE.read_text(), "crash_guard", _FLAGS, "guard_install",
                               "the crash guard", "an FMU's crash is not explained")
     if lib is not None:
-        lib.guard_install.restype = ctypes.c_int
-        lib.guard_register.argtypes = [ctypes.c_void_p, ctypes.c_char_p]
-        lib.guard_register.restype = ctypes.c_int
+        lib.guard_register.argtypes = [ctypes.c_void_p, ctypes.c_char_p]  # int results: the default restype
         lib.guard_unregister.argtypes = [ctypes.c_int]
         lib.guard_time.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
         lib.guard_salvage.argtypes = [ctypes.POINTER(ctypes.c_char_p), ctypes.c_int]
-        lib.guard_salvage.restype = ctypes.c_int
         if lib.guard_install() != 0:
             lib = None
     _state["lib"] = lib

@@ -282,7 +282,6 @@ class MEIntegrator:
         self.z, self.z_new = np.zeros(max(model.nz, 1)), np.zeros(max(model.nz, 1))
         self.next_event: float | None = None
         self.cvode = None
-        self.t = float("nan")
 
     # ------------------------------------------------------------------ events
     def _after_event(self, t: float, terminate: bool, nxt: float | None) -> None:
@@ -296,11 +295,10 @@ class MEIntegrator:
     def start(self, t0: float) -> None:
         """After ``ExitInitializationMode``: the initial event iteration, Continuous-Time
         Mode, the solver created."""
-        terminate, nxt = self.model.initial_event(t0)
-        self.t = t0
+        settled = self.model.initial_event(t0)
         if self.solver == "cvode":
             self.cvode = _cvode(self.model, t0, self.h_int or math.inf, self.rtol)
-        self._after_event(t0, terminate, nxt)
+        self._after_event(t0, *settled)
 
     def reset(self, t: float) -> None:
         """Reinitialise the solver at ``t`` (after an event, or an input that changed)."""
@@ -309,8 +307,7 @@ class MEIntegrator:
 
     def at_event(self, t: float, set_inputs: Callable[[], None]) -> None:
         """An event at ``t`` [s] whose Event Mode sets discrete inputs (``set_inputs()``)."""
-        terminate, nxt = self.model.event(t, set_inputs)
-        self._after_event(t, terminate, nxt)
+        self._after_event(t, *self.model.event(t, set_inputs))
 
     # ------------------------------------------------------------------ stepping
     def _fixed_step(self, t: float, h: float) -> None:
@@ -395,10 +392,8 @@ class MEIntegrator:
                 if terminate:
                     raise StopRequest(m.name, t_next, "the FMU requested termination after an integrator step")
             if time_event or state_event or step_event:
-                terminate, nxt = m.event(t_next)
-                self._after_event(t_next, terminate, nxt)
+                self._after_event(t_next, *m.event(t_next))
             t = t_next
-        self.t = t_end
 
 
 def unit_nominals_instead(models: list[FMUModel], components: list) -> bool:
