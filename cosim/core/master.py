@@ -35,14 +35,13 @@ MAX_THREADS = 64
 
 
 class Cosimulation:
-    """Couples components and runs them.
+    """Couples components and runs them (the co-simulation page of the documentation says how).
 
     Parameters
     ----------
     components : sequence of Component
         FMUs (:class:`~cosim.fmi.fmu_component.FMUComponent`), plant models
-        (:class:`~cosim.components.plant_model.ModelComponent`) and Python components. With the
-        default order the list order does not change results.
+        (:class:`~cosim.components.plant_model.ModelComponent`) and Python components.
     connections : mapping or iterable of pairs
         ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input gets at most
         one source, of a compatible type (:func:`cosim.core.component.ports_compatible`). Every
@@ -55,12 +54,11 @@ class Cosimulation:
     loops : {"refuse", "iterate"}
         Algebraic loops: refused before the run (default) or solved at each instant.
     loop_tolerance : float
-        Iteration stops when every loop signal changes by less than
-        ``loop_tolerance * (1 + |value|)`` (default 1e-10).
+        Iteration stops when every loop signal changes by less than ``loop_tolerance * (1 + |value|)``.
     loop_max_iter : int
-        Iteration limit per instant; reaching it stops the run with a CosimError (default 50).
+        Iteration limit per instant; reaching it stops the run with a CosimError.
     loop_solver : {"newton", "fixed-point"}
-        How loops are iterated (default Newton).
+        How loops are iterated.
     engine : {"auto", "native", "python"}
         What runs the base-step loop: the native kernel (:mod:`cosim.core.native`), the Python
         loop, or (default) the kernel where it can run; :meth:`describe` says each component's path.
@@ -102,7 +100,7 @@ class Cosimulation:
                                    ("loop_solver", loop_solver, LOOP_SOLVERS)):
             if value not in valid:
                 raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
-        self.order, self.loops, self.loop_solver, self._engine = order, loops, loop_solver, "auto"
+        self.order, self.loops, self.loop_solver = order, loops, loop_solver
         self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
         self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
@@ -206,11 +204,10 @@ class Cosimulation:
     def engine(self, value: str) -> None:
         if value not in ENGINES:
             raise ConfigurationError(f"engine must be one of {ENGINES}, got {value!r}")
-        old, self._engine = self._engine, value
-        why = self._whole_run_python()
+        why = self._whole_run_python(value)
         if value == "native" and why is not None:
-            self._engine = old
             raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
+        self._engine = value
 
     @property
     def threads(self) -> int | str:
@@ -225,9 +222,9 @@ class Cosimulation:
             raise ConfigurationError(f"threads must be 'auto' or a whole number from 1 to {MAX_THREADS}, got {value!r}")
         self._threads = value if value == "auto" else int(value)
 
-    def _whole_run_python(self) -> str | None:
-        """Why every call of a run takes the Python path, or None."""
-        if self.engine == "python":
+    def _whole_run_python(self, engine: str | None = None) -> str | None:
+        """Why every call of a run with ``engine`` (default the current one) takes the Python path, or None."""
+        if (engine or self.engine) == "python":
             return "engine='python'"
         if self.order == "jacobi":
             return "order='jacobi' (every component reads the values before the instant)"
