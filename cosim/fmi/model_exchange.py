@@ -177,16 +177,11 @@ class FMUModel(ContinuousModel):
     def iterate(self, t: float) -> tuple[bool, float | None]:
         """In Event Mode: update the discrete states until no more update is needed (at most
         1000 rounds); returns ``(terminate, next event time or None)``."""
-        fmu, inst = self.inst.fmu, self.inst
         name = {1: "EventUpdate", 2: "NewDiscreteStates", 3: "UpdateDiscreteStates"}[self.version]
-        update = getattr(fmu, name[0].lower() + name[1:])
+        update = getattr(self.inst.fmu, name[0].lower() + name[1:])
         for _ in range(1000):
-            info = inst.call(name, update)
-            if self.version == 1:       # (converged, stateValueReferencesChanged, stateValuesChanged, ...)
-                info = (not info[0], *info[3:])
-            else:
-                info = (info[0], info[1], *info[4:])
-            need, term, defined, nxt = info
+            info = self.inst.call(name, update)     # FMI 1.0: (converged, two "changed" flags, terminate, ...)
+            need, term, defined, nxt = (not info[0], *info[3:]) if self.version == 1 else (*info[:2], *info[4:])
             if term:
                 return True, None
             if not need:
