@@ -375,12 +375,7 @@ class Cosimulation:
                        output_interval: float | None = None, progress: bool | None = None,
                        chunk_rows: int = 8192) -> Path:
         """Run like :meth:`run`, streaming the rows to the Parquet file ``path`` in chunks
-        of ``chunk_rows`` (constant memory); returns the path.
-
-        The file is written under a temporary name and renamed at the end; a failed or
-        interrupted run leaves ``<name>.partial.parquet`` with the rows so far (named in
-        the error). ``pandas.read_parquet(path)`` gives the DataFrame :meth:`run` returns.
-        """
+        of ``chunk_rows`` (constant memory; a failed run leaves ``<name>.partial.parquet``); returns the path."""
         return self._run(partial(ParquetSink, path, chunk_rows=chunk_rows), stop_time, start_time, signals,
                          output_interval, progress)
 

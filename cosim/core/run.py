@@ -124,8 +124,7 @@ class Run:
             for c in cs.clock_plan.members:
                 self.failing = c
                 c.attach_clocks(self.board)
-        for c in cs.components:
-            self.bound[c.name] = self._bind(c)
+        self.bound = {c.name: self._bind(c) for c in cs.components}
         self.owner = {fn: name for name, calls in self.bound.items() for fn in calls}
         dues = [frozenset(c.name for c in cs.components if i % cs._ratio[c.name] == 0) for i in range(cs._hyper)]
         entries = {due: self._entry(due) for due in dict.fromkeys(dues)}      # one per set of due components

@@ -258,7 +258,6 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                 "evaluation; external inputs held over the step")
 
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse a run of too many fixed solver steps (see FMUComponent.check_run)."""
         for m in self.members:
             m.check_run(start_time, stop_time)
 

@@ -418,11 +418,10 @@ def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthro
     me : MEIntegrator
     h : float
         The communication step [s]: the update advances over ``[t, t + h]``.
-    setters : (list, list)
-        The calls that set the continuous and the discrete inputs (each returns whether a
-        value changed; its ``differs()`` whether one would).
-    feedthrough : (list, list)
-        The same for the feed-through inputs, set at ``t`` before the outputs are read.
+    setters, feedthrough : (list, list)
+        The calls that set the continuous and the discrete inputs, and those of the feed-through ones,
+        set at ``t`` before the outputs are read (each returns whether a value changed; ``differs()``:
+        whether one would).
     getters : list
         The calls that read the outputs.
     """
