@@ -284,10 +284,9 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         slot = {s: k for k, s in enumerate(sources)}
         buf = np.zeros(max(len(sources), 1))
         ints = np.zeros(max(len(sources), 1), dtype=np.int64)
-        # per member in order: its inputs from members before it (current when set), its
-        # outputs; then the inputs from members after it (set once every output is current:
-        # none of them reaches an output at once, or the order would differ). Each call with
-        # whether it sets discrete inputs; getters return None (no change)
+        # per member in order: its inputs from members before it (current when set), its outputs;
+        # then the inputs from members after it (set once every output is current: none of them
+        # reaches an output at once, or the order would differ). Getters return None: no change
         rank = {m.name: k for k, m in enumerate(self.order)}
         early, late = [], []
         for m in self.order:
