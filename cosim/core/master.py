@@ -154,7 +154,10 @@ class Cosimulation:
             if any(len(p) != 2 for p in pairs):
                 raise ConfigurationError("each connection must be a pair (src, dst)")
         out = {}
-        for src, dst in pairs:          # split_port refuses an end that is not text
+        for src, dst in pairs:
+            if not isinstance(src, str) or not isinstance(dst, str):
+                raise ConfigurationError(f"connection {dst!r} = {src!r}: both ends must be written "
+                                         "'component.port' (text)")
             (s, st), (d, dt) = self._port(src, "output"), self._port(dst, "input")
             if d in out:
                 raise ConfigurationError(f"input {dst!r} is connected twice "
