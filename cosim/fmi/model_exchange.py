@@ -119,25 +119,22 @@ class FMUModel(ContinuousModel):
             if st > 1:
                 fail(what, st)
 
-        def vector(function: str, n: int, what: str):
+        def vector(function: str, n: int, what: str, checked=check):
             fn, size = instance.raw(f"{p}{function}"), ctypes.c_size_t(n)
-            return (lambda x: check(fn(c, x.ctypes.data_as(_DP), size), what)) if n else (lambda x: None)
+            return (lambda x: checked(fn(c, x.ctypes.data_as(_DP), size), what)) if n else (lambda x: None)
 
         self.get_states = vector("GetContinuousStates", self.nx, "GetContinuousStates")
         self.set_states = vector("SetContinuousStates", self.nx, "SetContinuousStates")
         self.derivatives = vector("GetContinuousStateDerivatives" if self.version == 3 else "GetDerivatives", self.nx,
                                   "GetDerivatives")
         self.indicators = vector("GetEventIndicators", self.nz, "GetEventIndicators")
-        nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
-        get_nominals, n = instance.raw(f"{p}{nominals}"), ctypes.c_size_t(self.nx)
 
-        def ask_nominals(x: np.ndarray) -> None:
-            st = get_nominals(c, x.ctypes.data_as(_DP), n) if self.nx else 0
-            if st > 1:
-                self.nominals_refused = st == 3         # Error
-                fail(nominals, st)
+        def check_nominals(st, what):
+            self.nominals_refused = st == 3             # Error
+            check(st, what)
         if not unit_nominals:                           # else ContinuousModel's: 1 for every state
-            self.nominals = ask_nominals
+            nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
+            self.nominals = vector(nominals, self.nx, nominals, check_nominals)
         set_time, completed = instance.raw(f"{p}SetTime"), instance.raw(f"{p}CompletedIntegratorStep")
         self.set_time = lambda t: check(set_time(c, ctypes.c_double(t)), "SetTime")
         flag = {1: ctypes.c_int8, 2: ctypes.c_int}.get(self.version, ctypes.c_bool)       # fmiBoolean is a char
