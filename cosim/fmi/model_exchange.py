@@ -77,14 +77,14 @@ class ContinuousModel:
         return False, False
 
     def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
-        """Event Mode at ``t`` [s], ``set_inputs()``, then :meth:`settle`."""
+        """Event Mode at ``t`` [s], ``set_inputs()``, then ``settle(t)``."""
         self.enter_event_mode()
         if set_inputs is not None:
             set_inputs()
         return self.settle(t)
 
     def initial_event(self, t: float) -> tuple[bool, float | None]:
-        """:meth:`settle` after ``ExitInitializationMode``."""
+        """``settle(t)`` after ``ExitInitializationMode``."""
         return self.settle(t)
 
 
