@@ -1,10 +1,8 @@
 """Algebraic loops solved at each instant (``loops="iterate"`` of :class:`~cosim.core.master.Cosimulation`).
 
-A loop's signals ``z`` (every output of its components) are a fixed point of ``g``, one pass of
-the components' output calls from ``z``. Newton's method (default) solves ``g(z) = z`` with ``g`` a
-Jacobi pass and a finite-difference Jacobian (exact in one step for a linear loop); fixed-point
-iteration repeats a Gauss-Seidel sweep ``z = g(z)``. Iteration stops when every signal changes by
-less than ``tolerance * (1 + |z|)``, or fails with a CosimError after ``max_iter`` iterations.
+A loop's signals ``z`` (every output of its components) are a fixed point of ``g``, one pass of the
+components' output calls from ``z``: Newton on ``g(z) = z`` (``g`` a Jacobi pass, a finite-difference
+Jacobian) or fixed-point Gauss-Seidel sweeps ``z = g(z)`` (the co-simulation page of the documentation).
 """
 from __future__ import annotations
 

@@ -1,13 +1,8 @@
 """The crash guard: an FMU's code that kills the master's process says so before it dies.
 
-A not isolated FMU runs its C code in the master's process, where a fatal signal ends the process
-with no Python after it. The guard is a fatal-signal handler (``crash_guard.c``, compiled once and
-cached) that names the component whose FMU crashed (its library registered when loaded), the FMI
-function it was in and the time of the base step (the master registers its step counter), tells
-the user to set ``isolate = true``, starts the salvage program (:mod:`cosim.core.salvage`: the
-streamed rows so far become ``<name>.partial.parquet``, the run's temporary folders go), then
-hands the signal on, so the process ends as it would have. Without a C compiler there is no
-guard (:func:`guard` returns None).
+A fatal-signal handler (``crash_guard.c``, compiled once and cached) names the component whose
+FMU library holds the crash, the FMI function and the base step's time, starts the salvage program
+(:mod:`cosim.core.salvage`), then hands the signal on (the third-party FMUs page of the documentation).
 """
 from __future__ import annotations
 
@@ -38,13 +33,10 @@ def guard() -> ctypes.CDLL | None:
     lib, _ = compiled_library(_SOURCE.read_text(), "crash_guard", _FLAGS, "guard_install",
                               "the crash guard", "an FMU's crash is not explained")
     if lib is not None:
-        lib.guard_install.restype = ctypes.c_int
-        lib.guard_register.argtypes = [ctypes.c_void_p, ctypes.c_char_p]
-        lib.guard_register.restype = ctypes.c_int
+        lib.guard_register.argtypes = [ctypes.c_void_p, ctypes.c_char_p]  # int results: the default restype
         lib.guard_unregister.argtypes = [ctypes.c_int]
         lib.guard_time.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
         lib.guard_salvage.argtypes = [ctypes.POINTER(ctypes.c_char_p), ctypes.c_int]
-        lib.guard_salvage.restype = ctypes.c_int
         if lib.guard_install() != 0:
             lib = None
     _state["lib"] = lib

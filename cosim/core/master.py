@@ -1,11 +1,6 @@
-"""The co-simulation master: steps FMUs and Python components, each at its own period.
-
-:class:`Cosimulation` checks the components and connections, lays the signals out and derives the
-base step and evaluation order (:mod:`cosim.core.schedule`) and the clocks
-(:mod:`cosim.core.clocking`) once; each run is a :class:`~cosim.core.run.Run`. The calls at an
-instant are the component protocol's (:mod:`cosim.core.component`); the orders, periods,
-latencies, algebraic loops, the native kernel and parallel stepping are described on the
-co-simulation page of the documentation.
+"""The co-simulation master (:class:`~cosim.core.master.Cosimulation`): steps FMUs and Python
+components, each at its own period; each run is a :class:`~cosim.core.run.Run` (orders, periods,
+latencies, loops, the native kernel and parallel stepping: the co-simulation page of the documentation).
 """
 from __future__ import annotations
 
@@ -40,14 +35,13 @@ MAX_THREADS = 64
 
 
 class Cosimulation:
-    """Couples components and runs them.
+    """Couples components and runs them (the co-simulation page of the documentation says how).
 
     Parameters
     ----------
     components : sequence of Component
         FMUs (:class:`~cosim.fmi.fmu_component.FMUComponent`), plant models
-        (:class:`~cosim.components.plant_model.ModelComponent`) and Python components. With the
-        default order the list order does not change results.
+        (:class:`~cosim.components.plant_model.ModelComponent`) and Python components.
     connections : mapping or iterable of pairs
         ``{"dst.port": "src.port"}`` or ``[("src.port", "dst.port"), ...]``: each input gets at most
         one source, of a compatible type (:func:`cosim.core.component.ports_compatible`). Every
@@ -60,21 +54,17 @@ class Cosimulation:
     loops : {"refuse", "iterate"}
         Algebraic loops: refused before the run (default) or solved at each instant.
     loop_tolerance : float
-        Iteration stops when every loop signal changes by less than
-        ``loop_tolerance * (1 + |value|)`` (default 1e-10).
+        Iteration stops when every loop signal changes by less than ``loop_tolerance * (1 + |value|)``.
     loop_max_iter : int
-        Iteration limit per instant; reaching it stops the run with a CosimError (default 50).
+        Iteration limit per instant; reaching it stops the run with a CosimError.
     loop_solver : {"newton", "fixed-point"}
-        How loops are iterated (default Newton).
+        How loops are iterated.
     engine : {"auto", "native", "python"}
-        What runs the base-step loop: the native kernel (:mod:`cosim.core.native`), the
-        Python loop, or (default) the native kernel where it can run and a C compiler is
-        available; the same results bit for bit. :meth:`describe` says which path each
-        component takes.
+        What runs the base-step loop: the native kernel (:mod:`cosim.core.native`), the Python
+        loop, or (default) the kernel where it can run; :meth:`describe` says each component's path.
     threads : "auto" or int
         Threads that step the FMUs of an update phase at once in the native kernel
-        (:mod:`cosim.core.native_loop`): ``"auto"`` (default) where the measured steps pay
-        for them, an integer N on up to N threads, 1 serially; the same results bit for bit.
+        (:mod:`cosim.core.native_loop`): ``"auto"`` (default) where they pay, N on up to N, 1 serially.
 
     Attributes
     ----------
@@ -106,12 +96,11 @@ class Cosimulation:
                  order: str = "auto", loops: str = "refuse", loop_tolerance: float = 1e-10,
                  loop_max_iter: int = 50, loop_solver: str = "newton", engine: str = "auto",
                  threads: int | str = "auto"):
-
         for what, value, valid in (("order", order, ORDERS), ("loops", loops, LOOPS),
                                    ("loop_solver", loop_solver, LOOP_SOLVERS)):
             if value not in valid:
                 raise ConfigurationError(f"{what} must be one of {valid}, got {value!r}")
-        self.order, self.loops, self.loop_solver, self._engine = order, loops, loop_solver, "auto"
+        self.order, self.loops, self.loop_solver = order, loops, loop_solver
         self.loop_tolerance = positive(loop_tolerance, "loop_tolerance")
         self.loop_max_iter = positive_int(loop_max_iter, "loop_max_iter")
         self.components = list(components)
@@ -131,13 +120,11 @@ class Cosimulation:
         else:
             self.schedule = [Group((Unit(c, "all", frozenset(c.output_names), frozenset()),))
                              for c in self.components]
-        #: The clocks and clock connections, checked here before any run (None without any).
         self.clock_plan = ClockPlan.build(self.components, self.connections, self._ratio, base, order)
         self._update_order = self.components if self.clock_plan is None else self.clock_plan.update_order
         self.engine = engine                    # checked by the property, like a later change
         self.threads = threads
         self.stepping = "no run yet"
-        #: the activations of the last run's clocks (time, clock), or None
         self.clock_ticks: pd.DataFrame | None = None
         self.timings: dict[str, float] = {}
 
@@ -217,11 +204,10 @@ class Cosimulation:
     def engine(self, value: str) -> None:
         if value not in ENGINES:
             raise ConfigurationError(f"engine must be one of {ENGINES}, got {value!r}")
-        old, self._engine = self._engine, value
-        why = self._whole_run_python()
+        why = self._whole_run_python(value)
         if value == "native" and why is not None:
-            self._engine = old
             raise ConfigurationError(f"engine='native' cannot run this co-simulation: {why}; use engine='auto'")
+        self._engine = value
 
     @property
     def threads(self) -> int | str:
@@ -236,9 +222,9 @@ class Cosimulation:
             raise ConfigurationError(f"threads must be 'auto' or a whole number from 1 to {MAX_THREADS}, got {value!r}")
         self._threads = value if value == "auto" else int(value)
 
-    def _whole_run_python(self) -> str | None:
-        """Why every call of a run takes the Python path, or None."""
-        if self.engine == "python":
+    def _whole_run_python(self, engine: str | None = None) -> str | None:
+        """Why every call of a run with ``engine`` (default the current one) takes the Python path, or None."""
+        if (engine or self.engine) == "python":
             return "engine='python'"
         if self.order == "jacobi":
             return "order='jacobi' (every component reads the values before the instant)"
@@ -260,12 +246,11 @@ class Cosimulation:
         lines = [f"base step {h:g} s; the pattern of due components repeats every {self._hyper} "
                  f"base step(s) ({self._hyper * h:g} s); order: {self.order}; loops: {self.loops}", "",
                  "components (period; what an output at t means):"]
-        for c in self.components:
-            lines.append(f"  {c.name:16s} every {c.period:g} s; {c.timing()}")
+        lines += [f"  {c.name:16s} every {c.period:g} s; {c.timing()}" for c in self.components]
         lines += ["", "evaluation order of the outputs at an instant (components not due hold theirs):"]
-        for i, g in enumerate(self.schedule, 1):
-            label = " + ".join(str(u) for u in g.units)
-            lines.append(f"  {i}. {label}" + ("   [algebraic loop, solved by iteration]" if g.loop else ""))
+        loop = "   [algebraic loop, solved by iteration]"
+        lines += [f"  {i}. {' + '.join(map(str, g.units))}{loop if g.loop else ''}"
+                  for i, g in enumerate(self.schedule, 1)]
         if self.clock_plan is not None:
             lines += ["", *self.clock_plan.describe_lines()]
         whole = self._whole_run_python()
@@ -273,8 +258,8 @@ class Cosimulation:
                   "the base-step loop runs in the native kernel (when a C compiler is available), calls "
                   "marked Python return to the interpreter:")]
         if whole is None:
-            for name, why in self.component_paths().items():
-                lines.append(f"  {name:16s} " + ("native" if why is None else f"Python ({why})"))
+            lines += [f"  {name:16s} " + ("native" if why is None else f"Python ({why})")
+                      for name, why in self.component_paths().items()]
             if any(g.loop for g in self.schedule):
                 lines.append("  algebraic loops: Python (solved by iteration)")
             lines += self._threads_lines()
@@ -290,7 +275,7 @@ class Cosimulation:
         (sn, sp), (dn, dp) = source, target
         src, dst, plan = self.by_name[sn], self.by_name[dn], self.clock_plan
         ft = any(dp in deps for deps in dst.feedthrough.values())
-        if plan is not None and next(p for p in dst.input_ports if p.name == dp).kind == "clock":
+        if plan is not None and self.signal_types[self._slots[source]] == CLOCK:       # only a clock drives a clock
             return plan.connection_text(f"{sn}.{sp}", f"{dn}.{dp}")
         clocks = plan is not None and getattr(dst, "port_clocks", None) and dst.port_clocks(dp)
         if clocks:
@@ -393,12 +378,7 @@ class Cosimulation:
                        output_interval: float | None = None, progress: bool | None = None,
                        chunk_rows: int = 8192) -> Path:
         """Run like :meth:`run`, streaming the rows to the Parquet file ``path`` in chunks
-        of ``chunk_rows`` (constant memory); returns the path.
-
-        The file is written under a temporary name and renamed at the end; a failed or
-        interrupted run leaves ``<name>.partial.parquet`` with the rows so far (named in
-        the error). ``pandas.read_parquet(path)`` gives the DataFrame :meth:`run` returns.
-        """
+        of ``chunk_rows`` (constant memory; a failed run leaves ``<name>.partial.parquet``); returns the path."""
         return self._run(partial(ParquetSink, path, chunk_rows=chunk_rows), stop_time, start_time, signals,
                          output_interval, progress)
 

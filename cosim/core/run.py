@@ -1,15 +1,6 @@
-"""One run of a co-simulation: its state, its setup, the Python loop and the run's end.
-
-:meth:`Cosimulation.run <cosim.core.master.Cosimulation.run>` and ``run_to_parquet`` make a
-:class:`Run` and call :meth:`Run.execute`: the setup (:meth:`Run.setup`: reset, clocks attached,
-calls bound, the schedule listed, the native program built where the kernel runs), the loop
-(:meth:`Run.python_loop` or :class:`~cosim.core.native_loop.NativeLoop`, the same results bit for
-bit, every signal checked for NaN and inf after each block of
-:data:`~cosim.core.native_loop.BLOCK` base steps), and the end (the sink's result, a stop request
-finished by :meth:`Run.finish_stop`, a failure's CosimError with the rows so far, and whatever
-happened every component closed by :meth:`Run.teardown`). Its position: base step ``k``, next row
-``j``, the block's first base step ``k0`` and row ``jb``; ``phase`` is ``reset``, ``bind``,
-``output`` or ``update``, ``failing`` the call being made.
+"""One run of a co-simulation (:class:`~cosim.core.run.Run`): its state, its setup, the Python loop
+(the native one is :class:`~cosim.core.native_loop.NativeLoop`, the same results bit for bit) and
+the run's end, whatever happened.
 """
 from __future__ import annotations
 
@@ -35,7 +26,8 @@ __all__ = ["Run"]
 
 
 class Run:
-    """One run of a co-simulation (see the module documentation).
+    """One run of a co-simulation, made by :meth:`Cosimulation.run <cosim.core.master.Cosimulation.run>`
+    and ``run_to_parquet``; :meth:`execute` runs it.
 
     Parameters
     ----------
@@ -45,14 +37,19 @@ class Run:
         Where the rows go.
     sel : sequence of int
         The recorded signals (positions in ``cosim.signal_names``).
-    n : int
-        Base steps of the run.
-    m : int
-        Base steps between two rows.
+    n, m : int
+        Base steps of the run, and between two rows.
     t0 : float
         Start time [s].
     progress : bool or None
         Show a progress bar (None: when the run takes more than 2 s).
+
+    Attributes
+    ----------
+    k, j, k0, jb : int
+        The position: base step, next row, the block's first base step and its first row.
+    phase : str
+        ``reset``, ``bind``, ``output`` or ``update``; ``failing`` is the call being made.
     """
 
     def __init__(self, cosim, sink: MemorySink | ParquetSink, sel: Sequence[int], n: int, m: int, t0: float,
@@ -127,8 +124,7 @@ class Run:
             for c in cs.clock_plan.members:
                 self.failing = c
                 c.attach_clocks(self.board)
-        for c in cs.components:
-            self.bound[c.name] = self._bind(c)
+        self.bound = {c.name: self._bind(c) for c in cs.components}
         self.owner = {fn: name for name, calls in self.bound.items() for fn in calls}
         dues = [frozenset(c.name for c in cs.components if i % cs._ratio[c.name] == 0) for i in range(cs._hyper)]
         entries = {due: self._entry(due) for due in dict.fromkeys(dues)}      # one per set of due components
@@ -164,15 +160,13 @@ class Run:
 
     def _program(self):
         """The native kernel's program of the run, or None for the Python loop."""
-        if self.cosim._whole_run_python() is not None:
-            return None
-        self.kernel, _ = load_kernel()
+        if self.cosim._whole_run_python() is None:
+            self.kernel = load_kernel()[0]
         if self.kernel is None:
             return None
         program = build_program(self.schedule)
-        if program.n_native == 0 and self.cosim.engine == "auto":
-            return None                  # nothing runs natively: the Python loop costs less
-        return program
+        nothing_native = program.n_native == 0 and self.cosim.engine == "auto"      # the Python loop costs less
+        return None if nothing_native else program
 
     # ---------------------------------------------------------------- the Python loop
     def python_loop(self) -> None:

@@ -25,8 +25,7 @@ MAX_EVENT_ROUNDS = 1000
 
 def _slices(sizes: list[int]) -> list[slice]:
     """Consecutive slices of these sizes."""
-    ends = list(accumulate(sizes, initial=0))
-    return [slice(a, b) for a, b in pairwise(ends)]
+    return [slice(a, b) for a, b in pairwise(accumulate(sizes, initial=0))]
 
 
 class _Coupled(ContinuousModel):
@@ -77,24 +76,14 @@ class _Coupled(ContinuousModel):
             m.nominals(out[s])
 
     def completed_step(self):
-        enter = term = False
-        for m in self.models:
-            if m.needs_completed_step:
-                e, t = m.completed_step()
-                enter, term = enter or e, term or t
-        return enter, term
+        flags = [m.completed_step() for m in self.models if m.needs_completed_step]
+        return any(enter for enter, _ in flags), any(term for _, term in flags)
 
-    def event(self, t, set_inputs=None):
+    def enter_event_mode(self) -> None:
         for m in self.models:
             m.enter_event_mode()
-        if set_inputs is not None:
-            set_inputs()
-        return self._iterate(t)
 
-    def initial_event(self, t):
-        return self._iterate(t)
-
-    def _iterate(self, t: float) -> tuple[bool, float | None]:
+    def settle(self, t: float) -> tuple[bool, float | None]:
         """The joint event iteration: every member's own, the connections propagated,
         until no connected value changes. A member that asks to terminate is not asked
         again; the others settle on its last values, then the system terminates."""
@@ -152,7 +141,6 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
 
     def __init__(self, name: str, members: Sequence[FMUComponent], connections: Mapping[str, str],
                  period: float, solver: str = "cvode", solver_step: float | None = None, rtol: float = 1e-6):
-
         self.members = list(members)
         if not self.members:
             raise ConfigurationError(f"{name}: an ME system needs at least one member")
@@ -254,25 +242,22 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         return order
 
     def _feedthrough_map(self) -> dict[str, set[str]]:
-        """The external inputs each output depends on directly (through the connections)."""
-        memo: dict[tuple[str, str], set[str]] = {}
-
-        def deps(member: str, output: str) -> set[str]:
-            key = (member, output)
-            if key not in memo:
-                found = memo[key] = set()          # _order refused cycles: no recursion comes back here
-                for i in self.by_name[member].feedthrough.get(output, ()):
-                    src = self.connections.get((member, i))
-                    found |= deps(*src) if src is not None else {f"{member}.{i}"}
-            return memo[key]
-        return {f"{m.name}.{o}": deps(m.name, o) for m in self.members for o in m.output_names}
+        """The external inputs each output depends on directly (through the connections), found
+        in :meth:`_order`'s order: a connected feed-through input's source output comes first."""
+        deps: dict[tuple[str, str], set[str]] = {}
+        for m in self.order:
+            for o in m.output_names:
+                found = deps[m.name, o] = set()
+                for i in m.feedthrough.get(o, ()):
+                    src = self.connections.get((m.name, i))
+                    found |= deps[src] if src is not None else {f"{m.name}.{i}"}
+        return {f"{m.name}.{o}": deps[m.name, o] for m in self.members for o in m.output_names}
 
     def timing(self) -> str:
         return ("Model Exchange system: outputs at t; connections between members inside every derivative "
                 "evaluation; external inputs held over the step")
 
     def check_run(self, start_time: float, stop_time: float) -> None:
-        """Refuse a run of too many fixed solver steps (see FMUComponent.check_run)."""
         for m in self.members:
             m.check_run(start_time, stop_time)
 
@@ -299,14 +284,13 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         slot = {s: k for k, s in enumerate(sources)}
         buf = np.zeros(max(len(sources), 1))
         ints = np.zeros(max(len(sources), 1), dtype=np.int64)
-        # per member in order: its inputs from members before it (current when set), its
-        # outputs, then its inputs from members after it (set once every output is
-        # current: none of them reaches an output at once, or the order would differ)
+        # per member in order: its inputs from members before it (current when set), its outputs;
+        # then the inputs from members after it (set once every output is current: none of them
+        # reaches an output at once, or the order would differ). Getters return None: no change
         rank = {m.name: k for k, m in enumerate(self.order)}
         early, late = [], []
         for m in self.order:
-            setters = {}
-            for before in (True, False):
+            for before, phase in ((True, early), (False, late)):
                 for discrete in (False, True):
                     conns = [(di, src) for (dm, di), src in self.connections.items()
                              if dm == m.name and m.element_ports[di].discrete == discrete
@@ -314,27 +298,19 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
                     names = [(f"{self.name}.{sm}.{so}", self.by_name[sm].element_ports[so].type)
                              for _, (sm, so) in conns]
                     ex = m.instance.exchange([m.element_ports[di] for di, _ in conns], "set", names)
-                    setters[before, discrete] = ex.bind(buf, np.array([slot[s] for _, s in conns], np.intp), ints,
-                                                        changes=True)
+                    phase.append((ex.bind(buf, np.array([slot[s] for _, s in conns], np.intp), ints, changes=True),
+                                  discrete))
             mine = [s for s in sources if s[0] == m.name]
-            get = m.instance.exchange([m.element_ports[p] for _, p in mine], "get").bind(
-                buf, np.array([slot[s] for s in mine], np.intp), ints)
-            early.append((setters[True, False], setters[True, True], get))
-            late.append((setters[False, False], setters[False, True], no_exchange))
-        # the calls that do nothing as None: the loop below runs at every derivative evaluation
-        early, late = ([tuple(None if f is no_exchange else f for f in calls) for calls in phase]
-                       for phase in (early, late))
+            early.append((m.instance.exchange([m.element_ports[p] for _, p in mine], "get").bind(
+                buf, np.array([slot[s] for s in mine], np.intp), ints), False))
+        # the calls that do nothing left out: propagate runs at every derivative evaluation
+        calls = [(f, discrete) for f, discrete in early + late if f is not no_exchange]
+        continuous, every = [f for f, discrete in calls if not discrete], [f for f, _ in calls]
 
         def propagate(discrete: bool) -> bool:
             changed = False
-            for phase in (early, late):
-                for set_cont, set_disc, get in phase:
-                    if set_cont is not None:
-                        changed |= bool(set_cont())
-                    if discrete and set_disc is not None:
-                        changed |= bool(set_disc())
-                    if get is not None:
-                        get()
+            for f in every if discrete else continuous:
+                changed |= bool(f())
             return changed
 
         return _Coupled(self.name, [FMUModel(m.instance, m.unit_nominals) for m in self.order], propagate)
@@ -350,23 +326,22 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
         idx, out_idx = np.arange(len(values))[inputs], np.arange(len(values))[outputs]
         sources = self._sources or [(f"{self.name}.{n}", "Float64") for n in self.connected_inputs]
         ft_names = set().union(*self.feedthrough.values()) if self.feedthrough else set()
-        set_cont, set_disc, ft_cont, ft_disc, getters = [], [], [], [], []
-        out_pos = {n: k for k, n in enumerate(self.output_names)}
-        for m in self.members:
-            inst = m.instance
+        setters, feedthrough, getters = ([], []), ([], []), []     # (continuous, discrete) setters
+        for m, mine_out in zip(self.members, _slices([len(m.output_names) for m in self.members])):
             mine = [(k, n.split(".", 1)[1]) for k, n in enumerate(self.connected_inputs)
                     if n.split(".", 1)[0] == m.name]
-            for discrete, plain, ft in ((False, set_cont, ft_cont), (True, set_disc, ft_disc)):
+            for discrete in (False, True):
                 sel = [(k, p) for k, p in mine if m.element_ports[p].discrete == discrete]
-                for group, chosen in ((plain, sel), (ft, [(k, p) for k, p in sel if f"{m.name}.{p}" in ft_names])):
+                ft = [(k, p) for k, p in sel if f"{m.name}.{p}" in ft_names]
+                for group, chosen in ((setters, sel), (feedthrough, ft)):
                     if chosen:
-                        ex = inst.exchange([m.element_ports[p] for _, p in chosen], "set",
-                                           [sources[k] for k, _ in chosen])
-                        group.append(ex.bind(values, idx[[k for k, _ in chosen]], integers, changes=True))
+                        ex = m.instance.exchange([m.element_ports[p] for _, p in chosen], "set",
+                                                 [sources[k] for k, _ in chosen])
+                        group[discrete].append(ex.bind(values, idx[[k for k, _ in chosen]], integers, changes=True))
             if m.output_names:
-                ex = inst.exchange([m.element_ports[o] for o in m.output_names], "get")
-                getters.append(ex.bind(values, out_idx[[out_pos[f"{m.name}.{o}"] for o in m.output_names]], integers))
-        return held_inputs(self.integrator, self.period, (set_cont, set_disc), (ft_cont, ft_disc), getters)
+                ex = m.instance.exchange([m.element_ports[o] for o in m.output_names], "get")
+                getters.append(ex.bind(values, out_idx[mine_out], integers))
+        return held_inputs(self.integrator, self.period, setters, feedthrough, getters)
 
     def close(self) -> None:
         """End every member's instance by the FMI rules (safe twice)."""

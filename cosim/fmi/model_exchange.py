@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fmu_models.errors import ConfigurationError, FMUError, UnknownNameError
+from fmu_models.errors import FMUError, UnknownNameError
 from fmu_models.infra.checks import positive
 
 from ..core.component import StopRequest
@@ -41,9 +41,8 @@ class ContinuousModel:
 
     A model also has ``set_time(t)`` [s], ``get_states(x)``, ``set_states(x)``,
     ``derivatives(dx)`` (arrays of nx values), ``indicators(z)`` (nz values),
-    ``event(t, set_inputs=None)`` (Event Mode, ``set_inputs()``, the event iteration,
-    Continuous-Time Mode) and ``initial_event(t)`` (the same after
-    ``ExitInitializationMode``), both returning ``(terminate, next event time or None)``.
+    ``enter_event_mode()`` and ``settle(t)`` (the event iteration, then Continuous-Time Mode
+    unless the model terminates: ``(terminate, next event time or None)``).
 
     Attributes
     ----------
@@ -56,8 +55,7 @@ class ContinuousModel:
     stop_reason : str
         Why the model asked to terminate in its last event (for the stop notice).
     dirty : bool
-        An input changed since the values the outputs are read from were brought up to
-        date (:meth:`refresh`).
+        An input changed since the outputs' values were brought up to date (:meth:`refresh`).
     """
 
     nx = 0
@@ -77,6 +75,17 @@ class ContinuousModel:
     def completed_step(self) -> tuple[bool, bool]:
         """After an integrator step: ``(enter_event_mode, terminate)``."""
         return False, False
+
+    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
+        """Event Mode at ``t`` [s], ``set_inputs()``, then ``settle(t)``."""
+        self.enter_event_mode()
+        if set_inputs is not None:
+            set_inputs()
+        return self.settle(t)
+
+    def initial_event(self, t: float) -> tuple[bool, float | None]:
+        """``settle(t)`` after ``ExitInitializationMode``."""
+        return self.settle(t)
 
 
 class FMUModel(ContinuousModel):
@@ -110,25 +119,22 @@ class FMUModel(ContinuousModel):
             if st > 1:
                 fail(what, st)
 
-        def vector(function: str, n: int, what: str):
+        def vector(function: str, n: int, what: str, checked=check):
             fn, size = instance.raw(f"{p}{function}"), ctypes.c_size_t(n)
-            return (lambda x: check(fn(c, x.ctypes.data_as(_DP), size), what)) if n else (lambda x: None)
+            return (lambda x: checked(fn(c, x.ctypes.data_as(_DP), size), what)) if n else (lambda x: None)
 
         self.get_states = vector("GetContinuousStates", self.nx, "GetContinuousStates")
         self.set_states = vector("SetContinuousStates", self.nx, "SetContinuousStates")
         self.derivatives = vector("GetContinuousStateDerivatives" if self.version == 3 else "GetDerivatives", self.nx,
                                   "GetDerivatives")
         self.indicators = vector("GetEventIndicators", self.nz, "GetEventIndicators")
-        nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
-        get_nominals, n = instance.raw(f"{p}{nominals}"), ctypes.c_size_t(self.nx)
 
-        def ask_nominals(x: np.ndarray) -> None:
-            st = get_nominals(c, x.ctypes.data_as(_DP), n) if self.nx else 0
-            if st > 1:
-                self.nominals_refused = st == 3         # Error
-                fail(nominals, st)
+        def check_nominals(st, what):
+            self.nominals_refused = st == 3             # Error
+            check(st, what)
         if not unit_nominals:                           # else ContinuousModel's: 1 for every state
-            self.nominals = ask_nominals
+            nominals = "GetNominalContinuousStates" if self.version == 1 else "GetNominalsOfContinuousStates"
+            self.nominals = vector(nominals, self.nx, nominals, check_nominals)
         set_time, completed = instance.raw(f"{p}SetTime"), instance.raw(f"{p}CompletedIntegratorStep")
         self.set_time = lambda t: check(set_time(c, ctypes.c_double(t)), "SetTime")
         flag = {1: ctypes.c_int8, 2: ctypes.c_int}.get(self.version, ctypes.c_bool)       # fmiBoolean is a char
@@ -152,21 +158,14 @@ class FMUModel(ContinuousModel):
         if self.version > 1:
             self.inst.call("EnterContinuousTimeMode", self.inst.fmu.enterContinuousTimeMode)
 
-    def event(self, t: float, set_inputs: Callable[[], None] | None = None) -> tuple[bool, float | None]:
-        """Event Mode, ``set_inputs()``, the event iteration, Continuous-Time Mode."""
-        self.enter_event_mode()
-        if set_inputs is not None:
-            set_inputs()
-        return self._settle(t)
-
     def initial_event(self, t):
         """FMI 1.0: what ``fmiInitialize`` said (its initial event iteration is its own)."""
         if self.version == 1:
             return self.inst.initial_events
-        return self._settle(t)
+        return self.settle(t)
 
-    def _settle(self, t: float) -> tuple[bool, float | None]:
-        """The event iteration, then Continuous-Time Mode unless the model terminates."""
+    def settle(self, t: float) -> tuple[bool, float | None]:
+        """:meth:`iterate`, then Continuous-Time Mode unless the model terminates."""
         terminate, nxt = self.iterate(t)
         if not terminate:
             self.enter_continuous_time_mode()
@@ -175,16 +174,11 @@ class FMUModel(ContinuousModel):
     def iterate(self, t: float) -> tuple[bool, float | None]:
         """In Event Mode: update the discrete states until no more update is needed (at most
         1000 rounds); returns ``(terminate, next event time or None)``."""
-        fmu, inst = self.inst.fmu, self.inst
         name = {1: "EventUpdate", 2: "NewDiscreteStates", 3: "UpdateDiscreteStates"}[self.version]
-        update = getattr(fmu, name[0].lower() + name[1:])
+        update = getattr(self.inst.fmu, name[0].lower() + name[1:])
         for _ in range(1000):
-            info = inst.call(name, update)
-            if self.version == 1:       # (converged, stateValueReferencesChanged, stateValuesChanged, ...)
-                info = (not info[0], *info[3:])
-            else:
-                info = (info[0], info[1], *info[4:])
-            need, term, defined, nxt = info
+            info = self.inst.call(name, update)     # FMI 1.0: (converged, two "changed" flags, terminate, ...)
+            need, term, defined, nxt = (not info[0], *info[3:]) if self.version == 1 else (*info[:2], *info[4:])
             if term:
                 return True, None
             if not need:
@@ -192,96 +186,66 @@ class FMUModel(ContinuousModel):
         raise FMUError(f"{self.name}: the event iteration at t = {t:g} s did not converge in 1000 rounds")
 
 
-class _Callbacks:
-    """The functions fmpy's CVODE binding calls; an exception inside one is kept and raised
-    after CVODE returns (a ctypes callback cannot raise), and no model call follows it (after
-    an Error only FreeInstance may)."""
-
-    def __init__(self, model: ContinuousModel):
-        self.m = model
-        self.pending: BaseException | None = None
-        n = max(model.nx, 1)
-        self.x, self.dx = np.zeros(n), np.zeros(n)
-        self.z = np.zeros(max(model.nz, 1))
-
-    def _guard(self, fn):
-        if self.pending is not None:
-            return -1
-        try:
-            fn()
-            return 0
-        except BaseException as e:  # noqa: BLE001 - kept, raised after CVODE returns
-            self.pending = e
-            return -1
-
-    @staticmethod
-    def _out(fill, buf: np.ndarray, ptr, n: int) -> None:
-        fill(buf)
-        ctypes.memmove(ptr, buf.ctypes.data, 8 * n)
-
-    def get_x(self, ptr, n):
-        self._out(self.m.get_states, self.x, ptr, n)
-
-    def set_x(self, ptr, n):
-        if self.pending is not None:        # fmpy sets the states after a failed CVode call too
-            return
-        ctypes.memmove(self.x.ctypes.data, ptr, 8 * n)
-        self.m.set_states(self.x)
-
-    def get_dx(self, ptr, n):
-        self._out(self.m.derivatives, self.dx, ptr, n)
-
-    def get_z(self, ptr, n):
-        self._out(self.m.indicators, self.z, ptr, n)
-
-    def get_nominals(self, ptr, n):
-        self._out(self.m.nominals, np.ones(max(self.m.nx, 1)), ptr, n)
-
-
 def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
-    """fmpy's CVodeSolver for ``model``, its callbacks guarded (:class:`_Callbacks`), a
-    destructor that cannot fail (fmpy's reads ``cvode_mem``, never set by a constructor that
-    failed) and SUNDIALS' error messages kept for the FMUError, not printed on stderr."""
-    from fmpy.sundials import NV_DATA_S, CVodeSolver, SUNContext_PushErrHandler
+    """fmpy's CVodeSolver for ``model``: an exception inside a callback is kept in its ``pending`` and
+    raised after CVODE returns (a ctypes callback cannot raise), and no model call follows it (after
+    an Error only FreeInstance may); a destructor that cannot fail (fmpy's reads ``cvode_mem``, never
+    set by a constructor that failed); SUNDIALS' error messages kept for the FMUError, not printed."""
+    from fmpy.sundials import CVodeSolver, SUNContext_PushErrHandler
     from fmpy.sundials.libraries import sundials_core
 
-    cb = _Callbacks(model)
+    n = max(model.nx, 1)
+    x = np.zeros(n)
+
+    def out(fill, buf: np.ndarray):
+        def copy(ptr, size: int) -> None:
+            fill(buf)
+            ctypes.memmove(ptr, buf.ctypes.data, 8 * size)
+        return copy
 
     class _Solver(CVodeSolver):
-        def f(self, t, y, ydot, user_data):
-            def run():
-                model.set_time(t)
-                if model.nx:
-                    cb.set_x(NV_DATA_S(y), self.nx)
-                    cb.get_dx(NV_DATA_S(ydot), self.nx)
-                else:
-                    np.ctypeslib.as_array(NV_DATA_S(ydot), (self.nx,))[:] = 0.0
-            return cb._guard(run)
+        pending: BaseException | None = None
 
-        def g(self, t, y, gout, user_data):
-            def run():
-                model.set_time(t)
-                if model.nx:
-                    cb.set_x(NV_DATA_S(y), self.nx)
-                cb.get_z(gout, self.nz)
-            return cb._guard(run)
+        def __init__(self):
+            super().__init__(nx=model.nx, nz=model.nz, get_x=out(model.get_states, x), set_x=self._set_x,
+                             get_dx=out(model.derivatives, np.zeros(n)), get_nominals=out(model.nominals, np.ones(n)),
+                             get_z=out(model.indicators, np.zeros(max(model.nz, 1))), set_time=model.set_time,
+                             input=SimpleNamespace(apply=lambda t: None),     # the master holds the inputs
+                             startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+
+        def _set_x(self, ptr, size: int) -> None:
+            if self.pending is None:        # fmpy sets the states after a failed CVode call too
+                ctypes.memmove(x.ctypes.data, ptr, 8 * size)
+                model.set_states(x)
+
+        def _guarded(self, call, *args) -> int:
+            if self.pending is not None:
+                return -1
+            try:
+                return call(*args)
+            except BaseException as e:  # noqa: BLE001 - kept, raised after CVODE returns
+                self.pending = e
+                return -1
+
+        def f(self, *args):
+            return self._guarded(super().f, *args)
+
+        def g(self, *args):
+            return self._guarded(super().g, *args)
 
         def __del__(self):
             if "cvode_mem" in vars(self):       # made: freed (a constructor that failed before made none)
                 super().__del__()
 
     try:
-        solver = _Solver(nx=model.nx, nz=model.nz, get_x=cb.get_x, set_x=cb.set_x, get_dx=cb.get_dx,
-                         get_z=cb.get_z, get_nominals=cb.get_nominals, set_time=model.set_time,
-                         input=SimpleNamespace(apply=lambda t, **kw: None),     # the master holds the inputs
-                         startTime=t0, maxStep=max_step, relativeTolerance=rtol, maxNumSteps=1_000_000)
+        solver = _Solver()
     except FMUError:
         raise
     except Exception as e:  # noqa: BLE001 - fmpy's binding raises a plain Exception when a CVODE call fails
         raise FMUError(f"{model.name}: CVODE could not be set up at t = {t0:g} s: {e}") from None
     sundials_core.SUNContext_ClearErrHandlers(solver.sunctx)         # only fmpy's handler, which keeps them
     SUNContext_PushErrHandler(solver.sunctx, solver.ehfun_, None)
-    return solver, cb
+    return solver
 
 
 class MEIntegrator:
@@ -303,16 +267,13 @@ class MEIntegrator:
     MAX_ROUNDS = 10_000_000
 
     def __init__(self, model: ContinuousModel, solver: str, solver_step: float | None, rtol: float):
-        if solver not in SOLVERS:
-            raise ConfigurationError(f"unknown solver {solver!r}; valid: {', '.join(SOLVERS)}")
-        self.model, self.solver, self.h_int, self.rtol = model, solver, solver_step, rtol
+        self.model = model
+        self.solver, self.h_int, self.rtol = check_solver(model.name, solver, solver_step, rtol)
         n = max(model.nx, 1)
         self.x, self.dx, self.scratch = np.zeros(n), np.zeros(n), np.zeros(n)
         self.z, self.z_new = np.zeros(max(model.nz, 1)), np.zeros(max(model.nz, 1))
         self.next_event: float | None = None
         self.cvode = None
-        self._cb = None
-        self.t = float("nan")
 
     # ------------------------------------------------------------------ events
     def _after_event(self, t: float, terminate: bool, nxt: float | None) -> None:
@@ -326,11 +287,10 @@ class MEIntegrator:
     def start(self, t0: float) -> None:
         """After ``ExitInitializationMode``: the initial event iteration, Continuous-Time
         Mode, the solver created."""
-        terminate, nxt = self.model.initial_event(t0)
-        self.t = t0
+        settled = self.model.initial_event(t0)
         if self.solver == "cvode":
-            self.cvode, self._cb = _cvode(self.model, t0, self.h_int or math.inf, self.rtol)
-        self._after_event(t0, terminate, nxt)
+            self.cvode = _cvode(self.model, t0, self.h_int or math.inf, self.rtol)
+        self._after_event(t0, *settled)
 
     def reset(self, t: float) -> None:
         """Reinitialise the solver at ``t`` (after an event, or an input that changed)."""
@@ -339,8 +299,7 @@ class MEIntegrator:
 
     def at_event(self, t: float, set_inputs: Callable[[], None]) -> None:
         """An event at ``t`` [s] whose Event Mode sets discrete inputs (``set_inputs()``)."""
-        terminate, nxt = self.model.event(t, set_inputs)
-        self._after_event(t, terminate, nxt)
+        self._after_event(t, *self.model.event(t, set_inputs))
 
     # ------------------------------------------------------------------ stepping
     def _fixed_step(self, t: float, h: float) -> None:
@@ -363,14 +322,14 @@ class MEIntegrator:
         m.set_states(x)
 
     def _cvode_step(self, t: float, t_next: float) -> tuple[float, bool]:
-        cb = self._cb
+        cvode = self.cvode
         try:
-            root, _, t_reached = self.cvode.step(t, t_next)
+            root, _, t_reached = cvode.step(t, t_next)
         except RuntimeError as e:
-            if cb.pending is None:
+            if cvode.pending is None:
                 raise FMUError(f"{self.model.name}: CVODE failed between t = {t:g} s and {t_next:g} s: {e}") from None
-        if cb.pending is not None:
-            err, cb.pending = cb.pending, None
+        if cvode.pending is not None:
+            err, cvode.pending = cvode.pending, None
             raise err from None
         self.model.set_time(t_reached)
         self.model.get_states(self.x)
@@ -425,10 +384,8 @@ class MEIntegrator:
                 if terminate:
                     raise StopRequest(m.name, t_next, "the FMU requested termination after an integrator step")
             if time_event or state_event or step_event:
-                terminate, nxt = m.event(t_next)
-                self._after_event(t_next, terminate, nxt)
+                self._after_event(t_next, *m.event(t_next))
             t = t_next
-        self.t = t_end
 
 
 def unit_nominals_instead(models: list[FMUModel], components: list) -> bool:
@@ -458,29 +415,22 @@ def held_inputs(me: MEIntegrator, h: float, setters: tuple[list, list], feedthro
     me : MEIntegrator
     h : float
         The communication step [s]: the update advances over ``[t, t + h]``.
-    setters : (list, list)
-        The calls that set the continuous and the discrete inputs (each returns whether a
-        value changed; its ``differs()`` whether one would).
-    feedthrough : (list, list)
-        The same for the feed-through inputs, set at ``t`` before the outputs are read.
+    setters, feedthrough : (list, list)
+        The calls that set the continuous and the discrete inputs, and those of the feed-through ones,
+        set at ``t`` before the outputs are read (each returns whether a value changed; ``differs()``:
+        whether one would).
     getters : list
         The calls that read the outputs.
     """
     model = me.model
     pending = [False]                        # a continuous input jumped since the last advance
 
-    def apply(calls) -> bool:
-        changed = False
-        for s in calls:
-            changed |= bool(s())
-        return changed
-
     def set_inputs(t: float, cont: list, disc: list) -> None:
-        if cont and apply(cont):
+        if cont and any([s() for s in cont]):          # a list: every setter called
             pending[0] = True
             model.dirty = True
         if disc and any(s.differs() for s in disc):
-            me.at_event(t, lambda: apply(disc))
+            me.at_event(t, lambda: [s() for s in disc])
 
     def output_fn(t: float) -> None:
         set_inputs(t, *feedthrough)
