@@ -5,7 +5,6 @@ latencies, loops, the native kernel and parallel stepping: the co-simulation pag
 from __future__ import annotations
 
 import itertools
-from collections import Counter
 from collections.abc import Mapping, Sequence
 from functools import partial
 from pathlib import Path
@@ -14,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError, CosimError, ResourceError, TypeMismatchError, UnknownNameError
-from fmu_models.infra.checks import finite, positive, positive_int
+from fmu_models.infra.checks import check_unique, finite, positive, positive_int
 
 from .clocking import ClockPlan
 from .component import CLOCK, Component, port_kind, ports_compatible, split_port
@@ -107,9 +106,7 @@ class Cosimulation:
         for c in self.components:
             if not isinstance(c, Component):
                 raise TypeMismatchError(f"{c!r} is not a cosim.core.component.Component")
-        dup = sorted(name for name, k in Counter(c.name for c in self.components).items() if k > 1)
-        if dup:
-            raise ConfigurationError(f"duplicate component names: {dup}")
+        check_unique((c.name for c in self.components), "duplicate component names:")
         self.by_name = {c.name: c for c in self.components}
         self.connections = self._parse_connections(connections)
         base, self._ratio, self._hyper = base_step({c.name: c.period for c in self.components}, step_size)

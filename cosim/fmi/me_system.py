@@ -4,13 +4,13 @@ events handled jointly (see the third-party FMUs page of the documentation).
 """
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Mapping, Sequence
 from itertools import accumulate, pairwise
 
 import numpy as np
 
 from fmu_models.errors import ConfigurationError, FMUError, TypeMismatchError, UnknownNameError
+from fmu_models.infra.checks import check_unique
 
 from ..core.component import BoundCalls, Component, Port, ports_compatible, split_port
 from .exchange import no_exchange
@@ -156,9 +156,7 @@ class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
             if m.clock_model is not None:
                 raise ConfigurationError(f"{name}: member {m.name!r} has clocks; an ME system does not drive "
                                          "clocks: give it to the master as a component of its own")
-        dup = sorted(n for n, k in Counter(m.name for m in self.members).items() if k > 1)
-        if dup:
-            raise ConfigurationError(f"{name}: duplicate member names: {dup}")
+        check_unique((m.name for m in self.members), f"{name}: duplicate member names:")
         self.solver, self.solver_step, self.rtol = check_solver(name, solver, solver_step, rtol)
         self.by_name = {m.name: m for m in self.members}
         self.connections = self._parse(name, connections or {})
