@@ -1,12 +1,9 @@
 """Compile CasADi Functions to native code once, cache the shared library on disk, safely.
 
-A filter's fused step compiled by the C compiler runs about 10x faster than in CasADi's
-virtual machine. The library is keyed by a hash of the generated C code, the CasADi
-version, the compiler flags and the CPU, and kept in the project's compiled-code cache
-(:mod:`fmu_models.infra.cache`: private builds, atomic rename, a SHA-256 sidecar, damaged
-entries rebuilt). A machine without a C compiler, a compiler that fails, or a cache that
-cannot be written falls back to CasADi's virtual machine with a warning (same numbers,
-slower).
+The library (about 10x faster than CasADi's virtual machine) is keyed by a hash of the C code,
+the CasADi version, the compiler flags and the CPU, in the compiled-code cache of
+:mod:`fmu_models.infra.cache`. Without a working C compiler or a writable cache, the functions
+run in the virtual machine, with a warning (same numbers, slower).
 """
 from __future__ import annotations
 
@@ -65,13 +62,11 @@ def _compile(code: str, cc: str):
     def build(lib: Path) -> None:
         src = lib.with_suffix(".c")
         src.write_text(code)
-        for i, std in enumerate(_STDS):
-            try:
-                run_compiler([cc, *_FLAGS, std, str(src), "-o", str(lib), "-lm"], "filter functions")
-                return
-            except BuildError:
-                if i == len(_STDS) - 1:
-                    raise
+        command = [cc, *_FLAGS, str(src), "-o", str(lib), "-lm"]
+        try:
+            run_compiler([*command, _STDS[0]], "filter functions")
+        except BuildError:            # gnu89 refused: C99
+            run_compiler([*command, _STDS[1]], "filter functions")
     return build
 
 

@@ -1,14 +1,10 @@
 """Fold a compiled step Function over whole trajectories in native code, without copies.
 
-CasADi's ``mapaccum`` copies the accumulated state and every output through work vectors at
-each step (0.30 us a step on top of the 0.18 us of the cart-pole EKF step). :class:`NativeFold`
-compiles, with the step's C code, a driver that calls the step in a loop with pointers into
-the caller's numpy arrays: input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]``
-(stride 0: the same every step) or, accumulated, row ``k - 1`` of the output carrying it (step
-0 reads the initial state there); output ``j`` is written at ``res[j] + k * res_stride[j]``, or, for a
-state whose history nobody reads (an innovation window), at row ``k % 2`` of a two-row array
-(``res_cycle``); an outer loop runs ``runs`` realisations, each with its own base pointers.
-With the VM backend the same fold runs through ``mapaccum``.
+CasADi's ``mapaccum`` copies the state and every output through work vectors at each step
+(0.30 us a step on top of the 0.18 us of the cart-pole EKF step); :class:`NativeFold`'s driver,
+compiled with the step, calls it in a loop with pointers into the caller's numpy arrays (strides
+per step and per realisation; a state whose history nobody reads cycles through two rows).
+The VM backend folds through ``mapaccum``.
 """
 from __future__ import annotations
 
@@ -96,24 +92,21 @@ class NativeFold:
 
     def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled", library=None):
         self.step, self.n_state = step, n_state
-        self.names_in = [step.name_in(i) for i in range(step.n_in())]
-        self.names_out = [step.name_out(i) for i in range(step.n_out())]
+        self.names_in, self.names_out = step.name_in(), step.name_out()
         self._mapped: dict = {}
+        self.backend = backend
         if library is None:
             _, self.backend, library = compile_with_fold(step, backend)
-        else:
-            self.backend = backend
         if self.backend == "compiled":
             self._fold = getattr(ctypes.CDLL(str(library)), f"{FOLD_NAME}_fold")
             self._fold.restype = ctypes.c_int
 
     def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()) -> int:
-        """Fold ``n_steps`` steps for each of ``runs`` realisations: the non-state inputs
-        ``args`` are ``(runs, n_steps, nnz)`` (per step) or ``(runs, nnz)`` (the same every
-        step), the initial state ``init`` ``(runs, nnz)``, every output of ``outs`` ``(runs,
-        n_steps, nnz)`` (views allowed), filled in place, except the ``cycled`` state outputs,
-        ``(runs, 2, nnz)`` (see :meth:`outputs`). Every array is float64 with a contiguous last
-        axis, by name. Returns 0, or ``1 + k`` if the step's evaluation failed at step ``k``."""
+        """Fold ``n_steps`` steps for each of ``runs`` realisations; arrays by name, float64 with a
+        contiguous last axis: the non-state inputs ``args`` ``(runs, n_steps, nnz)`` (per step) or
+        ``(runs, nnz)`` (every step), the initial state ``init`` ``(runs, nnz)``, the outputs ``outs``
+        ``(runs, n_steps, nnz)`` filled in place (views allowed), the ``cycled`` ones ``(runs, 2,
+        nnz)`` (:meth:`outputs`). Returns 0, or ``1 + k`` if the step failed to evaluate at step ``k``."""
         if self.backend != "compiled":
             return self._vm(runs, n_steps, args, init, outs, cycled)
         return self.bind(runs, n_steps, args, init, outs, cycled)()

@@ -1,11 +1,8 @@
-"""The base class of every filter: its public interface, and the defaults of the protocol.
+"""The base class of every filter, :class:`~estimators.base.KalmanBase`: its interface and the protocol's defaults.
 
-From a filter's hooks (:mod:`estimators.protocol`) one CasADi Function is built per model and
-configuration, the fused ``step``; compiled (``estimators._compiled``), it is bound to the
-filter's arrays (:meth:`KalmanBase.step`: one native call), folded over a record
-(:meth:`KalmanBase.run`, ``estimators._fold``), mapped over realisations
-(:class:`~estimators.batch.BatchFilter`) and exported as an FMU (``estimators.filter_fmu``).
-Missing channels, the gate and refused inputs are described in the manual's estimators page.
+The hooks (:mod:`estimators.protocol`) make one fused ``step`` Function, compiled and bound to the
+filter's arrays, folded over records, mapped over realisations and exported as an FMU; the
+manual's estimators page describes missing channels, the gate and refused inputs.
 """
 from __future__ import annotations
 
@@ -39,12 +36,15 @@ DROPPABLE = ("x_prior", "P_prior", "innov", "S", "K")
 KEEP = ("all", "estimates")
 
 
-class KalmanBase:
-    """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``.
+def _matrix(key: str, rows: str, cols: str, doc: str) -> property:
+    """A property: a copy of ``KalmanBase._now(key)`` as a matrix of the model's sizes ``rows``, ``cols``."""
+    return property(lambda self: matrix(self._now(key), getattr(self.system, rows), getattr(self.system, cols)).copy(),
+                    doc=doc)
 
-    The estimate and the last step's diagnostics are the properties below; a new filter
-    implements the hooks of :mod:`estimators.protocol` and registers itself with a class
-    keyword (``register="Name"``).
+
+class KalmanBase:
+    """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``; a new filter
+    implements the hooks of :mod:`estimators.protocol` and registers with ``register="Name"``.
 
     Parameters
     ----------
@@ -68,11 +68,8 @@ class KalmanBase:
     ----------
     backend : str
         The backend in use.
-    k : int
-        Number of steps done.
     history : NoiseHistory
-        The diagonals of Q and R: the initial values, each :meth:`set_noise` and every
-        adaptation (:meth:`noise_history` gives a DataFrame).
+        The diagonals of Q and R: the initial values, each :meth:`set_noise` and every adaptation.
     """
 
     name = "base"
@@ -97,17 +94,15 @@ class KalmanBase:
                  "R": checks.covariance(R, p, "R").ravel(order="F")}
         self._start = (checks.vector(x0, n, "x0", ConfigurationError), checks.covariance(P0, n, "P0"))
         extra = self._extra_arrays()
-        params = list(self.step_parameters())
+        self._extra_names, self._params = list(extra), list(self.step_parameters())
         state = {"x": self._start[0], "P": self._start[1].ravel(order="F"), **(noise if self.adapts_noise else {}),
                  **extra}
         # fixed inputs of the step, shared with the bound step: changed in place (set_noise)
         self._fixed = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
-                       **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in params}}
-        self._extra_names = list(extra)
-        self._params = params
+                       **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in self._params}}
 
         def build():
-            raw = self.wrap_step(build_step(self, extra, params))
+            raw = self.wrap_step(build_step(self, extra, self._params))
             fn, used, lib = compile_with_fold(raw, backend)     # one library: the step and its fold
             return fn, used, raw, lib
 
@@ -271,31 +266,23 @@ class KalmanBase:
         return self._raw_step
 
     def _now(self, key: str) -> np.ndarray:
-        """The current state array ``key`` (or the fixed Q or R; shared)."""
-        return self._rt.now(key) if key in self._rt.pairs else self._fixed[key]
-
-    def _mat(self, key, rows, cols):
-        return matrix(self._now(key), rows, cols).copy()
+        """The current state array ``key``, else the fixed input (Q, R), else the output ``key`` (shared)."""
+        rt = self._rt
+        return rt.now(key) if key in rt.pairs else self._fixed[key] if key in self._fixed else rt.outputs[key]
 
     def _out(self, name: str) -> np.ndarray:
         return self._rt.outputs[name]
 
     x = property(lambda self: self._rt.now("x").copy(), doc="State estimate, shape (nx,).")
-    P = property(lambda self: self._mat("P", self.system.nx, self.system.nx),
-                 doc="State covariance, shape (nx, nx).")
-    Q = property(lambda self: self._mat("Q", self.system.nx, self.system.nx),
-                 doc="Process noise covariance, shape (nx, nx).")
-    R = property(lambda self: self._mat("R", self.system.ny, self.system.ny),
-                 doc="Measurement noise covariance, shape (ny, ny).")
+    P = _matrix("P", "nx", "nx", "State covariance, shape (nx, nx).")
+    Q = _matrix("Q", "nx", "nx", "Process noise covariance, shape (nx, nx).")
+    R = _matrix("R", "ny", "ny", "Measurement noise covariance, shape (ny, ny).")
     x_prior = property(lambda self: self._out("x_prior").copy(), doc="Prediction of the last step, (nx,).")
-    P_prior = property(lambda self: matrix(self._out("P_prior"), self.system.nx, self.system.nx).copy(),
-                       doc="Covariance of the prediction, (nx, nx).")
+    P_prior = _matrix("P_prior", "nx", "nx", "Covariance of the prediction, (nx, nx).")
     innovation = property(lambda self: self._out("innov").copy(),
                           doc="Last innovation ``y - h(x_prior)`` (seed 000 eq 26), (ny,).")
-    S = property(lambda self: matrix(self._out("S"), self.system.ny, self.system.ny).copy(),
-                 doc="Last innovation covariance, (ny, ny).")
-    K = property(lambda self: matrix(self._out("K"), self.system.nx, self.system.ny).copy(),
-                 doc="Last gain, (nx, ny).")
+    S = _matrix("S", "ny", "ny", "Last innovation covariance, (ny, ny).")
+    K = _matrix("K", "nx", "ny", "Last gain, (nx, ny).")
     nis = property(lambda self: float(self._out("nis")[0]), doc="Last normalised innovation squared.")
     accepted = property(lambda self: bool(self._out("accepted")[0]), doc="The gate passed the last measurement.")
 
@@ -432,10 +419,9 @@ class KalmanBase:
                 self._explain("update")
         finally:
             self._mask[:] = 1.0
-        out = self._rt.outputs
-        out["x_prior"][:], out["P_prior"][:] = self._now("x"), self._now("P")
-        for dest, value in zip((self._now("x"), self._now("P"), *(out[n] for n in DIAGNOSTICS[2:])), res):
-            dest[:] = np.asarray(value).ravel(order="F")
+        self._out("x_prior")[:], self._out("P_prior")[:] = self._now("x"), self._now("P")
+        for key, value in zip(("x", "P", *DIAGNOSTICS[2:]), res):
+            self._now(key)[:] = np.asarray(value).ravel(order="F")
         return self.x
 
     def native_fold(self):
@@ -452,15 +438,15 @@ class KalmanBase:
         state, params : dict of str to ndarray
             The initial state arrays and the step's fixed inputs, shape (runs, nnz) each.
         us, ys, masks : ndarray
-            The records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny); contiguous.
+            The contiguous records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny).
         drop : collection of str
             Outputs not kept (their views are scratch rows).
 
         Returns
         -------
         (stored, views, last)
-            The outputs and the arrays the fold wrote (``NativeFold.outputs``, without the
-            extra state's history) and the state after the last step, (runs, nnz) by name.
+            ``NativeFold.outputs`` (without the extra state's history) and the state after the
+            last step, (runs, nnz) by name.
         """
         runs, N = ys.shape[:2]
         fold = self.native_fold()
@@ -526,14 +512,14 @@ class KalmanBase:
             the log-likelihood includes it.
         keep : {"all", "estimates"}
             Keep every diagnostic (default; what :func:`~estimators.rts_smooth` needs), or only
-            ``x``, ``P``, the NIS, the acceptance and the log-likelihood (192 instead of 464 bytes
-            a step for the cart-pole EKF); the other attributes of the result are then None.
+            ``x``, ``P``, the NIS, the acceptance and the log-likelihood (the other attributes
+            of the result are then None).
 
         Returns
         -------
         FilterRun
-            Every step's estimate, covariance and diagnostics; the filter is left at the
-            last step, as after N calls of :meth:`step` (equal to 1e-12).
+            Every step's results; the filter is left at the last step, as after N calls of
+            :meth:`step` (equal to 1e-12).
 
         Raises
         ------

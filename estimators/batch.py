@@ -37,9 +37,7 @@ class FoldedStep(StepArrays):
     """
 
     def __init__(self, fold, runs: int, state, shared):
-        step = fold.step
-        super().__init__(fold.names_in, fold.names_out,
-                         lambda k, out: runs * (step.nnz_out(k) if out else step.nnz_in(k)), state, shared)
+        super().__init__(fold.step, state, shared, runs)
         args = {k: v.reshape(runs, -1) for k, v in self.inputs.items()}
 
         def bound(c: int):
