@@ -1,7 +1,4 @@
-"""The results of the filters' whole-record operations, as plain data with their names attached.
-
-:class:`FilterRun`, :class:`BatchRun`, :class:`Smoothed`, :class:`EMResult`; and
-:class:`NoiseHistory`, a filter's growing record of its Q and R.
+"""The results of the filters' whole-record operations, as plain data with their names attached, and a filter's record of its Q and R.
 """
 from __future__ import annotations
 
