@@ -154,7 +154,7 @@ class NativeFold:
                 for name in self.names_out}
         total = 8 * runs * sum(rows[n] * self.step.nnz_out(i) for i, n in enumerate(self.names_out))
         check_fits(total, f"the outputs of {runs} x {n_steps} steps of {self.step.name()} "
-                   f"({8 * sum(self.step.nnz_out(i) for i in range(self.step.n_out()))} bytes a step)",
+                   f"({8 * self.step.nnz_out()} bytes a step)",
                    "run shorter records (in pieces), fewer realisations, or keep='estimates'")
         stored, views = {}, {}
         for i, name in enumerate(self.names_out):

@@ -68,13 +68,9 @@ class AdaptationRecord:
 
     def after_run(self, outputs: dict) -> None:
         """Records the Q and R of every step of a native run that adapted."""
-        nx, ny = self.system.nx, self.system.ny
-        adapted = np.flatnonzero(outputs["adapted"].ravel())
-        N = len(outputs["adapted"])
-        Q = outputs["Q_new"].reshape(-1, nx, nx).diagonal(axis1=1, axis2=2)
-        R = outputs["R_new"].reshape(-1, ny, ny).diagonal(axis1=1, axis2=2)
-        for i in adapted:
-            self.history.append(self.k - N + i + 1, np.concatenate([Q[i], R[i]]))
+        adapted = outputs["adapted"].ravel()
+        for i in np.flatnonzero(adapted):
+            self.history.append_flat(self.k - len(adapted) + i + 1, outputs["Q_new"][i], outputs["R_new"][i])
 
 
 class WindowedAdaptiveEKF(AdaptationRecord, EKF):

@@ -216,7 +216,7 @@ class KalmanBase:
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the flat (column-major) state arrays by name: ``x, P`` and any adaptive
         state (``Q, R``, ...); what :class:`~estimators.BatchFilter` starts from."""
-        return {k: v[self._rt.cur].copy() for k, v in self._rt.pairs.items()}
+        return {k: self._rt.now(k).copy() for k in self._rt.pairs}
 
     def parameter_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the step's flat fixed inputs (gate, nan_missing, a fixed Q and R, step parameters)."""
@@ -295,9 +295,11 @@ class KalmanBase:
         self._start = (x, P)
         rt = self._rt
         values = {"x": x, "P": P.ravel(order="F"), **self._extra_arrays()}
-        for name in rt.pairs:
-            rt.set_state(name, values.get(name, rt.now(name).copy()))
-        rt.cur, self.k = 0, 0
+        for name, pair in rt.pairs.items():
+            value = values.get(name, rt.now(name).copy())
+            for a in pair:
+                a[:] = value
+        rt.cell[0], self.k = 0, 0
         self._record()
 
     def snapshot(self) -> dict:
@@ -306,7 +308,7 @@ class KalmanBase:
         rt = self._rt
         unique = {id(a): a for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(),
                                      *rt.inputs.values(), *self._fixed.values(), rt.status]}
-        return {"arrays": [(a, a.copy()) for a in unique.values()], "cur": rt.cur, "k": self.k,
+        return {"arrays": [(a, a.copy()) for a in unique.values()], "cur": rt.cell[0], "k": self.k,
                 "history": len(self.history), "attributes": dict(self.__dict__)}
 
     def restore(self, snapshot: dict) -> None:
@@ -315,7 +317,7 @@ class KalmanBase:
             a[:] = saved
         self.__dict__.clear()
         self.__dict__.update(snapshot["attributes"])
-        self._rt.cur, self.k = snapshot["cur"], snapshot["k"]
+        self._rt.cell[0], self.k = snapshot["cur"], snapshot["k"]
         self.history.count[0] = snapshot["history"]
 
     def set_noise(self, Q=None, R=None) -> None:
@@ -372,13 +374,13 @@ class KalmanBase:
                 if mask is not None:
                     self._fill_mask(mask)
             rt = self._rt
-            cur = rt.cur
+            cur = rt.cell[0]
             rt.triggers[cur]()
             if rt.status[0]:
                 self._explain("step")
         finally:
             self._mask[:] = 1.0
-        rt.cur = cur ^ 1
+        rt.cell[0] = cur ^ 1
         self._count[0] += 1
         if self._after:
             self.after_step()

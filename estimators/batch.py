@@ -91,8 +91,7 @@ class BatchFilter:
         s = template.system
         self.nx, self.nu, self.ny = s.nx, s.nu, s.ny
         step_fn = template.step_function()
-        per_run = 8 * (sum(step_fn.nnz_in(i) for i in range(step_fn.n_in()))
-                       + sum(step_fn.nnz_out(i) for i in range(step_fn.n_out())) + step_fn.nnz_out("x_new"))
+        per_run = 8 * (step_fn.nnz_in() + step_fn.nnz_out() + step_fn.nnz_out("x_new"))
         check_fits(self.n * per_run, f"n_runs = {self.n} realisations of {template.name} ({per_run} bytes each)",
                    "use fewer realisations per batch")
         state = {k: np.tile(v, self.n) for k, v in template.state_arrays().items()}
@@ -150,10 +149,10 @@ class BatchFilter:
         rt.trigger()
         bad = self._failures(rt.status, lambda: f"step {self.k}")
         if bad.any():
-            for pair in rt.pairs.values():     # failed runs keep their previous state
-                pair[1 - rt.cur].reshape(self.n, -1)[bad] = pair[rt.cur].reshape(self.n, -1)[bad]
+            for name, pair in rt.pairs.items():     # failed runs keep their previous state
+                pair[1 - rt.cell[0]].reshape(self.n, -1)[bad] = rt.now(name).reshape(self.n, -1)[bad]
             self.failed |= bad
-        rt.commit()
+        rt.cell[0] ^= 1
         self.k += 1
         return self.x
 

@@ -56,8 +56,8 @@ def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
 
 class StepArrays:
     """The flat arrays a step reads and writes: the state in two copies (``pairs``; the step
-    reads the current one and writes the other, :meth:`commit` makes that current, so a
-    failed step leaves the state as it was), the other ``inputs`` and the ``outputs``.
+    reads the current one, ``pairs[name][cell[0]]``, and writes the other, made current after a
+    successful step: a failed step leaves the state as it was), the other ``inputs`` and the ``outputs``.
 
     Parameters
     ----------
@@ -78,30 +78,12 @@ class StepArrays:
                        if k not in self.pairs}
         self.outputs = {n: np.zeros(runs * fn.nnz_out(n)) for n in fn.name_out() if not n.endswith("_new")}
         self.status = self.outputs["status"]
-        #: which copy of the state is current, in a cell the lean step shares
+        #: which copy of the state is current (0 or 1), in a cell the lean step shares
         self.cell = [0]
-
-    @property
-    def cur(self) -> int:
-        """Which copy of the state is current (0 or 1)."""
-        return self.cell[0]
-
-    @cur.setter
-    def cur(self, value: int) -> None:
-        self.cell[0] = value
 
     def now(self, name: str) -> np.ndarray:
         """The current copy of state array ``name`` (a view: writing it changes the state)."""
         return self.pairs[name][self.cell[0]]
-
-    def commit(self) -> None:
-        """Make the state the last evaluation wrote the current one."""
-        self.cell[0] ^= 1
-
-    def set_state(self, name: str, value) -> None:
-        """Set both copies of state array ``name``."""
-        for a in self.pairs[name]:
-            a[:] = value
 
 
 class BoundStep(StepArrays):
@@ -121,8 +103,8 @@ class BoundStep(StepArrays):
         return BufferedFunction(fn, args, res)
 
     def trigger(self) -> float:
-        """Evaluate the step into the other state copy (made current by :meth:`commit`); the status."""
-        self._steps[self.cur].trigger()
+        """Evaluate the step into the other state copy; the status."""
+        self._steps[self.cell[0]].trigger()
         return self.status[0]
 
 
