@@ -79,24 +79,19 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     fns : list of casadi.Function
         Functions to generate and compile together.
     backend : {"compiled", "vm"}
-        ``"vm"`` returns ``fns`` unchanged; ``"compiled"`` falls back to it (with a
-        warning) when no compiler is found or the cache cannot be written.
+        ``"vm"`` returns ``fns`` unchanged; ``"compiled"`` falls back to it (with a warning)
+        without a compiler, with a failing compiler found on the PATH, or an unwritable cache.
     extra_code : str
         C code appended to the generated file (e.g. a driver calling the functions).
     return_library : bool
-        Also return the library's path (None with the VM backend).
-
-    Returns
-    -------
-    (functions, backend) or (functions, backend, library path)
+        Also return the library's path (None with the VM backend) as a third element.
 
     Raises
     ------
     UnknownNameError
         An unknown backend.
     BuildError
-        The compiler named by ``$CC`` failed (a compiler found on the PATH that fails falls
-        back to the virtual machine with a warning naming it; the user's own is not replaced).
+        The compiler named by ``$CC`` failed (the user's own is not replaced).
     """
     if backend not in BACKENDS:
         raise UnknownNameError(f"backend must be one of {BACKENDS}, got {backend!r}")

@@ -9,6 +9,7 @@ The VM backend folds through ``mapaccum``.
 from __future__ import annotations
 
 import ctypes
+from functools import partial
 
 import casadi as ca
 import numpy as np
@@ -136,11 +137,8 @@ class NativeFold:
                 longs([self.names_out.index(f"{n}_new") if i < self.n_state else -1
                        for i, n in enumerate(self.names_in)]),
                 longs([int(n in cycled) for n in self.names_out]))
-        fold = self._fold
-
-        def run() -> int:
-            return fold(*call)
-        run.keep = keep
+        run = partial(self._fold, *call)
+        run.keep = keep          # the arrays must live as long as the call
         return run
 
     def outputs(self, runs: int, n_steps: int, init: dict, drop=(), cycle=()) -> tuple[dict, dict]:

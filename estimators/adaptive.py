@@ -1,9 +1,7 @@
 """Adaptive EKFs driven by a window of innovations (seed 000 eq 37), adapted inside the step.
 
-:class:`WindowedAdaptiveEKF` carries the last ``window`` complete, accepted innovations (a
-ring, part of the state), recomputes their covariance ``C_I`` (eq 37) at every step (no
-running sum that could drift) and hands it to the subclass's ``adapt_noise``; compiled with
-the filter, the adaptation runs batched, natively over a record and as an FMU.
+The window is a ring in the state; ``C_I`` (eq 37) is recomputed from it at every step (no
+running sum that could drift), so the adaptation runs batched, natively over a record and as an FMU.
 """
 from __future__ import annotations
 
@@ -44,9 +42,8 @@ def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
 
 
 class AdaptationRecord:
-    """Records Q and R in a filter's noise history whenever its step declares (output
-    ``adapted``) that it adapted them. A mixin before the filter class; call
-    ``_init_adaptation_record`` at the end of ``__init__``."""
+    """Mixin (before the filter class; call ``_init_adaptation_record`` at the end of ``__init__``):
+    records Q and R in the noise history whenever the step's output ``adapted`` says it adapted them."""
 
     def _init_adaptation_record(self) -> None:
         self._adapted_flag = memoryview(self._out("adapted"))
@@ -95,7 +92,6 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
         self._init_adaptation_record()
 
     def config_key(self) -> tuple:
-        """The window length."""
         return (self.window,)
 
     def adapt_noise(self, ctx: StepContext, result: StepResult, C_I: ca.SX) -> tuple[ca.SX, ca.SX]:
