@@ -62,12 +62,10 @@ class KalmanBase:
         A NaN measurement channel is missing (default True); with False it is an error.
     backend : {"compiled", "vm"}
         Run the step as compiled native code (cached on disk, about 10x faster; needs a C
-        compiler, else falls back to "vm") or in CasADi's VM.
+        compiler, else falls back to "vm") or in CasADi's VM; the attribute is the one in use.
 
     Attributes
     ----------
-    backend : str
-        The backend in use.
     history : NoiseHistory
         The diagonals of Q and R: the initial values, each :meth:`set_noise` and every adaptation.
     """
@@ -75,8 +73,7 @@ class KalmanBase:
     name = "base"
     #: Whether the fused step holds the whole filter (BatchFilter, native run, FMU use it).
     supports_batch = True
-    #: Whether Q and R are part of the state (adaptive filters) or fixed parameters of
-    #: the step (then they are not carried from step to step).
+    #: Whether Q and R are part of the state (adaptive filters), else fixed inputs of the step.
     adapts_noise = False
 
     def __init_subclass__(cls, register: str | None = None, aliases: tuple[str, ...] = (), **kwargs):
@@ -223,10 +220,9 @@ class KalmanBase:
         return {k: v.copy() for k, v in self._fixed.items()}
 
     def bind_summary(self, out: np.ndarray, covariance: str = "diagonal"):
-        """A call that writes, in one native call, the current estimate ``x`` (nx), the variances
-        ``diag P`` (nx), with ``covariance="full"`` the upper off-diagonal entries of P (row by
-        row, ``i < j``), and the last NIS into the contiguous float array ``out`` (bound once: a
-        co-simulation component's slice of the master's signals).
+        """A call writing, in one native call, the current ``x`` (nx), ``diag P`` (nx), with
+        ``covariance="full"`` the upper off-diagonal entries of P (row by row, ``i < j``), and the last
+        NIS into the contiguous float array ``out`` (bound once: a component's slice of the signals).
 
         Raises
         ------
