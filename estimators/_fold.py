@@ -168,28 +168,22 @@ class NativeFold:
         return stored, views
 
     def _vm(self, runs, n_steps, args, init, outs, cycled=()) -> int:
-        """The same fold through ``mapaccum`` in CasADi's virtual machine."""
+        """The same fold through ``mapaccum`` in CasADi's virtual machine, of the step on flat arrays."""
         if n_steps not in self._mapped:
-            self._mapped[n_steps] = self.step.mapaccum("fold", n_steps, list(range(self.n_state)),
-                                                       list(range(self.n_state)))
-        fn = self._mapped[n_steps]
-        for r in range(runs):
-            call = {}
-            for i, name in enumerate(self.names_in):
-                size = self.step.size_in(i)
-                if i < self.n_state:
-                    call[name] = init[name][r].reshape(size, order="F")
-                else:      # one row per step, or the same row every step
-                    rows = np.broadcast_to(args[name][r], (n_steps, args[name].shape[-1]))
-                    call[name] = np.hstack([row.reshape(size, order="F") for row in rows])
-            res = fn.call(call)
-            for name in self.names_out:
-                rr, cc = self.step.size_out(name)
-                val = np.asarray(res[name]).reshape(rr, n_steps, cc).transpose(1, 2, 0)   # (n, cc, rr)
-                val = val.reshape(n_steps, rr * cc)
+            flat = [ca.MX.sym(name, self.step.nnz_in(i)) for i, name in enumerate(self.names_in)]
+            res = self.step.call([ca.reshape(a, self.step.size_in(i)) for i, a in enumerate(flat)])
+            state = list(range(self.n_state))
+            self._mapped[n_steps] = ca.Function("flat", flat, [ca.vec(r) for r in res]).mapaccum("fold", n_steps,
+                                                                                                 state, state)
+        for r in range(runs):         # a step's inputs and outputs are the columns
+            res = self._mapped[n_steps].call([init[name][r] if i < self.n_state else
+                                              np.broadcast_to(args[name][r], (n_steps, args[name].shape[-1])).T
+                                              for i, name in enumerate(self.names_in)])
+            for name, value in zip(self.names_out, res):
+                rows = np.asarray(value).T
                 if name in cycled:                  # the last two steps, in rows k % 2
-                    for k in range(max(0, n_steps - 2), n_steps):
-                        outs[name][r][k % 2] = val[k]
+                    last = np.arange(max(0, n_steps - 2), n_steps)
+                    outs[name][r][last % 2] = rows[last]
                 else:
-                    outs[name][r] = val
+                    outs[name][r] = rows
         return 0
