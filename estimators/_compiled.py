@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import platform
 import sys
 import warnings
 from pathlib import Path
@@ -38,12 +39,9 @@ _VM = "running filters in CasADi's virtual machine (same numbers, slower)"
 
 def _cpu_identity() -> str:
     """The CPU model and feature flags (Linux), else the platform's machine name."""
-    import platform
-
     try:
         with open("/proc/cpuinfo") as f:
-            lines = [ln for ln in f if ln.startswith(("model name", "flags"))][:2]
-        return "".join(lines) or platform.machine()
+            return "".join([ln for ln in f if ln.startswith(("model name", "flags"))][:2]) or platform.machine()
     except OSError:
         return platform.machine()
 

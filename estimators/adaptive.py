@@ -95,7 +95,8 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
         return (self.window,)
 
     def adapt_noise(self, ctx: StepContext, result: StepResult, C_I: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(Q_new, R_new)`` from the step's symbols ``ctx``, its ``result`` and ``C_I`` (eq 37)."""
+        """``(Q_new, R_new)`` from the step's symbols ``ctx``, its ``result`` and ``C_I`` (eq 37); the outputs
+        it declares are 0 until the window is full."""
         raise NotImplementedError
 
     def extra_state(self) -> dict:
@@ -112,8 +113,11 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
         ring_new = ca.if_else(push, shifted, ring)
         count_new = count + push
         C_I = ca.mtimes(ring_new, ring_new.T) / N                          # eq 37
+        declared = set(ctx.outputs)
         Q_new, R_new = self.adapt_noise(ctx, result, C_I)
         adapted = push * (count_new >= N)
+        for name in [n for n in ctx.outputs if n not in declared]:
+            ctx.outputs[name] = ca.if_else(adapted, ctx.outputs[name], ca.SX.zeros(ctx.outputs[name].shape))
         ctx.output("adapted", adapted)
         return {"Q": ca.if_else(adapted, Q_new, ctx.Q), "R": ca.if_else(adapted, R_new, ctx.R),
                 "ring": ring_new, "count": count_new}

@@ -204,11 +204,10 @@ class KalmanBase:
     def fmu_initial(self, p: Mapping[str, ca.SX]) -> dict[str, ca.SX]:
         """The initial state arrays and the fixed step inputs from the FMU parameters ``p`` (SX by name)."""
         Q, R = self.fmu_noise(p)
-        out = {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
-               "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing))}
-        out.update({k: ca.SX(ca.DM(v)) for k, v in self.extra_state().items()})
-        out.update({q.name: p[q.name] for q in self._params})
-        return out
+        return {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
+                "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing)),
+                **{k: ca.SX(ca.DM(v)) for k, v in self.extra_state().items()},
+                **{q.name: p[q.name] for q in self._params}}
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the flat (column-major) state arrays by name: ``x, P`` and any adaptive
@@ -473,12 +472,9 @@ class KalmanBase:
         if not np.isfinite(us).all():
             k = int(np.flatnonzero(~np.isfinite(us).all(axis=1))[0])
             raise InputError(f"{self.name}: us contains NaN or inf at index {k}")
-        if masks is None:
-            m = np.ones((N, ny))
-        else:
-            m = checks.float_array(masks, "masks")
-            if m.shape != (N, ny):
-                raise InputError(f"{self.name}: masks must have shape ({N}, {ny}), got {m.shape}")
+        m = np.ones((N, ny)) if masks is None else checks.float_array(masks, "masks")
+        if m.shape != (N, ny):
+            raise InputError(f"{self.name}: masks must have shape ({N}, {ny}), got {m.shape}")
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
 
     def _check_run_fits(self, ys, keep: str) -> None:

@@ -1,9 +1,6 @@
-"""Run many realisations of one filter in lockstep: one native call per step for all, or one
-native call for whole trajectories of all.
+"""Run many realisations of one filter in lockstep: one native call per step for all, or one for whole records.
 
-:meth:`BatchFilter.step` maps the filter's fused step over the realisations,
-:meth:`BatchFilter.run` folds it over their records (``estimators._fold``): a Monte Carlo
-campaign pays the Python overhead once per step, or once, not once per realisation.
+A Monte Carlo campaign pays the Python overhead once per step, or once, not once per realisation.
 """
 from __future__ import annotations
 
@@ -25,16 +22,9 @@ ON_FAILURE = ("raise", "mark")
 
 
 class FoldedStep(StepArrays):
-    """One step of ``runs`` realisations through a filter's native fold (compiled: no code per
-    number of runs), with the interface of :class:`~estimators.runtime.BoundStep`.
-
-    Parameters
-    ----------
-    fold : NativeFold
-    runs : int
-    state, shared : mapping of str to ndarray
-        As :class:`~estimators.runtime.StepArrays`, flat run-major.
-    """
+    """One step of ``runs`` realisations through a filter's native ``fold`` (compiled: no code per
+    number of runs) with the interface of :class:`~estimators.runtime.BoundStep`; ``state`` and
+    ``shared`` as :class:`~estimators.runtime.StepArrays`, flat run-major."""
 
     def __init__(self, fold, runs: int, state, shared):
         super().__init__(fold.step, state, shared, runs)

@@ -134,11 +134,5 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         ctx.output("m", m)
         return q_new * ca.SX.eye(nx), ca.diag(r_new)            # eqs 41, 42
 
-    def adapt_expr(self, ctx, result):
-        """The windowed adaptation; ``m`` is 0 until the window is full."""
-        changes = super().adapt_expr(ctx, result)
-        ctx.outputs["m"] = ca.if_else(ctx.outputs["adapted"], ctx.outputs["m"], ca.SX.zeros(self.system.ny))
-        return changes
-
     m = property(lambda self: self._out("m").copy(),
                  doc="The last normalised fuzzy adjustment per channel (0 before the window is full), (ny,).")

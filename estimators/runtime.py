@@ -26,20 +26,17 @@ class BufferedFunction:
 
     def __init__(self, fn: ca.Function, bind_args: dict[int, np.ndarray] | None = None,
                  bind_res: dict[int, np.ndarray] | None = None):
-        sides = (("input", fn.n_in(), fn.sparsity_in, fn.name_in), ("output", fn.n_out(), fn.sparsity_out, fn.name_out))
-        for kind, count, sparsity, name in sides:        # every side dense before anything is bound
-            sparse = [name(i) for i in range(count) if not sparsity(i).is_dense()]
-            if sparse:
-                raise ValueError(f"{fn.name()}: {kind} {sparse[0]} must be dense")
         self.fn = fn
         self.buffer, self.trigger = fn.buffer()
-        self.args = self._bind(*sides[0], bind_args, self.buffer.set_arg)
-        self.res = self._bind(*sides[1], bind_res, self.buffer.set_res)
+        self.args = self._bind("input", fn.n_in(), fn.sparsity_in, fn.name_in, bind_args, self.buffer.set_arg)
+        self.res = self._bind("output", fn.n_out(), fn.sparsity_out, fn.name_out, bind_res, self.buffer.set_res)
 
     def _bind(self, kind: str, count: int, sparsity, name, bound, setter) -> list[np.ndarray]:
         """The arrays of the inputs (or outputs), the ``bound`` ones shared, set in the buffer."""
         arrays = []
         for i in range(count):
+            if not sparsity(i).is_dense():
+                raise ValueError(f"{self.fn.name()}: {kind} {name(i)} must be dense")
             nnz = sparsity(i).nnz()
             a = (bound or {}).get(i, np.zeros(nnz))
             if a.shape != (nnz,) or a.dtype != np.float64 or not a.flags.c_contiguous:
