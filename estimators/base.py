@@ -598,14 +598,12 @@ class KalmanBase:
 
     def _run_by_steps(self, us, ys, masks) -> FilterRun:
         """``run`` as a loop of :meth:`step` (a filter whose adaptation is not all in the fused step)."""
-        def state() -> dict:
-            return {"x_new": self.x, "P_new": self.P, "Q_new": self.Q, "R_new": self.R}
-
-        rec: dict = {**{k: [v.ravel(order="F")] for k, v in state().items()}, **{k: [] for k in DIAGNOSTICS}}
+        arrays = {"x_new": "x", "P_new": "P", "Q_new": "Q", "R_new": "R", **{name: name for name in DIAGNOSTICS}}
+        rec: dict = {key: [self._now(name).copy()] if key.endswith("_new") else [] for key, name in arrays.items()}
         for k in range(len(ys)):
             self.step(us[k], ys[k], masks[k] != 0)
-            for key, val in (*state().items(), *((name, self._out(name)) for name in DIAGNOSTICS)):
-                rec[key].append(np.array(val, float).ravel(order="F"))
+            for key, name in arrays.items():
+                rec[key].append(self._now(name).copy())
         return self._make_run({k: np.array(v) for k, v in rec.items()}, us, ys, masks)
 
 

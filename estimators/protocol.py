@@ -187,6 +187,5 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
 def renamed(fn: ca.Function, name: str) -> ca.Function:
     """``fn`` (SX or MX) under another ``name`` (generated C code calls it by that name)."""
     sym = ca.SX if fn.is_a("SXFunction") else ca.MX
-    args = [sym.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
-    return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],
-                       [fn.name_out(i) for i in range(fn.n_out())])
+    args = [sym.sym(n, fn.sparsity_in(i)) for i, n in enumerate(fn.name_in())]
+    return ca.Function(name, args, fn.call(args), fn.name_in(), fn.name_out())
