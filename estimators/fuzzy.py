@@ -1,11 +1,7 @@
 """Mamdani type-1 fuzzy system of seed 000's MF-IAE (eqs 38-40, Table 2), in CasADi.
 
-Inputs: the theoretical and measured innovation covariances C_T (eq 39) and C_I (eq 37),
-normalised by their mean (each in [0, 2]: scale-free), in the Gaussian sets NP ("small"), ZE
-("zero mismatch"), GA ("large"); output: the normalised adjustment ``m`` on [-1, 1] (the sign
-and size of ``MAdj = C_T - C_I``, eq 38) in the sigmoidal sets DI (decrease), MA (maintain), AU
-(increase). Inference: AND = min, implication = min, aggregation = max, defuzzification =
-centroid of the piecewise-linear aggregated membership.
+From the theoretical and measured innovation covariances C_T (eq 39) and C_I (eq 37), the
+normalised adjustment ``m`` on [-1, 1]; the manual's estimators page describes its sets and inference.
 """
 from __future__ import annotations
 
