@@ -1,10 +1,4 @@
-"""State estimators for the plant models of :mod:`fmu_models`.
-
-The filters share one interface (:class:`~estimators.base.KalmanBase`; a new one implements
-:mod:`estimators.protocol` and registers itself in :data:`FILTERS`) and run on a
-:class:`DiscreteModel` of a plant (:func:`discretize`) or of a Model Exchange FMU
-(:class:`FMUProcessModel`); offline, :func:`rts_smooth` and :func:`em_noise`. The manual's
-estimators page shows their use.
+"""State estimators for the plant models of :mod:`fmu_models` (the manual's estimators page shows their use).
 """
 from fmu_models.infra.version import VERSION as __version__
 

@@ -1,18 +1,16 @@
 """Compile CasADi Functions to native code once, cache the shared library on disk, safely.
 
-A filter's fused step compiled by the C compiler runs about 10x faster than in CasADi's
-virtual machine. The library is keyed by a hash of the generated C code, the CasADi
-version, the compiler flags and the CPU, and kept in the project's compiled-code cache
-(:mod:`fmu_models.infra.cache`: private builds, atomic rename, a SHA-256 sidecar, damaged
-entries rebuilt). A machine without a C compiler, a compiler that fails, or a cache that
-cannot be written falls back to CasADi's virtual machine with a warning (same numbers,
-slower).
+The library (about 10x faster than CasADi's virtual machine) is keyed by a hash of the C code,
+the CasADi version, the compiler flags and the CPU, in the compiled-code cache of
+:mod:`fmu_models.infra.cache`. Without a working C compiler or a writable cache, the functions
+run in the virtual machine, with a warning (same numbers, slower).
 """
 from __future__ import annotations
 
 import ctypes
 import hashlib
 import os
+import platform
 import sys
 import warnings
 from pathlib import Path
@@ -41,12 +39,9 @@ _VM = "running filters in CasADi's virtual machine (same numbers, slower)"
 
 def _cpu_identity() -> str:
     """The CPU model and feature flags (Linux), else the platform's machine name."""
-    import platform
-
     try:
         with open("/proc/cpuinfo") as f:
-            lines = [ln for ln in f if ln.startswith(("model name", "flags"))][:2]
-        return "".join(lines) or platform.machine()
+            return "".join([ln for ln in f if ln.startswith(("model name", "flags"))][:2]) or platform.machine()
     except OSError:
         return platform.machine()
 
@@ -65,13 +60,11 @@ def _compile(code: str, cc: str):
     def build(lib: Path) -> None:
         src = lib.with_suffix(".c")
         src.write_text(code)
-        for i, std in enumerate(_STDS):
-            try:
-                run_compiler([cc, *_FLAGS, std, str(src), "-o", str(lib), "-lm"], "filter functions")
-                return
-            except BuildError:
-                if i == len(_STDS) - 1:
-                    raise
+        command = [cc, *_FLAGS, str(src), "-o", str(lib), "-lm"]
+        try:
+            run_compiler([*command, _STDS[0]], "filter functions")
+        except BuildError:            # gnu89 refused: C99
+            run_compiler([*command, _STDS[1]], "filter functions")
     return build
 
 
@@ -84,24 +77,19 @@ def compile_functions(fns: list[ca.Function], backend: str = "compiled", extra_c
     fns : list of casadi.Function
         Functions to generate and compile together.
     backend : {"compiled", "vm"}
-        ``"vm"`` returns ``fns`` unchanged; ``"compiled"`` falls back to it (with a
-        warning) when no compiler is found or the cache cannot be written.
+        ``"vm"`` returns ``fns`` unchanged; ``"compiled"`` falls back to it (with a warning)
+        without a compiler, with a failing compiler found on the PATH, or an unwritable cache.
     extra_code : str
         C code appended to the generated file (e.g. a driver calling the functions).
     return_library : bool
-        Also return the library's path (None with the VM backend).
-
-    Returns
-    -------
-    (functions, backend) or (functions, backend, library path)
+        Also return the library's path (None with the VM backend) as a third element.
 
     Raises
     ------
     UnknownNameError
         An unknown backend.
     BuildError
-        The compiler named by ``$CC`` failed (a compiler found on the PATH that fails falls
-        back to the virtual machine with a warning naming it; the user's own is not replaced).
+        The compiler named by ``$CC`` failed (the user's own is not replaced).
     """
     if backend not in BACKENDS:
         raise UnknownNameError(f"backend must be one of {BACKENDS}, got {backend!r}")

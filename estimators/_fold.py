@@ -1,18 +1,15 @@
 """Fold a compiled step Function over whole trajectories in native code, without copies.
 
-CasADi's ``mapaccum`` copies the accumulated state and every output through work vectors at
-each step (0.30 us a step on top of the 0.18 us of the cart-pole EKF step). :class:`NativeFold`
-compiles, with the step's C code, a driver that calls the step in a loop with pointers into
-the caller's numpy arrays: input ``i`` of step ``k`` reads ``arg[i] + k * arg_stride[i]``
-(stride 0: the same every step) or, accumulated, row ``k - 1`` of the output carrying it (step
-0 reads the initial state there); output ``j`` is written at ``res[j] + k * res_stride[j]``, or, for a
-state whose history nobody reads (an innovation window), at row ``k % 2`` of a two-row array
-(``res_cycle``); an outer loop runs ``runs`` realisations, each with its own base pointers.
-With the VM backend the same fold runs through ``mapaccum``.
+CasADi's ``mapaccum`` copies the state and every output through work vectors at each step
+(0.30 us a step on top of the 0.18 us of the cart-pole EKF step); :class:`NativeFold`'s driver,
+compiled with the step, calls it in a loop with pointers into the caller's numpy arrays (strides
+per step and per realisation; a state whose history nobody reads cycles through two rows).
+The VM backend folds through ``mapaccum``.
 """
 from __future__ import annotations
 
 import ctypes
+from functools import partial
 
 import casadi as ca
 import numpy as np
@@ -96,24 +93,21 @@ class NativeFold:
 
     def __init__(self, step: ca.Function, n_state: int, backend: str = "compiled", library=None):
         self.step, self.n_state = step, n_state
-        self.names_in = [step.name_in(i) for i in range(step.n_in())]
-        self.names_out = [step.name_out(i) for i in range(step.n_out())]
+        self.names_in, self.names_out = step.name_in(), step.name_out()
         self._mapped: dict = {}
+        self.backend = backend
         if library is None:
             _, self.backend, library = compile_with_fold(step, backend)
-        else:
-            self.backend = backend
         if self.backend == "compiled":
             self._fold = getattr(ctypes.CDLL(str(library)), f"{FOLD_NAME}_fold")
             self._fold.restype = ctypes.c_int
 
     def __call__(self, runs: int, n_steps: int, args: dict, init: dict, outs: dict, cycled=()) -> int:
-        """Fold ``n_steps`` steps for each of ``runs`` realisations: the non-state inputs
-        ``args`` are ``(runs, n_steps, nnz)`` (per step) or ``(runs, nnz)`` (the same every
-        step), the initial state ``init`` ``(runs, nnz)``, every output of ``outs`` ``(runs,
-        n_steps, nnz)`` (views allowed), filled in place, except the ``cycled`` state outputs,
-        ``(runs, 2, nnz)`` (see :meth:`outputs`). Every array is float64 with a contiguous last
-        axis, by name. Returns 0, or ``1 + k`` if the step's evaluation failed at step ``k``."""
+        """Fold ``n_steps`` steps for each of ``runs`` realisations; arrays by name, float64 with a
+        contiguous last axis: the non-state inputs ``args`` ``(runs, n_steps, nnz)`` (per step) or
+        ``(runs, nnz)`` (every step), the initial state ``init`` ``(runs, nnz)``, the outputs ``outs``
+        ``(runs, n_steps, nnz)`` filled in place (views allowed), the ``cycled`` ones ``(runs, 2,
+        nnz)`` (:meth:`outputs`). Returns 0, or ``1 + k`` if the step failed to evaluate at step ``k``."""
         if self.backend != "compiled":
             return self._vm(runs, n_steps, args, init, outs, cycled)
         return self.bind(runs, n_steps, args, init, outs, cycled)()
@@ -143,11 +137,8 @@ class NativeFold:
                 longs([self.names_out.index(f"{n}_new") if i < self.n_state else -1
                        for i, n in enumerate(self.names_in)]),
                 longs([int(n in cycled) for n in self.names_out]))
-        fold = self._fold
-
-        def run() -> int:
-            return fold(*call)
-        run.keep = keep
+        run = partial(self._fold, *call)
+        run.keep = keep          # the arrays must live as long as the call
         return run
 
     def outputs(self, runs: int, n_steps: int, init: dict, drop=(), cycle=()) -> tuple[dict, dict]:
@@ -161,7 +152,7 @@ class NativeFold:
                 for name in self.names_out}
         total = 8 * runs * sum(rows[n] * self.step.nnz_out(i) for i, n in enumerate(self.names_out))
         check_fits(total, f"the outputs of {runs} x {n_steps} steps of {self.step.name()} "
-                   f"({8 * sum(self.step.nnz_out(i) for i in range(self.step.n_out()))} bytes a step)",
+                   f"({8 * self.step.nnz_out()} bytes a step)",
                    "run shorter records (in pieces), fewer realisations, or keep='estimates'")
         stored, views = {}, {}
         for i, name in enumerate(self.names_out):
@@ -177,28 +168,22 @@ class NativeFold:
         return stored, views
 
     def _vm(self, runs, n_steps, args, init, outs, cycled=()) -> int:
-        """The same fold through ``mapaccum`` in CasADi's virtual machine."""
+        """The same fold through ``mapaccum`` in CasADi's virtual machine, of the step on flat arrays."""
         if n_steps not in self._mapped:
-            self._mapped[n_steps] = self.step.mapaccum("fold", n_steps, list(range(self.n_state)),
-                                                       list(range(self.n_state)))
-        fn = self._mapped[n_steps]
-        for r in range(runs):
-            call = {}
-            for i, name in enumerate(self.names_in):
-                size = self.step.size_in(i)
-                if i < self.n_state:
-                    call[name] = init[name][r].reshape(size, order="F")
-                else:      # one row per step, or the same row every step
-                    rows = np.broadcast_to(args[name][r], (n_steps, args[name].shape[-1]))
-                    call[name] = np.hstack([row.reshape(size, order="F") for row in rows])
-            res = fn.call(call)
-            for name in self.names_out:
-                rr, cc = self.step.size_out(name)
-                val = np.asarray(res[name]).reshape(rr, n_steps, cc).transpose(1, 2, 0)   # (n, cc, rr)
-                val = val.reshape(n_steps, rr * cc)
+            flat = [ca.MX.sym(name, self.step.nnz_in(i)) for i, name in enumerate(self.names_in)]
+            res = self.step.call([ca.reshape(a, self.step.size_in(i)) for i, a in enumerate(flat)])
+            state = list(range(self.n_state))
+            self._mapped[n_steps] = ca.Function("flat", flat, [ca.vec(r) for r in res]).mapaccum("fold", n_steps,
+                                                                                                 state, state)
+        for r in range(runs):         # a step's inputs and outputs are the columns
+            res = self._mapped[n_steps].call([init[name][r] if i < self.n_state else
+                                              np.broadcast_to(args[name][r], (n_steps, args[name].shape[-1])).T
+                                              for i, name in enumerate(self.names_in)])
+            for name, value in zip(self.names_out, res):
+                rows = np.asarray(value).T
                 if name in cycled:                  # the last two steps, in rows k % 2
-                    for k in range(max(0, n_steps - 2), n_steps):
-                        outs[name][r][k % 2] = val[k]
+                    last = np.arange(max(0, n_steps - 2), n_steps)
+                    outs[name][r][last % 2] = rows[last]
                 else:
-                    outs[name][r] = val
+                    outs[name][r] = rows
         return 0

@@ -1,9 +1,7 @@
 """Adaptive EKFs driven by a window of innovations (seed 000 eq 37), adapted inside the step.
 
-:class:`WindowedAdaptiveEKF` carries the last ``window`` complete, accepted innovations (a
-ring, part of the state), recomputes their covariance ``C_I`` (eq 37) at every step (no
-running sum that could drift) and hands it to the subclass's ``adapt_noise``; compiled with
-the filter, the adaptation runs batched, natively over a record and as an FMU.
+The window is a ring in the state; ``C_I`` (eq 37) is recomputed from it at every step (no
+running sum that could drift), so the adaptation runs batched, natively over a record and as an FMU.
 """
 from __future__ import annotations
 
@@ -44,9 +42,8 @@ def bound_parameters(q_bounds, r_bounds) -> list[Parameter]:
 
 
 class AdaptationRecord:
-    """Records Q and R in a filter's noise history whenever its step declares (output
-    ``adapted``) that it adapted them. A mixin before the filter class; call
-    ``_init_adaptation_record`` at the end of ``__init__``."""
+    """Mixin (before the filter class; call ``_init_adaptation_record`` at the end of ``__init__``):
+    records Q and R in the noise history whenever the step's output ``adapted`` says it adapted them."""
 
     def _init_adaptation_record(self) -> None:
         self._adapted_flag = memoryview(self._out("adapted"))
@@ -68,13 +65,9 @@ class AdaptationRecord:
 
     def after_run(self, outputs: dict) -> None:
         """Records the Q and R of every step of a native run that adapted."""
-        nx, ny = self.system.nx, self.system.ny
-        adapted = np.flatnonzero(outputs["adapted"].ravel())
-        N = len(outputs["adapted"])
-        Q = outputs["Q_new"].reshape(-1, nx, nx).diagonal(axis1=1, axis2=2)
-        R = outputs["R_new"].reshape(-1, ny, ny).diagonal(axis1=1, axis2=2)
-        for i in adapted:
-            self.history.append(self.k - N + i + 1, np.concatenate([Q[i], R[i]]))
+        adapted = outputs["adapted"].ravel()
+        for i in np.flatnonzero(adapted):
+            self.history.append_flat(self.k - len(adapted) + i + 1, outputs["Q_new"][i], outputs["R_new"][i])
 
 
 class WindowedAdaptiveEKF(AdaptationRecord, EKF):
@@ -99,11 +92,11 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
         self._init_adaptation_record()
 
     def config_key(self) -> tuple:
-        """The window length."""
         return (self.window,)
 
     def adapt_noise(self, ctx: StepContext, result: StepResult, C_I: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """``(Q_new, R_new)`` from the step's symbols ``ctx``, its ``result`` and ``C_I`` (eq 37)."""
+        """``(Q_new, R_new)`` from the step's symbols ``ctx``, its ``result`` and ``C_I`` (eq 37); the outputs
+        it declares are 0 until the window is full."""
         raise NotImplementedError
 
     def extra_state(self) -> dict:
@@ -120,8 +113,11 @@ class WindowedAdaptiveEKF(AdaptationRecord, EKF):
         ring_new = ca.if_else(push, shifted, ring)
         count_new = count + push
         C_I = ca.mtimes(ring_new, ring_new.T) / N                          # eq 37
+        declared = set(ctx.outputs)
         Q_new, R_new = self.adapt_noise(ctx, result, C_I)
         adapted = push * (count_new >= N)
+        for name in [n for n in ctx.outputs if n not in declared]:
+            ctx.outputs[name] = ca.if_else(adapted, ctx.outputs[name], ca.SX.zeros(ctx.outputs[name].shape))
         ctx.output("adapted", adapted)
         return {"Q": ca.if_else(adapted, Q_new, ctx.Q), "R": ca.if_else(adapted, R_new, ctx.R),
                 "ring": ring_new, "count": count_new}

@@ -1,11 +1,8 @@
-"""The base class of every filter: its public interface, and the defaults of the protocol.
+"""The base class of every filter, :class:`~estimators.base.KalmanBase`: its interface and the protocol's defaults.
 
-From a filter's hooks (:mod:`estimators.protocol`) one CasADi Function is built per model and
-configuration, the fused ``step``; compiled (``estimators._compiled``), it is bound to the
-filter's arrays (:meth:`KalmanBase.step`: one native call), folded over a record
-(:meth:`KalmanBase.run`, ``estimators._fold``), mapped over realisations
-(:class:`~estimators.batch.BatchFilter`) and exported as an FMU (``estimators.filter_fmu``).
-Missing channels, the gate and refused inputs are described in the manual's estimators page.
+The hooks (:mod:`estimators.protocol`) make one fused ``step`` Function, compiled and bound to the
+filter's arrays, folded over records, mapped over realisations and exported as an FMU; the
+manual's estimators page describes missing channels, the gate and refused inputs.
 """
 from __future__ import annotations
 
@@ -39,12 +36,15 @@ DROPPABLE = ("x_prior", "P_prior", "innov", "S", "K")
 KEEP = ("all", "estimates")
 
 
-class KalmanBase:
-    """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``.
+def _matrix(key: str, rows: str, cols: str, doc: str) -> property:
+    """A property: a copy of ``KalmanBase._now(key)`` as a matrix of the model's sizes ``rows``, ``cols``."""
+    return property(lambda self: matrix(self._now(key), getattr(self.system, rows), getattr(self.system, cols)).copy(),
+                    doc=doc)
 
-    The estimate and the last step's diagnostics are the properties below; a new filter
-    implements the hooks of :mod:`estimators.protocol` and registers itself with a class
-    keyword (``register="Name"``).
+
+class KalmanBase:
+    """Common interface: ``predict(u)``, ``update(y)``, ``step(u, y)``, ``run(us, ys)``; a new filter
+    implements the hooks of :mod:`estimators.protocol` and registers with ``register="Name"``.
 
     Parameters
     ----------
@@ -62,24 +62,18 @@ class KalmanBase:
         A NaN measurement channel is missing (default True); with False it is an error.
     backend : {"compiled", "vm"}
         Run the step as compiled native code (cached on disk, about 10x faster; needs a C
-        compiler, else falls back to "vm") or in CasADi's VM.
+        compiler, else falls back to "vm") or in CasADi's VM; the attribute is the one in use.
 
     Attributes
     ----------
-    backend : str
-        The backend in use.
-    k : int
-        Number of steps done.
     history : NoiseHistory
-        The diagonals of Q and R: the initial values, each :meth:`set_noise` and every
-        adaptation (:meth:`noise_history` gives a DataFrame).
+        The diagonals of Q and R: the initial values, each :meth:`set_noise` and every adaptation.
     """
 
     name = "base"
     #: Whether the fused step holds the whole filter (BatchFilter, native run, FMU use it).
     supports_batch = True
-    #: Whether Q and R are part of the state (adaptive filters) or fixed parameters of
-    #: the step (then they are not carried from step to step).
+    #: Whether Q and R are part of the state (adaptive filters), else fixed inputs of the step.
     adapts_noise = False
 
     def __init_subclass__(cls, register: str | None = None, aliases: tuple[str, ...] = (), **kwargs):
@@ -97,17 +91,15 @@ class KalmanBase:
                  "R": checks.covariance(R, p, "R").ravel(order="F")}
         self._start = (checks.vector(x0, n, "x0", ConfigurationError), checks.covariance(P0, n, "P0"))
         extra = self._extra_arrays()
-        params = list(self.step_parameters())
+        self._extra_names, self._params = list(extra), list(self.step_parameters())
         state = {"x": self._start[0], "P": self._start[1].ravel(order="F"), **(noise if self.adapts_noise else {}),
                  **extra}
         # fixed inputs of the step, shared with the bound step: changed in place (set_noise)
         self._fixed = {"gate": np.array([self.gate]), "nan_missing": np.array([float(self.nan_is_missing)]),
-                       **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in params}}
-        self._extra_names = list(extra)
-        self._params = params
+                       **({} if self.adapts_noise else noise), **{q.name: q.value.copy() for q in self._params}}
 
         def build():
-            raw = self.wrap_step(build_step(self, extra, params))
+            raw = self.wrap_step(build_step(self, extra, self._params))
             fn, used, lib = compile_with_fold(raw, backend)     # one library: the step and its fold
             return fn, used, raw, lib
 
@@ -212,26 +204,24 @@ class KalmanBase:
     def fmu_initial(self, p: Mapping[str, ca.SX]) -> dict[str, ca.SX]:
         """The initial state arrays and the fixed step inputs from the FMU parameters ``p`` (SX by name)."""
         Q, R = self.fmu_noise(p)
-        out = {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
-               "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing))}
-        out.update({k: ca.SX(ca.DM(v)) for k, v in self.extra_state().items()})
-        out.update({q.name: p[q.name] for q in self._params})
-        return out
+        return {"x": p["x0"], "P": ca.diag(p["P0"]), "Q": Q, "R": R,
+                "gate": ca.if_else(p["gate"] > 0, p["gate"], ca.inf), "nan_missing": ca.SX(float(self.nan_is_missing)),
+                **{k: ca.SX(ca.DM(v)) for k, v in self.extra_state().items()},
+                **{q.name: p[q.name] for q in self._params}}
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the flat (column-major) state arrays by name: ``x, P`` and any adaptive
         state (``Q, R``, ...); what :class:`~estimators.BatchFilter` starts from."""
-        return {k: v[self._rt.cur].copy() for k, v in self._rt.pairs.items()}
+        return {k: self._rt.now(k).copy() for k in self._rt.pairs}
 
     def parameter_arrays(self) -> dict[str, np.ndarray]:
         """Copies of the step's flat fixed inputs (gate, nan_missing, a fixed Q and R, step parameters)."""
         return {k: v.copy() for k, v in self._fixed.items()}
 
     def bind_summary(self, out: np.ndarray, covariance: str = "diagonal"):
-        """A call that writes, in one native call, the current estimate ``x`` (nx), the variances
-        ``diag P`` (nx), with ``covariance="full"`` the upper off-diagonal entries of P (row by
-        row, ``i < j``), and the last NIS into the contiguous float array ``out`` (bound once: a
-        co-simulation component's slice of the master's signals).
+        """A call writing, in one native call, the current ``x`` (nx), ``diag P`` (nx), with
+        ``covariance="full"`` the upper off-diagonal entries of P (row by row, ``i < j``), and the last
+        NIS into the contiguous float array ``out`` (bound once: a component's slice of the signals).
 
         Raises
         ------
@@ -271,31 +261,23 @@ class KalmanBase:
         return self._raw_step
 
     def _now(self, key: str) -> np.ndarray:
-        """The current state array ``key`` (or the fixed Q or R; shared)."""
-        return self._rt.now(key) if key in self._rt.pairs else self._fixed[key]
-
-    def _mat(self, key, rows, cols):
-        return matrix(self._now(key), rows, cols).copy()
+        """The current state array ``key``, else the fixed input (Q, R), else the output ``key`` (shared)."""
+        rt = self._rt
+        return rt.now(key) if key in rt.pairs else self._fixed[key] if key in self._fixed else rt.outputs[key]
 
     def _out(self, name: str) -> np.ndarray:
         return self._rt.outputs[name]
 
     x = property(lambda self: self._rt.now("x").copy(), doc="State estimate, shape (nx,).")
-    P = property(lambda self: self._mat("P", self.system.nx, self.system.nx),
-                 doc="State covariance, shape (nx, nx).")
-    Q = property(lambda self: self._mat("Q", self.system.nx, self.system.nx),
-                 doc="Process noise covariance, shape (nx, nx).")
-    R = property(lambda self: self._mat("R", self.system.ny, self.system.ny),
-                 doc="Measurement noise covariance, shape (ny, ny).")
+    P = _matrix("P", "nx", "nx", "State covariance, shape (nx, nx).")
+    Q = _matrix("Q", "nx", "nx", "Process noise covariance, shape (nx, nx).")
+    R = _matrix("R", "ny", "ny", "Measurement noise covariance, shape (ny, ny).")
     x_prior = property(lambda self: self._out("x_prior").copy(), doc="Prediction of the last step, (nx,).")
-    P_prior = property(lambda self: matrix(self._out("P_prior"), self.system.nx, self.system.nx).copy(),
-                       doc="Covariance of the prediction, (nx, nx).")
+    P_prior = _matrix("P_prior", "nx", "nx", "Covariance of the prediction, (nx, nx).")
     innovation = property(lambda self: self._out("innov").copy(),
                           doc="Last innovation ``y - h(x_prior)`` (seed 000 eq 26), (ny,).")
-    S = property(lambda self: matrix(self._out("S"), self.system.ny, self.system.ny).copy(),
-                 doc="Last innovation covariance, (ny, ny).")
-    K = property(lambda self: matrix(self._out("K"), self.system.nx, self.system.ny).copy(),
-                 doc="Last gain, (nx, ny).")
+    S = _matrix("S", "ny", "ny", "Last innovation covariance, (ny, ny).")
+    K = _matrix("K", "nx", "ny", "Last gain, (nx, ny).")
     nis = property(lambda self: float(self._out("nis")[0]), doc="Last normalised innovation squared.")
     accepted = property(lambda self: bool(self._out("accepted")[0]), doc="The gate passed the last measurement.")
 
@@ -308,9 +290,11 @@ class KalmanBase:
         self._start = (x, P)
         rt = self._rt
         values = {"x": x, "P": P.ravel(order="F"), **self._extra_arrays()}
-        for name in rt.pairs:
-            rt.set_state(name, values.get(name, rt.now(name).copy()))
-        rt.cur, self.k = 0, 0
+        for name, pair in rt.pairs.items():
+            value = values.get(name, rt.now(name).copy())
+            for a in pair:
+                a[:] = value
+        rt.cell[0], self.k = 0, 0
         self._record()
 
     def snapshot(self) -> dict:
@@ -319,7 +303,7 @@ class KalmanBase:
         rt = self._rt
         unique = {id(a): a for a in [*(a for pair in rt.pairs.values() for a in pair), *rt.outputs.values(),
                                      *rt.inputs.values(), *self._fixed.values(), rt.status]}
-        return {"arrays": [(a, a.copy()) for a in unique.values()], "cur": rt.cur, "k": self.k,
+        return {"arrays": [(a, a.copy()) for a in unique.values()], "cur": rt.cell[0], "k": self.k,
                 "history": len(self.history), "attributes": dict(self.__dict__)}
 
     def restore(self, snapshot: dict) -> None:
@@ -328,7 +312,7 @@ class KalmanBase:
             a[:] = saved
         self.__dict__.clear()
         self.__dict__.update(snapshot["attributes"])
-        self._rt.cur, self.k = snapshot["cur"], snapshot["k"]
+        self._rt.cell[0], self.k = snapshot["cur"], snapshot["k"]
         self.history.count[0] = snapshot["history"]
 
     def set_noise(self, Q=None, R=None) -> None:
@@ -385,13 +369,13 @@ class KalmanBase:
                 if mask is not None:
                     self._fill_mask(mask)
             rt = self._rt
-            cur = rt.cur
+            cur = rt.cell[0]
             rt.triggers[cur]()
             if rt.status[0]:
                 self._explain("step")
         finally:
             self._mask[:] = 1.0
-        rt.cur = cur ^ 1
+        rt.cell[0] = cur ^ 1
         self._count[0] += 1
         if self._after:
             self.after_step()
@@ -432,10 +416,9 @@ class KalmanBase:
                 self._explain("update")
         finally:
             self._mask[:] = 1.0
-        out = self._rt.outputs
-        out["x_prior"][:], out["P_prior"][:] = self._now("x"), self._now("P")
-        for dest, value in zip((self._now("x"), self._now("P"), *(out[n] for n in DIAGNOSTICS[2:])), res):
-            dest[:] = np.asarray(value).ravel(order="F")
+        self._out("x_prior")[:], self._out("P_prior")[:] = self._now("x"), self._now("P")
+        for key, value in zip(("x", "P", *DIAGNOSTICS[2:]), res):
+            self._now(key)[:] = np.asarray(value).ravel(order="F")
         return self.x
 
     def native_fold(self):
@@ -452,15 +435,15 @@ class KalmanBase:
         state, params : dict of str to ndarray
             The initial state arrays and the step's fixed inputs, shape (runs, nnz) each.
         us, ys, masks : ndarray
-            The records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny); contiguous.
+            The contiguous records, shapes (runs, N, nu), (runs, N, ny), (runs, N, ny).
         drop : collection of str
             Outputs not kept (their views are scratch rows).
 
         Returns
         -------
         (stored, views, last)
-            The outputs and the arrays the fold wrote (``NativeFold.outputs``, without the
-            extra state's history) and the state after the last step, (runs, nnz) by name.
+            ``NativeFold.outputs`` (without the extra state's history) and the state after the
+            last step, (runs, nnz) by name.
         """
         runs, N = ys.shape[:2]
         fold = self.native_fold()
@@ -489,12 +472,9 @@ class KalmanBase:
         if not np.isfinite(us).all():
             k = int(np.flatnonzero(~np.isfinite(us).all(axis=1))[0])
             raise InputError(f"{self.name}: us contains NaN or inf at index {k}")
-        if masks is None:
-            m = np.ones((N, ny))
-        else:
-            m = checks.float_array(masks, "masks")
-            if m.shape != (N, ny):
-                raise InputError(f"{self.name}: masks must have shape ({N}, {ny}), got {m.shape}")
+        m = np.ones((N, ny)) if masks is None else checks.float_array(masks, "masks")
+        if m.shape != (N, ny):
+            raise InputError(f"{self.name}: masks must have shape ({N}, {ny}), got {m.shape}")
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (us, ys, m))
 
     def _check_run_fits(self, ys, keep: str) -> None:
@@ -526,14 +506,14 @@ class KalmanBase:
             the log-likelihood includes it.
         keep : {"all", "estimates"}
             Keep every diagnostic (default; what :func:`~estimators.rts_smooth` needs), or only
-            ``x``, ``P``, the NIS, the acceptance and the log-likelihood (192 instead of 464 bytes
-            a step for the cart-pole EKF); the other attributes of the result are then None.
+            ``x``, ``P``, the NIS, the acceptance and the log-likelihood (the other attributes
+            of the result are then None).
 
         Returns
         -------
         FilterRun
-            Every step's estimate, covariance and diagnostics; the filter is left at the
-            last step, as after N calls of :meth:`step` (equal to 1e-12).
+            Every step's results; the filter is left at the last step, as after N calls of
+            :meth:`step` (equal to 1e-12).
 
         Raises
         ------
@@ -618,14 +598,12 @@ class KalmanBase:
 
     def _run_by_steps(self, us, ys, masks) -> FilterRun:
         """``run`` as a loop of :meth:`step` (a filter whose adaptation is not all in the fused step)."""
-        def state() -> dict:
-            return {"x_new": self.x, "P_new": self.P, "Q_new": self.Q, "R_new": self.R}
-
-        rec: dict = {**{k: [v.ravel(order="F")] for k, v in state().items()}, **{k: [] for k in DIAGNOSTICS}}
+        arrays = {"x_new": "x", "P_new": "P", "Q_new": "Q", "R_new": "R", **{name: name for name in DIAGNOSTICS}}
+        rec: dict = {key: [self._now(name).copy()] if key.endswith("_new") else [] for key, name in arrays.items()}
         for k in range(len(ys)):
             self.step(us[k], ys[k], masks[k] != 0)
-            for key, val in (*state().items(), *((name, self._out(name)) for name in DIAGNOSTICS)):
-                rec[key].append(np.array(val, float).ravel(order="F"))
+            for key, name in arrays.items():
+                rec[key].append(self._now(name).copy())
         return self._make_run({k: np.array(v) for k, v in rec.items()}, us, ys, masks)
 
 

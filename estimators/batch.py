@@ -1,9 +1,6 @@
-"""Run many realisations of one filter in lockstep: one native call per step for all, or one
-native call for whole trajectories of all.
+"""Run many realisations of one filter in lockstep: one native call per step for all, or one for whole records.
 
-:meth:`BatchFilter.step` maps the filter's fused step over the realisations,
-:meth:`BatchFilter.run` folds it over their records (``estimators._fold``): a Monte Carlo
-campaign pays the Python overhead once per step, or once, not once per realisation.
+A Monte Carlo campaign pays the Python overhead once per step, or once, not once per realisation.
 """
 from __future__ import annotations
 
@@ -25,21 +22,12 @@ ON_FAILURE = ("raise", "mark")
 
 
 class FoldedStep(StepArrays):
-    """One step of ``runs`` realisations through a filter's native fold (compiled: no code per
-    number of runs), with the interface of :class:`~estimators.runtime.BoundStep`.
-
-    Parameters
-    ----------
-    fold : NativeFold
-    runs : int
-    state, shared : mapping of str to ndarray
-        As :class:`~estimators.runtime.StepArrays`, flat run-major.
-    """
+    """One step of ``runs`` realisations through a filter's native ``fold`` (compiled: no code per
+    number of runs) with the interface of :class:`~estimators.runtime.BoundStep`; ``state`` and
+    ``shared`` as :class:`~estimators.runtime.StepArrays`, flat run-major."""
 
     def __init__(self, fold, runs: int, state, shared):
-        step = fold.step
-        super().__init__(fold.names_in, fold.names_out,
-                         lambda k, out: runs * (step.nnz_out(k) if out else step.nnz_in(k)), state, shared)
+        super().__init__(fold.step, state, shared, runs)
         args = {k: v.reshape(runs, -1) for k, v in self.inputs.items()}
 
         def bound(c: int):
@@ -93,8 +81,7 @@ class BatchFilter:
         s = template.system
         self.nx, self.nu, self.ny = s.nx, s.nu, s.ny
         step_fn = template.step_function()
-        per_run = 8 * (sum(step_fn.nnz_in(i) for i in range(step_fn.n_in()))
-                       + sum(step_fn.nnz_out(i) for i in range(step_fn.n_out())) + step_fn.nnz_out("x_new"))
+        per_run = 8 * (step_fn.nnz_in() + step_fn.nnz_out() + step_fn.nnz_out("x_new"))
         check_fits(self.n * per_run, f"n_runs = {self.n} realisations of {template.name} ({per_run} bytes each)",
                    "use fewer realisations per batch")
         state = {k: np.tile(v, self.n) for k, v in template.state_arrays().items()}
@@ -152,10 +139,10 @@ class BatchFilter:
         rt.trigger()
         bad = self._failures(rt.status, lambda: f"step {self.k}")
         if bad.any():
-            for pair in rt.pairs.values():     # failed runs keep their previous state
-                pair[1 - rt.cur].reshape(self.n, -1)[bad] = pair[rt.cur].reshape(self.n, -1)[bad]
+            for name, pair in rt.pairs.items():     # failed runs keep their previous state
+                pair[1 - rt.cell[0]].reshape(self.n, -1)[bad] = rt.now(name).reshape(self.n, -1)[bad]
             self.failed |= bad
-        rt.commit()
+        rt.cell[0] ^= 1
         self.k += 1
         return self.x
 

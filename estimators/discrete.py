@@ -1,6 +1,6 @@
-"""Discrete-time models that the filters run on, as CasADi expressions with numbers bound:
-:class:`DiscreteModel`, built from a plant by :func:`discretize` (the process-model protocol
-it implements is in the guide's page on writing a filter, docs/guide/writing-a-filter.md).
+"""Discrete-time models that the filters run on, :class:`~estimators.discrete.DiscreteModel` (CasADi expressions).
+
+Its process-model protocol is in the guide's page on writing a filter.
 """
 from __future__ import annotations
 
@@ -136,13 +136,8 @@ class DiscreteModel:
 
 
 def checked_model(system) -> DiscreteModel:
-    """``system`` if it is a :class:`DiscreteModel`, else TypeMismatchError saying how to make one.
-
-    Parameters
-    ----------
-    system
-        What was given as the model.
-    """
+    """``system`` (what was given as the model) if it is a :class:`DiscreteModel`, else TypeMismatchError saying how
+    to make one."""
     if not isinstance(system, DiscreteModel):
         raise TypeMismatchError("system must be a DiscreteModel (build one with estimators.discretize, or "
                                 f"estimators.FMUProcessModel from an FMU), got {type(system).__name__}")

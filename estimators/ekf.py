@@ -11,13 +11,10 @@ __all__ = ["EKF"]
 
 
 class EKF(KalmanBase, register="EKF"):
-    """Extended Kalman filter.
+    """Extended Kalman filter with the model's exact Jacobians (:meth:`~estimators.DiscreteModel.transition`).
 
-    Prediction ``x^- = f(x, u)``, ``P^- = F P F^T + Q`` with ``F = df/dx`` exact (the
-    model's :meth:`~estimators.DiscreteModel.transition`); update with ``H = dh/dx`` at
-    ``x^-`` over the valid measurement channels, gain by a linear solve and the Joseph form.
-    Parameters ``system, x0, P0, Q, R, gate, nan_is_missing, backend`` and the attributes
-    are those of :class:`~estimators.base.KalmanBase`.
+    Parameters ``system, x0, P0, Q, R, gate, nan_is_missing, backend`` and the attributes are those
+    of :class:`~estimators.base.KalmanBase`.
     """
 
     name = "EKF"
@@ -28,7 +25,8 @@ class EKF(KalmanBase, register="EKF"):
         return xp, symmetric(ca.mtimes([F, ctx.P, F.T]) + ctx.Q)
 
     def update_expr(self, ctx: StepContext, x_prior, P_prior) -> Update:
-        """Gain, Joseph-form update of the valid channels (seed 002 eqs 12-16)."""
+        """``H = dh/dx`` at ``x^-``; gain by a linear solve, Joseph-form update of the valid channels
+        (seed 002 eqs 12-16)."""
         yp, H = self.system.measurement(x_prior)
         S, innov, M = mask_measurement(ctx.valid, ca.mtimes([H, P_prior, H.T]) + ctx.R, ctx.y - yp)
         Hm, Rm = ca.mtimes(M, H), ca.mtimes([M, ctx.R, M])

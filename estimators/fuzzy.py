@@ -1,32 +1,19 @@
 """Mamdani type-1 fuzzy system of seed 000's MF-IAE (eqs 38-40, Table 2), in CasADi.
 
-Inputs: the theoretical innovation covariance C_T (eq 39) and the measured one C_I
-(eq 37), both normalised by their mean ``s = (C_T + C_I)/2``, so each lies in [0, 2]
-and the system is scale-free. Input sets NP ("small"), ZE ("zero mismatch", the
-middle), GA ("large"): Gaussians centred at 0, 1 and 2. Output: the normalised minimum
-adjustment ``m`` on [-1, 1] (the sign and size of ``MAdj = C_T - C_I``, eq 38), sets DI
-(decrease), MA (maintain), AU (increase): sigmoids, MA the product of two. Rules (Table
-2, rows C_T, columns C_I)::
-
-            C_I: NP  ZE  GA
-    C_T NP       MA  DI  DI
-    C_T ZE       AU  MA  DI
-    C_T GA       AU  AU  MA
-
-Inference: AND = min, implication = min (clipping), aggregation = max, defuzzification =
-centroid of the piecewise-linear aggregated membership on an ``n_out``-point grid. The
-same expression evaluates numbers (``__call__``) and builds the filter's CasADi graph.
+From the theoretical and measured innovation covariances C_T (eq 39) and C_I (eq 37), the
+normalised adjustment ``m`` on [-1, 1]; the manual's estimators page describes its sets and inference.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import reduce
 
 import casadi as ca
 import numpy as np
 
 INPUT_SETS = ("NP", "ZE", "GA")
 OUTPUT_SETS = ("DI", "MA", "AU")
-#: Table 2 of seed 000, ``RULES[C_T set][C_I set] -> output set``.
+#: Table 2 of seed 000 (rows C_T, columns C_I), ``RULES[C_T set][C_I set] -> output set``.
 RULES = {"NP": {"NP": "MA", "ZE": "DI", "GA": "DI"},
          "ZE": {"NP": "AU", "ZE": "MA", "GA": "DI"},
          "GA": {"NP": "AU", "ZE": "AU", "GA": "MA"}}
@@ -82,23 +69,13 @@ class MamdaniFuzzy:
 
     def expression(self, c_t, c_i):
         """Normalised adjustment ``m`` in [-1, 1] for covariances ``c_t``, ``c_i`` (SX or float)."""
-        s = 0.5 * (c_t + c_i)
-        s = ca.fmax(s, 1e-300)
-        u_t, u_i = c_t / s, c_i / s
-        mu = lambda v, c: ca.exp(-0.5 * ((v - c) / self.in_sigma) ** 2)   # noqa: E731
-        mt = {n: mu(u_t, c) for n, c in zip(INPUT_SETS, self.in_centers)}
-        mi = {n: mu(u_i, c) for n, c in zip(INPUT_SETS, self.in_centers)}
-        strength = {o: 0 for o in OUTPUT_SETS}
-        for a in INPUT_SETS:
-            for b in INPUT_SETS:
-                o = RULES[a][b]
-                w = ca.fmin(mt[a], mi[b])
-                strength[o] = w if isinstance(strength[o], int) else ca.fmax(strength[o], w)
+        s = ca.fmax(0.5 * (c_t + c_i), 1e-300)
+        mt, mi = ({n: ca.exp(-0.5 * ((v - c) / self.in_sigma) ** 2) for n, c in zip(INPUT_SETS, self.in_centers)}
+                  for v in (c_t / s, c_i / s))
+        strength = {o: reduce(ca.fmax, [ca.fmin(mt[a], mi[b]) for a in INPUT_SETS for b in INPUT_SETS
+                                        if RULES[a][b] == o]) for o in OUTPUT_SETS}
         outs = self.output_memberships()
-        agg = None
-        for o in OUTPUT_SETS:
-            clipped = ca.fmin(strength[o], ca.DM(outs[o]))
-            agg = clipped if agg is None else ca.fmax(agg, clipped)
+        agg = reduce(ca.fmax, [ca.fmin(strength[o], ca.DM(outs[o])) for o in OUTPUT_SETS])
         # centroid of the piecewise-linear membership: segment areas and first moments
         x = self.grid
         h = x[1] - x[0]

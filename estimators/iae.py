@@ -78,14 +78,10 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
         q0 = np.diag(checks.covariance(Q, system.nx, "Q"))
         r0 = np.diag(checks.covariance(R, system.ny, "R"))
         self.adapt, self.form = tuple(sorted(adapt)), form
+        self.supports_batch = form != "full"          # the full form's projection runs in numpy
         self.q_bounds = bounds_around(q0, q_bounds, "q_bounds")
         self.r_bounds = bounds_around(r0, r_bounds, "r_bounds")
         super().__init__(system, x0, P0, Q, R, window, gate, nan_is_missing, backend)
-
-    @property
-    def supports_batch(self):
-        """False for ``form="full"`` (its projection runs in numpy)."""
-        return self.form != "full"
 
     def records_only(self) -> bool:
         """Whether :meth:`on_adapted` only records Q and R (not with ``form="full"``)."""
@@ -97,7 +93,6 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
         return (self.window, self.adapt, self.form)
 
     def step_parameters(self):
-        """The bounds of the adapted variances (``q_bounds``, ``r_bounds``)."""
         return bound_parameters(self.q_bounds, self.r_bounds)
 
     def adapt_noise(self, ctx, result, C_I):
@@ -109,8 +104,7 @@ class IAE(WindowedAdaptiveEKF, register="IAE"):
         if "R" in self.adapt:
             R = _project_sym(C_I - (result.S - ctx.R), rb[0], rb[1], self.form)   # eq 35
         if "Q" in self.adapt:
-            K = result.K
-            Q = _project_sym(ca.mtimes([K, C_I, K.T]), qb[0], qb[1], self.form)   # eq 36
+            Q = _project_sym(ca.mtimes([result.K, C_I, result.K.T]), qb[0], qb[1], self.form)   # eq 36
         return Q, R
 
     def on_adapted(self):

@@ -1,6 +1,4 @@
-"""Symbolic linear algebra of the filters: the CasADi SX building blocks of every fused step
-(symmetric products, Cholesky solves, the gated Joseph-form update, the masked measurement,
-finiteness tests; none inverts a matrix), and the Gaussian log-likelihood of a run.
+"""Symbolic linear algebra of the filters (CasADi SX; none inverts a matrix), and the Gaussian log-likelihood of a run.
 """
 from __future__ import annotations
 
@@ -22,12 +20,7 @@ OK, BAD_INPUT, BAD_RESULT = 0, 1, 2
 def symmetric(M: ca.SX) -> ca.SX:
     """The symmetric matrix with ``M``'s upper triangle: exactly symmetric, and the generated
     code computes only that half (16 % fewer operations in the cart-pole EKF step)."""
-    n = M.shape[0]
-    out = ca.SX(n, n)
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = M[min(i, j), max(i, j)]
-    return out
+    return ca.triu(M) + ca.triu(M, False).T
 
 
 def cholesky_lower(P: ca.SX) -> ca.SX:
@@ -80,17 +73,10 @@ def gated_gain(S: ca.SX, B: ca.SX, innov: ca.SX, gate) -> tuple[ca.SX, ca.SX, ca
 
 
 def mask_measurement(valid: ca.SX, S_raw: ca.SX, innov_raw: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """The update of the valid channels only, at fixed size: ``(S, innov, M)``, ``S_raw`` with
-    the rows and columns of missing channels those of the identity, ``innov_raw`` zero in them,
-    and ``M = diag(valid)``.
-
-    Parameters
-    ----------
-    valid : SX, shape (ny, 1)
-        1 for a channel used, 0 for a missing one.
-    S_raw, innov_raw : SX, shapes (ny, ny), (ny, 1)
-        The innovation covariance and innovation of all channels.
-    """
+    """The update of the ``valid`` channels (SX (ny, 1): 1 used, 0 missing) at fixed size:
+    ``(S, innov, M)``, the innovation covariance ``S_raw`` (ny, ny) with the rows and columns of
+    missing channels those of the identity, the innovation ``innov_raw`` (ny, 1) zero in them, and
+    ``M = diag(valid)``."""
     M = ca.diag(valid)
     S = symmetric(ca.mtimes([M, S_raw, M]) + ca.diag(1 - valid))
     return S, valid * innov_raw, M
@@ -114,14 +100,9 @@ def joseph_update(xp: ca.SX, Pp: ca.SX, innov: ca.SX, H: ca.SX, S: ca.SX, R: ca.
 
 
 def finite_flag(expr_list) -> ca.SX:
-    """1 if every entry is finite, else 0. Each entry is tested on its own (``|e| < inf``; CasADi
-    simplifies ``e - e`` to 0) and the results counted, so nothing can overflow (a sum of the
-    entries would, for finite values such as 1.5e308).
-
-    Parameters
-    ----------
-    expr_list : sequence of SX
-    """
+    """1 if every entry of the SX sequence ``expr_list`` is finite, else 0: each entry tested on its
+    own (``|e| < inf``; CasADi simplifies ``e - e`` to 0) and the results counted, so nothing can
+    overflow (a sum of the entries would, for finite values such as 1.5e308)."""
     count = sum(ca.sum1(ca.vec(ca.fabs(e) < ca.inf)) for e in expr_list)
     return count == sum(e.numel() for e in expr_list)
 
@@ -146,12 +127,7 @@ def log_likelihood(nis, logdet_S, n_used, accepted) -> float:
 
 
 def upper_entries(M: ca.SX) -> ca.SX:
-    """The upper-triangular entries of a square matrix, as a column.
-
-    Parameters
-    ----------
-    M : SX, shape (n, n)
-    """
+    """The upper-triangular entries of the square SX ``M`` (n, n), column by column, as a column."""
     n = M.shape[0]
     return ca.vertcat(*[M[i, j] for j in range(n) for i in range(j + 1)])
 

@@ -93,7 +93,6 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
         return (self.window, self.fuzzy, self.q_mapping, self.per_channel)
 
     def step_parameters(self):
-        """The gains (``gain_q``, ``gain_r``) and the bounds of the adapted variances."""
         return [Parameter("gains", (self.gain_q, self.gain_r), "unit",
                           ("step size of sigma_q^2 (eq 41), in (0, 1]", "step size of sigma_r^2 (eq 42), in (0, 1]"),
                           ("gain_q", "gain_r")),
@@ -129,20 +128,11 @@ class MFIAE(WindowedAdaptiveEKF, register="MFIAE", aliases=("MF-IAE",)):
             madj_q = ca.sum1(madj) / ny                         # eq 41 as printed
         else:
             madj_q = ca.trace(ca.mtimes([K, ca.diag(madj), K.T])) / nx
-        p = ctx.params
-        lo_q, hi_q = p["q_bounds"][0], p["q_bounds"][1]
-        lo_r, hi_r = p["r_bounds"][0], p["r_bounds"][1]
-        g_q, g_r = p["gains"][0], p["gains"][1]
-        q_new = ca.fmin(ca.fmax(ctx.Q[0, 0] - g_q * madj_q, lo_q), hi_q)
-        r_new = ca.fmin(ca.fmax(ca.diag(ctx.R) - g_r * madj, lo_r), hi_r)
+        qb, rb, gains = ctx.params["q_bounds"], ctx.params["r_bounds"], ctx.params["gains"]
+        q_new = ca.fmin(ca.fmax(ctx.Q[0, 0] - gains[0] * madj_q, qb[0]), qb[1])
+        r_new = ca.fmin(ca.fmax(ca.diag(ctx.R) - gains[1] * madj, rb[0]), rb[1])
         ctx.output("m", m)
         return q_new * ca.SX.eye(nx), ca.diag(r_new)            # eqs 41, 42
-
-    def adapt_expr(self, ctx, result):
-        """The windowed adaptation; ``m`` is 0 until the window is full."""
-        changes = super().adapt_expr(ctx, result)
-        ctx.outputs["m"] = ca.if_else(ctx.outputs["adapted"], ctx.outputs["m"], ca.SX.zeros(self.system.ny))
-        return changes
 
     m = property(lambda self: self._out("m").copy(),
                  doc="The last normalised fuzzy adjustment per channel (0 before the window is full), (ny,).")

@@ -1,8 +1,6 @@
-"""The filter protocol: what a filter declares, the hooks it implements, and how they become one
-compiled step.
+"""The filter protocol: what a filter declares and how :func:`~estimators.protocol.build_step` makes its hooks one step.
 
-The hooks and declarations are documented in the manual's page "Writing a filter";
-:func:`build_step` makes them one fused step Function.
+The hooks and declarations are documented in the manual's page "Writing a filter".
 """
 from __future__ import annotations
 
@@ -24,8 +22,7 @@ __all__ = ["DIAGNOSTICS", "STEP_INPUTS", "Parameter", "StepContext", "StepResult
 
 #: Outputs of every fused step after the new state, in order.
 DIAGNOSTICS = ("x_prior", "P_prior", "innov", "S", "K", "nis", "accepted", "logdet_S")
-#: The step's inputs after the state arrays (then Q, R of a non-adaptive filter, then the
-#: step parameters).
+#: The step's inputs after the state arrays (then Q, R of a non-adaptive filter, the step parameters).
 STEP_INPUTS = ("u", "y", "mask", "gate", "nan_missing")
 
 
@@ -155,8 +152,7 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     Inputs, in order: the state arrays (``x``, ``P``, ``Q`` and ``R`` if the filter adapts
     them, then the extra state in ``extra_state`` order), :data:`STEP_INPUTS`, ``Q`` and ``R``
     of a non-adaptive filter, the step parameters ``params``. Outputs: ``<state>_new`` for each
-    state array, :data:`DIAGNOSTICS`, the extra outputs and ``status``
-    (:func:`~estimators.linalg.status_flag`).
+    state array, :data:`DIAGNOSTICS`, the extra outputs and ``status``.
     """
     s, sym = filt.system, ca.SX.sym
     n, m, p = s.nx, s.nu, s.ny
@@ -180,12 +176,10 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     new.update(changes)
     inputs = {**state, "u": u, "y": y, "mask": mask, "gate": gate, "nan_missing": nan_missing,
               **({} if filt.adapts_noise else {"Q": Q, "R": R}), **psym}
-    diag = dict(zip(DIAGNOSTICS, (xp, Pp, upd.innovation, upd.S, upd.K, upd.nis, upd.accepted, result.logdet_S)))
     checked = [new["x"]] + [upper_entries(symmetric(new[k])) for k in ("P", "Q", "R") if k in new]
-    status = status_flag([u, y_used], checked)
-    d = ca.densify
-    outs = ([d(ca.reshape(new[k], state[k].shape)) for k in state] + [d(diag[k]) for k in DIAGNOSTICS]
-            + [d(v) for v in ctx.outputs.values()] + [status])
+    diagnostics = [v for k, v in result._asdict().items() if k not in ("x", "P")]     # DIAGNOSTICS, in order
+    outs = ([ca.densify(ca.reshape(new[k], state[k].shape)) for k in state]
+            + [ca.densify(v) for v in (*diagnostics, *ctx.outputs.values())] + [status_flag([u, y_used], checked)])
     return ca.Function("step", list(inputs.values()), outs, list(inputs),
                        [f"{k}_new" for k in state] + list(DIAGNOSTICS) + list(ctx.outputs) + ["status"], CSE)
 
@@ -193,6 +187,5 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
 def renamed(fn: ca.Function, name: str) -> ca.Function:
     """``fn`` (SX or MX) under another ``name`` (generated C code calls it by that name)."""
     sym = ca.SX if fn.is_a("SXFunction") else ca.MX
-    args = [sym.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
-    return ca.Function(name, args, fn.call(args), [fn.name_in(i) for i in range(fn.n_in())],
-                       [fn.name_out(i) for i in range(fn.n_out())])
+    args = [sym.sym(n, fn.sparsity_in(i)) for i, n in enumerate(fn.name_in())]
+    return ca.Function(name, args, fn.call(args), fn.name_in(), fn.name_out())

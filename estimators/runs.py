@@ -1,7 +1,4 @@
-"""The results of the filters' whole-record operations, as plain data with their names attached.
-
-:class:`FilterRun`, :class:`BatchRun`, :class:`Smoothed`, :class:`EMResult`; and
-:class:`NoiseHistory`, a filter's growing record of its Q and R.
+"""The results of the filters' whole-record operations as plain data with their names, and a record of Q and R.
 """
 from __future__ import annotations
 
@@ -163,7 +160,7 @@ class EMResult:
 
 
 class NoiseHistory:
-    """Rows ``(k, diag Q, diag R)``; append costs one array write.
+    """Rows ``(k, diag Q, diag R)``; appending one costs a few array writes.
 
     Parameters
     ----------
@@ -183,24 +180,16 @@ class NoiseHistory:
         self.rows = np.empty((capacity, 1 + nx + ny))
         self.count = np.zeros(1, dtype=np.int64)
 
-    def append(self, k: int, qr_diag) -> None:
-        """Add the row ``k, qr_diag`` where ``qr_diag = [diag Q, diag R]`` (nx + ny)."""
-        self._row(k)[1:] = qr_diag
-
     def append_flat(self, k: int, Q: np.ndarray, R: np.ndarray) -> None:
         """Add the row of step ``k`` from the flat (column-major) ``Q`` (nx*nx) and ``R`` (ny*ny)."""
-        row = self._row(k)
-        row[1:1 + self.nx] = Q[:: self.nx + 1]
-        row[1 + self.nx:] = R[:: self.ny + 1]
-
-    def _row(self, k: int) -> np.ndarray:
         n = len(self)
         if n == len(self.rows):
             self.rows = np.concatenate([self.rows, np.empty_like(self.rows)])
         row = self.rows[n]
         row[0] = k
+        row[1:1 + self.nx] = Q[:: self.nx + 1]
+        row[1 + self.nx:] = R[:: self.ny + 1]
         self.count[0] = n + 1
-        return row
 
     def __len__(self):
         return int(self.count[0])

@@ -1,9 +1,4 @@
-"""The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and
-the errors of a failed step.
-
-:class:`BufferedFunction` and :class:`BoundStep` bind a step once (evaluating it is one native
-call), :class:`VectorInput` and :func:`lean_step` convert a user's vectors, and
-:func:`explain_status` raises the error of a failed step.
+"""The filters' runtime: a compiled step bound to numpy buffers, fast input conversion, and the errors of a failed step.
 """
 from __future__ import annotations
 
@@ -31,20 +26,17 @@ class BufferedFunction:
 
     def __init__(self, fn: ca.Function, bind_args: dict[int, np.ndarray] | None = None,
                  bind_res: dict[int, np.ndarray] | None = None):
-        sides = (("input", fn.n_in(), fn.sparsity_in, fn.name_in), ("output", fn.n_out(), fn.sparsity_out, fn.name_out))
-        for kind, count, sparsity, name in sides:        # every side dense before anything is bound
-            sparse = [name(i) for i in range(count) if not sparsity(i).is_dense()]
-            if sparse:
-                raise ValueError(f"{fn.name()}: {kind} {sparse[0]} must be dense")
         self.fn = fn
         self.buffer, self.trigger = fn.buffer()
-        self.args = self._bind(*sides[0], bind_args, self.buffer.set_arg)
-        self.res = self._bind(*sides[1], bind_res, self.buffer.set_res)
+        self.args = self._bind("input", fn.n_in(), fn.sparsity_in, fn.name_in, bind_args, self.buffer.set_arg)
+        self.res = self._bind("output", fn.n_out(), fn.sparsity_out, fn.name_out, bind_res, self.buffer.set_res)
 
     def _bind(self, kind: str, count: int, sparsity, name, bound, setter) -> list[np.ndarray]:
         """The arrays of the inputs (or outputs), the ``bound`` ones shared, set in the buffer."""
         arrays = []
         for i in range(count):
+            if not sparsity(i).is_dense():
+                raise ValueError(f"{self.fn.name()}: {kind} {name(i)} must be dense")
             nnz = sparsity(i).nnz()
             a = (bound or {}).get(i, np.zeros(nnz))
             if a.shape != (nnz,) or a.dtype != np.float64 or not a.flags.c_contiguous:
@@ -55,98 +47,68 @@ class BufferedFunction:
 
 
 def matrix(flat: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """2-D view (column-major, shared memory) of a flat CasADi matrix array.
-
-    Parameters
-    ----------
-    flat : ndarray
-    rows, cols : int
-    """
+    """2-D view (column-major, shared memory) of the flat CasADi matrix array ``flat``, shape (``rows``, ``cols``)."""
     return flat.reshape((rows, cols), order="F")
 
 
 class StepArrays:
     """The flat arrays a step reads and writes: the state in two copies (``pairs``; the step
-    reads the current one and writes the other, :meth:`commit` makes that current, so a
-    failed step leaves the state as it was), the other ``inputs`` and the ``outputs``.
-
-    Parameters
-    ----------
-    names_in, names_out : sequence of str
-        The step's input and output names; an input ``s`` with an output ``s_new`` is state.
-    size : callable
-        ``size(name, output) -> int``: the entries of input (``output`` False) or output ``name``.
-    state : mapping of str to ndarray
-        Initial values of the state inputs (flat, column-major), copied.
-    shared : mapping of str to ndarray
-        Arrays bound as they are to inputs of these names (the owner changes them in place).
-    """
-
-    def __init__(self, names_in, names_out, size: Callable[[str, bool], int], state: Mapping[str, np.ndarray],
-                 shared: Mapping[str, np.ndarray]):
-        self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in names_in if k in state}
-        self.inputs = {k: (shared[k] if k in shared else np.zeros(size(k, False))) for k in names_in
-                       if k not in self.pairs}
-        self.outputs = {n: np.zeros(size(n, True)) for n in names_out if not n.endswith("_new")}
-        self.status = self.outputs["status"]
-        #: which copy of the state is current, in a cell the lean step shares
-        self.cell = [0]
-
-    @property
-    def cur(self) -> int:
-        """Which copy of the state is current (0 or 1)."""
-        return self.cell[0]
-
-    @cur.setter
-    def cur(self, value: int) -> None:
-        self.cell[0] = value
-
-    def now(self, name: str) -> np.ndarray:
-        """The current copy of state array ``name`` (a view: writing it changes the state)."""
-        return self.pairs[name][self.cell[0]]
-
-    def commit(self) -> None:
-        """Make the state the last evaluation wrote the current one."""
-        self.cell[0] ^= 1
-
-    def set_state(self, name: str, value) -> None:
-        """Set both copies of state array ``name``."""
-        for a in self.pairs[name]:
-            a[:] = value
-
-
-class BoundStep(StepArrays):
-    """A step Function bound to the arrays of :class:`StepArrays`.
+    reads the current one, ``pairs[name][cell[0]]``, and writes the other, made current after a
+    successful step: a failed step leaves the state as it was), the other ``inputs`` and the ``outputs``.
 
     Parameters
     ----------
     fn : casadi.Function
         The step: an input ``s`` with an output ``s_new`` is state.
-    state, shared : mapping of str to ndarray
-        As :class:`StepArrays`.
+    state : mapping of str to ndarray
+        Initial values of the state inputs (flat, column-major), copied.
+    shared : mapping of str to ndarray
+        Arrays bound as they are to inputs of these names (the owner changes them in place).
+    runs : int
+        Realisations side by side (run-major) in every array.
     """
 
+    def __init__(self, fn: ca.Function, state: Mapping[str, np.ndarray], shared: Mapping[str, np.ndarray],
+                 runs: int = 1):
+        self.pairs = {k: (np.array(state[k], float), np.array(state[k], float)) for k in fn.name_in() if k in state}
+        self.inputs = {k: (shared[k] if k in shared else np.zeros(runs * fn.nnz_in(k))) for k in fn.name_in()
+                       if k not in self.pairs}
+        self.outputs = {n: np.zeros(runs * fn.nnz_out(n)) for n in fn.name_out() if not n.endswith("_new")}
+        self.status = self.outputs["status"]
+        #: which copy of the state is current (0 or 1), in a cell the lean step shares
+        self.cell = [0]
+
+    def now(self, name: str) -> np.ndarray:
+        """The current copy of state array ``name`` (a view: writing it changes the state)."""
+        return self.pairs[name][self.cell[0]]
+
+
+class BoundStep(StepArrays):
+    """A step Function ``fn`` bound to the arrays of :class:`StepArrays` (parameters ``fn``, ``state``,
+    ``shared`` as there)."""
+
     def __init__(self, fn: ca.Function, state: Mapping[str, np.ndarray], shared: Mapping[str, np.ndarray]):
-        names_in = [fn.name_in(i) for i in range(fn.n_in())]
-        names_out = [fn.name_out(j) for j in range(fn.n_out())]
-        super().__init__(names_in, names_out, lambda k, out: fn.nnz_out(k) if out else fn.nnz_in(k), state, shared)
-        self._steps = tuple(self._bind(fn, names_in, names_out, i) for i in (0, 1))
+        super().__init__(fn, state, shared)
+        self._steps = tuple(self._bind(fn, i) for i in (0, 1))
         #: the two evaluations (from copy 0, from copy 1), for callers that inline trigger()
         self.triggers = tuple(s.trigger for s in self._steps)
 
-    def _bind(self, fn: ca.Function, names_in, names_out, i: int) -> BufferedFunction:
-        args = {j: self.pairs[n][i] if n in self.pairs else self.inputs[n] for j, n in enumerate(names_in)}
-        res = {j: self.pairs[n[:-4]][1 - i] if n.endswith("_new") else self.outputs[n] for j, n in enumerate(names_out)}
+    def _bind(self, fn: ca.Function, i: int) -> BufferedFunction:
+        args = {j: self.pairs[n][i] if n in self.pairs else self.inputs[n] for j, n in enumerate(fn.name_in())}
+        res = {j: self.pairs[n[:-4]][1 - i] if n.endswith("_new") else self.outputs[n]
+               for j, n in enumerate(fn.name_out())}
         return BufferedFunction(fn, args, res)
 
     def trigger(self) -> float:
-        """Evaluate the step into the other state copy (made current by :meth:`commit`); the status."""
-        self._steps[self.cur].trigger()
+        """Evaluate the step into the other state copy; the status."""
+        self._steps[self.cell[0]].trigger()
         return self.status[0]
 
 
 class VectorInput:
-    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into a buffer.
+    """Writes a vector of ``n`` numbers (a bare number if ``n == 1``) into a buffer: a length
+    check and one assignment per entry, else :meth:`checked` names the problem (NaN and inf are
+    left to the compiled step's status).
 
     Parameters
     ----------
@@ -154,12 +116,6 @@ class VectorInput:
         The float buffer (length ``n``).
     owner, what : str
         For messages: the filter's name and the input's (``"u"``, ``"y"``, ``"mask"``).
-
-    Notes
-    -----
-    The good path costs a length check and one assignment per entry (a list, a tuple or a
-    float array of the right length); anything else goes through :meth:`checked`, which names
-    the problem. NaN and inf are left to the compiled step's status (:func:`explain_status`).
     """
 
     def __init__(self, buffer: np.ndarray, owner: str, what: str):
@@ -198,8 +154,7 @@ _SCALARS = frozenset({float, np.float64})
 
 def _unpack(name: str, entries: list[str]) -> list[str]:
     """Lines of the lean step unpacking ``name`` into ``entries``; a one-element input also
-    takes a bare float (``ekf.step(U[k], Y[k])`` with a 1-D ``U``) at the cost of a list; a
-    model without inputs takes an empty sequence."""
+    takes a bare float (``ekf.step(U[k], Y[k])`` with a 1-D ``U``)."""
     if not entries:
         return [f"        if len({name}):", "            raise ValueError"]
     if len(entries) == 1:
@@ -215,24 +170,21 @@ def lean_step(rt: BoundStep, fill_u: VectorInput, fill_y: VectorInput, count: li
     """A filter's ``step(u, y, mask=None)`` specialised for its sizes.
 
     For the common call (a measurement, no mask) ``u`` and ``y`` (lists, tuples or float
-    arrays) are unpacked and copied entry by entry (written out for ``nu`` and ``ny``, as the
-    standard library's dataclasses write their methods) and the step is one native call;
-    nothing else is checked unless the conversion fails or the status is not 0.
+    arrays) are unpacked and copied entry by entry (source written out for ``nu`` and ``ny``, as
+    dataclasses writes its methods) and the step is one native call; nothing else is checked
+    unless the conversion fails or the status is not 0.
 
     Parameters
     ----------
     rt : BoundStep
         The filter's bound step.
     fill_u, fill_y : VectorInput
-        The checked conversions (they name a problem of the conversion).
+        The checked conversions.
     count : list
         One element: the step count.
-    general : callable
-        ``general(u, y, mask)``, the step for the other calls (``y=None``, a mask).
-    explain : callable
-        ``explain(what)`` raises the error of a failed step.
-    after : callable or None
-        The runtime hook after a step.
+    general, explain, after : callable
+        ``general(u, y, mask)`` steps the other calls (``y=None``, a mask); ``explain(what)``
+        raises the error of a failed step; ``after()`` is the runtime hook (or None).
     """
     scope = dict(general=general, ndarray=np.ndarray, SCALARS=_SCALARS, ub=memoryview(fill_u.buffer),
                  yb=memoryview(fill_y.buffer), SLOW=_SLOW, slow_u=fill_u.checked, slow_y=fill_y.checked,
@@ -274,14 +226,8 @@ def _lean_source(nu: int, ny: int, after: bool) -> str:
 
 
 def broadcast_inputs(us, runs: int, N: int, nu: int) -> np.ndarray:
-    """The inputs of ``runs`` records of ``N`` steps, shared or one sequence each, as a (runs, N,
-    nu) float array (a broadcast view), or InputError naming the problem (a shape, NaN or inf).
-
-    Parameters
-    ----------
-    us : array_like, shape (N, nu) or (runs, N, nu)
-    runs, N, nu : int
-    """
+    """The inputs ``us`` of ``runs`` records of ``N`` steps, (N, ``nu``) shared or (runs, N, nu),
+    as a (runs, N, nu) float array (a broadcast view), or InputError naming the problem."""
     us = float_array(us, "inputs us")
     try:
         us = np.broadcast_to(us.reshape(1, N, nu) if us.ndim <= 2 else us, (runs, N, nu))
@@ -300,16 +246,14 @@ def explain_status(status: float, owner: str, k: int, u: np.ndarray, y: np.ndarr
     Parameters
     ----------
     status : float
-    owner : str
-        The filter's name.
+    owner, what : str
+        The filter's name; what was running (``"step"``, ``"run index 12"``).
     k : int
         The step's index.
     u, y, mask : ndarray
         The step's inputs.
     nan_is_missing : bool
         Whether a NaN measurement is a missing channel.
-    what : str
-        What was running (``"step"``, ``"run index 12"``).
     """
     if status == BAD_INPUT:
         bad_u = np.flatnonzero(~np.isfinite(u))

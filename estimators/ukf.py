@@ -47,14 +47,12 @@ class UKF(KalmanBase, register="UKF"):
         if not (n + kappa > 0):
             raise ConfigurationError(f"kappa must satisfy n + kappa > 0 (n = {n}), got {kappa}")
         self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
-        lam = alpha**2 * (n + kappa) - n
-        self.lam = lam
+        self.lam = lam = alpha**2 * (n + kappa) - n
         self.Wm = [lam / (n + lam)] + [0.5 / (n + lam)] * (2 * n)
         self.Wc = [lam / (n + lam) + 1 - alpha**2 + beta] + [0.5 / (n + lam)] * (2 * n)
         super().__init__(system, x0, P0, Q, R, gate, nan_is_missing, backend)
 
     def config_key(self) -> tuple:
-        """The sigma-point parameters."""
         return (self.alpha, self.beta, self.kappa)
 
     def sigma_points(self, x, P):
@@ -66,18 +64,15 @@ class UKF(KalmanBase, register="UKF"):
 
     def predict_expr(self, ctx: StepContext):
         """The unscented transform of ``(x, P)`` through ``f``, plus Q."""
-        s = self.system
-        f = ca.Function("f", [s.x, s.u], [s.fx])
-        img = [f(p, ctx.u) for p in self.sigma_points(ctx.x, ctx.P)]
+        img = [self.system._f(p, ctx.u) for p in self.sigma_points(ctx.x, ctx.P)]
         xp = _mean(self.Wm, img)
         return xp, symmetric(_cross(self.Wc, img, xp, img, xp) + ctx.Q)
 
     def update_expr(self, ctx: StepContext, xp, Pp) -> Update:
         """Sigma points redrawn from the prior ``(x^-, P^-)``, so that Q is in S and Pxy;
         ``K = Pxy S^{-1}``, ``P = P^- - K S K^T``."""
-        h = ca.Function("h", [self.system.x], [self.system.hx])
         sig = self.sigma_points(xp, Pp)
-        sig_y = [h(p) for p in sig]
+        sig_y = [self.system._h(p) for p in sig]
         yp = _mean(self.Wm, sig_y)
         S, innov, M = mask_measurement(ctx.valid, symmetric(_cross(self.Wc, sig_y, yp, sig_y, yp) + ctx.R), ctx.y - yp)
         K, nis, acc = gated_gain(S, ca.mtimes(_cross(self.Wc, sig, xp, sig_y, yp), M).T, innov, ctx.gate)
@@ -87,10 +82,8 @@ class UKF(KalmanBase, register="UKF"):
     def smoother_cross_covariance(self, x, P, u):
         """The unscented RTS smoother's ``D_k`` (Särkkä, 2008): the cross-covariance of the
         sigma points of ``(x, P)`` and their images under ``f``."""
-        s = self.system
-        f = ca.Function("f", [s.x, s.u], [s.fx])
         sig = self.sigma_points(x, P)
-        img = [f(p, u) for p in sig]
+        img = [self.system._f(p, u) for p in sig]
         return _cross(self.Wc, sig, x, img, _mean(self.Wm, img))
 
 
