@@ -53,9 +53,9 @@ def counter_normal(seed: int, k, n: int) -> np.ndarray:
 
 class PerInstantNoise:
     """``n`` standard normal numbers per instant from a seeded PCG64 stream (a repeated call at
-    the same instant returns the same draw), drawn :data:`BLOCK` instants at a time into ``block``
-    (the same numbers as one vector at a time) so that the native kernel reads the rows :meth:`at`
-    reads: ``state`` holds the current row and the rows drawn, ``last`` the instant of the current
+    the same instant returns the same draw). They are drawn :data:`BLOCK` instants at a time into
+    ``block`` (the same numbers as one vector at a time) so that the native kernel reads the rows
+    :meth:`at` reads: ``state`` holds the current row and the rows drawn, ``last`` the instant of the current
     row (NaN before the first); ``on_refill`` callables run after every new block."""
 
     #: Instants drawn at a time.
