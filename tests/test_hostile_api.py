@@ -450,6 +450,27 @@ def _(cp, dm, tmp):
         pass
 
 
+
+@attempt("component-duplicate-port", "c: duplicate input port names: ['u']")
+def _(cp, dm, tmp):
+    from cosim import Component
+
+    class Sum(Component):
+        def output(self, t, u):
+            return u[:1]
+
+    Sum("c", 0.01, inputs=["u", "v", "u"], outputs=["y"])
+
+
+@attempt("plant-duplicate-variable", "duplicate")
+def _(cp, dm, tmp):
+    import casadi as ca
+
+    from fmu_models import PlantModel, Variable
+    x = [Variable("a", "m", "a", 0.0), Variable("a", "m", "again a", 0.0)]
+    PlantModel("twice", "Twice", "a state named twice", x, [Variable("u", "N", "force")],
+               [Variable("y", "m", "y")], [], lambda x, u, p: ca.vertcat(x[1], u[0]), lambda x, p: ca.vertcat(x[0]))
+
 @pytest.mark.parametrize("fn, words", TRIES)
 def test_api_refuses_with_a_named_error(fn, words, cp, dm, tmp_path):
     with pytest.raises(PendulumCosimError) as e:
