@@ -70,8 +70,10 @@ class MamdaniFuzzy:
     def expression(self, c_t, c_i):
         """Normalised adjustment ``m`` in [-1, 1] for covariances ``c_t``, ``c_i`` (SX or float)."""
         s = ca.fmax(0.5 * (c_t + c_i), 1e-300)
-        mt, mi = ({n: ca.exp(-0.5 * ((v - c) / self.in_sigma) ** 2) for n, c in zip(INPUT_SETS, self.in_centers)}
-                  for v in (c_t / s, c_i / s))
+        def memberships(v):
+            return {n: ca.exp(-0.5 * ((v - c) / self.in_sigma) ** 2) for n, c in zip(INPUT_SETS, self.in_centers)}
+
+        mt, mi = memberships(c_t / s), memberships(c_i / s)
         strength = {o: reduce(ca.fmax, [ca.fmin(mt[a], mi[b]) for a in INPUT_SETS for b in INPUT_SETS
                                         if RULES[a][b] == o]) for o in OUTPUT_SETS}
         outs = self.output_memberships()

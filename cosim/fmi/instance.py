@@ -291,7 +291,8 @@ class FMUInstance:
                 raise FMUError(f"{self.owner}: {self.prefix}{what} returned pending, but {self.description.path.name} "
                                "does not declare canRunAsynchronuously (FMI 1.0): the step was cancelled "
                                "(fmiCancelStep)")
-            get_status, c, value, delay = self.raw("fmi1GetStatus"), ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
+            get_status = self.raw("fmi1GetStatus")
+            c, value, delay = ctypes.c_void_p(self.handle), ctypes.c_int(0), 1e-4
             try:
                 while status == _PENDING:
                     st = get_status(c, 0, ctypes.byref(value))          # fmiDoStepStatus

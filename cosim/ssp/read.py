@@ -185,8 +185,10 @@ def open_ssp(path, communication_step: float | None = None, step_size: float | N
     ConfigurationError
         What this reader does not support, or a name, unit or value it cannot resolve.
     """
-    communication_step, step_size = (None if v is None else positive(v, f"open_ssp: {what} [s]") for what, v in
-                                     (("communication_step", communication_step), ("step_size", step_size)))
+    if communication_step is not None:
+        communication_step = positive(communication_step, "open_ssp: communication_step [s]")
+    if step_size is not None:
+        step_size = positive(step_size, "open_ssp: step_size [s]")
     path = Path(path)
     if not path.exists():
         raise FMUError(f"no SSP file {path}")

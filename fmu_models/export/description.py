@@ -101,8 +101,11 @@ class Description:
 
 def _units(variables) -> list[str]:
     units = sorted({v.unit for v in variables if v.unit})
-    rows = [f"    <Unit{xml_attrs(name=u)}>{f'<BaseUnit{xml_attrs(**b)}/>' if (b := base_units(u)) else ''}</Unit>"
-            for u in units]
+    rows = []
+    for u in units:
+        base = base_units(u)
+        inner = f"<BaseUnit{xml_attrs(**base)}/>" if base else ""
+        rows.append(f"    <Unit{xml_attrs(name=u)}>{inner}</Unit>")
     return ["  <UnitDefinitions>", *rows, "  </UnitDefinitions>"] if units else []
 
 
