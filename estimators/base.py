@@ -263,7 +263,9 @@ class KalmanBase:
     def _now(self, key: str) -> np.ndarray:
         """The current state array ``key``, else the fixed input (Q, R), else the output ``key`` (shared)."""
         rt = self._rt
-        return rt.now(key) if key in rt.pairs else self._fixed[key] if key in self._fixed else rt.outputs[key]
+        if key in rt.pairs:
+            return rt.now(key)
+        return self._fixed[key] if key in self._fixed else rt.outputs[key]
 
     def _out(self, name: str) -> np.ndarray:
         return self._rt.outputs[name]

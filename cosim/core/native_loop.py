@@ -318,7 +318,10 @@ class NativeLoop:
         ratio = CHUNK_SECONDS / max(now - self.since, 1e-6)
         self.chunk = max(BLOCK, min(CHUNK, int(self.chunk * min(ratio, 4.0)) // BLOCK * BLOCK))
         # while measuring: one warming block, then MEASURE_BLOCKS blocks (the threads may sleep between chunks)
-        length = self.chunk if stepping.state != "measure" else BLOCK if stepping.warm else MEASURE_BLOCKS * BLOCK
+        if stepping.state != "measure":
+            length = self.chunk
+        else:
+            length = BLOCK if stepping.warm else MEASURE_BLOCKS * BLOCK
         self.done, self.since, kst.kstop = kst.k, now, kst.k + length
 
     def _end(self, event: int) -> None:

@@ -177,8 +177,11 @@ class FMUModel(ContinuousModel):
         name = {1: "EventUpdate", 2: "NewDiscreteStates", 3: "UpdateDiscreteStates"}[self.version]
         update = getattr(self.inst.fmu, name[0].lower() + name[1:])
         for _ in range(1000):
-            info = self.inst.call(name, update)     # FMI 1.0: (converged, two "changed" flags, terminate, ...)
-            need, term, defined, nxt = (not info[0], *info[3:]) if self.version == 1 else (*info[:2], *info[4:])
+            info = self.inst.call(name, update)
+            if self.version == 1:   # (converged, two "changed" flags, terminate, upcomingTimeEvent, nextEventTime)
+                need, term, defined, nxt = not info[0], info[3], info[4], info[5]
+            else:                   # (update needed, terminate, two "changed" flags, next time defined, next time)
+                need, term, defined, nxt = info[0], info[1], info[4], info[5]
             if term:
                 return True, None
             if not need:
