@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from fmu_models.errors import ConfigurationError, TypeMismatchError, UnknownNameError
-from fmu_models.infra.files import atomic_write
+from fmu_models.infra.files import atomic_write, remove_empty_folders
 
 __all__ = ["MARKER", "MAX_PANELS", "OutputFolder", "plot_estimates", "plot_signals", "save_results"]
 
@@ -68,13 +68,6 @@ def _manifest(folder: Path) -> set[str] | None:
 def _write_marker(folder: Path, files: list[str], state: str) -> None:
     atomic_write(folder / MARKER, lambda tmp: tmp.write_text(json.dumps(
         {"tool": "pendulum-cosim", "state": state, "files": files}, indent=1), encoding="utf-8"))
-
-
-def _remove_empty(folders: list[Path]) -> None:
-    """Remove the folders this run created, the deepest first, if nothing was written in them."""
-    for d in reversed(folders):
-        with contextlib.suppress(OSError):
-            d.rmdir()
 
 
 def _take(p: Path, overwrite: bool) -> None:
@@ -139,7 +132,7 @@ def OutputFolder(path, overwrite: bool = False) -> Iterator[Path]:
             created.append(d)
         fd = os.open(p, os.O_RDONLY)
     except OSError as e:
-        _remove_empty(created)
+        remove_empty_folders(created[::-1])
         raise ConfigurationError(f"cannot create the output folder {p}: {e.strerror or e}") from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -162,7 +155,7 @@ def OutputFolder(path, overwrite: bool = False) -> Iterator[Path]:
                 with contextlib.suppress(OSError):
                     (p / MARKER).unlink()
             if not files:
-                _remove_empty(created)
+                remove_empty_folders(created[::-1])
         except OSError:
             pass
         finally:

@@ -4,7 +4,6 @@ binaries, see :mod:`fmu_models.export.platforms`)."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 import time
@@ -15,14 +14,7 @@ from .export.pack import FMI_VERSIONS
 from .export.plant_fmu import build_fmus
 from .export.platforms import PLATFORMS, add_platforms, parse_platforms, zig_command
 from .infra.cli import run_command
-from .infra.files import private_tempdir
-
-
-def _remove_empty(folders: list[Path]) -> None:
-    """Remove the folders a failed build created, deepest first, if they are empty."""
-    with contextlib.suppress(OSError):
-        for d in folders:
-            d.rmdir()
+from .infra.files import private_tempdir, remove_empty_folders
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"built {len(paths)} FMU(s) in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
         return 0
 
-    return run_command(build, cleanup=lambda: _remove_empty(created),
+    return run_command(build, cleanup=lambda: remove_empty_folders(created),
                        interrupted="interrupted: no FMU was left half-written")
 
 

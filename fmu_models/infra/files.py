@@ -12,7 +12,7 @@ from pathlib import Path
 
 from .interrupts import Deferred
 
-__all__ = ["atomic_copy", "atomic_write", "private_tempdir", "temp_beside"]
+__all__ = ["atomic_copy", "atomic_write", "private_tempdir", "remove_empty_folders", "temp_beside"]
 
 
 def temp_beside(dst: Path) -> tuple[int, str]:
@@ -63,3 +63,17 @@ def private_tempdir(prefix: str, dir=None) -> Iterator[str]:
         deferred.release()
         if path is not None:
             shutil.rmtree(path, ignore_errors=True)
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Remove ``folders`` in the order given (the deepest first: a folder a failed run created
+    and its created parents), each only if it is empty; any other is left as it is.
+
+    Parameters
+    ----------
+    folders : list of Path
+        The folders, each listed before its parent.
+    """
+    for d in folders:
+        with contextlib.suppress(OSError):
+            d.rmdir()
