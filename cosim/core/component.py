@@ -155,7 +155,10 @@ class BoundCalls:
     def _set_private_inputs(self, buf: np.ndarray, ints: np.ndarray, u) -> None:
         n_in = len(self.connected_inputs)
         buf[:n_in] = u
-        ints[:n_in] = np.asarray(u, dtype=float).astype(np.int64)
+        kinds = {p.name: port_kind(p.type) for p in self.input_ports}
+        for i, n in enumerate(self.connected_inputs):
+            if kinds[n] != "real":          # a real input may be NaN (a missing measurement)
+                ints[i] = int(u[i])
 
     def output(self, t: float, u: np.ndarray) -> np.ndarray:
         """Outputs at ``t`` [s] from the connected inputs ``u`` (in order); a new array."""
