@@ -177,7 +177,8 @@ def build_step(filt, extra_state: dict[str, np.ndarray], params: Sequence[Parame
     inputs = {**state, "u": u, "y": y, "mask": mask, "gate": gate, "nan_missing": nan_missing,
               **({} if filt.adapts_noise else {"Q": Q, "R": R}), **psym}
     checked = [new["x"]] + [upper_entries(symmetric(new[k])) for k in ("P", "Q", "R") if k in new]
-    diagnostics = [v for k, v in result._asdict().items() if k not in ("x", "P")]     # DIAGNOSTICS, in order
+    diagnostics = [result.x_prior, result.P_prior, result.innovation, result.S, result.K, result.nis,
+                   result.accepted, result.logdet_S]                                   # named by DIAGNOSTICS
     outs = ([ca.densify(ca.reshape(new[k], state[k].shape)) for k in state]
             + [ca.densify(v) for v in (*diagnostics, *ctx.outputs.values())] + [status_flag([u, y_used], checked)])
     return ca.Function("step", list(inputs.values()), outs, list(inputs),
