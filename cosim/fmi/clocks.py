@@ -164,7 +164,7 @@ def _by_name(root, section: str, tag: str) -> dict:
 
 
 class FMIClocks:
-    """The clocks of one FMI 3.0 FMU (see the module documentation).
+    """The clocks of one FMI 3.0 FMU (see the clocks page of the documentation).
 
     Parameters
     ----------

@@ -65,7 +65,7 @@ def unload_library(fmu) -> None:
 
 
 class FMUInstance:
-    """An instantiated FMU (see the module documentation).
+    """An instantiated FMU (see the FMI call sequence on the co-simulation page of the documentation).
 
     Parameters
     ----------
@@ -337,7 +337,8 @@ class FMUInstance:
 
     # ------------------------------------------------------------------ the end
     def finish(self) -> None:
-        """End the instance as the standard allows (see the module documentation); safe twice."""
+        """End the instance as the standard allows (the FMI call sequence on the co-simulation
+        page of the documentation); safe twice."""
         if self._freed:
             return
         self._freed = True

@@ -114,7 +114,7 @@ class _Coupled(ContinuousModel):
 
 class MESystem(BoundCalls, HeldInputs, Component, kind="me_system"):
     """Model Exchange FMUs connected to each other, integrated as one system (see the
-    module documentation).
+    third-party FMUs page of the documentation).
 
     Parameters
     ----------

@@ -21,7 +21,7 @@ from ..core.component import StopRequest
 __all__ = ["SOLVERS", "ContinuousModel", "FMUModel", "MEIntegrator", "check_solver", "held_inputs",
            "unit_nominals_instead"]
 
-#: The Model Exchange solvers (see the module documentation).
+#: The Model Exchange solvers (see the co-simulation page of the documentation).
 SOLVERS = ("cvode", "euler", "rk4")
 LOGGER = logging.getLogger("cosim.fmu")
 _DP = ctypes.POINTER(ctypes.c_double)
@@ -96,7 +96,8 @@ class FMUModel(ContinuousModel):
     ----------
     instance : FMUInstance
     unit_nominals : bool
-        The states' nominal values are 1, the FMU is not asked (see the module documentation).
+        The states' nominal values are 1, the FMU is not asked (see the co-simulation page of the
+        documentation).
 
     Attributes
     ----------
@@ -252,8 +253,8 @@ def _cvode(model: ContinuousModel, t0: float, max_step: float, rtol: float):
 
 
 class MEIntegrator:
-    """Advance a :class:`.ContinuousModel` between communication points (see the module
-    documentation).
+    """Advance a :class:`.ContinuousModel` between communication points (see the co-simulation
+    page of the documentation).
 
     Parameters
     ----------

@@ -95,7 +95,7 @@ def _conversion(src: Unit | None, dst: Unit | None, where: str) -> Transformatio
 
 
 class FlatSystem:
-    """The SSD's top system flattened (see the module documentation).
+    """The SSD's top system flattened (see the third-party FMUs page of the documentation).
 
     Parameters
     ----------
