@@ -6,7 +6,6 @@ C code generated for the filter's compiled fused step and for ``fmu_initial`` (t
 the FMU's variables, timing and clocked form."""
 from __future__ import annotations
 
-from collections import Counter
 from functools import partial
 from itertools import accumulate, groupby
 from pathlib import Path
@@ -19,6 +18,7 @@ from fmu_models.export.config import c_array, config_header, work_sizes
 from fmu_models.export.description import Description, Unknown, fmi2, fmi3
 from fmu_models.export.pack import pack_fmu
 from fmu_models.export.variable_list import VariableList
+from fmu_models.infra.checks import check_unique
 from fmu_models.infra.codegen import inline_min_max_file
 
 from .linalg import finite_flag
@@ -195,10 +195,8 @@ class _FilterCore:
         if clocked:
             v = clock_variables(v, ("U", "Y", "OUT", "VALID"), s.dt,
                                 f"the filter's sample instants (every {s.dt:g} s from the start time)")
-        dup = sorted(name for name, count in Counter(x.name for x in v.variables).items() if count > 1)
-        if dup:
-            raise ConfigurationError(f"{self.filt.name}: FMU variable names collide: {dup} (rename the model's "
-                                     "variables or the filter's parameters)")
+        check_unique((x.name for x in v.variables), f"{self.filt.name}: FMU variable names collide:",
+                     hint="rename the model's variables or the filter's parameters")
         return v
 
     def _ordered_pairs(self) -> list[tuple[int, int]]:

@@ -114,9 +114,10 @@ def positive_int(value, what: str, error: type[Exception] = ConfigurationError,
     return int(v)
 
 
-def check_unique(names: Iterable[str], what: str) -> None:
+def check_unique(names: Iterable[str], what: str, hint: str = "") -> None:
     """Refuse (ConfigurationError) repeated ``names``: the message is ``what`` then the repeated
-    names, sorted (``check_unique(names, "duplicate component names:")``)."""
+    names, sorted, then ``hint`` in parentheses if given (``check_unique(names, "duplicate
+    component names:")``)."""
     dup = sorted(n for n, k in Counter(names).items() if k > 1)
     if dup:
-        raise ConfigurationError(f"{what} {dup}")
+        raise ConfigurationError(f"{what} {dup}" + (f" ({hint})" if hint else ""))
