@@ -450,7 +450,6 @@ def _(cp, dm, tmp):
         pass
 
 
-
 @attempt("component-duplicate-port", "c: duplicate input port names: ['u']")
 def _(cp, dm, tmp):
     from cosim import Component
@@ -462,7 +461,7 @@ def _(cp, dm, tmp):
     Sum("c", 0.01, inputs=["u", "v", "u"], outputs=["y"])
 
 
-@attempt("plant-duplicate-variable", "duplicate")
+@attempt("plant-duplicate-variable", "model 'twice': duplicate variable names ['a']")
 def _(cp, dm, tmp):
     import casadi as ca
 
@@ -470,6 +469,7 @@ def _(cp, dm, tmp):
     x = [Variable("a", "m", "a", 0.0), Variable("a", "m", "again a", 0.0)]
     PlantModel("twice", "Twice", "a state named twice", x, [Variable("u", "N", "force")],
                [Variable("y", "m", "y")], [], lambda x, u, p: ca.vertcat(x[1], u[0]), lambda x, p: ca.vertcat(x[0]))
+
 
 @pytest.mark.parametrize("fn, words", TRIES)
 def test_api_refuses_with_a_named_error(fn, words, cp, dm, tmp_path):
