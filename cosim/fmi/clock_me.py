@@ -24,7 +24,8 @@ class MEClockedRun(EventModeRun):
         The component's integrator, whose events come here.
     """
 
-    __slots__ = ("inputs_changed", "me", "set_cont", "set_cont_ft", "set_disc", "set_disc_ft", "started", "window_end")
+    __slots__ = ("_enter_ct_mode", "inputs_changed", "me", "set_cont", "set_cont_ft", "set_disc", "set_disc_ft",
+                 "started", "window_end")
     read_unclocked_between = True
 
     def __init__(self, comp, board: ClockBoard, values, inputs, outputs, integers, integrator: MEIntegrator):
@@ -35,6 +36,7 @@ class MEClockedRun(EventModeRun):
         self.set_cont_ft = self._setter([i for i in cont if i in self._ft], changes=True)
         self.set_disc_ft = self._setter([i for i in disc if i in self._ft], changes=True)
         self.me = integrator
+        self._enter_ct_mode = self.inst.raw("fmi3EnterContinuousTimeMode")
         model = integrator.model = FMUModel(self.inst)   # its events go through this run
         model.event, model.initial_event = self._event, partial(self._event, set_inputs=self._set_rest)
         self.started = False
@@ -105,7 +107,7 @@ class MEClockedRun(EventModeRun):
             set_inputs()
         if self._finish(t):
             return True, None
-        st = self.inst.raw("fmi3EnterContinuousTimeMode")(self.c)
+        st = self._enter_ct_mode(self.c)
         if st > 1:
             self._fail(f"EnterContinuousTimeMode(t = {t:g} s)", st)
         self.in_event = False
