@@ -108,8 +108,10 @@ class ScenarioContext:
         """:meth:`construct` with the table's ``model`` (a registered model's name) and
         ``model_parameters`` turned into the constructor's ``model`` argument."""
         t = dict(table)
-        if "model" in t:            # else construct names it missing
-            t["model"] = self.model(t["model"], t.pop("model_parameters", None))
+        if "model" not in t:        # else model_parameters would be named an unknown key
+            raise ConfigurationError(f"component {name!r} ({getattr(cls, 'kind', cls.__name__)}) needs the key "
+                                     "'model'")
+        t["model"] = self.model(t["model"], t.pop("model_parameters", None))
         return self.construct(cls, name, t)
 
     def construct(self, cls: type, name: str, table: dict, **extra) -> Component:

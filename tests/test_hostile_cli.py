@@ -200,6 +200,9 @@ SCENARIO_TRIES = [
     ("component-name-with-dot", _component("", base='name = "a.b"\nperiod = 0.01\nvalue = 1.0'), "name"),
     ("duplicate-names", GOOD + '\n[[component]]\nname = "c"\ntype = "constant"\nperiod = 0.01\nvalue = 2.0\n',
      "duplicate"),
+    ("model-parameters-without-model", '[simulation]\nstop_time = 0.05\n[[component]]\nname = "p"\n'
+     'type = "plant_model"\nperiod = 0.01\nmodel_parameters = { mc = 1.0 }\n',
+     "component 'p' (plant_model) needs the key 'model'"),
     ("component-name-non-ascii", _component("", base='name = "ëkf"\nperiod = 0.01\nvalue = 1.0'), "ASCII"),
     ("period-text", _component("", base='name = "c"\nperiod = "fast"\nvalue = 1.0'), "period"),
     ("period-inf", _component("", base='name = "c"\nperiod = inf\nvalue = 1.0'), "period"),
