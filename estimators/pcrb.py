@@ -87,7 +87,7 @@ def _trajectories(X, nx: int) -> np.ndarray:
 
 def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
     """The used channels (runs, N, ny) of bool, or None if all are used."""
-    valid = np.ones((runs, N, ny), dtype=bool)
+    valid = None                    # all used: no (runs, N, ny) array in the common case
     if masks is not None:
         m = checks.float_array(masks, "masks")
         try:
@@ -96,15 +96,15 @@ def _valid_channels(masks, ys, runs: int, N: int, ny: int) -> np.ndarray | None:
             raise InputError(f"masks must have shape ({runs}, {N}, {ny}), got {m.shape}") from None
         if not np.isin(m, (0.0, 1.0)).all():
             raise InputError("masks must hold 0/1 (or False/True) only")
-        valid &= m != 0
+        valid = m != 0
     if ys is not None:
         y = checks.float_array(ys, "measurements ys")
         if y.shape != (runs, N, ny):
             raise InputError(f"measurements ys must have shape ({runs}, {N}, {ny}), got {y.shape}")
         if np.isinf(y).any():
             raise InputError("measurements ys contain inf (a missing channel is NaN)")
-        valid &= ~np.isnan(y)
-    return None if valid.all() else valid
+        valid = ~np.isnan(y) if valid is None else valid & ~np.isnan(y)
+    return None if valid is None or valid.all() else valid
 
 
 def _measurement_weights(R: np.ndarray, valid: np.ndarray | None, runs: int, N: int) -> np.ndarray | None:
