@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import connected_components
 
 from fmu_models.errors import ConfigurationError, ResourceError
 
+from .clocking import fraction_gcd
 from .component import Component
 
 __all__ = ["MAX_HYPERPERIOD", "MAX_RATIO", "Group", "Unit", "base_step", "evaluation_order"]
@@ -51,8 +52,7 @@ def base_step(periods: Mapping[str, float], step_size: float | None = None
         raise ConfigurationError("no components")
     fr = {n: _fraction(p) for n, p in periods.items()}
     if step_size is None:
-        common = math.lcm(*(p.denominator for p in fr.values()))
-        base = Fraction(math.gcd(*(p.numerator * (common // p.denominator) for p in fr.values())), common)
+        base = fraction_gcd(*fr.values())
     else:
         base = _fraction(step_size)
         if base <= 0:
