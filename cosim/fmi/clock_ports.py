@@ -126,8 +126,7 @@ class ClockPorts:
         self._outbox: list = []                      # output clock activations to send
         self._plans: dict = {}
         self._in_starts = comp._input_starts()        # the connected inputs' start values and sources
-        self._in_srcs = comp.input_sources or [(f"{comp.name}.{n}", comp.element_ports[n].type)
-                                               for n in comp.connected_inputs]
+        self._in_srcs = comp.connected_sources()
         self._build_clocks()
         self._build_inputs(comp)
         self._build_outputs(comp)

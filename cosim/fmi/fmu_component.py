@@ -242,6 +242,11 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
         """Each connected input's source signal name and FMI type (given to :meth:`use_inputs`), or None."""
         return list(self._sources) if self._sources is not None else None
 
+    def connected_sources(self) -> list[tuple[str, str]]:
+        """:attr:`input_sources` if given, else each connected input as its own source (its
+        signal name and FMI type)."""
+        return self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
+
     # ------------------------------------------------------------------ clocks
     @property
     def clock_infos(self) -> tuple:
@@ -386,7 +391,7 @@ class FMUComponent(BoundCalls, HeldInputs, Component, kind="fmu"):
             return run.output, run.update
         inst, idx = self.instance, np.arange(len(values))[inputs]
         ports = [self.element_ports[n] for n in self.connected_inputs]
-        sources = self._sources or [(f"{self.name}.{n}", self.element_ports[n].type) for n in self.connected_inputs]
+        sources = self.connected_sources()
 
         def setter(positions, changes=False):
             if not positions:
