@@ -22,35 +22,47 @@ __all__ = ["main", "salvage_stream"]
 
 def salvage_stream(ipc: str, tmp: str, partial: str) -> int:
     """Rows of the Arrow stream ``ipc`` (up to its last complete chunk) written to the
-    Parquet file ``partial``; ``ipc`` and ``tmp`` removed. Returns the rows kept."""
+    Parquet file ``partial``; ``ipc`` and ``tmp`` removed, and the temporary Parquet file
+    whatever happens. Returns the rows kept."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    rows = 0
+    rows, part = 0, f"{partial}.{os.getpid()}.tmp"
     try:
         with pa.OSFile(ipc, "rb") as f:
             try:
                 reader = pa.ipc.open_stream(f)
             except (pa.ArrowInvalid, OSError):                # not even its schema: no chunk written
                 return 0
-            part = f"{partial}.{os.getpid()}.tmp"
-            with pq.ParquetWriter(part, reader.schema) as writer:
-                while True:
-                    try:
-                        batch = reader.read_next_batch()
-                    except (StopIteration, pa.ArrowInvalid, OSError):   # the end, or the chunk being written
-                        break
-                    writer.write_batch(batch)
-                    rows += batch.num_rows
-            if rows:
-                os.replace(part, partial)
-            else:
-                os.unlink(part)
+            rows = _copy_batches(reader, part)
+        if rows:
+            os.replace(part, partial)
     finally:
-        for path in (ipc, tmp):
+        for path in (ipc, tmp, part):                         # part: left only if writing failed
             with contextlib.suppress(OSError):
                 os.unlink(path)
     return rows
+
+
+def _copy_batches(reader, part: str) -> int:
+    """The complete batches of ``reader`` into the Parquet file ``part`` (created with the
+    first batch); the rows written."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    rows, writer = 0, None
+    try:
+        while True:
+            try:
+                batch = reader.read_next_batch()
+            except (StopIteration, pa.ArrowInvalid, OSError):   # the end, or the chunk being written
+                return rows
+            if writer is None:
+                writer = pq.ParquetWriter(part, reader.schema)
+            writer.write_batch(batch)
+            rows += batch.num_rows
+    finally:
+        if writer is not None:
+            writer.close()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

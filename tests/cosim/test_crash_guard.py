@@ -124,6 +124,17 @@ def test_salvage_keeps_every_complete_chunk_of_a_cut_stream(tmp_path):
     assert not ipc.exists() and not tmp.exists()
 
 
+def test_salvage_leaves_no_temporary_file_when_the_stream_is_empty_or_the_write_fails(tmp_path):
+    ipc, tmp, partial = tmp_path / ".r.arrows", tmp_path / ".r.tmp", tmp_path / "r.partial.parquet"
+    _stream(ipc, 0)                                   # a schema, no chunk
+    assert salvage.salvage_stream(str(ipc), str(tmp), str(partial)) == 0
+    assert list(tmp_path.iterdir()) == []
+    _stream(ipc, 2)
+    partial.mkdir()                                   # the rename into place fails
+    with pytest.raises(OSError):
+        salvage.salvage_stream(str(ipc), str(tmp), str(partial))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.partial.parquet"]
+
 def test_salvage_of_nothing_and_bad_arguments(tmp_path, capsys):
     ipc = tmp_path / ".r.arrows"
     ipc.write_bytes(b"")
