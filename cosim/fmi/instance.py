@@ -353,8 +353,8 @@ class FMUInstance:
                     LOGGER.debug("%s: terminate refused", self.owner)
             try:
                 if self.keep_library:       # fmpy's freeInstance would unload the library too
-                    getattr(self.fmu, f"fmi{self.version}Free{'Slave' * (self.version == 1)}Instance")(
-                        self.fmu.component)
+                    free = {1: "fmi1FreeSlaveInstance", 2: "fmi2FreeInstance", 3: "fmi3FreeInstance"}[self.version]
+                    getattr(self.fmu, free)(self.fmu.component)
                 else:
                     self.fmu.freeInstance()
             except Exception:  # noqa: BLE001

@@ -194,9 +194,11 @@ class FlatSystem:
         if dst in self.edges:
             raise ConfigurationError(f"{self.where}: {'.'.join((*dst[0], dst[1]))} is connected twice")
         where = f"{self.where}: connection {self._label(c)}"
-        convert = c.get("suppressUnitConversion", "false") not in ("true", "1")
-        steps = [convert and _conversion(self._unit(src), self._unit(dst), where), Transformation.read(c, where)]
-        self.edges[dst] = (src, [step for step in steps if step])
+        steps = []                                  # each may be None: nothing to do
+        if c.get("suppressUnitConversion", "false") not in ("true", "1"):
+            steps.append(_conversion(self._unit(src), self._unit(dst), where))
+        steps.append(Transformation.read(c, where))
+        self.edges[dst] = (src, [step for step in steps if step is not None])
 
     @staticmethod
     def _label(c) -> str:
