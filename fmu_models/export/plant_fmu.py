@@ -89,11 +89,18 @@ def _write_sources(model: PlantModel, variables: VariableList, folder: Path, gui
 def _dependencies(model: PlantModel, J: ca.SX, row: int, known: list[int]) -> tuple[list[int], list[str]]:
     """The indices ``known`` that row ``row`` of ``J`` depends on, and the FMI 2.0 dependenciesKind of each."""
     s, deps, kinds = model.sym, [], []
+    xu = ca.vertcat(s.x, s.u)
     for col, k in enumerate(known):
-        if J.sparsity().has_nz(row, col) and not (e := J[row, col]).is_zero():
-            deps.append(k)
-            kinds.append("dependent" if ca.depends_on(e, ca.vertcat(s.x, s.u))
-                         else "fixed" if ca.depends_on(e, s.p) else "constant")
+        if not J.sparsity().has_nz(row, col):
+            continue
+        e = J[row, col]
+        if e.is_zero():
+            continue
+        deps.append(k)
+        if ca.depends_on(e, xu):
+            kinds.append("dependent")
+        else:
+            kinds.append("fixed" if ca.depends_on(e, s.p) else "constant")
     return deps, kinds
 
 
