@@ -168,7 +168,8 @@ class BoundCalls:
 
     def update(self, t: float, u: np.ndarray) -> None:
         """Set the connected inputs ``u`` and advance over ``[t, t + period]`` (``t`` in s)."""
-        self._bound(u)[2](t)
+        _, _, update_fn = self._bound(u)
+        update_fn(t)
 
 
 @runtime_checkable

@@ -260,7 +260,10 @@ class Cosimulation:
             if any(g.loop for g in self.schedule):
                 lines.append("  algebraic loops: Python (solved by iteration)")
             lines += self._threads_lines()
-        position = {u.comp.name: i for i, g in reversed(list(enumerate(self.schedule))) for u in g.units}
+        position = {}                                   # each component's first group
+        for i, g in enumerate(self.schedule):
+            for u in g.units:
+                position.setdefault(u.comp.name, i)
         lines += ["", "connections (latency = age of the value when it is used):"]
         lines += [f"  {sn}.{sp} -> {dn}.{dp}: {self._latency((sn, sp), (dn, dp), position)}"
                   for (dn, dp), (sn, sp) in self.connections.items()]
