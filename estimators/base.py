@@ -584,9 +584,11 @@ class KalmanBase:
         nis = cat["nis"].ravel()
         used = self._used_channels(ys, masks)
         if "Q_new" in cat:
-            Qd, Rd = (mats(k, n, n).diagonal(axis1=1, axis2=2) for k, n in (("Q_new", nx), ("R_new", ny)))
+            Qd = mats("Q_new", nx, nx).diagonal(axis1=1, axis2=2)
+            Rd = mats("R_new", ny, ny).diagonal(axis1=1, axis2=2)
         else:
-            Qd, Rd = (np.broadcast_to(np.diag(M), (len(nis) + 1, len(M))) for M in (self.Q, self.R))
+            Qd = np.broadcast_to(np.diag(self.Q), (len(nis) + 1, nx))
+            Rd = np.broadcast_to(np.diag(self.R), (len(nis) + 1, ny))
         kept = "x_prior" in cat
         return FilterRun(
             x=cat["x_new"].reshape(-1, nx), P=mats("P_new", nx, nx),

@@ -120,7 +120,9 @@ def _band_test(statistic: str, values, dof, confidence: float) -> BandTest:
     levels, where = np.unique(np.where(has, total, 1), return_inverse=True)
     with np.errstate(invalid="ignore"):
         per_step = np.where(has, v.mean(axis=0), np.nan)
-        lower, upper = (np.where(has, (chi2.ppf(p, levels) / N)[where.ravel()], np.nan) for p in (a / 2, 1 - a / 2))
+        q_lo, q_hi = chi2.ppf(a / 2, levels) / N, chi2.ppf(1 - a / 2, levels) / N
+        lower = np.where(has, q_lo[where.ravel()], np.nan)
+        upper = np.where(has, q_hi[where.ravel()], np.nan)
     inside = (per_step >= lower) & (per_step <= upper)
     mean_dof = float(total[has].mean() / N)
     average = float(per_step[has].mean())
